@@ -1,0 +1,61 @@
+#pragma once
+/// @brief caps error types, the cat() message builder and CAPS_ASSERT.
+///
+/// Library code throws and never aborts. Messages say what failed, where, the offending value and
+/// what to do next. The CLI maps InvalidInput and IoError to exit code 2, anything else to 1.
+
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+namespace caps {
+
+/// Base of every caps error.
+class Error : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// A file could not be read or written (missing, truncated, unreadable, unwritable).
+class IoError : public Error {
+ public:
+  using Error::Error;
+};
+
+/// The input is readable but not acceptable (bad values, wrong shape, out of range).
+class InvalidInput : public Error {
+ public:
+  using Error::Error;
+};
+
+/// A numerical solve failed; carries where it failed.
+class SolverError : public Error {
+ public:
+  SolverError(const std::string& what, int element = -1, int gauss_point = -1, int iteration = -1)
+      : Error(what), element(element), gauss_point(gauss_point), iteration(iteration) {}
+  int element;
+  int gauss_point;
+  int iteration;
+};
+
+/// Streams all arguments into one string: cat("spacing ", 0.5, " mm").
+template <typename... Args>
+std::string cat(const Args&... args) {
+  std::ostringstream os;
+  (os << ... << args);
+  return os.str();
+}
+
+namespace detail {
+[[noreturn]] void assertion_failed(const char* cond, const std::string& msg, const char* file,
+                                   int line);
+}
+
+}  // namespace caps
+
+#ifdef NDEBUG
+#define CAPS_ASSERT(cond, msg) ((void)0)
+#else
+#define CAPS_ASSERT(cond, msg) \
+  ((cond) ? (void)0 : ::caps::detail::assertion_failed(#cond, (msg), __FILE__, __LINE__))
+#endif

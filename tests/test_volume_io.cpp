@@ -1,0 +1,704 @@
+// Tests for the volume readers and the NIfTI writer: synthetic files written by the test (NIfTI,
+// NRRD, MetaImage, DICOM) with known geometry, the real shared data sets, and a catalogue of bad
+// inputs that must fail with the right exception type and a message naming the file.
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <Eigen/Geometry>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
+#include "caps/volume/read_volume.hpp"
+
+namespace fs = std::filesystem;
+using caps::Modality;
+using caps::ReadOptions;
+using caps::Volume;
+
+namespace {
+
+const fs::path kData = CAPS_SHARED_DATA;
+const fs::path kCranium = "/usr/share/doc/invesalius-examples/examples/Cranium.inv3";
+const fs::path kCh2 = "/usr/share/mricron/templates/ch2.nii.gz";
+
+/// A fresh temporary folder, removed with its contents at the end of the test.
+class TempDir {
+ public:
+  TempDir() {
+    std::random_device rd;
+    path_ = fs::temp_directory_path() / ("caps_test_volume_io_" + std::to_string(rd()));
+    fs::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  fs::path operator/(const std::string& name) const { return path_ / name; }
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+};
+
+void write_bytes(const fs::path& p, const std::string& bytes) {
+  std::ofstream out(p, std::ios::binary);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
+template <typename T>
+std::string raw_bytes(const std::vector<T>& v, bool big_endian = false) {
+  std::string s(v.size() * sizeof(T), '\0');
+  for (std::size_t n = 0; n < v.size(); ++n) {
+    char b[sizeof(T)];
+    std::memcpy(b, &v[n], sizeof(T));
+    if (big_endian) std::reverse(b, b + sizeof(T));
+    std::memcpy(&s[n * sizeof(T)], b, sizeof(T));
+  }
+  return s;
+}
+
+std::string read_bytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+// Deflate "stored" blocks: a valid, uncompressed deflate stream (RFC 1951, section 3.2.4).
+std::string deflate_stored(const std::string& data) {
+  std::string out;
+  std::size_t pos = 0;
+  do {
+    const std::size_t len = std::min<std::size_t>(data.size() - pos, 65535);
+    const bool last = pos + len == data.size();
+    out += static_cast<char>(last ? 1 : 0);
+    out += static_cast<char>(len & 0xff);
+    out += static_cast<char>(len >> 8);
+    out += static_cast<char>(~len & 0xff);
+    out += static_cast<char>((~len >> 8) & 0xff);
+    out += data.substr(pos, len);
+    pos += len;
+  } while (pos < data.size());
+  return out;
+}
+
+void put_le32(std::string& s, std::uint32_t v) {
+  for (int b = 0; b < 4; ++b) s += static_cast<char>((v >> (8 * b)) & 0xff);
+}
+
+std::string gzip_stored(const std::string& data) {
+  std::uint32_t crc = 0xffffffffu;
+  for (unsigned char c : data) {
+    crc ^= c;
+    for (int b = 0; b < 8; ++b) crc = (crc >> 1) ^ (0xedb88320u & (0u - (crc & 1u)));
+  }
+  std::string out("\x1f\x8b\x08\x00\x00\x00\x00\x00\x00\x03", 10);
+  out += deflate_stored(data);
+  put_le32(out, ~crc);
+  put_le32(out, static_cast<std::uint32_t>(data.size()));
+  return out;
+}
+
+std::string zlib_stored(const std::string& data) {
+  std::uint32_t a = 1, b = 0;
+  for (unsigned char c : data) {
+    a = (a + c) % 65521;
+    b = (b + a) % 65521;
+  }
+  std::string out("\x78\x01", 2);
+  out += deflate_stored(data);
+  const std::uint32_t adler = (b << 16) | a;
+  for (int s = 3; s >= 0; --s) out += static_cast<char>((adler >> (8 * s)) & 0xff);
+  return out;
+}
+
+/// Runs f, expects exception E whose message mentions `name`.
+template <typename E, typename F>
+void expect_error(F&& f, const std::string& name, const std::string& also = "") {
+  try {
+    f();
+    ADD_FAILURE() << "no exception for " << name;
+  } catch (const E& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(name), std::string::npos) << what;
+    if (!also.empty()) {
+      EXPECT_NE(what.find(also), std::string::npos) << what;
+    }
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "wrong exception type for " << name << ": " << e.what();
+  }
+}
+
+float value_fn(int i, int j, int k) { return static_cast<float>(i * 1.5 - j * 2.0 + k * 10.0 + 0.25); }
+
+// ---------------------------------------------------------------------------------------------
+// Minimal DICOM writer (explicit VR little endian) for synthetic CT slices.
+
+void put_u16(std::string& s, std::uint16_t v) {
+  s += static_cast<char>(v & 0xff);
+  s += static_cast<char>(v >> 8);
+}
+
+void element(std::string& s, std::uint16_t g, std::uint16_t e, const char* vr, std::string value) {
+  if (value.size() % 2) value += std::strcmp(vr, "UI") == 0 ? '\0' : ' ';
+  put_u16(s, g);
+  put_u16(s, e);
+  s += vr;
+  if (std::strcmp(vr, "OW") == 0 || std::strcmp(vr, "OB") == 0) {
+    put_u16(s, 0);
+    put_le32(s, static_cast<std::uint32_t>(value.size()));
+  } else {
+    put_u16(s, static_cast<std::uint16_t>(value.size()));
+  }
+  s += value;
+}
+
+std::string us(std::uint16_t v) {
+  std::string s;
+  put_u16(s, v);
+  return s;
+}
+
+std::string ds3(const Eigen::Vector3d& p) {
+  char buf[128];
+  std::snprintf(buf, sizeof buf, "%.6f\\%.6f\\%.6f", p.x(), p.y(), p.z());
+  return buf;
+}
+
+struct SliceSpec {
+  Eigen::Vector3d ipp;
+  Eigen::Vector3d row{1, 0, 0}, col{0, 1, 0};
+  int rows = 6, cols = 8;
+  double row_spacing = 0.5, col_spacing = 0.75;  // PixelSpacing = (row, col)
+  double slope = 1.0, intercept = -1024.0;
+  std::string series_uid = "1.2.3.4.5.1";
+  int instance = 1;
+};
+
+/// Writes one CT slice; stored(x, y) gives the stored int16 value at column x, row y.
+template <typename F>
+void write_dicom_slice(const fs::path& p, const SliceSpec& s, F stored) {
+  const std::string sop_class = "1.2.840.10008.5.1.4.1.1.2";
+  const std::string sop_inst = s.series_uid + ".9." + std::to_string(s.instance);
+  std::string meta;
+  element(meta, 0x0002, 0x0001, "OB", std::string("\0\1", 2));
+  element(meta, 0x0002, 0x0002, "UI", sop_class);
+  element(meta, 0x0002, 0x0003, "UI", sop_inst);
+  element(meta, 0x0002, 0x0010, "UI", "1.2.840.10008.1.2.1");
+  std::string out(128, '\0');
+  out += "DICM";
+  std::string len;
+  put_le32(len, static_cast<std::uint32_t>(meta.size()));
+  element(out, 0x0002, 0x0000, "UL", len);
+  out += meta;
+  char buf[256];
+  element(out, 0x0008, 0x0016, "UI", sop_class);
+  element(out, 0x0008, 0x0018, "UI", sop_inst);
+  element(out, 0x0008, 0x0060, "CS", "CT");
+  element(out, 0x0008, 0x103e, "LO", "synthetic");
+  element(out, 0x0020, 0x000d, "UI", "1.2.3.4.5");
+  element(out, 0x0020, 0x000e, "UI", s.series_uid);
+  element(out, 0x0020, 0x0013, "IS", std::to_string(s.instance));
+  element(out, 0x0020, 0x0032, "DS", ds3(s.ipp));
+  std::snprintf(buf, sizeof buf, "%.6f\\%.6f\\%.6f\\%.6f\\%.6f\\%.6f", s.row.x(), s.row.y(),
+                s.row.z(), s.col.x(), s.col.y(), s.col.z());
+  element(out, 0x0020, 0x0037, "DS", buf);
+  element(out, 0x0028, 0x0002, "US", us(1));
+  element(out, 0x0028, 0x0004, "CS", "MONOCHROME2");
+  element(out, 0x0028, 0x0010, "US", us(static_cast<std::uint16_t>(s.rows)));
+  element(out, 0x0028, 0x0011, "US", us(static_cast<std::uint16_t>(s.cols)));
+  std::snprintf(buf, sizeof buf, "%.6f\\%.6f", s.row_spacing, s.col_spacing);
+  element(out, 0x0028, 0x0030, "DS", buf);
+  element(out, 0x0028, 0x0100, "US", us(16));
+  element(out, 0x0028, 0x0101, "US", us(16));
+  element(out, 0x0028, 0x0102, "US", us(15));
+  element(out, 0x0028, 0x0103, "US", us(1));
+  std::snprintf(buf, sizeof buf, "%g", s.intercept);
+  element(out, 0x0028, 0x1052, "DS", buf);
+  std::snprintf(buf, sizeof buf, "%g", s.slope);
+  element(out, 0x0028, 0x1053, "DS", buf);
+  std::vector<std::int16_t> px;
+  for (int y = 0; y < s.rows; ++y)
+    for (int x = 0; x < s.cols; ++x) px.push_back(static_cast<std::int16_t>(stored(x, y)));
+  element(out, 0x7fe0, 0x0010, "OW", raw_bytes(px));
+  write_bytes(p, out);
+}
+
+/// A uniform axial series of n slices 2 mm apart; stored value = 100 * slice + 10 * y + x.
+void write_uniform_series(const fs::path& dir, int n, const std::string& uid = "1.2.3.4.5.1") {
+  fs::create_directories(dir);
+  for (int k = 0; k < n; ++k) {
+    SliceSpec s;
+    s.ipp = Eigen::Vector3d(-10, -20, 30 + 2.0 * k);
+    s.series_uid = uid;
+    s.instance = k + 1;
+    char name[32];
+    std::snprintf(name, sizeof name, "IM%03d.dcm", k);
+    write_dicom_slice(dir / name, s, [k](int x, int y) { return 100 * k + 10 * y + x; });
+  }
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// NIfTI
+
+TEST(VolumeIo, NiftiRoundTripKeepsObliqueGeometryAndValues) {
+  TempDir tmp;
+  Volume v;
+  v.source = "synthetic";
+  v.format = "phantom";
+  v.geom.dims = Eigen::Vector3i(7, 5, 4);
+  v.geom.spacing_mm = Eigen::Vector3d(0.8, 1.1, 2.5);
+  v.geom.origin_lps = Eigen::Vector3d(12.5, -30.25, 40.0);
+  v.geom.direction =
+      (Eigen::AngleAxisd(0.4, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix() *
+       Eigen::Vector3d(1, 1, -1).asDiagonal())  // an improper (left-handed) frame too
+          .eval();
+  v.data.resize(v.geom.n_voxels());
+  for (int k = 0; k < 4; ++k)
+    for (int j = 0; j < 5; ++j)
+      for (int i = 0; i < 7; ++i) v.at(i, j, k) = value_fn(i, j, k);
+
+  for (const char* name : {"rt.nii", "rt.nii.gz"}) {
+    caps::write_nifti(v, tmp / name);
+    const Volume r = caps::read_volume(tmp / name);
+    EXPECT_EQ(r.format, "NIfTI-1");
+    EXPECT_EQ(r.geom.dims, v.geom.dims);
+    EXPECT_LT((r.geom.spacing_mm - v.geom.spacing_mm).cwiseAbs().maxCoeff(), 1e-5) << name;
+    EXPECT_LT((r.geom.origin_lps - v.geom.origin_lps).cwiseAbs().maxCoeff(), 1e-5) << name;
+    EXPECT_LT((r.geom.direction - v.geom.direction).cwiseAbs().maxCoeff(), 1e-5) << name;
+    ASSERT_EQ(r.data.size(), v.data.size());
+    for (std::size_t n = 0; n < v.data.size(); ++n) ASSERT_FLOAT_EQ(r.data[n], v.data[n]);
+    // A voxel lands at the same LPS point.
+    const Eigen::Vector3d ijk(3, 2, 1);
+    EXPECT_LT((r.index_to_lps(ijk) - v.index_to_lps(ijk)).norm(), 1e-4);
+  }
+  EXPECT_FALSE(fs::exists(tmp / "rt.nii.gz.tmp"));
+}
+
+TEST(VolumeIo, NiftiWriteRejectsWrongExtension) {
+  TempDir tmp;
+  Volume v;
+  v.geom.dims = Eigen::Vector3i(1, 1, 1);
+  v.data = {1.0f};
+  expect_error<caps::InvalidInput>([&] { caps::write_nifti(v, tmp / "out.img"); }, "out.img");
+}
+
+TEST(VolumeIo, Ch2TemplateIsMrSizedAndInMniSpace) {
+  if (!fs::exists(kCh2)) GTEST_SKIP() << "mricron-data not installed";
+  const Volume v = caps::read_volume(kCh2);
+  EXPECT_EQ(v.geom.dims, Eigen::Vector3i(181, 217, 181));
+  EXPECT_LT((v.geom.spacing_mm - Eigen::Vector3d(1, 1, 1)).norm(), 1e-6);
+  EXPECT_NE(v.modality, Modality::CT);  // an MR template: not mistaken for CT
+  // sform is RAS with i towards +x(RAS) = right -> LPS -x.
+  EXPECT_NEAR(v.geom.direction(0, 0), -1.0, 1e-6);
+  EXPECT_NEAR(v.geom.direction(1, 1), -1.0, 1e-6);
+  EXPECT_NEAR(v.geom.direction(2, 2), 1.0, 1e-6);
+  EXPECT_LT((v.geom.origin_lps - Eigen::Vector3d(90, 126, -72)).cwiseAbs().maxCoeff(), 2.0);
+  float hi = 0;
+  for (float x : v.data) hi = std::max(hi, x);
+  EXPECT_GT(hi, 100.0f);
+}
+
+// ---------------------------------------------------------------------------------------------
+// NRRD
+
+TEST(VolumeIo, NrrdDetachedRawWithLpsDirections) {
+  TempDir tmp;
+  std::vector<std::int16_t> vals;
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 4; ++j)
+      for (int i = 0; i < 5; ++i) vals.push_back(static_cast<std::int16_t>(100 * k + 10 * j + i));
+  write_bytes(tmp / "img.raw", raw_bytes(vals));
+  write_bytes(tmp / "img.nhdr",
+              "NRRD0004\ntype: short\ndimension: 3\nsizes: 5 4 3\nspace: left-posterior-superior\n"
+              "space directions: (0,1.5,0) (-2,0,0) (0,0,3)\nspace origin: (1,2,3)\n"
+              "endian: little\nencoding: raw\ndata file: img.raw\n");
+  const Volume v = caps::read_volume(tmp / "img.nhdr");
+  EXPECT_EQ(v.format, "NRRD");
+  EXPECT_EQ(v.geom.dims, Eigen::Vector3i(5, 4, 3));
+  EXPECT_LT((v.geom.spacing_mm - Eigen::Vector3d(1.5, 2, 3)).norm(), 1e-9);
+  EXPECT_LT((v.geom.direction.col(0) - Eigen::Vector3d(0, 1, 0)).norm(), 1e-9);
+  EXPECT_LT((v.geom.direction.col(1) - Eigen::Vector3d(-1, 0, 0)).norm(), 1e-9);
+  EXPECT_LT((v.geom.origin_lps - Eigen::Vector3d(1, 2, 3)).norm(), 1e-9);
+  EXPECT_FLOAT_EQ(v.at(4, 3, 2), 234.0f);
+  EXPECT_FLOAT_EQ(v.at(1, 2, 0), 21.0f);
+  EXPECT_LT((v.index_to_lps({1, 1, 1}) - Eigen::Vector3d(-1, 3.5, 6)).norm(), 1e-9);
+}
+
+TEST(VolumeIo, NrrdRasSpaceIsFlippedToLps) {
+  TempDir tmp;
+  std::vector<float> vals(2 * 3 * 4);
+  for (std::size_t n = 0; n < vals.size(); ++n) vals[n] = static_cast<float>(n) * 0.5f;
+  write_bytes(tmp / "ras.nrrd",
+              "NRRD0004\ntype: float\ndimension: 3\nsizes: 2 3 4\n"
+              "space: right-anterior-superior\nspace directions: (1,0,0) (0,2,0) (0,0,3)\n"
+              "space origin: (10,20,30)\nendian: little\nencoding: raw\n\n" +
+                  raw_bytes(vals));
+  const Volume v = caps::read_volume(tmp / "ras.nrrd");
+  EXPECT_LT((v.geom.direction - Eigen::Matrix3d(Eigen::Vector3d(-1, -1, 1).asDiagonal())).norm(),
+            1e-12);
+  EXPECT_LT((v.geom.spacing_mm - Eigen::Vector3d(1, 2, 3)).norm(), 1e-12);
+  EXPECT_LT((v.geom.origin_lps - Eigen::Vector3d(-10, -20, 30)).norm(), 1e-12);
+  EXPECT_FLOAT_EQ(v.at(1, 2, 3), static_cast<float>(1 + 2 * 2 + 3 * 6) * 0.5f);
+}
+
+TEST(VolumeIo, NrrdGzipEncoding) {
+  TempDir tmp;
+  std::vector<std::uint16_t> vals(6 * 5 * 4);
+  for (std::size_t n = 0; n < vals.size(); ++n) vals[n] = static_cast<std::uint16_t>(n * 7);
+  write_bytes(tmp / "gz.nrrd",
+              "NRRD0004\ntype: ushort\ndimension: 3\nsizes: 6 5 4\nspacings: 0.5 0.6 0.7\n"
+              "endian: little\nencoding: gzip\n\n" +
+                  gzip_stored(raw_bytes(vals)));
+  const Volume v = caps::read_volume(tmp / "gz.nrrd");
+  EXPECT_EQ(v.geom.dims, Eigen::Vector3i(6, 5, 4));
+  EXPECT_LT((v.geom.spacing_mm - Eigen::Vector3d(0.5, 0.6, 0.7)).norm(), 1e-12);
+  EXPECT_FLOAT_EQ(v.at(5, 4, 3), static_cast<float>(119 * 7));
+  EXPECT_FALSE(v.notes.empty());  // "no space directions" is recorded
+}
+
+TEST(VolumeIo, HeadsqQuarterNhdr) {
+  const fs::path p = kData / "ct/vtk-headsq/quarter.nhdr";
+  if (!fs::exists(p)) GTEST_SKIP() << p;
+  const Volume v = caps::read_volume(p);
+  EXPECT_EQ(v.geom.dims, Eigen::Vector3i(64, 64, 93));
+  EXPECT_LT((v.geom.spacing_mm - Eigen::Vector3d(3.2, 3.2, 1.5)).norm(), 1e-9);
+  EXPECT_EQ(v.modality, Modality::Unknown);  // raw scanner values, not HU
+  float lo = 1e9f, hi = -1e9f;
+  for (float x : v.data) lo = std::min(lo, x), hi = std::max(hi, x);
+  EXPECT_GE(lo, 0.0f);
+  EXPECT_GT(hi, 1000.0f);
+  EXPECT_LT(v.at(0, 0, 46), 50.0f);       // air in the corner
+  EXPECT_GT(v.at(32, 32, 46), 50.0f);     // tissue in the middle
+  EXPECT_GE(v.notes.size(), 2u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// MetaImage
+
+TEST(VolumeIo, MhaLocalCompressedWithTransformMatrix) {
+  TempDir tmp;
+  std::vector<std::int16_t> vals;
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 4; ++j)
+      for (int i = 0; i < 5; ++i) vals.push_back(static_cast<std::int16_t>(-1000 + 100 * k + 10 * j + i));
+  const std::string z = zlib_stored(raw_bytes(vals));
+  // Axis i points to +y (LPS), axis j to -x, axis k to +z: ITK writes direction columns as
+  // consecutive triples.
+  write_bytes(tmp / "c.mha", "ObjectType = Image\nNDims = 3\nBinaryData = True\n"
+                             "BinaryDataByteOrderMSB = False\nCompressedData = True\n"
+                             "CompressedDataSize = " + std::to_string(z.size()) +
+                             "\nTransformMatrix = 0 1 0 -1 0 0 0 0 1\nOffset = -5 6.5 7\n"
+                             "CenterOfRotation = 0 0 0\nAnatomicalOrientation = RAI\n"
+                             "ElementSpacing = 0.5 0.25 2\nDimSize = 5 4 3\n"
+                             "ElementType = MET_SHORT\nElementDataFile = LOCAL\n" + z);
+  const Volume v = caps::read_volume(tmp / "c.mha");
+  EXPECT_EQ(v.format, "MetaImage");
+  EXPECT_LT((v.geom.direction.col(0) - Eigen::Vector3d(0, 1, 0)).norm(), 1e-12);
+  EXPECT_LT((v.geom.direction.col(1) - Eigen::Vector3d(-1, 0, 0)).norm(), 1e-12);
+  EXPECT_LT((v.geom.origin_lps - Eigen::Vector3d(-5, 6.5, 7)).norm(), 1e-12);
+  EXPECT_LT((v.geom.spacing_mm - Eigen::Vector3d(0.5, 0.25, 2)).norm(), 1e-12);
+  EXPECT_FLOAT_EQ(v.at(4, 3, 2), -1000.0f + 234.0f);
+  EXPECT_LT((v.index_to_lps({2, 0, 0}) - Eigen::Vector3d(-5, 7.5, 7)).norm(), 1e-12);
+}
+
+TEST(VolumeIo, MhdDetachedBigEndianFloat) {
+  TempDir tmp;
+  std::vector<float> vals(3 * 2 * 2);
+  for (std::size_t n = 0; n < vals.size(); ++n) vals[n] = 0.5f + static_cast<float>(n);
+  write_bytes(tmp / "d.raw", raw_bytes(vals, true));
+  write_bytes(tmp / "d.mhd", "ObjectType = Image\nNDims = 3\nDimSize = 3 2 2\n"
+                             "ElementType = MET_FLOAT\nElementSpacing = 1 1 4\n"
+                             "Origin = 1 2 3\nBinaryDataByteOrderMSB = True\n"
+                             "Modality = MET_MOD_CT\nElementDataFile = d.raw\n");
+  const Volume v = caps::read_volume(tmp / "d.mhd");
+  EXPECT_EQ(v.modality, Modality::CT);
+  EXPECT_FLOAT_EQ(v.at(2, 1, 1), 11.5f);
+  EXPECT_LT((v.geom.origin_lps - Eigen::Vector3d(1, 2, 3)).norm(), 1e-12);
+  EXPECT_TRUE(v.geom.direction.isIdentity());
+}
+
+// ---------------------------------------------------------------------------------------------
+// InVesalius
+
+TEST(VolumeIo, CraniumInv3IsHuAndFacesAnterior) {
+  if (!fs::exists(kCranium)) GTEST_SKIP() << "invesalius-examples not installed";
+  const Volume v = caps::read_volume(kCranium);
+  EXPECT_EQ(v.format, "InVesalius");
+  EXPECT_EQ(v.modality, Modality::CT);
+  EXPECT_EQ(v.geom.dims, Eigen::Vector3i(256, 256, 108));
+  EXPECT_NEAR(v.geom.spacing_mm[0], 0.957, 1e-3);
+  EXPECT_NEAR(v.geom.spacing_mm[2], 1.5, 1e-9);
+  float lo = 1e9f, hi = -1e9f;
+  for (float x : v.data) lo = std::min(lo, x), hi = std::max(hi, x);
+  EXPECT_EQ(lo, -1024.0f);
+  EXPECT_GT(hi, 1500.0f);  // bone / teeth in HU
+  // The most anterior skin voxel (smallest LPS y) is the nose: low on the head and near the
+  // left-right middle; the head's top (largest z with skin) is far above it.
+  const auto& d = v.geom.dims;
+  Eigen::Vector3d anterior(0, 1e9, 0), top(0, 0, -1e9), centre = Eigen::Vector3d::Zero();
+  std::size_t n_skin = 0;
+  for (int k = 0; k < d[2]; ++k)
+    for (int j = 1; j < d[1]; ++j)  // row 0 holds the table edge
+      for (int i = 0; i < d[0]; ++i)
+        if (v.at(i, j, k) > -400.0f) {
+          const Eigen::Vector3d p = v.index_to_lps(Eigen::Vector3d(i, j, k));
+          if (p.y() < anterior.y()) anterior = p;
+          if (p.z() > top.z()) top = p;
+          centre += p;
+          ++n_skin;
+        }
+  centre /= static_cast<double>(n_skin);
+  EXPECT_LT(anterior.y(), centre.y() - 80.0);                 // the face is far forward
+  EXPECT_NEAR(anterior.x(), centre.x(), 25.0);                // ... and on the midline
+  EXPECT_LT(anterior.z(), centre.z());                        // nose below the head's centre
+  EXPECT_GT(top.z(), centre.z() + 50.0);                      // vertex at high z
+  // Brain tissue near the centre of the head is soft tissue in HU.
+  const Eigen::Vector3d c = v.lps_to_index(centre + Eigen::Vector3d(0, 0, 20));
+  const float brain = v.at(static_cast<int>(c.x()), static_cast<int>(c.y()), static_cast<int>(c.z()));
+  EXPECT_GT(brain, -100.0f);
+  EXPECT_LT(brain, 100.0f);
+}
+
+// ---------------------------------------------------------------------------------------------
+// DICOM
+
+TEST(VolumeIo, DicomUniformSeriesAppliesRescale) {
+  TempDir tmp;
+  write_uniform_series(tmp / "ct", 5);
+  const Volume v = caps::read_volume(tmp / "ct");
+  EXPECT_EQ(v.format, "DICOM");
+  EXPECT_EQ(v.modality, Modality::CT);
+  EXPECT_EQ(v.geom.dims, Eigen::Vector3i(8, 6, 5));
+  EXPECT_LT((v.geom.spacing_mm - Eigen::Vector3d(0.75, 0.5, 2.0)).norm(), 1e-6);
+  EXPECT_LT((v.geom.origin_lps - Eigen::Vector3d(-10, -20, 30)).norm(), 1e-6);
+  EXPECT_TRUE(v.geom.direction.isIdentity(1e-9));
+  EXPECT_FLOAT_EQ(v.at(3, 2, 4), 400 + 20 + 3 - 1024.0f);
+  // One file of the series reads the whole series.
+  const Volume one = caps::read_volume(tmp / "ct/IM002.dcm");
+  EXPECT_EQ(one.geom.dims, v.geom.dims);
+}
+
+TEST(VolumeIo, DicomTiltedUnevenSeriesIsResampledExactlyForLinearFields) {
+  // A sheared stack (gantry tilt 20 deg about the row axis) with gaps 2, 2, 3, 3 mm along the
+  // normal. The stored values are an affine function of the LPS position, which bilinear +
+  // linear interpolation reproduces exactly, so every output voxel can be checked.
+  TempDir tmp;
+  fs::create_directories(tmp / "tilt");
+  const double tilt = caps::deg_to_rad(20.0);
+  const Eigen::Vector3d row(1, 0, 0), col(0, std::cos(tilt), -std::sin(tilt));
+  const Eigen::Vector3d normal = row.cross(col);
+  auto field = [](const Eigen::Vector3d& p) { return 2.0 * p.x() - 3.0 * p.y() + 5.0 * p.z(); };
+  const double positions[] = {0, 2, 4, 7, 10};
+  const int rows = 20, cols = 10;
+  for (int k = 0; k < 5; ++k) {
+    SliceSpec s;
+    s.rows = rows;
+    s.cols = cols;
+    s.row = row;
+    s.col = col;
+    s.intercept = 0;
+    s.slope = 0.5;
+    s.instance = k + 1;
+    // Slices move along z (the table), not along the normal.
+    s.ipp = Eigen::Vector3d(-5, -8, 0) + Eigen::Vector3d(0, 0, positions[k] / normal.z());
+    write_dicom_slice(tmp / ("tilt/s" + std::to_string(k) + ".dcm"), s, [&](int x, int y) {
+      const Eigen::Vector3d p = s.ipp + x * s.col_spacing * row + y * s.row_spacing * col;
+      return static_cast<int>(std::lround(field(p) / s.slope));
+    });
+  }
+  const Volume v = caps::read_volume(tmp / "tilt");
+  EXPECT_NEAR(v.geom.spacing_mm[2], 2.0, 1e-6);
+  EXPECT_EQ(v.geom.dims[2], 6);  // 0..10 mm every 2 mm
+  EXPECT_LT((v.geom.direction.col(2) - normal).norm(), 1e-6);
+  EXPECT_GT(v.geom.dims[1], rows);  // grown to keep every slice's field of view
+  ASSERT_FALSE(v.notes.empty());
+  bool noted = false;
+  for (const auto& n : v.notes) noted |= n.find("gantry tilt 20.0 deg") != std::string::npos;
+  EXPECT_TRUE(noted);
+  const auto& d = v.geom.dims;
+  int checked = 0;
+  for (int k = 0; k < d[2]; ++k)
+    for (int j = 0; j < d[1]; ++j)
+      for (int i = 0; i < d[0]; ++i) {
+        const Eigen::Vector3d p = v.index_to_lps(Eigen::Vector3d(i, j, k));
+        // Only voxels inside both bracketing slices' fields of view are exact.
+        const double along_col = (p - Eigen::Vector3d(-5, -8, 0)).dot(col);
+        const double w = p.dot(normal) - Eigen::Vector3d(-5, -8, 0).dot(normal);
+        const double shift = w / normal.z() * Eigen::Vector3d(0, 0, 1).dot(col);
+        const double y0 = along_col - shift;  // row coordinate (mm) in the local slice
+        if (y0 < 1.5 || y0 > (rows - 1) * 0.5 - 1.5) continue;
+        ASSERT_NEAR(v.at(i, j, k), field(p), 0.3) << i << " " << j << " " << k;
+        ++checked;
+      }
+  EXPECT_GT(checked, 200);
+}
+
+TEST(VolumeIo, DicomMissingMiddleSliceIsAnError) {
+  TempDir tmp;
+  write_uniform_series(tmp / "gap", 7);
+  fs::remove(tmp / "gap/IM003.dcm");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "gap"); }, "gap",
+                                   "IM002.dcm and IM004.dcm");
+  ReadOptions allow;
+  allow.allow_missing_slices = true;
+  const Volume v = caps::read_volume(tmp / "gap", allow);
+  EXPECT_EQ(v.geom.dims[2], 7);
+  EXPECT_NEAR(v.geom.spacing_mm[2], 2.0, 1e-6);
+  EXPECT_FLOAT_EQ(v.at(0, 0, 3), 300 - 1024.0f);  // interpolated halfway between 200 and 400
+}
+
+TEST(VolumeIo, DicomPicksLargestSeriesAndRejectsUnknownUid) {
+  TempDir tmp;
+  write_uniform_series(tmp / "two", 4, "1.2.3.4.5.1");
+  // Second, smaller series in the same folder, under other file names.
+  for (int k = 0; k < 2; ++k) {
+    SliceSpec s;
+    s.ipp = Eigen::Vector3d(0, 0, 5.0 * k);
+    s.series_uid = "1.2.3.4.5.2";
+    s.instance = k + 1;
+    write_dicom_slice(tmp / ("two/B" + std::to_string(k) + ".dcm"), s, [](int, int) { return 7; });
+  }
+  write_bytes(tmp / "two/README.txt", "not dicom\n");
+  const auto series = caps::list_dicom_series(tmp / "two");
+  ASSERT_EQ(series.size(), 2u);
+  EXPECT_EQ(series[0].uid, "1.2.3.4.5.1");
+  EXPECT_EQ(series[0].n_files, 4);
+  const Volume big = caps::read_volume(tmp / "two");
+  EXPECT_EQ(big.geom.dims[2], 4);
+  ReadOptions pick;
+  pick.series_uid = "1.2.3.4.5.2";
+  const Volume small = caps::read_volume(tmp / "two", pick);
+  EXPECT_EQ(small.geom.dims[2], 2);
+  EXPECT_FLOAT_EQ(small.at(0, 0, 0), 7 - 1024.0f);
+  pick.series_uid = "9.9.9";
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "two", pick); }, "9.9.9",
+                                   "1.2.3.4.5.2");
+}
+
+TEST(VolumeIo, GeHeadTiltIsResampledToHu) {
+  const fs::path p = kData / "ct/ge-head-tilt";
+  if (!fs::exists(p)) GTEST_SKIP() << p;
+  const Volume v = caps::read_volume(p);
+  EXPECT_EQ(v.modality, Modality::CT);
+  EXPECT_EQ(v.geom.dims[0], 512);
+  EXPECT_GE(v.geom.dims[1], 512);
+  // Gaps are 4.0 mm (x13), 1.08 mm (one junction) and 7.0 mm (x13): smallest gap 1.08 mm.
+  EXPECT_NEAR(v.geom.spacing_mm[2], 1.081, 0.01);
+  EXPECT_NEAR(v.geom.spacing_mm[0], 0.488, 1e-3);
+  EXPECT_NEAR(v.geom.dims[2] * v.geom.spacing_mm[2], 145.0, 3.0);
+  // The normal of an 18.5 deg tilted gantry.
+  EXPECT_NEAR(v.geom.direction(2, 2), std::cos(caps::deg_to_rad(18.5)), 1e-3);
+  bool noted = false;
+  for (const auto& n : v.notes) noted |= n.find("gantry tilt 18.5 deg") != std::string::npos;
+  EXPECT_TRUE(noted);
+  // Air in front of the face and brain in the middle of the head, in HU.
+  const auto& d = v.geom.dims;
+  const float air = v.at(d[0] / 2, 40, d[2] / 2);
+  EXPECT_LT(air, -900.0f);
+  EXPECT_GT(air, -1100.0f);
+  const Eigen::Vector3d mid = v.lps_to_index(Eigen::Vector3d(0, 0, 60));
+  const float brain = v.at(static_cast<int>(mid.x()), static_cast<int>(mid.y()),
+                           static_cast<int>(mid.z()));
+  EXPECT_GT(brain, 10.0f);
+  EXPECT_LT(brain, 60.0f);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bad inputs
+
+TEST(VolumeIo, BadInputsGiveTheRightErrorNamingTheFile) {
+  TempDir tmp;
+  // A valid .nii/.nii.gz to damage.
+  Volume v;
+  v.geom.dims = Eigen::Vector3i(30, 30, 30);
+  v.data.assign(v.geom.n_voxels(), 1.0f);
+  for (std::size_t n = 0; n < v.data.size(); ++n) v.data[n] = static_cast<float>(n % 977);
+  caps::write_nifti(v, tmp / "ok.nii.gz");
+  caps::write_nifti(v, tmp / "ok.nii");
+  const std::string gz = read_bytes(tmp / "ok.nii.gz");
+  write_bytes(tmp / "cut.nii.gz", gz.substr(0, gz.size() / 2));
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "cut.nii.gz"); }, "cut.nii.gz");
+  const std::string nii = read_bytes(tmp / "ok.nii");
+  write_bytes(tmp / "cut.nii", nii.substr(0, nii.size() - 100));
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "cut.nii"); }, "cut.nii",
+                              "truncated");
+
+  write_bytes(tmp / "x.nii", "this is a text file, not an image\n");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "x.nii"); }, "x.nii");
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "missing.nrrd"); }, "missing.nrrd");
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "nothing_here"); }, "nothing_here");
+  write_bytes(tmp / "img.xyz", "x");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "img.xyz"); }, "img.xyz",
+                                   ".nii.gz");
+
+  // NRRD: truncated detached raw data, zero and absurd sizes.
+  write_bytes(tmp / "short.raw", std::string(100, '\0'));
+  write_bytes(tmp / "short.nhdr", "NRRD0004\ntype: short\ndimension: 3\nsizes: 10 10 10\n"
+                                  "encoding: raw\nendian: little\ndata file: short.raw\n");
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "short.nhdr"); }, "short.nhdr");
+  write_bytes(tmp / "zero.nrrd", "NRRD0004\ntype: short\ndimension: 3\nsizes: 10 0 10\n"
+                                 "encoding: raw\nendian: little\n\n");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "zero.nrrd"); }, "zero.nrrd");
+  write_bytes(tmp / "huge.nrrd", "NRRD0004\ntype: short\ndimension: 3\n"
+                                 "sizes: 100000 100000 100000\nencoding: raw\nendian: little\n\n");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "huge.nrrd"); }, "huge.nrrd",
+                                   "sizes");
+
+  // MetaImage: header/data size mismatch, zero dims, absurd dims, corrupt compressed data.
+  const std::string mha_head = "ObjectType = Image\nNDims = 3\nElementType = MET_SHORT\n";
+  write_bytes(tmp / "mismatch.mha", mha_head + "DimSize = 4 4 4\nElementDataFile = LOCAL\n" +
+                                        std::string(100, '\0'));
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "mismatch.mha"); }, "mismatch.mha",
+                              "128");
+  write_bytes(tmp / "big.raw", std::string(200, '\0'));
+  write_bytes(tmp / "mismatch.mhd", mha_head + "DimSize = 4 4 4\nElementDataFile = big.raw\n");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "mismatch.mhd"); },
+                                   "mismatch.mhd", "200");
+  write_bytes(tmp / "zero.mha", mha_head + "DimSize = 4 0 4\nElementDataFile = LOCAL\n");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "zero.mha"); }, "zero.mha",
+                                   "DimSize");
+  write_bytes(tmp / "huge.mha",
+              mha_head + "DimSize = 100000 100000 100000\nElementDataFile = LOCAL\n");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "huge.mha"); }, "huge.mha",
+                                   "DimSize");
+  write_bytes(tmp / "bad.mha", mha_head + "DimSize = 4 4 4\nCompressedData = True\n"
+                                          "ElementDataFile = LOCAL\n" + std::string(50, 'z'));
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "bad.mha"); }, "bad.mha");
+  write_bytes(tmp / "nohdr.mhd", "hello = world\n");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "nohdr.mhd"); }, "nohdr.mhd");
+
+  // InVesalius: not a tar.
+  write_bytes(tmp / "p.inv3", "definitely not a gzipped tar archive\n");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "p.inv3"); }, "p.inv3");
+  write_bytes(tmp / "gz.inv3", gzip_stored(std::string(2000, 'a')));
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "gz.inv3"); }, "gz.inv3");
+
+  // DICOM: an empty folder, a folder of non-DICOM files, a non-DICOM .dcm file.
+  fs::create_directories(tmp / "empty");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "empty"); }, "empty");
+  fs::create_directories(tmp / "texts");
+  write_bytes(tmp / "texts/a.txt", "hello\n");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "texts"); }, "texts");
+  write_bytes(tmp / "fake.dcm", std::string(300, 'q'));
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "fake.dcm"); }, "fake.dcm");
+  // A DICOM slice whose pixel data were cut short.
+  write_uniform_series(tmp / "trunc", 3);
+  const std::string dcm = read_bytes(tmp / "trunc/IM001.dcm");
+  write_bytes(tmp / "trunc/IM001.dcm", dcm.substr(0, dcm.size() - 40));
+  try {
+    caps::read_volume(tmp / "trunc");
+    ADD_FAILURE() << "truncated DICOM slice accepted";
+  } catch (const caps::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("trunc"), std::string::npos) << e.what();
+  }
+}

@@ -1,0 +1,39 @@
+#pragma once
+/// @brief Reading and writing triangle meshes as PLY (Stanford polygon files).
+///
+/// Written files are binary little-endian with the standard property names (x y z, red green blue,
+/// vertex_indices), which ParaView, 3D Slicer, MeshLab and Blender open. Coordinates are LPS mm;
+/// a header comment says so. Note that 3D Slicer assumes LPS for PLY unless told otherwise.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <filesystem>
+
+#include "caps/core/mesh.hpp"
+
+namespace caps {
+
+/// Writes a mesh as binary little-endian PLY, atomically (temporary file, then rename).
+/// Header: "comment caps: units mm, frame LPS"; vertex x y z as float, face list uchar int.
+/// @param mesh    V #V×3 (LPS, mm), F #F×3
+/// @param path    output file; its directory must exist
+/// @param colors  optional #V×3 per-vertex RGB (written as uchar red green blue); not owned
+/// Throws InvalidInput for bad indices or non-finite vertices, IoError if the file cannot be
+/// written.
+void write_ply(const TriMesh& mesh, const std::filesystem::path& path,
+               const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 3>* colors);
+
+/// Writes a mesh as binary little-endian PLY without colours; see the overload above.
+void write_ply(const TriMesh& mesh, const std::filesystem::path& path);
+
+/// Reads a PLY file: ascii, binary_little_endian or binary_big_endian; vertex x y z of any
+/// numeric type; faces as a vertex_indices (or vertex_index) list, polygons split into fans of
+/// triangles. Other elements and properties are skipped.
+/// @param path  the file
+/// @return      V #V×3 as stored (caps writes LPS mm), F #F×3
+/// Throws IoError if the file is missing, unreadable or truncated; InvalidInput (naming the file)
+/// for a malformed header, no vertex coordinates, no faces, non-finite coordinates, a face with
+/// fewer than 3 vertices or an index out of range.
+TriMesh read_ply(const std::filesystem::path& path);
+
+}  // namespace caps

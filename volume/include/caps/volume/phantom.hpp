@@ -1,0 +1,66 @@
+#pragma once
+/// @brief An analytic head CT phantom whose every surface is known in closed form.
+///
+/// The head is built around a vertical axis through `axis_point()` (LPS mm). In cylindrical
+/// coordinates (theta, z, r) about that axis (theta = 0 anterior, increasing towards the patient's
+/// left, z superior), it has
+///   skin        r < R_skin(theta, z): an ellipsoid-like head, plus a nose (anterior) and a marker
+///               bump on the patient's left, above the centre (so left/right, front/back and
+///               up/down can all be told apart);
+///   skull       R_bone - kSkullMm < r < R_bone, with R_bone = R_head - thickness(theta, z): the
+///               soft-tissue thickness varies smoothly and is known exactly;
+///   brain       inside the skull, with an enclosed air cavity (a "sinus");
+///   head holder a plastic arc behind the head on a 1.5 mm foam pad, joined to it by a thin strap.
+/// Voxels carry partial-volume values (a linear ramp one voxel wide across each interface), so
+/// sub-voxel measurements can be checked against the analytic surfaces.
+
+#include <Eigen/Core>
+
+#include "caps/volume/volume.hpp"
+
+namespace caps {
+
+struct PhantomOptions {
+  Eigen::Vector3i dims{256, 256, 240};     ///< voxels along L, P, S
+  Eigen::Vector3d spacing_mm{1.0, 1.0, 1.0};
+  bool head_holder = true;                 ///< include the plastic head-holder arc
+};
+
+/// Analytic description of the phantom head (all lengths in mm, angles in radians).
+class HeadPhantom {
+ public:
+  static constexpr double kAirHu = -1000.0;
+  static constexpr double kTissueHu = 40.0;
+  static constexpr double kBoneHu = 1200.0;
+  static constexpr double kBrainHu = 35.0;
+  static constexpr double kHolderHu = 100.0;
+  static constexpr double kSkullMm = 6.0;
+
+  /// A point on the head's axis at z = 0 (LPS mm). The axis is parallel to LPS +z.
+  Eigen::Vector3d axis_point() const { return {2.0, 6.0, 0.0}; }
+  /// Unit vector of the ray at theta: (sin theta, -cos theta, 0) in LPS.
+  static Eigen::Vector3d ray_direction(double theta);
+
+  /// Skin radius without the nose and marker bumps.
+  double head_radius(double theta, double z) const;
+  /// Skin radius (outer envelope) including the nose and the marker.
+  double skin_radius(double theta, double z) const;
+  /// Soft-tissue thickness of the head without bumps, radially: 2.5 .. 8.5 mm.
+  double thickness(double theta, double z) const;
+  /// Outer bone radius: head_radius - thickness (may be <= 0 near the vertex: no bone there).
+  double bone_radius(double theta, double z) const;
+
+  /// Hounsfield value at an LPS point for a voxel of the given size (partial volume).
+  double hu_at(const Eigen::Vector3d& p, const Eigen::Vector3d& voxel_mm,
+               bool head_holder = true) const;
+
+  /// theta and z of the nose tip and of the marker centre.
+  static constexpr double kNoseZ = -20.0;
+  static constexpr double kMarkerTheta = 1.5707963267948966;  // patient's left
+  static constexpr double kMarkerZ = 50.0;
+};
+
+/// Samples the phantom on a grid centred on the head, identity direction, as a CT in HU.
+Volume make_phantom(const PhantomOptions& options = {});
+
+}  // namespace caps

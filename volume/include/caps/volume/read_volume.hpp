@@ -1,0 +1,41 @@
+#pragma once
+/// @brief Reading CT and MR volumes from DICOM, NIfTI, NRRD, MetaImage and InVesalius files.
+///
+/// Every reader lands in one Volume in patient LPS mm (see volume.hpp). CT values are returned
+/// in Hounsfield units (rescale slope/intercept applied).
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "caps/volume/volume.hpp"
+
+namespace caps {
+
+struct ReadOptions {
+  std::string series_uid;  ///< DICOM: the SeriesInstanceUID to read; empty = the largest series
+  /// DICOM: interpolate across slices that look missing instead of throwing InvalidInput.
+  bool allow_missing_slices = false;
+};
+
+/// One DICOM series found in a folder.
+struct DicomSeriesInfo {
+  std::string uid;
+  std::string description;
+  std::string modality;
+  int n_files = 0;
+};
+
+/// Reads a volume. `input` is a DICOM folder (or one DICOM file), .nii/.nii.gz, .nrrd/.nhdr,
+/// .mha/.mhd or .inv3. Throws IoError (missing, unreadable, truncated) or InvalidInput (not an
+/// image, inconsistent header, missing slices) with the file named and what to do.
+Volume read_volume(const std::filesystem::path& input, const ReadOptions& options = {});
+
+/// Lists the DICOM series in a folder, largest first.
+std::vector<DicomSeriesInfo> list_dicom_series(const std::filesystem::path& folder);
+
+/// Writes a volume as NIfTI-1 (.nii, or gzip-compressed .nii.gz), float32, with qform and sform
+/// set from the LPS geometry (NIfTI stores RAS; the conversion is done here).
+void write_nifti(const Volume& v, const std::filesystem::path& path);
+
+}  // namespace caps

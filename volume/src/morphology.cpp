@@ -1,0 +1,248 @@
+#include "caps/volume/morphology.hpp"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <numeric>
+
+namespace caps {
+namespace {
+
+// One line of the lower-envelope algorithm (Felzenszwalb & Huttenlocher 2012, Algorithm 1),
+// with spacing h: d(q) = min_p f(p) + h^2 (q - p)^2. Also carries the argmin's feature index.
+struct LineBuffers {
+  std::vector<float> f, d;
+  std::vector<std::int64_t> feat_in, feat_out;
+  std::vector<int> v;
+  std::vector<double> z;
+  void resize(int n) {
+    f.resize(n); d.resize(n); feat_in.resize(n); feat_out.resize(n);
+    v.resize(n); z.resize(n + 1);
+  }
+};
+
+void envelope_1d(LineBuffers& b, int n, double h, bool with_features) {
+  const double h2 = h * h;
+  auto intersect = [&](int q, int p) {
+    return ((b.f[q] + h2 * double(q) * q) - (b.f[p] + h2 * double(p) * p)) / (2.0 * h2 * (q - p));
+  };
+  int k = -1;
+  for (int q = 0; q < n; ++q) {
+    if (b.f[q] >= kFar) continue;  // not a site: no parabola
+    if (k < 0) {
+      k = 0; b.v[0] = q; b.z[0] = -1e300; b.z[1] = 1e300;
+      continue;
+    }
+    double s = intersect(q, b.v[k]);
+    while (s <= b.z[k]) s = intersect(q, b.v[--k]);  // z[0] = -inf ends the loop
+    ++k;
+    b.v[k] = q; b.z[k] = s; b.z[k + 1] = 1e300;
+  }
+  if (k < 0) {
+    for (int q = 0; q < n; ++q) { b.d[q] = kFar; if (with_features) b.feat_out[q] = -1; }
+    return;
+  }
+  int j = 0;
+  for (int q = 0; q < n; ++q) {
+    while (b.z[j + 1] < q) ++j;
+    const int p = b.v[j];
+    b.d[q] = static_cast<float>(h2 * double(q - p) * (q - p) + b.f[p]);
+    if (with_features) b.feat_out[q] = b.feat_in[p];
+  }
+}
+
+// Runs the 1-D transform along `axis` for every line of the grid, in place.
+void transform_axis(const VolumeGeometry& g, int axis, std::vector<float>& dist,
+                    std::vector<std::int64_t>* feat) {
+  const int n = g.dims[axis];
+  const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+  const std::int64_t stride[3] = {1, g.dims[0], std::int64_t(g.dims[0]) * g.dims[1]};
+  const double h = g.spacing_mm[axis];
+  tbb::parallel_for(tbb::blocked_range<int>(0, g.dims[a2]), [&](const tbb::blocked_range<int>& r) {
+    LineBuffers b;
+    b.resize(n);
+    for (int u2 = r.begin(); u2 < r.end(); ++u2)
+      for (int u1 = 0; u1 < g.dims[a1]; ++u1) {
+        const std::int64_t base = u1 * stride[a1] + u2 * stride[a2];
+        for (int q = 0; q < n; ++q) {
+          b.f[q] = dist[base + q * stride[axis]];
+          if (feat) b.feat_in[q] = (*feat)[base + q * stride[axis]];
+        }
+        envelope_1d(b, n, h, feat != nullptr);
+        for (int q = 0; q < n; ++q) {
+          dist[base + q * stride[axis]] = b.d[q];
+          if (feat) (*feat)[base + q * stride[axis]] = b.feat_out[q];
+        }
+      }
+  });
+}
+
+Mask same_grid(const Mask& m) {
+  Mask out;
+  out.geom = m.geom;
+  out.data.assign(m.data.size(), 0);
+  return out;
+}
+
+}  // namespace
+
+std::vector<float> squared_distance_mm2(const Mask& sites, std::vector<std::int64_t>* nearest) {
+  const std::size_t n = sites.data.size();
+  std::vector<float> dist(n);
+  for (std::size_t i = 0; i < n; ++i) dist[i] = sites.data[i] ? 0.0f : kFar;
+  if (nearest) {
+    nearest->resize(n);
+    for (std::size_t i = 0; i < n; ++i) (*nearest)[i] = sites.data[i] ? std::int64_t(i) : -1;
+  }
+  for (int axis = 0; axis < 3; ++axis) transform_axis(sites.geom, axis, dist, nearest);
+  return dist;
+}
+
+Mask erode(const Mask& m, double radius_mm) {
+  Mask background = same_grid(m);
+  for (std::size_t i = 0; i < m.data.size(); ++i) background.data[i] = !m.data[i];
+  const auto d2 = squared_distance_mm2(background);
+  Mask out = same_grid(m);
+  const float r2 = static_cast<float>(radius_mm * radius_mm);
+  for (std::size_t i = 0; i < m.data.size(); ++i) out.data[i] = m.data[i] && d2[i] > r2;
+  return out;
+}
+
+Mask dilate(const Mask& m, double radius_mm) {
+  const auto d2 = squared_distance_mm2(m);
+  Mask out = same_grid(m);
+  const float r2 = static_cast<float>(radius_mm * radius_mm);
+  for (std::size_t i = 0; i < m.data.size(); ++i) out.data[i] = d2[i] <= r2;
+  return out;
+}
+
+std::vector<std::int32_t> label_components(const Mask& m, std::vector<std::int64_t>& sizes) {
+  const auto& g = m.geom;
+  const std::size_t n = m.data.size();
+  // Union-find over foreground voxels, linking each to its -i, -j, -k neighbours.
+  std::vector<std::int64_t> parent(n, -1);
+  auto find = [&](std::int64_t x) {
+    while (parent[x] != x) {
+      parent[x] = parent[parent[x]];
+      x = parent[x];
+    }
+    return x;
+  };
+  auto unite = [&](std::int64_t a, std::int64_t b) {
+    a = find(a); b = find(b);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);
+  };
+  const std::int64_t sj = g.dims[0], sk = std::int64_t(g.dims[0]) * g.dims[1];
+  for (int k = 0; k < g.dims[2]; ++k)
+    for (int j = 0; j < g.dims[1]; ++j) {
+      const std::int64_t row = k * sk + j * sj;
+      for (int i = 0; i < g.dims[0]; ++i) {
+        const std::int64_t x = row + i;
+        if (!m.data[x]) continue;
+        parent[x] = x;
+        if (i > 0 && m.data[x - 1]) unite(x, x - 1);
+        if (j > 0 && m.data[x - sj]) unite(x, x - sj);
+        if (k > 0 && m.data[x - sk]) unite(x, x - sk);
+      }
+    }
+  std::vector<std::int64_t> count(n, 0);
+  std::vector<std::int64_t> roots;
+  for (std::size_t x = 0; x < n; ++x)
+    if (m.data[x]) {
+      const auto r = find(std::int64_t(x));
+      if (count[r]++ == 0) roots.push_back(r);
+    }
+  std::sort(roots.begin(), roots.end(), [&](auto a, auto b) {
+    return count[a] != count[b] ? count[a] > count[b] : a < b;
+  });
+  std::vector<std::int32_t> label_of_root(n, 0);
+  sizes.assign(roots.size() + 1, 0);
+  for (std::size_t l = 0; l < roots.size(); ++l) {
+    label_of_root[roots[l]] = static_cast<std::int32_t>(l + 1);
+    sizes[l + 1] = count[roots[l]];
+  }
+  std::vector<std::int32_t> labels(n, 0);
+  for (std::size_t x = 0; x < n; ++x)
+    if (m.data[x]) labels[x] = label_of_root[find(std::int64_t(x))];
+  return labels;
+}
+
+namespace {
+
+// Flood fill of background from the seeds; returns the reached set.
+void flood_background(const Mask& m, std::vector<std::uint8_t>& reached,
+                      std::vector<std::int64_t>& stack, int ni, int nj, int nk,
+                      std::int64_t base, bool slices_only) {
+  const std::int64_t sj = ni, sk = std::int64_t(ni) * nj;
+  while (!stack.empty()) {
+    const std::int64_t x = stack.back();
+    stack.pop_back();
+    const std::int64_t local = x - base;
+    const int k = static_cast<int>(local / sk);
+    const int j = static_cast<int>((local % sk) / sj);
+    const int i = static_cast<int>(local % sj);
+    auto push = [&](std::int64_t y) {
+      if (!m.data[y] && !reached[y]) { reached[y] = 1; stack.push_back(y); }
+    };
+    if (i > 0) push(x - 1);
+    if (i + 1 < ni) push(x + 1);
+    if (j > 0) push(x - sj);
+    if (j + 1 < nj) push(x + sj);
+    if (!slices_only) {
+      if (k > 0) push(x - sk);
+      if (k + 1 < nk) push(x + sk);
+    }
+  }
+}
+
+}  // namespace
+
+void fill_enclosed_3d(Mask& m) {
+  const auto& d = m.geom.dims;
+  std::vector<std::uint8_t> reached(m.data.size(), 0);
+  std::vector<std::int64_t> stack;
+  for (int k = 0; k < d[2]; ++k)
+    for (int j = 0; j < d[1]; ++j)
+      for (int i = 0; i < d[0]; ++i) {
+        const bool border = i == 0 || j == 0 || k == 0 || i == d[0] - 1 || j == d[1] - 1 ||
+                            k == d[2] - 1;
+        if (!border) continue;
+        const std::int64_t x = m.geom.linear(i, j, k);
+        if (!m.data[x] && !reached[x]) { reached[x] = 1; stack.push_back(x); }
+      }
+  flood_background(m, reached, stack, d[0], d[1], d[2], 0, false);
+  for (std::size_t x = 0; x < m.data.size(); ++x)
+    if (!m.data[x] && !reached[x]) m.data[x] = 1;
+}
+
+void fill_enclosed_slices(Mask& m, int axis) {
+  const auto& d = m.geom.dims;
+  const int a1 = axis == 0 ? 1 : 0, a2 = axis == 2 ? 1 : 2;  // in-plane axes, a1 < a2
+  const std::int64_t stride[3] = {1, d[0], std::int64_t(d[0]) * d[1]};
+  const int n1 = d[a1], n2 = d[a2];
+  tbb::parallel_for(0, d[axis], [&](int s) {
+    // A slice-local copy, so threads share no buffers.
+    Mask slice;
+    slice.geom.dims = {n1, n2, 1};
+    slice.data.resize(std::size_t(n1) * n2);
+    auto global = [&](int u, int v) { return s * stride[axis] + u * stride[a1] + v * stride[a2]; };
+    for (int v = 0; v < n2; ++v)
+      for (int u = 0; u < n1; ++u) slice.data[std::size_t(v) * n1 + u] = m.data[global(u, v)];
+    std::vector<std::uint8_t> seen(slice.data.size(), 0);
+    std::vector<std::int64_t> stack;
+    for (int v = 0; v < n2; ++v)
+      for (int u = 0; u < n1; ++u) {
+        if (!(u == 0 || v == 0 || u == n1 - 1 || v == n2 - 1)) continue;
+        const std::int64_t x = std::int64_t(v) * n1 + u;
+        if (!slice.data[x] && !seen[x]) { seen[x] = 1; stack.push_back(x); }
+      }
+    flood_background(slice, seen, stack, n1, n2, 1, 0, true);
+    for (int v = 0; v < n2; ++v)
+      for (int u = 0; u < n1; ++u) {
+        const std::int64_t x = std::int64_t(v) * n1 + u;
+        if (!slice.data[x] && !seen[x]) m.data[global(u, v)] = 1;
+      }
+  });
+}
+
+}  // namespace caps

@@ -1,0 +1,159 @@
+#include "caps/volume/phantom.hpp"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "caps/core/error.hpp"
+
+namespace caps {
+namespace {
+
+constexpr double kSemiLR = 75.0;    // head half-width, left-right
+constexpr double kSemiAP = 95.0;    // head half-depth, anterior-posterior
+constexpr double kTopMm = 105.0;    // vertex height above z = 0
+constexpr double kBottomMm = 160.0; // the ellipsoid's lower semi-axis (cut by the field of view)
+
+double gauss(double x) { return std::exp(-x * x); }
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Wrapped angular difference in (-pi, pi].
+double dtheta(double a, double b) {
+  double d = std::fmod(a - b, 2.0 * kPi);
+  if (d > kPi) d -= 2.0 * kPi;
+  if (d <= -kPi) d += 2.0 * kPi;
+  return d;
+}
+
+double clamp01(double x) { return x < 0 ? 0 : (x > 1 ? 1 : x); }
+
+}  // namespace
+
+Eigen::Vector3d HeadPhantom::ray_direction(double theta) {
+  return {std::sin(theta), -std::cos(theta), 0.0};
+}
+
+double HeadPhantom::head_radius(double theta, double z) const {
+  const double s = std::sin(theta) / kSemiLR, c = std::cos(theta) / kSemiAP;
+  const double ellipse = 1.0 / std::sqrt(s * s + c * c);
+  const double semi = z > 0 ? kTopMm : kBottomMm;
+  const double u = z / semi;
+  return u >= 1.0 ? 0.0 : ellipse * std::sqrt(1.0 - u * u);
+}
+
+double HeadPhantom::skin_radius(double theta, double z) const {
+  const double head = head_radius(theta, z);
+  if (head <= 0) return 0.0;
+  const double nose = 18.0 * gauss(dtheta(theta, 0.0) / 0.2) * gauss((z - kNoseZ) / 18.0);
+  const double marker =
+      8.0 * gauss(dtheta(theta, kMarkerTheta) / 0.12) * gauss((z - kMarkerZ) / 9.0);
+  return head + nose + marker;
+}
+
+double HeadPhantom::thickness(double theta, double z) const {
+  const double s = std::sin(0.5 * theta);
+  return 4.0 + 3.0 * s * s + 1.5 * std::cos(z / 25.0);
+}
+
+double HeadPhantom::bone_radius(double theta, double z) const {
+  return head_radius(theta, z) - thickness(theta, z);
+}
+
+double HeadPhantom::hu_at(const Eigen::Vector3d& p, const Eigen::Vector3d& voxel_mm,
+                          bool head_holder) const {
+  const Eigen::Vector3d a = axis_point();
+  const double x = p[0] - a[0], y = p[1] - a[1], z = p[2] - a[2];
+  const double r = std::hypot(x, y);
+  const double theta = std::atan2(x, -y);
+
+  // Fraction of a voxel inside the surface r = R(theta, z): a linear ramp across the interface,
+  // as wide as the voxel is along the surface normal. Distances come from the level set
+  // g = R - r divided by |grad g|, evaluated by central differences.
+  auto fraction = [&](auto&& R) {
+    const double g = R(theta, z) - r;
+    const double h = 1e-3;
+    const double rr = std::max(r, 1e-6);
+    const double gt = (R(theta + h, z) - R(theta - h, z)) / (2 * h) / rr;
+    const double gz = (R(theta, z + h) - R(theta, z - h)) / (2 * h);
+    // Gradient of g in (radial, tangential, axial) components: (-1, gt, gz).
+    const double norm = std::sqrt(1.0 + gt * gt + gz * gz);
+    const Eigen::Vector3d radial(x / rr, y / rr, 0.0);
+    const Eigen::Vector3d tangential(-y / rr, x / rr, 0.0);  // direction of increasing theta
+    const Eigen::Vector3d n = (radial - tangential * gt - Eigen::Vector3d(0, 0, gz)) / norm;
+    const double width = std::abs(n[0]) * voxel_mm[0] + std::abs(n[1]) * voxel_mm[1] +
+                         std::abs(n[2]) * voxel_mm[2];
+    return clamp01(0.5 + (g / norm) / width);
+  };
+
+  const double f_skin = fraction([&](double t, double zz) { return skin_radius(t, zz); });
+  double hu = kAirHu + f_skin * (kTissueHu - kAirHu);
+  if (f_skin > 0) {
+    const double f_bone = fraction([&](double t, double zz) { return bone_radius(t, zz); });
+    const double f_inner =
+        fraction([&](double t, double zz) { return bone_radius(t, zz) - kSkullMm; });
+    hu += f_bone * (kBoneHu - kTissueHu) + f_inner * (kBrainHu - kBoneHu);
+    // An enclosed air cavity (a "sinus") behind the forehead, inside the skull.
+    const Eigen::Vector3d c = a + Eigen::Vector3d(0.0, -45.0, 35.0);
+    const double d = (p - c).norm() - 9.0;
+    const double f_cavity = clamp01(0.5 - d / voxel_mm.mean());
+    hu += f_cavity * (kAirHu - kBrainHu) * f_inner;
+  }
+  if (head_holder) {
+    // A 5 mm plastic arc behind the head about a vertical line 6.5 mm anterior of the axis: its
+    // inner face (radius 103 mm) stays 1.5 mm (a foam pad) from the back of the head, and a thin
+    // strap (4 mm tall, 6 mm wide) bridges that gap at z = -40: it touches only thinly.
+    const double hx = x, hy = y + 6.5;
+    const double rh = std::hypot(hx, hy);
+    const double back = std::abs(dtheta(std::atan2(hx, -hy), kPi));
+    const double w = voxel_mm.mean();
+    if (back < 0.9 && z > -100 && z < 20) {
+      const double f = clamp01(0.5 + (rh - 103.0) / w) * clamp01(0.5 + (108.0 - rh) / w);
+      hu = std::max(hu, kAirHu + f * (kHolderHu - kAirHu));
+    }
+    const double lateral = std::abs(x);  // distance from the mid-sagittal plane at the back
+    if (y > 0 && rh < 104.0 && r > head_radius(theta, z) - 1.0) {
+      const double f =
+          clamp01(0.5 + (2.0 - std::abs(z + 40.0)) / w) * clamp01(0.5 + (3.0 - lateral) / w);
+      hu = std::max(hu, kAirHu + f * (kHolderHu - kAirHu));
+    }
+  }
+  return hu;
+}
+
+Volume make_phantom(const PhantomOptions& options) {
+  if (options.dims.minCoeff() < 8 || options.dims.cast<double>().maxCoeff() > 2048)
+    throw InvalidInput(cat("phantom: size (", options.dims.transpose(),
+                           ") voxels must be between 8 and 2048 per axis"));
+  if (!(options.spacing_mm.minCoeff() >= 0.1) || options.spacing_mm.maxCoeff() > 10.0)
+    throw InvalidInput(cat("phantom: spacing (", options.spacing_mm.transpose(),
+                           ") mm must be between 0.1 and 10 mm"));
+  Volume v;
+  v.geom.dims = options.dims;
+  v.geom.spacing_mm = options.spacing_mm;
+  v.geom.direction.setIdentity();
+  // Centre the grid on the head (between the vertex and the neck cut), so the head is inside.
+  const Eigen::Vector3d extent = (options.dims.cast<double>() - Eigen::Vector3d::Ones())
+                                     .cwiseProduct(options.spacing_mm);
+  v.geom.origin_lps = -0.5 * extent;
+  v.geom.origin_lps[2] = 115.0 - extent[2];  // the top slice is 10 mm above the vertex
+  v.modality = Modality::CT;
+  v.source = "phantom";
+  v.format = "phantom";
+  v.data.resize(v.geom.n_voxels());
+  const HeadPhantom head;
+  const auto& d = v.geom.dims;
+  tbb::parallel_for(0, d[2], [&](int k) {
+    for (int j = 0; j < d[1]; ++j)
+      for (int i = 0; i < d[0]; ++i) {
+        const Eigen::Vector3d p = v.index_to_lps(Eigen::Vector3d(i, j, k));
+        v.data[v.geom.linear(i, j, k)] =
+            static_cast<float>(head.hu_at(p, options.spacing_mm, options.head_holder));
+      }
+  });
+  v.notes.push_back("analytic head phantom (caps phantom)");
+  return v;
+}
+
+}  // namespace caps

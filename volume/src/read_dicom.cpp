@@ -1,0 +1,582 @@
+// DICOM series reading through GDCM.
+//
+// Geometry: DICOM patient coordinates are already LPS. Row direction r and column direction c
+// come from ImageOrientationPatient, the slice normal is n = r x c, and slices are sorted by
+// d = ImagePositionPatient . n. PixelSpacing is (row spacing, column spacing), so the spacing
+// along i (= r) is PixelSpacing[1] and along j (= c) is PixelSpacing[0].
+//
+// A stack with equal gaps and no in-plane shift between slices is copied as is. Otherwise
+// (uneven gaps and/or gantry tilt, where each slice is shifted in-plane) it is resampled onto the
+// orthogonal grid (r, c, n) with slice spacing = the smallest gap: each output voxel is
+// interpolated bilinearly in-plane inside the two bracketing (sheared) slices and linearly
+// between them. The in-plane grid is grown so that every slice's field of view is kept.
+//
+// Missing-slice rule: gap g_i is a missing slice when, for each neighbouring gap g_n that exists
+// (i-1, i+1), g_i is within 5% of an integer multiple k >= 2 of g_n. A deleted file in a uniform
+// run gives exactly that (2g between g and g), while genuinely mixed spacing (a 4 mm run followed
+// by a 7 mm run, with a 1.08 mm junction gap) does not, because a run's first or last gap always
+// has a neighbour of the same size. Missing slices are an InvalidInput unless
+// ReadOptions::allow_missing_slices is set, which interpolates across them and adds a note.
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
+#include "volume_io_detail.hpp"
+
+#include <Eigen/Geometry>
+#include <gdcmImageReader.h>
+#include <gdcmPixelFormat.h>
+#include <gdcmReader.h>
+#include <gdcmStringFilter.h>
+#include <gdcmTrace.h>
+#include <tbb/parallel_for.h>
+
+namespace fs = std::filesystem;
+
+namespace caps {
+namespace detail {
+namespace {
+
+struct SliceHeader {
+  fs::path file;
+  std::string series_uid, description, modality, transfer_syntax;
+  std::vector<double> ipp, iop, pixel_spacing;
+  int rows = 0, cols = 0, frames = 1, instance = 0;
+  double slope = 1.0, intercept = 0.0;
+  double d = 0.0;  // position along the slice normal
+  int bits_allocated = 16;
+  bool encapsulated = false;
+  std::uintmax_t pixel_bytes_in_file = 0;  // file size minus the offset of the PixelData value
+};
+
+std::string trim(std::string s) {
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\0')) s.pop_back();
+  std::size_t b = 0;
+  while (b < s.size() && s[b] == ' ') ++b;
+  return s.substr(b);
+}
+
+std::vector<double> split_numbers(const std::string& s) {
+  std::vector<double> out;
+  std::stringstream in(s);
+  std::string tok;
+  while (std::getline(in, tok, '\\')) {
+    tok = trim(tok);
+    if (tok.empty()) continue;
+    char* end = nullptr;
+    const double x = std::strtod(tok.c_str(), &end);
+    if (end == tok.c_str()) return {};
+    out.push_back(x);
+  }
+  return out;
+}
+
+void quiet_gdcm() {
+  gdcm::Trace::DebugOff();
+  gdcm::Trace::WarningOff();
+  gdcm::Trace::ErrorOff();
+}
+
+/// Reads the header of one file; returns false if it is not a DICOM image with a series UID.
+bool read_header(const fs::path& file, SliceHeader& h) {
+  gdcm::Reader reader;
+  reader.SetFileName(file.c_str());
+  const gdcm::Tag pixel_data(0x7fe0, 0x0010);
+  if (!reader.ReadUpToTag(pixel_data, std::set<gdcm::Tag>{pixel_data})) return false;
+  const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
+  if (!ds.FindDataElement(gdcm::Tag(0x0020, 0x000e))) return false;
+  gdcm::StringFilter sf;
+  sf.SetFile(reader.GetFile());
+  auto str = [&](uint16_t g, uint16_t e) {
+    const gdcm::Tag t(g, e);
+    return ds.FindDataElement(t) ? trim(sf.ToString(t)) : std::string();
+  };
+  h.file = file;
+  h.series_uid = str(0x0020, 0x000e);
+  if (h.series_uid.empty()) return false;
+  h.description = str(0x0008, 0x103e);
+  h.modality = str(0x0008, 0x0060);
+  h.ipp = split_numbers(str(0x0020, 0x0032));
+  h.iop = split_numbers(str(0x0020, 0x0037));
+  h.pixel_spacing = split_numbers(str(0x0028, 0x0030));
+  h.rows = std::atoi(str(0x0028, 0x0010).c_str());
+  h.cols = std::atoi(str(0x0028, 0x0011).c_str());
+  const std::string frames = str(0x0028, 0x0008);
+  h.frames = frames.empty() ? 1 : std::atoi(frames.c_str());
+  h.instance = std::atoi(str(0x0020, 0x0013).c_str());
+  const auto slope = split_numbers(str(0x0028, 0x1053));
+  const auto intercept = split_numbers(str(0x0028, 0x1052));
+  if (slope.size() == 1 && std::isfinite(slope[0]) && slope[0] != 0.0) h.slope = slope[0];
+  if (intercept.size() == 1 && std::isfinite(intercept[0])) h.intercept = intercept[0];
+  const gdcm::TransferSyntax& ts = reader.GetFile().GetHeader().GetDataSetTransferSyntax();
+  h.transfer_syntax = ts.GetString() ? ts.GetString() : "";
+  h.encapsulated = ts.IsEncapsulated();
+  const std::string bits = str(0x0028, 0x0100);
+  if (!bits.empty()) h.bits_allocated = std::atoi(bits.c_str());
+  // ReadUpToTag stops just after the PixelData element header, so the rest of the file is what
+  // the pixel data can hold; GDCM itself pads short native pixel data with a mere warning.
+  std::error_code ec;
+  const auto size = fs::file_size(file, ec);
+  const auto pos = reader.GetStreamCurrentPosition();
+  h.pixel_bytes_in_file = !ec && size > pos ? size - pos : 0;
+  return true;
+}
+
+/// All DICOM image headers under `folder` (recursively), and how many files were not DICOM.
+std::vector<SliceHeader> scan_folder(const fs::path& folder, int& n_skipped) {
+  quiet_gdcm();
+  std::vector<SliceHeader> out;
+  n_skipped = 0;
+  std::error_code ec;
+  fs::recursive_directory_iterator it(folder, fs::directory_options::skip_permission_denied, ec);
+  if (ec) throw IoError(cat(folder.string(), ": cannot list the folder: ", ec.message()));
+  std::vector<fs::path> files;
+  for (; it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    if (ec) throw IoError(cat(folder.string(), ": cannot list the folder: ", ec.message()));
+    const auto& p = it->path();
+    if (!it->is_regular_file(ec)) continue;
+    const std::string base = p.filename().string();
+    if (base.empty() || base[0] == '.' || base == "DICOMDIR") continue;
+    files.push_back(p);
+    if (files.size() > 200000)
+      throw InvalidInput(cat(folder.string(), ": holds more than 200000 files; point caps at the "
+                                              "folder of one study"));
+  }
+  std::sort(files.begin(), files.end());
+  for (const auto& f : files) {
+    SliceHeader h;
+    if (read_header(f, h)) out.push_back(std::move(h));
+    else ++n_skipped;
+  }
+  return out;
+}
+
+std::map<std::string, std::vector<SliceHeader>> group_series(std::vector<SliceHeader> headers) {
+  std::map<std::string, std::vector<SliceHeader>> series;
+  for (auto& h : headers) series[h.series_uid].push_back(std::move(h));
+  return series;
+}
+
+std::vector<DicomSeriesInfo> summarize(
+    const std::map<std::string, std::vector<SliceHeader>>& series) {
+  std::vector<DicomSeriesInfo> out;
+  for (const auto& [uid, files] : series) {
+    DicomSeriesInfo s;
+    s.uid = uid;
+    s.description = files.front().description;
+    s.modality = files.front().modality;
+    s.n_files = static_cast<int>(files.size());
+    out.push_back(s);
+  }
+  std::stable_sort(out.begin(), out.end(),
+                   [](const auto& a, const auto& b) { return a.n_files > b.n_files; });
+  return out;
+}
+
+std::string list_series(const std::vector<DicomSeriesInfo>& infos) {
+  std::string s;
+  for (const auto& i : infos)
+    s += cat("\n  ", i.uid, " (", i.modality, ", '", i.description, "', ", i.n_files, " files)");
+  return s;
+}
+
+Modality modality_from_tag(const std::string& m, std::vector<std::string>& notes) {
+  if (m == "CT") return Modality::CT;
+  if (m == "MR") return Modality::MR;
+  notes.push_back(cat("DICOM Modality '", m, "' is neither CT nor MR; modality unknown"));
+  return Modality::Unknown;
+}
+
+/// Decoded pixels of one file as floats (rescale applied), rows*cols*frames values.
+std::vector<float> read_pixels(const SliceHeader& h, int expected_frames) {
+  const std::string name = h.file.string();
+  gdcm::ImageReader reader;
+  reader.SetFileName(h.file.c_str());
+  if (!reader.Read())
+    throw IoError(cat(name, ": GDCM cannot read the image (truncated file, or a transfer syntax "
+                            "GDCM cannot decode: ", h.transfer_syntax, ")"));
+  const gdcm::Image& img = reader.GetImage();
+  const unsigned* dims = img.GetDimensions();
+  const unsigned frames = img.GetNumberOfDimensions() > 2 ? dims[2] : 1;
+  if (static_cast<int>(dims[0]) != h.cols || static_cast<int>(dims[1]) != h.rows ||
+      static_cast<int>(frames) != expected_frames)
+    throw InvalidInput(cat(name, ": pixel data are ", dims[0], "x", dims[1], "x", frames,
+                           " but Columns/Rows/NumberOfFrames say ", h.cols, "x", h.rows, "x",
+                           expected_frames));
+  const gdcm::PixelFormat& pf = img.GetPixelFormat();
+  if (pf.GetSamplesPerPixel() != 1)
+    throw InvalidInput(cat(name, ": ", pf.GetSamplesPerPixel(),
+                           " samples per pixel (colour); caps reads greyscale CT/MR only"));
+  const std::size_t n = static_cast<std::size_t>(h.cols) * h.rows * frames;
+  const unsigned bits = pf.GetBitsAllocated();
+  if (bits != 8 && bits != 16 && bits != 32 && bits != 64)
+    throw InvalidInput(cat(name, ": BitsAllocated = ", bits, " is not supported"));
+  // GDCM accepts native pixel data that stop short ("Incomplete Pixel Data") and pads the
+  // buffer, so compare the bytes present in the file with what the header promises.
+  if (!h.encapsulated && h.pixel_bytes_in_file < n * bits / 8)
+    throw IoError(cat(name, ": truncated: the file holds ", h.pixel_bytes_in_file,
+                      " bytes of pixel data, ", n * bits / 8, " expected for ", h.cols, "x",
+                      h.rows, "x", frames, " pixels of ", bits,
+                      " bits; re-export or re-copy the file"));
+  std::vector<char> buf(img.GetBufferLength());
+  if (buf.size() < n * bits / 8)
+    throw IoError(cat(name, ": the pixel data hold ", buf.size(), " bytes, ", n * bits / 8,
+                      " expected; the file is truncated"));
+  if (!img.GetBuffer(buf.data()))
+    throw IoError(cat(name, ": the pixel data could not be decoded (transfer syntax ",
+                      h.transfer_syntax, "); the file is truncated or corrupt"));
+
+  std::vector<float> out(n);
+  const auto st = pf.GetScalarType();
+  if (st == gdcm::PixelFormat::FLOAT32 || st == gdcm::PixelFormat::FLOAT64) {
+    decode_to_float(buf.data(), n, st == gdcm::PixelFormat::FLOAT32 ? "f32" : "f64", false,
+                    out.data());
+  } else {
+    const bool is_signed = pf.GetPixelRepresentation() == 1;
+    const unsigned stored = std::clamp<unsigned>(pf.GetBitsStored(), 1, bits);
+    decode_to_float(buf.data(), n,
+                    cat(is_signed ? "i" : "u", bits), false, out.data());
+    if (stored < bits && bits <= 32) {
+      // Keep only the stored bits and sign-extend them (BitsStored 12 in a 16-bit word).
+      const std::int64_t mask = (std::int64_t{1} << stored) - 1;
+      const std::int64_t sign = std::int64_t{1} << (stored - 1);
+      for (auto& x : out) {
+        std::int64_t raw = static_cast<std::int64_t>(x) & mask;
+        if (is_signed && (raw & sign)) raw -= (std::int64_t{1} << stored);
+        x = static_cast<float>(raw);
+      }
+    }
+  }
+  if (img.GetPhotometricInterpretation() == gdcm::PhotometricInterpretation::MONOCHROME1)
+    throw InvalidInput(cat(name, ": MONOCHROME1 (inverted greyscale) images are not supported "
+                                 "for CT/MR volumes"));
+  for (auto& x : out) x = static_cast<float>(h.slope * x + h.intercept);
+  return out;
+}
+
+std::string fmt(double x, int digits = 2) {
+  std::ostringstream os;
+  os.setf(std::ios::fixed);
+  os.precision(digits);
+  os << x;
+  return os.str();
+}
+
+Volume read_multiframe(const SliceHeader& h) {
+  Volume v;
+  v.source = h.file.string();
+  v.format = "DICOM";
+  gdcm::ImageReader reader;
+  reader.SetFileName(h.file.c_str());
+  if (!reader.Read()) throw IoError(cat(v.source, ": GDCM cannot read the multi-frame image"));
+  const gdcm::Image& img = reader.GetImage();
+  const double* sp = img.GetSpacing();
+  const double* org = img.GetOrigin();
+  const double* dc = img.GetDirectionCosines();
+  const Eigen::Vector3d r(dc[0], dc[1], dc[2]), c(dc[3], dc[4], dc[5]);
+  auto& g = v.geom;
+  g.dims = Eigen::Vector3i(h.cols, h.rows, h.frames);
+  g.spacing_mm = Eigen::Vector3d(sp[0], sp[1], sp[2]);
+  g.origin_lps = Eigen::Vector3d(org[0], org[1], org[2]);
+  g.direction.col(0) = r.normalized();
+  g.direction.col(1) = c.normalized();
+  g.direction.col(2) = r.cross(c).normalized();
+  v.data = read_pixels(h, h.frames);
+  v.modality = modality_from_tag(h.modality, v.notes);
+  v.notes.push_back("multi-frame DICOM: frame positions and spacing as GDCM reports them "
+                    "(assumed regular)");
+  validate_volume(v);
+  return v;
+}
+
+Volume build_volume(std::vector<SliceHeader> slices, const std::string& where,
+                    const ReadOptions& options, std::vector<std::string> notes) {
+  Volume v;
+  v.source = where;
+  v.format = "DICOM";
+  v.notes = std::move(notes);
+
+  for (const auto& s : slices) {
+    if (s.ipp.size() != 3 || s.iop.size() != 6)
+      throw InvalidInput(cat(s.file.string(), ": ImagePositionPatient / ImageOrientationPatient "
+                                              "missing or malformed; caps needs both to place "
+                                              "the slices (not a cross-sectional image?)"));
+    if (s.pixel_spacing.size() != 2 || !(s.pixel_spacing[0] > 0) || !(s.pixel_spacing[1] > 0))
+      throw InvalidInput(cat(s.file.string(), ": PixelSpacing missing or not positive"));
+    if (s.rows <= 0 || s.cols <= 0)
+      throw InvalidInput(cat(s.file.string(), ": Rows/Columns = ", s.rows, "/", s.cols,
+                             " must be positive"));
+    if (s.frames != 1)
+      throw InvalidInput(cat(s.file.string(), ": a multi-frame file inside a series of ",
+                             slices.size(), " files; read it on its own"));
+  }
+
+  // Keep the largest group of slices sharing one orientation (drops localizers in the series).
+  {
+    std::vector<std::vector<SliceHeader>> groups;
+    for (auto& s : slices) {
+      bool placed = false;
+      for (auto& gr : groups) {
+        double diff = 0;
+        for (int a = 0; a < 6; ++a) diff = std::max(diff, std::abs(gr[0].iop[a] - s.iop[a]));
+        if (diff < 1e-3 && gr[0].rows == s.rows && gr[0].cols == s.cols &&
+            std::abs(gr[0].pixel_spacing[0] - s.pixel_spacing[0]) < 1e-4 &&
+            std::abs(gr[0].pixel_spacing[1] - s.pixel_spacing[1]) < 1e-4) {
+          gr.push_back(std::move(s));
+          placed = true;
+          break;
+        }
+      }
+      if (!placed) groups.push_back({std::move(s)});
+    }
+    std::stable_sort(groups.begin(), groups.end(),
+                     [](const auto& a, const auto& b) { return a.size() > b.size(); });
+    if (groups.size() > 1) {
+      std::size_t dropped = 0;
+      for (std::size_t gi = 1; gi < groups.size(); ++gi) dropped += groups[gi].size();
+      v.notes.push_back(cat("ignored ", dropped, " file(s) whose orientation or size differs from "
+                            "the main stack (e.g. localizers), first: ",
+                            groups[1][0].file.filename().string()));
+    }
+    slices = std::move(groups[0]);
+  }
+
+  const auto& s0 = slices.front();
+  Eigen::Vector3d r(s0.iop[0], s0.iop[1], s0.iop[2]), c(s0.iop[3], s0.iop[4], s0.iop[5]);
+  if (r.norm() < 0.5 || c.norm() < 0.5 || std::abs(r.normalized().dot(c.normalized())) > 1e-2)
+    throw InvalidInput(cat(s0.file.string(), ": ImageOrientationPatient (",
+                           r.transpose(), ", ", c.transpose(),
+                           ") is not a pair of perpendicular unit vectors"));
+  r.normalize();
+  c = (c - r.dot(c) * r).normalized();
+  const Eigen::Vector3d n = r.cross(c);
+  const double sx = s0.pixel_spacing[1], sy = s0.pixel_spacing[0];
+  const int nx = s0.cols, ny = s0.rows;
+
+  for (auto& s : slices) s.d = Eigen::Vector3d(s.ipp[0], s.ipp[1], s.ipp[2]).dot(n);
+  std::stable_sort(slices.begin(), slices.end(),
+                   [](const auto& a, const auto& b) { return a.d < b.d; });
+  const std::size_t n_slices = slices.size();
+
+  std::vector<double> gaps;
+  for (std::size_t k = 0; k + 1 < n_slices; ++k) {
+    const double g = slices[k + 1].d - slices[k].d;
+    if (g < 0.01)
+      throw InvalidInput(cat(where, ": ", slices[k].file.filename().string(), " and ",
+                             slices[k + 1].file.filename().string(),
+                             " lie at the same position along the slice normal (", fmt(slices[k].d),
+                             " mm); the series mixes several acquisitions or holds duplicate "
+                             "files; remove them or choose another series"));
+    gaps.push_back(g);
+  }
+
+  // In-plane offset of each slice relative to the first (non-zero under gantry tilt).
+  const Eigen::Vector3d p0(s0.ipp[0], s0.ipp[1], s0.ipp[2]);
+  const Eigen::Vector3d first(slices[0].ipp[0], slices[0].ipp[1], slices[0].ipp[2]);
+  std::vector<double> off_u(n_slices), off_v(n_slices);
+  bool sheared = false;
+  for (std::size_t k = 0; k < n_slices; ++k) {
+    const Eigen::Vector3d p(slices[k].ipp[0], slices[k].ipp[1], slices[k].ipp[2]);
+    off_u[k] = (p - first).dot(r);
+    off_v[k] = (p - first).dot(c);
+    sheared |= std::abs(off_u[k]) > 0.02 * sx || std::abs(off_v[k]) > 0.02 * sy;
+  }
+
+  double gmin = 0, gmax = 0, gmed = 0;
+  if (!gaps.empty()) {
+    gmin = *std::min_element(gaps.begin(), gaps.end());
+    gmax = *std::max_element(gaps.begin(), gaps.end());
+    std::vector<double> sorted = gaps;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    gmed = sorted[sorted.size() / 2];
+  }
+
+  std::vector<std::string> missing;
+  for (std::size_t i = 0; i < gaps.size(); ++i) {
+    bool suspicious = gaps.size() > 1;
+    for (long nb : {static_cast<long>(i) - 1, static_cast<long>(i) + 1}) {
+      if (nb < 0 || nb >= static_cast<long>(gaps.size())) continue;
+      const double ratio = gaps[i] / gaps[nb];
+      const double k = std::round(ratio);
+      suspicious &= k >= 2 && std::abs(ratio - k) <= 0.05 * k;
+    }
+    if (suspicious)
+      missing.push_back(cat(fmt(gaps[i]), " mm between ", slices[i].file.filename().string(),
+                            " and ", slices[i + 1].file.filename().string()));
+  }
+  if (!missing.empty()) {
+    std::string list;
+    for (const auto& m : missing) list += (list.empty() ? "" : "; ") + m;
+    if (!options.allow_missing_slices)
+      throw InvalidInput(cat(where, ": slices seem to be missing: gap ", list,
+                             " is a whole multiple of its neighbouring gaps (median gap ",
+                             fmt(gmed), " mm); restore the missing files, or set "
+                             "allow_missing_slices (--allow-missing-slices) to interpolate "
+                             "across the gap"));
+    v.notes.push_back(cat("missing slices interpolated across: ", list));
+  }
+
+  // Per-slice pixels with rescale applied.
+  std::vector<std::vector<float>> pixels(n_slices);
+  for (std::size_t k = 0; k < n_slices; ++k) pixels[k] = read_pixels(slices[k], 1);
+
+  v.modality = modality_from_tag(s0.modality, v.notes);
+  auto& g = v.geom;
+  g.direction.col(0) = r;
+  g.direction.col(1) = c;
+  g.direction.col(2) = n;
+
+  const bool uniform = gaps.empty() || gmax - gmin <= std::max(0.01, 0.01 * gmed);
+  if (uniform && !sheared) {
+    g.dims = Eigen::Vector3i(nx, ny, static_cast<int>(n_slices));
+    double mean = 1.0;
+    if (!gaps.empty()) {
+      mean = (slices.back().d - slices.front().d) / static_cast<double>(gaps.size());
+    } else {
+      v.notes.push_back("single slice: slice spacing set to 1 mm");
+    }
+    g.spacing_mm = Eigen::Vector3d(sx, sy, mean);
+    g.origin_lps = first;
+    v.data.resize(g.n_voxels());
+    const std::size_t plane = static_cast<std::size_t>(nx) * ny;
+    for (std::size_t k = 0; k < n_slices; ++k)
+      std::copy(pixels[k].begin(), pixels[k].end(), v.data.begin() + k * plane);
+    v.notes.push_back(cat("DICOM series of ", n_slices, " slices, regular spacing ", fmt(mean, 3),
+                          " mm"));
+    validate_volume(v);
+    return v;
+  }
+
+  // Resample onto the orthogonal grid (r, c, n).
+  const double dz = gmin;
+  const double span = slices.back().d - slices.front().d;
+  const int nz = static_cast<int>(std::floor(span / dz + 1e-6)) + 1;
+  const double u_min = *std::min_element(off_u.begin(), off_u.end());
+  const double u_max = *std::max_element(off_u.begin(), off_u.end());
+  const double v_min = *std::min_element(off_v.begin(), off_v.end());
+  const double v_max = *std::max_element(off_v.begin(), off_v.end());
+  const int nx_out = nx + static_cast<int>(std::ceil((u_max - u_min) / sx - 1e-6));
+  const int ny_out = ny + static_cast<int>(std::ceil((v_max - v_min) / sy - 1e-6));
+  check_dims(where, "resampled grid", {nx_out, ny_out, nz});
+  g.dims = Eigen::Vector3i(nx_out, ny_out, nz);
+  g.spacing_mm = Eigen::Vector3d(sx, sy, dz);
+  g.origin_lps = first + u_min * r + v_min * c;
+
+  float data_min = pixels[0][0];
+  for (const auto& p : pixels)
+    for (float x : p) data_min = std::min(data_min, x);
+  const float fill = v.modality == Modality::CT ? std::max(data_min, -1024.0f) : data_min;
+
+  v.data.assign(g.n_voxels(), fill);
+  const std::size_t plane_out = static_cast<std::size_t>(nx_out) * ny_out;
+  tbb::parallel_for(0, nz, [&](int k) {
+    const double w = slices.front().d + k * dz;
+    std::size_t b = 1;
+    while (b + 1 < n_slices && slices[b].d < w) ++b;
+    const std::size_t a = b - 1;
+    const double t = std::clamp((w - slices[a].d) / (slices[b].d - slices[a].d), 0.0, 1.0);
+    // Bilinear sample of slice m at in-plane position (u, v) relative to the first slice.
+    auto sample = [&](std::size_t m, double u, double vv, float& out) {
+      const double x = (u - off_u[m]) / sx, y = (vv - off_v[m]) / sy;
+      if (!(x >= -1e-6 && y >= -1e-6 && x <= nx - 1 + 1e-6 && y <= ny - 1 + 1e-6)) return false;
+      const int i0 = std::clamp(static_cast<int>(std::floor(x)), 0, std::max(nx - 2, 0));
+      const int j0 = std::clamp(static_cast<int>(std::floor(y)), 0, std::max(ny - 2, 0));
+      const int i1 = std::min(i0 + 1, nx - 1), j1 = std::min(j0 + 1, ny - 1);
+      const double fx = std::clamp(x - i0, 0.0, 1.0), fy = std::clamp(y - j0, 0.0, 1.0);
+      const float* p = pixels[m].data();
+      const double top = p[j0 * nx + i0] * (1 - fx) + p[j0 * nx + i1] * fx;
+      const double bot = p[j1 * nx + i0] * (1 - fx) + p[j1 * nx + i1] * fx;
+      out = static_cast<float>(top * (1 - fy) + bot * fy);
+      return true;
+    };
+    float* dst = v.data.data() + static_cast<std::size_t>(k) * plane_out;
+    for (int j = 0; j < ny_out; ++j) {
+      const double vv = v_min + j * sy;
+      for (int i = 0; i < nx_out; ++i) {
+        const double u = u_min + i * sx;
+        float va = 0, vb = 0;
+        const bool ha = t < 1.0 && sample(a, u, vv, va);
+        const bool hb = t > 0.0 && sample(b, u, vv, vb);
+        if (ha && hb) dst[j * nx_out + i] = static_cast<float>((1 - t) * va + t * vb);
+        else if (ha) dst[j * nx_out + i] = va;
+        else if (hb) dst[j * nx_out + i] = vb;
+      }
+    }
+  });
+
+  std::string what;
+  if (sheared) {
+    const double shift = std::hypot(off_u.back(), off_v.back());
+    what = cat("gantry tilt ", fmt(rad_to_deg(std::atan2(shift, span)), 1), " deg, ");
+  }
+  v.notes.push_back(cat("resampled: ", what, "slice gaps ", fmt(gmin), "-", fmt(gmax), " mm -> ",
+                        fmt(dz), " mm; ", n_slices, " slices -> ", nz, ", in-plane ", nx, "x", ny,
+                        " -> ", nx_out, "x", ny_out,
+                        " so that every slice's field of view is kept (outside filled with ",
+                        fill, ")"));
+  validate_volume(v);
+  return v;
+}
+
+}  // namespace
+
+Volume read_dicom(const fs::path& input, const ReadOptions& options) {
+  quiet_gdcm();
+  std::error_code ec;
+  const bool is_dir = fs::is_directory(input, ec);
+  fs::path folder = input;
+  ReadOptions opts = options;
+  std::vector<std::string> notes;
+  if (!is_dir) {
+    file_size_or_throw(input);
+    SliceHeader h;
+    if (!read_header(input, h))
+      throw InvalidInput(cat(input.string(), ": not a DICOM image (or it has no SeriesInstanceUID)"
+                                             "; caps reads a DICOM folder or .dcm file, .nii, "
+                                             ".nii.gz, .nrrd, .nhdr, .mha, .mhd or .inv3"));
+    if (h.frames > 1) return read_multiframe(h);
+    folder = input.parent_path().empty() ? fs::path(".") : input.parent_path();
+    if (opts.series_uid.empty()) opts.series_uid = h.series_uid;
+    notes.push_back(cat("read the series of ", input.filename().string(), " from its folder"));
+  }
+
+  int n_skipped = 0;
+  auto series = group_series(scan_folder(folder, n_skipped));
+  if (series.empty())
+    throw InvalidInput(cat(folder.string(), ": no DICOM image files found (", n_skipped,
+                           " other files); point caps at the folder holding the series' .dcm "
+                           "files, or give a .nii/.nii.gz/.nrrd/.nhdr/.mha/.mhd/.inv3 file"));
+  const auto infos = summarize(series);
+  std::string uid = opts.series_uid;
+  if (uid.empty()) {
+    uid = infos.front().uid;
+    if (infos.size() > 1)
+      notes.push_back(cat("the folder holds ", infos.size(), " series; read the largest, ", uid,
+                          " ('", infos.front().description, "', ", infos.front().n_files,
+                          " files); choose another with --series"));
+  } else if (series.count(uid) == 0) {
+    throw InvalidInput(cat(folder.string(), ": no series with SeriesInstanceUID ", uid,
+                           "; the folder holds:", list_series(infos)));
+  }
+  if (n_skipped > 0) notes.push_back(cat("skipped ", n_skipped, " non-DICOM file(s)"));
+  auto& files = series[uid];
+  if (files.size() == 1 && files[0].frames > 1) return read_multiframe(files[0]);
+  return build_volume(std::move(files), folder.string(), opts, std::move(notes));
+}
+
+}  // namespace detail
+
+std::vector<DicomSeriesInfo> list_dicom_series(const fs::path& folder) {
+  std::error_code ec;
+  if (!fs::is_directory(folder, ec))
+    throw IoError(cat(folder.string(), ": not a folder; give the folder holding the DICOM files"));
+  int n_skipped = 0;
+  return detail::summarize(detail::group_series(detail::scan_folder(folder, n_skipped)));
+}
+
+}  // namespace caps

@@ -1,0 +1,152 @@
+// NIfTI-1/2 reading through nifti2_io. NIfTI world coordinates are RAS; caps is LPS, so the first
+// two rows of the chosen affine are negated. Affine priority follows the NIfTI-1 standard
+// (nifti1.h, "METHOD 3 / 2 / 1"): sform if sform_code > 0, else qform if qform_code > 0, else the
+// pixdim-only Analyze fallback.
+
+#include <cmath>
+#include <memory>
+#include <string>
+
+#include "caps/core/error.hpp"
+#include "volume_io_detail.hpp"
+
+#include <nifti2_io.h>
+
+namespace fs = std::filesystem;
+
+namespace caps::detail {
+namespace {
+
+struct NiftiFree {
+  void operator()(nifti_image* nim) const { nifti_image_free(nim); }
+};
+using NiftiPtr = std::unique_ptr<nifti_image, NiftiFree>;
+
+std::string nifti_element_type(int datatype) {
+  switch (datatype) {
+    case DT_UINT8: return "u8";
+    case DT_INT8: return "i8";
+    case DT_UINT16: return "u16";
+    case DT_INT16: return "i16";
+    case DT_UINT32: return "u32";
+    case DT_INT32: return "i32";
+    case DT_UINT64: return "u64";
+    case DT_INT64: return "i64";
+    case DT_FLOAT32: return "f32";
+    case DT_FLOAT64: return "f64";
+    default: return "";
+  }
+}
+
+bool is_gz(const fs::path& file) { return to_lower(file.extension().string()) == ".gz"; }
+
+}  // namespace
+
+Volume read_nifti(const fs::path& file) {
+  const auto file_bytes = file_size_or_throw(file);
+  nifti_set_debug_level(0);
+  const std::string name = file.string();
+
+  NiftiPtr nim(nifti_image_read(name.c_str(), 0));
+  if (!nim)
+    throw InvalidInput(cat(name, ": not a readable NIfTI-1/2 file (the header is missing, damaged "
+                                 "or the file is something else); check that the file is a NIfTI "
+                                 "image and, if compressed, that it is gzip"));
+
+  if (nim->dim[0] < 1 || nim->dim[0] > 7)
+    throw InvalidInput(cat(name, ": header field dim[0] = ", nim->dim[0],
+                           " must be 1..7; the header is damaged"));
+  check_dims(file, "dim[1..3]", {nim->nx, nim->ny, nim->nz});
+  Volume v;
+  v.source = name;
+  v.format = nim->nifti_type >= NIFTI_FTYPE_NIFTI2_1 ? "NIfTI-2" : "NIfTI-1";
+  long long extra = 1;
+  for (int d = 4; d <= nim->dim[0]; ++d) extra *= std::max<int64_t>(nim->dim[d], 1);
+  if (extra > 1)
+    v.notes.push_back(cat("the file holds ", extra, " volumes (dims 4..7); read the first one"));
+
+  const std::string type = nifti_element_type(nim->datatype);
+  if (type.empty())
+    throw InvalidInput(cat(name, ": datatype ", nim->datatype, " (",
+                           nifti_datatype_string(nim->datatype),
+                           ") is not a scalar numeric type; caps reads integer and float images "
+                           "only (convert RGB/complex images to a scalar first)"));
+  if (static_cast<std::size_t>(nim->nbyper) != type_size(type))
+    throw InvalidInput(cat(name, ": bitpix/datatype mismatch (", nim->nbyper,
+                           " bytes per voxel for ", nifti_datatype_string(nim->datatype), ")"));
+
+  const double n3 = static_cast<double>(nim->nx) * nim->ny * nim->nz;
+  const double needed = static_cast<double>(nim->iname_offset) + n3 * extra * nim->nbyper;
+  // Only uncompressed single files can be size-checked up front; for .gz the load below reports
+  // a short read.
+  if (!is_gz(file) && nim->iname && std::string(nim->iname) == name &&
+      static_cast<double>(file_bytes) < needed)
+    throw IoError(cat(name, ": truncated: the header needs ", needed, " bytes (offset ",
+                      nim->iname_offset, " + ", nim->nx, "x", nim->ny, "x", nim->nz,
+                      " voxels of ", nim->nbyper, " bytes) but the file has ", file_bytes,
+                      "; re-export or re-download it"));
+  if (extra * n3 > kMaxVoxels)
+    throw InvalidInput(cat(name, ": ", extra * n3, " voxels in all volumes is more than caps "
+                                                   "accepts; extract the first volume first"));
+
+  if (nifti_image_load(nim.get()) != 0 || nim->data == nullptr)
+    throw IoError(cat(name, ": the voxel data could not be read (truncated or corrupt ",
+                      is_gz(file) ? "gzip stream" : "file",
+                      "); re-export or re-download it"));
+
+  auto& g = v.geom;
+  g.dims = Eigen::Vector3i(static_cast<int>(nim->nx), static_cast<int>(nim->ny),
+                           static_cast<int>(nim->nz));
+  v.data.resize(g.n_voxels());
+  decode_to_float(static_cast<const char*>(nim->data), v.data.size(), type, false, v.data.data());
+
+  const double slope = nim->scl_slope, inter = nim->scl_inter;
+  if (std::isfinite(slope) && slope != 0.0 && std::isfinite(inter) &&
+      !(slope == 1.0 && inter == 0.0)) {
+    for (auto& x : v.data) x = static_cast<float>(slope * x + inter);
+    v.notes.push_back(cat("applied scl_slope ", slope, " and scl_inter ", inter));
+  }
+
+  double A[3][4];
+  auto from = [&](const nifti_dmat44& M) {
+    for (int r = 0; r < 3; ++r) {
+      const double s = r < 2 ? -1.0 : 1.0;  // RAS -> LPS
+      for (int c = 0; c < 4; ++c) A[r][c] = s * M.m[r][c];
+    }
+  };
+  if (nim->sform_code > 0) {
+    from(nim->sto_xyz);
+    v.notes.push_back(cat("orientation from the sform (code ", nim->sform_code, ")"));
+  } else if (nim->qform_code > 0) {
+    from(nim->qto_xyz);
+    v.notes.push_back(cat("orientation from the qform (code ", nim->qform_code, ")"));
+  } else {
+    const double dx = nim->dx > 0 ? nim->dx : 1.0, dy = nim->dy > 0 ? nim->dy : 1.0,
+                 dz = nim->dz > 0 ? nim->dz : 1.0;
+    const double M[3][4] = {{-dx, 0, 0, 0}, {0, -dy, 0, 0}, {0, 0, dz, 0}};
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) A[r][c] = M[r][c];
+    v.notes.push_back("no sform or qform: orientation unknown, assumed RAS axes from pixdim "
+                      "(NIfTI method 1) with the origin at voxel 0; check left/right before "
+                      "planning");
+  }
+  if (nim->xyz_units == NIFTI_UNITS_METER) {
+    for (auto& row : A)
+      for (double& x : row) x *= 1000.0;
+    v.notes.push_back("xyz units were metres; converted to mm");
+  } else if (nim->xyz_units == NIFTI_UNITS_MICRON) {
+    for (auto& row : A)
+      for (double& x : row) x *= 1e-3;
+    v.notes.push_back("xyz units were microns; converted to mm");
+  }
+  set_geometry_from_affine(g, A);
+  const Eigen::Matrix3d gram = g.direction.transpose() * g.direction;
+  if ((gram - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-4)
+    v.notes.push_back("the affine is sheared (axes not orthogonal); kept as is");
+
+  v.modality = guess_modality(v.data, v.notes);
+  validate_volume(v);
+  return v;
+}
+
+}  // namespace caps::detail

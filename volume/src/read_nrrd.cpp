@@ -1,0 +1,172 @@
+// NRRD (.nrrd, and .nhdr with detached data) through teem's nrrdLoad, which handles the raw,
+// ascii, gzip and bzip2 encodings and `data file:` lists and patterns. The header is read first
+// without data so that damaged or absurd headers are rejected before any large allocation, and so
+// that a failure in the second (data) pass can be reported as a truncated/missing data file.
+
+#include <cmath>
+#include <cstdlib>
+#include <memory>
+#include <string>
+
+#include "caps/core/error.hpp"
+#include "volume_io_detail.hpp"
+
+#include <Eigen/Geometry>
+#include <teem/biff.h>
+#include <teem/nrrd.h>
+
+namespace fs = std::filesystem;
+
+namespace caps::detail {
+namespace {
+
+struct NrrdFree {
+  void operator()(Nrrd* n) const { nrrdNuke(n); }
+};
+struct IoStateFree {
+  void operator()(NrrdIoState* s) const { nrrdIoStateNix(s); }
+};
+
+std::string teem_error() {
+  char* err = biffGetDone(NRRD);
+  std::string msg = err ? err : "unknown teem error";
+  std::free(err);
+  while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
+  // teem prefixes every line with the function name; keep the message on one line.
+  for (auto& c : msg)
+    if (c == '\n') c = ';';
+  return msg;
+}
+
+std::string nrrd_element_type(int type) {
+  switch (type) {
+    case nrrdTypeChar: return "i8";
+    case nrrdTypeUChar: return "u8";
+    case nrrdTypeShort: return "i16";
+    case nrrdTypeUShort: return "u16";
+    case nrrdTypeInt: return "i32";
+    case nrrdTypeUInt: return "u32";
+    case nrrdTypeLLong: return "i64";
+    case nrrdTypeULLong: return "u64";
+    case nrrdTypeFloat: return "f32";
+    case nrrdTypeDouble: return "f64";
+    default: return "";
+  }
+}
+
+}  // namespace
+
+Volume read_nrrd(const fs::path& file) {
+  file_size_or_throw(file);
+  const std::string name = file.string();
+
+  std::unique_ptr<Nrrd, NrrdFree> header(nrrdNew());
+  std::unique_ptr<NrrdIoState, IoStateFree> nio(nrrdIoStateNew());
+  nio->skipData = AIR_TRUE;
+  if (nrrdLoad(header.get(), name.c_str(), nio.get()) != 0)
+    throw InvalidInput(cat(name, ": not a readable NRRD header (", teem_error(),
+                           "); check the header fields"));
+
+  const unsigned dim = header->dim;
+  if (dim != 3 && dim != 2)
+    throw InvalidInput(cat(name, ": dimension = ", dim,
+                           "; caps reads scalar 3-D (or 2-D) NRRD images only"));
+  std::vector<long long> sizes;
+  for (unsigned a = 0; a < dim; ++a) sizes.push_back(static_cast<long long>(header->axis[a].size));
+  check_dims(file, "sizes", sizes);
+  const std::string type = nrrd_element_type(header->type);
+  if (type.empty())
+    throw InvalidInput(cat(name, ": type ", header->type,
+                           " is not a scalar numeric type; caps reads integer and float images"));
+
+  std::unique_ptr<Nrrd, NrrdFree> nrrd(nrrdNew());
+  if (nrrdLoad(nrrd.get(), name.c_str(), nullptr) != 0 || nrrd->data == nullptr)
+    throw IoError(cat(name, ": the voxel data could not be read (", teem_error(),
+                      "); a detached data file is missing or truncated, or the compressed data "
+                      "are corrupt"));
+
+  Volume v;
+  v.source = name;
+  v.format = "NRRD";
+  auto& g = v.geom;
+  g.dims = Eigen::Vector3i(static_cast<int>(sizes[0]), static_cast<int>(sizes[1]),
+                           dim == 3 ? static_cast<int>(sizes[2]) : 1);
+  v.data.resize(g.n_voxels());
+  decode_to_float(static_cast<const char*>(nrrd->data), v.data.size(), type, false,
+                  v.data.data());
+  if (dim == 2) v.notes.push_back("2-D image read as a single slice, slice spacing 1 mm");
+
+  bool have_directions = nrrd->spaceDim == 3;
+  for (unsigned a = 0; a < dim && have_directions; ++a)
+    for (int r = 0; r < 3; ++r) have_directions &= std::isfinite(nrrd->axis[a].spaceDirection[r]);
+
+  if (have_directions) {
+    Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
+    for (unsigned a = 0; a < dim; ++a)
+      for (int r = 0; r < 3; ++r) M(r, a) = nrrd->axis[a].spaceDirection[r];
+    if (dim == 2) M.col(2) = M.col(0).cross(M.col(1)).normalized();
+    Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+    if (std::isfinite(nrrd->spaceOrigin[0]) && std::isfinite(nrrd->spaceOrigin[1]) &&
+        std::isfinite(nrrd->spaceOrigin[2]))
+      origin = Eigen::Vector3d(nrrd->spaceOrigin[0], nrrd->spaceOrigin[1], nrrd->spaceOrigin[2]);
+    else
+      v.notes.push_back("no space origin: voxel 0 placed at the origin");
+
+    Eigen::Vector3d flip(1, 1, 1);
+    switch (nrrd->space) {
+      case nrrdSpaceLeftPosteriorSuperior: break;
+      case nrrdSpaceRightAnteriorSuperior: flip = {-1, -1, 1}; break;
+      case nrrdSpaceLeftAnteriorSuperior: flip = {1, -1, 1}; break;
+      case nrrdSpaceScannerXYZ:
+        v.notes.push_back("space scanner-xyz taken as DICOM patient axes (LPS)");
+        break;
+      case nrrdSpace3DRightHanded:
+      case nrrdSpace3DLeftHanded:
+      case nrrdSpaceUnknown:
+        v.notes.push_back("the NRRD space is not anatomical; its axes were taken as LPS, so "
+                          "check left/right before planning");
+        break;
+      default:
+        throw InvalidInput(cat(name, ": space '", airEnumStr(nrrdSpace, nrrd->space),
+                               "' is not a 3-D anatomical space; caps reads 3-D images only"));
+    }
+    const Eigen::Matrix3d F = flip.asDiagonal();
+    const Eigen::Matrix3d A = F * M;
+    origin = F * origin;
+    for (int c = 0; c < 3; ++c) {
+      g.spacing_mm[c] = A.col(c).norm();
+      if (g.spacing_mm[c] > 0) g.direction.col(c) = A.col(c) / g.spacing_mm[c];
+    }
+    if (dim == 2) g.spacing_mm[2] = 1.0;
+    g.origin_lps = origin;
+  } else {
+    bool missing = false;
+    for (unsigned a = 0; a < dim; ++a) {
+      const double s = nrrd->axis[a].spacing;
+      if (std::isfinite(s) && s != 0.0) {
+        g.spacing_mm[a] = std::abs(s);
+        if (s < 0) g.direction(a, a) = -1.0;
+      } else {
+        missing = true;
+      }
+    }
+    if (std::isfinite(nrrd->spaceOrigin[0]) && nrrd->spaceDim == 3)
+      g.origin_lps = Eigen::Vector3d(nrrd->spaceOrigin[0], nrrd->spaceOrigin[1],
+                                     nrrd->spaceOrigin[2]);
+    v.notes.push_back(cat("no space directions: axes taken as LPS with spacings ",
+                          g.spacing_mm.transpose(), " mm", missing ? " (missing ones set to 1)" : "",
+                          "; the true patient orientation is unknown"));
+  }
+  for (unsigned a = 0; a < nrrd->spaceDim && a < NRRD_SPACE_DIM_MAX; ++a) {
+    const char* unit = nrrd->spaceUnits[a];
+    if (unit && *unit && to_lower(unit) != "mm" && to_lower(unit) != "millimeter" &&
+        to_lower(unit) != "millimeters")
+      v.notes.push_back(cat("space unit '", unit, "' along axis ", a, " ignored; read as mm"));
+  }
+
+  v.modality = guess_modality(v.data, v.notes);
+  validate_volume(v);
+  return v;
+}
+
+}  // namespace caps::detail

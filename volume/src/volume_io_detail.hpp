@@ -1,0 +1,51 @@
+#pragma once
+/// @brief Private helpers shared by the volume readers (not installed, not public API).
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "caps/volume/read_volume.hpp"
+
+namespace caps::detail {
+
+Volume read_dicom(const std::filesystem::path& input, const ReadOptions& options);
+Volume read_nifti(const std::filesystem::path& file);
+Volume read_nrrd(const std::filesystem::path& file);
+Volume read_metaimage(const std::filesystem::path& file);
+Volume read_inv3(const std::filesystem::path& file);
+
+/// Size of a regular file in bytes; throws IoError naming the file if it is missing or unreadable.
+std::uintmax_t file_size_or_throw(const std::filesystem::path& file);
+
+/// Reads a whole file into memory; throws IoError.
+std::vector<char> read_binary_file(const std::filesystem::path& file);
+
+/// Largest voxel count any reader allocates (2^31 voxels, 8 GB as float): larger headers are
+/// treated as damaged rather than attempted.
+constexpr double kMaxVoxels = 2147483648.0;
+
+/// Throws InvalidInput (naming `file` and `field`) unless every dim is in 1..8192 and the total
+/// voxel count is below kMaxVoxels. Called before any allocation sized by a header.
+void check_dims(const std::filesystem::path& file, const std::string& field,
+                const std::vector<long long>& dims);
+
+/// The CT heuristic for formats without a modality field: CT if the minimum is <= -900 and at
+/// least 5% of the voxels lie in [-1100, -900] (air in HU). Returns CT or Unknown and adds a
+/// note saying why.
+Modality guess_modality(const std::vector<float>& data, std::vector<std::string>& notes);
+
+/// Geometry from a 3x4 affine whose columns map (i, j, k, 1) to LPS mm.
+void set_geometry_from_affine(VolumeGeometry& g, const double affine_lps[3][4]);
+
+/// Decodes `n` elements of a numeric type into floats. `type` is one of "u8","i8","u16","i16",
+/// "u32","i32","u64","i64","f32","f64"; `swap` reverses the bytes of each element.
+void decode_to_float(const char* src, std::size_t n, const std::string& type, bool swap,
+                     float* dst);
+std::size_t type_size(const std::string& type);
+
+/// Lower-case copy.
+std::string to_lower(std::string s);
+
+}  // namespace caps::detail
