@@ -304,16 +304,25 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
       if (!clip_to_grid(wg, centre, d, t0, t1)) { maps.flags[c] = kNoSkin; continue; }
       // 1. Walk the envelope mask inward: the outermost entry, and any re-entry (undercut).
       double r_entry = std::numeric_limits<double>::quiet_NaN();
+      // A re-entry counts as an undercut only after a real air gap (kMinGapMm): a ledge in the
+      // mask between thick slices is not an ear.
+      constexpr double kMinGapMm = 2.0;
       bool inside = skin_at(at(t1));
       if (inside) maps.flags[c] |= kTruncated;
       if (inside) r_entry = t1;
       int entries = inside ? 1 : 0;
+      double r_left = t1;  // where the ray last left the mask
       for (double r = t1 - coarse; r >= t0; r -= coarse) {
         const bool now = skin_at(at(r));
         if (now && !inside) {
-          ++entries;
-          if (entries == 1) r_entry = r + 0.5 * coarse;
+          if (entries == 0) {
+            r_entry = r + 0.5 * coarse;
+            entries = 1;
+          } else if (r_left - r >= kMinGapMm) {
+            ++entries;
+          }
         }
+        if (!now && inside) r_left = r;
         inside = now;
       }
       if (entries == 0) { maps.flags[c] = kNoSkin; continue; }
@@ -369,6 +378,8 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
       maps.r_skin[c] = static_cast<float>(r_s);
       maps.measured_skin[c] = 1;
       const Eigen::Vector3d p = at(r_s);
+      // The skin point sits on the edge of the acquired data: a cut face, not skin.
+      if (near_data_edge(v, p, 1.5)) maps.flags[c] |= kTruncated;
       if (!std::isfinite(r_b)) {
         maps.flags[c] |= kNoBone;
         continue;

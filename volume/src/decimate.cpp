@@ -1,6 +1,11 @@
 // CGAL is confined to this translation unit: it is slow to compile and must not leak into headers.
 #include "caps/volume/isosurface.hpp"
 
+// GCC 12 reports a false -Wmaybe-uninitialized inside Eigen for CGAL's 4x4 quadric matrices.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+
 #include "caps/core/error.hpp"
 
 #include <CGAL/Polygon_mesh_processing/orient_polygon_soup.h>

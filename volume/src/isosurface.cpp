@@ -311,8 +311,9 @@ TriMesh extract_isosurface(const Volume& field, float iso) {
       }
   });
 
-  // Prefix sums: the vertices of row r are its x-, then y-, then z-edge crossings; rows in memory
-  // order. Converting counts to offsets in place keeps the output independent of scheduling.
+  // Serial prefix sums turn the counts into offsets (in place): the vertices of row r are its x-,
+  // then y-, then z-edge crossings, rows in memory order. Fixed offsets make the output
+  // independent of how the rows are scheduled.
   std::int64_t n_vert = 0, n_tri = 0;
   for (std::size_t r = 0; r <= n_rows; ++r) {
     RowCounts c = counts[r];

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <numeric>
 
 #include "caps/core/atomic_output.hpp"
@@ -23,29 +24,33 @@ namespace {
 
 // The field whose `level` isosurface is the mask's boundary, placed on the intensities where
 // they agree with the mask: inside the mask values are raised to at least level + 1, outside
-// lowered to at most level - 1. Cut-away attachments and filled cavities so vanish.
+// lowered to at most level - 1, so cut-away attachments and filled cavities vanish. A border of
+// outside voxels closes the surface where the head is cut by the scan's field of view.
 Volume masked_field(const Volume& intensity, const Mask& m, float level) {
   Volume f;
   f.geom = m.geom;
-  f.data.resize(m.data.size());
-  for (std::size_t i = 0; i < m.data.size(); ++i)
-    f.data[i] = m.data[i] ? std::max(intensity.data[i], level + 1.0f)
-                          : std::min(intensity.data[i], level - 1.0f);
+  f.geom.dims = m.geom.dims + Eigen::Vector3i::Constant(2);
+  f.geom.origin_lps = m.geom.index_to_lps(Eigen::Vector3d::Constant(-1.0));
+  f.data.assign(f.geom.n_voxels(), level - 1.0f);
+  const auto& d = m.geom.dims;
+  for (int k = 0; k < d[2]; ++k)
+    for (int j = 0; j < d[1]; ++j)
+      for (int i = 0; i < d[0]; ++i) {
+        const std::size_t src = m.geom.linear(i, j, k);
+        const float value = intensity.data.empty() ? (m.data[src] ? level + 1.0f : level - 1.0f)
+                                                   : intensity.data[src];
+        f.data[f.geom.linear(i + 1, j + 1, k + 1)] =
+            m.data[src] ? std::max(value, level + 1.0f) : std::min(value, level - 1.0f);
+      }
   return f;
 }
 
 TriMesh surface_of(const Volume& working, const Mask& m, double level, bool use_intensity,
                    const ModelOptions& o) {
-  TriMesh mesh;
-  if (use_intensity) {
-    mesh = extract_isosurface(masked_field(working, m, static_cast<float>(level)),
-                              static_cast<float>(level));
-  } else {
-    Volume f;
-    f.geom = m.geom;
-    f.data.assign(m.data.begin(), m.data.end());
-    mesh = extract_isosurface(f, 0.5f);
-  }
+  static const Volume kNoIntensity;
+  TriMesh mesh = extract_isosurface(
+      masked_field(use_intensity ? working : kNoIntensity, m, static_cast<float>(level)),
+      static_cast<float>(level));
   if (o.smoothing_iterations > 0) smooth_taubin(mesh, o.smoothing_iterations);
   if (o.decimate_fraction < 1.0 && mesh.n_faces() > 0) mesh = decimate(mesh, o.decimate_fraction);
   return mesh;
@@ -91,24 +96,45 @@ ModelStatistics model_statistics(const CylindricalMaps& maps) {
     s.thickness_normal_median_mm = percentile(tn, 0.5);
   }
   s.r_skin_median_mm = percentile(rs, 0.5);
-  // The face: the most prominent local bump of r_skin above its surroundings 20 degrees to either
-  // side, over rows where skin was measured: the nose tip on a head.
-  const int half = std::max(1, static_cast<int>(std::lround(20.0 / g.dtheta_deg())));
-  double best = -1e300;
-  for (int k = 0; k < g.n_z; ++k)
-    for (int j = 0; j < g.n_theta; ++j) {
-      const std::size_t c = g.index(j, k);
-      if (!maps.measured_skin[c] || (maps.flags[c] & (kGrazing | kTruncated))) continue;
-      const std::size_t a = g.index((j + half) % g.n_theta, k);
-      const std::size_t b = g.index((j + g.n_theta - half) % g.n_theta, k);
-      if (!maps.measured_skin[a] || !maps.measured_skin[b]) continue;
-      const double prominence = maps.r_skin[c] - 0.5 * (maps.r_skin[a] + maps.r_skin[b]);
-      if (prominence > best) {
-        best = prominence;
-        s.face_theta_deg = g.theta_deg(j);
-        s.face_z_mm = g.z_mm(k);
+  // The face. A head is nearly mirror-symmetric about its mid-sagittal plane, which meets the
+  // cylinder in two meridians (front and back); of those, the front is the one with the most
+  // prominent bump (the nose) over its surroundings 20 degrees to either side. Ears are paired
+  // and off the meridians, so they cannot be taken for the face.
+  auto usable = [&](std::size_t c) {
+    return maps.measured_skin[c] && !(maps.flags[c] & (kGrazing | kTruncated | kUndercut));
+  };
+  auto r_at = [&](int j, int k) { return maps.r_skin[g.index((j % g.n_theta + g.n_theta) % g.n_theta, k)]; };
+  auto ok_at = [&](int j, int k) { return usable(g.index((j % g.n_theta + g.n_theta) % g.n_theta, k)); };
+  int best_j = 0;
+  double best_score = std::numeric_limits<double>::max();
+  const int quarter = g.n_theta / 4;
+  for (int j0 = 0; j0 < g.n_theta / 2; ++j0) {
+    double sum = 0;
+    int n = 0;
+    for (int k = 0; k < g.n_z; k += 2)
+      for (int d = 2; d <= quarter; d += 2) {
+        for (int side : {j0, j0 + g.n_theta / 2}) {
+          if (!ok_at(side + d, k) || !ok_at(side - d, k)) continue;
+          sum += std::abs(r_at(side + d, k) - r_at(side - d, k));
+          ++n;
+        }
       }
-    }
+    if (n > 0 && sum / n < best_score) { best_score = sum / n; best_j = j0; }
+  }
+  const int half = std::max(1, static_cast<int>(std::lround(20.0 / g.dtheta_deg())));
+  double best_prominence = -1e300;
+  for (int j0 : {best_j, best_j + g.n_theta / 2})
+    for (int k = 0; k < g.n_z; ++k)
+      for (int dj = -2; dj <= 2; ++dj) {
+        const int j = j0 + dj;
+        if (!ok_at(j, k) || !ok_at(j + half, k) || !ok_at(j - half, k)) continue;
+        const double prominence = r_at(j, k) - 0.5 * (r_at(j + half, k) + r_at(j - half, k));
+        if (prominence > best_prominence) {
+          best_prominence = prominence;
+          s.face_theta_deg = g.theta_deg((j % g.n_theta + g.n_theta) % g.n_theta);
+          s.face_z_mm = g.z_mm(k);
+        }
+      }
   std::vector<double> forehead;
   for (int k = 0; k < g.n_z; ++k) {
     const double dz = g.z_mm(k) - s.face_z_mm;

@@ -473,6 +473,7 @@ Volume build_volume(std::vector<SliceHeader> slices, const std::string& where,
   const float fill = v.modality == Modality::CT ? std::max(data_min, -1024.0f) : data_min;
 
   v.data.assign(g.n_voxels(), fill);
+  v.acquired.assign(g.n_voxels(), 0);
   const std::size_t plane_out = static_cast<std::size_t>(nx_out) * ny_out;
   tbb::parallel_for(0, nz, [&](int k) {
     const double w = slices.front().d + k * dz;
@@ -505,6 +506,7 @@ Volume build_volume(std::vector<SliceHeader> slices, const std::string& where,
         if (ha && hb) dst[j * nx_out + i] = static_cast<float>((1 - t) * va + t * vb);
         else if (ha) dst[j * nx_out + i] = va;
         else if (hb) dst[j * nx_out + i] = vb;
+        v.acquired[static_cast<std::size_t>(k) * plane_out + j * nx_out + i] = ha || hb;
       }
     }
   });

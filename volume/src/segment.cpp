@@ -63,6 +63,13 @@ Mask keep_label(const std::vector<std::int32_t>& labels, const VolumeGeometry& g
 
 // Keeps the head: the largest object above threshold, cut loose from thin attachments (table,
 // head holder, wrapping) by an opening, with small cut-off pieces (ear rims) put back.
+// Fills air enclosed by the head: per slice across the superior axis (airway, nostrils, mouth,
+// which open to the outside only downwards), then in 3-D (sinuses).
+void fill_enclosed(Mask& m) {
+  fill_enclosed_slices(m, superior_axis(m.geom));
+  fill_enclosed_3d(m);
+}
+
 Mask clean_skin(const Mask& raw, const SegmentOptions& o, Segmentation& seg) {
   std::vector<std::int64_t> sizes;
   auto labels = label_components(raw, sizes);
@@ -72,6 +79,9 @@ Mask clean_skin(const Mask& raw, const SegmentOptions& o, Segmentation& seg) {
                            "threshold ", seg.skin_threshold, "; check --skin-threshold and that "
                            "the file is a head scan"));
   Mask head = keep_label(labels, raw.geom, 1);
+  // Fill before opening: in MR the bright scalp is a shell a few mm thick over dark bone, which
+  // an opening would otherwise cut away as if it were an attachment.
+  fill_enclosed(head);
   constexpr double kMinHeadMl = 100.0;
   if (sizes[1] * ml < kMinHeadMl)
     throw InvalidInput(cat(seg.working.source, ": no head found: the largest object above ",
@@ -104,8 +114,7 @@ Mask clean_skin(const Mask& raw, const SegmentOptions& o, Segmentation& seg) {
   const auto final_labels = label_components(kept, final_sizes);
   Mask result = keep_label(final_labels, raw.geom, 1);
   for (std::size_t l = 2; l < final_sizes.size(); ++l) seg.detached_volume_ml += final_sizes[l] * ml;
-  for (std::size_t l = 1; l < sizes.size(); ++l)
-    if (l > 1) seg.detached_volume_ml += sizes[l] * ml;  // objects apart from the head
+  for (std::size_t l = 2; l < sizes.size(); ++l) seg.detached_volume_ml += sizes[l] * ml;
   return result;
 }
 
@@ -210,8 +219,7 @@ Segmentation segment_head(const Volume& v, const SegmentOptions& o) {
   const Mask raw_skin = threshold(seg.working, seg.skin_threshold);
   progress.update(1);
   seg.skin = clean_skin(raw_skin, o, seg);
-  fill_enclosed_slices(seg.skin, superior_axis(seg.skin.geom));
-  fill_enclosed_3d(seg.skin);
+  fill_enclosed(seg.skin);
   seg.head_volume_ml = seg.skin.count() * voxel_ml(seg.skin.geom);
   if (seg.detached_pieces > 0)
     seg.notes.push_back(cat("cut away ", seg.detached_pieces, " attached object(s), ",

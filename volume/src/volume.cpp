@@ -41,6 +41,23 @@ float sample_trilinear(const Volume& v, const Eigen::Vector3d& ijk, float outsid
   return static_cast<float>(c0 * (1 - fz) + c1 * fz);
 }
 
+bool near_data_edge(const Volume& v, const Eigen::Vector3d& p_lps, double margin_voxels) {
+  const Eigen::Vector3d q = v.lps_to_index(p_lps);
+  const auto& d = v.geom.dims;
+  for (int a = 0; a < 3; ++a)
+    if (d[a] > 1 && (q[a] < margin_voxels || q[a] > d[a] - 1 - margin_voxels)) return true;
+  if (v.acquired.empty()) return false;
+  const int m = static_cast<int>(std::ceil(margin_voxels));
+  const Eigen::Vector3i c = q.array().round().cast<int>();
+  for (int dk = -m; dk <= m; ++dk)
+    for (int dj = -m; dj <= m; ++dj)
+      for (int di = -m; di <= m; ++di) {
+        const int i = c[0] + di, j = c[1] + dj, k = c[2] + dk;
+        if (v.geom.contains(i, j, k) && !v.acquired[v.geom.linear(i, j, k)]) return true;
+      }
+  return false;
+}
+
 void validate_volume(const Volume& v) {
   const auto& g = v.geom;
   if (g.dims.minCoeff() <= 0)
@@ -61,6 +78,8 @@ void validate_volume(const Volume& v) {
                            "the orientation fields of the header are damaged"));
   if (!g.origin_lps.allFinite())
     throw InvalidInput(cat(v.source, ": the image origin is not finite"));
+  if (!v.acquired.empty() && v.acquired.size() != v.data.size())
+    throw InvalidInput(cat(v.source, ": internal: the acquired-data mask does not match the image"));
   if (v.data.size() != g.n_voxels())
     throw InvalidInput(cat(v.source, ": holds ", v.data.size(), " voxels but its header says ",
                            g.dims[0], "x", g.dims[1], "x", g.dims[2], " = ", g.n_voxels()));

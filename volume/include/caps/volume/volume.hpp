@@ -53,6 +53,9 @@ struct Volume {
   std::string source;       ///< file or folder it came from, for messages
   std::string format;       ///< "DICOM", "NIfTI-1", "NRRD", "MetaImage", "InVesalius", "phantom"
   std::vector<std::string> notes;  ///< what the reader did (resampling, series choice, ...)
+  /// 1 where the scanner acquired data, 0 where a reader filled in (e.g. outside a tilted
+  /// slab after resampling); empty means everywhere.
+  std::vector<std::uint8_t> acquired;
 
   float at(int i, int j, int k) const { return data[geom.linear(i, j, k)]; }
   float& at(int i, int j, int k) { return data[geom.linear(i, j, k)]; }
@@ -68,6 +71,10 @@ struct Mask {
   std::uint8_t at(int i, int j, int k) const { return data[geom.linear(i, j, k)]; }
   std::size_t count() const;
 };
+
+/// True if the LPS point lies within `margin_voxels` of the edge of the acquired data: the grid's
+/// boundary or, where Volume::acquired is set, a voxel that was filled in.
+bool near_data_edge(const Volume& v, const Eigen::Vector3d& p_lps, double margin_voxels);
 
 /// Trilinear interpolation at a continuous voxel index; outside the grid returns `outside`.
 float sample_trilinear(const Volume& v, const Eigen::Vector3d& ijk, float outside);
