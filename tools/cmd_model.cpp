@@ -22,6 +22,7 @@ struct FromVolumeArgs {
   double skin_threshold = NAN, bone_threshold = NAN;
   int n_theta = 512, n_z = 256;
   double bone_cap_mm = 40.0, decimate = 1.0, mr_scalp_mm = 6.0;
+  bool allow_missing_slices = false;
 };
 
 Eigen::Vector3d triple(const std::string& s, const std::string& option) {
@@ -34,6 +35,7 @@ void run_from_volume(const FromVolumeArgs& a, const Common& common) {
   { OutputDirectory probe(a.output, common.force); }
   ReadOptions ro;
   ro.series_uid = a.series;
+  ro.allow_missing_slices = a.allow_missing_slices;
   Volume v = read_volume(a.input, ro);
   if (!a.modality.empty()) {
     if (a.modality == "CT") v.modality = Modality::CT;
@@ -94,6 +96,8 @@ void add_model(CLI::App& app, Common& common, Action& action) {
   fv->add_option("INPUT", a->input, "the volume (file or DICOM folder)")->required();
   fv->add_option("-o,--output", a->output, "the model directory to create")->required();
   fv->add_option("--series", a->series, "DICOM SeriesInstanceUID (default: the largest series)");
+  fv->add_flag("--allow-missing-slices", a->allow_missing_slices,
+              "DICOM: interpolate across gaps where slices seem to be missing");
   fv->add_option("--modality", a->modality, "override the modality: CT or MR");
   fv->add_option("--skin-threshold", a->skin_threshold,
                  "tissue/air threshold (default: -400 HU for CT, Otsu for MR)");

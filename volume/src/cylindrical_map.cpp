@@ -157,6 +157,8 @@ double median(std::vector<double>& xs) {
   return xs[xs.size() / 2];
 }
 
+}  // namespace
+
 // Harmonic fill: values where known == 0 become the solution of Laplace's equation with the
 // known values as boundary conditions (periodic in theta, no-flux at the z ends).
 void harmonic_fill(std::vector<float>& img, const std::vector<std::uint8_t>& known,
@@ -227,8 +229,6 @@ void flag_grazing(CylindricalMaps& maps, double limit_deg) {
     }
 }
 
-}  // namespace
-
 CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const CylinderAxis& axis,
                                  const MapOptions& o) {
   if (o.n_theta < 8 || o.n_theta > 8192 || o.n_z < 4 || o.n_z > 8192)
@@ -256,6 +256,10 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
           zhi = std::max(zhi, z);
         }
   if (!(zhi > zlo)) throw InvalidInput(cat(v.source, ": no head found for the cylindrical map"));
+  if (o.z_min_mm) zlo = *o.z_min_mm;
+  if (o.z_max_mm) zhi = *o.z_max_mm;
+  if (!(zhi > zlo))
+    throw InvalidInput(cat("cylindrical grid: z range ", zlo, " .. ", zhi, " mm is empty"));
   grid.z0_mm = zlo;
   grid.dz_mm = (zhi - zlo) / (grid.n_z - 1);
 
@@ -290,6 +294,11 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
   const double coarse = 0.5 * wg.spacing_mm.minCoeff();  // mask marching step
   const double fine = 0.25 * v.geom.spacing_mm.minCoeff();
   const double edge_span = std::max(1.5, 1.5 * v.geom.spacing_mm.maxCoeff());
+  const double ramp = v.geom.spacing_mm.maxCoeff();  // width of an edge's partial-volume ramp
+  const bool is_ct = v.modality == Modality::CT;
+  // Physical ranges of CT plateaus (HU): air, and soft tissue from fat to muscle.
+  constexpr double kCtAirHu[2] = {-1024.0, -850.0};
+  constexpr double kCtTissueHu[2] = {-200.0, 150.0};
   const float skin_thr = static_cast<float>(seg.skin_threshold);
 
   tbb::parallel_for(0, grid.n_z, [&](int k) {
@@ -306,7 +315,7 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
       double r_entry = std::numeric_limits<double>::quiet_NaN();
       // A re-entry counts as an undercut only after a real air gap (kMinGapMm): a ledge in the
       // mask between thick slices is not an ear.
-      constexpr double kMinGapMm = 2.0;
+      constexpr double kMinGapMm = kUndercutMinGapMm;
       bool inside = skin_at(at(t1));
       if (inside) maps.flags[c] |= kTruncated;
       if (inside) r_entry = t1;
@@ -349,12 +358,23 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
       }
       // 4. Half-maximum edges: the threshold finds an edge, the level halfway between the
       // plateaus on either side locates it, independent of the threshold's value.
-      const double air = I_gated(r_s + edge_span);
-      double tissue = I(std::max(0.0, r_s - edge_span));
-      if (std::isfinite(r_b) && r_s - r_b > 2.0) {
+      // The soft-tissue plateau is sampled between the two edges' ramps where at least 1 mm is
+      // left free of both; thinner tissue on coarse voxels has no plateau, and CT then falls back
+      // on soft tissue's physical value. CT plateaus are kept within their physical ranges.
+      double air = I_gated(r_s + edge_span);
+      double tissue = std::numeric_limits<double>::quiet_NaN();
+      if (std::isfinite(r_b) && (r_s - r_b) - ramp >= 1.0) {
         samples.clear();
-        for (double r = r_b + 1.0; r <= r_s - 1.0; r += fine) samples.push_back(I(r));
+        for (double r = r_b + 0.5 * ramp; r <= r_s - 0.5 * ramp; r += fine) samples.push_back(I(r));
         if (samples.size() >= 3) tissue = median(samples);
+      } else if (!std::isfinite(r_b)) {
+        tissue = I(std::max(0.0, r_s - edge_span));
+      }
+      if (is_ct) {
+        tissue = std::isfinite(tissue) ? std::clamp(tissue, kCtTissueHu[0], kCtTissueHu[1]) : 0.0;
+        air = std::clamp(air, kCtAirHu[0], kCtAirHu[1]);
+      } else if (!std::isfinite(tissue)) {
+        tissue = I(std::max(0.0, r_s - edge_span));
       }
       if (air < skin_thr && tissue > skin_thr) {
         const double rs = crossing_inward(I_gated, r_s + edge_span, std::max(0.0, r_s - edge_span),

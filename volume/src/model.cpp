@@ -1,6 +1,7 @@
 #include "caps/volume/model.hpp"
 
 #include <nlohmann/json.hpp>
+#include <png.h>
 
 #include <algorithm>
 #include <cmath>
@@ -67,6 +68,18 @@ json vec(const Eigen::Vector3d& v) { return json::array({v[0], v[1], v[2]}); }
 json vec(const Eigen::Vector3i& v) { return json::array({v[0], v[1], v[2]}); }
 
 double finite_or_null_guard(double x) { return std::isfinite(x) ? x : 0.0; }
+
+void write_rgb_png(const fs::path& path, const RgbImage& img) {
+  write_file_atomic(path, [&](const fs::path& tmp) {
+    png_image image{};
+    image.version = PNG_IMAGE_VERSION;
+    image.width = static_cast<png_uint_32>(img.width);
+    image.height = static_cast<png_uint_32>(img.height);
+    image.format = PNG_FORMAT_RGB;
+    if (!png_image_write_to_file(&image, tmp.c_str(), 0, img.rgb.data(), 0, nullptr))
+      throw IoError(cat(path.string(), ": cannot write PNG (", image.message, ")"));
+  });
+}
 
 }  // namespace
 
@@ -178,10 +191,60 @@ VolumeModel build_volume_model(const Volume& v, const ModelOptions& o) {
 }
 
 void write_model(const VolumeModel& m, const fs::path& dir, bool force) {
+  const auto& seg = m.segmentation;
+  ModelDirectoryContents c;
+  c.maps = &m.maps;
+  c.stats = &m.stats;
+  c.skin = &m.skin;
+  c.bone = &m.bone;
+  c.name = fs::path(m.source).filename().string();
+  c.source_json = json{{"kind", "volume"},
+                       {"path", m.source},
+                       {"format", m.source_format},
+                       {"modality", to_string(m.modality)},
+                       {"dims", vec(m.source_dims)},
+                       {"spacing_mm", vec(m.source_spacing_mm)},
+                       {"notes", m.notes}}
+                      .dump();
+  c.segmentation_json = json{{"skin_method", seg.skin_method},
+                             {"skin_threshold", seg.skin_threshold},
+                             {"bone_method", seg.bone_method},
+                             {"bone_threshold", std::isfinite(seg.bone_threshold)
+                                                    ? json(seg.bone_threshold) : json(nullptr)},
+                             {"bone_is_approximate", seg.bone_is_approximate},
+                             {"working_spacing_mm", vec(seg.working.geom.spacing_mm)},
+                             {"head_volume_ml", seg.head_volume_ml},
+                             {"bone_volume_ml", seg.bone_volume_ml},
+                             {"detached_pieces", seg.detached_pieces},
+                             {"detached_volume_ml", seg.detached_volume_ml}}
+                            .dump();
+  c.thickness_json = json{{"kind", seg.bone_is_approximate ? "approximate" : "measured"},
+                          {"radial", "r_skin - r_bone along the ray from the axis"},
+                          {"normal", "distance from the skin point to the nearest bone"},
+                          {"fill", "invalid cells: r_skin and thickness filled by harmonic "
+                                   "interpolation from valid cells; see validity.nrrd"}}
+                         .dump();
+  write_model_directory(c, dir, force);
+}
+
+void write_model_directory(const ModelDirectoryContents& c, const fs::path& dir, bool force) {
+  if (!c.maps || !c.stats || !c.skin || !c.bone)
+    throw InvalidInput("write_model_directory: maps, statistics, skin and bone are required");
+  const auto& maps = *c.maps;
+  const auto& g = maps.grid;
+  if (c.color && (c.color->width != g.n_theta || c.color->height != g.n_z ||
+                  c.color->rgb.size() != g.size() * 3))
+    throw InvalidInput(cat("write_model_directory: the colour image is ", c.color->width, " x ",
+                           c.color->height, ", expected the grid's ", g.n_theta, " x ", g.n_z));
+  auto parse = [](const std::string& text, const char* what) {
+    try {
+      return text.empty() ? json::object() : json::parse(text);
+    } catch (const json::exception& e) {
+      throw InvalidInput(cat("write_model_directory: ", what, " is not valid JSON (", e.what(), ")"));
+    }
+  };
   OutputDirectory out(dir, force);
   const fs::path p = out.path();
-  const auto& maps = m.maps;
-  const auto& g = maps.grid;
   Progress progress("writing the model", 8);
   write_map_nrrd(p / "r_skin.nrrd", maps.r_skin, g, "r_skin: skin radius", "mm");
   write_map_nrrd(p / "r_bone.nrrd", maps.r_bone, g, "r_bone: bone radius", "mm");
@@ -193,30 +256,23 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force) {
                  "validity: 0 valid; bit flags 1 no_skin, 2 no_bone, 4 undercut, 8 grazing, "
                  "16 truncated", "flags");
   progress.update(3);
-  const std::string name = fs::path(m.source).filename().string();
   write_thickness_png(p / "thickness.png", maps, maps.thickness,
-                      cat("Soft-tissue thickness (radial), ", name));
-  write_skin_png(p / "skin.png", maps, cat("Skin range image (shaded), ", name));
+                      cat("Soft-tissue thickness (radial), ", c.name), c.credit);
+  write_skin_png(p / "skin.png", maps, cat("Skin range image (shaded), ", c.name), c.credit);
+  if (c.color) write_rgb_png(p / "color.png", *c.color);
   progress.update(5);
-  write_ply(m.skin, p / "skin.ply");
-  write_ply(m.bone, p / "bone.ply");
+  write_ply(*c.skin, p / "skin.ply");
+  write_ply(*c.bone, p / "bone.ply");
   progress.update(7);
 
-  const auto& s = m.stats;
-  const auto& seg = m.segmentation;
+  const auto& s = *c.stats;
   json j;
   j["format"] = "caps-model";
   j["format_version"] = kModelFormatVersion;
   j["created_by"] = "caps 0.1.0";
   j["units"] = {{"length", "mm"}, {"angle", "deg"}};
   j["frame"] = "LPS";
-  j["source"] = {{"kind", "volume"},
-                 {"path", m.source},
-                 {"format", m.source_format},
-                 {"modality", to_string(m.modality)},
-                 {"dims", vec(m.source_dims)},
-                 {"spacing_mm", vec(m.source_spacing_mm)},
-                 {"notes", m.notes}};
+  j["source"] = parse(c.source_json, "source_json");
   j["axis"] = {{"origin_lps", vec(maps.axis.origin_lps)},
                {"direction", vec(maps.axis.direction)},
                {"front", vec(maps.axis.front)},
@@ -226,22 +282,8 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force) {
   j["grid"] = {{"n_theta", g.n_theta}, {"n_z", g.n_z},       {"theta0_deg", g.theta0_deg},
                {"dtheta_deg", g.dtheta_deg()}, {"z0_mm", g.z0_mm}, {"dz_mm", g.dz_mm},
                {"layout", "theta fastest; sample (j, k) at theta0 + j dtheta, z0 + k dz"}};
-  j["segmentation"] = {{"skin_method", seg.skin_method},
-                       {"skin_threshold", seg.skin_threshold},
-                       {"bone_method", seg.bone_method},
-                       {"bone_threshold", std::isfinite(seg.bone_threshold)
-                                              ? json(seg.bone_threshold) : json(nullptr)},
-                       {"bone_is_approximate", seg.bone_is_approximate},
-                       {"working_spacing_mm", vec(seg.working.geom.spacing_mm)},
-                       {"head_volume_ml", seg.head_volume_ml},
-                       {"bone_volume_ml", seg.bone_volume_ml},
-                       {"detached_pieces", seg.detached_pieces},
-                       {"detached_volume_ml", seg.detached_volume_ml}};
-  j["thickness"] = {{"kind", seg.bone_is_approximate ? "approximate" : "measured"},
-                    {"radial", "r_skin - r_bone along the ray from the axis"},
-                    {"normal", "distance from the skin point to the nearest bone"},
-                    {"fill", "invalid cells: r_skin and thickness filled by harmonic "
-                             "interpolation from valid cells; see validity.nrrd"}};
+  j["segmentation"] = parse(c.segmentation_json, "segmentation_json");
+  j["thickness"] = parse(c.thickness_json, "thickness_json");
   j["statistics"] = {
       {"cells", s.cells},
       {"valid_cells", s.valid_cells},
@@ -259,11 +301,12 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force) {
                 {"validity", "validity.nrrd"},   {"thickness_png", "thickness.png"},
                 {"skin_png", "skin.png"},        {"skin_mesh", "skin.ply"},
                 {"bone_mesh", "bone.ply"}};
+  if (c.color) j["files"]["color"] = "color.png";
   j["meshes"] = {
-      {"skin", {{"vertices", m.skin.n_vertices()}, {"faces", m.skin.n_faces()},
-                {"area_mm2", mesh_area(m.skin)}, {"closed", is_closed_manifold(m.skin)}}},
-      {"bone", {{"vertices", m.bone.n_vertices()}, {"faces", m.bone.n_faces()},
-                {"area_mm2", mesh_area(m.bone)}, {"closed", is_closed_manifold(m.bone)}}}};
+      {"skin", {{"vertices", c.skin->n_vertices()}, {"faces", c.skin->n_faces()},
+                {"area_mm2", mesh_area(*c.skin)}, {"closed", is_closed_manifold(*c.skin)}}},
+      {"bone", {{"vertices", c.bone->n_vertices()}, {"faces", c.bone->n_faces()},
+                {"area_mm2", mesh_area(*c.bone)}, {"closed", is_closed_manifold(*c.bone)}}}};
   write_text_atomic(p / "model.json", j.dump(2) + "\n");
   out.commit();
 }

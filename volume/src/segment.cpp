@@ -196,6 +196,10 @@ Segmentation segment_head(const Volume& v, const SegmentOptions& o) {
   if (!(o.detach_radius_mm >= 0 && o.detach_radius_mm <= 20))
     throw InvalidInput(cat("segmentation: detach radius ", o.detach_radius_mm,
                            " mm must be in [0, 20]"));
+  const auto [lo, hi] = std::minmax_element(v.data.begin(), v.data.end());
+  if (!(*hi - *lo > 1e-3f * std::max(1.0f, std::abs(*hi))))
+    throw InvalidInput(cat(v.source, ": no head found: the image is uniform (every voxel is ", *lo,
+                           "); check that the file holds the scan"));
   Progress progress("segmenting skin and bone", 4);
   Segmentation seg;
   Eigen::Vector3i factor;

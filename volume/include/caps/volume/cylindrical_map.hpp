@@ -10,6 +10,7 @@
 
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -60,11 +61,16 @@ enum CellFlag : std::uint8_t {
 /// Short names of the flags, e.g. "no_bone|undercut".
 std::string describe_flags(std::uint8_t flags);
 
+/// A ray that re-enters the skin after an air gap of at least this length (mm) is kUndercut.
+inline constexpr double kUndercutMinGapMm = 2.0;
+
 struct MapOptions {
   int n_theta = 512;
   int n_z = 256;
   double bone_cap_mm = 40.0;     ///< no bone deeper than this under the skin -> kNoBone
   double grazing_deg = 70.0;     ///< ray-to-normal angle beyond which a cell is kGrazing
+  /// The z range of the grid (mm along the axis); by default the head's extent.
+  std::optional<double> z_min_mm, z_max_mm;
 };
 
 /// The maps. Images hold grid.size() values, theta fastest. Lengths in mm.
@@ -83,6 +89,17 @@ struct CylindricalMaps {
 
   bool is_valid(int j, int k) const { return flags[grid.index(j, k)] == 0; }
 };
+
+/// The fill policy of every model (docs/model-format.md): values where known == 0 are replaced by
+/// the solution of Laplace's equation with the known values as boundary conditions, periodic in
+/// theta, no-flux at the z ends. `img` and `known` hold grid.size() values, theta fastest.
+void harmonic_fill(std::vector<float>& img, const std::vector<std::uint8_t>& known,
+                   const CylinderGrid& grid);
+
+/// Sets kGrazing on measured cells (measured_skin) whose ray meets the range surface r_skin more
+/// than `limit_deg` from its normal (slopes from central differences where both neighbours were
+/// measured, one-sided otherwise). Used by volume and scan models alike.
+void flag_grazing(CylindricalMaps& maps, double limit_deg);
 
 /// Fits the axis to the segmented head: parallel to patient superior (LPS +z), through the
 /// area-weighted centre of the head's axial cross-sections; front = anterior (LPS -y).

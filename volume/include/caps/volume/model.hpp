@@ -12,6 +12,7 @@
 
 #include "caps/core/mesh.hpp"
 #include "caps/volume/cylindrical_map.hpp"
+#include "caps/volume/image_io.hpp"
 #include "caps/volume/segment.hpp"
 #include "caps/volume/volume.hpp"
 
@@ -62,6 +63,27 @@ ModelStatistics model_statistics(const CylindricalMaps& maps);
 /// Writes the model directory atomically (built under a temporary name, then renamed).
 /// An existing `dir` is replaced only with `force`; otherwise InvalidInput.
 void write_model(const VolumeModel& model, const std::filesystem::path& dir, bool force);
+
+/// What a model directory holds, whatever built it (a volume or a surface scan). The pointers
+/// are not owned and must outlive the call to write_model_directory().
+struct ModelDirectoryContents {
+  const CylindricalMaps* maps = nullptr;   ///< required
+  const ModelStatistics* stats = nullptr;  ///< required
+  const TriMesh* skin = nullptr;           ///< required, LPS mm
+  const TriMesh* bone = nullptr;           ///< required, LPS mm
+  const RgbImage* color = nullptr;  ///< optional skin colour, n_theta wide, n_z high, superior on top
+  std::string source_json;          ///< model.json "source" object, as JSON text
+  std::string segmentation_json;    ///< model.json "segmentation" object, as JSON text
+  std::string thickness_json;       ///< model.json "thickness" object, as JSON text
+  std::string name;                 ///< the source's name, shown in the pictures' titles
+  std::string credit;               ///< a credit line drawn on the pictures (may be empty)
+};
+
+/// Writes a model directory (format 1, docs/model-format.md) atomically; write_model() and the
+/// scan importer both use it. An existing `dir` is replaced only with `force`; otherwise
+/// InvalidInput.
+void write_model_directory(const ModelDirectoryContents& contents, const std::filesystem::path& dir,
+                           bool force);
 
 /// Reads model.json of a model directory and returns it as JSON text (pretty-printed), after
 /// checking the format version and that the files it names exist.

@@ -1,0 +1,97 @@
+#pragma once
+/// @brief The continuum mesh the solver reads: quadratic hexahedra and wedges, layers,
+/// fixed degrees of freedom, nodal loads and suture pairs. Units mm (LPS), N.
+///
+/// Local node numbering (paper Figure 5; docs/mesh-format.md has the drawings):
+///
+/// Hex20 (natural coordinates xi, eta, zeta in [-1,1]^3; zeta = -1 is face 0, the "top" face,
+/// the skin side; zeta = +1 is face 1, the bottom, towards bone):
+///   0-3   top_nodes       (-1,-1,-1) (1,-1,-1) (1,1,-1) (-1,1,-1)
+///   4-7   bottom_nodes    same at zeta = +1
+///   8-11  top_mid_nodes   edges 0-1, 1-2, 2-3, 3-0
+///   12-15 bottom_mid      edges 4-5, 5-6, 6-7, 7-4
+///   16-19 center_nodes    edges 0-4, 1-5, 2-6, 3-7
+/// The right-hand normal of 0-1-2-3 must point into the element (towards 4-7); otherwise the
+/// Jacobian is negative. This is exactly VTK_QUADRATIC_HEXAHEDRON (25): identity mapping.
+///
+/// Wedge15 (area coordinates r, s with L0 = 1-r-s, and zeta in [-1,1]):
+///   0-2   top corners (r,s) = (0,0) (1,0) (0,1) at zeta = -1;   3-5 same at zeta = +1
+///   6-8   top edges 0-1, 1-2, 2-0;  9-11 bottom edges 3-4, 4-5, 5-3;  12-14 edges 0-3, 1-4, 2-5
+/// Same orientation rule as Hex20 (0-1-2 right-hand normal towards 3-5). It is the paper's
+/// collapsed hexahedron with hex nodes 2=3=10, 18=19 and 6=7=14 merged (wedge_from_collapsed_hex).
+/// VTK_QUADRATIC_WEDGE (26) orients 0-1-2 the other way, so VTK order = caps order permuted by
+/// kWedge15ToVtk (an involution: the same table converts back).
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "caps/fem/material.hpp"
+
+namespace caps::fem {
+
+enum class ElementType : std::uint8_t { Hex20, Wedge15 };
+
+/// 20 for Hex20, 15 for Wedge15.
+int n_element_nodes(ElementType type);
+/// "Hex20" / "Wedge15".
+const char* element_type_name(ElementType type);
+
+/// vtk_node[k] = caps_node[kWedge15ToVtk[k]].
+inline constexpr std::array<int, 15> kWedge15ToVtk{0, 2, 1, 3, 5, 4, 8, 7, 6, 11, 10, 9, 12, 14, 13};
+
+/// One element: type, material layer id and node ids (first n_element_nodes(type) are used).
+struct Element {
+  ElementType type = ElementType::Hex20;
+  int layer = 0;
+  std::array<int, 20> nodes{};
+  int n_nodes() const { return n_element_nodes(type); }
+};
+
+/// A prescribed displacement of one component (0 = x, 1 = y, 2 = z) of one node, in mm.
+struct FixedDof {
+  int node = 0;
+  int component = 0;
+  double value_mm = 0.0;
+};
+
+/// A point force on a node, N.
+struct NodalLoad {
+  int node = 0;
+  Eigen::Vector3d force_n = Eigen::Vector3d::Zero();
+};
+
+/// A suture between nodes a and b: u_a - u_b = x_b - x_a, so the two meet after closure.
+struct SuturePair {
+  int a = 0;
+  int b = 0;
+};
+
+/// The solver's input mesh.
+struct Mesh {
+  Eigen::MatrixX3d nodes;                 ///< #N×3 positions, LPS mm
+  std::vector<Element> elements;          ///< connectivity in the numbering above
+  std::map<int, LinearElastic> materials; ///< layer id -> material
+  std::vector<int> fixed_nodes;           ///< all three components fixed at 0
+  std::vector<FixedDof> fixed_dofs;       ///< single prescribed components
+  std::vector<NodalLoad> loads;           ///< nodal forces
+  std::vector<SuturePair> sutures;        ///< suture constraints
+  std::string model;                      ///< reference to the patient model, if known
+  std::string plan;                       ///< reference to the surgical plan, if known
+
+  Eigen::Index n_nodes() const { return nodes.rows(); }
+  std::size_t n_elements() const { return elements.size(); }
+};
+
+/// Checks ids in range, finite coordinates, known layers, no self-sutures, no duplicate
+/// elements nodes, component in 0..2. Throws InvalidInput naming `where` and the item.
+void validate(const Mesh& mesh, const std::string& where = "mesh");
+
+/// Builds a Wedge15 from a 20-entry collapsed hexahedron (paper section 6: hex nodes 2, 10, 3
+/// share one node, 18 and 19 one, 6, 14, 7 one). Throws InvalidInput if the shared ids differ.
+Element wedge_from_collapsed_hex(const std::array<int, 20>& hex, int layer);
+
+}  // namespace caps::fem

@@ -1,0 +1,77 @@
+#pragma once
+/// @brief Linear static solve with fixed dofs and suture constraints, and its results.
+///
+/// Sutures are eliminated (master-slave): every group of nodes joined by sutures shares one
+/// final position, so u_n = u_m + (x_m - x_n) for each member n of master m's group. The reduced
+/// system is symmetric positive definite and is solved by MUMPS (default) or CHOLMOD.
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "caps/fem/mesh.hpp"
+
+namespace caps::fem {
+
+enum class SolverKind { Mumps, Cholmod };
+
+/// "mumps" / "cholmod".
+const char* solver_name(SolverKind kind);
+/// Parses "mumps" / "cholmod"; throws InvalidInput otherwise.
+SolverKind parse_solver(const std::string& name);
+
+struct SolveOptions {
+  SolverKind solver = SolverKind::Mumps;
+  /// MUMPS ICNTL(7) ordering: 0 AMD, 2 AMF, 3 SCOTCH (if built), 4 PORD, 5 METIS (if built),
+  /// 6 QAMD, 7 automatic. PORD is measured fastest here (docs/benchmarks.md).
+  int mumps_ordering = 4;
+  /// Threads for assembly and stress recovery (0 = all).
+  int threads = 0;
+};
+
+/// Wall-clock seconds of each phase.
+struct SolveTimings {
+  double constraints_s = 0, assembly_s = 0, analysis_s = 0, factorization_s = 0, solve_s = 0,
+         recovery_s = 0, total_s = 0;
+};
+
+/// The force one suture carries.
+struct SutureForce {
+  int a = 0, b = 0;
+  Eigen::Vector3d force_on_a_n = Eigen::Vector3d::Zero();  ///< N; the force on b is opposite
+  double magnitude_n = 0;
+};
+
+struct SolveResult {
+  Eigen::MatrixX3d displacement_mm;          ///< #N×3
+  Eigen::MatrixXd gauss_stress_mpa;          ///< #GP×6 Voigt, element by element in rule order
+  std::vector<int> gauss_offset;             ///< first row of element e in gauss_stress_mpa
+  Eigen::MatrixXd nodal_stress_mpa;          ///< #N×6 Voigt, averaged over adjacent elements
+  Eigen::VectorXd von_mises_mpa;             ///< #N
+  Eigen::VectorXd max_principal_mpa;         ///< #N
+  Eigen::VectorXd element_von_mises_mpa;     ///< #E mean over the element's Gauss points
+  Eigen::MatrixX3d reaction_n;               ///< #N×3 constraint reactions (fixed and sutured)
+  std::vector<SutureForce> suture_forces;    ///< one per mesh.sutures entry
+  double total_suture_force_n = 0;           ///< sum of magnitudes: the closing tension
+  double strain_energy_mj = 0;               ///< N·mm = mJ
+  double relative_residual = 0;              ///< ||K q - f|| / ||f|| of the reduced system
+  long n_dofs = 0;                           ///< 3 × nodes
+  long n_equations = 0;                      ///< after elimination
+  long n_nonzeros = 0;                       ///< upper triangle of the reduced matrix
+  long factor_nonzeros = 0;                  ///< entries of the factor (solver's report)
+  double peak_memory_mb = 0;                 ///< process peak RSS after the solve
+  std::string solver;
+  SolveTimings timings;
+};
+
+/// Solves the linear static problem. Throws InvalidInput for bad or under-constrained input
+/// (the message says what to fix), SolverError if the factorization fails otherwise.
+SolveResult solve(const Mesh& mesh, const SolveOptions& options = {});
+
+/// Writes result.vtu (deformed-ready: displacement, stresses, reactions) and result.json
+/// (summary, timings, sizes, suture forces) into an existing directory.
+void write_result_dir(const Mesh& mesh, const SolveResult& result,
+                      const std::filesystem::path& dir);
+
+}  // namespace caps::fem

@@ -1,0 +1,283 @@
+#include "caps/fem/elements.hpp"
+
+#include <Eigen/Dense>
+#include <Eigen/Eigenvalues>
+#include <cmath>
+
+#include "caps/core/error.hpp"
+#include "elements_impl.hpp"
+
+namespace caps::fem {
+namespace {
+
+// Hex20 natural node coordinates in the paper's Figure 5 numbering (see mesh.hpp).
+constexpr double kHexNodes[20][3] = {
+    {-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1},  // top corners
+    {-1, -1, 1},  {1, -1, 1},  {1, 1, 1},  {-1, 1, 1},   // bottom corners
+    {0, -1, -1},  {1, 0, -1},  {0, 1, -1}, {-1, 0, -1},  // top mid
+    {0, -1, 1},   {1, 0, 1},   {0, 1, 1},  {-1, 0, 1},   // bottom mid
+    {-1, -1, 0},  {1, -1, 0},  {1, 1, 0},  {-1, 1, 0}};  // center (vertical edges)
+
+// Wedge15 natural node coordinates (r, s, zeta).
+constexpr double kWedgeNodes[15][3] = {
+    {0, 0, -1},   {1, 0, -1},   {0, 1, -1},   {0, 0, 1},   {1, 0, 1},
+    {0, 1, 1},    {0.5, 0, -1}, {0.5, 0.5, -1}, {0, 0.5, -1}, {0.5, 0, 1},
+    {0.5, 0.5, 1}, {0, 0.5, 1}, {0, 0, 0},    {1, 0, 0},   {0, 1, 0}};
+
+// Serendipity hexahedron (Zienkiewicz, Taylor & Zhu 2005, sec. 6.5, eq. 6.32-6.33).
+void hex20_shape(const Eigen::Vector3d& p, double* N, double (*dN)[3]) {
+  for (int a = 0; a < 20; ++a) {
+    const double xa = kHexNodes[a][0], ya = kHexNodes[a][1], za = kHexNodes[a][2];
+    const double x = p[0], y = p[1], z = p[2];
+    if (a < 8) {
+      const double fx = 1 + x * xa, fy = 1 + y * ya, fz = 1 + z * za;
+      const double g = x * xa + y * ya + z * za - 2;
+      N[a] = 0.125 * fx * fy * fz * g;
+      dN[a][0] = 0.125 * fy * fz * (xa * g + fx * xa);
+      dN[a][1] = 0.125 * fx * fz * (ya * g + fy * ya);
+      dN[a][2] = 0.125 * fx * fy * (za * g + fz * za);
+    } else if (xa == 0) {
+      const double fy = 1 + y * ya, fz = 1 + z * za;
+      N[a] = 0.25 * (1 - x * x) * fy * fz;
+      dN[a][0] = -0.5 * x * fy * fz;
+      dN[a][1] = 0.25 * (1 - x * x) * ya * fz;
+      dN[a][2] = 0.25 * (1 - x * x) * fy * za;
+    } else if (ya == 0) {
+      const double fx = 1 + x * xa, fz = 1 + z * za;
+      N[a] = 0.25 * (1 - y * y) * fx * fz;
+      dN[a][0] = 0.25 * (1 - y * y) * xa * fz;
+      dN[a][1] = -0.5 * y * fx * fz;
+      dN[a][2] = 0.25 * (1 - y * y) * fx * za;
+    } else {
+      const double fx = 1 + x * xa, fy = 1 + y * ya;
+      N[a] = 0.25 * (1 - z * z) * fx * fy;
+      dN[a][0] = 0.25 * (1 - z * z) * xa * fy;
+      dN[a][1] = 0.25 * (1 - z * z) * fx * ya;
+      dN[a][2] = -0.5 * z * fx * fy;
+    }
+  }
+}
+
+// Quadratic (15-node) wedge: quadratic triangle in area coordinates x quadratic in zeta
+// (Zienkiewicz, Taylor & Zhu 2005, sec. 6.7; the same functions as CalculiX C3D15).
+void wedge15_shape(const Eigen::Vector3d& p, double* N, double (*dN)[3]) {
+  const double r = p[0], s = p[1], z = p[2];
+  const double L[3] = {1 - r - s, r, s};
+  const double dL[3][2] = {{-1, -1}, {1, 0}, {0, 1}};  // dL_i/d(r,s)
+  for (int c = 0; c < 6; ++c) {  // corners
+    const int i = c % 3;
+    const double zc = c < 3 ? -1.0 : 1.0;
+    const double fz = 1 + zc * z;
+    N[c] = 0.5 * L[i] * (2 * L[i] - 1) * fz - 0.5 * L[i] * (1 - z * z);
+    const double dNdL = 0.5 * (4 * L[i] - 1) * fz - 0.5 * (1 - z * z);
+    dN[c][0] = dNdL * dL[i][0];
+    dN[c][1] = dNdL * dL[i][1];
+    dN[c][2] = 0.5 * L[i] * (2 * L[i] - 1) * zc + L[i] * z;
+  }
+  const int edge[3][2] = {{0, 1}, {1, 2}, {2, 0}};
+  for (int e = 0; e < 6; ++e) {  // triangle edges, top then bottom
+    const int i = edge[e % 3][0], j = edge[e % 3][1];
+    const double zc = e < 3 ? -1.0 : 1.0;
+    const double fz = 1 + zc * z;
+    N[6 + e] = 2 * L[i] * L[j] * fz;
+    dN[6 + e][0] = 2 * (dL[i][0] * L[j] + L[i] * dL[j][0]) * fz;
+    dN[6 + e][1] = 2 * (dL[i][1] * L[j] + L[i] * dL[j][1]) * fz;
+    dN[6 + e][2] = 2 * L[i] * L[j] * zc;
+  }
+  for (int i = 0; i < 3; ++i) {  // vertical edges
+    N[12 + i] = L[i] * (1 - z * z);
+    dN[12 + i][0] = dL[i][0] * (1 - z * z);
+    dN[12 + i][1] = dL[i][1] * (1 - z * z);
+    dN[12 + i][2] = -2 * L[i] * z;
+  }
+}
+
+std::vector<QuadraturePoint> make_hex_rule() {
+  const double g = std::sqrt(0.6);
+  const double x[3] = {-g, 0, g}, w[3] = {5.0 / 9, 8.0 / 9, 5.0 / 9};
+  std::vector<QuadraturePoint> q;
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) q.push_back({Eigen::Vector3d(x[i], x[j], x[k]), w[i] * w[j] * w[k]});
+  return q;
+}
+
+std::vector<QuadraturePoint> make_wedge_rule() {
+  // 7-point degree-5 triangle rule (Dunavant 1985, Table "p = 5"; weights sum to 1/2 here).
+  const double a1 = 0.059715871789770, b1 = 0.470142064105115;
+  const double a2 = 0.797426985353087, b2 = 0.101286507323456;
+  const double w0 = 0.225, w1 = 0.132394152788506, w2 = 0.125939180544827;
+  const double tri[7][3] = {{1.0 / 3, 1.0 / 3, w0}, {a1, b1, w1}, {b1, a1, w1}, {b1, b1, w1},
+                            {a2, b2, w2},           {b2, a2, w2}, {b2, b2, w2}};
+  const double g = std::sqrt(0.6);
+  const double z[3] = {-g, 0, g}, wz[3] = {5.0 / 9, 8.0 / 9, 5.0 / 9};
+  std::vector<QuadraturePoint> q;
+  for (int k = 0; k < 3; ++k)
+    for (int t = 0; t < 7; ++t)
+      q.push_back({Eigen::Vector3d(tri[t][0], tri[t][1], z[k]), 0.5 * tri[t][2] * wz[k]});
+  return q;
+}
+
+}  // namespace
+
+namespace detail {
+
+const ShapeTable& shape_table(ElementType type) {
+  static const ShapeTable hex = [] {
+    ShapeTable t;
+    t.n = 20;
+    for (const auto& qp : quadrature(ElementType::Hex20)) {
+      Eigen::VectorXd N;
+      Eigen::MatrixX3d dN;
+      shape_functions(ElementType::Hex20, qp.xi, N, dN);
+      t.N.push_back(N);
+      t.dN.push_back(dN);
+      t.w.push_back(qp.weight);
+    }
+    return t;
+  }();
+  static const ShapeTable wedge = [] {
+    ShapeTable t;
+    t.n = 15;
+    for (const auto& qp : quadrature(ElementType::Wedge15)) {
+      Eigen::VectorXd N;
+      Eigen::MatrixX3d dN;
+      shape_functions(ElementType::Wedge15, qp.xi, N, dN);
+      t.N.push_back(N);
+      t.dN.push_back(dN);
+      t.w.push_back(qp.weight);
+    }
+    return t;
+  }();
+  return type == ElementType::Hex20 ? hex : wedge;
+}
+
+double gradients(const Eigen::MatrixX3d& dN_dxi, const Eigen::MatrixX3d& X, Eigen::MatrixX3d& G,
+                 int element, int gauss_point) {
+  // J_ij = dx_j/dxi_i; dN/dx = dN/dxi J^-T (Bathe 2014, sec. 5.3, eq. 5.25-5.27).
+  const Eigen::Matrix3d J = dN_dxi.transpose() * X;
+  const double det = J.determinant();
+  if (!(det > 0)) {
+    const double scale = J.col(0).norm() * J.col(1).norm() * J.col(2).norm() + 1e-300;
+    throw InvalidInput(cat("element ", element,
+                           gauss_point >= 0 ? cat(", Gauss point ", gauss_point) : ", a node",
+                           ": Jacobian determinant ", det, " mm^3 (relative ", det / scale,
+                           ") is not positive; the element is inverted or degenerate: check its "
+                           "node order (0-1-2-3 must turn towards the bottom face, mesh.hpp) and "
+                           "that no nodes coincide"));
+  }
+  G.noalias() = dN_dxi * J.inverse().transpose();
+  return det;
+}
+
+Eigen::Matrix3d strain_tensor(const Eigen::MatrixX3d& G, const Eigen::VectorXd& u_e) {
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();  // H_ij = du_i/dx_j
+  for (Eigen::Index a = 0; a < G.rows(); ++a)
+    H += u_e.segment<3>(3 * a) * G.row(a);
+  return 0.5 * (H + H.transpose());
+}
+
+Vector6d stress_from_strain(const Eigen::Matrix3d& eps, double lambda, double mu) {
+  const double tr = eps.trace();
+  Vector6d s;
+  s << lambda * tr + 2 * mu * eps(0, 0), lambda * tr + 2 * mu * eps(1, 1),
+      lambda * tr + 2 * mu * eps(2, 2), 2 * mu * eps(0, 1), 2 * mu * eps(1, 2), 2 * mu * eps(0, 2);
+  return s;
+}
+
+}  // namespace detail
+
+int n_element_nodes(ElementType type) { return type == ElementType::Hex20 ? 20 : 15; }
+const char* element_type_name(ElementType type) {
+  return type == ElementType::Hex20 ? "Hex20" : "Wedge15";
+}
+
+const std::vector<QuadraturePoint>& quadrature(ElementType type) {
+  static const std::vector<QuadraturePoint> hex = make_hex_rule();
+  static const std::vector<QuadraturePoint> wedge = make_wedge_rule();
+  return type == ElementType::Hex20 ? hex : wedge;
+}
+
+Eigen::MatrixX3d natural_nodes(ElementType type) {
+  const int n = n_element_nodes(type);
+  Eigen::MatrixX3d P(n, 3);
+  for (int a = 0; a < n; ++a)
+    for (int c = 0; c < 3; ++c)
+      P(a, c) = type == ElementType::Hex20 ? kHexNodes[a][c] : kWedgeNodes[a][c];
+  return P;
+}
+
+void shape_functions(ElementType type, const Eigen::Vector3d& xi, Eigen::VectorXd& N,
+                     Eigen::MatrixX3d& dN_dxi) {
+  double n[20], d[20][3];
+  const int m = n_element_nodes(type);
+  if (type == ElementType::Hex20)
+    hex20_shape(xi, n, d);
+  else
+    wedge15_shape(xi, n, d);
+  N.resize(m);
+  dN_dxi.resize(m, 3);
+  for (int a = 0; a < m; ++a) {
+    N[a] = n[a];
+    for (int c = 0; c < 3; ++c) dN_dxi(a, c) = d[a][c];
+  }
+}
+
+Eigen::MatrixX3d element_coordinates(const Mesh& mesh, int element) {
+  const Element& el = mesh.elements[element];
+  const int n = el.n_nodes();
+  Eigen::MatrixX3d X(n, 3);
+  for (int a = 0; a < n; ++a) X.row(a) = mesh.nodes.row(el.nodes[a]);
+  return X;
+}
+
+Eigen::MatrixXd element_stiffness(ElementType type, const Eigen::MatrixX3d& X,
+                                  const LinearElastic& material, int element) {
+  Eigen::MatrixXd K;
+  detail::stiffness_kernel(type, X, material.lambda_mpa(), material.mu_mpa(), element, K);
+  return K;
+}
+
+Eigen::VectorXd element_internal_force(ElementType type, const Eigen::MatrixX3d& X,
+                                       const LinearElastic& material, const Eigen::VectorXd& u_e,
+                                       int element) {
+  const auto& t = detail::shape_table(type);
+  Eigen::MatrixX3d G(t.n, 3), F = Eigen::MatrixX3d::Zero(t.n, 3);
+  for (std::size_t q = 0; q < t.w.size(); ++q) {
+    const double det = detail::gradients(t.dN[q], X, G, element, static_cast<int>(q));
+    const Vector6d s = detail::stress_from_strain(detail::strain_tensor(G, u_e),
+                                                  material.lambda_mpa(), material.mu_mpa());
+    Eigen::Matrix3d S;
+    S << s[0], s[3], s[5], s[3], s[1], s[4], s[5], s[4], s[2];
+    F += (t.w[q] * det) * G * S;  // f_a,i = int sigma_ij dN_a/dx_j dV
+  }
+  Eigen::VectorXd f(3 * t.n);
+  for (int a = 0; a < t.n; ++a) f.segment<3>(3 * a) = F.row(a).transpose();
+  return f;
+}
+
+Vector6d element_stress(ElementType type, const Eigen::MatrixX3d& X,
+                        const LinearElastic& material, const Eigen::VectorXd& u_e,
+                        const Eigen::Vector3d& xi, int element) {
+  Eigen::VectorXd N;
+  Eigen::MatrixX3d dN, G(X.rows(), 3);
+  shape_functions(type, xi, N, dN);
+  detail::gradients(dN, X, G, element, -1);
+  return detail::stress_from_strain(detail::strain_tensor(G, u_e), material.lambda_mpa(),
+                                    material.mu_mpa());
+}
+
+double von_mises(const Vector6d& s) {
+  const double d = (s[0] - s[1]) * (s[0] - s[1]) + (s[1] - s[2]) * (s[1] - s[2]) +
+                   (s[2] - s[0]) * (s[2] - s[0]);
+  return std::sqrt(0.5 * d + 3 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5]));
+}
+
+double max_principal(const Vector6d& s) {
+  Eigen::Matrix3d S;
+  S << s[0], s[3], s[5], s[3], s[1], s[4], s[5], s[4], s[2];
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(S, Eigen::EigenvaluesOnly);
+  return es.eigenvalues()[2];
+}
+
+}  // namespace caps::fem

@@ -1,0 +1,56 @@
+#pragma once
+// Internal element helpers shared by elements.cpp, assemble.cpp and solve.cpp.
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "caps/fem/elements.hpp"
+
+namespace caps::fem::detail {
+
+/// Shape functions and derivatives tabulated at the Gauss points of one element type.
+struct ShapeTable {
+  int n = 0;
+  std::vector<Eigen::VectorXd> N;
+  std::vector<Eigen::MatrixX3d> dN;
+  std::vector<double> w;
+};
+const ShapeTable& shape_table(ElementType type);
+
+/// G = dN/dx (#n×3); returns det J. Throws InvalidInput if det J <= 0.
+double gradients(const Eigen::MatrixX3d& dN_dxi, const Eigen::MatrixX3d& X, Eigen::MatrixX3d& G,
+                 int element, int gauss_point);
+Eigen::Matrix3d strain_tensor(const Eigen::MatrixX3d& G, const Eigen::VectorXd& u_e);
+Vector6d stress_from_strain(const Eigen::Matrix3d& eps, double lambda, double mu);
+
+/// Isotropic stiffness without forming B: with g = vec(G) (node-major) and weights w,
+///   A = sum w g g^T, S = sum w G G^T,
+///   K_(a i)(b j) = lambda A_(a i)(b j) + mu A_(a j)(b i) + mu delta_ij S_ab
+/// (the three terms of int B^T D B dV for isotropic D; Hughes 2000, sec. 2.7).
+inline void stiffness_kernel(ElementType type, const Eigen::MatrixX3d& X, double lambda,
+                             double mu, int element, Eigen::MatrixXd& K) {
+  const ShapeTable& t = shape_table(type);
+  const int n = t.n, m = 3 * n;
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(m, m);
+  Eigen::MatrixXd S = Eigen::MatrixXd::Zero(n, n);
+  Eigen::MatrixX3d G(n, 3);
+  Eigen::VectorXd g(m);
+  for (std::size_t q = 0; q < t.w.size(); ++q) {
+    const double det = gradients(t.dN[q], X, G, element, static_cast<int>(q));
+    const double w = t.w[q] * det;
+    for (int a = 0; a < n; ++a) g.segment<3>(3 * a) = G.row(a).transpose();
+    A.selfadjointView<Eigen::Upper>().rankUpdate(g, w);
+    S.selfadjointView<Eigen::Upper>().rankUpdate(G, w);
+  }
+  A.triangularView<Eigen::StrictlyLower>() = A.transpose();
+  S.triangularView<Eigen::StrictlyLower>() = S.transpose();
+  K.resize(m, m);
+  for (int b = 0; b < n; ++b)
+    for (int a = 0; a < n; ++a) {
+      const auto Aab = A.block<3, 3>(3 * a, 3 * b);
+      K.block<3, 3>(3 * a, 3 * b) = lambda * Aab + mu * Aab.transpose() +
+                                    (mu * S(a, b)) * Eigen::Matrix3d::Identity();
+    }
+}
+
+}  // namespace caps::fem::detail

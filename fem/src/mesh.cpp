@@ -1,0 +1,80 @@
+#include "caps/fem/mesh.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "caps/core/error.hpp"
+
+namespace caps::fem {
+
+void validate(const Mesh& mesh, const std::string& where) {
+  const Eigen::Index n = mesh.n_nodes();
+  if (n == 0) throw InvalidInput(cat(where, ": the mesh has no nodes"));
+  if (mesh.elements.empty()) throw InvalidInput(cat(where, ": the mesh has no elements"));
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (!mesh.nodes.row(i).allFinite())
+      throw InvalidInput(cat(where, ": node ", i, " has a non-finite coordinate (",
+                             mesh.nodes.row(i), "); fix or remove it"));
+  auto check_node = [&](long id, const std::string& item) {
+    if (id < 0 || id >= n)
+      throw InvalidInput(cat(where, ": ", item, " refers to node ", id, ", but node ids run 0..",
+                             n - 1));
+  };
+  for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
+    const Element& el = mesh.elements[e];
+    const std::string item = cat("element ", e, " (", element_type_name(el.type), ")");
+    if (el.type != ElementType::Hex20 && el.type != ElementType::Wedge15)
+      throw InvalidInput(cat(where, ": ", item, " has an unknown type"));
+    std::array<int, 20> sorted = el.nodes;
+    for (int a = 0; a < el.n_nodes(); ++a) check_node(el.nodes[a], cat(item, " local node ", a));
+    std::sort(sorted.begin(), sorted.begin() + el.n_nodes());
+    const auto dup = std::adjacent_find(sorted.begin(), sorted.begin() + el.n_nodes());
+    if (dup != sorted.begin() + el.n_nodes())
+      throw InvalidInput(cat(where, ": ", item, " uses node ", *dup,
+                             " twice; a collapsed hexahedron must be written as a Wedge15"));
+    if (!mesh.materials.count(el.layer))
+      throw InvalidInput(cat(where, ": ", item, " has layer ", el.layer,
+                             " but no material is given for that layer"));
+  }
+  for (std::size_t i = 0; i < mesh.fixed_nodes.size(); ++i)
+    check_node(mesh.fixed_nodes[i], cat("fixed node entry ", i));
+  for (std::size_t i = 0; i < mesh.fixed_dofs.size(); ++i) {
+    const FixedDof& f = mesh.fixed_dofs[i];
+    check_node(f.node, cat("fixed dof entry ", i));
+    if (f.component < 0 || f.component > 2)
+      throw InvalidInput(cat(where, ": fixed dof entry ", i, " has component ", f.component,
+                             "; use 0 (x), 1 (y) or 2 (z)"));
+    if (!std::isfinite(f.value_mm))
+      throw InvalidInput(cat(where, ": fixed dof entry ", i, " (node ", f.node,
+                             ") has a non-finite value"));
+  }
+  for (std::size_t i = 0; i < mesh.loads.size(); ++i) {
+    check_node(mesh.loads[i].node, cat("load entry ", i));
+    if (!mesh.loads[i].force_n.allFinite())
+      throw InvalidInput(cat(where, ": load entry ", i, " (node ", mesh.loads[i].node,
+                             ") has a non-finite force"));
+  }
+  for (std::size_t i = 0; i < mesh.sutures.size(); ++i) {
+    const SuturePair& s = mesh.sutures[i];
+    check_node(s.a, cat("suture ", i));
+    check_node(s.b, cat("suture ", i));
+    if (s.a == s.b)
+      throw InvalidInput(cat(where, ": suture ", i, " joins node ", s.a,
+                             " to itself; a suture needs two different nodes"));
+  }
+}
+
+Element wedge_from_collapsed_hex(const std::array<int, 20>& h, int layer) {
+  if (h[2] != h[3] || h[2] != h[10] || h[18] != h[19] || h[6] != h[7] || h[6] != h[14])
+    throw InvalidInput(cat("collapsed hexahedron: nodes 2, 10, 3 (", h[2], ", ", h[10], ", ",
+                           h[3], "), 18, 19 (", h[18], ", ", h[19], ") and 6, 14, 7 (", h[6],
+                           ", ", h[14], ", ", h[7], ") must each share one node id"));
+  Element w;
+  w.type = ElementType::Wedge15;
+  w.layer = layer;
+  const int map[15] = {0, 1, 2, 4, 5, 6, 8, 9, 11, 12, 13, 15, 16, 17, 18};
+  for (int k = 0; k < 15; ++k) w.nodes[k] = h[map[k]];
+  return w;
+}
+
+}  // namespace caps::fem

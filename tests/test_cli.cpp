@@ -1,0 +1,199 @@
+// The caps program as a user runs it: help, exit codes, --json, refusing to clobber, and the
+// catalogue of bad inputs (each exit code 2, a message naming the file, no output left behind).
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cstring>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Outcome {
+  int code;
+  std::string out, err;
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  static fs::path dir;
+  static void SetUpTestSuite() {
+    dir = fs::temp_directory_path() / ("caps_cli_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+  }
+  static void TearDownTestSuite() { fs::remove_all(dir); }
+
+  static Outcome run(const std::string& args) {
+    const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
+    const std::string cmd = std::string(CAPS_EXE) + " " + args + " >" + out.string() + " 2>" +
+                            err.string() + " </dev/null";
+    const int status = std::system(cmd.c_str());
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(out), slurp(err)};
+  }
+  // A small phantom CT, written once.
+  static fs::path phantom() {
+    const fs::path p = dir / "phantom.nii.gz";
+    if (!fs::exists(p)) {
+      const Outcome r = run("phantom -o " + p.string() + " --size 80,80,72 --spacing 3.2,3.2,3.2 -q");
+      EXPECT_EQ(r.code, 0) << r.err;
+    }
+    return p;
+  }
+  // Expects a refusal: exit code 2, the message names `what`, and `output` was not created.
+  static void expect_refused(const std::string& args, const std::string& what,
+                             const fs::path& output) {
+    const Outcome r = run(args);
+    EXPECT_EQ(r.code, 2) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find(what), std::string::npos) << "message should name " << what << ":\n" << r.err;
+    EXPECT_EQ(r.err.find("internal error"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(output)) << output;
+    for (const auto& e : fs::directory_iterator(output.parent_path()))
+      EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos)
+          << "temporary left behind: " << e.path();
+  }
+};
+fs::path Cli::dir;
+
+void write_file(const fs::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
+
+}  // namespace
+
+TEST_F(Cli, HelpShowsExamplesAndExitsZero) {
+  Outcome r = run("--help");
+  EXPECT_EQ(r.code, 0);
+  EXPECT_NE(r.out.find("model"), std::string::npos);
+  for (const char* cmd : {"model from-volume", "model info", "phantom", "volume info"}) {
+    r = run(std::string(cmd) + " --help");
+    EXPECT_EQ(r.code, 0) << cmd;
+    EXPECT_NE(r.out.find("Example"), std::string::npos) << cmd << " --help has no example";
+  }
+}
+
+TEST_F(Cli, UsageErrorsExitTwo) {
+  EXPECT_EQ(run("").code, 2);
+  EXPECT_EQ(run("no-such-command").code, 2);
+  EXPECT_EQ(run("model from-volume").code, 2);  // INPUT and -o are required
+  const Outcome r = run("model from-volume x.nii --skin-threshold abc -o " + (dir / "m").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("skin-threshold"), std::string::npos) << r.err;
+}
+
+TEST_F(Cli, PhantomToModelToInfoWithJson) {
+  const fs::path model = dir / "model_json";
+  Outcome r = run("model from-volume " + phantom().string() + " -o " + model.string() + " --json -q");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["format_version"], 1);
+  EXPECT_EQ(j["source"]["modality"], "CT");
+  EXPECT_TRUE(r.err.empty()) << "--quiet must silence stderr: " << r.err;
+  r = run("model info " + model.string() + " --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["grid"]["n_theta"], 512);
+  r = run("model info " + model.string());
+  EXPECT_EQ(r.code, 0);
+  EXPECT_NE(r.out.find("thickness"), std::string::npos);
+  // The same output again: refused without --force, untouched; replaced with it.
+  const auto before = fs::last_write_time(model / "model.json");
+  expect_refused("model from-volume " + phantom().string() + " -o " + model.string(), "--force",
+                 dir / "never_created");
+  EXPECT_EQ(fs::last_write_time(model / "model.json"), before);
+  r = run("model from-volume " + phantom().string() + " -o " + model.string() + " --force -q");
+  EXPECT_EQ(r.code, 0) << r.err;
+  // Inputs are never modified.
+  EXPECT_TRUE(fs::exists(phantom()));
+}
+
+TEST_F(Cli, BadVolumeInputsAreRefusedCleanly) {
+  const fs::path out = dir / "out_model";
+  auto refuse = [&](const fs::path& input, const std::string& extra = "") {
+    expect_refused("model from-volume " + input.string() + " -o " + out.string() + " " + extra,
+                   input.filename().string(), out);
+  };
+  // A missing file.
+  refuse(dir / "missing.nii.gz");
+  // Not an image: text with an image's name.
+  write_file(dir / "notes.nii", "this is not a NIfTI file\n");
+  refuse(dir / "notes.nii");
+  // A truncated gzip NIfTI.
+  {
+    const std::string whole = slurp(phantom());
+    write_file(dir / "truncated.nii.gz", whole.substr(0, whole.size() / 2));
+    refuse(dir / "truncated.nii.gz");
+  }
+  // NRRD headers: data shorter than the header says, zero and absurd dimensions.
+  write_file(dir / "short.raw", std::string(1000, '\0'));
+  write_file(dir / "short.nhdr", "NRRD0004\ntype: short\ndimension: 3\nsizes: 64 64 64\n"
+                                 "spacings: 1 1 1\nencoding: raw\nendian: little\ndata file: short.raw\n");
+  refuse(dir / "short.nhdr");
+  write_file(dir / "zero.nhdr", "NRRD0004\ntype: short\ndimension: 3\nsizes: 0 64 64\n"
+                                "spacings: 1 1 1\nencoding: raw\nendian: little\ndata file: short.raw\n");
+  refuse(dir / "zero.nhdr");
+  write_file(dir / "absurd.nhdr", "NRRD0004\ntype: short\ndimension: 3\nsizes: 100000 100000 100000\n"
+                                  "spacings: 1 1 1\nencoding: raw\nendian: little\ndata file: short.raw\n");
+  refuse(dir / "absurd.nhdr");
+  // An unknown extension.
+  write_file(dir / "scan.xyz", "1 2 3\n");
+  refuse(dir / "scan.xyz");
+  // An empty folder, and a DICOM series with a slice missing.
+  fs::create_directories(dir / "empty_dicom");
+  refuse(dir / "empty_dicom");
+  const fs::path ge = fs::path(CAPS_SHARED_DATA) / "ct" / "ge-head-tilt";
+  if (fs::exists(ge)) {
+    const fs::path gap = dir / "dicom_gap";
+    fs::create_directories(gap);
+    for (const auto& e : fs::directory_iterator(ge))
+      if (e.path().extension() == ".dcm" && e.path().filename() != "10.dcm")
+        fs::copy_file(e.path(), gap / e.path().filename());
+    const Outcome r = run("model from-volume " + gap.string() + " -o " + out.string());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find("missing"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("09.dcm"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(out));
+  }
+  // A volume with no head in it: air only.
+  {
+    std::string air(32 * 32 * 32 * 2, '\0');
+    for (std::size_t i = 0; i < air.size(); i += 2) {
+      const short v = -1000;
+      std::memcpy(&air[i], &v, 2);
+    }
+    write_file(dir / "air.raw", air);
+    write_file(dir / "air.nhdr", "NRRD0004\ntype: short\ndimension: 3\nsizes: 32 32 32\n"
+                                 "spacings: 4 4 4\nencoding: raw\nendian: little\ndata file: air.raw\n");
+    expect_refused("model from-volume " + (dir / "air.nhdr").string() + " --modality CT -o " +
+                       out.string(), "no head found", out);
+  }
+}
+
+TEST_F(Cli, BadOutputsAndOptionsAreRefusedCleanly) {
+  const std::string in = phantom().string();
+  // The output's parent folder does not exist; the output is an existing file.
+  expect_refused("model from-volume " + in + " -o " + (dir / "no" / "such" / "m").string(),
+                 "does not exist", dir / "no");
+  write_file(dir / "a_file", "x");
+  const Outcome r = run("model from-volume " + in + " -o " + (dir / "a_file").string() + " --force");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(slurp(dir / "a_file"), "x");
+  // Options out of range.
+  const fs::path out = dir / "opt_model";
+  expect_refused("model from-volume " + in + " -o " + out.string() + " --n-theta 3", "theta", out);
+  expect_refused("model from-volume " + in + " -o " + out.string() + " --decimate 2", "--decimate", out);
+  expect_refused("model from-volume " + in + " -o " + out.string() + " --axis-dir 0,0,0", "--axis-dir", out);
+  expect_refused("model from-volume " + in + " -o " + out.string() + " --axis-origin 1,2", "--axis-origin", out);
+  expect_refused("phantom -o " + (dir / "p.nii.gz").string() + " --size 0,0,0", "size", dir / "p.nii.gz");
+  expect_refused("phantom -o " + (dir / "p.txt").string(), ".nii", dir / "p.txt");
+  expect_refused("model info " + (dir / "nothing").string(), "nothing", dir / "nothing");
+}
