@@ -114,5 +114,6 @@ TEST(VolumeModel, SkinPositionBarelyDependsOnTheThreshold) {
       ++n;
     }
   ASSERT_GT(n, 2000);
-  EXPECT_LT(std::sqrt(se / n), 0.1);  // mm, against 0.8 mm (0.4 voxel) for a fixed threshold
+  // mm: under a fifth of the 0.8 mm (0.4 voxel) a fixed threshold would move.
+  EXPECT_LT(std::sqrt(se / n), 0.15);
 }
