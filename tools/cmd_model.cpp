@@ -117,6 +117,8 @@ void add_model(CLI::App& app, Common& common, Action& action) {
   add_common_flags(fv, common, true);
   fv->callback([&common, &action, a] { action = [&common, a] { run_from_volume(*a, common); }; });
 
+  add_model_scan(model, common, action);
+
   auto dir = std::make_shared<std::string>();
   auto* info = model->add_subcommand("info", "Print a model directory's summary.\n"
                                              "Example: caps model info cranium --json");

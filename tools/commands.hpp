@@ -20,6 +20,9 @@ using Action = std::function<void()>;
 void add_phantom(CLI::App& app, Common& common, Action& action);
 void add_model(CLI::App& app, Common& common, Action& action);
 void add_volume(CLI::App& app, Common& common, Action& action);
+void add_solve(CLI::App& app, Common& common, Action& action);
+/// `caps model from-scan` and `caps model pick` (tools/cmd_scan.cpp), added to the model command.
+void add_model_scan(CLI::App* model, Common& common, Action& action);
 
 /// Adds --json and --quiet (and --force when `writes`) to a subcommand.
 void add_common_flags(CLI::App* cmd, Common& common, bool writes);

@@ -43,6 +43,7 @@ int main(int argc, char** argv) {
   cli::add_phantom(app, common, action);
   cli::add_model(app, common, action);
   cli::add_volume(app, common, action);
+  cli::add_solve(app, common, action);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

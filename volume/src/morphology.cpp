@@ -51,29 +51,62 @@ void envelope_1d(LineBuffers& b, int n, double h, bool with_features) {
   }
 }
 
-// Runs the 1-D transform along `axis` for every line of the grid, in place.
+// Runs the 1-D transform along `axis` for every line of the grid, in place. Lines along j and k
+// are strided in memory, so they are processed kBlock neighbouring i-lines at a time: each row of
+// the block is one contiguous read, which keeps the passes cache-friendly.
 void transform_axis(const VolumeGeometry& g, int axis, std::vector<float>& dist,
                     std::vector<std::int64_t>* feat) {
+  constexpr int kBlock = 16;
   const int n = g.dims[axis];
-  const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
   const std::int64_t stride[3] = {1, g.dims[0], std::int64_t(g.dims[0]) * g.dims[1]};
   const double h = g.spacing_mm[axis];
-  tbb::parallel_for(tbb::blocked_range<int>(0, g.dims[a2]), [&](const tbb::blocked_range<int>& r) {
+  if (axis == 0) {
+    tbb::parallel_for(tbb::blocked_range<int>(0, g.dims[2]), [&](const tbb::blocked_range<int>& r) {
+      LineBuffers b;
+      b.resize(n);
+      for (int k = r.begin(); k < r.end(); ++k)
+        for (int j = 0; j < g.dims[1]; ++j) {
+          const std::int64_t base = j * stride[1] + k * stride[2];
+          std::copy_n(dist.begin() + base, n, b.f.begin());
+          if (feat) std::copy_n(feat->begin() + base, n, b.feat_in.begin());
+          envelope_1d(b, n, h, feat != nullptr);
+          std::copy_n(b.d.begin(), n, dist.begin() + base);
+          if (feat) std::copy_n(b.feat_out.begin(), n, feat->begin() + base);
+        }
+    });
+    return;
+  }
+  const int other = axis == 1 ? 2 : 1;
+  const int n_blocks = (g.dims[0] + kBlock - 1) / kBlock;
+  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, std::int64_t(g.dims[other]) * n_blocks),
+                    [&](const tbb::blocked_range<std::int64_t>& r) {
     LineBuffers b;
     b.resize(n);
-    for (int u2 = r.begin(); u2 < r.end(); ++u2)
-      for (int u1 = 0; u1 < g.dims[a1]; ++u1) {
-        const std::int64_t base = u1 * stride[a1] + u2 * stride[a2];
-        for (int q = 0; q < n; ++q) {
-          b.f[q] = dist[base + q * stride[axis]];
-          if (feat) b.feat_in[q] = (*feat)[base + q * stride[axis]];
+    std::vector<float> f(std::size_t(kBlock) * n);
+    std::vector<std::int64_t> fe(feat ? std::size_t(kBlock) * n : 0);
+    for (std::int64_t t = r.begin(); t < r.end(); ++t) {
+      const int o = static_cast<int>(t / n_blocks);
+      const int i0 = static_cast<int>(t % n_blocks) * kBlock;
+      const int nb = std::min(kBlock, g.dims[0] - i0);
+      const std::int64_t base = o * stride[other] + i0;
+      for (int q = 0; q < n; ++q)
+        for (int c = 0; c < nb; ++c) {
+          f[std::size_t(c) * n + q] = dist[base + q * stride[axis] + c];
+          if (feat) fe[std::size_t(c) * n + q] = (*feat)[base + q * stride[axis] + c];
         }
+      for (int c = 0; c < nb; ++c) {
+        std::copy_n(f.begin() + std::size_t(c) * n, n, b.f.begin());
+        if (feat) std::copy_n(fe.begin() + std::size_t(c) * n, n, b.feat_in.begin());
         envelope_1d(b, n, h, feat != nullptr);
-        for (int q = 0; q < n; ++q) {
-          dist[base + q * stride[axis]] = b.d[q];
-          if (feat) (*feat)[base + q * stride[axis]] = b.feat_out[q];
-        }
+        std::copy_n(b.d.begin(), n, f.begin() + std::size_t(c) * n);
+        if (feat) std::copy_n(b.feat_out.begin(), n, fe.begin() + std::size_t(c) * n);
       }
+      for (int q = 0; q < n; ++q)
+        for (int c = 0; c < nb; ++c) {
+          dist[base + q * stride[axis] + c] = f[std::size_t(c) * n + q];
+          if (feat) (*feat)[base + q * stride[axis] + c] = fe[std::size_t(c) * n + q];
+        }
+    }
   });
 }
 
@@ -119,51 +152,62 @@ Mask dilate(const Mask& m, double radius_mm) {
 std::vector<std::int32_t> label_components(const Mask& m, std::vector<std::int64_t>& sizes) {
   const auto& g = m.geom;
   const std::size_t n = m.data.size();
-  // Union-find over foreground voxels, linking each to its -i, -j, -k neighbours.
-  std::vector<std::int64_t> parent(n, -1);
-  auto find = [&](std::int64_t x) {
-    while (parent[x] != x) {
-      parent[x] = parent[parent[x]];
-      x = parent[x];
+  // Union-find over foreground voxels, linking each to its -i, -j, -k neighbours; labels[] holds
+  // the parent links first and the final labels at the end.
+  std::vector<std::int32_t> labels(n, -1);
+  auto find = [&](std::int32_t x) {
+    while (labels[x] != x) {
+      labels[x] = labels[labels[x]];
+      x = labels[x];
     }
     return x;
   };
-  auto unite = [&](std::int64_t a, std::int64_t b) {
-    a = find(a); b = find(b);
-    if (a != b) parent[std::max(a, b)] = std::min(a, b);
+  auto unite = [&](std::int32_t a, std::int32_t b) {
+    a = find(a);
+    b = find(b);
+    if (a != b) labels[std::max(a, b)] = std::min(a, b);
   };
-  const std::int64_t sj = g.dims[0], sk = std::int64_t(g.dims[0]) * g.dims[1];
+  const std::int32_t sj = g.dims[0], sk = g.dims[0] * g.dims[1];
   for (int k = 0; k < g.dims[2]; ++k)
     for (int j = 0; j < g.dims[1]; ++j) {
-      const std::int64_t row = k * sk + j * sj;
+      const std::int32_t row = k * sk + j * sj;
       for (int i = 0; i < g.dims[0]; ++i) {
-        const std::int64_t x = row + i;
+        const std::int32_t x = row + i;
         if (!m.data[x]) continue;
-        parent[x] = x;
-        if (i > 0 && m.data[x - 1]) unite(x, x - 1);
+        // Runs along i share the previous voxel's root: link directly.
+        labels[x] = (i > 0 && m.data[x - 1]) ? labels[x - 1] : x;
         if (j > 0 && m.data[x - sj]) unite(x, x - sj);
         if (k > 0 && m.data[x - sk]) unite(x, x - sk);
       }
     }
-  std::vector<std::int64_t> count(n, 0);
-  std::vector<std::int64_t> roots;
+  // Flatten every link to its root (a root is the smallest index of its set, so it comes first
+  // and still points at itself), then give roots provisional ids in scan order, stored as
+  // -2 - id in the root's entry, and count members.
   for (std::size_t x = 0; x < n; ++x)
-    if (m.data[x]) {
-      const auto r = find(std::int64_t(x));
-      if (count[r]++ == 0) roots.push_back(r);
+    if (labels[x] >= 0) labels[x] = find(static_cast<std::int32_t>(x));
+  std::vector<std::int64_t> count;
+  for (std::size_t x = 0; x < n; ++x) {
+    const std::int32_t r = labels[x];
+    if (r == -1) continue;
+    if (r == static_cast<std::int32_t>(x)) {
+      labels[x] = -2 - static_cast<std::int32_t>(count.size());
+      count.push_back(1);
+    } else {
+      labels[x] = labels[r];  // the root's provisional id
+      ++count[static_cast<std::size_t>(-2 - labels[r])];
     }
-  std::sort(roots.begin(), roots.end(), [&](auto a, auto b) {
-    return count[a] != count[b] ? count[a] > count[b] : a < b;
-  });
-  std::vector<std::int32_t> label_of_root(n, 0);
-  sizes.assign(roots.size() + 1, 0);
-  for (std::size_t l = 0; l < roots.size(); ++l) {
-    label_of_root[roots[l]] = static_cast<std::int32_t>(l + 1);
-    sizes[l + 1] = count[roots[l]];
   }
-  std::vector<std::int32_t> labels(n, 0);
+  std::vector<std::int32_t> order(count.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return count[a] > count[b]; });
+  std::vector<std::int32_t> final_label(count.size());
+  sizes.assign(count.size() + 1, 0);
+  for (std::size_t l = 0; l < order.size(); ++l) {
+    final_label[order[l]] = static_cast<std::int32_t>(l + 1);
+    sizes[l + 1] = count[order[l]];
+  }
   for (std::size_t x = 0; x < n; ++x)
-    if (m.data[x]) labels[x] = label_of_root[find(std::int64_t(x))];
+    labels[x] = labels[x] <= -2 ? final_label[static_cast<std::size_t>(-2 - labels[x])] : 0;
   return labels;
 }
 

@@ -70,29 +70,92 @@ void fill_enclosed(Mask& m) {
   fill_enclosed_3d(m);
 }
 
-Mask clean_skin(const Mask& raw, const SegmentOptions& o, Segmentation& seg) {
+// The voxel box [lo, hi] of a label, grown by `margin` voxels and clamped to the grid.
+void label_box(const std::vector<std::int32_t>& labels, const VolumeGeometry& g, std::int32_t label,
+               int margin, Eigen::Vector3i& lo, Eigen::Vector3i& hi) {
+  lo = g.dims;
+  hi = Eigen::Vector3i::Constant(-1);
+  for (int k = 0; k < g.dims[2]; ++k)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int i = 0; i < g.dims[0]; ++i)
+        if (labels[g.linear(i, j, k)] == label) {
+          lo = lo.cwiseMin(Eigen::Vector3i(i, j, k));
+          hi = hi.cwiseMax(Eigen::Vector3i(i, j, k));
+        }
+  lo = (lo.array() - margin).max(0).matrix();
+  hi = (hi.array() + margin).min(g.dims.array() - 1).matrix();
+}
+
+// The sub-grid [lo, hi] of a grid, with the same physical positions.
+VolumeGeometry sub_geometry(const VolumeGeometry& g, const Eigen::Vector3i& lo,
+                            const Eigen::Vector3i& hi) {
+  VolumeGeometry c = g;
+  c.dims = hi - lo + Eigen::Vector3i::Ones();
+  c.origin_lps = g.index_to_lps(lo.cast<double>());
+  return c;
+}
+
+template <typename T, typename F>
+std::vector<T> crop_values(const VolumeGeometry& g, const Eigen::Vector3i& lo,
+                           const VolumeGeometry& c, F&& value) {
+  std::vector<T> out(c.n_voxels());
+  tbb::parallel_for(0, c.dims[2], [&](int k) {
+    for (int j = 0; j < c.dims[1]; ++j)
+      for (int i = 0; i < c.dims[0]; ++i)
+        out[c.linear(i, j, k)] = value(g.linear(i + lo[0], j + lo[1], k + lo[2]));
+  });
+  return out;
+}
+
+// Finds the head (the largest object above the threshold), and crops the working volume to its
+// box so that the rest of the segmentation works on the head only.
+Mask find_head(const Mask& raw, const SegmentOptions& o, Segmentation& seg) {
   std::vector<std::int64_t> sizes;
-  auto labels = label_components(raw, sizes);
+  const auto labels = label_components(raw, sizes);
   const double ml = voxel_ml(raw.geom);
   if (sizes.size() < 2)
     throw InvalidInput(cat(seg.working.source, ": no head found: no voxel is above the skin "
                            "threshold ", seg.skin_threshold, "; check --skin-threshold and that "
                            "the file is a head scan"));
-  Mask head = keep_label(labels, raw.geom, 1);
-  // Fill before opening: in MR the bright scalp is a shell a few mm thick over dark bone, which
-  // an opening would otherwise cut away as if it were an attachment.
-  fill_enclosed(head);
   constexpr double kMinHeadMl = 100.0;
   if (sizes[1] * ml < kMinHeadMl)
     throw InvalidInput(cat(seg.working.source, ": no head found: the largest object above ",
                            seg.skin_threshold, " is only ", sizes[1] * ml, " ml (a head is over ",
                            kMinHeadMl, " ml); check --skin-threshold and that the file is a head "
                            "scan"));
+  for (std::size_t l = 2; l < sizes.size(); ++l) seg.detached_volume_ml += sizes[l] * ml;
+  const int margin = 2 + static_cast<int>(std::ceil(std::max(o.detach_radius_mm, o.bone_closing_mm) /
+                                                    raw.geom.spacing_mm.minCoeff()));
+  Eigen::Vector3i lo, hi;
+  label_box(labels, raw.geom, 1, margin, lo, hi);
+  const VolumeGeometry box = sub_geometry(raw.geom, lo, hi);
+  const Volume& w = seg.working;
+  Volume cropped;
+  cropped.geom = box;
+  cropped.modality = w.modality;
+  cropped.source = w.source;
+  cropped.format = w.format;
+  cropped.data = crop_values<float>(raw.geom, lo, box, [&](std::size_t x) { return w.data[x]; });
+  seg.working = std::move(cropped);
+  Mask head;
+  head.geom = box;
+  head.data = crop_values<std::uint8_t>(raw.geom, lo, box,
+                                        [&](std::size_t x) -> std::uint8_t { return labels[x] == 1; });
+  return head;
+}
+
+// Cuts the head loose from what touches it only thinly (table, head holder, wrapping) by an
+// opening, putting small cut-off pieces (ear rims) back.
+Mask clean_skin(Mask head, const SegmentOptions& o, Segmentation& seg) {
+  const double ml = voxel_ml(head.geom);
+  // Fill before opening: in MR the bright scalp is a shell a few mm thick over dark bone, which
+  // an opening would otherwise cut away as if it were an attachment.
+  fill_enclosed(head);
   const Mask core = erode(head, o.detach_radius_mm);
   std::vector<std::int64_t> core_sizes;
   const auto core_labels = label_components(core, core_sizes);
   if (core_sizes.size() < 2) return head;  // too thin to open: keep as is
-  const Mask body = dilate(keep_label(core_labels, raw.geom, 1), o.detach_radius_mm);
+  const Mask body = dilate(keep_label(core_labels, head.geom, 1), o.detach_radius_mm);
   Mask cut = head;
   for (std::size_t i = 0; i < cut.data.size(); ++i) cut.data[i] = head.data[i] && !body.data[i];
   std::vector<std::int64_t> cut_sizes;
@@ -112,9 +175,8 @@ Mask clean_skin(const Mask& raw, const SegmentOptions& o, Segmentation& seg) {
   // Removing a piece can leave crumbs that no longer touch the head.
   std::vector<std::int64_t> final_sizes;
   const auto final_labels = label_components(kept, final_sizes);
-  Mask result = keep_label(final_labels, raw.geom, 1);
+  Mask result = keep_label(final_labels, head.geom, 1);
   for (std::size_t l = 2; l < final_sizes.size(); ++l) seg.detached_volume_ml += final_sizes[l] * ml;
-  for (std::size_t l = 2; l < sizes.size(); ++l) seg.detached_volume_ml += sizes[l] * ml;
   return result;
 }
 
@@ -222,7 +284,7 @@ Segmentation segment_head(const Volume& v, const SegmentOptions& o) {
   }
   const Mask raw_skin = threshold(seg.working, seg.skin_threshold);
   progress.update(1);
-  seg.skin = clean_skin(raw_skin, o, seg);
+  seg.skin = clean_skin(find_head(raw_skin, o, seg), o, seg);
   fill_enclosed(seg.skin);
   seg.head_volume_ml = seg.skin.count() * voxel_ml(seg.skin.geom);
   if (seg.detached_pieces > 0)

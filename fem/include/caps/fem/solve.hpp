@@ -53,7 +53,11 @@ struct SolveResult {
   Eigen::VectorXd element_von_mises_mpa;     ///< #E mean over the element's Gauss points
   Eigen::MatrixX3d reaction_n;               ///< #N×3 constraint reactions (fixed and sutured)
   std::vector<SutureForce> suture_forces;    ///< one per mesh.sutures entry
-  double total_suture_force_n = 0;           ///< sum of magnitudes: the closing tension
+  /// The closing tension: sum over pairs of the force on a along the unit vector from x_a to
+  /// x_b (N). Single pairs of quadratic elements may carry negative (pushing) consistent forces;
+  /// this signed sum is the net force across the wound.
+  double total_suture_force_n = 0;
+  double sum_suture_magnitudes_n = 0;        ///< sum of |force| over pairs (N)
   double strain_energy_mj = 0;               ///< N·mm = mJ
   double relative_residual = 0;              ///< ||K q - f|| / ||f|| of the reduced system
   long n_dofs = 0;                           ///< 3 × nodes

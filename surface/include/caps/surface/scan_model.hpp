@@ -14,14 +14,14 @@
 
 namespace caps {
 
-/// A direction in the scan file's frame by name: "+x", "-x", "+y", "-y", "+z", "-z".
-/// Throws InvalidInput naming `option` for anything else.
+/// A direction in the scan file's frame by name ("+x", "-x", "+y", "-y", "+z", "-z") or as three
+/// numbers "X,Y,Z" (normalised). Throws InvalidInput naming `option` for anything else.
 Eigen::Vector3d parse_axis_name(const std::string& name, const std::string& option);
 
 /// The rotation taking scan-file coordinates to LPS given the file's up (patient superior) and
 /// front (patient anterior, where the face looks) directions: rows are L = up x front, P =
 /// -front, S = up. A proper rotation (determinant +1), so a scan is never mirrored.
-/// Throws InvalidInput if up and front are not perpendicular unit axes.
+/// Throws InvalidInput if up and front are not perpendicular unit vectors.
 Eigen::Matrix3d scan_to_lps_rotation(const Eigen::Vector3d& up, const Eigen::Vector3d& front);
 
 struct ScanModelOptions {
@@ -30,6 +30,7 @@ struct ScanModelOptions {
   std::optional<double> head_height_mm; ///< --head-height-mm: scale so the scan is this tall
   Eigen::Vector3d up{0, 1, 0};          ///< file direction of patient superior
   Eigen::Vector3d front{0, 0, 1};       ///< file direction of patient anterior (the face)
+  bool flip_faces = false;              ///< reverse every face (for inside-out files)
   MapOptions maps;                      ///< grid size and grazing limit
   std::optional<CylinderAxis> axis;     ///< overrides the fitted axis (LPS mm)
   /// Overrides the grid's z range (z0_mm and dz_mm of this grid are used; n_z from maps).

@@ -1,0 +1,65 @@
+// Solver (fem) benchmark: assembly, analysis, factorization, solve and peak memory against
+// problem size, MUMPS against CHOLMOD. Results in docs/benchmarks.md, section "Solver (fem)".
+//   build-fem/bench/bench_fem --benchmark_filter='Slab/.*' --benchmark_min_time=1x
+// Meshes: "slab" = a skin-like 2-layer plate of Hex20 (the shape caps solves: wide and thin,
+// bottom fixed, a sutured slot); "cube" = a cube of Hex20 (the CalculiX comparison case).
+#include <benchmark/benchmark.h>
+
+#include "caps/fem/box.hpp"
+#include "caps/fem/solve.hpp"
+
+namespace {
+
+using caps::fem::BoxOptions;
+using caps::fem::SolverKind;
+
+void run(benchmark::State& state, const BoxOptions& o) {
+  const caps::fem::Mesh mesh = caps::fem::make_box_mesh(o);
+  caps::fem::SolveOptions so;
+  so.solver = state.range(1) == 0 ? SolverKind::Mumps : SolverKind::Cholmod;
+  so.mumps_ordering = static_cast<int>(state.range(2));
+  caps::fem::SolveResult r;
+  for (auto _ : state) {
+    r = caps::fem::solve(mesh, so);
+    benchmark::DoNotOptimize(r.displacement_mm.data());
+  }
+  state.counters["dofs"] = static_cast<double>(r.n_dofs);
+  state.counters["equations"] = static_cast<double>(r.n_equations);
+  state.counters["assembly_s"] = r.timings.assembly_s;
+  state.counters["analysis_s"] = r.timings.analysis_s;
+  state.counters["factor_s"] = r.timings.factorization_s;
+  state.counters["solve_s"] = r.timings.solve_s;
+  state.counters["recovery_s"] = r.timings.recovery_s;
+  state.counters["total_s"] = r.timings.total_s;
+  state.counters["factor_nnz_M"] = static_cast<double>(r.factor_nonzeros) * 1e-6;
+  state.counters["peak_rss_MB"] = r.peak_memory_mb;
+  state.SetLabel(so.solver == SolverKind::Mumps ? "mumps" : "cholmod");
+}
+
+// range(0) = cells per side in x-y, range(1) = 0 MUMPS / 1 CHOLMOD, range(2) = ICNTL(7).
+void Slab(benchmark::State& state) {
+  BoxOptions o;
+  const int n = static_cast<int>(state.range(0));
+  o.size_mm = {4.0 * n, 4.0 * n, 6.0};
+  o.cells = {n | 1, n, 2};
+  o.slot = true;
+  run(state, o);
+}
+
+void Cube(benchmark::State& state) {
+  BoxOptions o;
+  const int n = static_cast<int>(state.range(0));
+  o.size_mm = {40, 40, 40};
+  o.cells = {n, n, n};
+  run(state, o);
+}
+
+}  // namespace
+
+// Slab cells 23 -> ~10k dofs, 51 -> ~50k, 73 -> ~100k, 127 -> ~300k.
+BENCHMARK(Slab)->ArgsProduct({{23, 51, 73, 127}, {0, 1}, {4}})->Unit(benchmark::kMillisecond)->Iterations(1);
+BENCHMARK(Slab)->ArgsProduct({{51}, {0}, {0, 2, 3, 5, 7}})->Unit(benchmark::kMillisecond)->Iterations(1);
+// Cube 8 -> ~10k dofs, 13 -> ~30k, 16 -> ~56k (the CalculiX 54k-dof case).
+BENCHMARK(Cube)->ArgsProduct({{8, 13, 16}, {0, 1}, {4}})->Unit(benchmark::kMillisecond)->Iterations(1);
+
+BENCHMARK_MAIN();

@@ -1,0 +1,29 @@
+#pragma once
+// Internal: maps every node dof to a reduced equation after eliminating fixed dofs and sutures.
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "caps/fem/mesh.hpp"
+
+namespace caps::fem::detail {
+
+/// u_full = T q + g: dof d is q[eq[d]] + g[d] when eq[d] >= 0, or prescribed g[d] otherwise.
+struct DofMap {
+  std::vector<int> eq;               ///< 3N
+  Eigen::VectorXd g;                 ///< 3N offsets / prescribed values (mm)
+  int n_eq = 0;
+  std::vector<int> group;            ///< node -> suture group id, -1 if not sutured
+  std::vector<std::vector<int>> groups;  ///< members of each suture group
+  std::vector<char> used;            ///< node is referenced by an element
+  std::vector<char> constrained;     ///< node has a prescribed dof or a suture
+};
+
+/// Builds the map; throws InvalidInput for conflicting constraints, sutures on nodes that are
+/// not in any element and parts with no support in some direction.
+DofMap build_dof_map(const Mesh& mesh);
+
+/// Names reduced equation `e` for messages: "node 12 (x)".
+std::string describe_equation(const DofMap& map, int e);
+
+}  // namespace caps::fem::detail

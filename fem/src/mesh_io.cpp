@@ -1,0 +1,247 @@
+#include "caps/fem/mesh_io.hpp"
+
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "caps/core/atomic_output.hpp"
+#include "caps/core/error.hpp"
+#include "vtu.hpp"
+
+namespace fs = std::filesystem;
+
+namespace caps::fem {
+namespace detail {
+namespace {
+
+constexpr int kVtkQuadraticHexahedron = 25;
+constexpr int kVtkQuadraticWedge = 26;
+
+std::string attribute(const std::string& tag, const std::string& name) {
+  const std::string key = " " + name + "=\"";
+  const auto p = tag.find(key);
+  if (p == std::string::npos) return {};
+  const auto q = tag.find('"', p + key.size());
+  return tag.substr(p + key.size(), q - p - key.size());
+}
+
+}  // namespace
+
+void write_vtu(const fs::path& path, const Eigen::MatrixX3d& points,
+               const std::vector<Element>& elements, const std::vector<VtuArray>& point_data,
+               const std::vector<VtuArray>& cell_data) {
+  write_file_atomic(path, [&](const fs::path& tmp) {
+    std::ofstream o(tmp);
+    o.precision(17);
+    o << "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" "
+         "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<UnstructuredGrid>\n"
+      << "<Piece NumberOfPoints=\"" << points.rows() << "\" NumberOfCells=\"" << elements.size()
+      << "\">\n";
+    auto write_array = [&](const VtuArray& a) {
+      o << "<DataArray type=\"" << (a.integer ? "Int32" : "Float64") << "\" Name=\"" << a.name
+        << "\" NumberOfComponents=\"" << a.values.cols() << "\" format=\"ascii\">\n";
+      for (Eigen::Index i = 0; i < a.values.rows(); ++i) {
+        for (Eigen::Index c = 0; c < a.values.cols(); ++c) {
+          if (a.integer)
+            o << static_cast<long>(std::lround(a.values(i, c)));
+          else
+            o << a.values(i, c);
+          o << (c + 1 < a.values.cols() ? ' ' : '\n');
+        }
+      }
+      o << "</DataArray>\n";
+    };
+    o << "<PointData>\n";
+    for (const auto& a : point_data) write_array(a);
+    o << "</PointData>\n<CellData>\n";
+    for (const auto& a : cell_data) write_array(a);
+    o << "</CellData>\n<Points>\n";
+    write_array({"Points", points, false});
+    o << "</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n";
+    for (const Element& el : elements) {
+      for (int k = 0; k < el.n_nodes(); ++k)
+        o << el.nodes[el.type == ElementType::Wedge15 ? kWedge15ToVtk[k] : k]
+          << (k + 1 < el.n_nodes() ? ' ' : '\n');
+    }
+    o << "</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n";
+    long off = 0;
+    for (const Element& el : elements) o << (off += el.n_nodes()) << '\n';
+    o << "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n";
+    for (const Element& el : elements)
+      o << (el.type == ElementType::Hex20 ? kVtkQuadraticHexahedron : kVtkQuadraticWedge) << '\n';
+    o << "</DataArray>\n</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n";
+    if (!o) throw IoError(cat(path.string(), ": write failed (disk full?)"));
+  });
+}
+
+VtuContent read_vtu(const fs::path& path) {
+  std::ifstream in(path);
+  if (!in) throw IoError(cat(path.string(), ": cannot open; is this a caps mesh directory?"));
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string text = ss.str();
+  VtuContent v;
+  const auto piece = text.find("<Piece");
+  if (piece == std::string::npos)
+    throw InvalidInput(cat(path.string(), ": no <Piece> element; not a VTK UnstructuredGrid file"));
+  const std::string ptag = text.substr(piece, text.find('>', piece) - piece);
+  v.n_points = std::atol(attribute(ptag, "NumberOfPoints").c_str());
+  v.n_cells = std::atol(attribute(ptag, "NumberOfCells").c_str());
+  std::size_t pos = 0;
+  while ((pos = text.find("<DataArray", pos)) != std::string::npos) {
+    const auto end_tag = text.find('>', pos);
+    const std::string tag = text.substr(pos, end_tag - pos);
+    const std::string name = attribute(tag, "Name");
+    if (attribute(tag, "format") != "ascii")
+      throw InvalidInput(cat(path.string(), ": DataArray '", name, "' is not ascii; caps-mesh "
+                             "version 1 reads ascii VTU only (write it with caps or ParaView's "
+                             "ascii option)"));
+    const auto close = text.find("</DataArray>", end_tag);
+    if (close == std::string::npos)
+      throw InvalidInput(cat(path.string(), ": DataArray '", name, "' is not closed (truncated file?)"));
+    std::vector<double> values;
+    const char* p = text.c_str() + end_tag + 1;
+    const char* stop = text.c_str() + close;
+    while (p < stop) {
+      char* next = nullptr;
+      const double x = std::strtod(p, &next);
+      if (next == p) {
+        if (std::isspace(static_cast<unsigned char>(*p))) {
+          ++p;
+          continue;
+        }
+        throw InvalidInput(cat(path.string(), ": DataArray '", name, "' entry ", values.size(),
+                               " is not a number"));
+      }
+      values.push_back(x);
+      p = next;
+    }
+    const std::string nc = attribute(tag, "NumberOfComponents");
+    v.components[name] = nc.empty() ? 1 : std::atoi(nc.c_str());
+    v.arrays[name] = std::move(values);
+    pos = close;
+  }
+  return v;
+}
+
+}  // namespace detail
+
+void write_mesh_dir(const Mesh& mesh, const fs::path& dir) {
+  validate(mesh, dir.string());
+  const Eigen::Index n = mesh.n_nodes();
+  Eigen::MatrixXd fixed = Eigen::MatrixXd::Zero(n, 1), partner = Eigen::MatrixXd::Constant(n, 1, -1);
+  for (int i : mesh.fixed_nodes) fixed(i, 0) = 1;
+  for (const SuturePair& s : mesh.sutures) {
+    partner(s.a, 0) = s.b;
+    partner(s.b, 0) = s.a;
+  }
+  Eigen::MatrixXd layer(static_cast<Eigen::Index>(mesh.elements.size()), 1);
+  for (std::size_t e = 0; e < mesh.elements.size(); ++e) layer(static_cast<Eigen::Index>(e), 0) = mesh.elements[e].layer;
+  detail::write_vtu(dir / "mesh.vtu", mesh.nodes, mesh.elements,
+                    {{"fixed", fixed, true}, {"suture_partner", partner, true}},
+                    {{"layer", layer, true}});
+  nlohmann::json j;
+  j["format"] = "caps-mesh";
+  j["version"] = 1;
+  j["units"] = {{"length", "mm"}, {"force", "N"}, {"stress", "MPa"}, {"frame", "LPS"}};
+  long n_hex = 0;
+  for (const Element& e : mesh.elements) n_hex += e.type == ElementType::Hex20;
+  j["counts"] = {{"nodes", n}, {"elements", mesh.elements.size()}, {"hex20", n_hex},
+                 {"wedge15", static_cast<long>(mesh.elements.size()) - n_hex},
+                 {"fixed_nodes", mesh.fixed_nodes.size()}, {"sutures", mesh.sutures.size()}};
+  j["materials"] = nlohmann::json::array();
+  for (const auto& [layer_id, m] : mesh.materials)
+    j["materials"].push_back({{"layer", layer_id}, {"model", "linear_elastic"},
+                              {"E_kpa", m.E_mpa() * 1e3}, {"nu", m.nu()}});
+  j["fixed_nodes"] = mesh.fixed_nodes;
+  j["fixed_dofs"] = nlohmann::json::array();
+  for (const FixedDof& f : mesh.fixed_dofs) j["fixed_dofs"].push_back({f.node, f.component, f.value_mm});
+  j["loads_n"] = nlohmann::json::array();
+  for (const NodalLoad& l : mesh.loads)
+    j["loads_n"].push_back({l.node, l.force_n.x(), l.force_n.y(), l.force_n.z()});
+  j["sutures"] = nlohmann::json::array();
+  for (const SuturePair& s : mesh.sutures) j["sutures"].push_back({s.a, s.b});
+  j["model"] = mesh.model;
+  j["plan"] = mesh.plan;
+  write_text_atomic(dir / "mesh.json", j.dump(1) + "\n");
+}
+
+Mesh read_mesh_dir(const fs::path& dir) {
+  const fs::path jpath = dir / "mesh.json", vpath = dir / "mesh.vtu";
+  if (!fs::is_directory(dir))
+    throw IoError(cat(dir.string(), ": not a directory; pass a mesh directory with mesh.json and mesh.vtu"));
+  std::ifstream jin(jpath);
+  if (!jin) throw IoError(cat(jpath.string(), ": cannot open; is this a caps mesh directory?"));
+  nlohmann::json j;
+  try {
+    jin >> j;
+  } catch (const std::exception& e) {
+    throw InvalidInput(cat(jpath.string(), ": not valid JSON: ", e.what()));
+  }
+  Mesh mesh;
+  const std::string jw = jpath.string();
+  try {
+    if (j.value("format", "") != "caps-mesh" || j.value("version", 0) != 1)
+      throw InvalidInput(cat(jw, ": format must be \"caps-mesh\" version 1"));
+    for (const auto& m : j.at("materials")) {
+      const int layer = m.at("layer").get<int>();
+      mesh.materials.emplace(layer, LinearElastic(m.at("E_kpa").get<double>() * 1e-3,
+                                                  m.at("nu").get<double>(),
+                                                  cat(jw, ": material of layer ", layer)));
+    }
+    mesh.fixed_nodes = j.value("fixed_nodes", std::vector<int>{});
+    for (const auto& f : j.value("fixed_dofs", nlohmann::json::array()))
+      mesh.fixed_dofs.push_back({f.at(0).get<int>(), f.at(1).get<int>(), f.at(2).get<double>()});
+    for (const auto& l : j.value("loads_n", nlohmann::json::array()))
+      mesh.loads.push_back({l.at(0).get<int>(),
+                            Eigen::Vector3d(l.at(1).get<double>(), l.at(2).get<double>(), l.at(3).get<double>())});
+    for (const auto& s : j.value("sutures", nlohmann::json::array()))
+      mesh.sutures.push_back({s.at(0).get<int>(), s.at(1).get<int>()});
+    mesh.model = j.value("model", "");
+    mesh.plan = j.value("plan", "");
+  } catch (const nlohmann::json::exception& e) {
+    throw InvalidInput(cat(jw, ": missing or mistyped field: ", e.what()));
+  }
+  const detail::VtuContent v = detail::read_vtu(vpath);
+  const std::string vw = vpath.string();
+  for (const char* name : {"Points", "connectivity", "offsets", "types", "layer"})
+    if (!v.arrays.count(name))
+      throw InvalidInput(cat(vw, ": the DataArray '", name, "' is missing"));
+  const auto& P = v.arrays.at("Points");
+  if (static_cast<long>(P.size()) != 3 * v.n_points)
+    throw InvalidInput(cat(vw, ": Points has ", P.size(), " values, expected 3 x ", v.n_points));
+  mesh.nodes.resize(v.n_points, 3);
+  for (long i = 0; i < v.n_points; ++i)
+    for (int c = 0; c < 3; ++c) mesh.nodes(i, c) = P[3 * i + c];
+  const auto& conn = v.arrays.at("connectivity");
+  const auto& offs = v.arrays.at("offsets");
+  const auto& types = v.arrays.at("types");
+  const auto& layer = v.arrays.at("layer");
+  if (static_cast<long>(offs.size()) != v.n_cells || static_cast<long>(types.size()) != v.n_cells ||
+      static_cast<long>(layer.size()) != v.n_cells)
+    throw InvalidInput(cat(vw, ": offsets/types/layer must have one entry per cell (", v.n_cells, ")"));
+  long begin = 0;
+  for (long c = 0; c < v.n_cells; ++c) {
+    Element el;
+    const int t = static_cast<int>(types[c]);
+    if (t != 25 && t != 26)
+      throw InvalidInput(cat(vw, ": cell ", c, " has VTK type ", t, "; only 25 (quadratic hexahedron) "
+                             "and 26 (quadratic wedge) are supported"));
+    el.type = t == 25 ? ElementType::Hex20 : ElementType::Wedge15;
+    el.layer = static_cast<int>(layer[c]);
+    const long end = static_cast<long>(offs[c]);
+    if (end - begin != el.n_nodes() || end > static_cast<long>(conn.size()))
+      throw InvalidInput(cat(vw, ": cell ", c, " has ", end - begin, " nodes, expected ", el.n_nodes()));
+    for (int k = 0; k < el.n_nodes(); ++k) {
+      const int src = el.type == ElementType::Wedge15 ? kWedge15ToVtk[k] : k;
+      el.nodes[k] = static_cast<int>(conn[begin + src]);
+    }
+    mesh.elements.push_back(el);
+    begin = end;
+  }
+  validate(mesh, dir.string());
+  return mesh;
+}
+
+}  // namespace caps::fem

@@ -1,0 +1,60 @@
+#include <nlohmann/json.hpp>
+
+#include "caps/core/atomic_output.hpp"
+#include "caps/core/error.hpp"
+#include "caps/fem/solve.hpp"
+#include "vtu.hpp"
+
+namespace caps::fem {
+
+void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesystem::path& dir) {
+  const Eigen::Index n = mesh.n_nodes();
+  Eigen::MatrixXd fixed = Eigen::MatrixXd::Zero(n, 1), partner = Eigen::MatrixXd::Constant(n, 1, -1);
+  for (int i : mesh.fixed_nodes) fixed(i, 0) = 1;
+  for (const FixedDof& f : mesh.fixed_dofs) fixed(f.node, 0) = 1;
+  for (const SuturePair& s : mesh.sutures) {
+    partner(s.a, 0) = s.b;
+    partner(s.b, 0) = s.a;
+  }
+  Eigen::MatrixXd layer(static_cast<Eigen::Index>(mesh.elements.size()), 1);
+  for (std::size_t e = 0; e < mesh.elements.size(); ++e)
+    layer(static_cast<Eigen::Index>(e), 0) = mesh.elements[e].layer;
+  detail::write_vtu(dir / "result.vtu", mesh.nodes, mesh.elements,
+                    {{"displacement", r.displacement_mm, false},
+                     {"stress", r.nodal_stress_mpa, false},
+                     {"von_mises", r.von_mises_mpa, false},
+                     {"max_principal", r.max_principal_mpa, false},
+                     {"reaction", r.reaction_n, false},
+                     {"fixed", fixed, true},
+                     {"suture_partner", partner, true}},
+                    {{"layer", layer, true}, {"von_mises_mean", r.element_von_mises_mpa, false}});
+  nlohmann::json j;
+  j["format"] = "caps-result";
+  j["version"] = 1;
+  j["units"] = {{"length", "mm"}, {"force", "N"}, {"stress", "MPa"}, {"energy", "mJ"}};
+  j["model"] = mesh.model;
+  j["plan"] = mesh.plan;
+  j["solver"] = r.solver;
+  j["sizes"] = {{"nodes", n}, {"elements", mesh.elements.size()}, {"dofs", r.n_dofs},
+                {"equations", r.n_equations}, {"matrix_nonzeros_upper", r.n_nonzeros},
+                {"factor_nonzeros", r.factor_nonzeros}};
+  j["timings_s"] = {{"constraints", r.timings.constraints_s}, {"assembly", r.timings.assembly_s},
+                    {"analysis", r.timings.analysis_s}, {"factorization", r.timings.factorization_s},
+                    {"solve", r.timings.solve_s}, {"recovery", r.timings.recovery_s},
+                    {"total", r.timings.total_s}};
+  j["peak_memory_mb"] = r.peak_memory_mb;
+  j["relative_residual"] = r.relative_residual;
+  j["max_displacement_mm"] = r.displacement_mm.rowwise().norm().maxCoeff();
+  j["max_von_mises_mpa"] = r.von_mises_mpa.maxCoeff();
+  j["max_principal_mpa"] = r.max_principal_mpa.maxCoeff();
+  j["strain_energy_mj"] = r.strain_energy_mj;
+  j["total_suture_force_n"] = r.total_suture_force_n;
+  j["sum_suture_magnitudes_n"] = r.sum_suture_magnitudes_n;
+  j["suture_forces"] = nlohmann::json::array();
+  for (const SutureForce& s : r.suture_forces)
+    j["suture_forces"].push_back({{"a", s.a}, {"b", s.b}, {"magnitude_n", s.magnitude_n},
+                                  {"force_on_a_n", {s.force_on_a_n.x(), s.force_on_a_n.y(), s.force_on_a_n.z()}}});
+  write_text_atomic(dir / "result.json", j.dump(1) + "\n");
+}
+
+}  // namespace caps::fem

@@ -1,0 +1,233 @@
+#include "caps/fem/solve.hpp"
+
+#include <sys/resource.h>
+#include <tbb/blocked_range.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Dense>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <optional>
+
+#include "caps/core/error.hpp"
+#include "caps/fem/elements.hpp"
+#include "assemble.hpp"
+#include "constraints.hpp"
+#include "direct_solver.hpp"
+#include "elements_impl.hpp"
+
+namespace caps::fem {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+double peak_rss_mb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return static_cast<double>(u.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
+}
+
+// Pair forces of one suture group: node reactions R_n = sum over its pairs of +-lambda_k; the
+// minimum-norm lambda (unique for a single pair, a tree of pairs or a consistent cycle).
+void group_pair_forces(const Mesh& mesh, const std::vector<int>& members,
+                       const std::vector<int>& pairs, const Eigen::MatrixX3d& R,
+                       std::vector<SutureForce>& out) {
+  const Eigen::Index nm = static_cast<Eigen::Index>(members.size());
+  const Eigen::Index np = static_cast<Eigen::Index>(pairs.size());
+  Eigen::MatrixXd D = Eigen::MatrixXd::Zero(nm, np);
+  Eigen::MatrixXd Rm(nm, 3);
+  auto local = [&](int node) {
+    return static_cast<Eigen::Index>(std::find(members.begin(), members.end(), node) - members.begin());
+  };
+  for (Eigen::Index k = 0; k < np; ++k) {
+    D(local(mesh.sutures[pairs[k]].a), k) += 1;
+    D(local(mesh.sutures[pairs[k]].b), k) -= 1;
+  }
+  for (Eigen::Index i = 0; i < nm; ++i) Rm.row(i) = R.row(members[i]);
+  const Eigen::MatrixXd L = D.completeOrthogonalDecomposition().solve(Rm);
+  for (Eigen::Index k = 0; k < np; ++k) {
+    SutureForce& s = out[pairs[k]];
+    s.force_on_a_n = L.row(k).transpose();
+    s.magnitude_n = s.force_on_a_n.norm();
+  }
+}
+
+}  // namespace
+
+const char* solver_name(SolverKind kind) { return kind == SolverKind::Mumps ? "mumps" : "cholmod"; }
+
+SolverKind parse_solver(const std::string& name) {
+  if (name == "mumps") return SolverKind::Mumps;
+  if (name == "cholmod") return SolverKind::Cholmod;
+  throw InvalidInput(cat("solver '", name, "' is unknown; use mumps or cholmod"));
+}
+
+SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
+  const auto t_start = Clock::now();
+  std::optional<tbb::global_control> threads;
+  if (options.threads > 0)
+    threads.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
+  validate(mesh);
+  SolveResult res;
+  res.solver = solver_name(options.solver);
+  auto t = Clock::now();
+  const detail::DofMap map = detail::build_dof_map(mesh);
+  res.timings.constraints_s = seconds_since(t);
+  const Eigen::Index n_nodes = mesh.n_nodes();
+  res.n_dofs = 3 * n_nodes;
+  res.n_equations = map.n_eq;
+  if (map.n_eq == 0) throw InvalidInput("every degree of freedom is fixed; nothing to solve");
+
+  t = Clock::now();
+  detail::Assembly sys = detail::assemble(mesh, map);
+  res.timings.assembly_s = seconds_since(t);
+  res.n_nonzeros = sys.K.nonZeros();
+
+  Eigen::VectorXd q;
+  {
+    auto solver = detail::make_direct_solver(options.solver, options.mumps_ordering);
+    try {
+      t = Clock::now();
+      solver->analyze(sys.K);
+      res.timings.analysis_s = seconds_since(t);
+      t = Clock::now();
+      solver->factorize(sys.K);
+      res.timings.factorization_s = seconds_since(t);
+      t = Clock::now();
+      q = solver->solve(sys.f);
+      res.timings.solve_s = seconds_since(t);
+    } catch (const detail::SingularMatrix& e) {
+      throw InvalidInput(cat(
+          "the stiffness matrix is singular (", e.what(),
+          e.equation >= 0 ? cat(", near ", detail::describe_equation(map, e.equation)) : "",
+          "): the mesh is under-constrained, a part can still move or rotate freely; fix at least "
+          "three non-collinear nodes of every connected part (e.g. the bottom layer on bone)"));
+    }
+    res.factor_nonzeros = solver->factor_nonzeros();
+  }
+  if (!q.allFinite())
+    throw SolverError(cat(res.solver, ": the solution contains NaN or Inf"));
+  const Eigen::VectorXd r = sys.K.selfadjointView<Eigen::Upper>() * q - sys.f;
+  const double fn = sys.f.norm();
+  res.relative_residual = fn > 0 ? r.norm() / fn : r.norm();
+  if (!(res.relative_residual < 1e-6))
+    throw InvalidInput(cat("the solve is inaccurate (relative residual ", res.relative_residual,
+                           "): the stiffness is nearly singular; check for under-constrained "
+                           "parts, extreme material contrasts or badly shaped elements"));
+
+  t = Clock::now();
+  res.displacement_mm.resize(n_nodes, 3);
+  for (Eigen::Index i = 0; i < n_nodes; ++i)
+    for (int c = 0; c < 3; ++c) {
+      const std::size_t d = 3 * static_cast<std::size_t>(i) + c;
+      res.displacement_mm(i, c) = (map.eq[d] >= 0 ? q[map.eq[d]] : 0.0) + map.g[d];
+    }
+
+  // Recovery: Gauss stresses, nodal stresses (evaluated at the element's nodes and averaged),
+  // strain energy and internal forces (for the reactions), all from the same stresses.
+  const int n_el = static_cast<int>(mesh.elements.size());
+  res.gauss_offset.resize(n_el + 1);
+  res.gauss_offset[0] = 0;
+  for (int e = 0; e < n_el; ++e)
+    res.gauss_offset[e + 1] = res.gauss_offset[e] +
+        static_cast<int>(quadrature(mesh.elements[e].type).size());
+  res.gauss_stress_mpa.resize(res.gauss_offset[n_el], 6);
+  res.element_von_mises_mpa.resize(n_el);
+  Eigen::MatrixXd nodal_sum = Eigen::MatrixXd::Zero(n_nodes, 6);
+  std::vector<int> nodal_count(n_nodes, 0);
+  Eigen::MatrixX3d f_int = Eigen::MatrixX3d::Zero(n_nodes, 3);
+  std::vector<double> energy(n_el, 0.0);
+  std::vector<Eigen::MatrixXd> elem_nodal(n_el);
+  tbb::parallel_for(tbb::blocked_range<int>(0, n_el, 32), [&](const tbb::blocked_range<int>& rr) {
+    for (int e = rr.begin(); e < rr.end(); ++e) {
+      const Element& el = mesh.elements[e];
+      const int nn = el.n_nodes();
+      const LinearElastic& mat = mesh.materials.at(el.layer);
+      const double lam = mat.lambda_mpa(), mu = mat.mu_mpa();
+      const Eigen::MatrixX3d X = element_coordinates(mesh, e);
+      Eigen::VectorXd ue(3 * nn);
+      for (int a = 0; a < nn; ++a) ue.segment<3>(3 * a) = res.displacement_mm.row(el.nodes[a]).transpose();
+      const auto& tab = detail::shape_table(el.type);
+      Eigen::MatrixX3d G(nn, 3), F = Eigen::MatrixX3d::Zero(nn, 3);
+      double vm = 0, w_sum = 0, en = 0;
+      for (std::size_t g = 0; g < tab.w.size(); ++g) {
+        const double det = detail::gradients(tab.dN[g], X, G, e, static_cast<int>(g));
+        const Eigen::Matrix3d eps = detail::strain_tensor(G, ue);
+        const Vector6d s = detail::stress_from_strain(eps, lam, mu);
+        res.gauss_stress_mpa.row(res.gauss_offset[e] + static_cast<int>(g)) = s.transpose();
+        Eigen::Matrix3d S;
+        S << s[0], s[3], s[5], s[3], s[1], s[4], s[5], s[4], s[2];
+        const double w = tab.w[g] * det;
+        F += w * G * S;
+        en += 0.5 * w * (S.array() * eps.array()).sum();
+        vm += w * von_mises(s);
+        w_sum += w;
+      }
+      res.element_von_mises_mpa[e] = vm / w_sum;
+      energy[e] = en;
+      const Eigen::MatrixX3d P = natural_nodes(el.type);
+      Eigen::MatrixXd ns(nn, 6);
+      Eigen::VectorXd N;
+      Eigen::MatrixX3d dN;
+      for (int a = 0; a < nn; ++a) {
+        shape_functions(el.type, P.row(a).transpose(), N, dN);
+        detail::gradients(dN, X, G, e, -1);
+        ns.row(a) = detail::stress_from_strain(detail::strain_tensor(G, ue), lam, mu).transpose();
+      }
+      elem_nodal[e] = std::move(ns);
+      for (int a = 0; a < nn; ++a)
+        if (map.constrained[el.nodes[a]])
+          for (int c = 0; c < 3; ++c)
+            std::atomic_ref<double>(f_int(el.nodes[a], c)).fetch_add(F(a, c), std::memory_order_relaxed);
+    }
+  });
+  for (int e = 0; e < n_el; ++e) {
+    const Element& el = mesh.elements[e];
+    for (int a = 0; a < el.n_nodes(); ++a) {
+      nodal_sum.row(el.nodes[a]) += elem_nodal[e].row(a);
+      ++nodal_count[el.nodes[a]];
+    }
+    res.strain_energy_mj += energy[e];
+  }
+  res.nodal_stress_mpa = Eigen::MatrixXd::Zero(n_nodes, 6);
+  res.von_mises_mpa = Eigen::VectorXd::Zero(n_nodes);
+  res.max_principal_mpa = Eigen::VectorXd::Zero(n_nodes);
+  for (Eigen::Index i = 0; i < n_nodes; ++i) {
+    if (!nodal_count[i]) continue;
+    res.nodal_stress_mpa.row(i) = nodal_sum.row(i) / nodal_count[i];
+    const Vector6d s = res.nodal_stress_mpa.row(i).transpose();
+    res.von_mises_mpa[i] = von_mises(s);
+    res.max_principal_mpa[i] = max_principal(s);
+  }
+  // Reactions: R = f_int - f_ext on constrained nodes (the force the supports/sutures apply).
+  res.reaction_n = Eigen::MatrixX3d::Zero(n_nodes, 3);
+  for (Eigen::Index i = 0; i < n_nodes; ++i)
+    if (map.constrained[i]) res.reaction_n.row(i) = f_int.row(i);
+  for (const NodalLoad& l : mesh.loads)
+    if (map.constrained[l.node]) res.reaction_n.row(l.node) -= l.force_n.transpose();
+  res.suture_forces.resize(mesh.sutures.size());
+  std::vector<std::vector<int>> group_pairs(map.groups.size());
+  for (std::size_t k = 0; k < mesh.sutures.size(); ++k) {
+    res.suture_forces[k].a = mesh.sutures[k].a;
+    res.suture_forces[k].b = mesh.sutures[k].b;
+    group_pairs[map.group[mesh.sutures[k].a]].push_back(static_cast<int>(k));
+  }
+  for (std::size_t gi = 0; gi < map.groups.size(); ++gi)
+    group_pair_forces(mesh, map.groups[gi], group_pairs[gi], res.reaction_n, res.suture_forces);
+  for (const SutureForce& s : res.suture_forces) {
+    const Eigen::Vector3d d = (mesh.nodes.row(s.b) - mesh.nodes.row(s.a)).transpose();
+    res.total_suture_force_n += d.norm() > 0 ? s.force_on_a_n.dot(d.normalized()) : s.magnitude_n;
+    res.sum_suture_magnitudes_n += s.magnitude_n;
+  }
+  res.timings.recovery_s = seconds_since(t);
+  res.timings.total_s = seconds_since(t_start);
+  res.peak_memory_mb = peak_rss_mb();
+  return res;
+}
+
+}  // namespace caps::fem

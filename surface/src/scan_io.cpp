@@ -1,0 +1,578 @@
+#include "caps/surface/scan_io.hpp"
+
+#include <jpeglib.h>
+#include <tiny_gltf.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <csetjmp>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "caps/core/error.hpp"
+
+namespace fs = std::filesystem;
+
+namespace caps {
+namespace {
+
+std::string lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+  return s;
+}
+
+// ---- JPEG through libjpeg(-turbo), with errors turned into exceptions.
+struct JpegError {
+  jpeg_error_mgr mgr;
+  std::jmp_buf jump;
+  char message[JMSG_LENGTH_MAX];
+};
+
+void jpeg_error_exit(j_common_ptr cinfo) {
+  auto* err = reinterpret_cast<JpegError*>(cinfo->err);
+  (*cinfo->err->format_message)(cinfo, err->message);
+  std::longjmp(err->jump, 1);
+}
+
+RgbImage decode_jpeg(const std::vector<unsigned char>& bytes, const std::string& where) {
+  jpeg_decompress_struct cinfo;
+  JpegError err;
+  cinfo.err = jpeg_std_error(&err.mgr);
+  err.mgr.error_exit = jpeg_error_exit;
+  RgbImage img;
+  if (setjmp(err.jump)) {
+    jpeg_destroy_decompress(&cinfo);
+    throw IoError(cat(where, ": unreadable JPEG (", err.message, ")"));
+  }
+  jpeg_create_decompress(&cinfo);
+  jpeg_mem_src(&cinfo, bytes.data(), static_cast<unsigned long>(bytes.size()));
+  jpeg_read_header(&cinfo, TRUE);
+  cinfo.out_color_space = JCS_RGB;
+  jpeg_start_decompress(&cinfo);
+  img.width = static_cast<int>(cinfo.output_width);
+  img.height = static_cast<int>(cinfo.output_height);
+  img.rgb.resize(std::size_t(img.width) * img.height * 3);
+  while (cinfo.output_scanline < cinfo.output_height) {
+    JSAMPROW row = img.rgb.data() + std::size_t(cinfo.output_scanline) * img.width * 3;
+    jpeg_read_scanlines(&cinfo, &row, 1);
+  }
+  jpeg_finish_decompress(&cinfo);
+  jpeg_destroy_decompress(&cinfo);
+  return img;
+}
+
+std::vector<unsigned char> read_bytes(const fs::path& path, const std::string& what) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw IoError(cat(path.string(), ": cannot open the ", what, " (missing or unreadable)"));
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// Finishes a scan: checks the texture coordinates refer to existing rows and applies flip_v.
+void finish(ScanMesh& s, const ScanReadOptions& o) {
+  if (!o.texture.empty()) {
+    s.texture = read_image(o.texture);
+    s.texture_source = o.texture.string();
+  }
+  if (o.flip_v && s.UV.rows() > 0) s.UV.col(1) = (1.0 - s.UV.col(1).array()).matrix();
+  if (s.mesh.n_faces() == 0)
+    throw InvalidInput(cat(s.source, ": the mesh has no faces; a scan must be a surface of "
+                               "triangles or polygons, not a point cloud"));
+  if (s.FUV.rows() > 0) {
+    if (s.FUV.rows() != s.mesh.n_faces())
+      throw InvalidInput(cat(s.source, ": texture coordinates for ", s.FUV.rows(), " of ",
+                             s.mesh.n_faces(), " faces"));
+    if (s.FUV.minCoeff() < 0 || s.FUV.maxCoeff() >= s.UV.rows())
+      throw InvalidInput(cat(s.source, ": a texture coordinate index is out of range"));
+  }
+}
+
+// ---- glTF 2.0
+Eigen::Matrix4d node_matrix(const tinygltf::Node& n) {
+  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+  if (n.matrix.size() == 16) {
+    for (int c = 0; c < 4; ++c)
+      for (int r = 0; r < 4; ++r) m(r, c) = n.matrix[c * 4 + r];
+    return m;
+  }
+  Eigen::Affine3d a = Eigen::Affine3d::Identity();
+  if (n.translation.size() == 3) a.translate(Eigen::Vector3d(n.translation[0], n.translation[1], n.translation[2]));
+  if (n.rotation.size() == 4)
+    a.rotate(Eigen::Quaterniond(n.rotation[3], n.rotation[0], n.rotation[1], n.rotation[2]));
+  if (n.scale.size() == 3) a.scale(Eigen::Vector3d(n.scale[0], n.scale[1], n.scale[2]));
+  return a.matrix();
+}
+
+// Reads accessor element i, component c, as double (normalised integers scaled to [0, 1]).
+struct AccessorView {
+  const unsigned char* base = nullptr;
+  std::size_t stride = 0, count = 0;
+  int components = 0, type = 0;
+  bool normalized = false;
+  double get(std::size_t i, int c) const {
+    const unsigned char* p = base + i * stride;
+    switch (type) {
+      case TINYGLTF_COMPONENT_TYPE_FLOAT: { float v; std::memcpy(&v, p + 4 * c, 4); return v; }
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: { const double v = p[c]; return normalized ? v / 255.0 : v; }
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { std::uint16_t v; std::memcpy(&v, p + 2 * c, 2); return normalized ? v / 65535.0 : v; }
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: { std::uint32_t v; std::memcpy(&v, p + 4 * c, 4); return v; }
+      default: return std::nan("");
+    }
+  }
+};
+
+AccessorView view_of(const tinygltf::Model& model, int index, const std::string& where) {
+  if (index < 0 || index >= static_cast<int>(model.accessors.size()))
+    throw InvalidInput(cat(where, ": accessor ", index, " does not exist"));
+  const auto& acc = model.accessors[index];
+  if (acc.bufferView < 0 || acc.bufferView >= static_cast<int>(model.bufferViews.size()))
+    throw InvalidInput(cat(where, ": accessor ", index, " has no buffer view (sparse accessors are "
+                               "not supported)"));
+  const auto& bv = model.bufferViews[acc.bufferView];
+  const auto& buf = model.buffers.at(bv.buffer);
+  AccessorView v;
+  v.components = tinygltf::GetNumComponentsInType(acc.type);
+  const int size = tinygltf::GetComponentSizeInBytes(acc.componentType);
+  if (v.components <= 0 || size <= 0) throw InvalidInput(cat(where, ": accessor ", index, " has an unknown type"));
+  v.type = acc.componentType;
+  v.normalized = acc.normalized;
+  v.count = acc.count;
+  v.stride = acc.ByteStride(bv) > 0 ? acc.ByteStride(bv) : std::size_t(v.components * size);
+  const std::size_t offset = bv.byteOffset + acc.byteOffset;
+  if (v.count > 0 && offset + (v.count - 1) * v.stride + v.components * size > buf.data.size())
+    throw InvalidInput(cat(where, ": accessor ", index, " runs past the end of its buffer; the file "
+                               "is truncated"));
+  v.base = buf.data.data() + offset;
+  return v;
+}
+
+RgbImage to_rgb(const tinygltf::Image& im, const std::string& where) {
+  if (im.image.empty() || im.width <= 0 || im.height <= 0 || im.component < 3 || im.bits != 8)
+    throw IoError(cat(where, ": the texture '", im.uri.empty() ? im.name : im.uri,
+                      "' could not be decoded; give one with --texture"));
+  RgbImage out;
+  out.width = im.width;
+  out.height = im.height;
+  out.rgb.resize(std::size_t(im.width) * im.height * 3);
+  for (std::size_t i = 0; i < std::size_t(im.width) * im.height; ++i)
+    for (int c = 0; c < 3; ++c) out.rgb[i * 3 + c] = im.image[i * im.component + c];
+  return out;
+}
+
+ScanMesh read_gltf(const fs::path& path, const ScanReadOptions& o) {
+  tinygltf::TinyGLTF loader;
+  tinygltf::Model model;
+  std::string err, warn;
+  const bool binary = lower(path.extension().string()) == ".glb";
+  const bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, path.string())
+                         : loader.LoadASCIIFromFile(&model, &err, &warn, path.string());
+  if (!ok) throw IoError(cat(path.string(), ": cannot read glTF (", err.empty() ? warn : err, ")"));
+  ScanMesh s;
+  s.source = path.string();
+  s.format = "glTF";
+  s.mm_per_unit = 1000.0;  // glTF 2.0 lengths are metres
+  std::vector<Eigen::Vector3d> V;
+  std::vector<Eigen::Vector2d> UV;
+  std::vector<std::array<std::uint8_t, 3>> colors;
+  std::vector<Eigen::Vector3i> F;
+  int texture_image = -1;
+  bool has_uv = true, has_color = true;
+  auto add_mesh = [&](int mesh_index, const Eigen::Matrix4d& M) {
+    const auto& mesh = model.meshes.at(mesh_index);
+    for (const auto& prim : mesh.primitives) {
+      const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
+      if (mode != TINYGLTF_MODE_TRIANGLES) {
+        s.notes.push_back(cat("skipped a primitive of mesh '", mesh.name, "' that is not triangles"));
+        continue;
+      }
+      const auto pos = prim.attributes.find("POSITION");
+      if (pos == prim.attributes.end()) continue;
+      const AccessorView P = view_of(model, pos->second, s.source);
+      const int base = static_cast<int>(V.size());
+      for (std::size_t i = 0; i < P.count; ++i)
+        V.push_back((M * Eigen::Vector4d(P.get(i, 0), P.get(i, 1), P.get(i, 2), 1.0)).head<3>());
+      const auto tc = prim.attributes.find("TEXCOORD_0");
+      if (tc != prim.attributes.end()) {
+        const AccessorView T = view_of(model, tc->second, s.source);
+        for (std::size_t i = 0; i < P.count; ++i)
+          UV.emplace_back(i < T.count ? T.get(i, 0) : 0.0, i < T.count ? T.get(i, 1) : 0.0);
+      } else {
+        has_uv = false;
+      }
+      const auto col = prim.attributes.find("COLOR_0");
+      if (col != prim.attributes.end()) {
+        const AccessorView C = view_of(model, col->second, s.source);
+        const bool unit = C.type == TINYGLTF_COMPONENT_TYPE_FLOAT || C.normalized;
+        for (std::size_t i = 0; i < P.count; ++i) {
+          std::array<std::uint8_t, 3> c{};
+          for (int k = 0; k < 3; ++k)
+            c[k] = static_cast<std::uint8_t>(std::clamp(C.get(i, k) * (unit ? 255.0 : 1.0), 0.0, 255.0));
+          colors.push_back(c);
+        }
+      } else {
+        has_color = false;
+      }
+      if (prim.indices >= 0) {
+        const AccessorView I = view_of(model, prim.indices, s.source);
+        for (std::size_t i = 0; i + 2 < I.count; i += 3)
+          F.emplace_back(base + int(I.get(i, 0)), base + int(I.get(i + 1, 0)), base + int(I.get(i + 2, 0)));
+      } else {
+        for (std::size_t i = 0; i + 2 < P.count; i += 3)
+          F.emplace_back(base + int(i), base + int(i + 1), base + int(i + 2));
+      }
+      if (prim.material >= 0 && texture_image < 0) {
+        const int t = model.materials.at(prim.material).pbrMetallicRoughness.baseColorTexture.index;
+        if (t >= 0 && t < static_cast<int>(model.textures.size())) texture_image = model.textures[t].source;
+      }
+    }
+  };
+  // Walk the default scene's node tree (or every root if there is no scene).
+  std::function<void(int, const Eigen::Matrix4d&)> walk = [&](int n, const Eigen::Matrix4d& parent) {
+    const auto& node = model.nodes.at(n);
+    const Eigen::Matrix4d M = parent * node_matrix(node);
+    if (node.mesh >= 0) add_mesh(node.mesh, M);
+    for (int c : node.children) walk(c, M);
+  };
+  const int scene = model.defaultScene >= 0 ? model.defaultScene : 0;
+  if (scene < static_cast<int>(model.scenes.size())) {
+    for (int n : model.scenes[scene].nodes) walk(n, Eigen::Matrix4d::Identity());
+  } else {
+    for (std::size_t m = 0; m < model.meshes.size(); ++m) add_mesh(static_cast<int>(m), Eigen::Matrix4d::Identity());
+  }
+  s.mesh.V.resize(static_cast<Eigen::Index>(V.size()), 3);
+  for (std::size_t i = 0; i < V.size(); ++i) s.mesh.V.row(i) = V[i].transpose();
+  s.mesh.F.resize(static_cast<Eigen::Index>(F.size()), 3);
+  for (std::size_t i = 0; i < F.size(); ++i) s.mesh.F.row(i) = F[i].transpose();
+  if (s.mesh.n_faces() > 0 && (s.mesh.F.minCoeff() < 0 || s.mesh.F.maxCoeff() >= s.mesh.n_vertices()))
+    throw InvalidInput(cat(s.source, ": a face refers to a vertex that does not exist"));
+  if (has_uv && !UV.empty()) {
+    s.UV.resize(static_cast<Eigen::Index>(UV.size()), 2);
+    for (std::size_t i = 0; i < UV.size(); ++i) s.UV.row(i) = UV[i].transpose();
+    s.FUV = s.mesh.F;  // glTF texture coordinates are per vertex
+  }
+  if (has_color && !colors.empty()) {
+    s.vertex_colors.resize(static_cast<Eigen::Index>(colors.size()), 3);
+    for (std::size_t i = 0; i < colors.size(); ++i)
+      for (int k = 0; k < 3; ++k) s.vertex_colors(i, k) = colors[i][k];
+  }
+  if (o.texture.empty() && texture_image >= 0) {
+    s.texture = to_rgb(model.images.at(texture_image), s.source);
+    s.texture_source = cat(s.source, " (base colour texture)");
+  }
+  finish(s, o);
+  return s;
+}
+
+// ---- VTK legacy polydata (ASCII)
+ScanMesh read_vtk(const fs::path& path, const ScanReadOptions& o) {
+  std::ifstream in(path);
+  if (!in) throw IoError(cat(path.string(), ": cannot open (missing or unreadable)"));
+  ScanMesh s;
+  s.source = path.string();
+  s.format = "VTK";
+  std::string line;
+  std::getline(in, line);
+  if (line.rfind("# vtk DataFile", 0) != 0)
+    throw InvalidInput(cat(s.source, ": not a VTK legacy file (no '# vtk DataFile' header)"));
+  std::getline(in, line);  // title
+  std::string encoding;
+  in >> encoding;
+  if (encoding != "ASCII")
+    throw InvalidInput(cat(s.source, ": ", encoding, " VTK files are not supported; save as ASCII"));
+  std::string word;
+  std::vector<Eigen::Vector3i> F;
+  Eigen::Index n_points = 0;
+  bool in_point_data = false;
+  auto need = [&](bool ok, const char* what) {
+    if (!ok) throw IoError(cat(s.source, ": truncated or malformed while reading ", what));
+  };
+  while (in >> word) {
+    if (word == "DATASET") {
+      in >> word;
+      if (word != "POLYDATA")
+        throw InvalidInput(cat(s.source, ": dataset ", word, " is not POLYDATA (a surface)"));
+    } else if (word == "POINTS") {
+      std::string type;
+      need(static_cast<bool>(in >> n_points >> type), "POINTS");
+      s.mesh.V.resize(n_points, 3);
+      for (Eigen::Index i = 0; i < n_points; ++i)
+        for (int c = 0; c < 3; ++c) {
+          std::string v;
+          need(static_cast<bool>(in >> v), "POINTS");
+          s.mesh.V(i, c) = std::strtod(v.c_str(), nullptr);
+          if (v == "nan" || v == "NaN" || v == "-nan") s.mesh.V(i, c) = std::nan("");
+        }
+    } else if (word == "POLYGONS" || word == "TRIANGLE_STRIPS") {
+      long n = 0, size = 0;
+      need(static_cast<bool>(in >> n >> size), word.c_str());
+      for (long c = 0; c < n; ++c) {
+        int k = 0;
+        need(static_cast<bool>(in >> k), word.c_str());
+        std::vector<int> ids(k);
+        for (int& id : ids) need(static_cast<bool>(in >> id), word.c_str());
+        if (word == "POLYGONS") {
+          for (int t = 1; t + 1 < k; ++t) F.emplace_back(ids[0], ids[t], ids[t + 1]);
+        } else {
+          for (int t = 0; t + 2 < k; ++t)
+            F.push_back(t % 2 ? Eigen::Vector3i(ids[t + 1], ids[t], ids[t + 2])
+                              : Eigen::Vector3i(ids[t], ids[t + 1], ids[t + 2]));
+        }
+      }
+    } else if (word == "VERTICES" || word == "LINES") {
+      long n = 0, size = 0;
+      need(static_cast<bool>(in >> n >> size), word.c_str());
+      for (long i = 0; i < size; ++i) need(static_cast<bool>(in >> word), "cells");
+    } else if (word == "POINT_DATA") {
+      in >> word;
+      in_point_data = true;
+    } else if (word == "CELL_DATA") {
+      in >> word;
+      in_point_data = false;
+    } else if (word == "TEXTURE_COORDINATES" && in_point_data) {
+      std::string name, type;
+      int dim = 0;
+      need(static_cast<bool>(in >> name >> dim >> type), "TEXTURE_COORDINATES");
+      s.UV.resize(n_points, 2);
+      for (Eigen::Index i = 0; i < n_points; ++i)
+        for (int c = 0; c < dim; ++c) {
+          double v;
+          need(static_cast<bool>(in >> v), "TEXTURE_COORDINATES");
+          if (c < 2) s.UV(i, c) = c == 1 ? 1.0 - v : v;  // VTK's v points up
+        }
+    }
+  }
+  s.mesh.F.resize(static_cast<Eigen::Index>(F.size()), 3);
+  for (std::size_t i = 0; i < F.size(); ++i) s.mesh.F.row(i) = F[i].transpose();
+  if (s.mesh.n_faces() > 0 && (s.mesh.F.minCoeff() < 0 || s.mesh.F.maxCoeff() >= n_points))
+    throw InvalidInput(cat(s.source, ": a polygon refers to a point that does not exist"));
+  if (s.UV.rows() > 0) s.FUV = s.mesh.F;
+  finish(s, o);
+  return s;
+}
+
+// ---- Wavefront OBJ with MTL
+ScanMesh read_obj(const fs::path& path, const ScanReadOptions& o) {
+  std::ifstream in(path);
+  if (!in) throw IoError(cat(path.string(), ": cannot open (missing or unreadable)"));
+  ScanMesh s;
+  s.source = path.string();
+  s.format = "OBJ";
+  std::vector<Eigen::Vector3d> V;
+  std::vector<Eigen::Vector2d> T;
+  std::vector<Eigen::Vector3i> F, FT;
+  std::vector<std::array<std::uint8_t, 3>> colors;
+  std::string mtllib, line;
+  while (std::getline(in, line)) {
+    std::istringstream ls(line);
+    std::string tag;
+    ls >> tag;
+    if (tag == "v") {
+      Eigen::Vector3d p;
+      std::string x, y, z;
+      ls >> x >> y >> z;
+      p = {std::strtod(x.c_str(), nullptr), std::strtod(y.c_str(), nullptr), std::strtod(z.c_str(), nullptr)};
+      V.push_back(p);
+      double r, g, b;
+      if (ls >> r >> g >> b)
+        colors.push_back({static_cast<std::uint8_t>(std::clamp(r * 255, 0.0, 255.0)),
+                          static_cast<std::uint8_t>(std::clamp(g * 255, 0.0, 255.0)),
+                          static_cast<std::uint8_t>(std::clamp(b * 255, 0.0, 255.0))});
+    } else if (tag == "vt") {
+      double u = 0, v = 0;
+      ls >> u >> v;
+      T.emplace_back(u, 1.0 - v);  // OBJ's v points up
+    } else if (tag == "f") {
+      std::vector<int> vi, ti;
+      std::string c;
+      while (ls >> c) {
+        const int a = std::atoi(c.c_str());
+        vi.push_back(a < 0 ? static_cast<int>(V.size()) + a : a - 1);
+        const auto slash = c.find('/');
+        int t = -1;
+        if (slash != std::string::npos && slash + 1 < c.size() && c[slash + 1] != '/') {
+          const int b = std::atoi(c.c_str() + slash + 1);
+          t = b < 0 ? static_cast<int>(T.size()) + b : b - 1;
+        }
+        ti.push_back(t);
+      }
+      for (std::size_t k = 1; k + 1 < vi.size(); ++k) {
+        F.emplace_back(vi[0], vi[k], vi[k + 1]);
+        FT.emplace_back(ti[0], ti[k], ti[k + 1]);
+      }
+    } else if (tag == "mtllib") {
+      std::getline(ls >> std::ws, mtllib);
+    }
+  }
+  s.mesh.V.resize(static_cast<Eigen::Index>(V.size()), 3);
+  for (std::size_t i = 0; i < V.size(); ++i) s.mesh.V.row(i) = V[i].transpose();
+  s.mesh.F.resize(static_cast<Eigen::Index>(F.size()), 3);
+  for (std::size_t i = 0; i < F.size(); ++i) s.mesh.F.row(i) = F[i].transpose();
+  if (s.mesh.n_faces() > 0 && (s.mesh.F.minCoeff() < 0 || s.mesh.F.maxCoeff() >= s.mesh.n_vertices()))
+    throw InvalidInput(cat(s.source, ": a face refers to a vertex that does not exist"));
+  bool all_uv = !T.empty() && !FT.empty();
+  for (const auto& ft : FT) all_uv = all_uv && ft.minCoeff() >= 0;
+  if (all_uv) {
+    s.UV.resize(static_cast<Eigen::Index>(T.size()), 2);
+    for (std::size_t i = 0; i < T.size(); ++i) s.UV.row(i) = T[i].transpose();
+    s.FUV.resize(static_cast<Eigen::Index>(FT.size()), 3);
+    for (std::size_t i = 0; i < FT.size(); ++i) s.FUV.row(i) = FT[i].transpose();
+  }
+  if (colors.size() == V.size() && !V.empty()) {
+    s.vertex_colors.resize(static_cast<Eigen::Index>(V.size()), 3);
+    for (std::size_t i = 0; i < V.size(); ++i)
+      for (int k = 0; k < 3; ++k) s.vertex_colors(i, k) = colors[i][k];
+  }
+  if (o.texture.empty() && !mtllib.empty()) {
+    const fs::path mtl = path.parent_path() / mtllib;
+    std::ifstream m(mtl);
+    if (!m) throw IoError(cat(s.source, ": its material file ", mtl.string(), " is missing; give "
+                                         "the texture with --texture"));
+    while (std::getline(m, line)) {
+      std::istringstream ls(line);
+      std::string tag;
+      ls >> tag;
+      if (tag == "map_Kd") {
+        std::string rest;
+        std::getline(ls >> std::ws, rest);
+        // Options such as -s u v come first; the file name is the last word.
+        const auto sp = rest.find_last_of(' ');
+        const fs::path tex = mtl.parent_path() / (sp == std::string::npos ? rest : rest.substr(sp + 1));
+        s.texture = read_image(tex);
+        s.texture_source = tex.string();
+        break;
+      }
+    }
+  }
+  finish(s, o);
+  return s;
+}
+
+// ---- PLY with vertex colours and optional texture coordinates.
+ScanMesh read_ply_scan(const fs::path& path, const ScanReadOptions& o) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw IoError(cat(path.string(), ": cannot open (missing or unreadable)"));
+  ScanMesh s;
+  s.source = path.string();
+  s.format = "PLY";
+  std::string line;
+  std::getline(in, line);
+  if (line.rfind("ply", 0) != 0) throw InvalidInput(cat(s.source, ": not a PLY file"));
+  struct Prop { std::string name, type, count_type; bool list = false; };
+  struct Element { std::string name; long count = 0; std::vector<Prop> props; };
+  std::vector<Element> elements;
+  std::string format;
+  while (std::getline(in, line)) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream ls(line);
+    std::string tag;
+    ls >> tag;
+    if (tag == "format") ls >> format;
+    else if (tag == "element") { Element e; ls >> e.name >> e.count; elements.push_back(e); }
+    else if (tag == "property") {
+      if (elements.empty()) throw InvalidInput(cat(s.source, ": property before any element"));
+      Prop p;
+      ls >> p.type;
+      if (p.type == "list") { p.list = true; ls >> p.count_type >> p.type; }
+      ls >> p.name;
+      elements.back().props.push_back(p);
+    } else if (tag == "end_header") break;
+  }
+  if (format != "ascii" && format != "binary_little_endian")
+    throw InvalidInput(cat(s.source, ": PLY format '", format, "' is not supported (ascii or "
+                                     "binary_little_endian)"));
+  const bool ascii = format == "ascii";
+  auto size_of = [&](const std::string& t) -> int {
+    if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
+    if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
+    if (t == "int" || t == "uint" || t == "int32" || t == "uint32" || t == "float" || t == "float32") return 4;
+    if (t == "double" || t == "float64") return 8;
+    throw InvalidInput(cat(s.source, ": unknown PLY type ", t));
+  };
+  auto read_value = [&](const std::string& t) -> double {
+    if (ascii) {
+      std::string w;
+      if (!(in >> w)) throw IoError(cat(s.source, ": truncated"));
+      return std::strtod(w.c_str(), nullptr);
+    }
+    unsigned char b[8];
+    const int n = size_of(t);
+    if (!in.read(reinterpret_cast<char*>(b), n)) throw IoError(cat(s.source, ": truncated"));
+    if (t == "char" || t == "int8") return static_cast<std::int8_t>(b[0]);
+    if (t == "uchar" || t == "uint8") return b[0];
+    if (t == "short" || t == "int16") { std::int16_t v; std::memcpy(&v, b, 2); return v; }
+    if (t == "ushort" || t == "uint16") { std::uint16_t v; std::memcpy(&v, b, 2); return v; }
+    if (t == "int" || t == "int32") { std::int32_t v; std::memcpy(&v, b, 4); return v; }
+    if (t == "uint" || t == "uint32") { std::uint32_t v; std::memcpy(&v, b, 4); return v; }
+    if (t == "float" || t == "float32") { float v; std::memcpy(&v, b, 4); return v; }
+    double v; std::memcpy(&v, b, 8); return v;
+  };
+  std::vector<Eigen::Vector3i> F;
+  bool has_color = false, has_uv = false;
+  for (const auto& e : elements) {
+    if (e.name == "vertex") {
+      s.mesh.V.resize(e.count, 3);
+      s.vertex_colors.resize(e.count, 3);
+      s.UV.resize(e.count, 2);
+      for (long i = 0; i < e.count; ++i)
+        for (const auto& p : e.props) {
+          if (p.list) { const int n = int(read_value(p.count_type)); for (int k = 0; k < n; ++k) read_value(p.type); continue; }
+          const double v = read_value(p.type);
+          const double unit = p.type.find("float") != std::string::npos || p.type == "double" ? 255.0 : 1.0;
+          if (p.name == "x") s.mesh.V(i, 0) = v;
+          else if (p.name == "y") s.mesh.V(i, 1) = v;
+          else if (p.name == "z") s.mesh.V(i, 2) = v;
+          else if (p.name == "red" || p.name == "r") { s.vertex_colors(i, 0) = std::uint8_t(std::clamp(v * unit, 0.0, 255.0)); has_color = true; }
+          else if (p.name == "green" || p.name == "g") s.vertex_colors(i, 1) = std::uint8_t(std::clamp(v * unit, 0.0, 255.0));
+          else if (p.name == "blue" || p.name == "b") s.vertex_colors(i, 2) = std::uint8_t(std::clamp(v * unit, 0.0, 255.0));
+          else if (p.name == "s" || p.name == "u" || p.name == "texture_u") { s.UV(i, 0) = v; has_uv = true; }
+          else if (p.name == "t" || p.name == "v" || p.name == "texture_v") s.UV(i, 1) = 1.0 - v;  // v up
+        }
+    } else {
+      for (long i = 0; i < e.count; ++i)
+        for (const auto& p : e.props) {
+          if (!p.list) { read_value(p.type); continue; }
+          const int n = static_cast<int>(read_value(p.count_type));
+          std::vector<int> ids(std::max(0, n));
+          for (int& id : ids) id = static_cast<int>(read_value(p.type));
+          if (e.name == "face" && (p.name == "vertex_indices" || p.name == "vertex_index"))
+            for (int t = 1; t + 1 < n; ++t) F.emplace_back(ids[0], ids[t], ids[t + 1]);
+        }
+    }
+  }
+  if (!has_color) s.vertex_colors.resize(0, 3);
+  if (!has_uv) s.UV.resize(0, 2);
+  s.mesh.F.resize(static_cast<Eigen::Index>(F.size()), 3);
+  for (std::size_t i = 0; i < F.size(); ++i) s.mesh.F.row(i) = F[i].transpose();
+  if (s.mesh.n_faces() > 0 && (s.mesh.F.minCoeff() < 0 || s.mesh.F.maxCoeff() >= s.mesh.n_vertices()))
+    throw InvalidInput(cat(s.source, ": a face refers to a vertex that does not exist"));
+  if (has_uv) s.FUV = s.mesh.F;
+  finish(s, o);
+  return s;
+}
+
+}  // namespace
+
+RgbImage read_image(const fs::path& path) {
+  const auto bytes = read_bytes(path, "texture");
+  if (bytes.size() >= 3 && bytes[0] == 0xFF && bytes[1] == 0xD8 && bytes[2] == 0xFF)
+    return decode_jpeg(bytes, path.string());
+  if (bytes.size() >= 8 && bytes[0] == 0x89 && bytes[1] == 'P' && bytes[2] == 'N' && bytes[3] == 'G')
+    return read_png(path);
+  throw IoError(cat(path.string(), ": not a JPEG or PNG image (unreadable texture)"));
+}
+
+ScanMesh read_scan_mesh(const fs::path& path, const ScanReadOptions& options) {
+  if (!fs::exists(path)) throw IoError(cat(path.string(), ": no such file"));
+  const std::string ext = lower(path.extension().string());
+  if (ext == ".glb" || ext == ".gltf") return read_gltf(path, options);
+  if (ext == ".vtk") return read_vtk(path, options);
+  if (ext == ".obj") return read_obj(path, options);
+  if (ext == ".ply") return read_ply_scan(path, options);
+  throw InvalidInput(cat(path.string(), ": unknown scan format '", ext, "'; use .glb, .gltf, .ply, "
+                                        ".obj or .vtk"));
+}
+
+}  // namespace caps

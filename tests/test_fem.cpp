@@ -1,0 +1,516 @@
+// caps::fem: element checks (patch, tangent, convergence, MUMPS = CHOLMOD), analytic benchmarks
+// (cantilever, Lame cylinder), suture closure, mesh directory IO and the bad-input catalogue.
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <Eigen/Eigenvalues>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
+#include "caps/fem/box.hpp"
+#include "caps/fem/elements.hpp"
+#include "caps/fem/mesh_io.hpp"
+#include "caps/fem/solve.hpp"
+
+using namespace caps;
+using namespace caps::fem;
+
+namespace {
+
+const ElementType kTypes[] = {ElementType::Hex20, ElementType::Wedge15};
+
+const std::vector<std::array<int, 2>>& mid_edges(ElementType t) {
+  static const std::vector<std::array<int, 2>> hex{{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
+                                                   {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
+  static const std::vector<std::array<int, 2>> wedge{{0, 1}, {1, 2}, {2, 0}, {3, 4}, {4, 5},
+                                                     {5, 3}, {0, 3}, {1, 4}, {2, 5}};
+  return t == ElementType::Hex20 ? hex : wedge;
+}
+int n_corners(ElementType t) { return t == ElementType::Hex20 ? 8 : 6; }
+
+// Moves every corner node by up to `amount` × cell size and puts mid-edge nodes back at the
+// middle of their (straight) edges.
+void distort(Mesh& m, double amount, double h, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> d(-amount * h, amount * h);
+  std::vector<char> corner(m.n_nodes(), 0);
+  for (const Element& el : m.elements)
+    for (int a = 0; a < n_corners(el.type); ++a) corner[el.nodes[a]] = 1;
+  for (Eigen::Index i = 0; i < m.n_nodes(); ++i)
+    if (corner[i])
+      for (int c = 0; c < 3; ++c) m.nodes(i, c) += d(rng);
+  for (const Element& el : m.elements) {
+    const auto& edges = mid_edges(el.type);
+    for (std::size_t k = 0; k < edges.size(); ++k)
+      m.nodes.row(el.nodes[n_corners(el.type) + k]) =
+          0.5 * (m.nodes.row(el.nodes[edges[k][0]]) + m.nodes.row(el.nodes[edges[k][1]]));
+  }
+}
+
+std::vector<char> on_box_boundary(const Mesh& m, const Eigen::Vector3d& size) {
+  std::vector<char> b(m.n_nodes(), 0);
+  for (Eigen::Index i = 0; i < m.n_nodes(); ++i)
+    for (int c = 0; c < 3; ++c)
+      if (std::abs(m.nodes(i, c)) < 1e-9 || std::abs(m.nodes(i, c) - size[c]) < 1e-9) b[i] = 1;
+  return b;
+}
+
+void prescribe_all(Mesh& m, const std::vector<char>& where,
+                   const std::function<Eigen::Vector3d(const Eigen::Vector3d&)>& u) {
+  for (Eigen::Index i = 0; i < m.n_nodes(); ++i)
+    if (where[i]) {
+      const Eigen::Vector3d v = u(m.nodes.row(i).transpose());
+      for (int c = 0; c < 3; ++c) m.fixed_dofs.push_back({static_cast<int>(i), c, v[c]});
+    }
+}
+
+Mesh box(ElementType t, Eigen::Vector3d size, Eigen::Vector3i cells, bool fix_bottom = false,
+         LinearElastic mat = LinearElastic(0.1, 0.3)) {
+  BoxOptions o;
+  o.size_mm = size;
+  o.cells = cells;
+  o.wedges = t == ElementType::Wedge15;
+  o.fix_bottom = fix_bottom;
+  o.material = mat;
+  return make_box_mesh(o);
+}
+
+template <typename F>
+std::string error_of(F&& f) {
+  try {
+    f();
+  } catch (const InvalidInput& e) {
+    return e.what();
+  } catch (const std::exception& e) {
+    return std::string("WRONG TYPE: ") + e.what();
+  }
+  return "NO ERROR";
+}
+
+}  // namespace
+
+TEST(FemElements, ShapeFunctionsInterpolateAndDifferentiate) {
+  for (ElementType t : kTypes) {
+    const Eigen::MatrixX3d P = natural_nodes(t);
+    const int n = static_cast<int>(P.rows());
+    Eigen::VectorXd N;
+    Eigen::MatrixX3d dN;
+    for (int a = 0; a < n; ++a) {  // Kronecker delta at the nodes
+      shape_functions(t, P.row(a).transpose(), N, dN);
+      for (int b = 0; b < n; ++b) EXPECT_NEAR(N[b], a == b ? 1.0 : 0.0, 1e-14) << element_type_name(t);
+    }
+    const Eigen::Vector3d xi(0.21, 0.17, -0.33);
+    shape_functions(t, xi, N, dN);
+    EXPECT_NEAR(N.sum(), 1.0, 1e-14);
+    EXPECT_LT(dN.colwise().sum().norm(), 1e-13);
+    for (int c = 0; c < 3; ++c) {  // derivatives against central differences
+      Eigen::VectorXd Np, Nm;
+      Eigen::MatrixX3d d;
+      const double h = 1e-6;
+      shape_functions(t, xi + h * Eigen::Vector3d::Unit(c), Np, d);
+      shape_functions(t, xi - h * Eigen::Vector3d::Unit(c), Nm, d);
+      EXPECT_LT(((Np - Nm) / (2 * h) - dN.col(c)).cwiseAbs().maxCoeff(), 1e-8);
+    }
+    double w = 0;
+    for (const auto& q : quadrature(t)) w += q.weight;
+    EXPECT_NEAR(w, t == ElementType::Hex20 ? 8.0 : 1.0, 1e-12);
+    EXPECT_EQ(quadrature(t).size(), t == ElementType::Hex20 ? 27u : 21u);
+  }
+}
+
+TEST(FemElements, StiffnessIsSymmetricWithSixRigidModesAndMatchesResidualDerivative) {
+  const LinearElastic mat(0.05, 0.35);
+  for (ElementType t : kTypes) {
+    Mesh m = box(t, {2, 3, 1.5}, {1, 1, 1});
+    distort(m, 0.15, 1.0, 7);
+    const Eigen::MatrixX3d X = element_coordinates(m, 0);
+    const Eigen::MatrixXd K = element_stiffness(t, X, mat);
+    EXPECT_LT((K - K.transpose()).norm(), 1e-12 * K.norm());
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(K);
+    const Eigen::VectorXd ev = es.eigenvalues();
+    for (int k = 0; k < 6; ++k) EXPECT_LT(std::abs(ev[k]), 1e-10 * ev.maxCoeff());
+    EXPECT_GT(ev[6], 1e-6 * ev.maxCoeff()) << "spurious zero-energy mode";
+    // K = d f_int / d u by central differences of the stress-based internal force.
+    std::mt19937 rng(3);
+    std::normal_distribution<double> nd;
+    Eigen::VectorXd u(K.rows());
+    for (Eigen::Index i = 0; i < u.size(); ++i) u[i] = 0.01 * nd(rng);
+    Eigen::MatrixXd Kfd(K.rows(), K.cols());
+    const double h = 1e-6;
+    for (Eigen::Index j = 0; j < u.size(); ++j) {
+      Eigen::VectorXd up = u, um = u;
+      up[j] += h;
+      um[j] -= h;
+      Kfd.col(j) = (element_internal_force(t, X, mat, up) - element_internal_force(t, X, mat, um)) / (2 * h);
+    }
+    EXPECT_LT((K - Kfd).cwiseAbs().maxCoeff(), 1e-7 * K.cwiseAbs().maxCoeff()) << element_type_name(t);
+    EXPECT_LT((K * u - element_internal_force(t, X, mat, u)).norm(), 1e-12 * (K * u).norm());
+  }
+}
+
+TEST(FemElements, CollapsedHexahedronMapsToWedge15) {
+  std::array<int, 20> h{};
+  for (int k = 0; k < 20; ++k) h[k] = 100 + k;
+  h[3] = h[10] = h[2];
+  h[19] = h[18];
+  h[7] = h[14] = h[6];
+  const Element w = wedge_from_collapsed_hex(h, 4);
+  EXPECT_EQ(w.type, ElementType::Wedge15);
+  EXPECT_EQ(w.layer, 4);
+  const int expect[15] = {100, 101, 102, 104, 105, 106, 108, 109, 111, 112, 113, 115, 116, 117, 118};
+  for (int k = 0; k < 15; ++k) EXPECT_EQ(w.nodes[k], expect[k]);
+  h[10] = 999;
+  EXPECT_NE(error_of([&] { wedge_from_collapsed_hex(h, 0); }).find("2, 10, 3"), std::string::npos);
+}
+
+TEST(FemPatch, LinearFieldIsExactOnDistortedMeshesBothSolvers) {
+  Eigen::Matrix3d A;
+  A << 1e-3, 2e-3, -1e-3, 0.5e-3, -2e-3, 1.5e-3, 3e-3, 1e-3, 2.5e-3;
+  const Eigen::Vector3d b(0.01, -0.02, 0.03);
+  auto exact = [&](const Eigen::Vector3d& x) -> Eigen::Vector3d { return A * x + b; };
+  const LinearElastic mat(0.1, 0.3);
+  const Eigen::Matrix3d eps = 0.5 * (A + A.transpose());
+  Vector6d s_exact;
+  const double lam = mat.lambda_mpa(), mu = mat.mu_mpa();
+  s_exact << lam * eps.trace() + 2 * mu * eps(0, 0), lam * eps.trace() + 2 * mu * eps(1, 1),
+      lam * eps.trace() + 2 * mu * eps(2, 2), 2 * mu * eps(0, 1), 2 * mu * eps(1, 2), 2 * mu * eps(0, 2);
+  for (ElementType t : kTypes)
+    for (SolverKind sk : {SolverKind::Mumps, SolverKind::Cholmod}) {
+      const Eigen::Vector3d size(3, 3, 3);
+      Mesh m = box(t, size, {3, 3, 3}, false, mat);
+      const auto boundary = on_box_boundary(m, size);
+      distort(m, 0.25, 1.0, 11);
+      prescribe_all(m, boundary, exact);
+      SolveOptions o;
+      o.solver = sk;
+      const SolveResult r = solve(m, o);
+      double err = 0;
+      for (Eigen::Index i = 0; i < m.n_nodes(); ++i)
+        err = std::max(err, (r.displacement_mm.row(i).transpose() - exact(m.nodes.row(i).transpose())).norm());
+      EXPECT_LT(err, 1e-12) << element_type_name(t) << " " << solver_name(sk);
+      const double s_err = (r.gauss_stress_mpa.rowwise() - s_exact.transpose()).cwiseAbs().maxCoeff();
+      EXPECT_LT(s_err, 1e-10 * s_exact.cwiseAbs().maxCoeff()) << element_type_name(t);
+      EXPECT_LT((r.nodal_stress_mpa.rowwise() - s_exact.transpose()).cwiseAbs().maxCoeff(),
+                1e-10 * s_exact.cwiseAbs().maxCoeff());
+      // Strain energy = 1/2 sigma:eps V for a constant field.
+      double vol = 0;
+      for (std::size_t e = 0; e < m.elements.size(); ++e) {
+        const auto X = element_coordinates(m, static_cast<int>(e));
+        Eigen::VectorXd N;
+        Eigen::MatrixX3d dN;
+        for (const auto& q : quadrature(t)) {
+          shape_functions(t, q.xi, N, dN);
+          vol += q.weight * (dN.transpose() * X).determinant();
+        }
+      }
+      Eigen::Matrix3d S;
+      S << s_exact[0], s_exact[3], s_exact[5], s_exact[3], s_exact[1], s_exact[4], s_exact[5], s_exact[4], s_exact[2];
+      EXPECT_NEAR(r.strain_energy_mj, 0.5 * (S.array() * eps.array()).sum() * vol, 1e-10 * r.strain_energy_mj);
+    }
+}
+
+namespace {
+
+// u = grad phi with phi = a e^{x/L} cos(y/L) harmonic: div u = 0 and Laplace u = 0, so it
+// solves Navier's equations with no body force for any lambda, mu.
+Eigen::Vector3d manufactured(const Eigen::Vector3d& x) {
+  const double a = 0.01, L = 0.5;
+  return a / L * std::exp(x[0] / L) * Eigen::Vector3d(std::cos(x[1] / L), -std::sin(x[1] / L), 0.0) +
+         Eigen::Vector3d(0, 0, 0.002 * x[0] * x[1] * x[2]) * 0.0;
+}
+
+double manufactured_error(ElementType t, int n) {
+  const Eigen::Vector3d size(1, 1, 1);
+  Mesh m = box(t, size, {n, n, n}, false, LinearElastic(0.1, 0.3));
+  prescribe_all(m, on_box_boundary(m, size), manufactured);
+  const SolveResult r = solve(m);
+  double err = 0;
+  for (Eigen::Index i = 0; i < m.n_nodes(); ++i)
+    err = std::max(err, (r.displacement_mm.row(i).transpose() - manufactured(m.nodes.row(i).transpose())).norm());
+  return err;
+}
+
+}  // namespace
+
+TEST(FemConvergence, ManufacturedSolutionConvergesAtQuadraticRate) {
+  for (ElementType t : kTypes) {
+    const double e2 = manufactured_error(t, 2), e4 = manufactured_error(t, 4), e8 = manufactured_error(t, 8);
+    const double r1 = std::log2(e2 / e4), r2 = std::log2(e4 / e8);
+    std::printf("%s max nodal error: h=1/2 %.3e, 1/4 %.3e, 1/8 %.3e; rates %.2f %.2f\n",
+                element_type_name(t), e2, e4, e8, r1, r2);
+    EXPECT_GT(r1, 2.7);
+    EXPECT_GT(r2, 2.7);
+    EXPECT_LT(e8, 2e-5);
+  }
+}
+
+namespace {
+
+// Consistent nodal forces of a uniform traction on the x = L face of a Hex20 box.
+void add_end_traction(Mesh& m, double L, const Eigen::Vector3d& traction) {
+  std::vector<Eigen::Vector3d> f(m.n_nodes(), Eigen::Vector3d::Zero());
+  const double g = std::sqrt(0.6), pts[3] = {-g, 0, g}, w[3] = {5.0 / 9, 8.0 / 9, 5.0 / 9};
+  for (std::size_t e = 0; e < m.elements.size(); ++e) {
+    const Element& el = m.elements[e];
+    if (std::abs(m.nodes(el.nodes[1], 0) - L) > 1e-9 || std::abs(m.nodes(el.nodes[2], 0) - L) > 1e-9) continue;
+    const auto X = element_coordinates(m, static_cast<int>(e));
+    Eigen::VectorXd N;
+    Eigen::MatrixX3d dN;
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) {
+        shape_functions(el.type, Eigen::Vector3d(1, pts[j], pts[k]), N, dN);
+        const Eigen::Matrix3d J = dN.transpose() * X;
+        const double dA = J.row(1).cross(J.row(2)).norm() * w[j] * w[k];
+        for (int a = 0; a < 20; ++a) f[el.nodes[a]] += N[a] * dA * traction;
+      }
+  }
+  for (Eigen::Index i = 0; i < m.n_nodes(); ++i)
+    if (f[i].norm() > 0) m.loads.push_back({static_cast<int>(i), f[i]});
+}
+
+}  // namespace
+
+TEST(FemBenchmarks, CantileverTipDeflectionMatchesTimoshenkoBeam) {
+  const double L = 100, h = 10, E = 0.1, P = 1e-3;
+  Mesh m = box(ElementType::Hex20, {L, h, h}, {20, 2, 2}, false, LinearElastic(E, 0.0));
+  for (Eigen::Index i = 0; i < m.n_nodes(); ++i)
+    if (m.nodes(i, 0) < 1e-9) m.fixed_nodes.push_back(static_cast<int>(i));
+  add_end_traction(m, L, {0, 0, -P / (h * h)});
+  double total = 0;
+  for (const auto& l : m.loads) total += l.force_n.z();
+  EXPECT_NEAR(total, -P, 1e-15);
+  const SolveResult r = solve(m);
+  const double I = h * h * h * h / 12, G = E / 2, A = h * h;
+  const double bending = P * L * L * L / (3 * E * I), shear = P * L / (5.0 / 6 * G * A);
+  double tip = 0;
+  for (Eigen::Index i = 0; i < m.n_nodes(); ++i)
+    if (std::abs(m.nodes(i, 0) - L) < 1e-9 && std::abs(m.nodes(i, 1) - h / 2) < 1e-9 &&
+        std::abs(m.nodes(i, 2) - h / 2) < 1e-9)
+      tip = -r.displacement_mm(i, 2);
+  std::printf("cantilever tip %.6f mm, Timoshenko %.6f mm (Euler-Bernoulli %.6f), ratio %.4f\n", tip,
+              bending + shear, bending, tip / (bending + shear));
+  EXPECT_NEAR(tip / (bending + shear), 1.0, 0.01);
+  // Work of the load = 2 × strain energy (Clapeyron).
+  double work = 0;
+  for (const auto& l : m.loads) work += l.force_n.dot(r.displacement_mm.row(l.node).transpose());
+  EXPECT_NEAR(0.5 * work, r.strain_energy_mj, 1e-9 * r.strain_energy_mj);
+  // Root reactions balance the load.
+  EXPECT_NEAR(r.reaction_n.col(2).sum(), P, 1e-9 * P);
+}
+
+TEST(FemBenchmarks, LameThickCylinderMatchesAnalyticSolution) {
+  const double a = 10, b = 20, ua = 0.1, E = 0.1, nu = 0.3;
+  const LinearElastic mat(E, nu);
+  const double lam = mat.lambda_mpa(), mu = mat.mu_mpa();
+  // Plane strain, u_r = A r + B / r with sigma_r(b) = 0 and u_r(a) = ua (Timoshenko & Goodier, sec. 28).
+  const double Bc = (lam + mu) * b * b / mu;
+  const double Ac = ua / (a + Bc / a), B = Bc * Ac;
+  auto ur = [&](double r) { return Ac * r + B / r; };
+  auto sig_t = [&](double r) { return 2 * (lam + mu) * Ac + 2 * mu * B / (r * r); };
+  for (ElementType t : kTypes) {
+    Mesh m = box(t, {b - a, kPi / 2, 2}, {6, 12, 1}, false, mat);
+    for (Eigen::Index i = 0; i < m.n_nodes(); ++i) {
+      const double r = a + m.nodes(i, 0), th = m.nodes(i, 1);
+      m.nodes(i, 0) = r * std::cos(th);
+      m.nodes(i, 1) = r * std::sin(th);
+    }
+    // Wedges of the (r, theta) box keep their counter-clockwise orientation under the map.
+    for (Eigen::Index i = 0; i < m.n_nodes(); ++i) {
+      const int n = static_cast<int>(i);
+      const double x = m.nodes(i, 0), y = m.nodes(i, 1), r = std::hypot(x, y);
+      m.fixed_dofs.push_back({n, 2, 0.0});
+      if (std::abs(y) < 1e-9) m.fixed_dofs.push_back({n, 1, 0.0});
+      if (std::abs(x) < 1e-9) m.fixed_dofs.push_back({n, 0, 0.0});
+      if (std::abs(r - a) < 1e-9) {
+        if (std::abs(x) >= 1e-9) m.fixed_dofs.push_back({n, 0, ua * x / r});
+        if (std::abs(y) >= 1e-9) m.fixed_dofs.push_back({n, 1, ua * y / r});
+      }
+    }
+    const SolveResult res = solve(m);
+    double err_u = 0, err_s = 0;
+    for (Eigen::Index i = 0; i < m.n_nodes(); ++i) {
+      const double x = m.nodes(i, 0), y = m.nodes(i, 1), r = std::hypot(x, y);
+      const double urn = (res.displacement_mm(i, 0) * x + res.displacement_mm(i, 1) * y) / r;
+      err_u = std::max(err_u, std::abs(urn - ur(r)) / ur(b));
+      const Vector6d s = res.nodal_stress_mpa.row(i).transpose();
+      const double st = (s[0] * y * y + s[1] * x * x - 2 * s[3] * x * y) / (r * r);
+      err_s = std::max(err_s, std::abs(st - sig_t(r)) / sig_t(a));
+    }
+    std::printf("Lame %s: max |u_r| error %.2e of u_r(b) = %.5f mm; max hoop stress error %.2e of %.5f MPa\n",
+                element_type_name(t), err_u, ur(b), err_s, sig_t(a));
+    EXPECT_LT(err_u, 1e-3);
+    EXPECT_LT(err_s, 2e-2);
+  }
+}
+
+TEST(FemSolvers, MumpsAndCholmodAgree) {
+  for (ElementType t : kTypes) {
+    BoxOptions o;
+    o.size_mm = {30, 20, 6};
+    o.cells = {5, 6, 2};
+    o.wedges = t == ElementType::Wedge15;
+    o.slot = true;
+    const Mesh m = make_box_mesh(o);
+    SolveOptions sm, sc;
+    sc.solver = SolverKind::Cholmod;
+    const SolveResult rm = solve(m, sm), rc = solve(m, sc);
+    const double scale = rm.displacement_mm.cwiseAbs().maxCoeff();
+    EXPECT_LT((rm.displacement_mm - rc.displacement_mm).cwiseAbs().maxCoeff(), 1e-8 * scale);
+    EXPECT_NEAR(rm.total_suture_force_n, rc.total_suture_force_n, 1e-8 * rm.total_suture_force_n);
+    EXPECT_LT(rm.relative_residual, 1e-10);
+    EXPECT_LT(rc.relative_residual, 1e-10);
+  }
+}
+
+TEST(FemSutures, SlotClosesSymmetricallyWithEqualAndOppositeForces) {
+  for (ElementType t : kTypes) {
+    BoxOptions o;
+    o.size_mm = {30, 20, 6};
+    o.cells = {5, 6, 2};
+    o.wedges = t == ElementType::Wedge15;
+    o.slot = true;
+    const Mesh m = make_box_mesh(o);
+    ASSERT_FALSE(m.sutures.empty());
+    const SolveResult r = solve(m);
+    const Eigen::MatrixX3d X1 = m.nodes + r.displacement_mm;
+    double gap = 0, sym = 0, balance = 0;
+    for (const SuturePair& s : m.sutures) {
+      gap = std::max(gap, (X1.row(s.a) - X1.row(s.b)).norm());
+      const Eigen::RowVector3d ua = r.displacement_mm.row(s.a), ub = r.displacement_mm.row(s.b);
+      // The wedge box splits every cell along the same diagonal, so only the Hex20 box is
+      // mirror-symmetric about the slot's mid-plane.
+      if (t == ElementType::Hex20)
+        sym = std::max({sym, std::abs(ua.x() + ub.x()), std::abs(ua.y() - ub.y()), std::abs(ua.z() - ub.z())});
+      balance = std::max(balance, (r.reaction_n.row(s.a) + r.reaction_n.row(s.b)).norm());
+    }
+    const double w = 30.0 / 5;  // slot width
+    EXPECT_LT(gap, 1e-9) << element_type_name(t);
+    EXPECT_LT(sym, 1e-9 * w);
+    EXPECT_LT(balance, 1e-9 * r.total_suture_force_n);
+    // Each side moves half the width at mid-length of the slot (x-displacement, mid-height).
+    double max_ux = 0;
+    for (const SuturePair& s : m.sutures) max_ux = std::max(max_ux, std::abs(r.displacement_mm(s.a, 0)));
+    if (t == ElementType::Hex20) EXPECT_NEAR(max_ux, w / 2, 1e-9);
+    // Consistent nodal forces of quadratic elements alternate in sign along an edge, so single
+    // pairs may push; the resultant across the wound pulls the left face towards +x.
+    Eigen::Vector3d resultant = Eigen::Vector3d::Zero();
+    for (const SutureForce& f : r.suture_forces) {
+      resultant += f.force_on_a_n;
+      EXPECT_NEAR(f.magnitude_n, f.force_on_a_n.norm(), 1e-15);
+    }
+    EXPECT_GT(resultant.x(), 0.0);
+    EXPECT_NEAR(r.total_suture_force_n, resultant.x(), 1e-9 * resultant.x());
+    if (t == ElementType::Hex20) EXPECT_LT(std::abs(resultant.y()), 1e-9 * resultant.x());
+    std::printf("slot %s: %zu sutures, total closing force %.4f N, gap %.1e mm, energy %.4f mJ\n",
+                element_type_name(t), m.sutures.size(), r.total_suture_force_n, gap, r.strain_energy_mj);
+  }
+}
+
+TEST(FemMeshIo, DirectoryRoundTripsBothElementTypes) {
+  for (ElementType t : kTypes) {
+    BoxOptions o;
+    o.size_mm = {30, 20, 6};
+    o.cells = {3, 4, 1};
+    o.wedges = t == ElementType::Wedge15;
+    o.slot = true;
+    Mesh m = make_box_mesh(o);
+    m.materials.emplace(1, default_subcutaneous());
+    m.elements.back().layer = 1;
+    m.fixed_dofs.push_back({static_cast<int>(m.n_nodes()) - 1, 1, 0.25});
+    m.loads.push_back({3, Eigen::Vector3d(0.1, 0.2, 0.3)});
+    m.model = "models/p1";
+    const auto dir = std::filesystem::temp_directory_path() / ("caps_fem_io_" + std::to_string(static_cast<int>(t)));
+    std::filesystem::remove_all(dir);
+    std::filesystem::create_directories(dir);
+    write_mesh_dir(m, dir);
+    const Mesh back = read_mesh_dir(dir);
+    EXPECT_EQ(back.nodes, m.nodes);
+    ASSERT_EQ(back.elements.size(), m.elements.size());
+    for (std::size_t e = 0; e < m.elements.size(); ++e) {
+      EXPECT_EQ(back.elements[e].type, m.elements[e].type);
+      EXPECT_EQ(back.elements[e].layer, m.elements[e].layer);
+      EXPECT_EQ(back.elements[e].nodes, m.elements[e].nodes);
+    }
+    EXPECT_EQ(back.fixed_nodes, m.fixed_nodes);
+    EXPECT_EQ(back.sutures.size(), m.sutures.size());
+    EXPECT_EQ(back.fixed_dofs.size(), 1u);
+    EXPECT_DOUBLE_EQ(back.fixed_dofs[0].value_mm, 0.25);
+    EXPECT_EQ(back.loads[0].force_n, m.loads[0].force_n);
+    EXPECT_DOUBLE_EQ(back.materials.at(1).E_mpa(), 0.005);
+    EXPECT_EQ(back.model, "models/p1");
+    std::ifstream v(dir / "mesh.vtu");
+    std::string text((std::istreambuf_iterator<char>(v)), {});
+    EXPECT_NE(text.find(t == ElementType::Hex20 ? "\n25\n" : "\n26\n"), std::string::npos);
+    EXPECT_NE(text.find("Name=\"suture_partner\""), std::string::npos);
+    // Results go next to it.
+    write_result_dir(back, solve(back), dir);
+    EXPECT_TRUE(std::filesystem::exists(dir / "result.vtu"));
+    EXPECT_TRUE(std::filesystem::exists(dir / "result.json"));
+    std::filesystem::remove_all(dir);
+  }
+}
+
+TEST(FemBadInput, EachErrorIsInvalidInputNamingTheItem) {
+  auto small = [] { return box(ElementType::Hex20, {2, 2, 2}, {2, 2, 2}, true); };
+  // nu >= 0.5 and E out of range.
+  EXPECT_NE(error_of([] { LinearElastic(0.1, 0.5, "layer 2"); }).find("layer 2: Poisson's ratio nu = 0.5"), std::string::npos);
+  EXPECT_NE(error_of([] { LinearElastic(-1, 0.3); }).find("Young's modulus"), std::string::npos);
+  // NaN coordinate.
+  {
+    Mesh m = small();
+    m.nodes(5, 1) = NAN;
+    EXPECT_NE(error_of([&] { solve(m); }).find("node 5 has a non-finite coordinate"), std::string::npos);
+  }
+  // Self-suture.
+  {
+    Mesh m = small();
+    m.sutures.push_back({7, 7});
+    EXPECT_NE(error_of([&] { solve(m); }).find("suture 0 joins node 7 to itself"), std::string::npos);
+  }
+  // Node id out of range.
+  {
+    Mesh m = small();
+    m.elements[3].nodes[4] = 100000;
+    EXPECT_NE(error_of([&] { solve(m); }).find("element 3 (Hex20) local node 4 refers to node 100000"), std::string::npos);
+  }
+  // Inverted element: swap top and bottom faces.
+  {
+    Mesh m = small();
+    auto& n = m.elements[2].nodes;
+    for (int k = 0; k < 4; ++k) {
+      std::swap(n[k], n[4 + k]);
+      std::swap(n[8 + k], n[12 + k]);
+    }
+    const std::string e = error_of([&] { solve(m); });
+    EXPECT_NE(e.find("element 2, Gauss point 0: Jacobian determinant"), std::string::npos) << e;
+  }
+  // No support at all, and support that still allows a rotation (one fixed node).
+  for (SolverKind sk : {SolverKind::Mumps, SolverKind::Cholmod}) {
+    SolveOptions o;
+    o.solver = sk;
+    Mesh m = small();
+    m.fixed_nodes.clear();
+    EXPECT_NE(error_of([&] { solve(m, o); }).find("under-constrained"), std::string::npos);
+    m.fixed_nodes = {0};
+    const std::string e = error_of([&] { solve(m, o); });
+    EXPECT_NE(e.find("singular"), std::string::npos) << solver_name(sk) << ": " << e;
+    EXPECT_NE(e.find("under-constrained"), std::string::npos) << e;
+  }
+  // Unknown layer; conflicting constraints.
+  {
+    Mesh m = small();
+    m.elements[0].layer = 9;
+    EXPECT_NE(error_of([&] { solve(m); }).find("element 0 (Hex20) has layer 9"), std::string::npos);
+  }
+  {
+    Mesh m = small();
+    m.fixed_dofs.push_back({m.fixed_nodes[0], 2, 0.5});
+    EXPECT_NE(error_of([&] { solve(m); }).find("is fixed twice"), std::string::npos);
+  }
+  // Missing directory / files.
+  EXPECT_THROW(read_mesh_dir("/nonexistent/caps"), IoError);
+}

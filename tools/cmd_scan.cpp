@@ -1,0 +1,126 @@
+// caps model from-scan / pick: patient models from surface scans, and picking on a model's skin.
+//   caps model from-scan ../shared/data/scan/leeperrysmith/LeePerrySmith.glb --texture ../shared/data/scan/leeperrysmith/Map-COL.jpg --flip-v --head-height-mm 230 --thickness 6 --credit "Infinite, 3D Head Scan by Lee Perry-Smith, CC BY 3.0 (www.triplegangers.com)" -o /tmp/lps --force
+//   caps model from-scan ../shared/data/scan/fran/fran_cut.vtk --texture ../shared/data/scan/fran/fran_cut.png --scale 1000 --front 1,0,-1 --flip-faces --thickness 6 -o /tmp/fran --force
+//   caps model pick /tmp/lps --ray 0,-400,0,0,1,0 --json
+#include <iostream>
+#include <nlohmann/json.hpp>
+
+#include "caps/core/atomic_output.hpp"
+#include "caps/core/error.hpp"
+#include "caps/surface/picking.hpp"
+#include "caps/surface/scan_model.hpp"
+#include "caps/volume/model.hpp"
+#include "commands.hpp"
+
+namespace caps::cli {
+namespace {
+
+struct FromScanArgs {
+  std::string input, output, texture, up, front, credit, axis_origin;
+  bool flip_v = false, flip_faces = false;
+  double thickness_mm = NAN, scale = NAN, head_height_mm = NAN;
+  int n_theta = 512, n_z = 256;
+};
+
+void run_from_scan(const FromScanArgs& a, const Common& common) {
+  { OutputDirectory probe(a.output, common.force); }
+  ScanReadOptions ro;
+  ro.texture = a.texture;
+  ro.flip_v = a.flip_v;
+  const ScanMesh scan = read_scan_mesh(a.input, ro);
+  ScanModelOptions o;
+  o.thickness_mm = a.thickness_mm;
+  if (std::isfinite(a.scale)) o.mm_per_unit = a.scale;
+  if (std::isfinite(a.head_height_mm)) o.head_height_mm = a.head_height_mm;
+  // Defaults: glTF is +y up with the asset facing +z; other formats are taken the same way.
+  o.up = parse_axis_name(a.up.empty() ? "+y" : a.up, "--up");
+  o.front = parse_axis_name(a.front.empty() ? "+z" : a.front, "--front");
+  o.maps.n_theta = a.n_theta;
+  o.maps.n_z = a.n_z;
+  o.credit = a.credit;
+  o.flip_faces = a.flip_faces;
+  if (!a.axis_origin.empty()) {
+    const auto t = parse_triple(a.axis_origin, "--axis-origin");
+    CylinderAxis axis;
+    axis.origin_lps = {t[0], t[1], t[2]};
+    o.axis = axis;
+  }
+  const ScanModel m = build_scan_model(scan, o);
+  write_scan_model(m, a.output, common.force);
+  if (common.json) std::cout << read_model_json(a.output) << "\n";
+  else if (!common.quiet) std::cerr << model_summary(a.output);
+}
+
+struct PickArgs {
+  std::string model, ray;
+};
+
+void run_pick(const PickArgs& a, const Common& common) {
+  const PatientModel model = PatientModel::load(a.model);
+  std::vector<double> v;
+  std::stringstream in(a.ray);
+  for (std::string item; std::getline(in, item, ',');) {
+    char* end = nullptr;
+    v.push_back(std::strtod(item.c_str(), &end));
+    if (end == item.c_str() || *end) v.push_back(NAN);
+  }
+  if (v.size() != 6 || !std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); }))
+    throw InvalidInput(cat("--ray '", a.ray, "': expected six numbers OX,OY,OZ,DX,DY,DZ (LPS mm)"));
+  const Ray ray{{v[0], v[1], v[2]}, {v[3], v[4], v[5]}};
+  const SkinPicker picker(model);
+  const SkinHit h = picker.pick(ray);
+  nlohmann::json j = {{"hit", h.hit}};
+  if (h.hit)
+    j.update({{"lps", {h.lps[0], h.lps[1], h.lps[2]}}, {"theta_deg", h.theta_deg}, {"z_mm", h.z_mm},
+              {"distance_mm", h.distance_mm}, {"flags", describe_flags(h.flags)},
+              {"on_pole_cap", h.on_pole_cap}});
+  if (common.json) std::cout << j.dump(2) << "\n";
+  else if (h.hit) std::cout << "hit theta " << h.theta_deg << " deg, z " << h.z_mm << " mm, LPS ("
+                            << h.lps.transpose() << ") mm, " << describe_flags(h.flags) << "\n";
+  else std::cout << "miss\n";
+}
+
+}  // namespace
+
+void add_model_scan(CLI::App* model, Common& common, Action& action) {
+  auto a = std::make_shared<FromScanArgs>();
+  auto* fs = model->add_subcommand(
+      "from-scan",
+      "Build a patient model from a textured surface scan, with a constant soft-tissue thickness\n"
+      "(the 1992 CAPS assumption). INPUT is .glb/.gltf, .ply (vertex colours), .obj (+ .mtl and\n"
+      "texture) or .vtk (legacy polydata with texture coordinates).\n"
+      "Example: caps model from-scan head.glb --head-height-mm 230 --thickness 6 -o head");
+  fs->add_option("INPUT", a->input, "the scan")->required();
+  fs->add_option("-o,--output", a->output, "the model directory to create")->required();
+  fs->add_option("--thickness", a->thickness_mm, "constant soft-tissue thickness, mm")->required();
+  fs->add_option("--texture", a->texture, "colour texture (JPEG or PNG) for the scan's texture "
+                                          "coordinates, overriding the file's own");
+  fs->add_flag("--flip-v", a->flip_v, "flip the texture's v coordinate (v' = 1 - v)");
+  fs->add_option("--scale", a->scale, "millimetres per file unit (glTF default 1000: metres; "
+                                      "other formats default 1: mm)");
+  fs->add_option("--head-height-mm", a->head_height_mm,
+                 "scale the scan so it is this tall along --up (for files in arbitrary units)");
+  fs->add_option("--up", a->up, "file direction towards the top of the head: +x -x +y -y +z -z "
+                                "or X,Y,Z (default +y)");
+  fs->add_option("--front", a->front, "file direction the face looks along, perpendicular to "
+                                      "--up (default +z)");
+  fs->add_flag("--flip-faces", a->flip_faces, "reverse the faces of a file whose normals point "
+                                              "into the head");
+  fs->add_option("--axis-origin", a->axis_origin, "a point of the cylinder axis, LPS mm: X,Y,Z "
+                                                  "(default: fitted)");
+  fs->add_option("--n-theta", a->n_theta, "cylindrical grid: samples around")->capture_default_str();
+  fs->add_option("--n-z", a->n_z, "cylindrical grid: samples along the axis")->capture_default_str();
+  fs->add_option("--credit", a->credit, "credit line drawn on the pictures and kept in model.json");
+  add_common_flags(fs, common, true);
+  fs->callback([&common, &action, a] { action = [&common, a] { run_from_scan(*a, common); }; });
+
+  auto p = std::make_shared<PickArgs>();
+  auto* pk = model->add_subcommand("pick", "Pick the first point of a ray on a model's skin.\n"
+                                           "Example: caps model pick head --ray 0,-400,0,0,1,0");
+  pk->add_option("MODEL_DIR", p->model, "a model directory")->required();
+  pk->add_option("--ray", p->ray, "origin and direction, LPS mm: OX,OY,OZ,DX,DY,DZ")->required();
+  add_common_flags(pk, common, false);
+  pk->callback([&common, &action, p] { action = [&common, p] { run_pick(*p, common); }; });
+}
+
+}  // namespace caps::cli
