@@ -157,3 +157,29 @@ TEST(Segmentation, OtsuSplitsTwoClasses) {
   EXPECT_GT(t, 16.0);
   EXPECT_LT(t, 200.0);
 }
+
+TEST(Morphology, SmallRadiusStencilMatchesDefinition) {
+  // Radii within two voxels use a digital-ball stencil; it must equal the definition: dilation =
+  // within r of a set voxel; erosion = set and farther than r from every unset voxel (the
+  // outside of the grid counting as unset).
+  const Mask m = random_mask({23, 17, 13}, 0.5, 5);
+  const double r = 1.5;  // spacing 0.7, 1.3, 2.1: reaches 2, 1, 0 voxels
+  const Mask d = dilate(m, r), e = erode(m, r);
+  const auto& g = m.geom;
+  for (int k = 0; k < g.dims[2]; ++k)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int i = 0; i < g.dims[0]; ++i) {
+        bool near_set = false, near_unset = false;
+        for (int c = -3; c <= 3; ++c)
+          for (int b = -3; b <= 3; ++b)
+            for (int a = -3; a <= 3; ++a) {
+              if (g.spacing_mm.cwiseProduct(Eigen::Vector3d(a, b, c)).norm() > r) continue;
+              const bool inside = g.contains(i + a, j + b, k + c);
+              const bool set = inside && m.at(i + a, j + b, k + c);
+              near_set |= set;
+              near_unset |= !set;
+            }
+        ASSERT_EQ(d.at(i, j, k) != 0, near_set) << i << " " << j << " " << k;
+        ASSERT_EQ(e.at(i, j, k) != 0, m.at(i, j, k) && !near_unset) << i << " " << j << " " << k;
+      }
+}

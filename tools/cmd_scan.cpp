@@ -2,11 +2,13 @@
 //   caps model from-scan ../shared/data/scan/leeperrysmith/LeePerrySmith.glb --texture ../shared/data/scan/leeperrysmith/Map-COL.jpg --flip-v --head-height-mm 230 --thickness 6 --credit "Infinite, 3D Head Scan by Lee Perry-Smith, CC BY 3.0 (www.triplegangers.com)" -o /tmp/lps --force
 //   caps model from-scan ../shared/data/scan/fran/fran_cut.vtk --texture ../shared/data/scan/fran/fran_cut.png --scale 1000 --front 1,0,-1 --flip-faces --thickness 6 -o /tmp/fran --force
 //   caps model pick /tmp/lps --ray 0,-400,0,0,1,0 --json
+//   caps model color-picture /tmp/lps -o /tmp/lps_color.png --force
 #include <iostream>
 #include <nlohmann/json.hpp>
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/surface/color_picture.hpp"
 #include "caps/surface/picking.hpp"
 #include "caps/surface/scan_model.hpp"
 #include "caps/volume/model.hpp"
@@ -80,6 +82,20 @@ void run_pick(const PickArgs& a, const Common& common) {
   else std::cout << "miss\n";
 }
 
+struct ColorPictureArgs {
+  std::string model, output;
+};
+
+void run_color_picture(const ColorPictureArgs& a, const Common& common) {
+  if (std::filesystem::exists(a.output) && !common.force)
+    throw InvalidInput(cat(a.output, ": exists; pass --force to replace it"));
+  const PatientModel model = PatientModel::load(a.model);
+  const auto j = nlohmann::json::parse(read_model_json(a.model));
+  const std::string credit = j["source"].value("credit", std::string());
+  const std::string name = std::filesystem::path(j["source"].value("path", a.model)).filename();
+  write_color_picture(a.output, model, cat("Skin colour, ", name), credit);
+}
+
 }  // namespace
 
 void add_model_scan(CLI::App* model, Common& common, Action& action) {
@@ -121,6 +137,15 @@ void add_model_scan(CLI::App* model, Common& common, Action& action) {
   pk->add_option("--ray", p->ray, "origin and direction, LPS mm: OX,OY,OZ,DX,DY,DZ")->required();
   add_common_flags(pk, common, false);
   pk->callback([&common, &action, p] { action = [&common, p] { run_pick(*p, common); }; });
+
+  auto c = std::make_shared<ColorPictureArgs>();
+  auto* cp = model->add_subcommand("color-picture",
+                                   "Draw a model's skin colour with axes and its credit line.\n"
+                                   "Example: caps model color-picture head -o head_color.png");
+  cp->add_option("MODEL_DIR", c->model, "a model directory with color.png")->required();
+  cp->add_option("-o,--output", c->output, "the PNG to write")->required();
+  add_common_flags(cp, common, true);
+  cp->callback([&common, &action, c] { action = [&common, c] { run_color_picture(*c, common); }; });
 }
 
 }  // namespace caps::cli

@@ -118,7 +118,7 @@ Eigen::Vector3d PatientModel::color_at(double theta_deg, double z_mm) const {
   const Stencil s = stencil(theta_deg, z_mm);
   const auto& g = maps_.grid;
   // color.png has superior on top: grid row k is image row n_z - 1 - k.
-  auto px = [&](std::size_t c) {
+  auto px = [&](std::size_t c) -> Eigen::Vector3d {
     const std::size_t j = c % g.n_theta, k = c / g.n_theta;
     const std::size_t o = ((g.n_z - 1 - k) * g.n_theta + j) * 3;
     return Eigen::Vector3d(color_.rgb[o], color_.rgb[o + 1], color_.rgb[o + 2]) / 255.0;

@@ -159,43 +159,62 @@ double median(std::vector<double>& xs) {
 
 }  // namespace
 
-// Harmonic fill: values where known == 0 become the solution of Laplace's equation with the
-// known values as boundary conditions (periodic in theta, no-flux at the z ends).
+// Fills cells where known == 0 smoothly from the known ones: a pull-push pyramid (Gortler et al.
+// 1996, "The Lumigraph", sec. 3.4) gives every cell a value from its nearest known
+// neighbourhood, then Gauss-Seidel sweeps of Laplace's equation (known cells fixed, periodic in
+// theta, no flux at the z ends) smooth the filled region towards the harmonic interpolant.
 void harmonic_fill(std::vector<float>& img, const std::vector<std::uint8_t>& known,
                    const CylinderGrid& g) {
-  double sum = 0;
   std::size_t n_known = 0;
-  for (std::size_t i = 0; i < img.size(); ++i)
-    if (known[i]) { sum += img[i]; ++n_known; }
-  if (n_known == img.size()) return;
-  const float mean = n_known ? static_cast<float>(sum / n_known) : 0.0f;
-  // Start from the mean of each row's known values (or the global mean), then SOR sweeps.
-  for (int k = 0; k < g.n_z; ++k) {
-    double s = 0;
-    int n = 0;
-    for (int j = 0; j < g.n_theta; ++j)
-      if (known[g.index(j, k)]) { s += img[g.index(j, k)]; ++n; }
-    const float start = n ? static_cast<float>(s / n) : mean;
-    for (int j = 0; j < g.n_theta; ++j)
-      if (!known[g.index(j, k)]) img[g.index(j, k)] = start;
+  for (auto k : known) n_known += k != 0;
+  if (n_known == img.size() || n_known == 0) return;
+  // Pull: weighted means over 2x2 blocks, level by level, until one cell is left.
+  struct Level { int w, h; std::vector<double> v, wt; };
+  std::vector<Level> levels(1);
+  levels[0] = {g.n_theta, g.n_z, std::vector<double>(img.size()), std::vector<double>(img.size())};
+  for (std::size_t i = 0; i < img.size(); ++i) {
+    levels[0].wt[i] = known[i] ? 1.0 : 0.0;
+    levels[0].v[i] = known[i] ? img[i] : 0.0;
   }
-  constexpr double kOmega = 1.8;
-  for (int sweep = 0; sweep < 400; ++sweep) {
-    double change = 0;
+  while (levels.back().w > 1 || levels.back().h > 1) {
+    const Level& f = levels.back();
+    Level c{(f.w + 1) / 2, (f.h + 1) / 2, {}, {}};
+    c.v.assign(std::size_t(c.w) * c.h, 0.0);
+    c.wt.assign(c.v.size(), 0.0);
+    for (int y = 0; y < f.h; ++y)
+      for (int x = 0; x < f.w; ++x) {
+        const std::size_t fi = std::size_t(y) * f.w + x, ci = std::size_t(y / 2) * c.w + x / 2;
+        c.v[ci] += f.v[fi] * f.wt[fi];
+        c.wt[ci] += f.wt[fi];
+      }
+    for (std::size_t i = 0; i < c.v.size(); ++i) {
+      if (c.wt[i] > 0) c.v[i] /= c.wt[i];
+      c.wt[i] = std::min(1.0, c.wt[i]);
+    }
+    levels.push_back(std::move(c));
+  }
+  // Push: cells without weight take their parent's value.
+  for (std::size_t l = levels.size() - 1; l-- > 0;) {
+    Level& f = levels[l];
+    const Level& c = levels[l + 1];
+    for (int y = 0; y < f.h; ++y)
+      for (int x = 0; x < f.w; ++x) {
+        const std::size_t fi = std::size_t(y) * f.w + x, ci = std::size_t(y / 2) * c.w + x / 2;
+        if (f.wt[fi] < 1.0) f.v[fi] = f.wt[fi] * f.v[fi] + (1.0 - f.wt[fi]) * c.v[ci];
+      }
+  }
+  for (std::size_t i = 0; i < img.size(); ++i)
+    if (!known[i]) img[i] = static_cast<float>(levels[0].v[i]);
+  for (int sweep = 0; sweep < 40; ++sweep)
     for (int k = 0; k < g.n_z; ++k)
       for (int j = 0; j < g.n_theta; ++j) {
         const std::size_t c = g.index(j, k);
         if (known[c]) continue;
         const int jl = (j + g.n_theta - 1) % g.n_theta, jr = (j + 1) % g.n_theta;
         const int kd = std::max(0, k - 1), ku = std::min(g.n_z - 1, k + 1);
-        const double avg = 0.25 * (img[g.index(jl, k)] + img[g.index(jr, k)] +
-                                   img[g.index(j, kd)] + img[g.index(j, ku)]);
-        const double next = img[c] + kOmega * (avg - img[c]);
-        change = std::max(change, std::abs(next - img[c]));
-        img[c] = static_cast<float>(next);
+        img[c] = 0.25f * (img[g.index(jl, k)] + img[g.index(jr, k)] + img[g.index(j, kd)] +
+                          img[g.index(j, ku)]);
       }
-    if (change < 1e-3) break;
-  }
 }
 
 // Marks measured cells whose ray meets the skin at more than `limit_deg` from its normal. The
@@ -321,12 +340,15 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
       if (inside) r_entry = t1;
       int entries = inside ? 1 : 0;
       double r_left = t1;  // where the ray last left the mask
-      for (double r = t1 - coarse; r >= t0; r -= coarse) {
+      // Below the outermost skin, only the bone cap's depth matters for undercuts.
+      double r_stop = t0;
+      for (double r = t1 - coarse; r >= r_stop; r -= coarse) {
         const bool now = skin_at(at(r));
         if (now && !inside) {
           if (entries == 0) {
             r_entry = r + 0.5 * coarse;
             entries = 1;
+            r_stop = std::max(t0, r_entry - o.bone_cap_mm);
           } else if (r_left - r >= kMinGapMm) {
             ++entries;
           }

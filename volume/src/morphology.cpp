@@ -131,17 +131,69 @@ std::vector<float> squared_distance_mm2(const Mask& sites, std::vector<std::int6
   return dist;
 }
 
+namespace {
+
+// The voxel offsets within radius_mm of the centre (a digital ball), or empty if the ball spans
+// more than kMaxReach voxels along an axis, where a distance transform is cheaper.
+std::vector<Eigen::Vector3i> ball_offsets(const VolumeGeometry& g, double radius_mm) {
+  constexpr int kMaxReach = 2;
+  Eigen::Vector3i reach;
+  for (int a = 0; a < 3; ++a) reach[a] = static_cast<int>(std::floor(radius_mm / g.spacing_mm[a]));
+  if (reach.maxCoeff() > kMaxReach) return {};
+  std::vector<Eigen::Vector3i> offsets;
+  for (int k = -reach[2]; k <= reach[2]; ++k)
+    for (int j = -reach[1]; j <= reach[1]; ++j)
+      for (int i = -reach[0]; i <= reach[0]; ++i)
+        if (g.spacing_mm.cwiseProduct(Eigen::Vector3d(i, j, k)).norm() <= radius_mm &&
+            (i || j || k))
+          offsets.emplace_back(i, j, k);
+  return offsets;
+}
+
+// Dilation of `m` by a small digital ball: out = 1 where any offset neighbour is `value`
+// (value 1: dilation of m; value 0: dilation of the background, i.e. the complement of erosion).
+Mask stencil(const Mask& m, const std::vector<Eigen::Vector3i>& offsets, std::uint8_t value) {
+  Mask out;
+  out.geom = m.geom;
+  out.data.assign(m.data.size(), 0);
+  const auto& d = m.geom.dims;
+  tbb::parallel_for(0, d[2], [&](int k) {
+    for (int j = 0; j < d[1]; ++j)
+      for (int i = 0; i < d[0]; ++i) {
+        const std::size_t x = m.geom.linear(i, j, k);
+        bool hit = m.data[x] == value;
+        for (std::size_t o = 0; !hit && o < offsets.size(); ++o) {
+          const int a = i + offsets[o][0], b = j + offsets[o][1], c = k + offsets[o][2];
+          // Outside the grid counts as background.
+          hit = m.geom.contains(a, b, c) ? m.data[m.geom.linear(a, b, c)] == value : value == 0;
+        }
+        out.data[x] = hit;
+      }
+  });
+  return out;
+}
+
+}  // namespace
+
 Mask erode(const Mask& m, double radius_mm) {
+  const auto offsets = ball_offsets(m.geom, radius_mm);
+  Mask out = same_grid(m);
+  if (!offsets.empty()) {
+    const Mask near_background = stencil(m, offsets, 0);
+    for (std::size_t i = 0; i < m.data.size(); ++i) out.data[i] = m.data[i] && !near_background.data[i];
+    return out;
+  }
   Mask background = same_grid(m);
   for (std::size_t i = 0; i < m.data.size(); ++i) background.data[i] = !m.data[i];
   const auto d2 = squared_distance_mm2(background);
-  Mask out = same_grid(m);
   const float r2 = static_cast<float>(radius_mm * radius_mm);
   for (std::size_t i = 0; i < m.data.size(); ++i) out.data[i] = m.data[i] && d2[i] > r2;
   return out;
 }
 
 Mask dilate(const Mask& m, double radius_mm) {
+  const auto offsets = ball_offsets(m.geom, radius_mm);
+  if (!offsets.empty()) return stencil(m, offsets, 1);
   const auto d2 = squared_distance_mm2(m);
   Mask out = same_grid(m);
   const float r2 = static_cast<float>(radius_mm * radius_mm);
