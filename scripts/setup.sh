@@ -6,10 +6,10 @@ set -euo pipefail
 packages=(
   build-essential cmake pkg-config
   libeigen3-dev libcgal-dev libopenvdb-dev libboost-iostreams-dev libtbb-dev
-  libsuitesparse-dev libmumps-seq-dev libgdcm-dev libgdcm-tools
+  libsuitesparse-dev libmumps-seq-dev libopenblas0-pthread libgdcm-dev libgdcm-tools
   nlohmann-json3-dev libcli11-dev libgtest-dev libbenchmark-dev
   libnifti2-dev libteem-dev libarchive-dev libpng-dev zlib1g-dev
-  libcairo2-dev fonts-dejavu-core
+  libcairo2-dev fonts-dejavu-core libtinygltf-dev libjpeg-dev
   invesalius-examples mricron-data
 )
 
