@@ -1,0 +1,75 @@
+#pragma once
+/// @brief The continuum mesher (paper section 6): extrudes a surface mesh from the skin to the
+/// bone in layers of 20-node hexahedra (quads) and 15-node wedges (triangles), with suture pairs
+/// and fixed nodes, ready for solve().
+///
+/// Depth: each surface site (vertex or edge midpoint, at (theta, z)) gets a column of nodes on the
+/// line from the skin point r_skin(theta, z) towards the axis, down to r_skin - thickness(theta, z)
+/// (the measured bone; the paper used a constant depth, `constant_thickness_mm`). Layer k has the
+/// thickness fraction grading^k / sum_j grading^j. Vertex columns carry corner nodes at every layer
+/// interface and a centre node in the middle of every layer; edge columns carry the mid-edge nodes
+/// at every interface. Elements of one column share those nodes, so neighbouring elements share
+/// faces and mid-edge nodes.
+/// Sutures: for each suture ((a,b),(c,d)) the nodes along the two border edges are paired at every
+/// depth (corners, mid-edge and centre nodes); the shared point of a closed corner is skipped.
+/// Fixed nodes: every bottom node that is not sutured (the bony support); with RimCondition::Fixed
+/// also every node on the outer rim (the far field is clamped), with Free the rim is traction free.
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "caps/fem/material.hpp"
+#include "caps/fem/mesh.hpp"
+#include "caps/fem/surface_mesher.hpp"
+
+namespace caps::fem {
+
+/// What holds the outer rim of the mesh.
+enum class RimCondition { Fixed, Free };
+
+/// "fixed" / "free".
+const char* rim_condition_name(RimCondition rim);
+/// Parses "fixed" / "free"; throws InvalidInput otherwise.
+RimCondition parse_rim_condition(const std::string& name);
+
+struct ContinuumMeshOptions {
+  int n_layers = 2;             ///< element layers between skin and bone, >= 1
+  double grading = 1.0;         ///< thickness ratio of each layer to the one above, > 0
+  RimCondition rim = RimCondition::Fixed;
+  double min_thickness_mm = 0.5;  ///< refuse sites with less soft tissue than this
+  /// > 0: a constant depth (mm) as in the 1992 paper, instead of the model's thickness map.
+  double constant_thickness_mm = 0;
+  LinearElastic material = default_skin();  ///< used for every layer
+};
+
+/// The continuum mesh and where its nodes came from.
+struct ContinuumMesh {
+  Mesh mesh;
+  Eigen::MatrixX2d node_theta_z;      ///< #N×2 (theta deg, z mm) of each node's column
+  Eigen::VectorXd node_level;         ///< #N depth level: 0 skin .. n_layers bone (k + 0.5 centre)
+  std::vector<int> element_polygon;   ///< element -> surface polygon
+  int n_layers = 0;
+  double min_thickness_mm = 0, max_thickness_mm = 0;  ///< over the mesh's sites
+  double min_jacobian = 0;  ///< smallest det J over all Gauss points (mm^3 per unit volume)
+};
+
+/// Extrudes `surface` through the patient model. Throws InvalidInput naming theta and z where a
+/// site lies outside the model's z range, on an invalid cell (flags_at != 0), where the thickness
+/// is below `min_thickness_mm`, or where an element's Jacobian is not positive at a Gauss point.
+ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
+                             const ContinuumMeshOptions& options = {});
+
+/// The smallest Jacobian determinant of each element over its Gauss points (#E).
+Eigen::VectorXd min_element_jacobians(const Mesh& mesh);
+
+/// The whole mesher: surface mesh, then continuum mesh.
+struct WoundMesh {
+  SurfaceMesh surface;
+  ContinuumMesh continuum;
+};
+WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
+                     const SurfaceMeshOptions& surface_options = {},
+                     const ContinuumMeshOptions& continuum_options = {});
+
+}  // namespace caps::fem

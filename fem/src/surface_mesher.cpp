@@ -1,0 +1,339 @@
+#include "caps/fem/surface_mesher.hpp"
+
+#include "caps/core/error.hpp"
+#include "caps/surface/patient_model.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace caps::fem {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+constexpr double kDeg = kPi / 180.0;
+
+using Vec2 = Eigen::Vector2d;
+
+double cross2(const Vec2& a, const Vec2& b) { return a.x() * b.y() - a.y() * b.x(); }
+
+/// Signed turning angle at b (radians, (-pi, pi]); an exact reversal (a slit's end, where the
+/// hole angle is 0) is +pi: seen from the hole, a slit's end is always convex.
+double turning(const Vec2& a, const Vec2& b, const Vec2& c) {
+  const Vec2 d1 = b - a, d2 = c - b;
+  const double cr = cross2(d1, d2), dt = d1.dot(d2);
+  if (std::abs(cr) <= 1e-12 * d1.norm() * d2.norm() && dt < 0) return kPi;
+  return std::atan2(cr, dt);
+}
+
+/// Outward (tissue-side) unit normal of a border edge a -> b: the hole is on the left.
+Vec2 outward(const Vec2& a, const Vec2& b) {
+  const Vec2 d = (b - a).normalized();
+  return {d.y(), -d.x()};
+}
+
+Vec2 rotate(const Vec2& v, double angle) {
+  const double c = std::cos(angle), s = std::sin(angle);
+  return {c * v.x() - s * v.y(), s * v.x() + c * v.y()};
+}
+
+double polygon_area(const std::vector<Vec2>& P, const std::vector<int>& ids) {
+  double a = 0;
+  for (std::size_t i = 0; i < ids.size(); ++i)
+    a += cross2(P[ids[i]], P[ids[(i + 1) % ids.size()]]);
+  return 0.5 * a;
+}
+
+bool point_in_triangle(const Vec2& p, const Vec2& a, const Vec2& b, const Vec2& c) {
+  const double tol = 1e-9 * ((b - a).norm() + (c - b).norm());
+  return cross2(b - a, p - a) > tol && cross2(c - b, p - b) > tol && cross2(a - c, p - c) > tol;
+}
+
+bool segments_cross(const Vec2& p1, const Vec2& p2, const Vec2& q1, const Vec2& q2) {
+  const double d1 = cross2(p2 - p1, q1 - p1), d2 = cross2(p2 - p1, q2 - p1);
+  const double d3 = cross2(q2 - q1, p1 - q1), d4 = cross2(q2 - q1, p2 - q1);
+  return ((d1 > 0) != (d2 > 0)) && ((d3 > 0) != (d4 > 0)) && d1 != 0 && d2 != 0 && d3 != 0 &&
+         d4 != 0;
+}
+
+struct Builder {
+  std::vector<Vec2> P;
+  SurfaceMesh out;
+  bool mirrored = false;
+
+  int add_vertex(const Vec2& p) {
+    P.push_back(p);
+    return static_cast<int>(P.size()) - 1;
+  }
+  Eigen::Vector2d theta_z(const Vec2& p) const {
+    const double x = mirrored ? -p.x() : p.x();
+    return {out.theta_c_deg + x / out.ref_radius_mm / kDeg, out.z_c_mm + p.y()};
+  }
+  void add_polygon(std::vector<int> ids, int stage, int layer, int expanded) {
+    if (!(polygon_area(P, ids) > 0)) {
+      Vec2 c = Vec2::Zero();
+      for (int id : ids) c += P[id];
+      const Eigen::Vector2d tz = theta_z(c / ids.size());
+      throw InvalidInput(cat("surface mesh: layer ", layer, " folds over near theta ", tz.x(),
+                             " deg, z ", tz.y(), " mm (an element has no positive area); use a "
+                             "smaller --size or check the wound border there"));
+    }
+    out.polygons.push_back(std::move(ids));
+    out.polygon_stage.push_back(stage);
+    out.polygon_layer.push_back(layer);
+    out.polygon_expanded.push_back(expanded);
+  }
+  /// Throws if the closed polygon `border` crosses itself.
+  void check_simple(const std::vector<int>& border, int layer) const {
+    const std::size_t m = border.size();
+    for (std::size_t i = 0; i < m; ++i)
+      for (std::size_t j = i + 2; j < m; ++j) {
+        if (i == 0 && j == m - 1) continue;
+        const Vec2 &p1 = P[border[i]], &p2 = P[border[(i + 1) % m]];
+        const Vec2 &q1 = P[border[j]], &q2 = P[border[(j + 1) % m]];
+        if (segments_cross(p1, p2, q1, q2)) {
+          const Eigen::Vector2d tz = theta_z(0.5 * (p1 + p2));
+          throw InvalidInput(cat("surface mesh: layer ", layer, " overlaps itself near theta ",
+                                 tz.x(), " deg, z ", tz.y(), " mm; use a smaller --size, a "
+                                 "smaller --extent, or a wound border without tight folds"));
+        }
+      }
+  }
+};
+
+double median_edge(const std::vector<Vec2>& P, const std::vector<int>& border) {
+  std::vector<double> len;
+  for (std::size_t i = 0; i < border.size(); ++i)
+    len.push_back((P[border[(i + 1) % border.size()]] - P[border[i]]).norm());
+  std::nth_element(len.begin(), len.begin() + len.size() / 2, len.end());
+  return len[len.size() / 2];
+}
+
+}  // namespace
+
+SurfaceQuality surface_quality(const Eigen::MatrixX2d& xy,
+                               const std::vector<std::vector<int>>& polygons) {
+  SurfaceQuality q;
+  q.min_angle_deg = 360;
+  double sum_aspect = 0;
+  for (const auto& poly : polygons) {
+    const std::size_t n = poly.size();
+    (n == 3 ? q.n_triangles : q.n_quads)++;
+    double lmin = 1e300, lmax = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const Vec2 a = xy.row(poly[(i + n - 1) % n]), b = xy.row(poly[i]), c = xy.row(poly[(i + 1) % n]);
+      const Vec2 u = a - b, v = c - b;
+      const double ang = std::atan2(std::abs(cross2(u, v)), u.dot(v)) / kDeg;
+      q.min_angle_deg = std::min(q.min_angle_deg, ang);
+      q.max_angle_deg = std::max(q.max_angle_deg, ang);
+      lmin = std::min(lmin, v.norm());
+      lmax = std::max(lmax, v.norm());
+    }
+    const double aspect = lmax / std::max(lmin, 1e-300);
+    q.max_aspect_ratio = std::max(q.max_aspect_ratio, aspect);
+    sum_aspect += aspect;
+  }
+  q.mean_aspect_ratio = polygons.empty() ? 0 : sum_aspect / polygons.size();
+  if (polygons.empty()) q.min_angle_deg = 0;
+  return q;
+}
+
+SurfaceMesh mesh_surface(const WoundBorder& border, const PatientModel& model,
+                         const SurfaceMeshOptions& options) {
+  if (border.loop_theta_z.empty())
+    throw InvalidInput("wound border: the loop is empty; a wound needs at least 2 points");
+  double t0 = border.loop_theta_z[0].x(), sx = 0, sz = 0;
+  for (const auto& p : border.loop_theta_z) {
+    sx += std::remainder(p.x() - t0, 360.0);
+    sz += p.y();
+  }
+  const double n = static_cast<double>(border.loop_theta_z.size());
+  const double r = model.r_skin(t0 + sx / n, sz / n);
+  return mesh_surface(border, r, options);
+}
+
+SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
+                         const SurfaceMeshOptions& o) {
+  const auto& loop = border.loop_theta_z;
+  const int n = static_cast<int>(loop.size());
+  if (n < 2)
+    throw InvalidInput(cat("wound border: the loop has ", n, " point(s); a wound needs at least "
+                           "2 (an incision) or 3 (an excision)"));
+  if (!(ref_radius_mm > 0) || !std::isfinite(ref_radius_mm))
+    throw InvalidInput(cat("surface mesher: reference radius ", ref_radius_mm,
+                           " mm must be positive (r_skin at the wound's centre)"));
+  if (!(o.size_mm > 0) || !(o.t1_deg > 0 && o.t1_deg < 180) || !(o.t2_deg >= 0 && o.t2_deg < 180) ||
+      !(o.growth >= 1) || !(o.split_ratio > 1) || o.max_layers < 1)
+    throw InvalidInput(cat("surface mesher: options out of range (size ", o.size_mm, " mm > 0, t1 ",
+                           o.t1_deg, " in (0,180), t2 ", o.t2_deg, " in [0,180), growth ",
+                           o.growth, " >= 1, split ratio ", o.split_ratio, " > 1)"));
+  Builder B;
+  SurfaceMesh& out = B.out;
+  out.ref_radius_mm = ref_radius_mm;
+  out.sutures = border.sutures;
+
+  // Local tangent plane around the wound (the seam at +-180 is unwrapped around point 0).
+  std::vector<double> theta(n);
+  double sx = 0, sz = 0;
+  for (int i = 0; i < n; ++i) {
+    if (!loop[i].allFinite())
+      throw InvalidInput(cat("wound border: point ", i, " (", loop[i].x(), ", ", loop[i].y(),
+                             ") is not finite"));
+    theta[i] = loop[0].x() + std::remainder(loop[i].x() - loop[0].x(), 360.0);
+    sx += theta[i];
+    sz += loop[i].y();
+  }
+  out.theta_c_deg = sx / n;
+  out.z_c_mm = sz / n;
+  std::vector<Vec2> L(n);
+  for (int i = 0; i < n; ++i)
+    L[i] = {(theta[i] - out.theta_c_deg) * kDeg * ref_radius_mm, loop[i].y() - out.z_c_mm};
+  double area = 0, perimeter = 0;
+  for (int i = 0; i < n; ++i) {
+    const Vec2 &a = L[i], &b = L[(i + 1) % n];
+    area += 0.5 * cross2(a, b);
+    perimeter += (b - a).norm();
+    if ((b - a).norm() < 1e-6)
+      throw InvalidInput(cat("wound border: points ", i, " and ", (i + 1) % n, " coincide at theta ",
+                             loop[i].x(), " deg, z ", loop[i].y(), " mm; neighbouring loop points "
+                             "must differ (twins are points of the other lip, not neighbours)"));
+    for (int j = 0; j < n; ++j) out.wound_size_mm = std::max(out.wound_size_mm, (L[j] - a).norm());
+  }
+  // A loop running clockwise (hole on its right) is mirrored so that the hole is on the left; a
+  // zero-area incision may run either way: which lip is which is then a free choice.
+  B.mirrored = area < -1e-9 * perimeter * perimeter;
+  if (B.mirrored)
+    for (auto& p : L) p.x() = -p.x();
+  out.extent_mm = o.extent_mm > 0 ? o.extent_mm : 3.0 * out.wound_size_mm;
+
+  // Subdivide loop edges to the mesh size; sutured edges get the same count on both sides so that
+  // their nodes pair up one to one.
+  std::vector<int> segments(n);
+  for (int i = 0; i < n; ++i)
+    segments[i] = std::max(1, static_cast<int>(std::ceil((L[(i + 1) % n] - L[i]).norm() /
+                                                          o.size_mm - 1e-6)));
+  auto edge_index = [&](int a, int b, std::size_t s) {
+    if (a < 0 || b < 0 || a >= n || b >= n || !((b == (a + 1) % n) || (a == (b + 1) % n)))
+      throw InvalidInput(cat("wound border: suture ", s, " edge (", a, ",", b, ") is not an edge "
+                             "of the ", n, "-point loop (its points must be neighbours)"));
+    return b == (a + 1) % n ? a : b;
+  };
+  for (int pass = 0; pass < n + 1; ++pass)
+    for (std::size_t s = 0; s < border.sutures.size(); ++s) {
+      const auto& q = border.sutures[s];
+      const int e1 = edge_index(q[0], q[1], s), e2 = edge_index(q[2], q[3], s);
+      segments[e1] = segments[e2] = std::max(segments[e1], segments[e2]);
+    }
+  for (int i = 0; i < n; ++i) B.add_vertex(L[i]);
+  out.loop_vertex.resize(n);
+  for (int i = 0; i < n; ++i) out.loop_vertex[i] = i;
+  out.edge_chain.resize(n);
+  std::vector<int> front;
+  for (int i = 0; i < n; ++i) {
+    const int j = (i + 1) % n;
+    auto& chain = out.edge_chain[i];
+    chain.push_back(i);
+    front.push_back(i);
+    for (int k = 1; k < segments[i]; ++k) {
+      const double t = static_cast<double>(k) / segments[i];
+      chain.push_back(B.add_vertex((1 - t) * L[i] + t * L[j]));
+      front.push_back(chain.back());
+    }
+    chain.push_back(j);
+  }
+
+  // Stage 1: fill concave corners deeper than t1 with triangles (v_{i+2}, v_{i+1}, v_i).
+  const double t1 = o.t1_deg * kDeg;
+  for (bool changed = true; changed && front.size() > 3;) {
+    changed = false;
+    for (std::size_t i = 0; i < front.size() && front.size() > 3; ++i) {
+      const std::size_t m = front.size();
+      const int a = front[i], b = front[(i + 1) % m], c = front[(i + 2) % m];
+      if (!(turning(B.P[a], B.P[b], B.P[c]) < -t1)) continue;
+      bool blocked = (B.P[a] - B.P[c]).norm() < 1e-9;
+      for (std::size_t k = 0; k < m && !blocked; ++k)
+        blocked = point_in_triangle(B.P[front[k]], B.P[c], B.P[b], B.P[a]);
+      if (blocked) continue;
+      B.add_polygon({c, b, a}, 1, 0, 0);
+      front.erase(front.begin() + static_cast<long>((i + 1) % m));
+      changed = true;
+    }
+  }
+
+  // Stage 2 and growth: layers of quadrilaterals until the extent is reached.
+  const double t2 = o.t2_deg * kDeg;
+  double l = o.size_mm, reached = 0;
+  int layer = 0;
+  while (reached < out.extent_mm - 1e-9 && layer < o.max_layers) {
+    ++layer;
+    const std::size_t m = front.size();
+    std::vector<std::vector<int>> fan(m);
+    std::vector<int> expanded(m, 0);
+    for (std::size_t i = 0; i < m; ++i) {
+      const Vec2& p = B.P[front[(i + m - 1) % m]];
+      const Vec2& v = B.P[front[i]];
+      const Vec2& q = B.P[front[(i + 1) % m]];
+      const double tau = turning(p, v, q);
+      const Vec2 n1 = outward(p, v), n2 = outward(v, q);
+      const double hole_angle = kPi - tau;
+      if (hole_angle < t2 || 1 + n1.dot(n2) < 0.5) {
+        // Expanded vertex: a fan of corner quads; two at a slit's end, where one would be flat.
+        expanded[i] = 1;
+        const int nq = tau > 150 * kDeg ? 2 : 1;
+        const double step = tau / (2 * nq);
+        const double diag = std::min(1 / std::cos(step), std::sqrt(2.0));
+        for (int k = 0; k <= 2 * nq; ++k)
+          fan[i].push_back(B.add_vertex(v + l * (k % 2 ? diag : 1.0) * rotate(n1, k * step)));
+      } else {
+        fan[i].push_back(B.add_vertex(v + l * (n1 + n2) / (1 + n1.dot(n2))));
+      }
+    }
+    std::vector<int> next;
+    for (std::size_t i = 0; i < m; ++i) {
+      const int v = front[i];
+      if (expanded[i])
+        for (std::size_t k = 0; k + 2 < fan[i].size(); k += 2)
+          B.add_polygon({v, fan[i][k], fan[i][k + 1], fan[i][k + 2]}, 2, layer, 1);
+      next.insert(next.end(), fan[i].begin(), fan[i].end());
+      const int a = v, b = front[(i + 1) % m];
+      const int a2 = fan[i].back(), b2 = fan[(i + 1) % m].front();
+      if ((B.P[b2] - B.P[a2]).norm() > o.split_ratio * l) {
+        const int mid = B.add_vertex(0.5 * (B.P[a2] + B.P[b2]));
+        B.add_polygon({a, a2, mid, b}, 2, layer, 0);
+        B.add_polygon({b, mid, b2}, 2, layer, 0);
+        next.push_back(mid);
+      } else {
+        B.add_polygon({a, a2, b2, b}, 2, layer, 0);
+      }
+    }
+    B.check_simple(next, layer);
+    front = std::move(next);
+    reached += l;
+    const double remaining = out.extent_mm - reached;
+    double l_next = std::min(l * o.growth, std::max(l, median_edge(B.P, front)));
+    if (remaining < 1.5 * l_next) l_next = remaining;
+    l = l_next;
+  }
+  if (reached < out.extent_mm - 1e-9)
+    throw InvalidInput(cat("surface mesher: ", o.max_layers, " layers reach only ", reached,
+                           " of the ", out.extent_mm, " mm extent; use a larger --size or a "
+                           "smaller --extent"));
+  out.n_layers = layer;
+  out.outer_border = front;
+
+  const int nv = static_cast<int>(B.P.size());
+  out.xy_mm.resize(nv, 2);
+  out.theta_z.resize(nv, 2);
+  for (int i = 0; i < nv; ++i) {
+    out.theta_z.row(i) = B.theta_z(B.P[i]).transpose();
+    out.xy_mm.row(i) << (B.mirrored ? -B.P[i].x() : B.P[i].x()), B.P[i].y();
+  }
+  if (B.mirrored) {
+    for (auto& poly : out.polygons) std::reverse(poly.begin(), poly.end());
+    std::reverse(out.outer_border.begin(), out.outer_border.end());
+  }
+  out.quality = surface_quality(out.xy_mm, out.polygons);
+  return out;
+}
+
+}  // namespace caps::fem
