@@ -157,18 +157,31 @@ Mask stencil(const Mask& m, const std::vector<Eigen::Vector3i>& offsets, std::ui
   out.geom = m.geom;
   out.data.assign(m.data.size(), 0);
   const auto& d = m.geom.dims;
+  Eigen::Vector3i reach = Eigen::Vector3i::Zero();
+  std::vector<std::ptrdiff_t> linear;
+  for (const auto& o : offsets) {
+    reach = reach.cwiseMax(o.cwiseAbs());
+    linear.push_back(o[0] + std::ptrdiff_t(d[0]) * (o[1] + std::ptrdiff_t(d[1]) * o[2]));
+  }
   tbb::parallel_for(0, d[2], [&](int k) {
-    for (int j = 0; j < d[1]; ++j)
+    for (int j = 0; j < d[1]; ++j) {
+      const bool row_inside = k >= reach[2] && k < d[2] - reach[2] && j >= reach[1] && j < d[1] - reach[1];
       for (int i = 0; i < d[0]; ++i) {
         const std::size_t x = m.geom.linear(i, j, k);
         bool hit = m.data[x] == value;
-        for (std::size_t o = 0; !hit && o < offsets.size(); ++o) {
-          const int a = i + offsets[o][0], b = j + offsets[o][1], c = k + offsets[o][2];
-          // Outside the grid counts as background.
-          hit = m.geom.contains(a, b, c) ? m.data[m.geom.linear(a, b, c)] == value : value == 0;
+        if (!hit && row_inside && i >= reach[0] && i < d[0] - reach[0]) {
+          // Away from the border: plain offsets, no bounds checks.
+          for (std::size_t o = 0; !hit && o < linear.size(); ++o) hit = m.data[x + linear[o]] == value;
+        } else {
+          for (std::size_t o = 0; !hit && o < offsets.size(); ++o) {
+            const int a = i + offsets[o][0], b = j + offsets[o][1], c = k + offsets[o][2];
+            // Outside the grid counts as background.
+            hit = m.geom.contains(a, b, c) ? m.data[m.geom.linear(a, b, c)] == value : value == 0;
+          }
         }
         out.data[x] = hit;
       }
+    }
   });
   return out;
 }
@@ -294,21 +307,23 @@ void flood_background(const Mask& m, std::vector<std::uint8_t>& reached,
 }  // namespace
 
 void fill_enclosed_3d(Mask& m) {
+  // Components of the background; those that touch the grid's border are the outside.
+  Mask background;
+  background.geom = m.geom;
+  background.data.resize(m.data.size());
+  for (std::size_t x = 0; x < m.data.size(); ++x) background.data[x] = !m.data[x];
+  std::vector<std::int64_t> sizes;
+  const auto labels = label_components(background, sizes);
+  std::vector<std::uint8_t> outside(sizes.size(), 0);
   const auto& d = m.geom.dims;
-  std::vector<std::uint8_t> reached(m.data.size(), 0);
-  std::vector<std::int64_t> stack;
   for (int k = 0; k < d[2]; ++k)
-    for (int j = 0; j < d[1]; ++j)
-      for (int i = 0; i < d[0]; ++i) {
-        const bool border = i == 0 || j == 0 || k == 0 || i == d[0] - 1 || j == d[1] - 1 ||
-                            k == d[2] - 1;
-        if (!border) continue;
-        const std::int64_t x = m.geom.linear(i, j, k);
-        if (!m.data[x] && !reached[x]) { reached[x] = 1; stack.push_back(x); }
-      }
-  flood_background(m, reached, stack, d[0], d[1], d[2], 0, false);
+    for (int j = 0; j < d[1]; ++j) {
+      const bool face = k == 0 || j == 0 || k == d[2] - 1 || j == d[1] - 1;
+      for (int i = 0; i < d[0]; i += (face ? 1 : std::max(1, d[0] - 1)))
+        outside[labels[m.geom.linear(i, j, k)]] = 1;
+    }
   for (std::size_t x = 0; x < m.data.size(); ++x)
-    if (!m.data[x] && !reached[x]) m.data[x] = 1;
+    if (!m.data[x] && !outside[labels[x]]) m.data[x] = 1;
 }
 
 void fill_enclosed_slices(Mask& m, int axis) {

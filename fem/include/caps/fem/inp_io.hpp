@@ -1,0 +1,30 @@
+#pragma once
+/// @brief Abaqus / CalculiX input deck (.inp) of a caps mesh, so that an independent code
+/// (Debian calculix-ccx) solves the same problem.
+///
+/// Node ids are caps ids + 1. Elements: C3D20 (caps Hex20 order, identity) and C3D15 (caps
+/// Wedge15 order, identity: CalculiX's wedge has nodes 1-3 at zeta = -1 with the right-hand
+/// normal of 1-2-3 towards 4-6, like caps; checked by running ccx, docs/mesher.md), one ELSET and
+/// material per layer. Fixed nodes: NSET FIXED with *BOUNDARY 1-3. Sutures: the pairs are grouped
+/// (union-find) and each group member n other than its root m gets, per component i,
+///   *EQUATION  u_n,i - u_m,i - u_h,i = 0
+/// with a helper node h (unattached, ids after the mesh's) whose displacement is prescribed to
+/// x_m - x_n: the same "all members meet" condition that solve() imposes, without redundant
+/// equations. One *STATIC linear step; *NODE PRINT writes U to the .dat file and *NODE FILE U to
+/// the .frd file. Units: mm, N, MPa (consistent).
+
+#include <filesystem>
+#include <string>
+
+#include "caps/fem/mesh.hpp"
+
+namespace caps::fem {
+
+/// Writes `mesh` as an .inp deck to `path` (atomically). Throws IoError if it cannot be written,
+/// InvalidInput if the mesh is not valid.
+void write_inp(const Mesh& mesh, const std::filesystem::path& path);
+
+/// The deck as a string (what write_inp writes).
+std::string inp_text(const Mesh& mesh);
+
+}  // namespace caps::fem

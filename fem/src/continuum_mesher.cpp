@@ -1,0 +1,224 @@
+#include "caps/fem/continuum_mesher.hpp"
+
+#include "caps/core/error.hpp"
+#include "caps/fem/elements.hpp"
+#include "caps/surface/patient_model.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+
+namespace caps::fem {
+
+const char* rim_condition_name(RimCondition rim) {
+  return rim == RimCondition::Fixed ? "fixed" : "free";
+}
+
+RimCondition parse_rim_condition(const std::string& name) {
+  if (name == "fixed") return RimCondition::Fixed;
+  if (name == "free") return RimCondition::Free;
+  throw InvalidInput(cat("rim condition '", name, "': expected fixed or free"));
+}
+
+Eigen::VectorXd min_element_jacobians(const Mesh& mesh) {
+  Eigen::VectorXd out(static_cast<Eigen::Index>(mesh.n_elements()));
+  Eigen::VectorXd N;
+  Eigen::MatrixX3d dN;
+  for (std::size_t e = 0; e < mesh.n_elements(); ++e) {
+    const ElementType type = mesh.elements[e].type;
+    const Eigen::MatrixX3d X = element_coordinates(mesh, static_cast<int>(e));
+    double jmin = 1e300;
+    for (const auto& q : quadrature(type)) {
+      shape_functions(type, q.xi, N, dN);
+      const Eigen::Matrix3d J = X.transpose() * dN;
+      jmin = std::min(jmin, J.determinant());
+    }
+    out[static_cast<Eigen::Index>(e)] = jmin;
+  }
+  return out;
+}
+
+ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
+                             const ContinuumMeshOptions& o) {
+  const int NL = o.n_layers;
+  if (NL < 1 || NL > 50 || !(o.grading > 0) || !std::isfinite(o.grading))
+    throw InvalidInput(cat("continuum mesher: layers ", NL, " must be in 1..50 and grading ",
+                           o.grading, " positive"));
+  if (surface.polygons.empty())
+    throw InvalidInput("continuum mesher: the surface mesh has no polygons");
+  ContinuumMesh out;
+  out.n_layers = NL;
+  Mesh& mesh = out.mesh;
+
+  // Layer interfaces as fractions of the depth: layer k is grading^k times the first.
+  std::vector<double> F(NL + 1, 0.0);
+  for (int k = 0; k < NL; ++k) F[k + 1] = F[k] + std::pow(o.grading, k);
+  for (double& f : F) f /= F[NL];
+  auto fraction = [&](int half_level) {
+    return half_level % 2 == 0 ? F[half_level / 2]
+                               : 0.5 * (F[half_level / 2] + F[half_level / 2 + 1]);
+  };
+
+  // Surface edges.
+  std::map<std::pair<int, int>, int> edge_id;
+  std::vector<std::pair<int, int>> edges;
+  auto edge_of = [&](int a, int b) {
+    const auto key = std::minmax(a, b);
+    auto [it, inserted] = edge_id.try_emplace({key.first, key.second}, static_cast<int>(edges.size()));
+    if (inserted) edges.emplace_back(key.first, key.second);
+    return it->second;
+  };
+  for (const auto& poly : surface.polygons)
+    for (std::size_t i = 0; i < poly.size(); ++i) edge_of(poly[i], poly[(i + 1) % poly.size()]);
+
+  const int NV = surface.n_vertices();
+  const int NE = static_cast<int>(edges.size());
+  const int per_vertex = 2 * NL + 1, per_edge = NL + 1;
+  auto vnode = [&](int v, int half_level) { return v * per_vertex + half_level; };
+  auto enode = [&](int e, int level) { return NV * per_vertex + e * per_edge + level; };
+  const int n_nodes = NV * per_vertex + NE * per_edge;
+  mesh.nodes.resize(n_nodes, 3);
+  out.node_theta_z.resize(n_nodes, 2);
+  out.node_level.resize(n_nodes);
+  out.min_thickness_mm = 1e300;
+  out.max_thickness_mm = 0;
+
+  auto column = [&](const Eigen::Vector2d& tz, auto&& node_of, int n_half_levels, int step) {
+    const double theta = tz.x(), z = tz.y();
+    if (!model.has_z(z))
+      throw InvalidInput(cat("mesh: the site at theta ", theta, " deg, z ", z, " mm lies outside "
+                             "the model's z range; use a smaller --extent or a wound further from "
+                             "the model's ends"));
+    if (const auto f = model.flags_at(theta, z); f != 0)
+      throw InvalidInput(cat("mesh: the site at theta ", theta, " deg, z ", z, " mm lies on cells "
+                             "of the model that are not valid (", describe_flags(f), "); move the "
+                             "wound or use a smaller --extent"));
+    const double r_top = model.r_skin(theta, z);
+    const double T = o.constant_thickness_mm > 0 ? o.constant_thickness_mm : model.thickness(theta, z);
+    if (!(T >= o.min_thickness_mm) || !(T < r_top))
+      throw InvalidInput(cat("mesh: the soft-tissue thickness at theta ", theta, " deg, z ", z,
+                             " mm is ", T, " mm (minimum ", o.min_thickness_mm, " mm, skin radius ",
+                             r_top, " mm); there is no valid tissue layer to mesh there"));
+    out.min_thickness_mm = std::min(out.min_thickness_mm, T);
+    out.max_thickness_mm = std::max(out.max_thickness_mm, T);
+    for (int h = 0; h <= n_half_levels; h += step) {
+      const int id = node_of(h);
+      // Nodes lie on the line from the skin point to the axis (paper section 6).
+      mesh.nodes.row(id) = model.to_lps(theta, z, r_top - fraction(h) * T).transpose();
+      out.node_theta_z.row(id) = tz.transpose();
+      out.node_level[id] = 0.5 * h;
+    }
+  };
+  for (int v = 0; v < NV; ++v)
+    column(surface.theta_z.row(v).transpose(), [&](int h) { return vnode(v, h); }, 2 * NL, 1);
+  for (int e = 0; e < NE; ++e) {
+    // The mid-edge node of the top face: the midpoint in (theta, z), snapped to the skin.
+    const Eigen::Vector2d tz =
+        0.5 * (surface.theta_z.row(edges[e].first) + surface.theta_z.row(edges[e].second)).transpose();
+    column(tz, [&](int h) { return enode(e, h / 2); }, 2 * NL, 2);
+  }
+
+  // Elements: polygons run counter-clockwise in (theta, z), i.e. seen from outside the skin;
+  // reversed, their right-hand normal points into the tissue as the element numbering needs.
+  for (int k = 0; k < NL; ++k) mesh.materials.emplace(k, o.material);
+  for (std::size_t p = 0; p < surface.polygons.size(); ++p) {
+    std::vector<int> v(surface.polygons[p].rbegin(), surface.polygons[p].rend());
+    const int n = static_cast<int>(v.size());
+    for (int k = 0; k < NL; ++k) {
+      Element el;
+      el.layer = k;
+      el.type = n == 4 ? ElementType::Hex20 : ElementType::Wedge15;
+      const int top_mid_off = n == 4 ? 8 : 6, bot_mid_off = n == 4 ? 12 : 9;
+      const int centre = n == 4 ? 16 : 12;
+      for (int i = 0; i < n; ++i) {
+        const int e = edge_id.at(std::minmax(v[i], v[(i + 1) % n]));
+        el.nodes[i] = vnode(v[i], 2 * k);
+        el.nodes[n + i] = vnode(v[i], 2 * k + 2);
+        el.nodes[top_mid_off + i] = enode(e, k);
+        el.nodes[bot_mid_off + i] = enode(e, k + 1);
+        el.nodes[centre + i] = vnode(v[i], 2 * k + 1);
+      }
+      mesh.elements.push_back(el);
+      out.element_polygon.push_back(static_cast<int>(p));
+    }
+  }
+
+  // Suture pairs along every sutured border edge, through all layers.
+  std::set<std::pair<int, int>> pairs;
+  auto add_pair = [&](int a, int b) {
+    if (a != b && !pairs.count({b, a})) pairs.insert({a, b});
+  };
+  const int nloop = static_cast<int>(surface.loop_vertex.size());
+  auto chain = [&](int a, int b) {
+    if (b == (a + 1) % nloop) return surface.edge_chain[a];
+    auto c = surface.edge_chain[b];
+    std::reverse(c.begin(), c.end());
+    return c;
+  };
+  for (const auto& s : surface.sutures) {
+    const auto c1 = chain(s[0], s[1]), c2 = chain(s[2], s[3]);
+    if (c1.size() != c2.size())
+      throw InvalidInput(cat("mesh: suture (", s[0], ",", s[1], ")-(", s[2], ",", s[3],
+                             ") joins edges with different node counts"));
+    for (std::size_t i = 0; i < c1.size(); ++i) {
+      if (c1[i] == c2[i]) continue;  // a closed corner
+      for (int h = 0; h <= 2 * NL; ++h) add_pair(vnode(c1[i], h), vnode(c2[i], h));
+    }
+    for (std::size_t i = 0; i + 1 < c1.size(); ++i) {
+      const int e1 = edge_id.at(std::minmax(c1[i], c1[i + 1]));
+      const int e2 = edge_id.at(std::minmax(c2[i], c2[i + 1]));
+      if (e1 == e2) continue;
+      for (int k = 0; k <= NL; ++k) add_pair(enode(e1, k), enode(e2, k));
+    }
+  }
+  std::set<int> sutured;
+  for (const auto& [a, b] : pairs) {
+    mesh.sutures.push_back({a, b});
+    sutured.insert(a);
+    sutured.insert(b);
+  }
+
+  // Fixed nodes: the bottom (bone), and with a fixed rim the whole outer rim, unless sutured.
+  std::set<int> fixed;
+  for (int v = 0; v < NV; ++v) fixed.insert(vnode(v, 2 * NL));
+  for (int e = 0; e < NE; ++e) fixed.insert(enode(e, NL));
+  if (o.rim == RimCondition::Fixed) {
+    const auto& rim = surface.outer_border;
+    for (std::size_t i = 0; i < rim.size(); ++i) {
+      const int e = edge_id.at(std::minmax(rim[i], rim[(i + 1) % rim.size()]));
+      for (int h = 0; h <= 2 * NL; ++h) fixed.insert(vnode(rim[i], h));
+      for (int k = 0; k <= NL; ++k) fixed.insert(enode(e, k));
+    }
+  }
+  for (int id : fixed)
+    if (!sutured.count(id)) mesh.fixed_nodes.push_back(id);
+
+  // Every element must have a positive Jacobian at every Gauss point.
+  const Eigen::VectorXd jac = min_element_jacobians(mesh);
+  out.min_jacobian = jac.size() ? jac.minCoeff() : 0;
+  for (Eigen::Index e = 0; e < jac.size(); ++e)
+    if (!(jac[e] > 0)) {
+      const auto& poly = surface.polygons[out.element_polygon[e]];
+      Eigen::Vector2d c = Eigen::Vector2d::Zero();
+      for (int id : poly) c += surface.theta_z.row(id).transpose();
+      c /= static_cast<double>(poly.size());
+      throw InvalidInput(cat("mesh: element ", e, " (layer ", mesh.elements[e].layer,
+                             ") near theta ", c.x(), " deg, z ", c.y(), " mm is inverted or "
+                             "degenerate (smallest Jacobian ", jac[e], "); use a smaller --size or "
+                             "fewer layers there"));
+    }
+  validate(mesh, "continuum mesh");
+  return out;
+}
+
+WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
+                     const SurfaceMeshOptions& surface_options,
+                     const ContinuumMeshOptions& continuum_options) {
+  WoundMesh w;
+  w.surface = mesh_surface(border, model, surface_options);
+  w.continuum = mesh_continuum(w.surface, model, continuum_options);
+  return w;
+}
+
+}  // namespace caps::fem

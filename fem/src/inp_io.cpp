@@ -1,0 +1,125 @@
+#include "caps/fem/inp_io.hpp"
+
+#include "caps/core/atomic_output.hpp"
+#include "caps/core/error.hpp"
+
+#include <cstdio>
+#include <numeric>
+#include <set>
+#include <sstream>
+#include <vector>
+
+namespace caps::fem {
+namespace {
+
+int find_root(std::vector<int>& parent, int a) {
+  while (parent[a] != a) a = parent[a] = parent[parent[a]];
+  return a;
+}
+
+std::string num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.12g", v);
+  return buf;
+}
+
+/// Writes ids 16 to a line (the format's limit), as continuation lines.
+void id_lines(std::ostringstream& os, const std::vector<int>& ids) {
+  for (std::size_t i = 0; i < ids.size(); ++i)
+    os << ids[i] + 1 << (i + 1 == ids.size() ? "\n" : (i % 16 == 15 ? ",\n" : ", "));
+}
+
+}  // namespace
+
+std::string inp_text(const Mesh& mesh) {
+  validate(mesh, "inp export");
+  std::ostringstream os;
+  const int N = static_cast<int>(mesh.n_nodes());
+  os << "** caps mesh: " << N << " nodes, " << mesh.n_elements() << " elements; units mm, N, MPa\n";
+  if (!mesh.model.empty()) os << "** model: " << mesh.model << "\n";
+  if (!mesh.plan.empty()) os << "** plan: " << mesh.plan << "\n";
+  os << "*HEADING\ncaps wound-closure mesh\n*NODE, NSET=NALL\n";
+  for (int i = 0; i < N; ++i)
+    os << i + 1 << ", " << num(mesh.nodes(i, 0)) << ", " << num(mesh.nodes(i, 1)) << ", "
+       << num(mesh.nodes(i, 2)) << "\n";
+
+  // Suture groups: a spanning forest of the pairs, so that no equation is redundant.
+  std::vector<int> parent(N);
+  std::iota(parent.begin(), parent.end(), 0);
+  for (const auto& s : mesh.sutures) {
+    const int ra = find_root(parent, s.a), rb = find_root(parent, s.b);
+    if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+  }
+  std::vector<int> members;
+  for (int i = 0; i < N; ++i)
+    if (find_root(parent, i) != i) members.push_back(i);
+  const std::set<int> fixed(mesh.fixed_nodes.begin(), mesh.fixed_nodes.end());
+  if (!members.empty()) {
+    os << "*NODE, NSET=SUTURE_HELPERS\n";
+    for (std::size_t k = 0; k < members.size(); ++k) os << N + 1 + k << ", 0, 0, 0\n";
+  }
+
+  // Elements by layer and type, element ids in caps order + 1.
+  std::set<int> layers;
+  for (const auto& e : mesh.elements) layers.insert(e.layer);
+  for (int layer : layers)
+    for (ElementType type : {ElementType::Hex20, ElementType::Wedge15}) {
+      bool header = false;
+      for (std::size_t e = 0; e < mesh.n_elements(); ++e) {
+        const Element& el = mesh.elements[e];
+        if (el.layer != layer || el.type != type) continue;
+        if (!header) {
+          os << "*ELEMENT, TYPE=" << (type == ElementType::Hex20 ? "C3D20" : "C3D15")
+             << ", ELSET=LAYER" << layer << "\n";
+          header = true;
+        }
+        // C3D20 and C3D15 follow the caps numbering node for node (see inp_io.hpp).
+        os << e + 1;
+        for (int k = 0; k < el.n_nodes(); ++k)
+          os << (k == 15 ? ",\n" : ", ") << el.nodes[k] + 1;
+        os << "\n";
+      }
+    }
+  for (int layer : layers) {
+    const LinearElastic& m = mesh.materials.at(layer);
+    os << "*MATERIAL, NAME=MAT" << layer << "\n*ELASTIC\n" << num(m.E_mpa()) << ", " << num(m.nu())
+       << "\n*SOLID SECTION, ELSET=LAYER" << layer << ", MATERIAL=MAT" << layer << "\n";
+  }
+  if (!fixed.empty()) {
+    os << "*NSET, NSET=FIXED\n";
+    id_lines(os, std::vector<int>(fixed.begin(), fixed.end()));
+  }
+  for (std::size_t k = 0; k < members.size(); ++k) {
+    const int n = members[k], m = find_root(parent, n), h = N + static_cast<int>(k);
+    os << "*EQUATION\n";
+    for (int c = 1; c <= 3; ++c)
+      os << "3\n" << n + 1 << ", " << c << ", 1., " << m + 1 << ", " << c << ", -1., " << h + 1
+         << ", " << c << ", -1.\n";
+  }
+  os << "*STEP\n*STATIC\n*BOUNDARY\n";
+  if (!fixed.empty()) os << "FIXED, 1, 3, 0.\n";
+  for (const auto& d : mesh.fixed_dofs)
+    os << d.node + 1 << ", " << d.component + 1 << ", " << d.component + 1 << ", "
+       << num(d.value_mm) << "\n";
+  for (std::size_t k = 0; k < members.size(); ++k) {
+    const int n = members[k], m = find_root(parent, n), h = N + static_cast<int>(k);
+    // u_n - u_m = x_m - x_n: the group meets at the root's final position.
+    for (int c = 0; c < 3; ++c)
+      os << h + 1 << ", " << c + 1 << ", " << c + 1 << ", "
+         << num(mesh.nodes(m, c) - mesh.nodes(n, c)) << "\n";
+  }
+  if (!mesh.loads.empty()) {
+    os << "*CLOAD\n";
+    for (const auto& l : mesh.loads)
+      for (int c = 0; c < 3; ++c)
+        if (l.force_n[c] != 0) os << l.node + 1 << ", " << c + 1 << ", " << num(l.force_n[c]) << "\n";
+  }
+  os << "*NODE PRINT, NSET=NALL\nU\n*NODE FILE\nU\n*EL FILE\nS\n*END STEP\n";
+  return os.str();
+}
+
+void write_inp(const Mesh& mesh, const std::filesystem::path& path) {
+  write_text_atomic(path, inp_text(mesh));
+}
+
+}  // namespace caps::fem

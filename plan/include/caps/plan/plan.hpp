@@ -1,0 +1,133 @@
+#pragma once
+/// @brief A surgical plan (CAPS 1992, section 5): points on the skin, the cutting path(s), the
+/// border loop of the hole they make, excision offsets and the suture pairs of border edges.
+///
+/// Frames and units. Points on the skin are (theta deg, z mm) of the patient model, with their
+/// LPS position kept for reading. Procedures are laid out in the local tangent plane of the skin
+/// at the plan's centre (PlanFrame), in mm: x along the plan's orientation, y to the left of x as
+/// seen from outside the patient. The orientation is measured in degrees from the model's +z
+/// (superior) direction towards +theta (the patient's left), so 0 points superior and 90 points
+/// to the patient's left. Geometry is done in these unwrapped local coordinates, so a plan may
+/// straddle the seam at theta = +-180.
+///
+/// Border loop (Figure 2 of the paper). A single cutting path 0..n-1 becomes the loop
+/// 0..n-1, n-2..1: the copies of n-2..1 are the points on the other side of the cut, coincident
+/// with their originals. Paths that share points (a branching cut, e.g. multiple Z-plasty) form a
+/// tree; its loop is the walk around the tree, which for a single path is exactly the rule above.
+/// The loop keeps the tissue on its left as seen from outside (clockwise in a picture with theta
+/// across and superior up): loop nodes 0..n-1 lie on the left side of the cutting direction.
+///
+/// Sutures. A suture pair ((a,b),(c,d)) names two border edges (pairs of loop-consecutive
+/// nodes) to be sewn together. Which nodes meet does not depend on the order in which the pair
+/// is written: sewing two border edges of an oriented surface always joins them with opposite
+/// directions along the loop, so for loop edges i->i+1 and j->j+1, i meets j+1 and i+1 meets j.
+/// This reproduces both of the paper's examples (its Z-plasty pair ((0,1),(3,4)) means 0 meets 4
+/// and 1 meets 3). A node that both edges share is a corner being closed and is not sutured.
+/// oriented_suture() rewrites a pair so that a meets c and b meets d.
+
+#include <Eigen/Core>
+#include <array>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "caps/surface/patient_model.hpp"
+
+namespace caps::plan {
+
+inline constexpr int kPlanFormatVersion = 1;
+
+/// A point on the skin.
+struct SkinPoint {
+  double theta_deg = 0;            ///< [-180, 180)
+  double z_mm = 0;
+  Eigen::Vector3d lps{0, 0, 0};    ///< for reading; recomputed from (theta, z) on load
+};
+
+/// A border edge: two loop indices, consecutive along the loop (either order).
+struct BorderEdge {
+  int a = 0, b = 0;
+  bool operator==(const BorderEdge&) const = default;
+};
+
+/// A suture pair ((a,b),(c,d)) as written by the user or the procedure.
+struct SuturePair {
+  BorderEdge first, second;
+  bool operator==(const SuturePair&) const = default;
+};
+
+/// An excision offset: a loop node moved away from its twin by `offset_mm` in the local
+/// tangent frame (x along the orientation, y to its left), mm.
+struct ExcisionOffset {
+  int loop_index = 0;
+  Eigen::Vector2d offset_mm{0, 0};
+};
+
+/// The local tangent frame at the plan's centre: a linear map between local mm (x, y) and
+/// (dtheta deg, dz mm), exact to first order at the centre (from the skin's metric there).
+struct PlanFrame {
+  double theta_deg = 0, z_mm = 0;     ///< the centre
+  double orientation_deg = 0;         ///< x axis: from +z (superior) towards +theta
+  Eigen::Matrix2d local_to_theta_z = Eigen::Matrix2d::Identity();  ///< (x,y) mm -> (dtheta deg, dz mm)
+
+  /// (theta deg, z mm) of a local point (x, y) mm; theta wrapped into [-180, 180).
+  Eigen::Vector2d to_theta_z(const Eigen::Vector2d& xy_mm) const;
+  /// Local (x, y) mm of (theta deg, z mm); theta unwrapped about the centre (seam-safe).
+  Eigen::Vector2d to_local(double theta_deg, double z_mm) const;
+};
+
+/// The local tangent frame of `model`'s skin at (theta, z) with the given orientation.
+/// Throws InvalidInput if the skin there is degenerate (on the axis) or the values are not finite.
+PlanFrame make_frame(const PatientModel& model, double theta_deg, double z_mm,
+                     double orientation_deg);
+
+/// A surgical plan. Stored as JSON (docs/plan-format.md).
+struct Plan {
+  std::string model;                        ///< the patient model directory, as given
+  std::string procedure = "custom";         ///< a template name, or "custom"
+  std::map<std::string, double> parameters; ///< the procedure's parameters (mm, deg, counts)
+  PlanFrame frame;
+  std::vector<SkinPoint> points;            ///< the surgeon's points
+  std::vector<std::vector<int>> paths;      ///< cutting paths, as indices into `points`
+  std::vector<ExcisionOffset> excisions;
+  std::vector<SuturePair> sutures;
+  std::string notes;
+};
+
+/// The paper's Figure 2 rule for one path of n >= 2 points: 0..n-1 then n-2..1.
+std::vector<int> incision_to_loop(int n_points);
+
+/// The border loop of a plan: for each loop node, the point it was copied from, and its
+/// position with the excision offsets applied.
+struct BorderLoop {
+  std::vector<int> point;                         ///< loop index -> index into Plan::points
+  std::vector<Eigen::Vector2d> local_mm;          ///< loop positions, local frame, mm
+  std::vector<Eigen::Vector2d> theta_z;           ///< the same as (theta deg, z mm)
+  int size() const { return static_cast<int>(point.size()); }
+};
+
+/// The border loop of the plan's cutting paths (the walk around their tree, starting at the
+/// first point of the first path, which must be an end of the cut). Throws InvalidInput when
+/// the paths are not a tree (a cycle, disconnected, an index out of range, a repeated point)
+/// or an excision names a node that is not on the loop.
+BorderLoop border_loop(const Plan& plan);
+
+/// Whether (a, b) is a border edge of a loop of `loop_size` nodes.
+bool is_border_edge(const BorderEdge& e, int loop_size);
+
+/// A suture pair rewritten as (a, b, c, d) with (a, b) in loop order and a meeting c, b meeting d
+/// (see @brief). Throws InvalidInput if an edge is not a border edge.
+std::array<int, 4> oriented_suture(const SuturePair& s, int loop_size);
+
+/// What the mesher needs: the border loop with excision offsets applied, as (theta deg, z mm),
+/// and the suture edge pairs as quadruples (a, b, c, d) into that loop, a meeting c and b
+/// meeting d; a == c or b == d is a corner being closed (no suture for that node).
+struct WoundBorder {
+  std::vector<Eigen::Vector2d> loop_theta_z;
+  std::vector<std::array<int, 4>> sutures;
+};
+
+/// The wound border of a plan (structure checked, see border_loop() and oriented_suture()).
+WoundBorder wound_border(const Plan& plan);
+
+}  // namespace caps::plan

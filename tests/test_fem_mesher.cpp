@@ -1,0 +1,309 @@
+// caps::fem meshers: hand counts of the surface and continuum meshes (a square hole, the paper's
+// Z-plasty), positive Jacobians, constant vs variable depth, suture pairs, refusals, a closing
+// solve, and the CalculiX deck solved by ccx against caps' own solve.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
+#include "caps/fem/continuum_mesher.hpp"
+#include "caps/fem/inp_io.hpp"
+#include "caps/fem/solve.hpp"
+#include "caps/fem/surface_mesher.hpp"
+#include "caps/surface/patient_model.hpp"
+
+using namespace caps;
+using namespace caps::fem;
+
+namespace {
+
+constexpr double kR = 70.0;
+
+// A cylinder of radius 70 mm about the LPS z axis, z in [-100, 100], with thickness T(theta, z).
+template <typename Thickness>
+PatientModel cylinder(Thickness&& T, std::uint8_t flag_band = 0) {
+  CylindricalMaps m;
+  m.grid.n_theta = 360;
+  m.grid.n_z = 201;
+  m.grid.z0_mm = -100;
+  m.grid.dz_mm = 1;
+  const auto n = m.grid.size();
+  m.r_skin.assign(n, static_cast<float>(kR));
+  m.r_bone.resize(n);
+  m.thickness.resize(n);
+  m.thickness_normal.resize(n);
+  m.flags.assign(n, 0);
+  m.measured_skin.assign(n, 1);
+  m.measured_bone.assign(n, 1);
+  for (int k = 0; k < m.grid.n_z; ++k)
+    for (int j = 0; j < m.grid.n_theta; ++j) {
+      const auto c = m.grid.index(j, k);
+      const double t = T(m.grid.theta_deg(j), m.grid.z_mm(k));
+      m.thickness[c] = m.thickness_normal[c] = static_cast<float>(t);
+      m.r_bone[c] = static_cast<float>(kR - t);
+      // an invalid band at z in [60, 70] (e.g. no bone)
+      if (flag_band && m.grid.z_mm(k) >= 60 && m.grid.z_mm(k) <= 70) m.flags[c] = flag_band;
+    }
+  return PatientModel(std::move(m));
+}
+
+PatientModel constant_cylinder() { return cylinder([](double, double) { return 5.0; }); }
+
+// (x mm of arc, z mm) on the cylinder to (theta deg, z mm).
+Eigen::Vector2d tz(double x, double z) { return {x / kR * 180.0 / kPi, z}; }
+
+// The paper's Z-plasty (Figure 2): central limb 1-2 of length L, lateral limbs at 60 degrees;
+// loop 0 1 2 3 4 5 with 4 = 2 and 5 = 1 coincident twins; sutures as in section 5.
+WoundBorder z_plasty(double L = 20) {
+  const double h = L * std::sqrt(3.0) / 2;
+  WoundBorder b;
+  b.loop_theta_z = {tz(L / 2, h), tz(0, 0), tz(L, 0), tz(L / 2, -h), tz(L, 0), tz(0, 0)};
+  b.sutures = {{5, 0, 5, 4}, {2, 1, 2, 3}, {0, 1, 3, 4}};
+  return b;
+}
+
+// An elliptical excision (paper Figure 1): tips 0 and 3, lips 1 2 and 5 4.
+WoundBorder lens(double half_length = 12, double half_width = 3) {
+  const double a = half_length, w = half_width;
+  WoundBorder b;
+  b.loop_theta_z = {tz(-a, 0),    tz(-a / 3, w), tz(a / 3, w),
+                    tz(a, 0),     tz(a / 3, -w), tz(-a / 3, -w)};
+  b.sutures = {{0, 1, 0, 5}, {1, 2, 5, 4}, {2, 3, 4, 3}};
+  return b;
+}
+
+int count_edges(const SurfaceMesh& s) {
+  std::set<std::pair<int, int>> e;
+  for (const auto& p : s.polygons)
+    for (std::size_t i = 0; i < p.size(); ++i)
+      e.insert(std::minmax(p[i], p[(i + 1) % p.size()]));
+  return static_cast<int>(e.size());
+}
+
+SurfaceMeshOptions no_growth(double size, double extent) {
+  SurfaceMeshOptions o;
+  o.size_mm = size;
+  o.extent_mm = extent;
+  o.split_ratio = 1e9;
+  return o;
+}
+
+}  // namespace
+
+TEST(SurfaceMesher, SquareHoleOneLayerHandCount) {
+  WoundBorder b;
+  b.loop_theta_z = {tz(-5, -5), tz(5, -5), tz(5, 5), tz(-5, 5)};
+  const SurfaceMesh s = mesh_surface(b, kR, no_growth(10, 10));
+  EXPECT_EQ(s.n_vertices(), 8);
+  EXPECT_EQ(s.quality.n_quads, 4);
+  EXPECT_EQ(s.quality.n_triangles, 0);
+  EXPECT_EQ(s.n_layers, 1);
+  // Miter corners: the outer border is the square of half-width 15 mm.
+  for (int v : s.outer_border) {
+    EXPECT_NEAR(std::abs(s.xy_mm(v, 0)), 15, 1e-9);
+    EXPECT_NEAR(std::abs(s.xy_mm(v, 1)), 15, 1e-9);
+  }
+  const PatientModel model = constant_cylinder();
+  for (int layers : {1, 2, 3}) {
+    ContinuumMeshOptions o;
+    o.n_layers = layers;
+    const ContinuumMesh c = mesh_continuum(s, model, o);
+    // 8 vertex columns of 2N+1 nodes, 12 edge columns of N+1 nodes.
+    EXPECT_EQ(c.mesh.n_nodes(), 8 * (2 * layers + 1) + 12 * (layers + 1));
+    EXPECT_EQ(c.mesh.n_elements(), 4u * layers);
+    // Fixed rim: bottom (8 + 12) plus the outer rim's columns above it (4 vertices, 4 edges).
+    EXPECT_EQ(c.mesh.fixed_nodes.size(), 20u + 4 * 2 * layers + 4 * layers);
+    EXPECT_GT(min_element_jacobians(c.mesh).minCoeff(), 0);
+  }
+  ContinuumMeshOptions free;
+  free.n_layers = 2;
+  free.rim = RimCondition::Free;
+  EXPECT_EQ(mesh_continuum(s, model, free).mesh.fixed_nodes.size(), 20u);
+}
+
+TEST(SurfaceMesher, ZPlastyMatchesFigure3) {
+  // One layer, no subdivision: stage 1 fills the two concave corners (polygons 1 and 2), stage 2
+  // adds one quad per border edge of the resulting rhombus and one per expanded 60-degree corner.
+  const SurfaceMesh s = mesh_surface(z_plasty(), kR, no_growth(20, 20));
+  int stage1 = 0, expanded = 0;
+  for (std::size_t p = 0; p < s.polygons.size(); ++p) {
+    stage1 += s.polygon_stage[p] == 1;
+    expanded += s.polygon_expanded[p];
+    EXPECT_EQ(s.polygons[p].size(), s.polygon_stage[p] == 1 ? 3u : 4u);
+  }
+  EXPECT_EQ(stage1, 2);
+  EXPECT_EQ(s.polygons.size(), 8u);
+  EXPECT_EQ(expanded, 2);
+  EXPECT_EQ(s.n_vertices(), 6 + 2 + 2 * 3);
+  EXPECT_EQ(count_edges(s), 14 + 8);  // an annulus: V - E + F = 0
+  // Twins stay distinct vertices at the same place.
+  EXPECT_NE(s.loop_vertex[1], s.loop_vertex[5]);
+  EXPECT_NEAR((s.theta_z.row(1) - s.theta_z.row(5)).norm(), 0, 1e-12);
+
+  ContinuumMeshOptions o;
+  o.n_layers = 1;
+  const ContinuumMesh c = mesh_continuum(s, constant_cylinder(), o);
+  EXPECT_EQ(c.mesh.n_nodes(), 14 * 3 + 22 * 2);
+  int wedges = 0;
+  for (const auto& e : c.mesh.elements) wedges += e.type == ElementType::Wedge15;
+  EXPECT_EQ(wedges, 2);
+  EXPECT_EQ(c.mesh.n_elements(), 8u);
+  // Sutures ((5,0),(5,4)) ((2,1),(2,3)) ((0,1),(3,4)): corner pairs 0-4, 1-3, 0-3, 1-4 (points 5
+  // and 2 are closed corners) in 3 vertex levels, plus 3 edge pairs in 2 levels.
+  EXPECT_EQ(c.mesh.sutures.size(), 4u * 3 + 3 * 2);
+}
+
+TEST(SurfaceMesher, DefaultZPlastyIsValidAndWellShaped) {
+  const PatientModel model = constant_cylinder();
+  const WoundMesh w = mesh_wound(z_plasty(), model);
+  const SurfaceMesh& s = w.surface;
+  EXPECT_NEAR(s.extent_mm, 3 * 20 * std::sqrt(3.0), 1e-9);
+  EXPECT_GT(s.quality.min_angle_deg, 15);
+  EXPECT_LT(s.quality.max_angle_deg, 170);
+  EXPECT_LT(s.quality.max_aspect_ratio, 6);
+  EXPECT_GT(w.continuum.min_jacobian, 0);
+  EXPECT_GT(min_element_jacobians(w.continuum.mesh).minCoeff(), 0);
+  EXPECT_EQ(w.continuum.n_layers, 2);
+}
+
+TEST(SurfaceMesher, IncisionLipsPairNodeForNode) {
+  // A straight incision of 3 picked points: loop 0 1 2 3 with 3 = 1; closed corners at 0 and 2.
+  WoundBorder b;
+  b.loop_theta_z = {tz(-10, 0), tz(0, 1), tz(10, 0), tz(0, 1)};
+  b.sutures = {{0, 1, 0, 3}, {1, 2, 3, 2}};
+  SurfaceMeshOptions so;
+  so.size_mm = 2.5;
+  so.extent_mm = 20;
+  ContinuumMeshOptions co;
+  co.n_layers = 2;
+  const WoundMesh w = mesh_wound(b, constant_cylinder(), so, co);
+  const ContinuumMesh& c = w.continuum;
+  // Each half is 10.05 mm: 5 segments, 4 inner points + point 1 on each lip, 6 edges... per half:
+  // 4 inner vertices + (point 1 once) = 9 paired vertices, 10 paired edges.
+  EXPECT_EQ(c.mesh.sutures.size(), 9u * 5 + 10u * 3);
+  for (const auto& p : c.mesh.sutures) {
+    EXPECT_NEAR((c.node_theta_z.row(p.a) - c.node_theta_z.row(p.b)).norm(), 0, 1e-9);
+    EXPECT_NEAR((c.mesh.nodes.row(p.a) - c.mesh.nodes.row(p.b)).norm(), 0, 1e-9);
+    EXPECT_EQ(c.node_level[p.a], c.node_level[p.b]);
+    EXPECT_NE(p.a, p.b);
+  }
+  // Sutured bottom nodes are not fixed.
+  const std::set<int> fixed(c.mesh.fixed_nodes.begin(), c.mesh.fixed_nodes.end());
+  for (const auto& p : c.mesh.sutures) EXPECT_FALSE(fixed.count(p.a) || fixed.count(p.b));
+  EXPECT_GT(c.min_jacobian, 0);
+}
+
+TEST(ContinuumMesher, ConstantAndVariableThicknessDifferOnlyInDepth) {
+  const PatientModel flat = constant_cylinder();
+  const PatientModel bumpy =
+      cylinder([](double theta, double z) { return 5.0 + 2.0 * std::sin(theta / 7.0) * std::cos(z / 9.0); });
+  const SurfaceMesh s = mesh_surface(lens(), flat);
+  const ContinuumMesh a = mesh_continuum(s, flat), b = mesh_continuum(s, bumpy);
+  ASSERT_EQ(a.mesh.n_nodes(), b.mesh.n_nodes());
+  ASSERT_EQ(a.mesh.n_elements(), b.mesh.n_elements());
+  for (std::size_t e = 0; e < a.mesh.n_elements(); ++e)
+    EXPECT_EQ(a.mesh.elements[e].nodes, b.mesh.elements[e].nodes);
+  EXPECT_EQ(a.mesh.fixed_nodes, b.mesh.fixed_nodes);
+  double max_depth_diff = 0;
+  for (Eigen::Index i = 0; i < a.mesh.n_nodes(); ++i) {
+    const Eigen::Vector3d pa = a.mesh.nodes.row(i), pb = b.mesh.nodes.row(i);
+    // Same (theta, z): the same ray from the axis; only r differs, and not at the skin.
+    EXPECT_NEAR(pa.z(), pb.z(), 1e-9);
+    EXPECT_NEAR(std::atan2(pa.y(), pa.x()), std::atan2(pb.y(), pb.x()), 1e-9);
+    if (a.node_level[i] == 0) EXPECT_NEAR((pa - pb).norm(), 0, 1e-9);
+    max_depth_diff = std::max(max_depth_diff, std::abs(pa.head<2>().norm() - pb.head<2>().norm()));
+  }
+  EXPECT_GT(max_depth_diff, 0.5);
+  EXPECT_LT(b.min_thickness_mm, 4.0);
+  // The bottom follows the bone: r_bottom = 70 - thickness(theta, z) at every bottom node.
+  for (Eigen::Index i = 0; i < b.mesh.n_nodes(); ++i)
+    if (b.node_level[i] == b.n_layers)
+      EXPECT_NEAR(b.mesh.nodes.row(i).head<2>().norm(),
+                  kR - bumpy.thickness(b.node_theta_z(i, 0), b.node_theta_z(i, 1)), 1e-9);
+}
+
+TEST(ContinuumMesher, RefusesInvalidCellsAndThinTissueNamingThePlace) {
+  const PatientModel bad = cylinder([](double, double) { return 5.0; }, kNoBone);
+  WoundBorder b = lens();
+  for (auto& p : b.loop_theta_z) p.y() += 55;  // the rim reaches the invalid band at z 60..70
+  try {
+    mesh_wound(b, bad);
+    FAIL() << "expected InvalidInput";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("theta"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("no_bone"), std::string::npos) << e.what();
+  }
+  const PatientModel thin = cylinder([](double theta, double) { return theta > 5 ? 0.2 : 5.0; });
+  EXPECT_THROW(mesh_wound(lens(), thin), InvalidInput);
+  WoundBorder one;
+  one.loop_theta_z = {tz(0, 0)};
+  EXPECT_THROW(mesh_surface(one, kR), InvalidInput);
+  WoundBorder badsut = lens();
+  badsut.sutures.push_back({0, 2, 3, 4});
+  EXPECT_THROW(mesh_surface(badsut, kR), InvalidInput);
+}
+
+TEST(ContinuumMesher, SolvedLensClosesTheWound) {
+  SurfaceMeshOptions so;
+  so.size_mm = 3;
+  so.extent_mm = 20;
+  const WoundMesh w = mesh_wound(lens(), constant_cylinder(), so);
+  const Mesh& m = w.continuum.mesh;
+  const SolveResult r = solve(m);
+  double gap = 0;
+  for (const auto& p : m.sutures) {
+    const Eigen::Vector3d xa = m.nodes.row(p.a) + r.displacement_mm.row(p.a);
+    const Eigen::Vector3d xb = m.nodes.row(p.b) + r.displacement_mm.row(p.b);
+    gap = std::max(gap, (xa - xb).norm());
+  }
+  EXPECT_LT(gap, 1e-6);
+  EXPECT_GT(r.total_suture_force_n, 0);
+}
+
+TEST(InpExport, CalculixSolvesTheSameProblem) {
+  SurfaceMeshOptions so;
+  so.size_mm = 4;
+  so.extent_mm = 12;
+  const WoundMesh w = mesh_wound(lens(), constant_cylinder(), so);
+  const Mesh& m = w.continuum.mesh;
+  const std::string deck = inp_text(m);
+  EXPECT_NE(deck.find("TYPE=C3D20"), std::string::npos);
+  EXPECT_NE(deck.find("TYPE=C3D15"), std::string::npos);
+  EXPECT_NE(deck.find("*EQUATION"), std::string::npos);
+  if (std::system("command -v ccx > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "ccx (Debian calculix-ccx) is not installed; scripts/setup.sh installs it";
+  const auto dir = std::filesystem::temp_directory_path() / "caps_test_ccx";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  write_inp(m, dir / "lens.inp");
+  const std::string cmd = "cd '" + dir.string() + "' && ccx -i lens > ccx.log 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << "see " << (dir / "ccx.log");
+  // lens.dat: "displacements (vx,vy,vz) for set NALL ..." then "node ux uy uz" rows.
+  std::ifstream dat(dir / "lens.dat");
+  std::string line;
+  Eigen::MatrixX3d u = Eigen::MatrixX3d::Constant(m.n_nodes(), 3, NAN);
+  bool in_block = false;
+  while (std::getline(dat, line)) {
+    if (line.find("displacements") != std::string::npos) {
+      in_block = true;
+      continue;
+    }
+    std::istringstream is(line);
+    int id;
+    double x, y, z;
+    if (in_block && (is >> id >> x >> y >> z) && id >= 1 && id <= m.n_nodes()) u.row(id - 1) << x, y, z;
+  }
+  ASSERT_TRUE(u.allFinite()) << "ccx did not print every node's displacement";
+  const SolveResult r = solve(m);
+  const double scale = r.displacement_mm.cwiseAbs().maxCoeff();
+  const double diff = (u - r.displacement_mm).cwiseAbs().maxCoeff();
+  EXPECT_LT(diff, 1e-6 * scale + 1e-9) << "max |u_ccx - u_caps| = " << diff << " mm of " << scale;
+  std::filesystem::remove_all(dir);
+}
