@@ -197,3 +197,23 @@ TEST_F(Cli, BadOutputsAndOptionsAreRefusedCleanly) {
   expect_refused("phantom -o " + (dir / "p.txt").string(), ".nii", dir / "p.txt");
   expect_refused("model info " + (dir / "nothing").string(), "nothing", dir / "nothing");
 }
+
+TEST_F(Cli, CylindricalRangeImageRoundTrip) {
+  const fs::path model = dir / "model_for_range", range = dir / "range", back = dir / "from_range";
+  ASSERT_EQ(run("model from-volume " + phantom().string() + " -o " + model.string() + " -q").code, 0);
+  Outcome r = run("model export-range " + model.string() + " -o " + range.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = run("model from-scan " + (range / "range.json").string() + " --thickness 5 -o " + back.string() +
+          " --json -q");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["source"]["kind"], "scan");
+  EXPECT_EQ(j["thickness"]["kind"], "constant");
+  // A sidecar without scales, and a colour image as the range image: refused cleanly.
+  write_file(dir / "noscale.json", R"({"range": "range/range.png"})");
+  expect_refused("model from-scan " + (dir / "noscale.json").string() + " --thickness 5 -o " +
+                     (dir / "x").string(), "r_scale_mm", dir / "x");
+  expect_refused("model from-scan " + (model / "thickness.png").string() +
+                     " --r-scale 0.1 --z-scale 1 --thickness 5 -o " + (dir / "y").string(),
+                 "grey", dir / "y");
+}

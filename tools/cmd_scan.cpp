@@ -1,6 +1,9 @@
 // caps model from-scan / pick: patient models from surface scans, and picking on a model's skin.
 //   caps model from-scan ../shared/data/scan/leeperrysmith/LeePerrySmith.glb --texture ../shared/data/scan/leeperrysmith/Map-COL.jpg --flip-v --head-height-mm 230 --thickness 6 --credit "Infinite, 3D Head Scan by Lee Perry-Smith, CC BY 3.0 (www.triplegangers.com)" -o /tmp/lps --force
 //   caps model from-scan ../shared/data/scan/fran/fran_cut.vtk --texture ../shared/data/scan/fran/fran_cut.png --scale 1000 --front 1,0,-1 --flip-faces --thickness 6 -o /tmp/fran --force
+//   caps model from-scan head_range.json --thickness 6 -o /tmp/cyberware --force
+//   caps model from-scan head_range.png --color head_color.png --r-scale 0.1 --z-scale 0.7 --thickness 6 -o /tmp/cyberware --force
+//   caps model export-range /tmp/lps -o /tmp/lps_range
 //   caps model pick /tmp/lps --ray 0,-400,0,0,1,0 --json
 //   caps model color-picture /tmp/lps -o /tmp/lps_color.png --force
 #include <iostream>
@@ -9,6 +12,7 @@
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/surface/color_picture.hpp"
+#include "caps/surface/cylindrical_scan.hpp"
 #include "caps/surface/picking.hpp"
 #include "caps/surface/scan_model.hpp"
 #include "caps/volume/model.hpp"
@@ -22,14 +26,40 @@ struct FromScanArgs {
   bool flip_v = false, flip_faces = false;
   double thickness_mm = NAN, scale = NAN, head_height_mm = NAN;
   int n_theta = 512, n_z = 256;
+  // Cylindrical range images (Cyberware style): a sidecar .json, or a grey PNG with these.
+  std::string color;
+  double r_scale = NAN, r_offset = 0, z_scale = NAN, theta_span = 360;
+  bool theta_rows = false, theta_reverse = false, bottom_first = false;
 };
 
-void run_from_scan(const FromScanArgs& a, const Common& common) {
-  { OutputDirectory probe(a.output, common.force); }
+bool ends_with(const std::string& s, const std::string& tail) {
+  return s.size() >= tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
+}
+
+ScanMesh read_any_scan(const FromScanArgs& a) {
+  if (ends_with(a.input, ".json")) return cylindrical_scan_mesh(read_cylindrical_sidecar(a.input));
+  if (std::isfinite(a.r_scale) || std::isfinite(a.z_scale) || !a.color.empty()) {
+    CylindricalScanSpec spec;
+    spec.range = a.input;
+    spec.color = a.color;
+    spec.r_scale_mm = std::isfinite(a.r_scale) ? a.r_scale : 0.0;
+    spec.r_offset_mm = a.r_offset;
+    spec.z_scale_mm = std::isfinite(a.z_scale) ? a.z_scale : 0.0;
+    spec.theta_span_deg = a.theta_span;
+    spec.theta_along_rows = a.theta_rows;
+    spec.theta_reverse = a.theta_reverse;
+    spec.top_first = !a.bottom_first;
+    return cylindrical_scan_mesh(spec);
+  }
   ScanReadOptions ro;
   ro.texture = a.texture;
   ro.flip_v = a.flip_v;
-  const ScanMesh scan = read_scan_mesh(a.input, ro);
+  return read_scan_mesh(a.input, ro);
+}
+
+void run_from_scan(const FromScanArgs& a, const Common& common) {
+  { OutputDirectory probe(a.output, common.force); }
+  const ScanMesh scan = read_any_scan(a);
   ScanModelOptions o;
   o.thickness_mm = a.thickness_mm;
   if (std::isfinite(a.scale)) o.mm_per_unit = a.scale;
@@ -82,6 +112,21 @@ void run_pick(const PickArgs& a, const Common& common) {
   else std::cout << "miss\n";
 }
 
+struct ExportRangeArgs {
+  std::string model, output;
+  double r_scale_mm = 0.01;
+};
+
+void run_export_range(const ExportRangeArgs& a, const Common& common) {
+  const PatientModel model = PatientModel::load(a.model);
+  OutputDirectory out(a.output, common.force);
+  write_cylindrical_scan(model, out.path(), a.r_scale_mm);
+  out.commit();
+  if (common.json)
+    std::cout << nlohmann::json{{"sidecar", (std::filesystem::path(a.output) / "range.json").string()}}.dump(2)
+              << "\n";
+}
+
 struct ColorPictureArgs {
   std::string model, output;
 };
@@ -104,8 +149,11 @@ void add_model_scan(CLI::App* model, Common& common, Action& action) {
       "from-scan",
       "Build a patient model from a textured surface scan, with a constant soft-tissue thickness\n"
       "(the 1992 CAPS assumption). INPUT is .glb/.gltf, .ply (vertex colours), .obj (+ .mtl and\n"
-      "texture) or .vtk (legacy polydata with texture coordinates).\n"
-      "Example: caps model from-scan head.glb --head-height-mm 230 --thickness 6 -o head");
+      "texture) or .vtk (legacy polydata with texture coordinates), or a Cyberware-style\n"
+      "cylindrical range image: a sidecar .json, or a grey PNG with --r-scale and --z-scale.\n"
+      "Example: caps model from-scan head.glb --head-height-mm 230 --thickness 6 -o head\n"
+      "Example: caps model from-scan range.png --color color.png --r-scale 0.1 --z-scale 0.7 "
+      "--thickness 6 -o head");
   fs->add_option("INPUT", a->input, "the scan")->required();
   fs->add_option("-o,--output", a->output, "the model directory to create")->required();
   fs->add_option("--thickness", a->thickness_mm, "constant soft-tissue thickness, mm")->required();
@@ -127,10 +175,31 @@ void add_model_scan(CLI::App* model, Common& common, Action& action) {
   fs->add_option("--n-theta", a->n_theta, "cylindrical grid: samples around")->capture_default_str();
   fs->add_option("--n-z", a->n_z, "cylindrical grid: samples along the axis")->capture_default_str();
   fs->add_option("--credit", a->credit, "credit line drawn on the pictures and kept in model.json");
+  auto* cyl = "Cylindrical range images";
+  fs->add_option("--color", a->color, "the colour image of a range image (same layout)")->group(cyl);
+  fs->add_option("--r-scale", a->r_scale, "mm per range value")->group(cyl);
+  fs->add_option("--r-offset", a->r_offset, "radius in mm for a range value of 0")->group(cyl);
+  fs->add_option("--z-scale", a->z_scale, "mm between neighbouring z lines")->group(cyl);
+  fs->add_option("--theta-span", a->theta_span, "the image's extent in theta, degrees")
+      ->capture_default_str()->group(cyl);
+  fs->add_flag("--theta-rows", a->theta_rows, "theta runs down the rows (z across)")->group(cyl);
+  fs->add_flag("--theta-reverse", a->theta_reverse, "theta decreases along its axis")->group(cyl);
+  fs->add_flag("--bottom-first", a->bottom_first, "the first z line is the bottom")->group(cyl);
   add_common_flags(fs, common, true);
   fs->callback([&common, &action, a] { action = [&common, a] { run_from_scan(*a, common); }; });
 
   auto p = std::make_shared<PickArgs>();
+  auto e = std::make_shared<ExportRangeArgs>();
+  auto* ex = model->add_subcommand(
+      "export-range", "Write a model's skin as a Cyberware-style cylindrical range image: range.png "
+                      "(16-bit grey),\ncolor.png and the sidecar range.json that from-scan reads.\n"
+                      "Example: caps model export-range cranium -o cranium_range");
+  ex->add_option("MODEL_DIR", e->model, "a model directory")->required();
+  ex->add_option("-o,--output", e->output, "the folder to create")->required();
+  ex->add_option("--r-scale", e->r_scale_mm, "mm per range value")->capture_default_str();
+  add_common_flags(ex, common, true);
+  ex->callback([&common, &action, e] { action = [&common, e] { run_export_range(*e, common); }; });
+
   auto* pk = model->add_subcommand("pick", "Pick the first point of a ray on a model's skin.\n"
                                            "Example: caps model pick head --ray 0,-400,0,0,1,0");
   pk->add_option("MODEL_DIR", p->model, "a model directory")->required();
