@@ -702,3 +702,28 @@ TEST(VolumeIo, BadInputsGiveTheRightErrorNamingTheFile) {
     EXPECT_NE(std::string(e.what()).find("trunc"), std::string::npos) << e.what();
   }
 }
+
+namespace caps {
+
+TEST(VolumeIo, IntegerVolumesAreWrittenAsInt16) {
+  Volume v;
+  v.geom.dims = {6, 5, 4};
+  v.geom.spacing_mm = {0.5, 0.7, 1.2};
+  v.geom.origin_lps = {-3, 4, 10};
+  v.data.resize(v.geom.n_voxels());
+  for (std::size_t i = 0; i < v.data.size(); ++i) v.data[i] = static_cast<float>(int(i * 37 % 3000) - 1024);
+  v.source = "ints";
+  const auto dir = std::filesystem::temp_directory_path() / ("caps_int16_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  write_nifti(v, dir / "a.nii");
+  EXPECT_EQ(std::filesystem::file_size(dir / "a.nii"), 352u + 2u * v.data.size());
+  const Volume r = read_volume(dir / "a.nii");
+  EXPECT_EQ(r.data, v.data);
+  EXPECT_TRUE(r.geom.origin_lps.isApprox(v.geom.origin_lps, 1e-5));
+  v.data[3] = 0.25f;  // one fraction: float32
+  write_nifti(v, dir / "b.nii");
+  EXPECT_EQ(std::filesystem::file_size(dir / "b.nii"), 352u + 4u * v.data.size());
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace caps

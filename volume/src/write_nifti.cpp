@@ -1,7 +1,8 @@
-// NIfTI-1 writing: float32, one file (.nii) or gzip (.nii.gz), qform and sform both set from the
+// NIfTI-1 writing: int16 for whole-number data, else float32; one file (.nii) or gzip (.nii.gz), qform and sform both set from the
 // LPS geometry converted to RAS (negate the first two rows). Written by hand with zlib rather than
 // through nifti_image_write so that the temporary name chosen by write_file_atomic is honoured.
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -40,8 +41,18 @@ void write_nifti(const Volume& v, const fs::path& path) {
     h.dim[a + 1] = static_cast<short>(g.dims[a]);
   }
   for (int a = 4; a < 8; ++a) h.dim[a] = 1;
-  h.datatype = DT_FLOAT32;
-  h.bitpix = 32;
+  // Integer values that fit (CT in HU, label maps) are stored as int16, as scanners store them;
+  // anything else as float32.
+  const bool as_int16 = std::all_of(v.data.begin(), v.data.end(), [](float x) {
+    return x == std::nearbyint(x) && x >= -32768.0f && x <= 32767.0f;
+  });
+  std::vector<std::int16_t> int16_data;
+  if (as_int16) {
+    int16_data.resize(v.data.size());
+    for (std::size_t i = 0; i < v.data.size(); ++i) int16_data[i] = static_cast<std::int16_t>(v.data[i]);
+  }
+  h.datatype = as_int16 ? DT_INT16 : DT_FLOAT32;
+  h.bitpix = as_int16 ? 16 : 32;
   h.vox_offset = 352;
   h.scl_slope = 1.0f;
   h.scl_inter = 0.0f;
@@ -86,7 +97,9 @@ void write_nifti(const Volume& v, const fs::path& path) {
   h.cal_max = hi;
 
   const char extension[4] = {0, 0, 0, 0};
-  const std::size_t n_bytes = v.data.size() * sizeof(float);
+  const std::size_t n_bytes = v.data.size() * (as_int16 ? sizeof(std::int16_t) : sizeof(float));
+  const void* payload = as_int16 ? static_cast<const void*>(int16_data.data())
+                                 : static_cast<const void*>(v.data.data());
   write_file_atomic(path, [&](const fs::path& tmp) {
     const std::string tname = tmp.string();
     bool ok = true;
@@ -96,7 +109,7 @@ void write_nifti(const Volume& v, const fs::path& path) {
       ok = gzwrite(f, &h, sizeof h) == static_cast<int>(sizeof h) &&
            gzwrite(f, extension, 4) == 4;
       // gzwrite takes an unsigned length: write in chunks below 1 GB.
-      const char* p = reinterpret_cast<const char*>(v.data.data());
+      const char* p = static_cast<const char*>(payload);
       for (std::size_t off = 0; ok && off < n_bytes;) {
         const unsigned len = static_cast<unsigned>(std::min<std::size_t>(n_bytes - off, 1u << 30));
         ok = gzwrite(f, p + off, len) == static_cast<int>(len);
@@ -107,7 +120,7 @@ void write_nifti(const Volume& v, const fs::path& path) {
       std::FILE* f = std::fopen(tname.c_str(), "wb");
       if (!f) throw IoError(cat(path.string(), ": cannot create the file"));
       ok = std::fwrite(&h, sizeof h, 1, f) == 1 && std::fwrite(extension, 4, 1, f) == 1 &&
-           (n_bytes == 0 || std::fwrite(v.data.data(), n_bytes, 1, f) == 1);
+           (n_bytes == 0 || std::fwrite(payload, n_bytes, 1, f) == 1);
       ok = (std::fclose(f) == 0) && ok;
     }
     if (!ok) throw IoError(cat(path.string(), ": write failed (disk full?)"));
