@@ -11,6 +11,7 @@ packages=(
   libnifti2-dev libteem-dev libarchive-dev libpng-dev zlib1g-dev
   libcairo2-dev fonts-dejavu-core libtinygltf-dev libjpeg-dev
   invesalius-examples mricron-data
+  calculix-ccx
 )
 
 missing=()

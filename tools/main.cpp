@@ -44,6 +44,8 @@ int main(int argc, char** argv) {
   cli::add_model(app, common, action);
   cli::add_volume(app, common, action);
   cli::add_solve(app, common, action);
+  cli::add_plan(app, common, action);
+  cli::add_mesh(app, common, action);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -61,7 +61,7 @@ struct Builder {
   SurfaceMesh out;
   bool mirrored = false;
 
-  int add_vertex(const Vec2& p) {
+  int add_vertex(Vec2 p) {
     P.push_back(p);
     return static_cast<int>(P.size()) - 1;
   }
@@ -242,22 +242,28 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
     chain.push_back(j);
   }
 
-  // Stage 1: fill concave corners deeper than t1 with triangles (v_{i+2}, v_{i+1}, v_i).
+  // Stage 1: fill concave corners deeper than t1 with triangles (v_{i+2}, v_{i+1}, v_i). The paper
+  // walks the border in order; with subdivided edges that zips a concavity into a fan of slivers,
+  // so the sharpest corner is filled first, which zips it into a strip.
   const double t1 = o.t1_deg * kDeg;
-  for (bool changed = true; changed && front.size() > 3;) {
-    changed = false;
-    for (std::size_t i = 0; i < front.size() && front.size() > 3; ++i) {
-      const std::size_t m = front.size();
-      const int a = front[i], b = front[(i + 1) % m], c = front[(i + 2) % m];
-      if (!(turning(B.P[a], B.P[b], B.P[c]) < -t1)) continue;
+  while (front.size() > 3) {
+    const std::size_t m = front.size();
+    std::size_t best = m;
+    double best_turn = -t1;
+    for (std::size_t i = 0; i < m; ++i) {
+      const int a = front[(i + m - 1) % m], b = front[i], c = front[(i + 1) % m];
+      const double tau = turning(B.P[a], B.P[b], B.P[c]);
+      if (!(tau < best_turn)) continue;
       bool blocked = (B.P[a] - B.P[c]).norm() < 1e-9;
       for (std::size_t k = 0; k < m && !blocked; ++k)
         blocked = point_in_triangle(B.P[front[k]], B.P[c], B.P[b], B.P[a]);
       if (blocked) continue;
-      B.add_polygon({c, b, a}, 1, 0, 0);
-      front.erase(front.begin() + static_cast<long>((i + 1) % m));
-      changed = true;
+      best = i;
+      best_turn = tau;
     }
+    if (best == m) break;
+    B.add_polygon({front[(best + 1) % m], front[best], front[(best + m - 1) % m]}, 1, 0, 0);
+    front.erase(front.begin() + static_cast<long>(best));
   }
 
   // Stage 2 and growth: layers of quadrilaterals until the extent is reached.
@@ -270,9 +276,10 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
     std::vector<std::vector<int>> fan(m);
     std::vector<int> expanded(m, 0);
     for (std::size_t i = 0; i < m; ++i) {
-      const Vec2& p = B.P[front[(i + m - 1) % m]];
-      const Vec2& v = B.P[front[i]];
-      const Vec2& q = B.P[front[(i + 1) % m]];
+      // copies: add_vertex() below may reallocate B.P
+      const Vec2 p = B.P[front[(i + m - 1) % m]];
+      const Vec2 v = B.P[front[i]];
+      const Vec2 q = B.P[front[(i + 1) % m]];
       const double tau = turning(p, v, q);
       const Vec2 n1 = outward(p, v), n2 = outward(v, q);
       const double hole_angle = kPi - tau;
@@ -281,7 +288,10 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
         expanded[i] = 1;
         const int nq = tau > 150 * kDeg ? 2 : 1;
         const double step = tau / (2 * nq);
-        const double diag = std::min(1 / std::cos(step), std::sqrt(2.0));
+        // The paper's diagonal vertex v + l (n1 + n2) lies 2 cos(step) l out: a square corner at
+        // step = 45 deg, a 60/120 rhombus at 60 deg (whose outer corner then turns by only
+        // 60 deg, so the next layer does not expand it again). Below 45 deg, a right-angled kite.
+        const double diag = step >= kPi / 4 ? std::max(1.0, 2 * std::cos(step)) : 1 / std::cos(step);
         for (int k = 0; k <= 2 * nq; ++k)
           fan[i].push_back(B.add_vertex(v + l * (k % 2 ? diag : 1.0) * rotate(n1, k * step)));
       } else {

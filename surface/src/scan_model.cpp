@@ -216,13 +216,7 @@ ScanModel build_scan_model(const ScanMesh& scan, const ScanModelOptions& o) {
     g.dz_mm = (z.maxCoeff() - z.minCoeff()) / (g.n_z - 1);
   }
   const std::size_t n = g.size();
-  maps.r_skin.assign(n, 0.0f);
-  maps.r_bone.assign(n, 0.0f);
-  maps.thickness.assign(n, 0.0f);
-  maps.thickness_normal.assign(n, 0.0f);
-  maps.flags.assign(n, 0);
-  maps.measured_skin.assign(n, 0);
-  maps.measured_bone.assign(n, 0);
+  maps.allocate();
 
   // Faces touching the scan's open border: a hit there is on a cut edge of the scan.
   std::unordered_map<std::uint64_t, int> edges;

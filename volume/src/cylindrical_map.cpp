@@ -30,6 +30,12 @@ Eigen::Vector3d CylinderAxis::to_cylindrical(const Eigen::Vector3d& p) const {
   return {theta, z, radial.norm()};
 }
 
+void CylindricalMaps::allocate() {
+  const std::size_t n = grid.size();
+  for (auto* img : {&r_skin, &r_bone, &thickness, &thickness_normal}) img->assign(n, 0.0f);
+  for (auto* img : {&flags, &measured_skin, &measured_bone}) img->assign(n, 0);
+}
+
 std::string describe_flags(std::uint8_t flags) {
   if (flags == 0) return "valid";
   static const std::pair<std::uint8_t, const char*> kNames[] = {
@@ -319,13 +325,7 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
   }
 
   const std::size_t n = grid.size();
-  maps.r_skin.assign(n, 0.0f);
-  maps.r_bone.assign(n, 0.0f);
-  maps.thickness.assign(n, 0.0f);
-  maps.thickness_normal.assign(n, 0.0f);
-  maps.flags.assign(n, 0);
-  maps.measured_skin.assign(n, 0);
-  maps.measured_bone.assign(n, 0);
+  maps.allocate();
 
   const float lowest = *std::min_element(v.data.begin(), v.data.end());
   const Field intensity(v, lowest);

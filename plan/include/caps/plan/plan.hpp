@@ -97,6 +97,14 @@ struct Plan {
 /// The paper's Figure 2 rule for one path of n >= 2 points: 0..n-1 then n-2..1.
 std::vector<int> incision_to_loop(int n_points);
 
+/// The walk around the cut formed by `paths` (indices into `xy_mm`, local mm), starting at the
+/// first point of the first path, with the tissue on the left: the loop as point indices. For
+/// one path of n points this is incision_to_loop(n). Throws InvalidInput when the paths are not a
+/// tree (a cycle, disconnected, an index out of range, a repeated point or segment) or the first
+/// point is not an end of the cut.
+std::vector<int> walk_around_cut(const std::vector<Eigen::Vector2d>& xy_mm,
+                                 const std::vector<std::vector<int>>& paths);
+
 /// The border loop of a plan: for each loop node, the point it was copied from, and its
 /// position with the excision offsets applied.
 struct BorderLoop {

@@ -88,6 +88,8 @@ struct CylindricalMaps {
   std::vector<std::uint8_t> measured_bone;  ///< 1 where r_bone was measured, 0 where filled
 
   bool is_valid(int j, int k) const { return flags[grid.index(j, k)] == 0; }
+  /// Sizes every image to grid.size(), all zero (nothing measured yet).
+  void allocate();
 };
 
 /// The fill policy of every model (docs/model-format.md): values where known == 0 are replaced by

@@ -1,0 +1,66 @@
+#pragma once
+/// @brief The procedure library (the paper's menu of procedures): each template turns a few
+/// clinical parameters into the cutting path, the excision offsets and the suture pairs. The
+/// hand-worked topologies are documented with figures in docs/plan.md.
+///
+/// Templates are laid out in the local tangent frame (plan.hpp): x along the orientation, y to
+/// its left, mm, centred on the given point. Users can define their own procedure by listing
+/// points, paths, excisions and suture pairs in a procedure file (docs/plan-format.md) and reuse it.
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "caps/plan/plan.hpp"
+#include "caps/surface/patient_model.hpp"
+
+namespace caps::plan {
+
+/// One parameter of a template: its unit, default and clinical range (inclusive).
+struct ParameterInfo {
+  std::string name;
+  std::string unit;      ///< "mm", "deg" or "count"
+  double default_value = 0;
+  double min = 0, max = 0;
+  std::string meaning;
+};
+
+/// A template of the library.
+struct ProcedureInfo {
+  std::string name;      ///< e.g. "z-plasty"
+  std::string summary;
+  std::vector<ParameterInfo> parameters;   ///< besides the centre and the orientation
+};
+
+/// The library, in a fixed order.
+const std::vector<ProcedureInfo>& procedure_library();
+
+/// A procedure in local coordinates: what a template or a procedure file produces.
+struct LocalProcedure {
+  std::string name;
+  std::map<std::string, double> parameters;
+  std::vector<Eigen::Vector2d> points_mm;   ///< local frame, mm
+  std::vector<std::vector<int>> paths;
+  std::vector<ExcisionOffset> excisions;
+  std::vector<SuturePair> sutures;
+  std::string notes;
+};
+
+/// A template's layout from its parameters (missing ones take their defaults). Throws
+/// InvalidInput for an unknown template or parameter, or a value outside its clinical range.
+LocalProcedure layout_procedure(const std::string& name,
+                                const std::map<std::string, double>& parameters);
+
+/// Places a local procedure on the model at (theta, z) with the given orientation (deg from +z
+/// towards +theta): the frame, the points' (theta, z) and LPS. Does not check the plan; see
+/// check_plan().
+Plan place_procedure(const LocalProcedure& procedure, const PatientModel& model, double theta_deg,
+                     double z_mm, double orientation_deg);
+
+/// A user-defined procedure (a procedure file, "format": "caps-procedure"), as JSON text.
+LocalProcedure parse_procedure_json(const std::string& text, const std::string& source);
+std::string procedure_to_json(const LocalProcedure& procedure);
+/// A plan's procedure in its local frame, to save and reuse (the paper's "more flexible solution").
+LocalProcedure procedure_from_plan(const Plan& plan);
+
+}  // namespace caps::plan

@@ -1,0 +1,229 @@
+#include "caps/plan/check.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+
+#include "caps/core/error.hpp"
+#include "caps/plan/procedures.hpp"
+#include "caps/volume/cylindrical_map.hpp"
+
+namespace caps::plan {
+
+namespace {
+
+double cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); }
+
+// Whether segments pq and rs meet (touching or overlapping counts), in mm.
+bool segments_meet(const Eigen::Vector2d& p, const Eigen::Vector2d& q, const Eigen::Vector2d& r,
+                   const Eigen::Vector2d& s, double tol) {
+  auto dist_point_seg = [](const Eigen::Vector2d& x, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    const Eigen::Vector2d ab = b - a;
+    const double t = std::clamp((x - a).dot(ab) / std::max(ab.squaredNorm(), 1e-30), 0.0, 1.0);
+    return (a + t * ab - x).norm();
+  };
+  const double d1 = cross2(q - p, r - p), d2 = cross2(q - p, s - p);
+  const double d3 = cross2(s - r, p - r), d4 = cross2(s - r, q - r);
+  if (((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0)))
+    return true;
+  return dist_point_seg(p, r, s) < tol || dist_point_seg(q, r, s) < tol ||
+         dist_point_seg(r, p, q) < tol || dist_point_seg(s, p, q) < tol;
+}
+
+// Whether segments cross properly: each one's interior strictly separates the other's ends.
+bool segments_cross(const Eigen::Vector2d& p, const Eigen::Vector2d& q, const Eigen::Vector2d& r,
+                    const Eigen::Vector2d& s, double tol) {
+  const double lpq = (q - p).norm(), lrs = (s - r).norm();
+  if (lpq < tol || lrs < tol) return false;
+  const double d1 = cross2(q - p, r - p) / lpq, d2 = cross2(q - p, s - p) / lpq;
+  const double d3 = cross2(s - r, p - r) / lrs, d4 = cross2(s - r, q - r) / lrs;
+  return ((d1 > tol && d2 < -tol) || (d1 < -tol && d2 > tol)) &&
+         ((d3 > tol && d4 < -tol) || (d3 < -tol && d4 > tol));
+}
+
+std::string at(const Plan& plan, const Eigen::Vector2d& local) {
+  const Eigen::Vector2d tz = plan.frame.to_theta_z(local);
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "(theta %.2f deg, z %.2f mm)", tz[0], tz[1]);
+  return buf;
+}
+
+constexpr double kMinSegmentMm = 0.1;   // shorter cuts cannot be told apart from a point
+constexpr double kTouchMm = 0.05;       // cuts closer than this touch
+constexpr double kSampleMm = 0.25;      // edge sampling on the model
+
+}  // namespace
+
+double SutureLength::ratio() const {
+  const double lo = std::min(first_mm, second_mm), hi = std::max(first_mm, second_mm);
+  return lo > 0 ? hi / lo : INFINITY;
+}
+
+PlanReport check_plan_structure(const Plan& plan) {
+  if (plan.points.empty()) throw InvalidInput("the plan has no points");
+  for (std::size_t i = 0; i < plan.points.size(); ++i)
+    if (!std::isfinite(plan.points[i].theta_deg) || !std::isfinite(plan.points[i].z_mm))
+      throw InvalidInput(cat("point ", i, ": theta and z must be finite numbers"));
+  if (!plan.frame.local_to_theta_z.allFinite() ||
+      std::abs(plan.frame.local_to_theta_z.determinant()) < 1e-12)
+    throw InvalidInput("the plan's frame (local_to_theta_z) is singular or not finite");
+  // Parameters of a library procedure stay in their clinical range.
+  for (const auto& info : procedure_library()) {
+    if (info.name != plan.procedure) continue;
+    for (const auto& [k, v] : plan.parameters) {
+      auto it = std::find_if(info.parameters.begin(), info.parameters.end(),
+                             [&](const ParameterInfo& p) { return p.name == k; });
+      if (it == info.parameters.end()) continue;
+      if (!(v >= it->min && v <= it->max))
+        throw InvalidInput(cat(plan.procedure, ": parameter ", k, " = ", v, " ", it->unit,
+                               " is outside its clinical range [", it->min, ", ", it->max, "]"));
+    }
+  }
+  const BorderLoop loop = border_loop(plan);
+  const int n = loop.size();
+  PlanReport report;
+  report.n_points = static_cast<int>(plan.points.size());
+  report.n_loop = n;
+  report.n_sutures = static_cast<int>(plan.sutures.size());
+
+  // The cut: segments of positive length that meet only at shared points, without folding back.
+  struct Seg { int a, b; std::size_t path; };
+  std::vector<Seg> segs;
+  for (std::size_t p = 0; p < plan.paths.size(); ++p)
+    for (std::size_t i = 1; i < plan.paths[p].size(); ++i)
+      segs.push_back({plan.paths[p][i - 1], plan.paths[p][i], p});
+  std::vector<Eigen::Vector2d> xy(plan.points.size());
+  for (std::size_t i = 0; i < xy.size(); ++i)
+    xy[i] = plan.frame.to_local(plan.points[i].theta_deg, plan.points[i].z_mm);
+  for (const auto& s : segs)
+    if ((xy[s.a] - xy[s.b]).norm() < kMinSegmentMm)
+      throw InvalidInput(cat("path ", s.path, ": segment (", s.a, ",", s.b, ") is ",
+                             (xy[s.a] - xy[s.b]).norm(), " mm long at ", at(plan, xy[s.a]),
+                             "; points of a cut must be at least ", kMinSegmentMm, " mm apart"));
+  for (std::size_t i = 0; i < segs.size(); ++i)
+    for (std::size_t j = i + 1; j < segs.size(); ++j) {
+      const Seg &s = segs[i], &t = segs[j];
+      int shared = -1;
+      if (s.a == t.a || s.a == t.b) shared = s.a;
+      if (s.b == t.a || s.b == t.b) shared = s.b;
+      if (shared < 0) {
+        if (segments_meet(xy[s.a], xy[s.b], xy[t.a], xy[t.b], kTouchMm))
+          throw InvalidInput(cat("the cut crosses itself: segments (", s.a, ",", s.b, ") and (",
+                                 t.a, ",", t.b, ") meet near ", at(plan, xy[s.a])));
+        continue;
+      }
+      const int so = s.a == shared ? s.b : s.a, to = t.a == shared ? t.b : t.a;
+      const Eigen::Vector2d u = (xy[so] - xy[shared]).normalized(), v = (xy[to] - xy[shared]).normalized();
+      if (std::abs(cross2(u, v)) < 1e-3 && u.dot(v) > 0)
+        throw InvalidInput(cat("the cut overlaps itself: segments (", s.a, ",", s.b, ") and (", t.a,
+                               ",", t.b, ") leave point ", shared, " in the same direction"));
+    }
+  // Excisions must not make the border cross itself.
+  for (int i = 0; i < n; ++i)
+    for (int j = i + 2; j < n; ++j) {
+      if ((j + 1) % n == i) continue;
+      const auto &p = loop.local_mm[i], &q = loop.local_mm[(i + 1) % n];
+      const auto &r = loop.local_mm[j], &s = loop.local_mm[(j + 1) % n];
+      if (segments_cross(p, q, r, s, 1e-6))
+        throw InvalidInput(cat("the border crosses itself: loop edges (", i, ",", (i + 1) % n,
+                               ") and (", j, ",", (j + 1) % n, ") cross near ", at(plan, p),
+                               "; check the excision offsets"));
+    }
+  // The tissue lies left of the loop: an excision that swaps a node and its twin across the cut
+  // turns the border inside out (a counterclockwise loop).
+  double area2 = 0;
+  for (int i = 0; i < n; ++i) area2 += cross2(loop.local_mm[i], loop.local_mm[(i + 1) % n]);
+  if (area2 > 1e-6) {
+    int worst = 0;
+    for (const auto& x : plan.excisions) worst = x.loop_index;
+    for (const auto& x : plan.excisions) {
+      // The first moved node whose offset points to the right of its outgoing edge.
+      const auto d = loop.local_mm[(x.loop_index + 1) % n] - loop.local_mm[x.loop_index];
+      if (cross2(d, x.offset_mm) < 0) { worst = x.loop_index; break; }
+    }
+    throw InvalidInput(cat("the excision offsets turn the border inside out (it must keep the "
+                           "tissue on its left, running clockwise with superior up); check loop "
+                           "node ", worst, " and its twin: nodes 0..n-1 of a path lie on its left"));
+  }
+  // Sutures: border edges, each sewn once, never to itself.
+  std::map<std::pair<int, int>, int> used;
+  for (std::size_t k = 0; k < plan.sutures.size(); ++k) {
+    const auto& s = plan.sutures[k];
+    for (const BorderEdge& e : {s.first, s.second})
+      if (!is_border_edge(e, n))
+        throw InvalidInput(cat("suture ", k, " ((", s.first.a, ",", s.first.b, "),(", s.second.a,
+                               ",", s.second.b, ")): edge (", e.a, ",", e.b,
+                               ") is not on the border; border edges join consecutive nodes of "
+                               "the loop 0..", n - 1));
+    const auto q = oriented_suture(s, n);
+    if (q[0] == q[3])
+      throw InvalidInput(cat("suture ", k, ": edge (", s.first.a, ",", s.first.b,
+                             ") is sewn to itself"));
+    for (int e : {q[0], q[3]}) {
+      auto [it, fresh] = used.insert({{e, (e + 1) % n}, static_cast<int>(k)});
+      if (!fresh)
+        throw InvalidInput(cat("border edge (", e, ",", (e + 1) % n, ") is used by sutures ",
+                               it->second, " and ", k, "; each edge can be sewn once"));
+    }
+  }
+  std::string open;
+  for (int i = 0; i < n; ++i)
+    if (!used.count({i, (i + 1) % n})) open += cat(open.empty() ? "" : ", ", "(", i, ",", (i + 1) % n, ")");
+  if (!open.empty())
+    report.warnings.push_back(cat("border edges not sutured (the wound stays open there): ", open));
+  return report;
+}
+
+PlanReport check_plan(const Plan& plan, const PatientModel& model) {
+  PlanReport report = check_plan_structure(plan);
+  const BorderLoop loop = border_loop(plan);
+  const int n = loop.size();
+  const auto& g = model.grid();
+  const double z_lo = g.z0_mm, z_hi = g.z_mm(g.n_z - 1);
+  auto check_at = [&](const Eigen::Vector2d& tz, const std::string& what) {
+    if (!model.has_z(tz[1]))
+      throw InvalidInput(cat(what, " at (theta ", tz[0], " deg, z ", tz[1],
+                             " mm) is outside the model (z from ", z_lo, " to ", z_hi, " mm)"));
+    const auto f = model.flags_at(tz[0], tz[1]);
+    if (f != 0)
+      throw InvalidInput(cat(what, " at (theta ", tz[0], " deg, z ", tz[1],
+                             " mm) lies on cells without a valid skin and thickness (",
+                             describe_flags(f), "); move the plan where the model is valid"));
+  };
+  for (int i = 0; i < n; ++i)
+    check_at(loop.theta_z[i], cat("loop node ", i, " (point ", loop.point[i], ")"));
+  // Edge lengths on the skin, sampled densely in the local frame.
+  std::vector<double> len(n, 0.0);
+  for (int i = 0; i < n; ++i) {
+    const auto &p = loop.local_mm[i], &q = loop.local_mm[(i + 1) % n];
+    const int steps = std::max(1, static_cast<int>(std::ceil((q - p).norm() / kSampleMm)));
+    Eigen::Vector3d last = model.skin_point(loop.theta_z[i][0], loop.theta_z[i][1]);
+    for (int s = 1; s <= steps; ++s) {
+      const Eigen::Vector2d tz = plan.frame.to_theta_z(p + (q - p) * (double(s) / steps));
+      if (s < steps) check_at(tz, cat("loop edge (", i, ",", (i + 1) % n, ")"));
+      const Eigen::Vector3d x = model.skin_point(tz[0], tz[1]);
+      len[i] += (x - last).norm();
+      last = x;
+    }
+  }
+  // Each cut segment is traversed twice by the loop.
+  for (double l : len) report.cut_length_mm += 0.5 * l;
+  for (std::size_t k = 0; k < plan.sutures.size(); ++k) {
+    const auto q = oriented_suture(plan.sutures[k], n);
+    SutureLength sl{static_cast<int>(k), len[q[0]], len[q[3]]};
+    report.suture_lengths.push_back(sl);
+    if (sl.ratio() > kSutureRatioWarning) {
+      const auto& s = plan.sutures[k];
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%.1f and %.1f mm, ratio %.2f", sl.first_mm, sl.second_mm,
+                    sl.ratio());
+      report.warnings.push_back(cat("suture ", k, " ((", s.first.a, ",", s.first.b, "),(",
+                                    s.second.a, ",", s.second.b, ")): edges of ", buf,
+                                    "; expect puckering (a dog-ear) or tension"));
+    }
+  }
+  return report;
+}
+
+}  // namespace caps::plan

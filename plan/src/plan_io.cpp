@@ -1,0 +1,139 @@
+#include "caps/plan/plan_io.hpp"
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "caps/core/atomic_output.hpp"
+#include "caps/core/error.hpp"
+
+namespace caps::plan {
+
+using nlohmann::json;
+
+std::string plan_to_json(const Plan& plan, const PlanReport* report) {
+  json j;
+  j["format"] = "caps-plan";
+  j["format_version"] = kPlanFormatVersion;
+  j["units"] = {{"length", "mm"}, {"angle", "deg"}, {"frame", "LPS"}};
+  j["model"] = plan.model;
+  j["procedure"] = {{"name", plan.procedure}, {"parameters", plan.parameters}};
+  const auto& m = plan.frame.local_to_theta_z;
+  j["frame"] = {{"theta_deg", plan.frame.theta_deg},
+                {"z_mm", plan.frame.z_mm},
+                {"orientation_deg", plan.frame.orientation_deg},
+                {"local_to_theta_z", {{m(0, 0), m(0, 1)}, {m(1, 0), m(1, 1)}}}};
+  j["points"] = json::array();
+  for (const auto& p : plan.points)
+    j["points"].push_back({{"theta_deg", p.theta_deg}, {"z_mm", p.z_mm},
+                           {"lps", {p.lps.x(), p.lps.y(), p.lps.z()}}});
+  j["paths"] = plan.paths;
+  j["excisions"] = json::array();
+  for (const auto& e : plan.excisions)
+    j["excisions"].push_back(
+        {{"loop_index", e.loop_index}, {"offset_mm", {e.offset_mm.x(), e.offset_mm.y()}}});
+  j["sutures"] = json::array();
+  for (const auto& s : plan.sutures)
+    j["sutures"].push_back({{s.first.a, s.first.b}, {s.second.a, s.second.b}});
+  // Derived, for reading (ignored on load): the loop, its correspondence and positions.
+  try {
+    const BorderLoop loop = border_loop(plan);
+    json l = json::array();
+    for (int i = 0; i < loop.size(); ++i)
+      l.push_back({{"point", loop.point[i]}, {"theta_deg", loop.theta_z[i][0]},
+                   {"z_mm", loop.theta_z[i][1]}});
+    j["border_loop"] = l;
+    json q = json::array();
+    for (const auto& s : plan.sutures) q.push_back(oriented_suture(s, loop.size()));
+    j["suture_quadruples"] = q;
+  } catch (const InvalidInput&) {
+    // A plan being written need not be valid (e.g. a draft); check_plan() says why.
+  }
+  if (report) {
+    json r;
+    r["cut_length_mm"] = report->cut_length_mm;
+    r["suture_lengths_mm"] = json::array();
+    for (const auto& s : report->suture_lengths)
+      r["suture_lengths_mm"].push_back({s.first_mm, s.second_mm});
+    r["warnings"] = report->warnings;
+    j["check"] = r;
+  }
+  j["notes"] = plan.notes;
+  return j.dump(2) + "\n";
+}
+
+Plan parse_plan_json(const std::string& text, const std::string& source) {
+  json j;
+  try {
+    j = json::parse(text);
+  } catch (const json::exception& e) {
+    throw InvalidInput(cat(source, ": not valid JSON (", e.what(), ")"));
+  }
+  if (!j.is_object() || j.value("format", "") != "caps-plan")
+    throw InvalidInput(cat(source, ": not a caps plan (\"format\" must be \"caps-plan\")"));
+  const int version = j.value("format_version", 0);
+  if (version != kPlanFormatVersion)
+    throw InvalidInput(cat(source, ": plan format_version ", version,
+                           " is not supported (this caps reads version ", kPlanFormatVersion, ")"));
+  Plan plan;
+  std::string field;
+  try {
+    field = "model";
+    plan.model = j.value("model", "");
+    field = "procedure";
+    if (j.contains("procedure")) {
+      plan.procedure = j["procedure"].value("name", "custom");
+      if (j["procedure"].contains("parameters"))
+        plan.parameters = j["procedure"]["parameters"].get<std::map<std::string, double>>();
+    }
+    field = "frame";
+    const auto& f = j.at("frame");
+    plan.frame.theta_deg = f.at("theta_deg").get<double>();
+    plan.frame.z_mm = f.at("z_mm").get<double>();
+    plan.frame.orientation_deg = f.at("orientation_deg").get<double>();
+    const auto& m = f.at("local_to_theta_z");
+    plan.frame.local_to_theta_z << m.at(0).at(0).get<double>(), m.at(0).at(1).get<double>(),
+        m.at(1).at(0).get<double>(), m.at(1).at(1).get<double>();
+    field = "points";
+    for (const auto& p : j.at("points")) {
+      SkinPoint s;
+      s.theta_deg = p.at("theta_deg").get<double>();
+      s.z_mm = p.at("z_mm").get<double>();
+      if (p.contains("lps")) s.lps = {p["lps"].at(0).get<double>(), p["lps"].at(1).get<double>(), p["lps"].at(2).get<double>()};
+      plan.points.push_back(s);
+    }
+    field = "paths";
+    plan.paths = j.at("paths").get<std::vector<std::vector<int>>>();
+    field = "excisions";
+    if (j.contains("excisions"))
+      for (const auto& e : j["excisions"])
+        plan.excisions.push_back({e.at("loop_index").get<int>(),
+                                  {e.at("offset_mm").at(0).get<double>(), e.at("offset_mm").at(1).get<double>()}});
+    field = "sutures";
+    for (const auto& s : j.at("sutures")) {
+      if (s.size() != 2 || s.at(0).size() != 2 || s.at(1).size() != 2)
+        throw InvalidInput(cat(source, ": sutures: each entry is [[a,b],[c,d]], got ", s.dump()));
+      plan.sutures.push_back({{s[0][0].get<int>(), s[0][1].get<int>()}, {s[1][0].get<int>(), s[1][1].get<int>()}});
+    }
+    field = "notes";
+    plan.notes = j.value("notes", "");
+  } catch (const json::exception& e) {
+    throw InvalidInput(cat(source, ": field \"", field, "\": ", e.what(),
+                           "; see docs/plan-format.md"));
+  }
+  return plan;
+}
+
+Plan read_plan(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) throw IoError(cat(path.string(), ": cannot read the plan file"));
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return parse_plan_json(ss.str(), path.string());
+}
+
+void write_plan(const std::filesystem::path& path, const Plan& plan, const PlanReport* report) {
+  write_text_atomic(path, plan_to_json(plan, report));
+}
+
+}  // namespace caps::plan

@@ -1,0 +1,318 @@
+#include "caps/plan/procedures.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
+
+namespace caps::plan {
+
+namespace {
+
+using V2 = Eigen::Vector2d;
+
+SuturePair sp(int a, int b, int c, int d) { return {{a, b}, {c, d}}; }
+
+// Ellipse and W-plasty: one path from apex to apex, every interior point moved off its twin,
+// each edge sewn to its twin edge; the apices are corners (CAPS 1992, Figure 1).
+std::vector<SuturePair> twin_sutures(int n_path) {
+  const int n_loop = 2 * n_path - 2;
+  auto twin = [&](int k) { return (k == 0 || k == n_path - 1) ? k : n_loop - k; };
+  std::vector<SuturePair> s;
+  for (int k = 0; k + 1 < n_path; ++k) s.push_back(sp(k, k + 1, twin(k), twin(k + 1)));
+  return s;
+}
+
+LocalProcedure ellipse(std::map<std::string, double>& p) {
+  const double L = p["length"];
+  double W = p["width"];
+  if (p.count("apex_angle")) W = L * std::tan(deg_to_rad(p["apex_angle"]) / 2);
+  const double apex = rad_to_deg(2 * std::atan(W / L));
+  if (!(apex >= 15 && apex <= 90))
+    throw InvalidInput(cat("ellipse: length ", L, " mm and width ", W, " mm give an apex angle of ",
+                           apex, " deg; keep it between 15 and 90 deg (about 30 deg avoids "
+                           "dog-ears: length about 3.5 x width)"));
+  p["width"] = W;
+  p["apex_angle"] = apex;
+  // The surgeon's points 0..3 along the axis; 1, 2 and their twins 5, 4 moved onto a lens
+  // (two circular arcs) of the given length and width.
+  const double R = (L * L / 4 + W * W / 4) / W;
+  const double y = std::sqrt(R * R - L * L / 36) - (R - W / 2);
+  LocalProcedure out;
+  out.points_mm = {V2(-L / 2, 0), V2(-L / 6, 0), V2(L / 6, 0), V2(L / 2, 0)};
+  out.paths = {{0, 1, 2, 3}};
+  out.excisions = {{1, V2(0, y)}, {2, V2(0, y)}, {4, V2(0, -y)}, {5, V2(0, -y)}};
+  out.sutures = {sp(0, 1, 0, 5), sp(1, 2, 5, 4), sp(2, 3, 4, 3)};  // the paper's list
+  out.notes = "Elliptical (fusiform) excision, CAPS 1992 Figure 1: surgeon points 0..3 along the "
+              "axis; 4 and 5 start on 2 and 1 and are moved (with 1 and 2) to enclose the lens.";
+  return out;
+}
+
+LocalProcedure z_plasty(std::map<std::string, double>& p) {
+  const double L = p["length"], a = deg_to_rad(p["angle"]);
+  const V2 limb = L * V2(std::cos(a), std::sin(a));
+  LocalProcedure out;
+  const V2 p1(-L / 2, 0), p2(L / 2, 0);
+  out.points_mm = {p1 + limb, p1, p2, p2 - limb};
+  out.paths = {{0, 1, 2, 3}};
+  out.sutures = {sp(5, 0, 5, 4), sp(2, 1, 2, 3), sp(0, 1, 3, 4)};  // the paper's list
+  out.notes = "Z-plasty, CAPS 1992 Figure 2: path 0,1,2,3 (central limb 1-2 along the "
+              "orientation); loop 0..5 with 4 on 2 and 5 on 1. Flap tips at 1 and 4 transpose: "
+              "0 meets 4, 1 meets 3; 2 and 5 are closed corners.";
+  return out;
+}
+
+LocalProcedure multiple_z(std::map<std::string, double>& p) {
+  const int n = static_cast<int>(std::lround(p["segments"]));
+  p["segments"] = n;
+  const double seg = p["length"] / n, a = deg_to_rad(p["angle"]);
+  const V2 limb = seg * V2(std::cos(a), std::sin(a));
+  LocalProcedure out;
+  // Central points c_0..c_n are 0..n; limb ends p_i = c_i + limb (i < n), q_i = c_i - limb (i > 0).
+  for (int i = 0; i <= n; ++i) out.points_mm.push_back(V2(-p["length"] / 2 + i * seg, 0));
+  std::vector<int> pi(n), qi(n + 1, -1);
+  for (int i = 0; i < n; ++i) {
+    pi[i] = static_cast<int>(out.points_mm.size());
+    out.points_mm.push_back(out.points_mm[i] + limb);
+  }
+  for (int i = 1; i <= n; ++i) {
+    qi[i] = static_cast<int>(out.points_mm.size());
+    out.points_mm.push_back(out.points_mm[i] - limb);
+  }
+  out.paths.push_back({pi[0], 0});
+  for (int i = 0; i < n; ++i) out.paths.back().push_back(i + 1);
+  out.paths.back().push_back(qi[n]);
+  for (int i = 1; i < n; ++i) out.paths.push_back({qi[i], i, pi[i]});
+  // Each Z (p_i, c_i, c_i+1, q_i+1) is sutured like the paper's: with E(u,v) the loop edge
+  // running from u to v, {E(b,a), E(c,b)}, {E(b,c), E(c,d)}, {E(a,b), E(d,c)}.
+  const std::vector<int> loop = walk_around_cut(out.points_mm, out.paths);
+  const int nl = static_cast<int>(loop.size());
+  auto E = [&](int u, int v) {
+    for (int i = 0; i < nl; ++i)
+      if (loop[i] == u && loop[(i + 1) % nl] == v) return BorderEdge{i, (i + 1) % nl};
+    throw Error("multiple-z-plasty: internal error, a segment missing from the loop");
+  };
+  for (int i = 0; i < n; ++i) {
+    const int a = pi[i], b = i, c = i + 1, d = qi[i + 1];
+    out.sutures.push_back({E(b, a), E(c, b)});
+    out.sutures.push_back({E(b, c), E(c, d)});
+    out.sutures.push_back({E(a, b), E(d, c)});
+  }
+  out.notes = cat(n, " Z-plasties in series sharing one central line; at each inner point the "
+                  "limbs of two neighbouring Zs form one straight cut. Each Z is sutured like the "
+                  "paper's Z-plasty.");
+  return out;
+}
+
+LocalProcedure w_plasty(std::map<std::string, double>& p) {
+  const double L = p["length"], h = p["width"] / 2, limb = p["limb"], a = deg_to_rad(p["angle"]);
+  const double pitch = limb * std::sin(a / 2), amp = limb * std::cos(a / 2) / 2;
+  const int m = std::max(1, static_cast<int>(std::lround(L / pitch)) - 1);
+  const double dx = L / (m + 1);
+  LocalProcedure out;
+  out.points_mm.push_back(V2(-L / 2, 0));
+  for (int k = 1; k <= m; ++k) out.points_mm.push_back(V2(-L / 2 + k * dx, (k % 2 ? amp : -amp)));
+  out.points_mm.push_back(V2(L / 2, 0));
+  const int np = m + 2, n_loop = 2 * np - 2;
+  out.paths.push_back({});
+  for (int k = 0; k < np; ++k) out.paths[0].push_back(k);
+  for (int k = 1; k <= m; ++k) {
+    out.excisions.push_back({k, V2(0, h)});
+    out.excisions.push_back({n_loop - k, V2(0, -h)});
+  }
+  std::sort(out.excisions.begin(), out.excisions.end(),
+            [](const ExcisionOffset& x, const ExcisionOffset& y) { return x.loop_index < y.loop_index; });
+  out.sutures = twin_sutures(np);
+  p["teeth"] = m;
+  out.notes = "W-plasty: the surgeon's zigzag along the scar, both sides moved apart by the width; "
+              "the two zigzags are translates of each other and interdigitate when closed.";
+  return out;
+}
+
+LocalProcedure rhomboid(std::map<std::string, double>& p) {
+  const double L = p["side"], s3 = std::sqrt(3.0);
+  LocalProcedure out;
+  // Rhombus A B C D (60 deg at A and C, long diagonal C->A along the orientation), flap cut
+  // D -> E (the short diagonal extended) -> F (parallel to D->C). Path F, E, D, C, B.
+  const V2 A(s3 / 2 * L, 0), C(-s3 / 2 * L, 0), E(0, -1.5 * L), F(-s3 / 2 * L, -L);
+  const V2 D(0, -0.5 * L), B(0, 0.5 * L);
+  out.points_mm = {F, E, D, C, B};
+  out.paths = {{0, 1, 2, 3, 4}};
+  out.excisions = {{5, A - C}};  // the twin of C becomes the rhombus corner A
+  out.sutures = {sp(1, 2, 5, 4), sp(3, 2, 3, 4), sp(0, 1, 6, 5), sp(7, 0, 7, 6)};
+  out.notes = "Rhomboid (Limberg) flap: loop F0 E1 D2 C3 B4 A5 D'6 E'7. The flap D-E-F-C turns "
+              "60 deg about C into the defect: E meets A, D meets B, F meets D'; C and E' are "
+              "closed corners.";
+  return out;
+}
+
+struct Template {
+  ProcedureInfo info;
+  LocalProcedure (*layout)(std::map<std::string, double>&);
+};
+
+const std::vector<Template>& templates() {
+  static const std::vector<Template> t = {
+      {{"ellipse", "elliptical (fusiform) excision, the paper's Figure 1",
+        {{"length", "mm", 30, 5, 150, "apex to apex"},
+         {"width", "mm", 10, 1, 60, "widest point (or give apex_angle)"},
+         {"apex_angle", "deg", 36.87, 15, 90, "angle at each apex; sets the width"}}},
+       ellipse},
+      {{"z-plasty", "Z-plasty (transposition of two triangular flaps), the paper's Figure 2",
+        {{"length", "mm", 20, 5, 80, "central limb (and each lateral limb)"},
+         {"angle", "deg", 60, 30, 90, "between each lateral limb and the central limb"}}},
+       z_plasty},
+      {{"multiple-z-plasty", "serial Z-plasties along one central line",
+        {{"length", "mm", 45, 10, 200, "the whole central line"},
+         {"angle", "deg", 60, 30, 90, "between lateral and central limbs"},
+         {"segments", "count", 3, 2, 8, "number of Z-plasties"}}},
+       multiple_z},
+      {{"w-plasty", "W-plasty: zigzag excision of a scar with interdigitating closure",
+        {{"length", "mm", 30, 10, 150, "along the scar"},
+         {"width", "mm", 3, 1, 15, "how far the two zigzags are moved apart"},
+         {"limb", "mm", 6, 3, 10, "each zigzag limb"},
+         {"angle", "deg", 60, 50, 120, "at each tooth"}}},
+       w_plasty},
+      {{"rhomboid", "rhomboid (Limberg) transposition flap closing a rhombic defect",
+        {{"side", "mm", 15, 5, 50, "side of the 60/120 deg rhombus (and of the flap)"}}},
+       rhomboid},
+  };
+  return t;
+}
+
+}  // namespace
+
+const std::vector<ProcedureInfo>& procedure_library() {
+  static const std::vector<ProcedureInfo> lib = [] {
+    std::vector<ProcedureInfo> v;
+    for (const auto& t : templates()) v.push_back(t.info);
+    return v;
+  }();
+  return lib;
+}
+
+LocalProcedure layout_procedure(const std::string& name,
+                                const std::map<std::string, double>& given) {
+  auto it = std::find_if(templates().begin(), templates().end(),
+                         [&](const Template& t) { return t.info.name == name; });
+  if (it == templates().end()) {
+    std::string names;
+    for (const auto& t : templates()) names += (names.empty() ? "" : ", ") + t.info.name;
+    throw InvalidInput(cat("unknown procedure '", name, "'; the library has: ", names,
+                           " (or give a procedure file, *.json)"));
+  }
+  std::map<std::string, double> p;
+  for (const auto& info : it->info.parameters)
+    if (info.name != "apex_angle") p[info.name] = info.default_value;
+  for (const auto& [k, v] : given) {
+    auto pi = std::find_if(it->info.parameters.begin(), it->info.parameters.end(),
+                           [&](const ParameterInfo& x) { return x.name == k; });
+    if (pi == it->info.parameters.end()) {
+      std::string names;
+      for (const auto& x : it->info.parameters) names += (names.empty() ? "" : ", ") + x.name;
+      throw InvalidInput(cat(name, ": no parameter '", k, "'; it takes ", names));
+    }
+    if (!(v >= pi->min && v <= pi->max))
+      throw InvalidInput(cat(name, ": ", k, " = ", v, " ", pi->unit,
+                             " is outside its clinical range [", pi->min, ", ", pi->max, "] ",
+                             pi->unit));
+    p[k] = v;
+  }
+  LocalProcedure out = it->layout(p);
+  out.name = name;
+  out.parameters = p;
+  return out;
+}
+
+Plan place_procedure(const LocalProcedure& proc, const PatientModel& model, double theta_deg,
+                     double z_mm, double orientation_deg) {
+  Plan plan;
+  plan.procedure = proc.name.empty() ? "custom" : proc.name;
+  plan.parameters = proc.parameters;
+  plan.frame = make_frame(model, theta_deg, z_mm, orientation_deg);
+  for (const auto& xy : proc.points_mm) {
+    const Eigen::Vector2d tz = plan.frame.to_theta_z(xy);
+    plan.points.push_back({tz[0], tz[1], model.skin_point(tz[0], tz[1])});
+  }
+  plan.paths = proc.paths;
+  plan.excisions = proc.excisions;
+  plan.sutures = proc.sutures;
+  plan.notes = proc.notes;
+  return plan;
+}
+
+namespace {
+
+using nlohmann::json;
+
+json sutures_json(const std::vector<SuturePair>& s) {
+  json a = json::array();
+  for (const auto& x : s) a.push_back({{x.first.a, x.first.b}, {x.second.a, x.second.b}});
+  return a;
+}
+
+}  // namespace
+
+std::string procedure_to_json(const LocalProcedure& p) {
+  json j;
+  j["format"] = "caps-procedure";
+  j["format_version"] = 1;
+  j["name"] = p.name;
+  j["units"] = {{"length", "mm"}};
+  j["frame"] = "local tangent plane: x along the orientation, y to its left (seen from outside)";
+  j["points_mm"] = json::array();
+  for (const auto& x : p.points_mm) j["points_mm"].push_back({x.x(), x.y()});
+  j["paths"] = p.paths;
+  j["excisions"] = json::array();
+  for (const auto& e : p.excisions)
+    j["excisions"].push_back({{"loop_index", e.loop_index}, {"offset_mm", {e.offset_mm.x(), e.offset_mm.y()}}});
+  j["sutures"] = sutures_json(p.sutures);
+  j["notes"] = p.notes;
+  return j.dump(2);
+}
+
+LocalProcedure parse_procedure_json(const std::string& text, const std::string& source) {
+  json j;
+  try {
+    j = json::parse(text);
+  } catch (const json::exception& e) {
+    throw InvalidInput(cat(source, ": not valid JSON (", e.what(), ")"));
+  }
+  try {
+    if (j.value("format", "") != "caps-procedure")
+      throw InvalidInput(cat(source, ": \"format\" must be \"caps-procedure\""));
+    if (j.value("format_version", 0) != 1)
+      throw InvalidInput(cat(source, ": format_version ", j.value("format_version", 0),
+                             " is not supported (this caps reads version 1)"));
+    LocalProcedure p;
+    p.name = j.value("name", "custom");
+    for (const auto& x : j.at("points_mm")) p.points_mm.push_back(V2(x.at(0).get<double>(), x.at(1).get<double>()));
+    p.paths = j.at("paths").get<std::vector<std::vector<int>>>();
+    if (j.contains("excisions"))
+      for (const auto& e : j["excisions"])
+        p.excisions.push_back({e.at("loop_index").get<int>(),
+                               V2(e.at("offset_mm").at(0).get<double>(), e.at("offset_mm").at(1).get<double>())});
+    for (const auto& s : j.at("sutures"))
+      p.sutures.push_back(sp(s.at(0).at(0), s.at(0).at(1), s.at(1).at(0), s.at(1).at(1)));
+    p.notes = j.value("notes", "");
+    return p;
+  } catch (const json::exception& e) {
+    throw InvalidInput(cat(source, ": ", e.what(), "; see docs/plan-format.md (procedure files)"));
+  }
+}
+
+LocalProcedure procedure_from_plan(const Plan& plan) {
+  LocalProcedure p;
+  p.name = plan.procedure;
+  p.parameters = plan.parameters;
+  for (const auto& x : plan.points) p.points_mm.push_back(plan.frame.to_local(x.theta_deg, x.z_mm));
+  p.paths = plan.paths;
+  p.excisions = plan.excisions;
+  p.sutures = plan.sutures;
+  p.notes = plan.notes;
+  return p;
+}
+
+}  // namespace caps::plan

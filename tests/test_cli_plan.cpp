@@ -1,0 +1,99 @@
+// `caps plan` as a user runs it on a small phantom model: plans are made, checked and drawn; bad
+// plans and bad options exit with code 2, a message naming the problem, and no output file.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct CliRun {
+  int code;
+  std::string out;
+};
+
+CliRun caps(const std::string& args) {
+  const std::string cmd = std::string(CAPS_EXE) + " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buf{};
+  while (fgets(buf.data(), buf.size(), p)) out += buf.data();
+  const int status = pclose(p);
+  return {WEXITSTATUS(status), out};
+}
+
+const fs::path kTmp = fs::temp_directory_path() / "caps_test_cli_plan";
+const std::string kModel = (kTmp / "model").string();
+
+class CliPlan : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    fs::remove_all(kTmp);
+    fs::create_directories(kTmp);
+    const std::string ct = (kTmp / "ct.nii.gz").string();
+    ASSERT_EQ(caps("phantom -q -o " + ct + " --size 96,96,90 --spacing 2.5,2.5,2.5").code, 0);
+    ASSERT_EQ(caps("model from-volume -q " + ct + " -o " + kModel + " --n-theta 128 --n-z 64").code, 0);
+  }
+};
+
+std::string p(const std::string& name) { return (kTmp / name).string(); }
+
+void expect_refused(const std::string& args, const std::string& out, const std::string& what) {
+  fs::remove(out);
+  const CliRun r = caps(args);
+  EXPECT_EQ(r.code, 2) << args << "\n" << r.out;
+  EXPECT_NE(r.out.find(what), std::string::npos) << r.out << "\n  lacks: " << what;
+  EXPECT_FALSE(fs::exists(out)) << out;
+}
+
+}  // namespace
+
+TEST_F(CliPlan, MakesChecksAndDrawsEveryTemplate) {
+  const CliRun t = caps("plan templates --json");
+  ASSERT_EQ(t.code, 0);
+  const auto lib = nlohmann::json::parse(t.out);
+  ASSERT_GE(lib.size(), 5u);
+  for (const auto& entry : lib) {
+    const std::string name = entry["name"], plan = p(name + ".json"), png = p(name + ".png");
+    const CliRun n = caps("plan new " + name + " --model " + kModel + " --at 0,60 --orientation 90 -q -o " + plan);
+    ASSERT_EQ(n.code, 0) << n.out;
+    EXPECT_EQ(caps("plan check -q " + plan).code, 0);
+    const CliRun s = caps("plan show -q " + plan + " -o " + png);
+    EXPECT_EQ(s.code, 0) << s.out;
+    EXPECT_GT(fs::file_size(png), 1000u);
+  }
+  const auto z = nlohmann::json::parse(std::ifstream(p("z-plasty.json")));
+  EXPECT_EQ(z["sutures"], nlohmann::json::parse("[[[5,0],[5,4]],[[2,1],[2,3]],[[0,1],[3,4]]]"));
+  EXPECT_EQ(z["border_loop"].size(), 6u);
+  // A saved procedure is reused elsewhere.
+  ASSERT_EQ(caps("plan save-procedure -q " + p("z-plasty.json") + " -o " + p("my_z.json")).code, 0);
+  EXPECT_EQ(caps("plan new " + p("my_z.json") + " --model " + kModel + " --at 40,50 -q -o " + p("z2.json")).code, 0);
+}
+
+TEST_F(CliPlan, RefusesBadPlansWithoutOutput) {
+  const std::string out = p("bad.json");
+  const std::string m = " --model " + kModel;
+  expect_refused("plan new z-plasty" + m + " --at 0,60 --angle 20 -o " + out, out, "clinical range");
+  expect_refused("plan new q-plasty" + m + " --at 0,60 -o " + out, out, "unknown procedure");
+  expect_refused("plan new z-plasty" + m + " --at 0,900 -o " + out, out, "outside the model");
+  expect_refused("plan new z-plasty" + m + " --at 0 -o " + out, out, "--at '0'");
+  expect_refused("plan new z-plasty --model " + p("nowhere") + " --at 0,60 -o " + out, out, "nowhere");
+  expect_refused("plan new ellipse" + m + " --at 0,95 -o " + out, out, "loop node 3 (point 3)");
+  // An existing output needs --force.
+  ASSERT_EQ(caps("plan new z-plasty" + m + " --at 0,60 -q -o " + out).code, 0);
+  EXPECT_EQ(caps("plan new z-plasty" + m + " --at 0,60 -q -o " + out).code, 2);
+  // A hand-edited plan whose suture names an edge off the border.
+  auto j = nlohmann::json::parse(std::ifstream(out));
+  j["sutures"][0] = nlohmann::json::parse("[[0,2],[3,4]]");
+  std::ofstream(p("edited.json")) << j.dump();
+  const CliRun r = caps("plan check " + p("edited.json"));
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("(0,2) is not on the border"), std::string::npos) << r.out;
+  expect_refused("plan show " + p("edited.json") + " -o " + p("edited.png"), p("edited.png"), "(0,2)");
+}

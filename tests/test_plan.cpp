@@ -1,0 +1,336 @@
+// caps::plan: the paper's rules (Figure 2 incision to loop, Figure 1 excision, suture pairs), the
+// procedure library against hand-worked loops and suture lists, plan files, and a catalogue of
+// plans that cannot be operated. The model is an analytic cylinder built in memory.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numeric>
+
+#include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
+#include "caps/plan/check.hpp"
+#include "caps/plan/plan.hpp"
+#include "caps/plan/plan_io.hpp"
+#include "caps/plan/procedures.hpp"
+
+using namespace caps;
+using namespace caps::plan;
+
+namespace {
+
+constexpr double kR = 80.0;  // skin radius of the test cylinder, mm
+
+// A cylinder of radius 80 mm, z from -50 to 150 mm, 6 mm of soft tissue, with a patch of cells
+// without bone at theta 30..40 deg, z 20..30 mm.
+const PatientModel& cylinder() {
+  static const PatientModel model = [] {
+    CylindricalMaps m;
+    m.grid.n_theta = 720;
+    m.grid.n_z = 401;
+    m.grid.theta0_deg = -180;
+    m.grid.z0_mm = -50;
+    m.grid.dz_mm = 0.5;
+    const std::size_t n = m.grid.size();
+    m.r_skin.assign(n, kR);
+    m.r_bone.assign(n, kR - 6);
+    m.thickness.assign(n, 6);
+    m.thickness_normal.assign(n, 6);
+    m.flags.assign(n, 0);
+    m.measured_skin.assign(n, 1);
+    m.measured_bone.assign(n, 1);
+    for (int k = 0; k < m.grid.n_z; ++k)
+      for (int j = 0; j < m.grid.n_theta; ++j)
+        if (m.grid.theta_deg(j) >= 30 && m.grid.theta_deg(j) <= 40 && m.grid.z_mm(k) >= 20 &&
+            m.grid.z_mm(k) <= 30)
+          m.flags[m.grid.index(j, k)] = kNoBone;
+    return PatientModel(std::move(m));
+  }();
+  return model;
+}
+
+Plan placed(const std::string& name, const std::map<std::string, double>& p = {},
+            double theta = 0, double z = 60, double orientation = 90) {
+  return place_procedure(layout_procedure(name, p), cylinder(), theta, z, orientation);
+}
+
+std::vector<SuturePair> pairs(std::initializer_list<std::array<int, 4>> q) {
+  std::vector<SuturePair> v;
+  for (const auto& x : q) v.push_back({{x[0], x[1]}, {x[2], x[3]}});
+  return v;
+}
+
+// Every border edge sewn exactly once, and the nodes brought together form consistent groups.
+void expect_closed(const Plan& plan) {
+  const BorderLoop loop = border_loop(plan);
+  std::vector<int> uses(loop.size(), 0);
+  for (const auto& s : plan.sutures) {
+    const auto q = oriented_suture(s, loop.size());
+    ++uses[q[0]];
+    ++uses[q[3]];
+  }
+  for (int i = 0; i < loop.size(); ++i) EXPECT_EQ(uses[i], 1) << "border edge " << i;
+}
+
+}  // namespace
+
+TEST(PlanRules, IncisionToLoopIsFigure2) {
+  EXPECT_EQ(incision_to_loop(4), (std::vector<int>{0, 1, 2, 3, 2, 1}));
+  EXPECT_EQ(incision_to_loop(2), (std::vector<int>{0, 1}));
+  EXPECT_EQ(incision_to_loop(5), (std::vector<int>{0, 1, 2, 3, 4, 3, 2, 1}));
+  EXPECT_THROW(incision_to_loop(1), InvalidInput);
+  // The walk around a single path is the same rule, whatever the path's shape.
+  std::vector<Eigen::Vector2d> xy = {{0, 0}, {5, 3}, {9, -2}, {14, 1}, {20, 0}};
+  EXPECT_EQ(walk_around_cut(xy, {{0, 1, 2, 3, 4}}), incision_to_loop(5));
+}
+
+TEST(PlanRules, SutureOrientationFollowsTheLoop) {
+  // The paper's ellipse and Z-plasty pairs: a meets c, b meets d after orientation.
+  EXPECT_EQ(oriented_suture({{0, 1}, {0, 5}}, 6), (std::array<int, 4>{0, 1, 0, 5}));
+  EXPECT_EQ(oriented_suture({{1, 2}, {5, 4}}, 6), (std::array<int, 4>{1, 2, 5, 4}));
+  EXPECT_EQ(oriented_suture({{2, 3}, {4, 3}}, 6), (std::array<int, 4>{2, 3, 4, 3}));
+  EXPECT_EQ(oriented_suture({{5, 0}, {5, 4}}, 6), (std::array<int, 4>{5, 0, 5, 4}));
+  EXPECT_EQ(oriented_suture({{2, 1}, {2, 3}}, 6), (std::array<int, 4>{1, 2, 3, 2}));
+  EXPECT_EQ(oriented_suture({{0, 1}, {3, 4}}, 6), (std::array<int, 4>{0, 1, 4, 3}));
+  EXPECT_THROW(oriented_suture({{0, 2}, {3, 4}}, 6), InvalidInput);
+}
+
+TEST(PlanLibrary, ZPlastyIsThePapersFigure2) {
+  const Plan plan = placed("z-plasty", {{"length", 20}, {"angle", 60}});
+  const BorderLoop loop = border_loop(plan);
+  EXPECT_EQ(loop.point, (std::vector<int>{0, 1, 2, 3, 2, 1}));
+  EXPECT_LT((loop.local_mm[4] - loop.local_mm[2]).norm(), 1e-9);
+  EXPECT_LT((loop.local_mm[5] - loop.local_mm[1]).norm(), 1e-9);
+  EXPECT_EQ(plan.sutures, pairs({{5, 0, 5, 4}, {2, 1, 2, 3}, {0, 1, 3, 4}}));
+  const WoundBorder w = wound_border(plan);
+  EXPECT_EQ(w.sutures, (std::vector<std::array<int, 4>>{{5, 0, 5, 4}, {1, 2, 3, 2}, {0, 1, 4, 3}}));
+  ASSERT_EQ(w.loop_theta_z.size(), 6u);
+  // Limbs of 20 mm at 60 degrees to the central limb, measured on the skin.
+  const PlanReport r = check_plan(plan, cylinder());
+  EXPECT_TRUE(r.warnings.empty()) << r.warnings.front();
+  EXPECT_NEAR(r.cut_length_mm, 60.0, 0.6);
+  const Eigen::Vector2d u = loop.local_mm[0] - loop.local_mm[1], v = loop.local_mm[2] - loop.local_mm[1];
+  EXPECT_NEAR(rad_to_deg(std::acos(u.normalized().dot(v.normalized()))), 60.0, 1e-6);
+  // The flap tips (nodes 1 and 4) are the acute corners on their tissue side: the tissue lies
+  // left of the loop, so the turn there is to the left.
+  auto turn = [&](int i) {
+    const Eigen::Vector2d a = loop.local_mm[(i + 5) % 6], b = loop.local_mm[i], c = loop.local_mm[(i + 1) % 6];
+    const Eigen::Vector2d d1 = b - a, d2 = c - b;
+    return d1.x() * d2.y() - d1.y() * d2.x();
+  };
+  EXPECT_GT(turn(1), 0);
+  expect_closed(plan);
+}
+
+TEST(PlanLibrary, EllipseIsThePapersFigure1) {
+  const Plan plan = placed("ellipse", {{"length", 30}, {"width", 10}});
+  const BorderLoop loop = border_loop(plan);
+  EXPECT_EQ(loop.point, (std::vector<int>{0, 1, 2, 3, 2, 1}));
+  EXPECT_EQ(plan.sutures, pairs({{0, 1, 0, 5}, {1, 2, 5, 4}, {2, 3, 4, 3}}));
+  // 4 and 5 started on 2 and 1 and were moved across the axis; 1 and 2 to the other side.
+  EXPECT_NEAR(loop.local_mm[1].y(), -loop.local_mm[5].y(), 1e-9);
+  EXPECT_NEAR(loop.local_mm[2].y(), -loop.local_mm[4].y(), 1e-9);
+  EXPECT_GT(loop.local_mm[1].y(), 3.0);
+  EXPECT_NEAR(loop.local_mm[3].x() - loop.local_mm[0].x(), 30.0, 1e-9);
+  EXPECT_NEAR(plan.parameters.at("apex_angle"), rad_to_deg(2 * std::atan(10.0 / 30.0)), 1e-9);
+  const PlanReport r = check_plan(plan, cylinder());
+  EXPECT_TRUE(r.warnings.empty());
+  for (const auto& s : r.suture_lengths) EXPECT_NEAR(s.ratio(), 1.0, 0.02);
+  expect_closed(plan);
+  // The apex angle sets the width.
+  const Plan narrow = placed("ellipse", {{"length", 40}, {"apex_angle", 30}});
+  EXPECT_NEAR(narrow.parameters.at("width"), 40 * std::tan(deg_to_rad(15)), 1e-9);
+}
+
+TEST(PlanLibrary, MultipleZPlastyWalksAroundTheBranchingCut) {
+  const Plan plan = placed("multiple-z-plasty", {{"segments", 2}, {"length", 30}});
+  const BorderLoop loop = border_loop(plan);
+  // Points: centre line 0,1,2; limb ends p0 = 3, p1 = 4, q1 = 5, q2 = 6 (worked by hand in
+  // docs/plan.md).
+  EXPECT_EQ(loop.point, (std::vector<int>{3, 0, 1, 4, 1, 2, 6, 2, 1, 5, 1, 0}));
+  EXPECT_EQ(plan.sutures, pairs({{11, 0, 10, 11}, {1, 2, 8, 9}, {0, 1, 9, 10},
+                                 {2, 3, 7, 8}, {4, 5, 5, 6}, {3, 4, 6, 7}}));
+  expect_closed(plan);
+  EXPECT_TRUE(check_plan(plan, cylinder()).warnings.empty());
+  const Plan four = placed("multiple-z-plasty", {{"segments", 4}, {"length", 48}});
+  EXPECT_EQ(border_loop(four).size(), 24);
+  expect_closed(four);
+  EXPECT_NO_THROW(check_plan(four, cylinder()));
+}
+
+TEST(PlanLibrary, WPlastySewsEachToothToItsTwin) {
+  const Plan plan = placed("w-plasty", {{"length", 30}, {"limb", 6}, {"angle", 60}, {"width", 3}});
+  const int m = static_cast<int>(plan.parameters.at("teeth"));
+  EXPECT_EQ(m, 9);  // pitch 6 sin 30 = 3 mm over 30 mm: 10 intervals, 9 inner points
+  const BorderLoop loop = border_loop(plan);
+  EXPECT_EQ(loop.point, incision_to_loop(m + 2));
+  ASSERT_EQ(plan.sutures.size(), static_cast<std::size_t>(m + 1));
+  EXPECT_EQ(plan.sutures.front(), (SuturePair{{0, 1}, {0, 2 * m + 1}}));
+  EXPECT_EQ(plan.sutures.back(), (SuturePair{{m, m + 1}, {m + 2, m + 1}}));
+  // The two sides are translates: twins are 3 mm apart across the axis.
+  for (int k = 1; k <= m; ++k)
+    EXPECT_NEAR((loop.local_mm[k] - loop.local_mm[2 * (m + 1) - k]).norm(), 3.0, 1e-9);
+  expect_closed(plan);
+  EXPECT_NO_THROW(check_plan(plan, cylinder()));
+}
+
+TEST(PlanLibrary, RhomboidFlapClosesWithEqualEdges) {
+  const Plan plan = placed("rhomboid", {{"side", 12}});
+  const BorderLoop loop = border_loop(plan);
+  EXPECT_EQ(loop.point, (std::vector<int>{0, 1, 2, 3, 4, 3, 2, 1}));
+  EXPECT_EQ(plan.sutures, pairs({{1, 2, 5, 4}, {3, 2, 3, 4}, {0, 1, 6, 5}, {7, 0, 7, 6}}));
+  expect_closed(plan);
+  const PlanReport r = check_plan(plan, cylinder());
+  EXPECT_TRUE(r.warnings.empty());
+  for (const auto& s : r.suture_lengths) {
+    EXPECT_NEAR(s.first_mm, 12.0, 0.15);
+    EXPECT_NEAR(s.ratio(), 1.0, 0.01);
+  }
+  // The rhombus: node 5 (C's twin) moved to the corner A, opposite C along the orientation.
+  EXPECT_NEAR((loop.local_mm[5] - loop.local_mm[3]).norm(), 12 * std::sqrt(3.0), 1e-9);
+}
+
+TEST(PlanFrame, LengthsAndOrientationMeanWhatTheySay) {
+  // Orientation 0 points superior: an ellipse along z, 30 mm in z.
+  const Plan up = placed("ellipse", {{"length", 30}}, 10, 40, 0);
+  EXPECT_NEAR(up.points[3].z_mm - up.points[0].z_mm, 30, 1e-6);
+  EXPECT_NEAR(up.points[3].theta_deg - up.points[0].theta_deg, 0, 1e-6);
+  // Orientation 90 points towards +theta: 30 mm of arc on a radius of 80 mm.
+  const Plan across = placed("ellipse", {{"length", 30}}, 10, 40, 90);
+  // The tangent comes from the bilinear (polygonal) skin, so the arc agrees to 0.01 mm.
+  EXPECT_NEAR(deg_to_rad(across.points[3].theta_deg - across.points[0].theta_deg) * kR, 30, 0.01);
+  EXPECT_NEAR((across.points[3].lps - across.points[0].lps).norm(), 2 * kR * std::sin(15.0 / kR), 0.02);
+}
+
+TEST(PlanFrame, PlansStraddleTheSeam) {
+  const Plan a = placed("z-plasty", {}, 179.0, 40, 90);
+  bool wrapped = false;
+  for (const auto& p : a.points) wrapped |= p.theta_deg < 0;
+  EXPECT_TRUE(wrapped);
+  const PlanReport r = check_plan(a, cylinder());
+  EXPECT_NEAR(r.cut_length_mm, 60.0, 0.6);
+  const BorderLoop la = border_loop(a), lb = border_loop(placed("z-plasty", {}, 0.0, 40, 90));
+  for (int i = 0; i < la.size(); ++i) EXPECT_LT((la.local_mm[i] - lb.local_mm[i]).norm(), 1e-6);
+}
+
+TEST(PlanFiles, RoundTripAndUserProcedures) {
+  const Plan plan = placed("rhomboid");
+  const Plan back = parse_plan_json(plan_to_json(plan), "test");
+  EXPECT_EQ(back.sutures, plan.sutures);
+  EXPECT_EQ(back.paths, plan.paths);
+  EXPECT_EQ(back.procedure, "rhomboid");
+  const WoundBorder w1 = wound_border(plan), w2 = wound_border(back);
+  EXPECT_EQ(w1.sutures, w2.sutures);
+  for (std::size_t i = 0; i < w1.loop_theta_z.size(); ++i)
+    EXPECT_LT((w1.loop_theta_z[i] - w2.loop_theta_z[i]).norm(), 1e-9);
+  // A plan saved as a procedure and placed elsewhere keeps its topology and shape.
+  const LocalProcedure user = parse_procedure_json(procedure_to_json(procedure_from_plan(plan)), "user");
+  const Plan again = place_procedure(user, cylinder(), -60, 80, 90);
+  EXPECT_EQ(again.sutures, plan.sutures);
+  EXPECT_NO_THROW(check_plan(again, cylinder()));
+  EXPECT_THROW(parse_plan_json("{\"format\":\"caps-plan\",\"format_version\":2}", "v2"), InvalidInput);
+}
+
+TEST(PlanCheck, WarnsOnSuturedEdgesOfDifferentLengths) {
+  Plan plan = placed("z-plasty");
+  // Stretch the first limb to twice its length: sutures 0 and 2 now sew 40 mm to 20 mm.
+  const Eigen::Vector2d p0 = plan.frame.to_local(plan.points[0].theta_deg, plan.points[0].z_mm);
+  const Eigen::Vector2d p1 = plan.frame.to_local(plan.points[1].theta_deg, plan.points[1].z_mm);
+  const Eigen::Vector2d tz = plan.frame.to_theta_z(p1 + 2 * (p0 - p1));
+  plan.points[0].theta_deg = tz[0];
+  plan.points[0].z_mm = tz[1];
+  const PlanReport r = check_plan(plan, cylinder());
+  ASSERT_FALSE(r.warnings.empty());
+  EXPECT_NE(r.warnings.front().find("ratio 2.0"), std::string::npos) << r.warnings.front();
+}
+
+// The catalogue of plans that cannot be operated: each is refused with InvalidInput and a message
+// naming the offending item.
+namespace {
+
+Plan custom(std::vector<Eigen::Vector2d> xy, std::vector<std::vector<int>> paths,
+            std::vector<SuturePair> sutures = {}, std::vector<ExcisionOffset> ex = {},
+            double theta = 0, double z = 60) {
+  LocalProcedure p;
+  p.points_mm = std::move(xy);
+  p.paths = std::move(paths);
+  p.sutures = std::move(sutures);
+  p.excisions = std::move(ex);
+  return place_procedure(p, cylinder(), theta, z, 90);
+}
+
+void expect_refused(const std::function<void()>& f, const std::vector<std::string>& words) {
+  try {
+    f();
+    ADD_FAILURE() << "not refused; expected: " << words.front();
+  } catch (const InvalidInput& e) {
+    for (const auto& w : words)
+      EXPECT_NE(std::string(e.what()).find(w), std::string::npos) << e.what() << "\n  lacks: " << w;
+  }
+}
+
+const std::vector<Eigen::Vector2d> kLine = {{0, 0}, {10, 0}, {20, 0}, {30, 0}};
+
+}  // namespace
+
+TEST(PlanCatalogue, BadPlansAreRefusedByName) {
+  const auto& M = cylinder();
+  auto check = [&](const Plan& p) { return [p, &M] { check_plan(p, M); }; };
+  Plan empty = custom(kLine, {{0, 1, 2, 3}});
+  empty.points.clear();
+  expect_refused(check(empty), {"no points"});                                            // 1
+  expect_refused(check(custom(kLine, {})), {"no cutting path"});                          // 2
+  expect_refused(check(custom(kLine, {{0}, {0, 1, 2, 3}})), {"path 0", "at least 2"});     // 3
+  expect_refused(check(custom(kLine, {{0, 1, 2, 7}})), {"names point 7"});                // 4
+  expect_refused(check(custom(kLine, {{0, 1, 1, 2, 3}})), {"repeats point 1"});           // 5
+  expect_refused(check(custom(kLine, {{0, 1, 2, 3}, {2, 1}})), {"(2,1)", "cut twice"});   // 6
+  expect_refused(check(custom({{0, 0}, {10, 0}, {10, 10}, {0, 10}}, {{0, 1}, {1, 2}, {2, 3}, {3, 1}})),
+                 {"close a loop"});                                                        // 7
+  expect_refused(check(custom(kLine, {{0, 1, 2}})), {"point 3 is on no cutting path"});   // 8
+  expect_refused(check(custom(kLine, {{0, 1}, {2, 3}})), {"point 2", "not connected"});   // 9
+  expect_refused(check(custom(kLine, {{1, 0}, {1, 2, 3}})), {"point 1 joins 2"});         // 10
+  expect_refused(check(custom({{0, 0}, {10, 10}, {10, 0}, {0, 10}}, {{0, 1, 2, 3}})),
+                 {"crosses itself", "(0,1)", "(2,3)"});                                    // 11
+  expect_refused(check(custom({{0, 0}, {10, 0}, {5, 0}}, {{0, 1, 2}})),
+                 {"overlaps itself", "point 1"});                                          // 12
+  expect_refused(check(custom({{0, 0}, {10, 0}, {10.01, 0}}, {{0, 1, 2}})),
+                 {"segment (1,2)", "mm long"});                                            // 13
+  expect_refused(check(custom(kLine, {{0, 1, 2, 3}}, {}, {{9, {0, 1}}})),
+                 {"excision 0", "loop node 9"});                                           // 14
+  expect_refused(check(custom(kLine, {{0, 1, 2, 3}}, {}, {{4, {0, 1}}, {4, {0, 2}}})),
+                 {"loop node 4", "moved twice"});                                          // 15
+  expect_refused(check(custom(kLine, {{0, 1, 2, 3}}, {}, {{1, {0, 3}}, {2, {0, -3}}})),
+                 {"border crosses itself", "(1,2)", "(4,5)"});                             // 16
+  expect_refused(check(custom(kLine, {{0, 1, 2, 3}}, {}, {{1, {0, -3}}, {5, {0, 3}}})),
+                 {"inside out", "loop node 1"});                                           // 16b
+  expect_refused(check(custom(kLine, {{0, 1, 2, 3}}, pairs({{0, 2, 3, 4}}))),
+                 {"suture 0", "(0,2) is not on the border"});                              // 17
+  expect_refused(check(custom(kLine, {{0, 1, 2, 3}}, pairs({{0, 1, 0, 5}, {5, 0, 3, 4}}))),
+                 {"border edge (5,0)", "sutures 0 and 1"});                                // 18
+  expect_refused(check(custom(kLine, {{0, 1, 2, 3}}, pairs({{0, 1, 1, 0}}))),
+                 {"suture 0", "sewn to itself"});                                          // 19
+  expect_refused(check(custom(kLine, {{0, 1, 2, 3}}, pairs({{0, 1, 7, 8}}))),
+                 {"(7,8) is not on the border"});                                          // 20
+  expect_refused(check(custom(kLine, {{0, 1, 2, 3}}, {}, {}, 0, 155)),
+                 {"loop node", "outside the model"});                                      // 21
+  expect_refused(check(custom(kLine, {{0, 1, 2, 3}}, {}, {}, 35, 25)),
+                 {"loop node 0 (point 0)", "no_bone"});                                    // 22
+  // The ends are valid, the edge between them crosses the no-bone patch.
+  expect_refused(check(custom({{0, 0}, {40, 0}}, {{0, 1}}, {}, {}, 22, 25)),
+                 {"loop edge (0,1)", "no_bone"});                                          // 23
+  expect_refused([] { layout_procedure("z-plasty", {{"angle", 20}}); },
+                 {"z-plasty", "angle = 20", "clinical range [30, 90]"});                   // 24
+  expect_refused([] { layout_procedure("x-plasty", {}); }, {"unknown procedure 'x-plasty'"});  // 25
+  expect_refused([] { layout_procedure("ellipse", {{"radius", 3}}); }, {"no parameter 'radius'"});  // 26
+  expect_refused([] { layout_procedure("ellipse", {{"length", 20}, {"width", 40}}); },
+                 {"apex angle"});                                                          // 27
+  Plan edited = placed("z-plasty");
+  edited.parameters["angle"] = 100;
+  expect_refused(check(edited), {"angle = 100", "clinical range"});                        // 28
+  Plan nan_point = placed("z-plasty");
+  nan_point.points[2].z_mm = NAN;
+  expect_refused(check(nan_point), {"point 2", "finite"});                                 // 29
+  expect_refused([] { parse_plan_json("{\"format\":\"caps-plan\",\"format_version\":1}", "p.json"); },
+                 {"p.json", "frame"});                                                     // 30
+  expect_refused([] { layout_procedure("multiple-z-plasty", {{"segments", 12}}); },
+                 {"segments = 12"});                                                       // 31
+}

@@ -1,0 +1,144 @@
+// caps mesh: the wound-closure mesh of a wound border on a patient model (paper section 6):
+// mesh.vtu + mesh.json (for `caps solve`), mesh.inp (CalculiX / Abaqus), surface.png (Figure 3),
+// section.png (Figure 4) and a summary.
+//   caps mesh --model /tmp/cranium --border border.json -o /tmp/zplasty-mesh
+//   caps mesh --model /tmp/cranium --border border.json -o /tmp/m --layers 3 --size 1.5 --extent 60 --rim free --force --json
+//   caps solve /tmp/zplasty-mesh -o /tmp/zplasty-result
+// border.json: {"loop_theta_z": [[theta_deg, z_mm], ...], "sutures": [[a, b, c, d], ...]}
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+
+#include "caps/core/atomic_output.hpp"
+#include "caps/core/error.hpp"
+#include "caps/fem/continuum_mesher.hpp"
+#include "caps/fem/inp_io.hpp"
+#include "caps/fem/mesh_io.hpp"
+#include "caps/fem/mesh_pictures.hpp"
+#include "caps/surface/patient_model.hpp"
+#include "commands.hpp"
+
+namespace caps::cli {
+namespace {
+
+struct MeshArgs {
+  std::string model, border, output, rim = "fixed";
+  int layers = 2;
+  double size_mm = 2, extent_mm = 0, grading = 1, t1_deg = 30, t2_deg = 90, constant_mm = 0;
+  bool no_pictures = false;
+};
+
+fem::WoundBorder read_border(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw IoError(cat(path, ": cannot open the wound border file"));
+  nlohmann::json j;
+  try {
+    in >> j;
+  } catch (const std::exception& e) {
+    throw InvalidInput(cat(path, ": not valid JSON (", e.what(), ")"));
+  }
+  fem::WoundBorder b;
+  try {
+    for (const auto& p : j.at("loop_theta_z")) b.loop_theta_z.emplace_back(p.at(0), p.at(1));
+    if (j.contains("sutures"))
+      for (const auto& s : j.at("sutures"))
+        b.sutures.push_back({s.at(0).get<int>(), s.at(1).get<int>(), s.at(2).get<int>(),
+                             s.at(3).get<int>()});
+  } catch (const nlohmann::json::exception& e) {
+    throw InvalidInput(cat(path, ": expected {\"loop_theta_z\": [[theta_deg, z_mm], ...], "
+                           "\"sutures\": [[a, b, c, d], ...]} (", e.what(), ")"));
+  }
+  return b;
+}
+
+void run_mesh(const MeshArgs& a, const Common& common) {
+  fem::SurfaceMeshOptions so;
+  so.size_mm = a.size_mm;
+  so.extent_mm = a.extent_mm;
+  so.t1_deg = a.t1_deg;
+  so.t2_deg = a.t2_deg;
+  fem::ContinuumMeshOptions co;
+  co.n_layers = a.layers;
+  co.grading = a.grading;
+  co.rim = fem::parse_rim_condition(a.rim);
+  co.constant_thickness_mm = a.constant_mm;
+  const fem::WoundBorder border = read_border(a.border);
+  OutputDirectory out(a.output, common.force);
+  const PatientModel model = PatientModel::load(a.model);
+  fem::WoundMesh w = fem::mesh_wound(border, model, so, co);
+  w.continuum.mesh.model = a.model;
+  w.continuum.mesh.plan = a.border;
+  fem::write_mesh_dir(w.continuum.mesh, out.path());
+  fem::write_inp(w.continuum.mesh, out.path() / "mesh.inp");
+  if (!a.no_pictures) {
+    fem::write_surface_mesh_png(out.path() / "surface.png", w.surface,
+                                cat("caps mesh: surface mesh of ", a.border));
+    fem::write_cross_section_png(out.path() / "section.png", w.surface, model, co,
+                                 cat("caps mesh: cross-section of ", a.border));
+  }
+  const auto& s = w.surface;
+  const auto& c = w.continuum;
+  int hex = 0;
+  for (const auto& e : c.mesh.elements) hex += e.type == fem::ElementType::Hex20;
+  nlohmann::json j{
+      {"output", a.output},
+      {"surface", {{"vertices", s.n_vertices()}, {"quads", s.quality.n_quads},
+                   {"triangles", s.quality.n_triangles}, {"layers", s.n_layers},
+                   {"extent_mm", s.extent_mm}, {"wound_size_mm", s.wound_size_mm},
+                   {"min_angle_deg", s.quality.min_angle_deg},
+                   {"max_angle_deg", s.quality.max_angle_deg},
+                   {"max_aspect_ratio", s.quality.max_aspect_ratio},
+                   {"mean_aspect_ratio", s.quality.mean_aspect_ratio}}},
+      {"continuum", {{"nodes", c.mesh.n_nodes()}, {"elements", c.mesh.n_elements()},
+                     {"hex20", hex}, {"wedge15", static_cast<int>(c.mesh.n_elements()) - hex},
+                     {"layers", c.n_layers}, {"fixed_nodes", c.mesh.fixed_nodes.size()},
+                     {"suture_pairs", c.mesh.sutures.size()}, {"rim", a.rim},
+                     {"thickness_mm", {c.min_thickness_mm, c.max_thickness_mm}},
+                     {"min_jacobian", c.min_jacobian}}}};
+  write_text_atomic(out.path() / "summary.json", j.dump(1) + "\n");
+  out.commit();
+  if (common.json)
+    std::cout << j.dump(2) << "\n";
+  else if (!common.quiet)
+    std::cerr << "caps mesh: " << c.mesh.n_elements() << " elements (" << hex << " Hex20), "
+              << c.mesh.n_nodes() << " nodes, " << c.mesh.sutures.size() << " suture pairs; "
+              << "corner angles " << s.quality.min_angle_deg << "-" << s.quality.max_angle_deg
+              << " deg -> " << a.output << "\n";
+}
+
+}  // namespace
+
+void add_mesh(CLI::App& app, Common& common, Action& action) {
+  auto* cmd = app.add_subcommand(
+      "mesh", "Mesh a wound border on a patient model (paper section 6): mesh.vtu + mesh.json "
+              "(for caps solve), mesh.inp (CalculiX), surface.png, section.png, summary.json.\n"
+              "Example: caps mesh --model cranium --border border.json -o mesh");
+  auto a = std::make_shared<MeshArgs>();
+  cmd->add_option("--model", a->model, "patient model directory")->required();
+  cmd->add_option("--border", a->border,
+                  "wound border JSON: {\"loop_theta_z\": [[deg, mm], ...], \"sutures\": "
+                  "[[a, b, c, d], ...]}")
+      ->required();
+  cmd->add_option("-o,--output", a->output, "mesh directory to create")->required();
+  cmd->add_option("--layers", a->layers, "element layers from skin to bone")->capture_default_str();
+  cmd->add_option("--size", a->size_mm, "mesh size at the wound and first layer thickness (mm)")
+      ->capture_default_str();
+  cmd->add_option("--extent", a->extent_mm,
+                  "distance from the wound to the outer rim (mm); 0 = 3 x the wound's size");
+  cmd->add_option("--rim", a->rim, "outer rim: fixed (clamped) or free (traction free)")
+      ->capture_default_str();
+  cmd->add_option("--grading", a->grading, "thickness ratio of each layer to the one above")
+      ->capture_default_str();
+  cmd->add_option("--t1", a->t1_deg, "stage 1: fill concave corners deeper than this (deg)")
+      ->capture_default_str();
+  cmd->add_option("--t2", a->t2_deg, "stage 2: expand corners sharper than this (deg)")
+      ->capture_default_str();
+  cmd->add_option("--constant-thickness", a->constant_mm,
+                  "mesh a constant depth (mm) instead of the model's thickness (the 1992 paper)");
+  cmd->add_flag("--no-pictures", a->no_pictures, "skip surface.png and section.png");
+  add_common_flags(cmd, common, true);
+  cmd->callback([&common, &action, a] { action = [&common, a] { run_mesh(*a, common); }; });
+}
+
+}  // namespace caps::cli
