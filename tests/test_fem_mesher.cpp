@@ -17,8 +17,10 @@
 #include "caps/fem/continuum_mesher.hpp"
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/mesh_io.hpp"
+#include "caps/fem/simulate.hpp"
 #include "caps/fem/solve.hpp"
 #include "caps/fem/surface_mesher.hpp"
+#include "caps/plan/procedures.hpp"
 #include "caps/surface/patient_model.hpp"
 
 using namespace caps;
@@ -339,4 +341,27 @@ TEST(InpExport, CalculixSolvesTheSameProblem) {
     std::cout << (m == &hex ? "hex20" : "mixed") << ": max |u_ccx - u_caps| = " << diff
               << " mm, max |u| = " << scale << " mm\n";
   }
+}
+
+TEST(Simulate, PlanToClosedWoundWithAnAutomaticExtent) {
+  // An ellipse placed 30 mm below an invalid band (z 60..70): the default extent (3 x the wound)
+  // would reach the band, so it shrinks; the wound closes (sutured pairs meet) and pulls.
+  const PatientModel model = cylinder([](double, double) { return 5.0; }, kNoBone);
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0.0, 30.0, 90.0);
+  SimulateOptions o;
+  o.surface.size_mm = 2.0;
+  const Simulation sim = simulate(model, p, o);
+  EXPECT_LT(sim.wound.surface.extent_mm, 3.0 * sim.wound.surface.wound_size_mm);
+  EXPECT_GT(sim.wound.surface.extent_mm, sim.wound.surface.wound_size_mm * 0.5);
+  EXPECT_LT(sim.max_suture_gap_mm, 1e-6);
+  EXPECT_GT(sim.result.total_suture_force_n, 0.0);
+  EXPECT_GT(sim.result.strain_energy_mj, 0.0);
+  // A given extent is kept, and refused if it reaches the band; a wound on the band is refused.
+  o.surface.extent_mm = 40.0;
+  EXPECT_THROW(simulate(model, p, o), OffModelError);
+  const plan::Plan on_band = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0.0, 65.0, 90.0);
+  o.surface.extent_mm = 0.0;
+  EXPECT_THROW(simulate(model, on_band, o), InvalidInput);
 }

@@ -334,3 +334,89 @@ TEST(PlanCatalogue, BadPlansAreRefusedByName) {
   expect_refused([] { layout_procedure("multiple-z-plasty", {{"segments", 12}}); },
                  {"segments = 12"});                                                       // 31
 }
+
+TEST(PlanLibrary, RotationFlapTurnsIntoTheDefect) {
+  // Radius 12 mm, defect angle 40 deg, arc 120 deg: arc segments about half the defect's base
+  // (4.10 mm) long gives m = 6. Points F0 O1 S2, A1..A5 = 3..7, P8 (worked by hand in docs/plan.md).
+  const Plan plan = placed("rotation-flap", {{"radius", 12}, {"defect_angle", 40}, {"arc_angle", 120}});
+  EXPECT_EQ(plan.parameters.at("segments"), 6);
+  const BorderLoop loop = border_loop(plan);
+  EXPECT_EQ(loop.point, incision_to_loop(9));
+  EXPECT_EQ(plan.excisions.size(), 1u);
+  EXPECT_EQ(plan.excisions[0].loop_index, 15);  // the twin of O
+  EXPECT_EQ(plan.sutures, pairs({{0, 1, 1, 2},                                      // corner O
+                                 {2, 3, 15, 0}, {3, 4, 14, 15}, {4, 5, 13, 14},   // flap arc
+                                 {5, 6, 12, 13}, {6, 7, 11, 12}, {7, 8, 10, 11},  // to outer
+                                 {8, 9, 9, 10}}));                                 // corner A5'
+  const WoundBorder w = wound_border(plan);
+  EXPECT_EQ(w.sutures[0], (std::array<int, 4>{0, 1, 2, 1}));    // F meets S, corner O
+  EXPECT_EQ(w.sutures[1], (std::array<int, 4>{2, 3, 0, 15}));   // S meets F, A1 meets M
+  EXPECT_EQ(w.sutures[6], (std::array<int, 4>{7, 8, 11, 10}));  // A5 meets A3', P meets A4'
+  EXPECT_EQ(w.sutures[7], (std::array<int, 4>{8, 9, 10, 9}));   // corner A5': P meets A4'
+  expect_closed(plan);
+  // The defect: O' sits in the middle of the base F-S, 2 R sin(20 deg) = 8.21 mm wide.
+  const double base = 2 * 12 * std::sin(deg_to_rad(20.0));
+  EXPECT_NEAR((loop.local_mm[0] - loop.local_mm[2]).norm(), base, 1e-9);
+  EXPECT_LT((loop.local_mm[15] - (loop.local_mm[0] + loop.local_mm[2]) / 2).norm(), 1e-9);
+  for (int k = 2; k <= 8; ++k) EXPECT_NEAR(loop.local_mm[k].norm(), 12.0, 1e-9);  // on the arc
+  // On the skin: the leading edge and the far edge are both 12 mm; the first flap segments
+  // (chord 2 R sin 10 deg = 4.17 mm) are sewn to the base halves (4.10 mm); no warnings.
+  const PlanReport r = check_plan(plan, cylinder());
+  EXPECT_TRUE(r.warnings.empty()) << r.warnings.front();
+  EXPECT_NEAR(r.suture_lengths[0].first_mm, 12.0, 0.1);
+  EXPECT_NEAR(r.suture_lengths[0].ratio(), 1.0, 0.01);
+  EXPECT_NEAR(r.suture_lengths[1].first_mm, 2 * 12 * std::sin(deg_to_rad(10.0)), 0.05);
+  EXPECT_NEAR(r.suture_lengths[1].second_mm, base / 2, 0.05);
+  for (const auto& s : r.suture_lengths) EXPECT_LT(s.ratio(), 1.05);
+  // What is left over: the outer arc (from F) is longer than the flap's arc by the base; the two
+  // pivot-side outer edges closed as a corner take up about that much.
+  double flap_mm = 0, outer_mm = base;
+  for (int k = 2; k < 8; ++k) flap_mm += (loop.local_mm[k + 1] - loop.local_mm[k]).norm();
+  for (int k = 8; k < 14; ++k) outer_mm += (loop.local_mm[k + 1] - loop.local_mm[k]).norm();
+  EXPECT_NEAR(outer_mm - flap_mm, base, 1e-9);
+
+  // A back-cut from the pivot towards the centre: path F O S A1..A5 P B, loop of 18; the flap's
+  // arc gains the edge P-B, and the corner moves to P'.
+  const Plan bc = placed("rotation-flap", {{"radius", 12}, {"defect_angle", 40}, {"arc_angle", 120},
+                                           {"back_cut", 4}});
+  const BorderLoop lb = border_loop(bc);
+  EXPECT_EQ(lb.point, incision_to_loop(10));
+  EXPECT_NEAR(lb.local_mm[9].norm(), 8.0, 1e-9);
+  EXPECT_EQ(bc.excisions[0].loop_index, 17);
+  EXPECT_EQ(bc.sutures, pairs({{0, 1, 1, 2}, {2, 3, 17, 0}, {3, 4, 16, 17}, {4, 5, 15, 16},
+                               {5, 6, 14, 15}, {6, 7, 13, 14}, {7, 8, 12, 13}, {8, 9, 11, 12},
+                               {9, 10, 10, 11}}));
+  expect_closed(bc);
+  EXPECT_TRUE(check_plan(bc, cylinder()).warnings.empty());
+
+  // side -1 is the mirror image: the path is reversed so that the same tissue stays on its left,
+  // the loop is the same loop run backwards, and the sutured lengths are the same.
+  const Plan mir = placed("rotation-flap", {{"radius", 12}, {"defect_angle", 40}, {"arc_angle", 120},
+                                            {"side", -1}});
+  const BorderLoop lm = border_loop(mir);
+  EXPECT_EQ(lm.point, (std::vector<int>{8, 7, 6, 5, 4, 3, 2, 1, 0, 1, 2, 3, 4, 5, 6, 7}));
+  EXPECT_EQ(mir.excisions[0].loop_index, 9);
+  for (int i = 0; i < 16; ++i) {
+    const Eigen::Vector2d a = loop.local_mm[i], b = lm.local_mm[(16 + 8 - i) % 16];
+    EXPECT_LT((a - Eigen::Vector2d(b.x(), -b.y())).norm(), 1e-9) << i;
+  }
+  expect_closed(mir);
+  const PlanReport rm = check_plan(mir, cylinder());
+  EXPECT_TRUE(rm.warnings.empty());
+  ASSERT_EQ(rm.suture_lengths.size(), r.suture_lengths.size());
+
+  // Every parameter across its range lays out a closed, checkable plan.
+  for (double arc : {60.0, 90.0, 150.0, 180.0})
+    for (double delta : {20.0, 40.0, 60.0}) {
+      const Plan q = placed("rotation-flap", {{"radius", 15}, {"defect_angle", delta}, {"arc_angle", arc},
+                                              {"back_cut", 5}});
+      expect_closed(q);
+      EXPECT_NO_THROW(check_plan(q, cylinder())) << arc << " " << delta;
+    }
+  expect_refused([] { layout_procedure("rotation-flap", {{"defect_angle", 75}}); },
+                 {"defect_angle = 75", "[20, 60]"});
+  expect_refused([] { layout_procedure("rotation-flap", {{"radius", 10}, {"back_cut", 6}}); },
+                 {"back_cut = 6", "half the radius"});
+  expect_refused([] { layout_procedure("rotation-flap", {{"side", 0}}); }, {"side = 0"});
+  expect_refused([] { layout_procedure("rotation-flap", {{"arc_angle", 200}}); }, {"arc_angle = 200"});
+}

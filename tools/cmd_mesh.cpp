@@ -1,6 +1,9 @@
-// caps mesh: the wound-closure mesh of a wound border on a patient model (paper section 6):
-// mesh.vtu + mesh.json (for `caps solve`), mesh.inp (CalculiX / Abaqus), surface.png (Figure 3),
-// section.png (Figure 4) and a summary.
+// caps mesh: the wound-closure mesh of a plan (or a bare wound border) on a patient model (paper
+// section 6): mesh.vtu + mesh.json (for `caps solve`), mesh.inp (CalculiX / Abaqus), surface.png
+// (Figure 3), section.png (Figure 4) and a summary. caps simulate: mesh and solve in one go.
+//   caps plan new z-plasty --model /tmp/cranium --at 0,90 -o /tmp/z.json
+//   caps mesh --model /tmp/cranium --plan /tmp/z.json -o /tmp/zplasty-mesh
+//   caps simulate --model /tmp/cranium --plan /tmp/z.json -o /tmp/zplasty-result
 //   caps mesh --model /tmp/cranium --border border.json -o /tmp/zplasty-mesh
 //   caps mesh --model /tmp/cranium --border border.json -o /tmp/m --layers 3 --size 1.5 --extent 60 --rim free --force --json
 //   caps solve /tmp/zplasty-mesh -o /tmp/zplasty-result
@@ -16,6 +19,8 @@
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/mesh_pictures.hpp"
+#include "caps/fem/simulate.hpp"
+#include "caps/plan/plan_io.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "commands.hpp"
 
@@ -23,7 +28,7 @@ namespace caps::cli {
 namespace {
 
 struct MeshArgs {
-  std::string model, border, output, rim = "fixed";
+  std::string model, border, plan, output, rim = "fixed", solver = "mumps";
   int layers = 2;
   double size_mm = 2, extent_mm = 0, grading = 1, t1_deg = 30, t2_deg = 90, constant_mm = 0;
   bool no_pictures = false;
@@ -52,6 +57,55 @@ fem::WoundBorder read_border(const std::string& path) {
   return b;
 }
 
+fem::WoundBorder border_of(const MeshArgs& a) {
+  if (a.plan.empty() == a.border.empty())
+    throw InvalidInput("give the wound as --plan plan.json (from caps plan new) or as --border "
+                       "border.json, one of the two");
+  return a.plan.empty() ? read_border(a.border) : plan::wound_border(plan::read_plan(a.plan));
+}
+
+fem::SimulateOptions options_of(const MeshArgs& a) {
+  fem::SimulateOptions o;
+  o.surface.size_mm = a.size_mm;
+  o.surface.extent_mm = a.extent_mm;
+  o.surface.t1_deg = a.t1_deg;
+  o.surface.t2_deg = a.t2_deg;
+  o.continuum.n_layers = a.layers;
+  o.continuum.grading = a.grading;
+  o.continuum.rim = fem::parse_rim_condition(a.rim);
+  o.continuum.constant_thickness_mm = a.constant_mm;
+  o.solve.solver = fem::parse_solver(a.solver);
+  return o;
+}
+
+void run_simulate(const MeshArgs& a, const Common& common) {
+  const fem::SimulateOptions o = options_of(a);
+  const plan::Plan plan = plan::read_plan(a.plan);
+  OutputDirectory out(a.output, common.force);
+  const PatientModel model = PatientModel::load(a.model);
+  fem::Simulation sim = fem::simulate(model, plan, o);
+  sim.wound.continuum.mesh.model = a.model;
+  sim.wound.continuum.mesh.plan = a.plan;
+  fem::write_simulation(sim, model, o, out.path(), std::filesystem::path(a.plan).filename().string());
+  out.commit();
+  const auto& r = sim.result;
+  nlohmann::json j{{"output", a.output},
+                   {"elements", sim.wound.continuum.mesh.n_elements()},
+                   {"nodes", sim.wound.continuum.mesh.n_nodes()},
+                   {"suture_pairs", sim.wound.continuum.mesh.sutures.size()},
+                   {"max_displacement_mm", r.displacement_mm.rowwise().norm().maxCoeff()},
+                   {"closing_force_n", r.total_suture_force_n},
+                   {"max_suture_gap_mm", sim.max_suture_gap_mm},
+                   {"strain_energy_mj", r.strain_energy_mj},
+                   {"solve_s", r.timings.total_s}};
+  if (common.json) std::cout << j.dump(2) << "\n";
+  else if (!common.quiet)
+    std::cerr << "caps simulate: " << j["elements"] << " elements, closing force "
+              << r.total_suture_force_n << " N, max displacement "
+              << j["max_displacement_mm"].get<double>() << " mm, suture gap after closure "
+              << sim.max_suture_gap_mm << " mm -> " << a.output << "\n";
+}
+
 void run_mesh(const MeshArgs& a, const Common& common) {
   fem::SurfaceMeshOptions so;
   so.size_mm = a.size_mm;
@@ -63,19 +117,20 @@ void run_mesh(const MeshArgs& a, const Common& common) {
   co.grading = a.grading;
   co.rim = fem::parse_rim_condition(a.rim);
   co.constant_thickness_mm = a.constant_mm;
-  const fem::WoundBorder border = read_border(a.border);
+  const fem::WoundBorder border = border_of(a);
   OutputDirectory out(a.output, common.force);
   const PatientModel model = PatientModel::load(a.model);
   fem::WoundMesh w = fem::mesh_wound(border, model, so, co);
   w.continuum.mesh.model = a.model;
-  w.continuum.mesh.plan = a.border;
+  const std::string wound = a.plan.empty() ? a.border : a.plan;
+  w.continuum.mesh.plan = wound;
   fem::write_mesh_dir(w.continuum.mesh, out.path());
   fem::write_inp(w.continuum.mesh, out.path() / "mesh.inp");
   if (!a.no_pictures) {
     fem::write_surface_mesh_png(out.path() / "surface.png", w.surface,
-                                cat("caps mesh: surface mesh of ", a.border));
+                                cat("caps mesh: surface mesh of ", wound));
     fem::write_cross_section_png(out.path() / "section.png", w.surface, model, co,
-                                 cat("caps mesh: cross-section of ", a.border));
+                                 cat("caps mesh: cross-section of ", wound));
   }
   const auto& s = w.surface;
   const auto& c = w.continuum;
@@ -113,13 +168,13 @@ void add_mesh(CLI::App& app, Common& common, Action& action) {
   auto* cmd = app.add_subcommand(
       "mesh", "Mesh a wound border on a patient model (paper section 6): mesh.vtu + mesh.json "
               "(for caps solve), mesh.inp (CalculiX), surface.png, section.png, summary.json.\n"
-              "Example: caps mesh --model cranium --border border.json -o mesh");
+              "Example: caps mesh --model cranium --plan zplasty.json -o mesh");
   auto a = std::make_shared<MeshArgs>();
   cmd->add_option("--model", a->model, "patient model directory")->required();
+  cmd->add_option("--plan", a->plan, "the plan (caps plan new)");
   cmd->add_option("--border", a->border,
-                  "wound border JSON: {\"loop_theta_z\": [[deg, mm], ...], \"sutures\": "
-                  "[[a, b, c, d], ...]}")
-      ->required();
+                  "or a bare wound border JSON: {\"loop_theta_z\": [[deg, mm], ...], \"sutures\": "
+                  "[[a, b, c, d], ...]}");
   cmd->add_option("-o,--output", a->output, "mesh directory to create")->required();
   cmd->add_option("--layers", a->layers, "element layers from skin to bone")->capture_default_str();
   cmd->add_option("--size", a->size_mm, "mesh size at the wound and first layer thickness (mm)")
@@ -139,6 +194,24 @@ void add_mesh(CLI::App& app, Common& common, Action& action) {
   cmd->add_flag("--no-pictures", a->no_pictures, "skip surface.png and section.png");
   add_common_flags(cmd, common, true);
   cmd->callback([&common, &action, a] { action = [&common, a] { run_mesh(*a, common); }; });
+
+  auto b = std::make_shared<MeshArgs>();
+  auto* sim = app.add_subcommand(
+      "simulate", "Mesh a plan on a patient model and solve the wound closure in one go: the "
+                  "mesh and result files of caps mesh and caps solve in one folder.\n"
+                  "Example: caps simulate --model cranium --plan zplasty.json -o result");
+  sim->add_option("--model", b->model, "patient model directory")->required();
+  sim->add_option("--plan", b->plan, "the plan (caps plan new)")->required();
+  sim->add_option("-o,--output", b->output, "result directory to create")->required();
+  sim->add_option("--layers", b->layers, "element layers from skin to bone")->capture_default_str();
+  sim->add_option("--size", b->size_mm, "mesh size at the wound (mm)")->capture_default_str();
+  sim->add_option("--extent", b->extent_mm, "distance from the wound to the rim (mm); 0 = 3 x wound");
+  sim->add_option("--rim", b->rim, "outer rim: fixed or free")->capture_default_str();
+  sim->add_option("--constant-thickness", b->constant_mm,
+                  "a constant depth (mm) instead of the model's thickness (the 1992 paper)");
+  sim->add_option("--solver", b->solver, "mumps or cholmod")->capture_default_str();
+  add_common_flags(sim, common, true);
+  sim->callback([&common, &action, b] { action = [&common, b] { run_simulate(*b, common); }; });
 }
 
 }  // namespace caps::cli

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 
 #include "caps/core/atomic_output.hpp"
@@ -151,9 +152,13 @@ void add_plan(CLI::App& app, Common& common, Action& action) {
   nw->add_option("--at-xyz", a->at_xyz, "the centre as an LPS point X,Y,Z (mm)");
   nw->add_option("--orientation", a->orientation_deg,
                  "deg from superior towards +theta (the patient's left)")->capture_default_str();
-  for (const char* name : {"length", "width", "angle", "apex-angle", "segments", "limb", "side"}) {
-    std::string key = name;
-    std::replace(key.begin(), key.end(), '-', '_');
+  // One flag per parameter name in the library (apex_angle -> --apex-angle).
+  std::set<std::string> keys;
+  for (const auto& t : plan::procedure_library())
+    for (const auto& q : t.parameters) keys.insert(q.name);
+  for (const std::string& key : keys) {
+    std::string name = key;
+    std::replace(name.begin(), name.end(), '_', '-');
     nw->add_option_function<double>(cat("--", name), [a, key](double v) { a->values[key] = v; },
                                     "template parameter (see caps plan templates)");
   }

@@ -1,6 +1,7 @@
 #include "caps/fem/continuum_mesher.hpp"
 
 #include "caps/core/error.hpp"
+#include "caps/core/progress.hpp"
 #include "caps/fem/elements.hpp"
 #include "caps/surface/patient_model.hpp"
 
@@ -87,17 +88,17 @@ ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& mod
   auto column = [&](const Eigen::Vector2d& tz, auto&& node_of, int n_half_levels, int step) {
     const double theta = tz.x(), z = tz.y();
     if (!model.has_z(z))
-      throw InvalidInput(cat("mesh: the site at theta ", theta, " deg, z ", z, " mm lies outside "
+      throw OffModelError(cat("mesh: the site at theta ", theta, " deg, z ", z, " mm lies outside "
                              "the model's z range; use a smaller --extent or a wound further from "
                              "the model's ends"));
     if (const auto f = model.flags_at(theta, z); f != 0)
-      throw InvalidInput(cat("mesh: the site at theta ", theta, " deg, z ", z, " mm lies on cells "
+      throw OffModelError(cat("mesh: the site at theta ", theta, " deg, z ", z, " mm lies on cells "
                              "of the model that are not valid (", describe_flags(f), "); move the "
                              "wound or use a smaller --extent"));
     const double r_top = model.r_skin(theta, z);
     const double T = o.constant_thickness_mm > 0 ? o.constant_thickness_mm : model.thickness(theta, z);
     if (!(T >= o.min_thickness_mm) || !(T < r_top))
-      throw InvalidInput(cat("mesh: the soft-tissue thickness at theta ", theta, " deg, z ", z,
+      throw OffModelError(cat("mesh: the soft-tissue thickness at theta ", theta, " deg, z ", z,
                              " mm is ", T, " mm (minimum ", o.min_thickness_mm, " mm, skin radius ",
                              r_top, " mm); there is no valid tissue layer to mesh there"));
     out.min_thickness_mm = std::min(out.min_thickness_mm, T);
@@ -217,8 +218,28 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
                      const ContinuumMeshOptions& continuum_options) {
   WoundMesh w;
   w.surface = mesh_surface(border, model, surface_options);
-  w.continuum = mesh_continuum(w.surface, model, continuum_options);
-  return w;
+  if (surface_options.extent_mm > 0) {
+    w.continuum = mesh_continuum(w.surface, model, continuum_options);
+    return w;
+  }
+  const double full = w.surface.extent_mm;
+  SurfaceMeshOptions o = surface_options;
+  for (double extent = full;; extent *= 0.75) {
+    try {
+      if (extent != full) {
+        o.extent_mm = extent;
+        w.surface = mesh_surface(border, model, o);
+      }
+      w.continuum = mesh_continuum(w.surface, model, continuum_options);
+      if (extent != full)
+        warn(cat("mesh: the extent was limited to ", extent, " mm (", extent / w.surface.wound_size_mm,
+                 " x the wound's size) to stay on valid cells of the model; the result depends more "
+                 "on the rim condition (docs/mesher.md)"));
+      return w;
+    } catch (const OffModelError&) {
+      if (extent * 0.75 < surface_options.size_mm) throw;
+    }
+  }
 }
 
 }  // namespace caps::fem

@@ -148,6 +148,79 @@ LocalProcedure rhomboid(std::map<std::string, double>& p) {
   return out;
 }
 
+// Rotation flap. Arc centre O (the apex of the triangular defect), defect O F S with the angle
+// delta at O and legs R; the arc S = A_0, A_1 .. A_m = P (the pivot) runs on the circle of radius R
+// through alpha, away from the defect. Path F, O, S, A_1 .. A_m (, B: the back-cut from P towards
+// O). Nodes on the left of the path are the tissue beyond the far edge F-O, the flap's leading
+// edge O-S and the flap's side of the arc; the twins are the outer side of the arc and the defect
+// side of O-S. The twin of O is moved to the middle M of the base F-S to open the defect.
+// Sutures (E(u,v): the loop edge from u to v): the leading edge to the far edge, corner O (S meets
+// F); the flap's arc E(A_k, A_k+1) (then E(P, B)) to the outer side two edges further round,
+// E(O,F), E(S,O), E(A_1,S), ..., so that A_k meets the outer node two places back; the two outer
+// edges left at the pivot are closed as a corner (the standing cone / Burow's triangle).
+LocalProcedure rotation_flap(std::map<std::string, double>& p) {
+  const double R = p["radius"], delta = deg_to_rad(p["defect_angle"]);
+  const double alpha = deg_to_rad(p["arc_angle"]), back_mm = p["back_cut"];
+  const double side = p["side"];
+  if (side != 1 && side != -1)
+    throw InvalidInput(cat("rotation-flap: side = ", side, "; give 1 (the arc sweeps to the left "
+                           "of the orientation) or -1 (to the right)"));
+  if (back_mm > R / 2)
+    throw InvalidInput(cat("rotation-flap: back_cut = ", back_mm, " mm is more than half the radius (",
+                           R, " mm); a longer back-cut narrows the flap's pedicle too far"));
+  const bool mirror = side < 0;
+  // Arc segments about as long as half the defect's base: the two base halves are sewn to the
+  // first two arc segments.
+  const double half_base = R * std::sin(delta / 2);
+  const int m = std::clamp(
+      static_cast<int>(std::lround(alpha / (2 * std::asin(half_base / (2 * R))))), 4, 8);
+  p["segments"] = m;
+  auto at = [&](double phi) { return V2(R * std::cos(phi), (mirror ? -1 : 1) * R * std::sin(phi)); };
+  LocalProcedure out;
+  const int iF = 0, iO = 1, iS = 2;  // then A_k = 2 + k, k = 1..m (A_m = P), then B
+  out.points_mm = {at(-delta), V2(0, 0), at(0)};
+  for (int k = 1; k <= m; ++k) out.points_mm.push_back(at(k * alpha / m));
+  auto A = [&](int k) { return k == 0 ? iS : 2 + k; };
+  const int iP = A(m);
+  const bool back = back_mm > 0;
+  const int iB = static_cast<int>(out.points_mm.size());
+  if (back) out.points_mm.push_back(out.points_mm[iP] * (1 - back_mm / R));
+  std::vector<int> path = {iF, iO, iS};
+  for (int k = 1; k <= m; ++k) path.push_back(A(k));
+  if (back) path.push_back(iB);
+  // Mirrored, the path is reversed so that the same side stays on the left.
+  if (mirror) std::reverse(path.begin(), path.end());
+  out.paths = {path};
+  const std::vector<int> loop = walk_around_cut(out.points_mm, out.paths);
+  const int nl = static_cast<int>(loop.size());
+  auto E = [&](int u, int v) {
+    if (mirror) std::swap(u, v);
+    for (int i = 0; i < nl; ++i)
+      if (loop[i] == u && loop[(i + 1) % nl] == v) return BorderEdge{i, (i + 1) % nl};
+    throw Error("rotation-flap: internal error, a segment missing from the loop");
+  };
+  // The twin of O (between E(S,O) and E(O,F)) moves to the middle of the base.
+  const BorderEdge so = E(iS, iO);
+  const int twin_O = mirror ? so.a : so.b;
+  out.excisions = {{twin_O, (out.points_mm[iF] + out.points_mm[iS]) / 2}};
+  out.sutures.push_back({E(iF, iO), E(iO, iS)});
+  std::vector<BorderEdge> flap, outer = {E(iO, iF), E(iS, iO)};
+  for (int k = 0; k < m; ++k) flap.push_back(E(A(k), A(k + 1)));
+  if (back) flap.push_back(E(iP, iB));
+  for (int k = 0; outer.size() < flap.size(); ++k) outer.push_back(E(A(k + 1), A(k)));
+  for (std::size_t k = 0; k < flap.size(); ++k) out.sutures.push_back({flap[k], outer[k]});
+  if (back)
+    out.sutures.push_back({E(iB, iP), E(iP, A(m - 1))});
+  else
+    out.sutures.push_back({E(iP, A(m - 1)), E(A(m - 1), A(m - 2))});
+  out.notes = cat("Rotation flap: triangular defect F-O-S (apex O at the arc's centre), arc of ", m,
+                  " segments from S to the pivot P", back ? " and a back-cut P-B" : "",
+                  ". The flap turns into the defect: S meets F (corner O); the flap's arc is sewn "
+                  "to the outer arc shifted by the defect's base; the outer arc's excess at the "
+                  "pivot closes as a corner (the standing cone, or Burow's triangle).");
+  return out;
+}
+
 struct Template {
   ProcedureInfo info;
   LocalProcedure (*layout)(std::map<std::string, double>&);
@@ -178,6 +251,14 @@ const std::vector<Template>& templates() {
       {{"rhomboid", "rhomboid (Limberg) transposition flap closing a rhombic defect",
         {{"side", "mm", 15, 5, 50, "side of the 60/120 deg rhombus (and of the flap)"}}},
        rhomboid},
+      {{"rotation-flap", "rotation flap: a curved flap turned about its pivot into a triangular defect",
+        {{"radius", "mm", 15, 5, 40, "legs of the triangular defect = radius of the arc"},
+         {"defect_angle", "deg", 40, 20, 60, "at the defect's apex (the arc's centre)"},
+         {"arc_angle", "deg", 120, 60, 180, "sweep of the curved incision from the defect"},
+         {"back_cut", "mm", 0, 0, 20, "cut from the pivot towards the centre (0: none; at most "
+                                      "half the radius)"},
+         {"side", "sign", 1, -1, 1, "1: the arc sweeps to the left of the orientation, -1: right"}}},
+       rotation_flap},
   };
   return t;
 }

@@ -21,6 +21,7 @@
 
 #include "caps/fem/material.hpp"
 #include "caps/fem/mesh.hpp"
+#include "caps/core/error.hpp"
 #include "caps/fem/surface_mesher.hpp"
 
 namespace caps::fem {
@@ -68,6 +69,17 @@ struct WoundMesh {
   SurfaceMesh surface;
   ContinuumMesh continuum;
 };
+/// A mesh node would stand where the model cannot carry it (an invalid cell, outside the model's
+/// z range, or tissue thinner than the minimum). The message names theta and z.
+class OffModelError : public InvalidInput {
+ public:
+  using InvalidInput::InvalidInput;
+};
+
+/// Both stages. With surface_options.extent_mm == 0 (automatic: 3 x the wound's size) the extent
+/// shrinks, in steps of 0.75, down to 1 x the mesh size, while the outer layers would leave the
+/// model's valid cells, and a warning gives the extent reached; a given extent is never changed.
+/// A wound whose own site is not valid is refused (OffModelError naming the place).
 WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
                      const SurfaceMeshOptions& surface_options = {},
                      const ContinuumMeshOptions& continuum_options = {});

@@ -21,21 +21,18 @@
 #include <array>
 #include <vector>
 
+#include "caps/plan/plan.hpp"
+
 namespace caps {
 class PatientModel;
 }
 
 namespace caps::fem {
 
-/// The wound border the plan layer hands to the mesher.
-struct WoundBorder {
-  /// (theta deg, z mm), the hole's border loop in order, excision offsets applied; coincident
-  /// twins allowed (an incision has zero width).
-  std::vector<Eigen::Vector2d> loop_theta_z;
-  /// Border edges (a,b) sutured to (c,d): a meets c, b meets d; a shared point (a==c or b==d) is
-  /// a closed corner: no suture there. (a,b) are neighbours in the loop, in either order.
-  std::vector<std::array<int, 4>> sutures;
-};
+/// The wound border the plan layer hands to the mesher (plan::wound_border()): the hole's border
+/// loop in (theta deg, z mm), excision offsets applied, coincident twins allowed; and the border
+/// edges (a,b) sutured to (c,d), a meeting c and b meeting d, a shared point being a closed corner.
+using WoundBorder = plan::WoundBorder;
 
 struct SurfaceMeshOptions {
   double t1_deg = 30;        ///< stage 1: fill concavities deeper than this (paper default 30)

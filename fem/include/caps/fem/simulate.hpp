@@ -1,0 +1,45 @@
+#pragma once
+/// @brief A plan on a patient model, from border to post-operative shape in one call: the plan is
+/// checked on the model, its wound border meshed (surface mesher, then the variable-thickness
+/// continuum mesher) and the closure solved.
+
+#include <filesystem>
+#include <string>
+
+#include "caps/fem/continuum_mesher.hpp"
+#include "caps/fem/solve.hpp"
+#include "caps/fem/surface_mesher.hpp"
+#include "caps/plan/plan.hpp"
+
+namespace caps {
+class PatientModel;
+}
+
+namespace caps::fem {
+
+struct SimulateOptions {
+  SurfaceMeshOptions surface;
+  ContinuumMeshOptions continuum;
+  SolveOptions solve;
+};
+
+struct Simulation {
+  WoundMesh wound;
+  SolveResult result;
+  /// The largest distance (mm) between sutured nodes after the closure: 0 up to round-off.
+  double max_suture_gap_mm = 0;
+};
+
+/// Checks the plan on the model (plan::check_plan), meshes its wound border and solves the
+/// closure. Throws InvalidInput naming the plan's point or edge, or the mesh's place, that cannot
+/// be operated; SolverError if the solve fails.
+Simulation simulate(const PatientModel& model, const plan::Plan& plan,
+                    const SimulateOptions& options = {});
+
+/// Writes a simulation into an existing directory: mesh.vtu, mesh.json, mesh.inp, result.vtu,
+/// result.json, surface.png and section.png (titled with `name`).
+void write_simulation(const Simulation& sim, const PatientModel& model,
+                      const SimulateOptions& options, const std::filesystem::path& dir,
+                      const std::string& name);
+
+}  // namespace caps::fem

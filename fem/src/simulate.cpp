@@ -1,0 +1,43 @@
+#include "caps/fem/simulate.hpp"
+
+#include <algorithm>
+
+#include "caps/core/error.hpp"
+#include "caps/fem/inp_io.hpp"
+#include "caps/fem/mesh_io.hpp"
+#include "caps/fem/mesh_pictures.hpp"
+#include "caps/plan/check.hpp"
+#include "caps/surface/patient_model.hpp"
+
+namespace caps::fem {
+
+Simulation simulate(const PatientModel& model, const plan::Plan& plan,
+                    const SimulateOptions& options) {
+  plan::check_plan(plan, model);
+  Simulation sim;
+  sim.wound = mesh_wound(plan::wound_border(plan), model, options.surface, options.continuum);
+  sim.result = solve(sim.wound.continuum.mesh, options.solve);
+  // The sutures must close: measured on the deformed positions, not assumed.
+  const Mesh& mesh = sim.wound.continuum.mesh;
+  const auto& u = sim.result.displacement_mm;
+  for (const auto& s : mesh.sutures) {
+    const Eigen::Vector3d a = mesh.nodes.row(s.a).transpose() + u.row(s.a).transpose();
+    const Eigen::Vector3d b = mesh.nodes.row(s.b).transpose() + u.row(s.b).transpose();
+    sim.max_suture_gap_mm = std::max(sim.max_suture_gap_mm, (a - b).norm());
+  }
+  return sim;
+}
+
+void write_simulation(const Simulation& sim, const PatientModel& model,
+                      const SimulateOptions& options, const std::filesystem::path& dir,
+                      const std::string& name) {
+  const Mesh& mesh = sim.wound.continuum.mesh;
+  write_mesh_dir(mesh, dir);
+  write_inp(mesh, dir / "mesh.inp");
+  write_result_dir(mesh, sim.result, dir);
+  write_surface_mesh_png(dir / "surface.png", sim.wound.surface, cat("surface mesh of ", name));
+  write_cross_section_png(dir / "section.png", sim.wound.surface, model, options.continuum,
+                          cat("cross-section of ", name));
+}
+
+}  // namespace caps::fem
