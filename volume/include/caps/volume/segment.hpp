@@ -18,7 +18,7 @@ struct SegmentOptions {
   std::optional<double> skin_threshold;
   /// Bone threshold. Default: +250 HU for CT; MR has none (see bone_mask and mr_scalp_mm).
   std::optional<double> bone_threshold;
-  double working_voxel_mm = 1.0;  ///< segment on blocks averaging to about this size
+  double working_voxel_mm = 1.5;  ///< segment on blocks averaging to about this size
   /// Opening radius that cuts the head loose from what touches it (table, head holder, wrapping):
   /// it removes attachments up to about twice this thick that meet the head broadly.
   double detach_radius_mm = 3.5;
