@@ -2,6 +2,8 @@
 // plans and bad options exit with code 2, a message naming the problem, and no output file.
 #include <gtest/gtest.h>
 
+#include "cli_run.hpp"
+
 #include <array>
 #include <cstdio>
 #include <filesystem>
@@ -13,20 +15,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct CliRun {
-  int code;
-  std::string out;
-};
-
-CliRun caps(const std::string& args) {
-  const std::string cmd = std::string(CAPS_EXE) + " " + args + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf{};
-  while (fgets(buf.data(), buf.size(), p)) out += buf.data();
-  const int status = pclose(p);
-  return {WEXITSTATUS(status), out};
-}
+using caps_test::CliRun;
+using caps_test::caps;
 
 const fs::path kTmp = fs::temp_directory_path() / "caps_test_cli_plan";
 const std::string kModel = (kTmp / "model").string();
@@ -71,6 +61,16 @@ TEST_F(CliPlan, MakesChecksAndDrawsEveryTemplate) {
   const auto z = nlohmann::json::parse(std::ifstream(p("z-plasty.json")));
   EXPECT_EQ(z["sutures"], nlohmann::json::parse("[[[5,0],[5,4]],[[2,1],[2,3]],[[0,1],[3,4]]]"));
   EXPECT_EQ(z["border_loop"].size(), 6u);
+  // Every library parameter has its flag (--back-cut for back_cut), negative values included.
+  const std::string rf = p("rf.json");
+  const CliRun rot = caps("plan new rotation-flap --model " + kModel + " --at 0,60 --radius 12 "
+                          "--defect-angle 40 --arc-angle 120 --back-cut 4 --arc-side -1 -q -o " + rf);
+  ASSERT_EQ(rot.code, 0) << rot.out;
+  const auto rj = nlohmann::json::parse(std::ifstream(rf));
+  EXPECT_EQ(rj["procedure"]["parameters"]["arc_side"], -1);
+  EXPECT_EQ(rj["procedure"]["parameters"]["back_cut"], 4);
+  EXPECT_EQ(rj["border_loop"].size(), 18u);
+  EXPECT_EQ(rj["sutures"].size(), 9u);
   // A saved procedure is reused elsewhere.
   ASSERT_EQ(caps("plan save-procedure -q " + p("z-plasty.json") + " -o " + p("my_z.json")).code, 0);
   EXPECT_EQ(caps("plan new " + p("my_z.json") + " --model " + kModel + " --at 40,50 -q -o " + p("z2.json")).code, 0);

@@ -2,6 +2,8 @@
 // a message that says what to do, and no output directory.
 #include <gtest/gtest.h>
 
+#include "cli_run.hpp"
+
 #include <array>
 #include <cstdio>
 #include <filesystem>
@@ -12,20 +14,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct CliRun {
-  int code;
-  std::string out;
-};
-
-CliRun caps(const std::string& args) {
-  const std::string cmd = std::string(CAPS_EXE) + " " + args + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf{};
-  while (fgets(buf.data(), buf.size(), p)) out += buf.data();
-  const int status = pclose(p);
-  return {WEXITSTATUS(status), out};
-}
+using caps_test::CliRun;
+using caps_test::caps;
 
 const fs::path kTmp = fs::temp_directory_path() / "caps_test_cli_surface";
 const std::string kScan = std::string(CAPS_SHARED_DATA) + "/scan/leeperrysmith/";
