@@ -389,10 +389,10 @@ TEST(PlanLibrary, RotationFlapTurnsIntoTheDefect) {
   expect_closed(bc);
   EXPECT_TRUE(check_plan(bc, cylinder()).warnings.empty());
 
-  // side -1 is the mirror image: the path is reversed so that the same tissue stays on its left,
+  // arc_side -1 is the mirror image: the path is reversed so that the same tissue stays on its left,
   // the loop is the same loop run backwards, and the sutured lengths are the same.
   const Plan mir = placed("rotation-flap", {{"radius", 12}, {"defect_angle", 40}, {"arc_angle", 120},
-                                            {"side", -1}});
+                                            {"arc_side", -1}});
   const BorderLoop lm = border_loop(mir);
   EXPECT_EQ(lm.point, (std::vector<int>{8, 7, 6, 5, 4, 3, 2, 1, 0, 1, 2, 3, 4, 5, 6, 7}));
   EXPECT_EQ(mir.excisions[0].loop_index, 9);
@@ -417,6 +417,6 @@ TEST(PlanLibrary, RotationFlapTurnsIntoTheDefect) {
                  {"defect_angle = 75", "[20, 60]"});
   expect_refused([] { layout_procedure("rotation-flap", {{"radius", 10}, {"back_cut", 6}}); },
                  {"back_cut = 6", "half the radius"});
-  expect_refused([] { layout_procedure("rotation-flap", {{"side", 0}}); }, {"side = 0"});
+  expect_refused([] { layout_procedure("rotation-flap", {{"arc_side", 0}}); }, {"arc_side = 0"});
   expect_refused([] { layout_procedure("rotation-flap", {{"arc_angle", 200}}); }, {"arc_angle = 200"});
 }

@@ -161,9 +161,9 @@ LocalProcedure rhomboid(std::map<std::string, double>& p) {
 LocalProcedure rotation_flap(std::map<std::string, double>& p) {
   const double R = p["radius"], delta = deg_to_rad(p["defect_angle"]);
   const double alpha = deg_to_rad(p["arc_angle"]), back_mm = p["back_cut"];
-  const double side = p["side"];
+  const double side = p["arc_side"];
   if (side != 1 && side != -1)
-    throw InvalidInput(cat("rotation-flap: side = ", side, "; give 1 (the arc sweeps to the left "
+    throw InvalidInput(cat("rotation-flap: arc_side = ", side, "; give 1 (the arc sweeps to the left "
                            "of the orientation) or -1 (to the right)"));
   if (back_mm > R / 2)
     throw InvalidInput(cat("rotation-flap: back_cut = ", back_mm, " mm is more than half the radius (",
@@ -257,7 +257,7 @@ const std::vector<Template>& templates() {
          {"arc_angle", "deg", 120, 60, 180, "sweep of the curved incision from the defect"},
          {"back_cut", "mm", 0, 0, 20, "cut from the pivot towards the centre (0: none; at most "
                                       "half the radius)"},
-         {"side", "sign", 1, -1, 1, "1: the arc sweeps to the left of the orientation, -1: right"}}},
+         {"arc_side", "sign", 1, -1, 1, "1: the arc sweeps to the left of the orientation, -1: right"}}},
        rotation_flap},
   };
   return t;
