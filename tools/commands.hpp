@@ -23,6 +23,8 @@ void add_volume(CLI::App& app, Common& common, Action& action);
 void add_solve(CLI::App& app, Common& common, Action& action);
 void add_plan(CLI::App& app, Common& common, Action& action);
 void add_mesh(CLI::App& app, Common& common, Action& action);
+void add_render(CLI::App& app, Common& common, Action& action);
+void add_compare(CLI::App& app, Common& common, Action& action);
 /// `caps model from-scan` and `caps model pick` (tools/cmd_scan.cpp), added to the model command.
 void add_model_scan(CLI::App* model, Common& common, Action& action);
 

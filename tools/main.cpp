@@ -46,6 +46,8 @@ int main(int argc, char** argv) {
   cli::add_solve(app, common, action);
   cli::add_plan(app, common, action);
   cli::add_mesh(app, common, action);
+  cli::add_render(app, common, action);
+  cli::add_compare(app, common, action);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -5,6 +5,8 @@
 #include "caps/fem/solve.hpp"
 #include "vtu.hpp"
 
+#include <cmath>
+
 namespace caps::fem {
 
 void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesystem::path& dir) {
@@ -55,6 +57,26 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
     j["suture_forces"].push_back({{"a", s.a}, {"b", s.b}, {"magnitude_n", s.magnitude_n},
                                   {"force_on_a_n", {s.force_on_a_n.x(), s.force_on_a_n.y(), s.force_on_a_n.z()}}});
   write_text_atomic(dir / "result.json", j.dump(1) + "\n");
+}
+
+Eigen::MatrixX3d read_result_displacement(const std::filesystem::path& dir, Eigen::Index n_nodes) {
+  const std::filesystem::path path = dir / "result.vtu";
+  if (!std::filesystem::exists(path))
+    throw IoError(cat(path.string(), ": missing; pass a `caps simulate` or `caps solve` output"));
+  const detail::VtuContent v = detail::read_vtu(path);
+  const auto it = v.arrays.find("displacement");
+  if (it == v.arrays.end() || v.components.at("displacement") != 3)
+    throw InvalidInput(cat(path.string(), ": no 3-component point array 'displacement'"));
+  if (v.n_points != n_nodes || static_cast<Eigen::Index>(it->second.size()) != 3 * n_nodes)
+    throw InvalidInput(cat(path.string(), ": ", v.n_points, " points, but the mesh has ", n_nodes,
+                           " nodes; is it the result of this mesh?"));
+  Eigen::MatrixX3d u(n_nodes, 3);
+  for (Eigen::Index i = 0; i < 3 * n_nodes; ++i) {
+    if (!std::isfinite(it->second[i]))
+      throw InvalidInput(cat(path.string(), ": displacement of node ", i / 3, " is not finite"));
+    u(i / 3, i % 3) = it->second[i];
+  }
+  return u;
 }
 
 }  // namespace caps::fem

@@ -78,4 +78,8 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options = {});
 void write_result_dir(const Mesh& mesh, const SolveResult& result,
                       const std::filesystem::path& dir);
 
+/// Reads the nodal displacement (#N×3, mm) from `dir`/result.vtu and checks it has `n_nodes`
+/// finite rows. Throws IoError (missing file) or InvalidInput (wrong size, missing array).
+Eigen::MatrixX3d read_result_displacement(const std::filesystem::path& dir, Eigen::Index n_nodes);
+
 }  // namespace caps::fem

@@ -1,0 +1,47 @@
+#pragma once
+/// @brief Measured versus constant thickness: the same plan on the same skin, meshed once with the
+/// soft-tissue thickness measured in the volume and once with a constant thickness (the 1992
+/// paper's assumption for surface scans), so that the two results differ only in depth.
+
+#include <filesystem>
+#include <string>
+
+#include "caps/fem/simulate.hpp"
+
+namespace caps::fem {
+
+/// What a surgeon compares between two simulations of one plan (clinical units).
+struct SimulationSummary {
+  std::string label;
+  double thickness_mean_mm = 0, thickness_min_mm = 0, thickness_max_mm = 0;  ///< under the wound
+  double max_displacement_mm = 0;   ///< over the skin (top) nodes
+  double mean_displacement_mm = 0;  ///< over the skin nodes within one wound size of the wound
+  double closing_force_n = 0;       ///< net force across the wound
+  double max_suture_force_n = 0;    ///< the largest force on one sutured node pair
+  double max_skin_tension_kpa = 0;  ///< largest maximum principal stress at a skin node
+  double strain_energy_mj = 0;
+  int elements = 0, nodes = 0;
+};
+
+struct Comparison {
+  Simulation measured, constant;
+  SimulationSummary measured_summary, constant_summary;
+  double constant_thickness_mm = 0;
+};
+
+/// Summarises a simulation; `model` gives the thickness under the wound.
+SimulationSummary summarize(const Simulation& sim, const PatientModel& model, const std::string& label,
+                            double constant_thickness_mm = 0);
+
+/// Simulates the plan with the model's measured thickness and with a constant one:
+/// `constant_mm` > 0, or 0 for the median measured thickness under the wound, so that the
+/// comparison shows the effect of the thickness's variation rather than of its mean.
+Comparison compare_thickness(const PatientModel& model, const plan::Plan& plan, double constant_mm,
+                             const SimulateOptions& options = {});
+
+/// Writes measured/ and constant/ (each as write_simulation), comparison.json and report.html
+/// (the table of differences and the two results' pictures side by side) into an existing folder.
+void write_comparison(const Comparison& c, const PatientModel& model, const SimulateOptions& options,
+                      const std::filesystem::path& dir, const std::string& plan_name);
+
+}  // namespace caps::fem

@@ -1,0 +1,85 @@
+#pragma once
+/// @brief The displacement-mapped skin (paper section 4): the skin faces of the finite elements
+/// are subdivided into micropolygons that carry the full-resolution range and colour data, and
+/// the rest of the head is the model's range mesh, stitched to the micropolygons without cracks.
+///
+/// For each element whose top face (nodes 0-3 of a Hex20, 0-2 of a Wedge15, with their mid-edge
+/// nodes) lies on the skin, the face is subdivided n × n in its natural coordinates. At each
+/// micropolygon vertex (xi, eta):
+///   x_face = sum_a N_a(xi, eta, -1) X_a           the element's face (its shape functions)
+///   (theta, z) of x_face; s = skin_point(theta, z), colour = color_at(theta, z)
+///   d = s - x_face                                 the range offset, kept per vertex
+///   pre  = x_face + d  (= s)
+///   post = x_face + u(xi, eta) + d,  u = sum_a N_a U_a   (the FE displacement)
+/// Vertices on an edge shared by two elements are welded (one vertex per edge point), so the
+/// micropolygon skin has no cracks between elements.
+///
+/// Outside the mesh the skin is the range mesh: one vertex per (theta, z) sample, two triangles
+/// per cell, periodic in theta, closed at the first and last rows by a fan to the axis. Cells
+/// near the mesh's footprint (touching it, dilated by one cell, holes filled) are left out, and
+/// the annulus between the staircase border of those cells and the mesh's outer rim is filled by
+/// a strip of triangles that reuses the vertices of both (a zipper by arc length): every seam
+/// edge is shared by two triangles, so the seam cannot crack, whatever the rim does. The wound
+/// (the hole of an excision) is filled by an ear-clipped triangulation of its border's
+/// micropolygon vertices: pre-operatively it is the skin to be removed; when the wound closes
+/// its border vertices meet and the fill collapses onto the suture line, covering the small
+/// mismatch of the two lips' range offsets.
+///
+/// Pre and post share one triangle list and one colour per vertex (so images, animations and
+/// morph targets can blend them); only the positions differ.
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "caps/core/mesh.hpp"
+#include "caps/fem/mesh.hpp"
+#include "caps/fem/solve.hpp"
+
+namespace caps {
+class PatientModel;
+}
+
+namespace caps::render {
+
+/// What produced a triangle of the skin.
+enum class SkinPart : int { Range = 0, Micropolygon = 1, Seam = 2, WoundFill = 3 };
+
+/// The pre- and post-operative skin, one topology.
+struct SkinSurfaces {
+  TriMesh pre;                    ///< V #V×3 (LPS, mm), F #F×3 outward (counter-clockwise)
+  TriMesh post;                   ///< same F, displaced V
+  Eigen::MatrixX3d color;         ///< #V×3 RGB in [0, 1]
+  Eigen::MatrixX2d theta_z;       ///< #V×2 (theta deg, z mm) where each vertex sampled the model
+  Eigen::MatrixX3d range_offset_mm;  ///< #V×3 d = skin - x_face (zero off the mesh)
+  Eigen::VectorXi vertex_element;    ///< #V the element a micropolygon vertex came from, else -1
+  std::vector<SkinPart> face_part;   ///< #F
+  std::vector<int> skin_elements;    ///< elements whose top face lies on the skin
+  int n_micropolygon_vertices = 0;
+  Eigen::Vector3d mesh_centre_lps = Eigen::Vector3d::Zero();  ///< centroid of the skin faces
+  double mesh_radius_mm = 0;  ///< largest distance of a micropolygon vertex from the centre
+};
+
+/// A face lies on the skin when each of its nodes is within this distance (mm) of the range
+/// surface along the model's radial ray.
+inline constexpr double kOnSkinToleranceMm = 1e-4;
+
+/// The elements whose top face lies on the skin (each face node within kOnSkinToleranceMm).
+std::vector<int> skin_elements(const PatientModel& model, const fem::Mesh& mesh);
+
+/// The subdivisions (1..64) that make the micropolygons of the longest skin-face edge no longer
+/// than the model's finest sample spacing (dz, or dtheta as arc at the skin), so the
+/// micropolygons carry the full resolution of the range data (paper section 4).
+int full_resolution_subdivisions(const PatientModel& model, const fem::Mesh& mesh);
+
+/// Builds the pre- and post-operative skin of `mesh` on `model` with `n_subdivisions` (>= 1)
+/// micropolygons along each element edge. `displacement_mm` (#N×3, mm) or null for none (then
+/// post == pre). Throws InvalidInput if no element face lies on the skin, if the displacement has
+/// the wrong size or is not finite, or if the mesh reaches the first or last row of the model.
+SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
+                            const Eigen::MatrixX3d* displacement_mm, int n_subdivisions);
+
+/// The same with a solve result (null: no displacement).
+SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
+                            const fem::SolveResult* result, int n_subdivisions);
+
+}  // namespace caps::render

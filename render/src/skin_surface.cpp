@@ -1,0 +1,546 @@
+#include "caps/render/skin_surface.hpp"
+
+#include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
+#include "caps/fem/elements.hpp"
+#include "caps/surface/patient_model.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <map>
+#include <set>
+
+namespace caps::render {
+namespace {
+
+// A skin tone for models without colour (CT, MR): sRGB of light skin.
+const Eigen::Vector3d kSkinTone(0.87, 0.70, 0.60);
+
+struct Builder {
+  std::vector<Eigen::Vector3d> pre, post, color, offset;
+  std::vector<Eigen::Vector2d> theta_z;
+  std::vector<int> element;
+  std::vector<Eigen::Vector3i> faces;
+  std::vector<SkinPart> part;
+
+  int add(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& c,
+          const Eigen::Vector3d& d, const Eigen::Vector2d& tz, int e) {
+    pre.push_back(p);
+    post.push_back(q);
+    color.push_back(c);
+    offset.push_back(d);
+    theta_z.push_back(tz);
+    element.push_back(e);
+    return static_cast<int>(pre.size()) - 1;
+  }
+  void tri(int a, int b, int c, SkinPart p) {
+    if (a == b || b == c || a == c) return;
+    faces.emplace_back(a, b, c);
+    part.push_back(p);
+  }
+};
+
+double wrap180(double deg) {
+  double t = std::fmod(deg + 180.0, 360.0);
+  if (t < 0) t += 360.0;
+  return t - 180.0;
+}
+
+double signed_area(const std::vector<Eigen::Vector2d>& poly) {
+  double a = 0;
+  for (std::size_t i = 0; i < poly.size(); ++i) {
+    const auto& p = poly[i];
+    const auto& q = poly[(i + 1) % poly.size()];
+    a += p.x() * q.y() - q.x() * p.y();
+  }
+  return 0.5 * a;
+}
+
+bool inside(const std::vector<Eigen::Vector2d>& poly, const Eigen::Vector2d& p) {
+  bool in = false;
+  for (std::size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
+    const auto& a = poly[i];
+    const auto& b = poly[j];
+    if ((a.y() > p.y()) != (b.y() > p.y()) &&
+        p.x() < (b.x() - a.x()) * (p.y() - a.y()) / (b.y() - a.y()) + a.x())
+      in = !in;
+  }
+  return in;
+}
+
+double cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& c) {
+  return (b - a).x() * (c - a).y() - (b - a).y() * (c - a).x();
+}
+
+// Ear clipping of a counter-clockwise polygon; returns index triples into `poly`. Of the valid
+// ears the one of least `cost` goes first: with the post-operative area as the cost, a wound is
+// zipped up from its tips, so that its fill collapses when the lips meet. Falls back to a fan
+// when no ear is found (degenerate loops such as an incision's coincident lips).
+template <typename Cost>
+std::vector<std::array<int, 3>> ear_clip(const std::vector<Eigen::Vector2d>& poly, Cost&& cost) {
+  std::vector<std::array<int, 3>> out;
+  std::vector<int> idx(poly.size());
+  for (std::size_t i = 0; i < idx.size(); ++i) idx[i] = static_cast<int>(i);
+  while (idx.size() > 3) {
+    const std::size_t n = idx.size();
+    std::size_t best = n;
+    double best_cost = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const int a = idx[(i + n - 1) % n], b = idx[i], c = idx[(i + 1) % n];
+      if (cross2(poly[a], poly[b], poly[c]) <= 0) continue;
+      bool empty = true;
+      for (int k : idx) {
+        if (k == a || k == b || k == c) continue;
+        const Eigen::Vector2d& p = poly[k];
+        if (cross2(poly[a], poly[b], p) >= 0 && cross2(poly[b], poly[c], p) >= 0 &&
+            cross2(poly[c], poly[a], p) >= 0) {
+          empty = false;
+          break;
+        }
+      }
+      if (!empty) continue;
+      const double c_abc = cost(a, b, c);
+      if (best == n || c_abc < best_cost) {
+        best = i;
+        best_cost = c_abc;
+      }
+    }
+    if (best == n) {
+      for (std::size_t i = 1; i + 1 < idx.size(); ++i) out.push_back({idx[0], idx[i], idx[i + 1]});
+      return out;
+    }
+    out.push_back({idx[(best + n - 1) % n], idx[best], idx[(best + 1) % n]});
+    idx.erase(idx.begin() + static_cast<std::ptrdiff_t>(best));
+  }
+  if (idx.size() == 3) out.push_back({idx[0], idx[1], idx[2]});
+  return out;
+}
+
+// The face nodes (corners then mid-edge nodes) of an element's top face.
+std::vector<int> top_face_local(fem::ElementType t) {
+  if (t == fem::ElementType::Hex20) return {0, 1, 2, 3, 8, 9, 10, 11};
+  return {0, 1, 2, 6, 7, 8};
+}
+
+}  // namespace
+
+std::vector<int> skin_elements(const PatientModel& model, const fem::Mesh& mesh) {
+  std::vector<int> out;
+  for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
+    const fem::Element& el = mesh.elements[e];
+    bool on = true;
+    for (int a : top_face_local(el.type)) {
+      const CylindricalPoint c = model.to_cylindrical(mesh.nodes.row(el.nodes[a]).transpose());
+      if (!(std::abs(c.r_mm - model.r_skin(c.theta_deg, c.z_mm)) <= kOnSkinToleranceMm)) {
+        on = false;
+        break;
+      }
+    }
+    if (on) out.push_back(static_cast<int>(e));
+  }
+  if (out.empty())
+    throw InvalidInput(cat("render: no element of the mesh (", mesh.n_elements(),
+                           " elements) has its top face on the model's skin; is it the mesh of "
+                           "this model?"));
+  return out;
+}
+
+int full_resolution_subdivisions(const PatientModel& model, const fem::Mesh& mesh) {
+  double longest = 0, radius = 0;
+  int n_corners = 0;
+  for (int e : skin_elements(model, mesh)) {
+    const fem::Element& el = mesh.elements[e];
+    const int nc = el.type == fem::ElementType::Hex20 ? 4 : 3;
+    for (int a = 0; a < nc; ++a) {
+      const Eigen::Vector3d p = mesh.nodes.row(el.nodes[a]);
+      longest = std::max(longest, (p - mesh.nodes.row(el.nodes[(a + 1) % nc]).transpose()).norm());
+      radius += model.to_cylindrical(p).r_mm;
+      ++n_corners;
+    }
+  }
+  radius /= n_corners;
+  const double spacing = std::min(model.grid().dz_mm, deg_to_rad(model.grid().dtheta_deg()) * radius);
+  return std::clamp(static_cast<int>(std::ceil(longest / spacing)), 1, 64);
+}
+
+SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
+                            const fem::SolveResult* result, int n_subdivisions) {
+  return displaced_skin(model, mesh, result ? &result->displacement_mm : nullptr, n_subdivisions);
+}
+
+SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
+                            const Eigen::MatrixX3d* displacement_mm, int n_subdivisions) {
+  const int n = n_subdivisions;
+  if (n < 1 || n > 64)
+    throw InvalidInput(cat("render: subdivisions ", n, " must be in 1..64 per element edge"));
+  if (displacement_mm) {
+    if (displacement_mm->rows() != mesh.n_nodes())
+      throw InvalidInput(cat("render: the displacement has ", displacement_mm->rows(),
+                             " rows but the mesh has ", mesh.n_nodes(), " nodes"));
+    if (!displacement_mm->allFinite())
+      throw InvalidInput("render: the displacement has non-finite values");
+  }
+  const CylinderGrid& g = model.grid();
+  const bool has_color = model.has_color();
+  auto color_of = [&](double theta, double z) -> Eigen::Vector3d {
+    return has_color ? model.color_at(theta, z) : kSkinTone;
+  };
+
+  SkinSurfaces out;
+  out.skin_elements = skin_elements(model, mesh);
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  int n_face_nodes = 0;
+  for (int e : out.skin_elements)
+    for (int a : top_face_local(mesh.elements[e].type)) {
+      centre += mesh.nodes.row(mesh.elements[e].nodes[a]).transpose();
+      ++n_face_nodes;
+    }
+  centre /= n_face_nodes;
+  out.mesh_centre_lps = centre;
+  const double theta_c = model.to_cylindrical(centre).theta_deg;
+  // theta unwrapped around the mesh's centre, so a mesh across the seam (+-180) stays in one piece
+  auto unwrap = [&](double theta) { return theta_c + wrap180(theta - theta_c); };
+
+  // --- Micropolygons, welded along element edges.
+  Builder b;
+  std::map<std::array<long, 3>, int> welded;
+  Eigen::VectorXd N;
+  Eigen::MatrixX3d dN;
+  for (int e : out.skin_elements) {
+    const fem::Element& el = mesh.elements[e];
+    const bool hex = el.type == fem::ElementType::Hex20;
+    const Eigen::MatrixX3d X = fem::element_coordinates(mesh, e);
+    Eigen::MatrixX3d U = Eigen::MatrixX3d::Zero(el.n_nodes(), 3);
+    if (displacement_mm)
+      for (int a = 0; a < el.n_nodes(); ++a) U.row(a) = displacement_mm->row(el.nodes[a]);
+    // key of the grid point (i, j): a corner node, an edge point (lower node id first), or none
+    auto edge_key = [&](int la, int lb, int t) -> std::array<long, 3> {
+      const long a = el.nodes[la], c = el.nodes[lb];
+      if (t == 0) return {a, -1, -1};
+      if (t == n) return {c, -1, -1};
+      return a < c ? std::array<long, 3>{a, c, t} : std::array<long, 3>{c, a, n - t};
+    };
+    auto key_of = [&](int i, int j) -> std::array<long, 3> {
+      if (hex) {
+        if (j == 0) return edge_key(0, 1, i);
+        if (i == n) return edge_key(1, 2, j);
+        if (j == n) return edge_key(3, 2, i);
+        if (i == 0) return edge_key(0, 3, j);
+      } else {
+        if (j == 0) return edge_key(0, 1, i);
+        if (i + j == n) return edge_key(1, 2, j);
+        if (i == 0) return edge_key(0, 2, j);
+      }
+      return {-1, -1, -1};
+    };
+    auto vertex = [&](int i, int j) -> int {
+      const std::array<long, 3> key = key_of(i, j);
+      if (key[0] >= 0) {
+        const auto it = welded.find(key);
+        if (it != welded.end()) return it->second;
+      }
+      const Eigen::Vector3d xi = hex ? Eigen::Vector3d(-1.0 + 2.0 * i / n, -1.0 + 2.0 * j / n, -1.0)
+                                     : Eigen::Vector3d(double(i) / n, double(j) / n, -1.0);
+      fem::shape_functions(el.type, xi, N, dN);
+      const Eigen::Vector3d x_face = X.transpose() * N;
+      const Eigen::Vector3d u = U.transpose() * N;
+      const CylindricalPoint c = model.to_cylindrical(x_face);
+      const Eigen::Vector3d s = model.skin_point(c.theta_deg, c.z_mm);
+      const Eigen::Vector3d d = s - x_face;
+      // post = x_face + u + d (paper section 4); pre is the same with u = 0
+      const int v = b.add(x_face + d, (x_face + u) + d, color_of(c.theta_deg, c.z_mm), d,
+                          {unwrap(c.theta_deg), c.z_mm}, e);
+      if (key[0] >= 0) welded.emplace(key, v);
+      return v;
+    };
+    if (hex) {
+      std::vector<int> id((n + 1) * (n + 1));
+      for (int j = 0; j <= n; ++j)
+        for (int i = 0; i <= n; ++i) id[j * (n + 1) + i] = vertex(i, j);
+      auto at = [&](int i, int j) { return id[j * (n + 1) + i]; };
+      // the face's 0-1-2-3 normal points into the element: reverse it to face outwards
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+          b.tri(at(i, j), at(i, j + 1), at(i + 1, j + 1), SkinPart::Micropolygon);
+          b.tri(at(i, j), at(i + 1, j + 1), at(i + 1, j), SkinPart::Micropolygon);
+        }
+    } else {
+      std::map<std::pair<int, int>, int> id;
+      for (int j = 0; j <= n; ++j)
+        for (int i = 0; i + j <= n; ++i) id[{i, j}] = vertex(i, j);
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i + j < n; ++i) {
+          b.tri(id[{i, j}], id[{i, j + 1}], id[{i + 1, j}], SkinPart::Micropolygon);
+          if (i + j + 1 < n)
+            b.tri(id[{i + 1, j}], id[{i, j + 1}], id[{i + 1, j + 1}], SkinPart::Micropolygon);
+        }
+    }
+  }
+  const int n_micro = static_cast<int>(b.pre.size());
+  out.n_micropolygon_vertices = n_micro;
+  for (int v = 0; v < n_micro; ++v)
+    out.mesh_radius_mm = std::max(out.mesh_radius_mm, (b.pre[v] - centre).norm());
+
+  // --- Border loops of the micropolygon skin: the outer rim (counter-clockwise in theta, z) and
+  // the wounds (clockwise).
+  std::set<std::pair<int, int>> directed;
+  for (const auto& f : b.faces)
+    for (int k = 0; k < 3; ++k) directed.insert({f[k], f[(k + 1) % 3]});
+  std::multimap<int, int> next;
+  for (const auto& [a, c] : directed)
+    if (!directed.count({c, a})) next.emplace(a, c);
+  std::vector<std::vector<int>> loops;
+  while (!next.empty()) {
+    std::vector<int> loop;
+    int v = next.begin()->first;
+    const int start = v;
+    while (true) {
+      const auto it = next.find(v);
+      if (it == next.end()) break;
+      loop.push_back(v);
+      v = it->second;
+      next.erase(it);
+      if (v == start) break;
+    }
+    if (loop.size() >= 2) loops.push_back(std::move(loop));
+  }
+  auto loop_xy = [&](const std::vector<int>& loop) {
+    std::vector<Eigen::Vector2d> p;
+    for (int v : loop) p.push_back(b.theta_z[v]);
+    return p;
+  };
+  int rim = -1;
+  double rim_area = 0;
+  for (std::size_t l = 0; l < loops.size(); ++l) {
+    const double a = signed_area(loop_xy(loops[l]));
+    if (a > rim_area) {
+      rim_area = a;
+      rim = static_cast<int>(l);
+    }
+  }
+  if (rim < 0)
+    throw InvalidInput("render: the mesh's skin faces have no counter-clockwise outer rim; are "
+                       "the elements oriented as in docs/mesh-format.md?");
+
+  // --- Wound fills.
+  for (std::size_t l = 0; l < loops.size(); ++l) {
+    if (static_cast<int>(l) == rim) continue;
+    std::vector<int> loop = loops[l];
+    if (signed_area(loop_xy(loop)) > 0) continue;  // a second island; leave it open
+    std::reverse(loop.begin(), loop.end());
+    auto post_area = [&](int a, int c, int d) {
+      const Eigen::Vector3d& pa = b.post[loop[a]];
+      return (b.post[loop[c]] - pa).cross(b.post[loop[d]] - pa).norm();
+    };
+    for (const auto& t : ear_clip(loop_xy(loop), post_area))
+      b.tri(loop[t[0]], loop[t[1]], loop[t[2]], SkinPart::WoundFill);
+  }
+
+  // --- Range mesh vertices (one per sample).
+  const int nt = g.n_theta, nz = g.n_z;
+  const int range0 = static_cast<int>(b.pre.size());
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < nt; ++j) {
+      const double th = g.theta_deg(j), z = g.z_mm(k);
+      const Eigen::Vector3d s = model.skin_point(th, z);
+      b.add(s, s, color_of(th, z), Eigen::Vector3d::Zero(), {th, z}, -1);
+    }
+  auto grid_vertex = [&](long j, long k) {
+    const long jj = ((j % nt) + nt) % nt;
+    return range0 + static_cast<int>(k * nt + jj);
+  };
+
+  // --- Cells under the footprint: touching the rim polygon, dilated by one, holes filled,
+  // diagonal pinches removed so that their border is one simple loop.
+  const std::vector<Eigen::Vector2d> rim_poly = loop_xy(loops[rim]);
+  double tmin = 1e300, tmax = -1e300, zmin = 1e300, zmax = -1e300;
+  for (const auto& p : rim_poly) {
+    tmin = std::min(tmin, p.x());
+    tmax = std::max(tmax, p.x());
+    zmin = std::min(zmin, p.y());
+    zmax = std::max(zmax, p.y());
+  }
+  const double dth = g.dtheta_deg();
+  const long j0 = static_cast<long>(std::floor((tmin - g.theta0_deg) / dth)) - 3;
+  const long j1 = static_cast<long>(std::floor((tmax - g.theta0_deg) / dth)) + 3;
+  const long k0 = static_cast<long>(std::floor((zmin - g.z0_mm) / g.dz_mm)) - 3;
+  const long k1 = static_cast<long>(std::floor((zmax - g.z0_mm) / g.dz_mm)) + 3;
+  if (k0 < 0 || k1 > nz - 2 || j1 - j0 >= nt - 2)
+    throw InvalidInput(cat("render: the mesh (z ", zmin, "..", zmax, " mm, theta ", tmin, "..",
+                           tmax, " deg) comes within 3 rows of the model's z range or wraps "
+                           "around the head; the skin cannot be stitched there"));
+  const long W = j1 - j0 + 1, H = k1 - k0 + 1;
+  std::vector<char> R(static_cast<std::size_t>(W * H), 0);
+  auto cell = [&](long j, long k) -> char& { return R[static_cast<std::size_t>((k - k0) * W + (j - j0))]; };
+  auto in_box = [&](long j, long k) { return j >= j0 && j <= j1 && k >= k0 && k <= k1; };
+  auto corner = [&](long j, long k) {
+    return Eigen::Vector2d(g.theta0_deg + j * dth, g.z0_mm + k * g.dz_mm);
+  };
+  std::vector<char> corner_in(static_cast<std::size_t>((W + 1) * (H + 1)));
+  for (long k = k0; k <= k1 + 1; ++k)
+    for (long j = j0; j <= j1 + 1; ++j)
+      corner_in[static_cast<std::size_t>((k - k0) * (W + 1) + (j - j0))] = inside(rim_poly, corner(j, k));
+  for (long k = k0; k <= k1; ++k)
+    for (long j = j0; j <= j1; ++j)
+      for (long dk = 0; dk <= 1; ++dk)
+        for (long dj = 0; dj <= 1; ++dj)
+          if (corner_in[static_cast<std::size_t>((k + dk - k0) * (W + 1) + (j + dj - j0))]) cell(j, k) = 1;
+  for (const auto& p : rim_poly) {
+    const long j = static_cast<long>(std::floor((p.x() - g.theta0_deg) / dth));
+    const long k = static_cast<long>(std::floor((p.y() - g.z0_mm) / g.dz_mm));
+    if (in_box(j, k)) cell(j, k) = 1;
+  }
+  {
+    const std::vector<char> seed = R;
+    for (long k = k0 + 1; k < k1; ++k)
+      for (long j = j0 + 1; j < j1; ++j)
+        if (seed[static_cast<std::size_t>((k - k0) * W + (j - j0))])
+          for (long dk = -1; dk <= 1; ++dk)
+            for (long dj = -1; dj <= 1; ++dj) cell(j + dj, k + dk) = 1;
+  }
+  auto fill_holes = [&] {
+    std::vector<char> outside(R.size(), 0);
+    std::vector<std::pair<long, long>> stack;
+    for (long k = k0; k <= k1; ++k)
+      for (long j = j0; j <= j1; ++j)
+        if ((k == k0 || k == k1 || j == j0 || j == j1) && !cell(j, k)) stack.push_back({j, k});
+    while (!stack.empty()) {
+      const auto [j, k] = stack.back();
+      stack.pop_back();
+      const auto c = static_cast<std::size_t>((k - k0) * W + (j - j0));
+      if (outside[c] || R[c]) continue;
+      outside[c] = 1;
+      for (const auto& [dj, dk] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}})
+        if (in_box(j + dj, k + dk)) stack.push_back({j + dj, k + dk});
+    }
+    for (std::size_t c = 0; c < R.size(); ++c)
+      if (!outside[c]) R[c] = 1;
+  };
+  fill_holes();
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (long k = k0; k < k1; ++k)
+      for (long j = j0; j < j1; ++j) {
+        const char a = cell(j, k), c = cell(j + 1, k), d = cell(j, k + 1), e = cell(j + 1, k + 1);
+        if ((a && e && !c && !d) || (c && d && !a && !e)) {
+          cell(j, k) = cell(j + 1, k) = cell(j, k + 1) = cell(j + 1, k + 1) = 1;
+          changed = true;
+        }
+      }
+    if (changed) fill_holes();
+  }
+
+  // --- Range cells outside the footprint, and the end caps.
+  auto removed = [&](long j, long k) {
+    // the footprint in unwrapped cell indices; a cell may be reached one turn away
+    for (long t : {j, j - nt, j + nt})
+      if (in_box(t, k) && cell(t, k)) return true;
+    return false;
+  };
+  for (long k = 0; k + 1 < nz; ++k)
+    for (long j = 0; j < nt; ++j) {
+      if (removed(j, k)) continue;
+      const int v00 = grid_vertex(j, k), v10 = grid_vertex(j + 1, k), v01 = grid_vertex(j, k + 1),
+                v11 = grid_vertex(j + 1, k + 1);
+      b.tri(v00, v10, v11, SkinPart::Range);
+      b.tri(v00, v11, v01, SkinPart::Range);
+    }
+  for (int end = 0; end < 2; ++end) {
+    const int k = end == 0 ? 0 : nz - 1;
+    const Eigen::Vector3d c = model.to_lps(0.0, g.z_mm(k), 0.0);
+    Eigen::Vector3d color = Eigen::Vector3d::Zero();
+    for (int j = 0; j < nt; ++j) color += b.color[grid_vertex(j, k)];
+    const int cv = b.add(c, c, color / nt, Eigen::Vector3d::Zero(), {0.0, g.z_mm(k)}, -1);
+    for (int j = 0; j < nt; ++j) {
+      if (end == 0)
+        b.tri(cv, grid_vertex(j + 1, k), grid_vertex(j, k), SkinPart::Range);
+      else
+        b.tri(cv, grid_vertex(j, k), grid_vertex(j + 1, k), SkinPart::Range);
+    }
+  }
+
+  // --- The staircase border of the removed cells, counter-clockwise around them (grid vertex
+  // coordinates, unwrapped), then the seam strip between it and the rim.
+  std::map<std::pair<long, long>, std::pair<long, long>> step;
+  for (long k = k0; k <= k1; ++k)
+    for (long j = j0; j <= j1; ++j) {
+      if (!cell(j, k)) continue;
+      auto off = [&](long jj, long kk) { return !in_box(jj, kk) || !cell(jj, kk); };
+      if (off(j, k - 1)) step[{j, k}] = {j + 1, k};
+      if (off(j + 1, k)) step[{j + 1, k}] = {j + 1, k + 1};
+      if (off(j, k + 1)) step[{j + 1, k + 1}] = {j, k + 1};
+      if (off(j - 1, k)) step[{j, k + 1}] = {j, k};
+    }
+  std::vector<std::pair<long, long>> stair;
+  {
+    auto at = step.begin()->first;
+    const auto start = at;
+    do {
+      stair.push_back(at);
+      const auto it = step.find(at);
+      if (it == step.end())
+        throw Error("render: the footprint's border is not closed (internal error)");
+      at = it->second;
+    } while (at != start && stair.size() <= step.size());
+  }
+  // arc length in mm (theta as arc at the rim's radius), for the zipper
+  const double r_ref = model.r_skin(theta_c, model.to_cylindrical(centre).z_mm);
+  const double mm_per_deg = deg_to_rad(1.0) * r_ref;
+  auto to_mm = [&](const Eigen::Vector2d& tz) { return Eigen::Vector2d(tz.x() * mm_per_deg, tz.y()); };
+  const std::vector<int>& P = loops[rim];
+  std::vector<Eigen::Vector2d> Pm, Qm;
+  for (int v : P) Pm.push_back(to_mm(b.theta_z[v]));
+  for (const auto& [j, k] : stair) Qm.push_back(to_mm(corner(j, k)));
+  std::size_t q0 = 0;
+  for (std::size_t q = 1; q < Qm.size(); ++q)
+    if ((Qm[q] - Pm[0]).squaredNorm() < (Qm[q0] - Pm[0]).squaredNorm()) q0 = q;
+  auto params = [](const std::vector<Eigen::Vector2d>& L, std::size_t s) {
+    std::vector<double> t(L.size() + 1, 0.0);
+    for (std::size_t i = 0; i < L.size(); ++i)
+      t[i + 1] = t[i] + (L[(s + i + 1) % L.size()] - L[(s + i) % L.size()]).norm();
+    for (double& x : t) x /= t.back();
+    return t;
+  };
+  const std::vector<double> tp = params(Pm, 0), tq = params(Qm, q0);
+  const std::size_t np = P.size(), nq = stair.size();
+  auto pv = [&](std::size_t i) { return P[i % np]; };
+  auto qv = [&](std::size_t i) {
+    const auto& [j, k] = stair[(q0 + i) % nq];
+    return grid_vertex(j, k);
+  };
+  for (std::size_t i = 0, j = 0; i < np || j < nq;) {
+    const bool advance_p = j == nq || (i < np && tp[i + 1] <= tq[j + 1]);
+    if (advance_p) {
+      b.tri(pv(i), qv(j), pv(i + 1), SkinPart::Seam);
+      ++i;
+    } else {
+      b.tri(qv(j), qv(j + 1), pv(i), SkinPart::Seam);
+      ++j;
+    }
+  }
+
+  // --- Pack.
+  const auto nv = static_cast<Eigen::Index>(b.pre.size());
+  out.pre.V.resize(nv, 3);
+  out.post.V.resize(nv, 3);
+  out.color.resize(nv, 3);
+  out.range_offset_mm.resize(nv, 3);
+  out.theta_z.resize(nv, 2);
+  out.vertex_element.resize(nv);
+  for (Eigen::Index v = 0; v < nv; ++v) {
+    out.pre.V.row(v) = b.pre[v];
+    out.post.V.row(v) = b.post[v];
+    out.color.row(v) = b.color[v];
+    out.range_offset_mm.row(v) = b.offset[v];
+    out.theta_z.row(v) = b.theta_z[v];
+    out.vertex_element[v] = b.element[v];
+  }
+  out.pre.F.resize(static_cast<Eigen::Index>(b.faces.size()), 3);
+  for (std::size_t f = 0; f < b.faces.size(); ++f) out.pre.F.row(static_cast<Eigen::Index>(f)) = b.faces[f];
+  out.post.F = out.pre.F;
+  out.face_part = std::move(b.part);
+  return out;
+}
+
+}  // namespace caps::render
