@@ -12,6 +12,7 @@
 #include "caps/core/error.hpp"
 #include "caps/fem/compare.hpp"
 #include "caps/plan/plan_io.hpp"
+#include "caps/render/simulation_report.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "commands.hpp"
 
@@ -33,7 +34,8 @@ void run_compare(const CompareArgs& a, const Common& common) {
   OutputDirectory out(a.output, common.force);
   const PatientModel model = PatientModel::load(a.model);
   const fem::Comparison c = fem::compare_thickness(model, plan, a.thickness_mm, o);
-  fem::write_comparison(c, model, o, out.path(), std::filesystem::path(a.plan).filename().string());
+  render::write_comparison_report(c, model, o, out.path(),
+                                  std::filesystem::path(a.plan).filename().string());
   out.commit();
   if (common.json) {
     std::ifstream in(std::filesystem::path(a.output) / "comparison.json");

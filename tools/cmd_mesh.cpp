@@ -3,7 +3,7 @@
 // (Figure 3), section.png (Figure 4) and a summary. caps simulate: mesh and solve in one go.
 //   caps plan new z-plasty --model /tmp/cranium --at 0,90 -o /tmp/z.json
 //   caps mesh --model /tmp/cranium --plan /tmp/z.json -o /tmp/zplasty-mesh
-//   caps simulate --model /tmp/cranium --plan /tmp/z.json -o /tmp/zplasty-result
+//   caps simulate --model /tmp/cranium --plan /tmp/z.json -o /tmp/zplasty-result --render
 //   caps mesh --model /tmp/cranium --border border.json -o /tmp/zplasty-mesh
 //   caps mesh --model /tmp/cranium --border border.json -o /tmp/m --layers 3 --size 1.5 --extent 60 --rim free --force --json
 //   caps solve /tmp/zplasty-mesh -o /tmp/zplasty-result
@@ -21,6 +21,7 @@
 #include "caps/fem/mesh_pictures.hpp"
 #include "caps/fem/simulate.hpp"
 #include "caps/plan/plan_io.hpp"
+#include "caps/render/simulation_report.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "commands.hpp"
 
@@ -32,6 +33,7 @@ struct MeshArgs {
   int layers = 2;
   double size_mm = 2, extent_mm = 0, grading = 1, t1_deg = 30, t2_deg = 90, constant_mm = 0;
   bool no_pictures = false;
+  bool render = false;  // simulate: also the pre- and post-operative images
 };
 
 fem::WoundBorder read_border(const std::string& path) {
@@ -87,6 +89,10 @@ void run_simulate(const MeshArgs& a, const Common& common) {
   sim.wound.continuum.mesh.model = a.model;
   sim.wound.continuum.mesh.plan = a.plan;
   fem::write_simulation(sim, model, o, out.path(), std::filesystem::path(a.plan).filename().string());
+  if (a.render)
+    render::render_simulation(model, sim, {render::View::Front, render::View::Oblique,
+                                           render::View::Side, render::View::Plan},
+                              {}, out.path());
   out.commit();
   const auto& r = sim.result;
   nlohmann::json j{{"output", a.output},
@@ -210,6 +216,8 @@ void add_mesh(CLI::App& app, Common& common, Action& action) {
   sim->add_option("--constant-thickness", b->constant_mm,
                   "a constant depth (mm) instead of the model's thickness (the 1992 paper)");
   sim->add_option("--solver", b->solver, "mumps or cholmod")->capture_default_str();
+  sim->add_flag("--render", b->render, "also render pre_<view>.png and post_<view>.png (front, "
+                                       "oblique, side, plan; the same camera before and after)");
   add_common_flags(sim, common, true);
   sim->callback([&common, &action, b] { action = [&common, b] { run_simulate(*b, common); }; });
 }

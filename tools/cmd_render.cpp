@@ -17,6 +17,7 @@
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/solve.hpp"
 #include "caps/render/render.hpp"
+#include "caps/render/simulation_report.hpp"
 #include "caps/render/skin_surface.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "commands.hpp"
@@ -42,16 +43,7 @@ void run_render(const RenderArgs& a, const Common& common) {
   const int n = a.subdivisions > 0 ? a.subdivisions
                                    : render::full_resolution_subdivisions(model, mesh);
   const render::SkinSurfaces skin = render::displaced_skin(model, mesh, &u, n);
-  // the excised skin: its area before, and what is left of it after the closure
-  double fill_pre_mm2 = 0, fill_post_mm2 = 0;
-  for (Eigen::Index f = 0; f < skin.pre.F.rows(); ++f) {
-    if (skin.face_part[f] != render::SkinPart::WoundFill) continue;
-    for (const TriMesh* m : {&skin.pre, &skin.post}) {
-      const Eigen::Vector3d p0 = m->V.row(m->F(f, 0)), p1 = m->V.row(m->F(f, 1)),
-                            p2 = m->V.row(m->F(f, 2));
-      (m == &skin.pre ? fill_pre_mm2 : fill_post_mm2) += 0.5 * (p1 - p0).cross(p2 - p0).norm();
-    }
-  }
+  const auto [fill_pre_mm2, fill_post_mm2] = render::wound_fill_area_mm2(skin);
   OutputDirectory out(a.output, common.force);
   render::RenderOptions o;
   o.width = o.height = a.size;

@@ -6,7 +6,6 @@
 #include <cmath>
 #include <vector>
 
-#include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/surface/patient_model.hpp"
 
@@ -97,17 +96,7 @@ Comparison compare_thickness(const PatientModel& model, const plan::Plan& plan, 
   return c;
 }
 
-void write_comparison(const Comparison& c, const PatientModel& model, const SimulateOptions& options,
-                      const std::filesystem::path& dir, const std::string& plan_name) {
-  namespace fs = std::filesystem;
-  fs::create_directories(dir / "measured");
-  fs::create_directories(dir / "constant");
-  write_simulation(c.measured, model, options, dir / "measured", plan_name + ", measured thickness");
-  SimulateOptions constant = options;
-  constant.continuum.constant_thickness_mm = c.constant_thickness_mm;
-  write_simulation(c.constant, model, constant, dir / "constant", plan_name + ", constant thickness");
-  const auto& a = c.measured_summary;
-  const auto& b = c.constant_summary;
+std::string comparison_json(const Comparison& c, const std::string& plan_name) {
   auto side = [](const SimulationSummary& s) {
     return nlohmann::json{{"label", s.label},
                           {"thickness_under_wound_mm", {{"mean", s.thickness_mean_mm},
@@ -122,48 +111,11 @@ void write_comparison(const Comparison& c, const PatientModel& model, const Simu
                           {"elements", s.elements},
                           {"nodes", s.nodes}};
   };
-  const nlohmann::json j{{"plan", plan_name},
-                         {"constant_thickness_mm", c.constant_thickness_mm},
-                         {"measured", side(a)},
-                         {"constant", side(b)}};
-  write_text_atomic(dir / "comparison.json", j.dump(2) + "\n");
-
-  auto row = [&](const std::string& what, const std::string& unit, double x, double y, int d = 2) {
-    const double diff = y != 0 ? 100.0 * (x - y) / std::abs(y) : 0.0;
-    return "<tr><td>" + what + "</td><td>" + unit + "</td><td>" + fmt(x, d) + "</td><td>" + fmt(y, d) +
-           "</td><td>" + (y != 0 ? fmt(diff, 1) + " %" : "") + "</td></tr>\n";
-  };
-  std::string html =
-      "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>caps compare: " +
-      plan_name +
-      "</title>\n<style>body{font-family:DejaVu Sans,Arial,sans-serif;max-width:1100px;margin:2em "
-      "auto;color:#222}table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:4px "
-      "10px;text-align:right}td:first-child,th:first-child{text-align:left}img{max-width:100%;"
-      "border:1px solid #ddd}.pair{display:flex;gap:12px}.pair div{flex:1}</style></head><body>\n"
-      "<h1>Measured versus constant soft-tissue thickness</h1>\n<p>The plan <b>" + plan_name +
-      "</b> simulated on the same skin twice: with the thickness measured in the patient's volume, "
-      "and with a constant " + fmt(c.constant_thickness_mm, 1) +
-      " mm (the median measured under the wound), the assumption the 1992 CAPS system made for "
-      "surface scans. Both use the same surface mesh, so the results differ only in depth. "
-      "Linear elasticity, the wound closed by suture constraints (docs/fem.md).</p>\n"
-      "<table><tr><th>quantity</th><th>unit</th><th>measured</th><th>constant</th>"
-      "<th>measured vs constant</th></tr>\n" +
-      row("thickness under the wound, mean", "mm", a.thickness_mean_mm, b.thickness_mean_mm) +
-      row("thickness under the wound, min", "mm", a.thickness_min_mm, b.thickness_min_mm) +
-      row("thickness under the wound, max", "mm", a.thickness_max_mm, b.thickness_max_mm) +
-      row("largest skin displacement", "mm", a.max_displacement_mm, b.max_displacement_mm) +
-      row("mean skin displacement near the wound", "mm", a.mean_displacement_mm, b.mean_displacement_mm) +
-      row("closing force across the wound", "N", a.closing_force_n, b.closing_force_n) +
-      row("largest force on one suture pair", "N", a.max_suture_force_n, b.max_suture_force_n) +
-      row("largest skin tension (max principal stress)", "kPa", a.max_skin_tension_kpa, b.max_skin_tension_kpa, 1) +
-      row("strain energy", "mJ", a.strain_energy_mj, b.strain_energy_mj) +
-      "</table>\n<h2>Cross-sections</h2>\n<div class=\"pair\"><div><p>measured</p><img "
-      "src=\"measured/section.png\" alt=\"cross-section, measured thickness\"></div><div><p>constant"
-      "</p><img src=\"constant/section.png\" alt=\"cross-section, constant thickness\"></div></div>\n"
-      "<h2>Surface mesh (the same for both)</h2>\n<img src=\"measured/surface.png\" alt=\"surface "
-      "mesh\">\n<p>Files: measured/ and constant/ hold mesh.vtu, result.vtu (ParaView), mesh.inp "
-      "(CalculiX) and result.json; comparison.json holds this table.</p>\n</body></html>\n";
-  write_text_atomic(dir / "report.html", html);
+  return nlohmann::json{{"plan", plan_name},
+                        {"constant_thickness_mm", c.constant_thickness_mm},
+                        {"measured", side(c.measured_summary)},
+                        {"constant", side(c.constant_summary)}}
+             .dump(2);
 }
 
 }  // namespace caps::fem

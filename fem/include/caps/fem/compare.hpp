@@ -39,9 +39,8 @@ SimulationSummary summarize(const Simulation& sim, const PatientModel& model, co
 Comparison compare_thickness(const PatientModel& model, const plan::Plan& plan, double constant_mm,
                              const SimulateOptions& options = {});
 
-/// Writes measured/ and constant/ (each as write_simulation), comparison.json and report.html
-/// (the table of differences and the two results' pictures side by side) into an existing folder.
-void write_comparison(const Comparison& c, const PatientModel& model, const SimulateOptions& options,
-                      const std::filesystem::path& dir, const std::string& plan_name);
+/// The comparison's table as JSON (comparison.json): the plan, the constant thickness, and each
+/// side's summary.
+std::string comparison_json(const Comparison& c, const std::string& plan_name);
 
 }  // namespace caps::fem

@@ -1,0 +1,111 @@
+#include "caps/render/simulation_report.hpp"
+
+#include <cmath>
+#include <cstdio>
+
+#include "caps/core/atomic_output.hpp"
+#include "caps/core/error.hpp"
+#include "caps/surface/patient_model.hpp"
+
+namespace fs = std::filesystem;
+
+namespace caps::render {
+namespace {
+
+std::string fmt(double x, int digits = 2) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, x);
+  return buf;
+}
+
+double triangle_area(const TriMesh& m, Eigen::Index f) {
+  const Eigen::Vector3d p0 = m.V.row(m.F(f, 0)), p1 = m.V.row(m.F(f, 1)), p2 = m.V.row(m.F(f, 2));
+  return 0.5 * (p1 - p0).cross(p2 - p0).norm();
+}
+
+}  // namespace
+
+std::pair<double, double> wound_fill_area_mm2(const SkinSurfaces& skin) {
+  double pre = 0, post = 0;
+  for (Eigen::Index f = 0; f < skin.pre.F.rows(); ++f) {
+    if (skin.face_part[f] != SkinPart::WoundFill) continue;
+    pre += triangle_area(skin.pre, f);
+    post += triangle_area(skin.post, f);
+  }
+  return {pre, post};
+}
+
+SkinSurfaces simulated_skin(const PatientModel& model, const fem::Simulation& sim) {
+  const fem::Mesh& mesh = sim.wound.continuum.mesh;
+  return displaced_skin(model, mesh, &sim.result, full_resolution_subdivisions(model, mesh));
+}
+
+std::vector<fs::path> render_simulation(const PatientModel& model, const fem::Simulation& sim,
+                                        const std::vector<View>& views, const RenderOptions& options,
+                                        const fs::path& dir) {
+  return render_views(model, simulated_skin(model, sim), views, options, dir);
+}
+
+void write_comparison_report(const fem::Comparison& c, const PatientModel& model,
+                             const fem::SimulateOptions& options, const fs::path& dir,
+                             const std::string& plan_name, const RenderOptions& render_options) {
+  fs::create_directories(dir / "measured");
+  fs::create_directories(dir / "constant");
+  fem::SimulateOptions constant = options;
+  constant.continuum.constant_thickness_mm = c.constant_thickness_mm;
+  fem::write_simulation(c.measured, model, options, dir / "measured", plan_name + ", measured thickness");
+  fem::write_simulation(c.constant, model, constant, dir / "constant", plan_name + ", constant thickness");
+  const std::vector<View> views{View::Plan, View::Oblique};
+  render_simulation(model, c.measured, views, render_options, dir / "measured");
+  render_simulation(model, c.constant, views, render_options, dir / "constant");
+  write_text_atomic(dir / "comparison.json", fem::comparison_json(c, plan_name) + "\n");
+
+  const auto& a = c.measured_summary;
+  const auto& b = c.constant_summary;
+  auto row = [&](const std::string& what, const std::string& unit, double x, double y, int d = 2) {
+    const std::string diff = y != 0 ? fmt(100.0 * (x - y) / std::abs(y), 1) + " %" : "";
+    return "<tr><td>" + what + "</td><td>" + unit + "</td><td>" + fmt(x, d) + "</td><td>" +
+           fmt(y, d) + "</td><td>" + diff + "</td></tr>\n";
+  };
+  auto pair = [](const std::string& title, const std::string& image) {
+    return "<h2>" + title + "</h2>\n<div class=\"pair\"><div><p>measured thickness</p><img src=\"measured/" +
+           image + "\" alt=\"" + title + ", measured\"></div><div><p>constant thickness</p><img "
+           "src=\"constant/" + image + "\" alt=\"" + title + ", constant\"></div></div>\n";
+  };
+  const std::string html =
+      "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>caps compare: " +
+      plan_name +
+      "</title>\n<style>body{font-family:DejaVu Sans,Arial,sans-serif;max-width:1100px;margin:2em "
+      "auto;color:#222}table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:4px "
+      "10px;text-align:right}td:first-child,th:first-child{text-align:left}img{max-width:100%;"
+      "border:1px solid #ddd}.pair{display:flex;gap:12px}.pair div{flex:1}</style></head><body>\n"
+      "<h1>Measured versus constant soft-tissue thickness</h1>\n<p>The plan <b>" + plan_name +
+      "</b> simulated on the same skin twice: with the thickness measured in the patient's volume, "
+      "and with a constant " + fmt(c.constant_thickness_mm, 1) +
+      " mm (the median measured under the wound, unless given), the assumption the 1992 CAPS system "
+      "made for surface scans. Both use the same surface mesh, so the results differ only in depth. "
+      "Linear elasticity; the wound closed by suture constraints (docs/fem.md).</p>\n"
+      "<table><tr><th>quantity</th><th>unit</th><th>measured</th><th>constant</th>"
+      "<th>measured vs constant</th></tr>\n" +
+      row("thickness under the wound, mean", "mm", a.thickness_mean_mm, b.thickness_mean_mm) +
+      row("thickness under the wound, min", "mm", a.thickness_min_mm, b.thickness_min_mm) +
+      row("thickness under the wound, max", "mm", a.thickness_max_mm, b.thickness_max_mm) +
+      row("largest skin displacement", "mm", a.max_displacement_mm, b.max_displacement_mm) +
+      row("mean skin displacement near the wound", "mm", a.mean_displacement_mm, b.mean_displacement_mm) +
+      row("closing force across the wound", "N", a.closing_force_n, b.closing_force_n) +
+      row("largest force on one suture pair", "N", a.max_suture_force_n, b.max_suture_force_n) +
+      row("largest skin tension (max principal stress)", "kPa", a.max_skin_tension_kpa,
+          b.max_skin_tension_kpa, 1) +
+      row("strain energy", "mJ", a.strain_energy_mj, b.strain_energy_mj) + "</table>\n" +
+      pair("After the closure, looking at the wound", "post_plan.png") +
+      pair("After the closure, oblique", "post_oblique.png") +
+      "<h2>Before (the same for both)</h2>\n<img src=\"measured/pre_plan.png\" alt=\"before\" "
+      "style=\"max-width:49%\">\n" + pair("Cross-sections", "section.png") +
+      "<h2>Surface mesh (the same for both)</h2>\n<img src=\"measured/surface.png\" alt=\"surface "
+      "mesh\">\n<p>Files: measured/ and constant/ hold mesh.vtu, result.vtu (ParaView), mesh.inp "
+      "(CalculiX), result.json and the pictures; comparison.json holds this table.</p>\n"
+      "</body></html>\n";
+  write_text_atomic(dir / "report.html", html);
+}
+
+}  // namespace caps::render
