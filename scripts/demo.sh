@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # The main job on the demo patient (Cranium.inv3, a real head CT from Debian's invesalius-examples):
-# installs what is missing, builds, then writes into out/ (or the folder given):
-#   cranium/            the patient model (measured thickness map, skin and bone surfaces)
-#   ellipse.json, z-plasty.json        two plans on the forehead, with ellipse.png, z-plasty.png
-#   ellipse/, z-plasty/                each plan meshed and its closure solved (caps simulate)
+# installs what is missing, builds, then writes everything into out/ (or the folder given), with
+# out/index.html to open in a browser:
+#   cranium/               the patient model (measured thickness map, skin and bone surfaces)
+#   ellipse.json, z-plasty.json, *.png   two plans on the forehead and their drawings
+#   ellipse/, z-plasty/    each plan meshed, its closure solved and rendered before and after
+#   ellipse-compare/, z-plasty-compare/  measured versus constant thickness (report.html)
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$here/scripts/build.sh"
@@ -17,10 +19,42 @@ mkdir -p "$out"
 "$caps" plan new z-plasty --model "$out/cranium" --at 30,110 --length 15 -o "$out/z-plasty.json" --force
 for p in ellipse z-plasty; do
   "$caps" plan show "$out/$p.json" -o "$out/$p.png" --force
-  "$caps" simulate --model "$out/cranium" --plan "$out/$p.json" -o "$out/$p" --force
+  "$caps" simulate --model "$out/cranium" --plan "$out/$p.json" -o "$out/$p" --render --force
+  "$caps" compare --model "$out/cranium" --plan "$out/$p.json" -o "$out/$p-compare" --force
 done
-echo "caps demo: results in $out"
-echo "  cranium/thickness.png, cranium/skin.png: the patient model (skin.ply, bone.ply open in"
-echo "    3D Slicer, ParaView and Blender; the .nrrd maps in 3D Slicer)"
-echo "  ellipse.png, z-plasty.png: the plans; ellipse/, z-plasty/: mesh.vtu and result.vtu for"
-echo "    ParaView, mesh.inp for CalculiX, result.json with the closing force"
+
+cat > "$out/index.html" <<'HTML'
+<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>caps demo: Cranium.inv3</title>
+<style>body{font-family:DejaVu Sans,Arial,sans-serif;max-width:1150px;margin:2em auto;color:#222}
+img{max-width:100%;border:1px solid #ddd}.row{display:flex;gap:12px}.row div{flex:1}</style></head>
+<body>
+<h1>caps demo: a patient model from CT, two plans, their closure</h1>
+<p>The patient: <code>Cranium.inv3</code>, a head CT from Debian's invesalius-examples. caps measured
+the soft-tissue thickness between skin and bone in the CT, planned an elliptical excision and a
+Z-plasty on the forehead, meshed each plan (20-node hexahedra and 15-node wedges down to the
+measured bone), closed the wound with suture constraints and rendered the skin before and after at
+the CT's full resolution. Each plan is also simulated with a constant thickness (the 1992 CAPS
+assumption for surface scans) for comparison.</p>
+<h2>The patient model</h2>
+<div class="row"><div><p>Soft-tissue thickness (mm)</p><img src="cranium/thickness.png" alt="thickness map"></div>
+<div><p>Skin range image</p><img src="cranium/skin.png" alt="skin range image"></div></div>
+<p>Files: <code>cranium/model.json</code>, the NRRD maps (3D Slicer), <code>skin.ply</code>,
+<code>bone.ply</code> (3D Slicer, ParaView, Blender).</p>
+HTML
+for p in ellipse z-plasty; do
+  cat >> "$out/index.html" <<HTML
+<h2>${p}</h2>
+<div class="row"><div><p>The plan</p><img src="${p}.png" alt="${p} plan"></div>
+<div><p>The surface mesh</p><img src="${p}/surface.png" alt="${p} surface mesh"></div></div>
+<div class="row"><div><p>Before</p><img src="${p}/pre_plan.png" alt="${p} before"></div>
+<div><p>After the closure</p><img src="${p}/post_plan.png" alt="${p} after"></div></div>
+<div class="row"><div><p>Before, oblique</p><img src="${p}/pre_oblique.png" alt="${p} before, oblique"></div>
+<div><p>After, oblique</p><img src="${p}/post_oblique.png" alt="${p} after, oblique"></div></div>
+<p><a href="${p}-compare/report.html">Measured versus constant thickness</a> &middot;
+<code>${p}/result.vtu</code> (ParaView) &middot; <code>${p}/mesh.inp</code> (CalculiX) &middot;
+<code>${p}/result.json</code> (closing force, stresses, timings)</p>
+HTML
+done
+echo "</body></html>" >> "$out/index.html"
+echo "caps demo: open $out/index.html"
