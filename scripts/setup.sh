@@ -9,7 +9,7 @@ packages=(
   libsuitesparse-dev libmumps-seq-dev libopenblas0-pthread libgdcm-dev libgdcm-tools
   nlohmann-json3-dev libcli11-dev libgtest-dev libbenchmark-dev
   libnifti2-dev libteem-dev libarchive-dev libpng-dev zlib1g-dev
-  libcairo2-dev fonts-dejavu-core libtinygltf-dev libjpeg-dev libembree-dev
+  libcairo2-dev fonts-dejavu-core libtinygltf-dev libjpeg-dev libembree-dev libgif-dev
   invesalius-examples mricron-data
   calculix-ccx
 )

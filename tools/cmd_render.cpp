@@ -6,7 +6,9 @@
 //   caps plan new ellipse --model /tmp/cranium --at 25,105 -o /tmp/e.json
 //   caps simulate --model /tmp/cranium --plan /tmp/e.json -o /tmp/esim
 //   caps render /tmp/esim --model /tmp/cranium -o /tmp/esim-images
+//   caps render /tmp/esim --model /tmp/cranium -o /tmp/esim-overlays --plan /tmp/e.json --displacement-map --views plan --force
 //   caps render /tmp/esim --model /tmp/cranium -o /tmp/esim-plan --views plan --size 400 --force --json
+//   caps render /tmp/esim --model /tmp/cranium -o /tmp/esim-anim --views plan --size 400 --gltf --animation --force
 #include <filesystem>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -16,6 +18,10 @@
 #include "caps/core/error.hpp"
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/solve.hpp"
+#include "caps/render/animation.hpp"
+#include "caps/render/gltf_export.hpp"
+#include "caps/plan/plan_io.hpp"
+#include "caps/render/overlay.hpp"
 #include "caps/render/render.hpp"
 #include "caps/render/simulation_report.hpp"
 #include "caps/render/skin_surface.hpp"
@@ -27,7 +33,9 @@ namespace {
 
 struct RenderArgs {
   std::string result, model, output, views = "front,oblique,side,plan";
-  int size = 800, subdivisions = 0;
+  int size = 800, subdivisions = 0, frames = render::kGifDefaultFrames;
+  bool gltf = false, animation = false, views_given = false, displacement_map = false;
+  std::string plan;  // draw its cutting lines over the pre-operative images
 };
 
 void run_render(const RenderArgs& a, const Common& common) {
@@ -37,6 +45,8 @@ void run_render(const RenderArgs& a, const Common& common) {
   if (views.empty()) throw InvalidInput("--views: name at least one of front,oblique,side,plan");
   if (a.size < 16 || a.size > 8192)
     throw InvalidInput(cat("--size ", a.size, ": expected 16..8192 pixels"));
+  if (a.frames < 2 || a.frames > 600)
+    throw InvalidInput(cat("--frames ", a.frames, ": expected 2..600"));
   const fem::Mesh mesh = fem::read_mesh_dir(a.result);
   const Eigen::MatrixX3d u = fem::read_result_displacement(a.result, mesh.n_nodes());
   const PatientModel model = PatientModel::load(a.model);
@@ -47,7 +57,17 @@ void run_render(const RenderArgs& a, const Common& common) {
   OutputDirectory out(a.output, common.force);
   render::RenderOptions o;
   o.width = o.height = a.size;
-  const auto files = render::render_views(model, skin, views, o, out.path());
+  render::Overlays overlays;
+  overlays.displacement_map = a.displacement_map;
+  if (!a.plan.empty()) overlays.plan_lines = render::plan_lines(plan::read_plan(a.plan), model);
+  const auto files = render::render_views_with_overlays(model, skin, views, o, overlays, out.path());
+  if (a.gltf) render::write_gltf(skin, out.path() / "skin.glb");
+  std::vector<std::filesystem::path> gifs;
+  if (a.animation) {  // of the plan view unless views were named
+    const std::vector<render::View> anim_views =
+        a.views_given ? views : std::vector{render::View::Plan};
+    gifs = render::write_transition_gifs(model, skin, anim_views, o, a.frames, out.path());
+  }
   out.commit();
   nlohmann::json j{{"output", a.output},
                    {"skin_elements", skin.skin_elements.size()},
@@ -58,11 +78,18 @@ void run_render(const RenderArgs& a, const Common& common) {
                    {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},
                    {"images", nlohmann::json::array()}};
   for (const auto& f : files) j["images"].push_back(f.filename().string());
+  if (a.gltf) j["gltf"] = "skin.glb";
+  if (a.animation) {
+    j["animations"] = nlohmann::json::array();
+    for (const auto& f : gifs) j["animations"].push_back(f.filename().string());
+    j["frames"] = a.frames;
+  }
   if (common.json) std::cout << j.dump(2) << "\n";
   else if (!common.quiet)
-    std::cerr << "caps render: " << files.size() << " images in " << a.output << " ("
-              << skin.skin_elements.size() << " skin faces, " << skin.n_micropolygon_vertices
-              << " micropolygon vertices)\n";
+    std::cerr << "caps render: " << files.size() << " images" << (a.gltf ? ", skin.glb" : "")
+              << (a.animation ? cat(", ", gifs.size(), " animations") : std::string()) << " in "
+              << a.output << " (" << skin.skin_elements.size() << " skin faces, "
+              << skin.n_micropolygon_vertices << " micropolygon vertices)\n";
 }
 
 }  // namespace
@@ -71,19 +98,35 @@ void add_render(CLI::App& app, Common& common, Action& action) {
   auto a = std::make_shared<RenderArgs>();
   auto* cmd = app.add_subcommand(
       "render", "Pre- and post-operative images of a simulation: pre_<view>.png and "
-                "post_<view>.png, same camera, displacement-mapped skin (paper section 4).\n"
+                "post_<view>.png, same camera, displacement-mapped skin (paper section 4); "
+                "optionally skin.glb (glTF morph target) and transition_<view>.gif.\n"
                 "Example: caps render esim --model cranium -o esim-images");
   cmd->add_option("result", a->result, "a caps simulate (or caps solve) output directory")
       ->required();
   cmd->add_option("--model", a->model, "patient model directory")->required();
   cmd->add_option("-o,--output", a->output, "image directory to create")->required();
-  cmd->add_option("--views", a->views, "comma-separated: front, oblique, side, plan")
-      ->capture_default_str();
+  auto* views = cmd->add_option("--views", a->views, "comma-separated: front, oblique, side, plan")
+                    ->capture_default_str();
   cmd->add_option("--size", a->size, "image width and height (pixels)")->capture_default_str();
   cmd->add_option("--subdivisions", a->subdivisions,
                   "micropolygons along each element edge (1..64); 0 = the model's full resolution")->capture_default_str();
+  cmd->add_option("--plan", a->plan, "draw this plan's cutting lines over the pre-operative images");
+  cmd->add_flag("--displacement-map", a->displacement_map,
+                "also write displacement_<view>.png: the skin coloured by displacement, with a "
+                "colour bar in mm");
+  cmd->add_flag("--gltf", a->gltf,
+                "also write skin.glb: glTF 2.0, pre-operative skin with the post-operative skin as "
+                "a morph target and a 2 s animation (metres, +Y up, face along +Z)");
+  cmd->add_flag("--animation", a->animation,
+                "also write transition_<view>.gif, the looping pre-to-post transition, for the "
+                "plan view (or for each of --views if given)");
+  cmd->add_option("--frames", a->frames, "frames of each --animation (2..600)")
+      ->capture_default_str();
   add_common_flags(cmd, common, true);
-  cmd->callback([&common, &action, a] { action = [&common, a] { run_render(*a, common); }; });
+  cmd->callback([&common, &action, a, views] {
+    a->views_given = views->count() > 0;
+    action = [&common, a] { run_render(*a, common); };
+  });
 }
 
 }  // namespace caps::cli
