@@ -3,6 +3,8 @@
 // solve, and the CalculiX deck solved by ccx against caps' own solve.
 #include <gtest/gtest.h>
 
+#include "synthetic_model.hpp"
+
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -34,28 +36,12 @@ constexpr double kR = 70.0;
 // A cylinder of radius 70 mm about the LPS z axis, z in [-200, 200], with thickness T(theta, z).
 template <typename Thickness>
 PatientModel cylinder(Thickness&& T, std::uint8_t flag_band = 0) {
-  CylindricalMaps m;
-  m.grid.n_theta = 360;
-  m.grid.n_z = 401;
-  m.grid.z0_mm = -200;
-  m.grid.dz_mm = 1;
-  const auto n = m.grid.size();
-  m.r_skin.assign(n, static_cast<float>(kR));
-  m.r_bone.resize(n);
-  m.thickness.resize(n);
-  m.thickness_normal.resize(n);
-  m.flags.assign(n, 0);
-  m.measured_skin.assign(n, 1);
-  m.measured_bone.assign(n, 1);
+  CylindricalMaps m = caps_test::synthetic_maps(caps_test::grid(360, 401, -200, 1),
+                                                [](double, double) { return kR; }, T);
+  // an invalid band at z in [60, 70] (e.g. no bone)
   for (int k = 0; k < m.grid.n_z; ++k)
-    for (int j = 0; j < m.grid.n_theta; ++j) {
-      const auto c = m.grid.index(j, k);
-      const double t = T(m.grid.theta_deg(j), m.grid.z_mm(k));
-      m.thickness[c] = m.thickness_normal[c] = static_cast<float>(t);
-      m.r_bone[c] = static_cast<float>(kR - t);
-      // an invalid band at z in [60, 70] (e.g. no bone)
-      if (flag_band && m.grid.z_mm(k) >= 60 && m.grid.z_mm(k) <= 70) m.flags[c] = flag_band;
-    }
+    for (int j = 0; j < m.grid.n_theta; ++j)
+      if (flag_band && m.grid.z_mm(k) >= 60 && m.grid.z_mm(k) <= 70) m.flags[m.grid.index(j, k)] = flag_band;
   return PatientModel(std::move(m));
 }
 

@@ -3,6 +3,8 @@
 // plans that cannot be operated. The model is an analytic cylinder built in memory.
 #include <gtest/gtest.h>
 
+#include "synthetic_model.hpp"
+
 #include <cmath>
 #include <numeric>
 
@@ -24,20 +26,9 @@ constexpr double kR = 80.0;  // skin radius of the test cylinder, mm
 // without bone at theta 30..40 deg, z 20..30 mm.
 const PatientModel& cylinder() {
   static const PatientModel model = [] {
-    CylindricalMaps m;
-    m.grid.n_theta = 720;
-    m.grid.n_z = 401;
-    m.grid.theta0_deg = -180;
-    m.grid.z0_mm = -50;
-    m.grid.dz_mm = 0.5;
-    const std::size_t n = m.grid.size();
-    m.r_skin.assign(n, kR);
-    m.r_bone.assign(n, kR - 6);
-    m.thickness.assign(n, 6);
-    m.thickness_normal.assign(n, 6);
-    m.flags.assign(n, 0);
-    m.measured_skin.assign(n, 1);
-    m.measured_bone.assign(n, 1);
+    CylindricalMaps m = caps_test::synthetic_maps(caps_test::grid(720, 401, -50, 0.5),
+                                                  [](double, double) { return kR; },
+                                                  [](double, double) { return 6.0; });
     for (int k = 0; k < m.grid.n_z; ++k)
       for (int j = 0; j < m.grid.n_theta; ++j)
         if (m.grid.theta_deg(j) >= 30 && m.grid.theta_deg(j) <= 40 && m.grid.z_mm(k) >= 20 &&

@@ -4,6 +4,8 @@
 // (zero displacement: pre and post pixel-identical) with the expected silhouette.
 #include <gtest/gtest.h>
 
+#include "synthetic_model.hpp"
+
 #include <cmath>
 #include <map>
 
@@ -24,26 +26,8 @@ constexpr double kR = 70.0;
 // A cylinder about the LPS z axis, z in [-100, 100], skin radius r(theta, z), 5 mm of tissue.
 template <typename Radius>
 PatientModel cylinder(Radius&& r) {
-  CylindricalMaps m;
-  m.grid.n_theta = 360;
-  m.grid.n_z = 201;
-  m.grid.z0_mm = -100;
-  m.grid.dz_mm = 1;
-  const auto n = m.grid.size();
-  m.r_skin.resize(n);
-  m.r_bone.resize(n);
-  m.thickness.assign(n, 5.0f);
-  m.thickness_normal.assign(n, 5.0f);
-  m.flags.assign(n, 0);
-  m.measured_skin.assign(n, 1);
-  m.measured_bone.assign(n, 1);
-  for (int k = 0; k < m.grid.n_z; ++k)
-    for (int j = 0; j < m.grid.n_theta; ++j) {
-      const auto c = m.grid.index(j, k);
-      m.r_skin[c] = static_cast<float>(r(m.grid.theta_deg(j), m.grid.z_mm(k)));
-      m.r_bone[c] = m.r_skin[c] - 5.0f;
-    }
-  return PatientModel(std::move(m));
+  return PatientModel(caps_test::synthetic_maps(caps_test::grid(360, 201, -100, 1), r,
+                                                [](double, double) { return 5.0; }));
 }
 
 // A bumpy cylinder, so that the element faces and the range surface differ (d != 0).

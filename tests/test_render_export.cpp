@@ -4,6 +4,8 @@
 // renders of pre and post).
 #include <gif_lib.h>
 #include <gtest/gtest.h>
+
+#include "synthetic_model.hpp"
 #include <tiny_gltf.h>
 
 #include <unistd.h>
@@ -31,27 +33,12 @@ namespace {
 // A bumpy cylinder about the LPS z axis (r = 70 mm ± 2), z in [-100, 100], 5 mm of tissue.
 const PatientModel& bumpy() {
   static const PatientModel model = [] {
-    CylindricalMaps m;
-    m.grid.n_theta = 360;
-    m.grid.n_z = 201;
-    m.grid.z0_mm = -100;
-    m.grid.dz_mm = 1;
-    const auto n = m.grid.size();
-    m.r_skin.resize(n);
-    m.r_bone.resize(n);
-    m.thickness.assign(n, 5.0f);
-    m.thickness_normal.assign(n, 5.0f);
-    m.flags.assign(n, 0);
-    m.measured_skin.assign(n, 1);
-    m.measured_bone.assign(n, 1);
-    for (int k = 0; k < m.grid.n_z; ++k)
-      for (int j = 0; j < m.grid.n_theta; ++j) {
-        const auto c = m.grid.index(j, k);
-        const double theta = m.grid.theta_deg(j), z = m.grid.z_mm(k);
-        m.r_skin[c] =
-            static_cast<float>(70.0 + 2.0 * std::sin(deg_to_rad(3 * theta)) * std::cos(z / 15.0));
-        m.r_bone[c] = m.r_skin[c] - 5.0f;
-      }
+    CylindricalMaps m = caps_test::synthetic_maps(
+        caps_test::grid(360, 201, -100, 1),
+        [](double theta, double z) {
+          return 70.0 + 2.0 * std::sin(deg_to_rad(3 * theta)) * std::cos(z / 15.0);
+        },
+        [](double, double) { return 5.0; });
     return PatientModel(std::move(m));
   }();
   return model;

@@ -3,6 +3,8 @@
 // volume path; the Lee Perry-Smith scan comes out upright, facing theta = 0).
 #include <gtest/gtest.h>
 
+#include "synthetic_model.hpp"
+
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -28,26 +30,11 @@ namespace {
 template <typename Radius>
 CylindricalMaps analytic_maps(Radius&& R, int n_theta, int n_z, double z0, double dz,
                               Eigen::Vector3d origin = {0, 0, 0}) {
-  CylindricalMaps m;
+  CylindricalMaps m = caps_test::synthetic_maps(
+      caps_test::grid(n_theta, n_z, z0, dz),
+      [&](double theta_deg, double z) { return R(deg_to_rad(theta_deg), z); },
+      [](double, double) { return 5.0; });
   m.axis.origin_lps = origin;
-  m.grid.n_theta = n_theta;
-  m.grid.n_z = n_z;
-  m.grid.z0_mm = z0;
-  m.grid.dz_mm = dz;
-  const auto n = m.grid.size();
-  m.r_skin.resize(n);
-  m.r_bone.resize(n);
-  m.thickness.assign(n, 5.0f);
-  m.thickness_normal.assign(n, 5.0f);
-  m.flags.assign(n, 0);
-  m.measured_skin.assign(n, 1);
-  m.measured_bone.assign(n, 1);
-  for (int k = 0; k < n_z; ++k)
-    for (int j = 0; j < n_theta; ++j) {
-      const auto c = m.grid.index(j, k);
-      m.r_skin[c] = static_cast<float>(R(deg_to_rad(m.grid.theta_deg(j)), m.grid.z_mm(k)));
-      m.r_bone[c] = m.r_skin[c] - 5.0f;
-    }
   return m;
 }
 
