@@ -347,14 +347,19 @@ TEST(FemBenchmarks, LameThickCylinderMatchesAnalyticSolution) {
   }
 }
 
+// A 30 x 20 x 6 mm box with a sutured slot (the solver tests' common case).
+Mesh slotted_box(ElementType t) {
+  BoxOptions o;
+  o.size_mm = {30, 20, 6};
+  o.cells = {5, 6, 2};
+  o.wedges = t == ElementType::Wedge15;
+  o.slot = true;
+  return make_box_mesh(o);
+}
+
 TEST(FemSolvers, MumpsAndCholmodAgree) {
   for (ElementType t : kTypes) {
-    BoxOptions o;
-    o.size_mm = {30, 20, 6};
-    o.cells = {5, 6, 2};
-    o.wedges = t == ElementType::Wedge15;
-    o.slot = true;
-    const Mesh m = make_box_mesh(o);
+    const Mesh m = slotted_box(t);
     SolveOptions sm, sc;
     sc.solver = SolverKind::Cholmod;
     const SolveResult rm = solve(m, sm), rc = solve(m, sc);
@@ -368,12 +373,7 @@ TEST(FemSolvers, MumpsAndCholmodAgree) {
 
 TEST(FemSutures, SlotClosesSymmetricallyWithEqualAndOppositeForces) {
   for (ElementType t : kTypes) {
-    BoxOptions o;
-    o.size_mm = {30, 20, 6};
-    o.cells = {5, 6, 2};
-    o.wedges = t == ElementType::Wedge15;
-    o.slot = true;
-    const Mesh m = make_box_mesh(o);
+    const Mesh m = slotted_box(t);
     ASSERT_FALSE(m.sutures.empty());
     const SolveResult r = solve(m);
     const Eigen::MatrixX3d X1 = m.nodes + r.displacement_mm;

@@ -122,33 +122,24 @@ std::vector<QuadraturePoint> make_wedge_rule() {
 
 namespace detail {
 
+// Shape functions, derivatives and weights at every Gauss point of the element's rule.
+ShapeTable make_shape_table(ElementType type, int n_nodes) {
+  ShapeTable t;
+  t.n = n_nodes;
+  for (const auto& qp : quadrature(type)) {
+    Eigen::VectorXd N;
+    Eigen::MatrixX3d dN;
+    shape_functions(type, qp.xi, N, dN);
+    t.N.push_back(N);
+    t.dN.push_back(dN);
+    t.w.push_back(qp.weight);
+  }
+  return t;
+}
+
 const ShapeTable& shape_table(ElementType type) {
-  static const ShapeTable hex = [] {
-    ShapeTable t;
-    t.n = 20;
-    for (const auto& qp : quadrature(ElementType::Hex20)) {
-      Eigen::VectorXd N;
-      Eigen::MatrixX3d dN;
-      shape_functions(ElementType::Hex20, qp.xi, N, dN);
-      t.N.push_back(N);
-      t.dN.push_back(dN);
-      t.w.push_back(qp.weight);
-    }
-    return t;
-  }();
-  static const ShapeTable wedge = [] {
-    ShapeTable t;
-    t.n = 15;
-    for (const auto& qp : quadrature(ElementType::Wedge15)) {
-      Eigen::VectorXd N;
-      Eigen::MatrixX3d dN;
-      shape_functions(ElementType::Wedge15, qp.xi, N, dN);
-      t.N.push_back(N);
-      t.dN.push_back(dN);
-      t.w.push_back(qp.weight);
-    }
-    return t;
-  }();
+  static const ShapeTable hex = make_shape_table(ElementType::Hex20, 20);
+  static const ShapeTable wedge = make_shape_table(ElementType::Wedge15, 15);
   return type == ElementType::Hex20 ? hex : wedge;
 }
 
