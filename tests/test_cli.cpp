@@ -217,3 +217,26 @@ TEST_F(Cli, CylindricalRangeImageRoundTrip) {
                      " --r-scale 0.1 --z-scale 1 --thickness 5 -o " + (dir / "y").string(),
                  "grey", dir / "y");
 }
+
+TEST_F(Cli, SolvesABoxInEitherPrecisionAndRefusesBadSolverOptions) {
+  const fs::path mesh = dir / "box_mesh";
+  ASSERT_EQ(run("fem box -o " + mesh.string() + " --size 30,20,6 --cells 5,6,2 --slot -q").code, 0);
+  nlohmann::json results[2];
+  const char* precision[2] = {"mixed", "double"};
+  for (int k = 0; k < 2; ++k) {
+    const fs::path out = dir / (std::string("box_result_") + precision[k]);
+    const Outcome r = run("solve " + mesh.string() + " -o " + out.string() + " --precision " +
+                          precision[k] + " -q");
+    ASSERT_EQ(r.code, 0) << r.err;
+    results[k] = nlohmann::json::parse(slurp(out / "result.json"));
+    EXPECT_EQ(results[k]["precision"]["arithmetic"], precision[k]);
+    EXPECT_LT(results[k]["relative_residual"].get<double>(), 1e-10);
+  }
+  EXPECT_GT(results[0]["precision"]["refinement_iterations"].get<int>(), 0);
+  const double f0 = results[0]["total_suture_force_n"], f1 = results[1]["total_suture_force_n"];
+  EXPECT_NEAR(f0, f1, 1e-9 * std::abs(f1));
+  const fs::path out = dir / "box_result_bad";
+  expect_refused("solve " + mesh.string() + " -o " + out.string() + " --precision half", "half", out);
+  expect_refused("solve " + mesh.string() + " -o " + out.string() + " --solver lu", "lu", out);
+  expect_refused("solve " + (dir / "no_mesh").string() + " -o " + out.string(), "no_mesh", out);
+}

@@ -20,7 +20,7 @@ namespace caps::cli {
 namespace {
 
 struct CompareArgs {
-  std::string model, plan, output, solver = "mumps";
+  std::string model, plan, output, solver = "mumps", precision = "mixed";
   double thickness_mm = 0, size_mm = 2;
   int layers = 2;
 };
@@ -30,6 +30,7 @@ void run_compare(const CompareArgs& a, const Common& common) {
   o.surface.size_mm = a.size_mm;
   o.continuum.n_layers = a.layers;
   o.solve.solver = fem::parse_solver(a.solver);
+  o.solve.mixed_precision = fem::parse_precision(a.precision);
   const plan::Plan plan = plan::read_plan(a.plan);
   OutputDirectory out(a.output, common.force);
   const PatientModel model = PatientModel::load(a.model);
@@ -67,6 +68,9 @@ void add_compare(CLI::App& app, Common& common, Action& action) {
   cmd->add_option("--size", a->size_mm, "mesh size at the wound (mm)")->capture_default_str();
   cmd->add_option("--layers", a->layers, "element layers from skin to bone")->capture_default_str();
   cmd->add_option("--solver", a->solver, "mumps or cholmod")->capture_default_str();
+  cmd->add_option("--precision", a->precision,
+                  "mixed (a single-precision factorization refined to double accuracy; falls back to double by itself when that is not enough) or double; MUMPS only")
+      ->capture_default_str();
   add_common_flags(cmd, common, true);
   cmd->callback([&common, &action, a] { action = [&common, a] { run_compare(*a, common); }; });
 }

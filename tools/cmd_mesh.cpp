@@ -29,7 +29,8 @@ namespace caps::cli {
 namespace {
 
 struct MeshArgs {
-  std::string model, border, plan, output, rim = "fixed", solver = "mumps";
+  std::string model, border, plan, output, rim = "fixed", solver = "mumps",
+              precision = "mixed";
   int layers = 2;
   double size_mm = 2, extent_mm = 0, grading = 1, t1_deg = 30, t2_deg = 90, constant_mm = 0;
   bool no_pictures = false;
@@ -77,6 +78,7 @@ fem::SimulateOptions options_of(const MeshArgs& a) {
   o.continuum.rim = fem::parse_rim_condition(a.rim);
   o.continuum.constant_thickness_mm = a.constant_mm;
   o.solve.solver = fem::parse_solver(a.solver);
+  o.solve.mixed_precision = fem::parse_precision(a.precision);
   return o;
 }
 
@@ -216,6 +218,9 @@ void add_mesh(CLI::App& app, Common& common, Action& action) {
   sim->add_option("--constant-thickness", b->constant_mm,
                   "a constant depth (mm) instead of the model's thickness (the 1992 paper)");
   sim->add_option("--solver", b->solver, "mumps or cholmod")->capture_default_str();
+  sim->add_option("--precision", b->precision,
+                  "mixed (a single-precision factorization refined to double accuracy; falls back to double by itself when that is not enough) or double; MUMPS only")
+      ->capture_default_str();
   sim->add_flag("--render", b->render, "also render pre_<view>.png and post_<view>.png (front, "
                                        "oblique, side, plan; the same camera before and after)");
   add_common_flags(sim, common, true);

@@ -18,7 +18,7 @@ namespace caps::cli {
 namespace {
 
 struct SolveArgs {
-  std::string mesh, output, solver = "mumps";
+  std::string mesh, output, solver = "mumps", precision = "mixed";
   double E_kpa = -1, nu = -1;
 };
 
@@ -30,6 +30,7 @@ struct BoxArgs {
 void run_solve(const SolveArgs& a, const Common& common) {
   fem::SolveOptions o;
   o.solver = fem::parse_solver(a.solver);
+  o.mixed_precision = fem::parse_precision(a.precision);
   OutputDirectory out(a.output, common.force);
   fem::Mesh mesh = fem::read_mesh_dir(a.mesh);
   if (a.E_kpa >= 0 || a.nu >= 0)
@@ -88,6 +89,9 @@ void add_solve(CLI::App& app, Common& common, Action& action) {
   cmd->add_option("MESH_DIR", a->mesh, "mesh directory (mesh.json + mesh.vtu)")->required();
   cmd->add_option("-o,--output", a->output, "result directory to create")->required();
   cmd->add_option("--solver", a->solver, "mumps or cholmod")->capture_default_str();
+  cmd->add_option("--precision", a->precision,
+                  "mixed (a single-precision factorization refined to double accuracy; falls back to double by itself when that is not enough) or double; MUMPS only")
+      ->capture_default_str();
   cmd->add_option("--E", a->E_kpa, "Young's modulus in kPa for every layer (overrides mesh.json)");
   cmd->add_option("--nu", a->nu, "Poisson's ratio for every layer, 0 <= nu <= 0.499");
   add_common_flags(cmd, common, true);

@@ -5,7 +5,6 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <atomic>
 
 #include "caps/fem/elements.hpp"
 #include "elements_impl.hpp"
@@ -13,125 +12,214 @@
 namespace caps::fem::detail {
 namespace {
 
-void element_equations(const Element& el, const DofMap& map, int* eq) {
-  for (int a = 0; a < el.n_nodes(); ++a)
-    for (int c = 0; c < 3; ++c) eq[3 * a + c] = map.eq[3 * static_cast<std::size_t>(el.nodes[a]) + c];
+// Compressed rows: row r is items[start[r] .. start[r+1]).
+struct Csr {
+  std::vector<int> start, items;
+};
+
+// The distinct blocks of one element's nodes; returns how many.
+int element_blocks(const Element& el, const DofMap& map, int* out) {
+  int k = 0;
+  for (int a = 0; a < el.n_nodes(); ++a) {
+    const int b = map.node_block[el.nodes[a]];
+    if (b >= 0 && std::find(out, out + k, b) == out + k) out[k++] = b;
+  }
+  return k;
+}
+
+// Block -> elements touching it, each element once, in increasing order.
+Csr block_elements(const Mesh& mesh, const DofMap& map, int n_blocks) {
+  Csr c;
+  c.start.assign(n_blocks + 1, 0);
+  int blocks[20];
+  for (const Element& el : mesh.elements) {
+    const int k = element_blocks(el, map, blocks);
+    for (int i = 0; i < k; ++i) ++c.start[blocks[i] + 1];
+  }
+  for (int b = 0; b < n_blocks; ++b) c.start[b + 1] += c.start[b];
+  c.items.resize(c.start[n_blocks]);
+  std::vector<int> fill(c.start.begin(), c.start.end() - 1);
+  for (int e = 0; e < static_cast<int>(mesh.elements.size()); ++e) {
+    const int k = element_blocks(mesh.elements[e], map, blocks);
+    for (int i = 0; i < k; ++i) c.items[fill[blocks[i]]++] = e;
+  }
+  return c;
+}
+
+// Greedy colouring: each element takes the smallest colour no element sharing a block has.
+Csr colour_elements(const Mesh& mesh, const DofMap& map, const Csr& by_block) {
+  const int n_el = static_cast<int>(mesh.elements.size());
+  std::vector<int> colour(n_el, -1), seen;  // seen[c] == e: colour c is taken near element e
+  int n_colours = 0, blocks[20];
+  for (int e = 0; e < n_el; ++e) {
+    const int k = element_blocks(mesh.elements[e], map, blocks);
+    for (int i = 0; i < k; ++i)
+      for (int j = by_block.start[blocks[i]]; j < by_block.start[blocks[i] + 1]; ++j)
+        if (const int c = colour[by_block.items[j]]; c >= 0) seen[c] = e;
+    int c = 0;
+    while (c < n_colours && seen[c] == e) ++c;
+    if (c == n_colours) {
+      ++n_colours;
+      seen.push_back(-1);
+    }
+    colour[e] = c;
+  }
+  Csr out;
+  out.start.assign(n_colours + 1, 0);
+  for (int e = 0; e < n_el; ++e) ++out.start[colour[e] + 1];
+  for (int c = 0; c < n_colours; ++c) out.start[c + 1] += out.start[c];
+  out.items.resize(n_el);
+  std::vector<int> fill(out.start.begin(), out.start.end() - 1);
+  for (int e = 0; e < n_el; ++e) out.items[fill[colour[e]]++] = e;
+  return out;
 }
 
 }  // namespace
 
-Assembly assemble(const Mesh& mesh, const DofMap& map) {
+Assembly assemble_structure(const Mesh& mesh, const DofMap& map) {
   const int n = map.n_eq;
-  const int n_el = static_cast<int>(mesh.elements.size());
+  const int n_blocks = static_cast<int>(map.block_start.size()) - 1;
+  const Csr by_block = block_elements(mesh, map, n_blocks);
+  Assembly out;
 
-  // Equation -> elements (CSR).
-  std::vector<int> start(n + 1, 0), list;
-  {
-    int eq[60];
-    for (const Element& el : mesh.elements) {
-      element_equations(el, map, eq);
-      for (int p = 0; p < 3 * el.n_nodes(); ++p)
-        if (eq[p] >= 0) ++start[eq[p] + 1];
-    }
-    for (int i = 0; i < n; ++i) start[i + 1] += start[i];
-    list.resize(start[n]);
-    std::vector<int> fill(start.begin(), start.end() - 1);
-    for (int e = 0; e < n_el; ++e) {
-      element_equations(mesh.elements[e], map, eq);
-      for (int p = 0; p < 3 * mesh.elements[e].n_nodes(); ++p)
-        if (eq[p] >= 0 && (fill[eq[p]] == start[eq[p]] || list[fill[eq[p]] - 1] != e))
-          list[fill[eq[p]]++] = e;
-      }
-    // Duplicates (an element listing one equation twice through a suture) leave gaps: mark them.
-    for (int i = 0; i < n; ++i) std::fill(list.begin() + fill[i], list.begin() + start[i + 1], -1);
-  }
-
-  // Column pattern: rows r <= j coupled to j through some element.
-  std::vector<std::vector<int>> cols(n);
-  tbb::enumerable_thread_specific<std::vector<int>> marks([n] { return std::vector<int>(n, -1); });
-  tbb::parallel_for(tbb::blocked_range<int>(0, n, 256), [&](const tbb::blocked_range<int>& r) {
+  // Block pattern: column block B couples to the blocks B' <= B of the elements touching it.
+  std::vector<std::vector<int>> cols(n_blocks);
+  tbb::enumerable_thread_specific<std::vector<int>> marks(
+      [n_blocks] { return std::vector<int>(n_blocks, -1); });
+  tbb::parallel_for(tbb::blocked_range<int>(0, n_blocks, 256), [&](const tbb::blocked_range<int>& r) {
     auto& mark = marks.local();
-    int eq[60];
-    for (int j = r.begin(); j < r.end(); ++j) {
-      auto& c = cols[j];
-      for (int k = start[j]; k < start[j + 1]; ++k) {
-        if (list[k] < 0) continue;
-        const Element& el = mesh.elements[list[k]];
-        element_equations(el, map, eq);
-        for (int p = 0; p < 3 * el.n_nodes(); ++p)
-          if (eq[p] >= 0 && eq[p] <= j && mark[eq[p]] != j) {
-            mark[eq[p]] = j;
-            c.push_back(eq[p]);
+    int blocks[20];
+    for (int B = r.begin(); B < r.end(); ++B) {
+      auto& c = cols[B];
+      for (int k = by_block.start[B]; k < by_block.start[B + 1]; ++k) {
+        const int m = element_blocks(mesh.elements[by_block.items[k]], map, blocks);
+        for (int i = 0; i < m; ++i)
+          if (blocks[i] <= B && mark[blocks[i]] != B) {
+            mark[blocks[i]] = B;
+            c.push_back(blocks[i]);
           }
       }
       std::sort(c.begin(), c.end());
     }
   });
-  Assembly out;
+  out.nbr_start.assign(n_blocks + 1, 0);
+  for (int B = 0; B < n_blocks; ++B)
+    out.nbr_start[B + 1] = out.nbr_start[B] + static_cast<int>(cols[B].size());
+  out.nbr.resize(out.nbr_start[n_blocks]);
+  out.nbr_row.resize(out.nbr_start[n_blocks]);
+  for (int B = 0; B < n_blocks; ++B) {
+    int row = 0;
+    for (std::size_t i = 0; i < cols[B].size(); ++i) {
+      const int Bp = cols[B][i];
+      out.nbr[out.nbr_start[B] + i] = Bp;
+      out.nbr_row[out.nbr_start[B] + i] = row;
+      row += map.block_start[Bp + 1] - map.block_start[Bp];
+    }
+    std::vector<int>().swap(cols[B]);
+  }
+
+  // Scalar pattern: column j of block B holds every equation of its neighbours before B, then
+  // those of B up to j; blocks are numbered in equation order, so the rows come out sorted.
   Eigen::SparseMatrix<double>& K = out.K;
   K.resize(n, n);
-  long nnz = 0;
-  for (const auto& c : cols) nnz += static_cast<long>(c.size());
-  K.resizeNonZeros(nnz);
   int* outer = K.outerIndexPtr();
-  int* inner = K.innerIndexPtr();
-  double* val = K.valuePtr();
   outer[0] = 0;
-  for (int j = 0; j < n; ++j) {
-    std::copy(cols[j].begin(), cols[j].end(), inner + outer[j]);
-    outer[j + 1] = outer[j] + static_cast<int>(cols[j].size());
-    std::vector<int>().swap(cols[j]);
+  for (int B = 0; B < n_blocks; ++B) {
+    const int before = out.nbr_row[out.nbr_start[B + 1] - 1];
+    for (int j = map.block_start[B]; j < map.block_start[B + 1]; ++j)
+      outer[j + 1] = outer[j] + before + (j - map.block_start[B]) + 1;
   }
-  std::fill(val, val + nnz, 0.0);
-
+  K.resizeNonZeros(outer[n]);
+  outer = K.outerIndexPtr();
+  int* inner = K.innerIndexPtr();
+  tbb::parallel_for(tbb::blocked_range<int>(0, n_blocks, 256), [&](const tbb::blocked_range<int>& r) {
+    for (int B = r.begin(); B < r.end(); ++B)
+      for (int j = map.block_start[B]; j < map.block_start[B + 1]; ++j) {
+        int* row = inner + outer[j];
+        for (int k = out.nbr_start[B]; k < out.nbr_start[B + 1]; ++k) {
+          const int Bp = out.nbr[k];
+          const int last = Bp == B ? j + 1 : map.block_start[Bp + 1];
+          for (int i = map.block_start[Bp]; i < last; ++i) *row++ = i;
+        }
+      }
+  });
+  std::fill(K.valuePtr(), K.valuePtr() + K.nonZeros(), 0.0);
   out.f = Eigen::VectorXd::Zero(n);
+
+  const Csr colours = colour_elements(mesh, map, by_block);
+  out.colour_start = colours.start;
+  out.colour_elements = colours.items;
+  return out;
+}
+
+void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys) {
   for (const NodalLoad& l : mesh.loads)
     for (int c = 0; c < 3; ++c) {
       const int e = map.eq[3 * static_cast<std::size_t>(l.node) + c];
-      if (e >= 0) out.f[e] += l.force_n[c];
+      if (e >= 0) sys.f[e] += l.force_n[c];
     }
-  double* f = out.f.data();
-  tbb::parallel_for(tbb::blocked_range<int>(0, n_el, 16), [&](const tbb::blocked_range<int>& r) {
-    Eigen::MatrixXd Ke;
-    Eigen::MatrixX3d X;
-    int eq[60];
-    double ge[60];
-    for (int e = r.begin(); e < r.end(); ++e) {
-      const Element& el = mesh.elements[e];
-      const int nn = el.n_nodes(), m = 3 * nn;
-      X.resize(nn, 3);
-      for (int a = 0; a < nn; ++a) X.row(a) = mesh.nodes.row(el.nodes[a]);
-      const LinearElastic& mat = mesh.materials.at(el.layer);
-      stiffness_kernel(el.type, X, mat.lambda_mpa(), mat.mu_mpa(), e, Ke);
-      element_equations(el, map, eq);
-      bool has_g = false;
-      for (int a = 0; a < nn; ++a)
-        for (int c = 0; c < 3; ++c) {
-          ge[3 * a + c] = map.g[3 * static_cast<std::size_t>(el.nodes[a]) + c];
-          has_g = has_g || ge[3 * a + c] != 0.0;
-        }
-      for (int q = 0; q < m; ++q) {
-        const int s = eq[q];
-        if (s < 0) continue;
-        const int* rows = inner + outer[s];
-        const int len = outer[s + 1] - outer[s];
-        for (int p = 0; p < m; ++p) {
-          const int rr = eq[p];
-          if (rr < 0 || rr > s) continue;
-          const int k = static_cast<int>(std::lower_bound(rows, rows + len, rr) - rows);
-          std::atomic_ref<double>(val[outer[s] + k]).fetch_add(Ke(p, q), std::memory_order_relaxed);
-        }
-      }
-      if (has_g)  // lifting: f_r -= T^T K g (prescribed values and suture offsets)
-        for (int p = 0; p < m; ++p) {
-          if (eq[p] < 0) continue;
-          double s = 0;
-          for (int q = 0; q < m; ++q) s += Ke(p, q) * ge[q];
-          if (s != 0.0) std::atomic_ref<double>(f[eq[p]]).fetch_add(-s, std::memory_order_relaxed);
-        }
-    }
-  });
-  return out;
+  const int* outer = sys.K.outerIndexPtr();
+  double* val = sys.K.valuePtr();
+  double* f = sys.f.data();
+  const int n_colours = static_cast<int>(sys.colour_start.size()) - 1;
+  for (int colour = 0; colour < n_colours; ++colour)
+    tbb::parallel_for(
+        tbb::blocked_range<int>(sys.colour_start[colour], sys.colour_start[colour + 1], 8),
+        [&](const tbb::blocked_range<int>& r) {
+          Eigen::MatrixXd Ke;
+          Eigen::MatrixX3d X;
+          int eq[60], blk[20];
+          double ge[60];
+          for (int i = r.begin(); i < r.end(); ++i) {
+            const int e = sys.colour_elements[i];
+            const Element& el = mesh.elements[e];
+            const int nn = el.n_nodes(), m = 3 * nn;
+            X.resize(nn, 3);
+            for (int a = 0; a < nn; ++a) X.row(a) = mesh.nodes.row(el.nodes[a]);
+            const LinearElastic& mat = mesh.materials.at(el.layer);
+            stiffness_kernel(el.type, X, mat.lambda_mpa(), mat.mu_mpa(), e, Ke);
+            bool has_g = false;
+            for (int a = 0; a < nn; ++a) {
+              blk[a] = map.node_block[el.nodes[a]];
+              for (int c = 0; c < 3; ++c) {
+                const std::size_t d = 3 * static_cast<std::size_t>(el.nodes[a]) + c;
+                eq[3 * a + c] = map.eq[d];
+                ge[3 * a + c] = map.g[d];
+                has_g = has_g || ge[3 * a + c] != 0.0;
+              }
+            }
+            // Node pair (a, b) with block(a) <= block(b) adds its 3×3 block to column block(b).
+            for (int b = 0; b < nn; ++b) {
+              const int Bb = blk[b];
+              if (Bb < 0) continue;
+              const int* nb = sys.nbr.data() + sys.nbr_start[Bb];
+              const int n_nb = sys.nbr_start[Bb + 1] - sys.nbr_start[Bb];
+              for (int a = 0; a < nn; ++a) {
+                const int Ba = blk[a];
+                if (Ba < 0 || Ba > Bb) continue;
+                const int k = static_cast<int>(std::lower_bound(nb, nb + n_nb, Ba) - nb);
+                const int row0 = sys.nbr_row[sys.nbr_start[Bb] + k] - map.block_start[Ba];
+                for (int cj = 0; cj < 3; ++cj) {
+                  const int j = eq[3 * b + cj];
+                  if (j < 0) continue;
+                  double* column = val + outer[j] + row0;
+                  for (int ci = 0; ci < 3; ++ci) {
+                    const int ri = eq[3 * a + ci];
+                    if (ri < 0 || (Ba == Bb && ri > j)) continue;
+                    column[ri] += Ke(3 * a + ci, 3 * b + cj);
+                  }
+                }
+              }
+            }
+            if (has_g)  // lifting: f_r -= T^T K g (prescribed values and suture offsets)
+              for (int p = 0; p < m; ++p) {
+                if (eq[p] < 0) continue;
+                double s = 0;
+                for (int q = 0; q < m; ++q) s += Ke(p, q) * ge[q];
+                f[eq[p]] -= s;
+              }
+          }
+        });
 }
 
 }  // namespace caps::fem::detail

@@ -1,7 +1,10 @@
 #pragma once
-// Internal: parallel assembly of the reduced stiffness (upper triangle) and load vector.
+// Internal: assembly of the reduced stiffness (upper triangle) and load vector, in two steps so
+// that the solver's symbolic analysis, which needs only the structure, can run while the values
+// are computed.
 
 #include <Eigen/Sparse>
+#include <vector>
 
 #include "caps/fem/mesh.hpp"
 #include "constraints.hpp"
@@ -11,9 +14,20 @@ namespace caps::fem::detail {
 struct Assembly {
   Eigen::SparseMatrix<double> K;  ///< n_eq × n_eq, column-major, upper triangle (row <= col)
   Eigen::VectorXd f;              ///< T^T (f_ext - K g)
+
+  // Block structure (DofMap blocks): for block column B, the blocks B' <= B it couples to,
+  // sorted (B itself last), and how many rows of each column of B come before block B'.
+  std::vector<int> nbr_start, nbr, nbr_row;
+  // Elements grouped by colour: no two elements of one colour share a block, so a colour is
+  // assembled in parallel without atomics and the sums do not depend on the thread count.
+  std::vector<int> colour_start, colour_elements;
 };
 
-/// Assembles with TBB over elements (atomic scatter into a precomputed pattern).
-Assembly assemble(const Mesh& mesh, const DofMap& map);
+/// The structure of K (values zero), f = 0 and the scatter tables. TBB-parallel.
+Assembly assemble_structure(const Mesh& mesh, const DofMap& map);
+
+/// Element stiffnesses into K's values and the loads and lifting (-K g) into f, colour by
+/// colour in parallel over elements.
+void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys);
 
 }  // namespace caps::fem::detail

@@ -3,6 +3,8 @@
 #include <cmath>
 #include <numeric>
 
+#include <Eigen/Eigenvalues>
+
 #include "caps/core/error.hpp"
 
 namespace caps::fem::detail {
@@ -23,6 +25,87 @@ struct UnionFind {
 };
 
 const char* kAxis[3] = {"x", "y", "z"};
+
+// Every part must also be held against rigid rotation: the six rigid motions u = t + w × x of
+// a part must all violate some constraint, a prescribed dof (u_c = 0) or a suture between two
+// of its nodes (u_a = u_b, so w × (x_a - x_b) = 0). With C the constraint rows over (t, w), in
+// coordinates centred on the part and scaled by its size, a free rotation is a null vector of
+// C^T C. This is exact for meshes without mechanisms and does not depend on the pivots of a
+// factorization (which, for a singular matrix, are round-off of either sign).
+void check_rotations(const Mesh& mesh, const DofMap& m, UnionFind& part, const std::vector<int>& size) {
+  const int n = static_cast<int>(mesh.n_nodes());
+  std::vector<int> index(n, -1);
+  std::vector<Eigen::Vector3d> centre;
+  std::vector<double> extent;
+  std::vector<int> root;
+  for (int node = 0; node < n; ++node)
+    if (m.used[node] && index[part.find(node)] < 0) {
+      index[part.find(node)] = static_cast<int>(root.size());
+      root.push_back(part.find(node));
+    }
+  const std::size_t n_parts = root.size();
+  centre.assign(n_parts, Eigen::Vector3d::Zero());
+  Eigen::MatrixX3d lo = Eigen::MatrixX3d::Constant(n_parts, 3, INFINITY), hi = -lo;
+  for (int node = 0; node < n; ++node) {
+    if (!m.used[node]) continue;
+    const int p = index[part.find(node)];
+    centre[p] += mesh.nodes.row(node).transpose() / size[root[p]];
+    lo.row(p) = lo.row(p).cwiseMin(mesh.nodes.row(node));
+    hi.row(p) = hi.row(p).cwiseMax(mesh.nodes.row(node));
+  }
+  for (std::size_t p = 0; p < n_parts; ++p) extent.push_back(std::max((hi.row(p) - lo.row(p)).norm(), 1e-300));
+  std::vector<Eigen::Matrix<double, 6, 6>> CtC(n_parts, Eigen::Matrix<double, 6, 6>::Zero());
+  auto add_row = [&](int p, const Eigen::Matrix<double, 6, 1>& row) { CtC[p] += row * row.transpose(); };
+  for (int node = 0; node < n; ++node) {
+    if (!m.used[node]) continue;
+    const int p = index[part.find(node)];
+    const Eigen::Vector3d x = (mesh.nodes.row(node).transpose() - centre[p]) / extent[p];
+    for (int c = 0; c < 3; ++c) {
+      if (m.eq[3 * node + c] >= 0 || m.group[node] >= 0) continue;  // free, or sutured (below)
+      Eigen::Matrix<double, 6, 1> row = Eigen::Matrix<double, 6, 1>::Zero();
+      row[c] = 1;
+      for (int j = 0; j < 3; ++j) row[3 + j] = Eigen::Vector3d::Unit(j).cross(x)[c];
+      add_row(p, row);
+    }
+  }
+  // A suture group whose position is prescribed holds each member like a fixed dof; the pairs
+  // hold the part through their separations.
+  for (std::size_t gi = 0; gi < m.groups.size(); ++gi)
+    for (int node : m.groups[gi]) {
+      const int p = index[part.find(node)];
+      const Eigen::Vector3d x = (mesh.nodes.row(node).transpose() - centre[p]) / extent[p];
+      for (int c = 0; c < 3; ++c) {
+        if (m.eq[3 * node + c] >= 0) continue;
+        Eigen::Matrix<double, 6, 1> row = Eigen::Matrix<double, 6, 1>::Zero();
+        row[c] = 1;
+        for (int j = 0; j < 3; ++j) row[3 + j] = Eigen::Vector3d::Unit(j).cross(x)[c];
+        add_row(p, row);
+      }
+    }
+  for (const SuturePair& s : mesh.sutures) {
+    const int p = index[part.find(s.a)];
+    const Eigen::Vector3d d = (mesh.nodes.row(s.a) - mesh.nodes.row(s.b)).transpose() / extent[p];
+    for (int c = 0; c < 3; ++c) {
+      Eigen::Matrix<double, 6, 1> row = Eigen::Matrix<double, 6, 1>::Zero();
+      for (int j = 0; j < 3; ++j) row[3 + j] = Eigen::Vector3d::Unit(j).cross(d)[c];
+      add_row(p, row);
+    }
+  }
+  for (std::size_t p = 0; p < n_parts; ++p) {
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(CtC[p]);
+    if (es.eigenvalues()[0] > 1e-10 * std::max(es.eigenvalues()[5], 1.0)) continue;
+    Eigen::Vector3d w = es.eigenvectors().col(0).tail<3>().normalized();
+    Eigen::Index big;
+    w.cwiseAbs().maxCoeff(&big);
+    if (w[big] < 0) w = -w;
+    for (int c = 0; c < 3; ++c) w[c] = std::round(w[c] * 1e3) / 1e3 + 0.0;  // no "-0"
+    throw InvalidInput(cat(
+        "the mesh is under-constrained: the part containing node ", root[p], " (", size[root[p]],
+        " nodes) can still rotate about the axis (", w.x(), ", ", w.y(), ", ", w.z(),
+        "), the stiffness matrix is singular; fix at least three non-collinear nodes of it (the "
+        "bottom layer, on bone) or suture it to a fixed part"));
+  }
+}
 
 }  // namespace
 
@@ -94,9 +177,13 @@ DofMap build_dof_map(const Mesh& mesh) {
                                  " is fixed at ", gp, " mm; they cannot meet: unfix one of them"));
         gp = p;
       }
+  m.block_start.assign(1, 0);
+  m.node_block.assign(n, -1);
+  std::vector<int> group_block(m.groups.size(), -1);
   for (int node = 0; node < n; ++node) {
     if (!m.used[node]) continue;  // orphan nodes keep u = 0 and get no equation
     const int gi = m.group[node];
+    const int n_eq_before = m.n_eq;
     for (int c = 0; c < 3; ++c) {
       const std::size_t d = 3 * static_cast<std::size_t>(node) + c;
       if (gi < 0) {
@@ -116,6 +203,13 @@ DofMap build_dof_map(const Mesh& mesh) {
       m.eq[d] = ge;
       const int master = m.groups[gi].front();
       m.g[d] = mesh.nodes(master, c) - mesh.nodes(node, c);  // u_n = u_master + x_m - x_n
+    }
+    if (m.n_eq > n_eq_before) {  // this node opened a block (its own or its group's)
+      m.node_block[node] = static_cast<int>(m.block_start.size()) - 1;
+      m.block_start.push_back(m.n_eq);
+      if (gi >= 0) group_block[gi] = m.node_block[node];
+    } else if (gi >= 0) {
+      m.node_block[node] = group_block[gi];  // -1 when the whole group is prescribed
     }
   }
   m.constrained.assign(n, 0);
@@ -144,6 +238,7 @@ DofMap build_dof_map(const Mesh& mesh) {
                                size[r], " nodes) has no fixed ", kAxis[c],
                                " displacement and can move freely; fix some of its nodes (the "
                                "bottom layer, on bone) or suture it to a fixed part"));
+  check_rotations(mesh, m, part, size);
   return m;
 }
 

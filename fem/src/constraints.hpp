@@ -17,6 +17,10 @@ struct DofMap {
   std::vector<std::vector<int>> groups;  ///< members of each suture group
   std::vector<char> used;            ///< node is referenced by an element
   std::vector<char> constrained;     ///< node has a prescribed dof or a suture
+  /// Equations come in blocks of up to three consecutive ones, one block per free node or
+  /// suture group: block b is equations block_start[b] .. block_start[b+1]-1.
+  std::vector<int> block_start;
+  std::vector<int> node_block;       ///< node -> its block, -1 if every dof is prescribed
 };
 
 /// Builds the map; throws InvalidInput for conflicting constraints, sutures on nodes that are

@@ -4,6 +4,8 @@
 #include <Eigen/Sparse>
 #include <memory>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "caps/fem/solve.hpp"
 
@@ -17,17 +19,30 @@ struct SingularMatrix : std::runtime_error {
   int equation;
 };
 
+/// How a solve was done: "double", or "mixed" (single-precision factor, refined to double
+/// accuracy by conjugate gradients), with its iteration count and whether it fell back.
+struct SolverReport {
+  std::string precision = "double";
+  int iterations = 0;
+  bool fell_back_to_double = false;
+};
+
 class DirectSolver {
  public:
   virtual ~DirectSolver() = default;
-  /// Symbolic analysis (ordering) of the upper triangle K (column-major). K must stay alive
-  /// and unchanged in structure until the solver is destroyed.
-  virtual void analyze(const Eigen::SparseMatrix<double>& K) = 0;
+  /// Symbolic analysis (ordering) of the structure of the upper triangle K (column-major); K's
+  /// values are not read, so they may be assembled meanwhile. `block_start` (optional) groups
+  /// consecutive equations that share their structure (a node's x, y, z): block b is
+  /// block_start[b] .. block_start[b+1]-1. K must stay alive and unchanged in structure until
+  /// the solver is destroyed.
+  virtual void analyze(const Eigen::SparseMatrix<double>& K, const std::vector<int>& block_start) = 0;
   virtual void factorize(const Eigen::SparseMatrix<double>& K) = 0;
   virtual Eigen::VectorXd solve(const Eigen::VectorXd& b) = 0;
   virtual long factor_nonzeros() const = 0;
+  virtual SolverReport report() const { return {}; }
 };
 
-std::unique_ptr<DirectSolver> make_direct_solver(SolverKind kind, int mumps_ordering);
+std::unique_ptr<DirectSolver> make_direct_solver(SolverKind kind, int mumps_ordering,
+                                                 bool mixed_precision);
 
 }  // namespace caps::fem::detail

@@ -24,15 +24,14 @@ Eigen::Matrix3d strain_tensor(const Eigen::MatrixX3d& G, const Eigen::VectorXd& 
 Vector6d stress_from_strain(const Eigen::Matrix3d& eps, double lambda, double mu);
 
 /// Isotropic stiffness without forming B: with g = vec(G) (node-major) and weights w,
-///   A = sum w g g^T, S = sum w G G^T,
-///   K_(a i)(b j) = lambda A_(a i)(b j) + mu A_(a j)(b i) + mu delta_ij S_ab
-/// (the three terms of int B^T D B dV for isotropic D; Hughes 2000, sec. 2.7).
+///   A = sum w g g^T,  K_(a i)(b j) = lambda A_(a i)(b j) + mu A_(a j)(b i) + mu delta_ij tr A_ab
+/// (the three terms of int B^T D B dV for isotropic D; Hughes 2000, sec. 2.7; the trace of the
+/// 3×3 block A_ab is sum w grad N_a . grad N_b).
 inline void stiffness_kernel(ElementType type, const Eigen::MatrixX3d& X, double lambda,
                              double mu, int element, Eigen::MatrixXd& K) {
   const ShapeTable& t = shape_table(type);
   const int n = t.n, m = 3 * n;
   Eigen::MatrixXd A = Eigen::MatrixXd::Zero(m, m);
-  Eigen::MatrixXd S = Eigen::MatrixXd::Zero(n, n);
   Eigen::MatrixX3d G(n, 3);
   Eigen::VectorXd g(m);
   for (std::size_t q = 0; q < t.w.size(); ++q) {
@@ -40,16 +39,16 @@ inline void stiffness_kernel(ElementType type, const Eigen::MatrixX3d& X, double
     const double w = t.w[q] * det;
     for (int a = 0; a < n; ++a) g.segment<3>(3 * a) = G.row(a).transpose();
     A.selfadjointView<Eigen::Upper>().rankUpdate(g, w);
-    S.selfadjointView<Eigen::Upper>().rankUpdate(G, w);
   }
   A.triangularView<Eigen::StrictlyLower>() = A.transpose();
-  S.triangularView<Eigen::StrictlyLower>() = S.transpose();
   K.resize(m, m);
   for (int b = 0; b < n; ++b)
-    for (int a = 0; a < n; ++a) {
-      const auto Aab = A.block<3, 3>(3 * a, 3 * b);
-      K.block<3, 3>(3 * a, 3 * b) = lambda * Aab + mu * Aab.transpose() +
-                                    (mu * S(a, b)) * Eigen::Matrix3d::Identity();
+    for (int a = 0; a <= b; ++a) {
+      const Eigen::Matrix3d Aab = A.block<3, 3>(3 * a, 3 * b);
+      const Eigen::Matrix3d Kab = lambda * Aab + mu * Aab.transpose() +
+                                  (mu * Aab.trace()) * Eigen::Matrix3d::Identity();
+      K.block<3, 3>(3 * a, 3 * b) = Kab;
+      K.block<3, 3>(3 * b, 3 * a) = Kab.transpose();
     }
 }
 

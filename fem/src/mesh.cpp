@@ -15,32 +15,34 @@ void validate(const Mesh& mesh, const std::string& where) {
     if (!mesh.nodes.row(i).allFinite())
       throw InvalidInput(cat(where, ": node ", i, " has a non-finite coordinate (",
                              mesh.nodes.row(i), "); fix or remove it"));
-  auto check_node = [&](long id, const std::string& item) {
+  // `item` names the entry; it is only formatted for the message (validation runs on every solve).
+  auto check_node = [&](long id, auto&& item) {
     if (id < 0 || id >= n)
-      throw InvalidInput(cat(where, ": ", item, " refers to node ", id, ", but node ids run 0..",
-                             n - 1));
+      throw InvalidInput(cat(where, ": ", item(), " refers to node ", id,
+                             ", but node ids run 0..", n - 1));
   };
   for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
     const Element& el = mesh.elements[e];
-    const std::string item = cat("element ", e, " (", element_type_name(el.type), ")");
+    const auto item = [&] { return cat("element ", e, " (", element_type_name(el.type), ")"); };
     if (el.type != ElementType::Hex20 && el.type != ElementType::Wedge15)
-      throw InvalidInput(cat(where, ": ", item, " has an unknown type"));
+      throw InvalidInput(cat(where, ": element ", e, " has an unknown type"));
     std::array<int, 20> sorted = el.nodes;
-    for (int a = 0; a < el.n_nodes(); ++a) check_node(el.nodes[a], cat(item, " local node ", a));
+    for (int a = 0; a < el.n_nodes(); ++a)
+      check_node(el.nodes[a], [&] { return cat(item(), " local node ", a); });
     std::sort(sorted.begin(), sorted.begin() + el.n_nodes());
     const auto dup = std::adjacent_find(sorted.begin(), sorted.begin() + el.n_nodes());
     if (dup != sorted.begin() + el.n_nodes())
-      throw InvalidInput(cat(where, ": ", item, " uses node ", *dup,
+      throw InvalidInput(cat(where, ": ", item(), " uses node ", *dup,
                              " twice; a collapsed hexahedron must be written as a Wedge15"));
     if (!mesh.materials.count(el.layer))
-      throw InvalidInput(cat(where, ": ", item, " has layer ", el.layer,
+      throw InvalidInput(cat(where, ": ", item(), " has layer ", el.layer,
                              " but no material is given for that layer"));
   }
   for (std::size_t i = 0; i < mesh.fixed_nodes.size(); ++i)
-    check_node(mesh.fixed_nodes[i], cat("fixed node entry ", i));
+    check_node(mesh.fixed_nodes[i], [&] { return cat("fixed node entry ", i); });
   for (std::size_t i = 0; i < mesh.fixed_dofs.size(); ++i) {
     const FixedDof& f = mesh.fixed_dofs[i];
-    check_node(f.node, cat("fixed dof entry ", i));
+    check_node(f.node, [&] { return cat("fixed dof entry ", i); });
     if (f.component < 0 || f.component > 2)
       throw InvalidInput(cat(where, ": fixed dof entry ", i, " has component ", f.component,
                              "; use 0 (x), 1 (y) or 2 (z)"));
@@ -49,15 +51,15 @@ void validate(const Mesh& mesh, const std::string& where) {
                              ") has a non-finite value"));
   }
   for (std::size_t i = 0; i < mesh.loads.size(); ++i) {
-    check_node(mesh.loads[i].node, cat("load entry ", i));
+    check_node(mesh.loads[i].node, [&] { return cat("load entry ", i); });
     if (!mesh.loads[i].force_n.allFinite())
       throw InvalidInput(cat(where, ": load entry ", i, " (node ", mesh.loads[i].node,
                              ") has a non-finite force"));
   }
   for (std::size_t i = 0; i < mesh.sutures.size(); ++i) {
     const SuturePair& s = mesh.sutures[i];
-    check_node(s.a, cat("suture ", i));
-    check_node(s.b, cat("suture ", i));
+    check_node(s.a, [&] { return cat("suture ", i); });
+    check_node(s.b, [&] { return cat("suture ", i); });
     if (s.a == s.b)
       throw InvalidInput(cat(where, ": suture ", i, " joins node ", s.a,
                              " to itself; a suture needs two different nodes"));

@@ -37,6 +37,8 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
   j["model"] = mesh.model;
   j["plan"] = mesh.plan;
   j["solver"] = r.solver;
+  j["precision"] = {{"arithmetic", r.precision}, {"refinement_iterations", r.refinement_iterations},
+                    {"fell_back_to_double", r.fell_back_to_double}};
   j["sizes"] = {{"nodes", n}, {"elements", mesh.elements.size()}, {"dofs", r.n_dofs},
                 {"equations", r.n_equations}, {"matrix_nonzeros_upper", r.n_nonzeros},
                 {"factor_nonzeros", r.factor_nonzeros}};

@@ -3,11 +3,13 @@
 #include <sys/resource.h>
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Dense>
 #include <atomic>
 #include <chrono>
+#include <future>
 #include <cmath>
 #include <optional>
 
@@ -67,6 +69,12 @@ SolverKind parse_solver(const std::string& name) {
   throw InvalidInput(cat("solver '", name, "' is unknown; use mumps or cholmod"));
 }
 
+bool parse_precision(const std::string& name) {
+  if (name == "mixed") return true;
+  if (name == "double") return false;
+  throw InvalidInput(cat("precision '", name, "' is unknown; use mixed or double"));
+}
+
 SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   const auto t_start = Clock::now();
   std::optional<tbb::global_control> threads;
@@ -83,18 +91,27 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   res.n_equations = map.n_eq;
   if (map.n_eq == 0) throw InvalidInput("every degree of freedom is fixed; nothing to solve");
 
+  // The analysis needs only K's structure: it runs on its own thread while the element
+  // stiffnesses are computed and assembled (the two take about as long on this problem size).
   t = Clock::now();
-  detail::Assembly sys = detail::assemble(mesh, map);
-  res.timings.assembly_s = seconds_since(t);
+  detail::Assembly sys = detail::assemble_structure(mesh, map);
   res.n_nonzeros = sys.K.nonZeros();
-
   Eigen::VectorXd q;
   {
-    auto solver = detail::make_direct_solver(options.solver, options.mumps_ordering);
+    auto solver = detail::make_direct_solver(options.solver, options.mumps_ordering,
+                                             options.mixed_precision);
     try {
-      t = Clock::now();
-      solver->analyze(sys.K);
-      res.timings.analysis_s = seconds_since(t);
+      auto analysis = std::async(options.threads == 1 ? std::launch::deferred : std::launch::async,
+                                 [&] {
+                                   const auto t0 = Clock::now();
+                                   solver->analyze(sys.K, map.block_start);
+                                   return seconds_since(t0);
+                                 });
+      // One core for the analysis, the others for the values.
+      tbb::task_arena arena(std::max(1, tbb::this_task_arena::max_concurrency() - 1));
+      arena.execute([&] { detail::assemble_values(mesh, map, sys); });
+      res.timings.assembly_s = seconds_since(t);
+      res.timings.analysis_s = analysis.get();
       t = Clock::now();
       solver->factorize(sys.K);
       res.timings.factorization_s = seconds_since(t);
@@ -109,6 +126,10 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
           "three non-collinear nodes of every connected part (e.g. the bottom layer on bone)"));
     }
     res.factor_nonzeros = solver->factor_nonzeros();
+    const detail::SolverReport report = solver->report();
+    res.precision = report.precision;
+    res.refinement_iterations = report.iterations;
+    res.fell_back_to_double = report.fell_back_to_double;
   }
   if (!q.allFinite())
     throw SolverError(cat(res.solver, ": the solution contains NaN or Inf"));
