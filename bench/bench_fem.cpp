@@ -16,7 +16,8 @@ using caps::fem::SolverKind;
 void run(benchmark::State& state, const BoxOptions& o) {
   const caps::fem::Mesh mesh = caps::fem::make_box_mesh(o);
   caps::fem::SolveOptions so;
-  so.solver = state.range(1) == 0 ? SolverKind::Mumps : SolverKind::Cholmod;
+  so.solver = state.range(1) == 1 ? SolverKind::Cholmod : SolverKind::Mumps;
+  so.mixed_precision = state.range(1) == 0;
   so.mumps_ordering = static_cast<int>(state.range(2));
   caps::fem::SolveResult r;
   for (auto _ : state) {
@@ -36,10 +37,13 @@ void run(benchmark::State& state, const BoxOptions& o) {
   state.counters["peak_rss_MB"] = r.peak_memory_mb;
   state.counters["cg_iterations"] = r.refinement_iterations;
   state.counters["residual"] = r.relative_residual;
-  state.SetLabel(so.solver == SolverKind::Mumps ? "mumps" : "cholmod");
+  state.SetLabel(so.solver == SolverKind::Cholmod ? "cholmod"
+                 : r.fell_back_to_double   ? "mumps mixed (fell back to double)"
+                                           : "mumps " + r.precision);
 }
 
-// range(0) = cells per side in x-y, range(1) = 0 MUMPS / 1 CHOLMOD, range(2) = ICNTL(7).
+// range(0) = cells per side in x-y, range(1) = 0 MUMPS mixed precision / 1 CHOLMOD / 2 MUMPS
+// double, range(2) = ICNTL(7).
 void Slab(benchmark::State& state) {
   BoxOptions o;
   const int n = static_cast<int>(state.range(0));
@@ -62,10 +66,10 @@ void Cube(benchmark::State& state) {
 // Slab cells 23 -> 18.5k dofs, 38 -> 50.6k, 51 -> 88k, 73 -> 179k, 127 -> ~540k.
 BENCHMARK(Slab)->ArgsProduct({{23, 51, 73, 127}, {0, 1}, {4}})->Unit(benchmark::kMillisecond)->Iterations(1);
 // About 50k DOF, the target size, with each MUMPS ordering.
-BENCHMARK(Slab)->ArgsProduct({{38, 95}, {0, 1}, {4}})->Unit(benchmark::kMillisecond)->Iterations(1);
+BENCHMARK(Slab)->ArgsProduct({{38, 95}, {0, 1, 2}, {4}})->Unit(benchmark::kMillisecond)->Iterations(1);
 BENCHMARK(Slab)->ArgsProduct({{38}, {0}, {0, 3, 5, 7}})->Unit(benchmark::kMillisecond)->Iterations(1);
 BENCHMARK(Slab)->ArgsProduct({{51}, {0}, {0, 2, 3, 5, 7}})->Unit(benchmark::kMillisecond)->Iterations(1);
 // Cube 8 -> ~10k dofs, 13 -> ~30k, 16 -> ~56k (the CalculiX 54k-dof case).
-BENCHMARK(Cube)->ArgsProduct({{8, 13, 16}, {0, 1}, {4}})->Unit(benchmark::kMillisecond)->Iterations(1);
+BENCHMARK(Cube)->ArgsProduct({{8, 13, 16}, {0, 1, 2}, {4}})->Unit(benchmark::kMillisecond)->Iterations(1);
 
 BENCHMARK_MAIN();

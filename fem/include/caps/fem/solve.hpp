@@ -31,7 +31,7 @@ struct SolveOptions {
   /// 6 QAMD, 7 automatic. PORD is measured fastest here (docs/benchmarks.md).
   int mumps_ordering = 4;
   /// MUMPS only: factor in single precision and refine with conjugate gradients on the
-  /// double-precision system to a relative residual of 1e-13 (about 1.7× faster at 50k DOF);
+  /// double-precision system to a relative residual of 1e-12 (about 1.7× faster at 50k DOF);
   /// falls back to a double-precision factorization by itself when that does not converge.
   /// false = factor in double precision.
   bool mixed_precision = true;
