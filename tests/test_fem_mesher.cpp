@@ -56,7 +56,8 @@ WoundBorder z_plasty(double L = 20) {
   const double h = L * std::sqrt(3.0) / 2;
   WoundBorder b;
   b.loop_theta_z = {tz(L / 2, h), tz(0, 0), tz(L, 0), tz(L / 2, -h), tz(L, 0), tz(0, 0)};
-  b.sutures = {{5, 0, 5, 4}, {2, 1, 2, 3}, {0, 1, 3, 4}};
+  // The paper's ((5,0),(5,4)), ((2,1),(2,3)), ((0,1),(3,4)), oriented (plan::oriented_suture).
+  b.sutures = {{5, 0, 5, 4}, {1, 2, 3, 2}, {0, 1, 4, 3}};
   return b;
 }
 
@@ -146,9 +147,11 @@ TEST(SurfaceMesher, ZPlastyMatchesFigure3) {
   for (const auto& e : c.mesh.elements) wedges += e.type == ElementType::Wedge15;
   EXPECT_EQ(wedges, 2);
   EXPECT_EQ(c.mesh.n_elements(), 8u);
-  // Sutures ((5,0),(5,4)) ((2,1),(2,3)) ((0,1),(3,4)): corner pairs 0-4, 1-3, 0-3, 1-4 (points 5
-  // and 2 are closed corners) in 3 vertex levels, plus 3 edge pairs in 2 levels.
-  EXPECT_EQ(c.mesh.sutures.size(), 4u * 3 + 3 * 2);
+  // Sutures ((5,0),(5,4)) ((2,1),(2,3)) ((0,1),(3,4)): 0 meets 4 and 1 meets 3 (each named
+  // twice; points 5 and 2 are closed corners) in 3 vertex levels, plus 3 edge pairs in 2 levels.
+  // (This test used to build its border from the paper's unoriented list, which paired 0-3 and
+  // 1-4 as well: a twisted closure, 18 pairs. The plan layer always oriented them.)
+  EXPECT_EQ(c.mesh.sutures.size(), 2u * 3 + 3 * 2);
 }
 
 TEST(SurfaceMesher, DefaultZPlastyIsValidAndWellShaped) {

@@ -151,14 +151,20 @@ ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& mod
     if (a != b && !pairs.count({b, a})) pairs.insert({a, b});
   };
   const int nloop = static_cast<int>(surface.loop_vertex.size());
+  // The vertices along the loop from a forward to b (the edges' chains joined).
   auto chain = [&](int a, int b) {
-    if (b == (a + 1) % nloop) return surface.edge_chain[a];
-    auto c = surface.edge_chain[b];
-    std::reverse(c.begin(), c.end());
+    std::vector<int> c;
+    for (int e : plan::forward_edges(a, b, nloop)) {
+      const auto& ec = surface.edge_chain[e];
+      c.insert(c.end(), ec.begin() + (c.empty() ? 0 : 1), ec.end());
+    }
     return c;
   };
   for (const auto& s : surface.sutures) {
-    const auto c1 = chain(s[0], s[1]), c2 = chain(s[2], s[3]);
+    // The first side from a forward to b meets the second from c backward to d.
+    const auto c1 = chain(s[0], s[1]);
+    auto c2 = chain(s[3], s[2]);
+    std::reverse(c2.begin(), c2.end());
     if (c1.size() != c2.size())
       throw InvalidInput(cat("mesh: suture (", s[0], ",", s[1], ")-(", s[2], ",", s[3],
                              ") joins edges with different node counts"));

@@ -206,24 +206,75 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
     for (auto& p : L) p.x() = -p.x();
   out.extent_mm = o.extent_mm > 0 ? o.extent_mm : 3.0 * out.wound_size_mm;
 
-  // Subdivide loop edges to the mesh size; sutured edges get the same count on both sides so that
-  // their nodes pair up one to one.
-  std::vector<int> segments(n);
-  for (int i = 0; i < n; ++i)
-    segments[i] = std::max(1, static_cast<int>(std::ceil((L[(i + 1) % n] - L[i]).norm() /
-                                                          o.size_mm - 1e-6)));
-  auto edge_index = [&](int a, int b, std::size_t s) {
-    if (a < 0 || b < 0 || a >= n || b >= n || !((b == (a + 1) % n) || (a == (b + 1) % n)))
-      throw InvalidInput(cat("wound border: suture ", s, " edge (", a, ",", b, ") is not an edge "
-                             "of the ", n, "-point loop (its points must be neighbours)"));
-    return b == (a + 1) % n ? a : b;
+  // Subdivide loop edges to the mesh size: `inner[i]` are the parameters in (0, 1) of the extra
+  // nodes on edge i. Sutured sides get matching nodes so that their nodes pair up one to one: by
+  // arc length along each side, at the loop points of both sides (a run of several edges may be
+  // sewn to one edge), and evenly between them.
+  std::vector<std::vector<double>> inner(n);
+  auto even = [&](int i, double len) {
+    const int k = std::max(1, static_cast<int>(std::ceil(len / o.size_mm - 1e-6)));
+    for (int j = 1; j < k; ++j) inner[i].push_back(static_cast<double>(j) / k);
   };
-  for (int pass = 0; pass < n + 1; ++pass)
-    for (std::size_t s = 0; s < border.sutures.size(); ++s) {
-      const auto& q = border.sutures[s];
-      const int e1 = edge_index(q[0], q[1], s), e2 = edge_index(q[2], q[3], s);
-      segments[e1] = segments[e2] = std::max(segments[e1], segments[e2]);
+  for (int i = 0; i < n; ++i) even(i, (L[(i + 1) % n] - L[i]).norm());
+  std::vector<int> sewn_by(n, -1);
+  for (std::size_t s = 0; s < border.sutures.size(); ++s) {
+    const auto& q = border.sutures[s];
+    for (int v : q)
+      if (v < 0 || v >= n)
+        throw InvalidInput(cat("wound border: suture ", s, " names loop point ", v, "; the loop has ",
+                               n, " points"));
+    if (q[0] == q[1] || q[2] == q[3])
+      throw InvalidInput(cat("wound border: suture ", s, " (", q[0], ",", q[1], ")-(", q[2], ",",
+                             q[3], ") has a side without an edge; each side runs from one loop "
+                             "point to another"));
+    const auto sides = plan::suture_edges(q, n);
+    for (const auto& side : sides)
+      for (int e : side) {
+        if (sewn_by[e] >= 0)
+          throw InvalidInput(cat("wound border: suture ", s, " sews loop edge (", e, ",",
+                                 (e + 1) % n, "), which suture ", sewn_by[e],
+                                 " sews already; each edge can be sewn once"));
+        sewn_by[e] = static_cast<int>(s);
+      }
+    // Arc-length positions of each side's loop points, as fractions of the side.
+    std::array<std::vector<double>, 2> at;
+    std::array<double, 2> length{};
+    for (int k = 0; k < 2; ++k) {
+      at[k] = {0.0};
+      for (int e : sides[k]) at[k].push_back(length[k] += (L[(e + 1) % n] - L[e]).norm());
+      for (double& t : at[k]) t /= std::max(length[k], 1e-300);
     }
+    // The second side runs against the loop: its fraction t along the suture is 1 - t along
+    // its edges.
+    for (double& t : at[1]) t = 1 - t;
+    std::vector<double> breaks = at[0];
+    breaks.insert(breaks.end(), at[1].begin(), at[1].end());
+    std::sort(breaks.begin(), breaks.end());
+    std::vector<double> T;  // the suture's nodes, fractions along it
+    for (std::size_t b = 0; b + 1 < breaks.size(); ++b) {
+      const double dt = breaks[b + 1] - breaks[b];
+      if (dt < 1e-9) continue;
+      const int k = std::max(1, static_cast<int>(std::ceil(dt * std::max(length[0], length[1]) /
+                                                           o.size_mm - 1e-6)));
+      for (int j = 0; j < k; ++j) T.push_back(breaks[b] + dt * j / k);
+    }
+    T.push_back(1.0);
+    // Each edge of a side gets the nodes strictly inside its stretch, in its own parameter.
+    for (int k = 0; k < 2; ++k)
+      for (std::size_t m = 0; m < sides[k].size(); ++m) {
+        const int e = sides[k][m];
+        double t0 = at[k][m], t1 = at[k][m + 1];
+        inner[e].clear();
+        const bool backwards = t1 < t0;
+        if (backwards) std::swap(t0, t1);
+        for (double t : T)
+          if (t > t0 + 1e-9 && t < t1 - 1e-9) inner[e].push_back((t - t0) / (t1 - t0));
+        if (backwards) {
+          for (double& u : inner[e]) u = 1 - u;
+          std::reverse(inner[e].begin(), inner[e].end());
+        }
+      }
+  }
   for (int i = 0; i < n; ++i) B.add_vertex(L[i]);
   out.loop_vertex.resize(n);
   for (int i = 0; i < n; ++i) out.loop_vertex[i] = i;
@@ -234,8 +285,7 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
     auto& chain = out.edge_chain[i];
     chain.push_back(i);
     front.push_back(i);
-    for (int k = 1; k < segments[i]; ++k) {
-      const double t = static_cast<double>(k) / segments[i];
+    for (double t : inner[i]) {
       chain.push_back(B.add_vertex((1 - t) * L[i] + t * L[j]));
       front.push_back(chain.back());
     }

@@ -146,26 +146,29 @@ PlanReport check_plan_structure(const Plan& plan) {
                            "tissue on its left, running clockwise with superior up); check loop "
                            "node ", worst, " and its twin: nodes 0..n-1 of a path lie on its left"));
   }
-  // Sutures: border edges, each sewn once, never to itself.
+  // Sutures: border edges (or runs of them), each edge sewn once, never to itself.
   std::map<std::pair<int, int>, int> used;
   for (std::size_t k = 0; k < plan.sutures.size(); ++k) {
     const auto& s = plan.sutures[k];
-    for (const BorderEdge& e : {s.first, s.second})
-      if (!is_border_edge(e, n))
-        throw InvalidInput(cat("suture ", k, " ((", s.first.a, ",", s.first.b, "),(", s.second.a,
-                               ",", s.second.b, ")): edge (", e.a, ",", e.b,
-                               ") is not on the border; border edges join consecutive nodes of "
-                               "the loop 0..", n - 1));
+    for (const BorderRun* r : {&s.first, &s.second})
+      for (std::size_t i = 0; i + 1 < r->size(); ++i)
+        if (!is_border_edge({(*r)[i], (*r)[i + 1]}, n))
+          throw InvalidInput(cat("suture ", k, " ", suture_text(s), ": edge (", (*r)[i], ",",
+                                 (*r)[i + 1], ") is not on the border; border edges join "
+                                 "consecutive nodes of the loop 0..", n - 1));
     const auto q = oriented_suture(s, n);
-    if (q[0] == q[3])
-      throw InvalidInput(cat("suture ", k, ": edge (", s.first.a, ",", s.first.b,
-                             ") is sewn to itself"));
-    for (int e : {q[0], q[3]}) {
-      auto [it, fresh] = used.insert({{e, (e + 1) % n}, static_cast<int>(k)});
-      if (!fresh)
-        throw InvalidInput(cat("border edge (", e, ",", (e + 1) % n, ") is used by sutures ",
-                               it->second, " and ", k, "; each edge can be sewn once"));
-    }
+    const auto edges = suture_edges(q, n);
+    for (int e : edges[0])
+      if (std::find(edges[1].begin(), edges[1].end(), e) != edges[1].end())
+        throw InvalidInput(cat("suture ", k, " ", suture_text(s), ": edge (", e, ",", (e + 1) % n,
+                               ") is sewn to itself"));
+    for (const auto& side : edges)
+      for (int e : side) {
+        auto [it, fresh] = used.insert({{e, (e + 1) % n}, static_cast<int>(k)});
+        if (!fresh)
+          throw InvalidInput(cat("border edge (", e, ",", (e + 1) % n, ") is used by sutures ",
+                                 it->second, " and ", k, "; each edge can be sewn once"));
+      }
   }
   std::string open;
   for (int i = 0; i < n; ++i)
@@ -210,17 +213,17 @@ PlanReport check_plan(const Plan& plan, const PatientModel& model) {
   // Each cut segment is traversed twice by the loop.
   for (double l : len) report.cut_length_mm += 0.5 * l;
   for (std::size_t k = 0; k < plan.sutures.size(); ++k) {
-    const auto q = oriented_suture(plan.sutures[k], n);
-    SutureLength sl{static_cast<int>(k), len[q[0]], len[q[3]]};
+    const auto edges = suture_edges(oriented_suture(plan.sutures[k], n), n);
+    SutureLength sl{static_cast<int>(k), 0, 0};
+    for (int e : edges[0]) sl.first_mm += len[e];
+    for (int e : edges[1]) sl.second_mm += len[e];
     report.suture_lengths.push_back(sl);
     if (sl.ratio() > kSutureRatioWarning) {
-      const auto& s = plan.sutures[k];
       char buf[64];
       std::snprintf(buf, sizeof buf, "%.1f and %.1f mm, ratio %.2f", sl.first_mm, sl.second_mm,
                     sl.ratio());
-      report.warnings.push_back(cat("suture ", k, " ((", s.first.a, ",", s.first.b, "),(",
-                                    s.second.a, ",", s.second.b, ")): edges of ", buf,
-                                    "; expect puckering (a dog-ear) or tension"));
+      report.warnings.push_back(cat("suture ", k, " ", suture_text(plan.sutures[k]), ": sides of ",
+                                    buf, "; expect puckering (a dog-ear) or tension"));
     }
   }
   return report;

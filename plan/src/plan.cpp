@@ -175,17 +175,58 @@ bool is_border_edge(const BorderEdge& e, int n) {
   return e.b == (e.a + 1) % n || e.a == (e.b + 1) % n;
 }
 
-std::array<int, 4> oriented_suture(const SuturePair& s, int n) {
-  auto first_of = [n](const BorderEdge& e, const char* which) {
-    if (!is_border_edge(e, n))
-      throw InvalidInput(cat("suture ((", e.a, ",", e.b, "), ...): its ", which, " edge (", e.a,
-                             ",", e.b, ") is not a border edge; border edges join consecutive "
-                             "nodes of the loop 0..", n - 1, " (or ", n - 1, " and 0)"));
-    return e.b == (e.a + 1) % n ? e.a : e.b;
+std::string suture_text(const SuturePair& s) {
+  auto run = [](const BorderRun& r) {
+    std::string t = "(";
+    for (std::size_t i = 0; i < r.size(); ++i) t += cat(i ? "," : "", r[i]);
+    return t + ")";
   };
-  const int i = first_of(s.first, "first"), j = first_of(s.second, "second");
-  // Opposite directions along the loop: i meets j+1, i+1 meets j.
-  return {i, (i + 1) % n, (j + 1) % n, j};
+  return "(" + run(s.first) + "," + run(s.second) + ")";
+}
+
+std::array<int, 4> oriented_suture(const SuturePair& s, int n) {
+  // +1 if the run goes along the loop, -1 against it; for one edge both may hold (n = 2), and
+  // an edge is taken as written in whichever direction fits.
+  auto direction = [&](const BorderRun& r, const char* which) {
+    auto fail = [&](const std::string& why) -> int {
+      throw InvalidInput(cat("suture ", suture_text(s), ": its ", which, " side ", why,
+                             "; a side is a border edge (two consecutive nodes of the loop 0..",
+                             n - 1, ", or ", n - 1, " and 0) or a run of them"));
+    };
+    if (r.size() < 2) fail("has fewer than two nodes");
+    for (int v : r)
+      if (v < 0 || v >= n) fail(cat("names node ", v, ", which is not on the loop"));
+    if (static_cast<int>(r.size()) > n) fail("is longer than the loop");
+    int dir = 0;
+    for (std::size_t i = 0; i + 1 < r.size(); ++i) {
+      const bool fwd = r[i + 1] == (r[i] + 1) % n, bwd = r[i] == (r[i + 1] + 1) % n;
+      if (!fwd && !bwd) fail(cat("(", r[i], ",", r[i + 1], ") is not a border edge"));
+      const int d = fwd ? 1 : -1;
+      if (r.size() > 2 && dir != 0 && d != dir) fail("turns back on itself");
+      dir = d;
+    }
+    return dir;
+  };
+  BorderRun first = s.first, second = s.second;
+  if (direction(first, "first") < 0) std::reverse(first.begin(), first.end());
+  const int d2 = direction(second, "second");
+  if (second.size() == 2) {
+    // An edge as the second side is read against the loop: (i+1, i).
+    if (second[0] != (second[1] + 1) % n) std::swap(second[0], second[1]);
+  } else if (d2 > 0) {
+    std::reverse(second.begin(), second.end());
+  }
+  return {first.front(), first.back(), second.front(), second.back()};
+}
+
+std::vector<int> forward_edges(int a, int b, int n) {
+  std::vector<int> e;
+  for (int i = a; e.empty() || i != b; i = (i + 1) % n) e.push_back(i);
+  return e;
+}
+
+std::array<std::vector<int>, 2> suture_edges(const std::array<int, 4>& q, int n) {
+  return {forward_edges(q[0], q[1], n), forward_edges(q[3], q[2], n)};
 }
 
 WoundBorder wound_border(const Plan& plan) {

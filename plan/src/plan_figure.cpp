@@ -160,7 +160,8 @@ void write_plan_png(const fs::path& path, const Plan& plan, const PatientModel& 
       cairo_stroke(cr);
     }
     cairo_set_dash(cr, nullptr, 0, 0);
-    for (int e : {q[0], q[3]}) {
+    const auto edges = suture_edges(q, n);
+    for (int e : {edges[0][edges[0].size() / 2], edges[1][edges[1].size() / 2]}) {
       const V2 a = px(loop.local_mm[e]), b = px(loop.local_mm[(e + 1) % n]);
       if ((b - a).norm() < 36) continue;  // too short to label legibly; the list below has it
       const V2 d = (b - a).normalized();
@@ -198,7 +199,7 @@ void write_plan_png(const fs::path& path, const Plan& plan, const PatientModel& 
   int row = 0;
   for (std::size_t k = 0; k < plan.sutures.size(); ++k) {
     const auto& s = plan.sutures[k];
-    line += cat("s", k, " = ((", s.first.a, ",", s.first.b, "),(", s.second.a, ",", s.second.b, "))   ");
+    line += cat("s", k, " = ", suture_text(s), "   ");
     if (k % 3 == 2 || k + 1 == plan.sutures.size()) {
       text(cr, left, ly + 32 + 16 * row++, line, 11, 0, 0.1, 0.25, 0.85);
       line.clear();

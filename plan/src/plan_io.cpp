@@ -6,6 +6,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "suture_json.hpp"
 
 namespace caps::plan {
 
@@ -34,7 +35,7 @@ std::string plan_to_json(const Plan& plan, const PlanReport* report) {
         {{"loop_index", e.loop_index}, {"offset_mm", {e.offset_mm.x(), e.offset_mm.y()}}});
   j["sutures"] = json::array();
   for (const auto& s : plan.sutures)
-    j["sutures"].push_back({{s.first.a, s.first.b}, {s.second.a, s.second.b}});
+    j["sutures"].push_back(detail::suture_to_json(s));
   // Derived, for reading (ignored on load): the loop, its correspondence and positions.
   try {
     const BorderLoop loop = border_loop(plan);
@@ -110,11 +111,7 @@ Plan parse_plan_json(const std::string& text, const std::string& source) {
         plan.excisions.push_back({e.at("loop_index").get<int>(),
                                   {e.at("offset_mm").at(0).get<double>(), e.at("offset_mm").at(1).get<double>()}});
     field = "sutures";
-    for (const auto& s : j.at("sutures")) {
-      if (s.size() != 2 || s.at(0).size() != 2 || s.at(1).size() != 2)
-        throw InvalidInput(cat(source, ": sutures: each entry is [[a,b],[c,d]], got ", s.dump()));
-      plan.sutures.push_back({{s[0][0].get<int>(), s[0][1].get<int>()}, {s[1][0].get<int>(), s[1][1].get<int>()}});
-    }
+    for (const auto& s : j.at("sutures")) plan.sutures.push_back(detail::suture_from_json(s, source));
     field = "notes";
     plan.notes = j.value("notes", "");
   } catch (const json::exception& e) {

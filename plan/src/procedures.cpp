@@ -6,6 +6,7 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "suture_json.hpp"
 
 namespace caps::plan {
 
@@ -91,7 +92,7 @@ LocalProcedure multiple_z(std::map<std::string, double>& p) {
   const int nl = static_cast<int>(loop.size());
   auto E = [&](int u, int v) {
     for (int i = 0; i < nl; ++i)
-      if (loop[i] == u && loop[(i + 1) % nl] == v) return BorderEdge{i, (i + 1) % nl};
+      if (loop[i] == u && loop[(i + 1) % nl] == v) return BorderRun{i, (i + 1) % nl};
     throw Error("multiple-z-plasty: internal error, a segment missing from the loop");
   };
   for (int i = 0; i < n; ++i) {
@@ -196,15 +197,15 @@ LocalProcedure rotation_flap(std::map<std::string, double>& p) {
   auto E = [&](int u, int v) {
     if (mirror) std::swap(u, v);
     for (int i = 0; i < nl; ++i)
-      if (loop[i] == u && loop[(i + 1) % nl] == v) return BorderEdge{i, (i + 1) % nl};
+      if (loop[i] == u && loop[(i + 1) % nl] == v) return BorderRun{i, (i + 1) % nl};
     throw Error("rotation-flap: internal error, a segment missing from the loop");
   };
   // The twin of O (between E(S,O) and E(O,F)) moves to the middle of the base.
-  const BorderEdge so = E(iS, iO);
-  const int twin_O = mirror ? so.a : so.b;
+  const BorderRun so = E(iS, iO);
+  const int twin_O = mirror ? so[0] : so[1];
   out.excisions = {{twin_O, (out.points_mm[iF] + out.points_mm[iS]) / 2}};
   out.sutures.push_back({E(iF, iO), E(iO, iS)});
-  std::vector<BorderEdge> flap, outer = {E(iO, iF), E(iS, iO)};
+  std::vector<BorderRun> flap, outer = {E(iO, iF), E(iS, iO)};
   for (int k = 0; k < m; ++k) flap.push_back(E(A(k), A(k + 1)));
   if (back) flap.push_back(E(iP, iB));
   for (int k = 0; outer.size() < flap.size(); ++k) outer.push_back(E(A(k + 1), A(k)));
@@ -330,7 +331,7 @@ using nlohmann::json;
 
 json sutures_json(const std::vector<SuturePair>& s) {
   json a = json::array();
-  for (const auto& x : s) a.push_back({{x.first.a, x.first.b}, {x.second.a, x.second.b}});
+  for (const auto& x : s) a.push_back(detail::suture_to_json(x));
   return a;
 }
 
@@ -375,8 +376,7 @@ LocalProcedure parse_procedure_json(const std::string& text, const std::string& 
       for (const auto& e : j["excisions"])
         p.excisions.push_back({e.at("loop_index").get<int>(),
                                V2(e.at("offset_mm").at(0).get<double>(), e.at("offset_mm").at(1).get<double>())});
-    for (const auto& s : j.at("sutures"))
-      p.sutures.push_back(sp(s.at(0).at(0), s.at(0).at(1), s.at(1).at(0), s.at(1).at(1)));
+    for (const auto& s : j.at("sutures")) p.sutures.push_back(detail::suture_from_json(s, source));
     p.notes = j.value("notes", "");
     return p;
   } catch (const json::exception& e) {

@@ -24,6 +24,13 @@
 /// This reproduces both of the paper's examples (its Z-plasty pair ((0,1),(3,4)) means 0 meets 4
 /// and 1 meets 3). A node that both edges share is a corner being closed and is not sutured.
 /// oriented_suture() rewrites a pair so that a meets c and b meets d.
+///
+/// Runs (an extension of the paper). A side of a suture pair may also be a run of several
+/// consecutive border nodes [a, ..., b], sewn to a run with a different number of edges; the two
+/// meet by arc length (the mesher puts matching nodes on both). This is what an advancement
+/// needs: in the V-Y flap each side of the flap is sewn to the shorter stretch of the outer arm
+/// left beyond the stem of the Y (docs/plan.md). The same rule orients runs: the first traversed
+/// along the loop meets the second traversed against it.
 
 #include <Eigen/Core>
 #include <array>
@@ -50,11 +57,19 @@ struct BorderEdge {
   bool operator==(const BorderEdge&) const = default;
 };
 
-/// A suture pair ((a,b),(c,d)) as written by the user or the procedure.
+/// A run of border nodes: loop indices [a, ..., b], each next to the one before on the loop,
+/// all in one direction; two nodes are one border edge.
+using BorderRun = std::vector<int>;
+
+/// A suture pair ((a,b),(c,d)) as written by the user or the procedure (the paper's form), or
+/// with runs ((a,...,b),(c,...,d)).
 struct SuturePair {
-  BorderEdge first, second;
+  BorderRun first, second;
   bool operator==(const SuturePair&) const = default;
 };
+
+/// "((0,1),(0,5))" — a pair as written, for messages and figures.
+std::string suture_text(const SuturePair& s);
 
 /// An excision offset: a loop node moved away from its twin by `offset_mm` in the local
 /// tangent frame (x along the orientation, y to its left), mm.
@@ -123,13 +138,23 @@ BorderLoop border_loop(const Plan& plan);
 /// Whether (a, b) is a border edge of a loop of `loop_size` nodes.
 bool is_border_edge(const BorderEdge& e, int loop_size);
 
-/// A suture pair rewritten as (a, b, c, d) with (a, b) in loop order and a meeting c, b meeting d
-/// (see @brief). Throws InvalidInput if an edge is not a border edge.
+/// A suture pair rewritten as (a, b, c, d): the run from a forward along the loop to b meets the
+/// run from c backward to d, a meeting c and b meeting d; for edges b = a + 1 and d = c - 1 (see
+/// @brief). Throws InvalidInput if a side is not a run of border nodes.
 std::array<int, 4> oriented_suture(const SuturePair& s, int loop_size);
 
+/// The border edges of the run from `a` forward along the loop to `b`, each by its first node
+/// (edge i joins i and i+1 mod loop_size); at least one.
+std::vector<int> forward_edges(int a, int b, int loop_size);
+
+/// Both runs of an oriented suture (a, b, c, d) as edge lists: the first's edges a .. b-1, the
+/// second's d .. c-1.
+std::array<std::vector<int>, 2> suture_edges(const std::array<int, 4>& q, int loop_size);
+
 /// What the mesher needs: the border loop with excision offsets applied, as (theta deg, z mm),
-/// and the suture edge pairs as quadruples (a, b, c, d) into that loop, a meeting c and b
-/// meeting d; a == c or b == d is a corner being closed (no suture for that node).
+/// and the suture pairs as quadruples (a, b, c, d) into that loop (oriented_suture()): the run
+/// from a forward to b meets the run from c backward to d, a meeting c and b meeting d; a == c
+/// or b == d is a corner being closed (no suture for that node).
 struct WoundBorder {
   std::vector<Eigen::Vector2d> loop_theta_z;
   std::vector<std::array<int, 4>> sutures;
