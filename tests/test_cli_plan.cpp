@@ -61,6 +61,10 @@ TEST_F(CliPlan, MakesChecksAndDrawsEveryTemplate) {
   const auto z = nlohmann::json::parse(std::ifstream(p("z-plasty.json")));
   EXPECT_EQ(z["sutures"], nlohmann::json::parse("[[[5,0],[5,4]],[[2,1],[2,3]],[[0,1],[3,4]]]"));
   EXPECT_EQ(z["border_loop"].size(), 6u);
+  // Runs of border nodes are written as longer lists (the V-Y flap's sides).
+  const auto vy = nlohmann::json::parse(std::ifstream(p("v-y-advancement.json")));
+  EXPECT_EQ(vy["sutures"], nlohmann::json::parse("[[[5,6],[6,7]],[[0,1,2],[0,7]],[[2,3,4],[5,4]]]"));
+  EXPECT_EQ(vy["suture_quadruples"], nlohmann::json::parse("[[5,6,7,6],[0,2,0,7],[2,4,5,4]]"));
   // Every library parameter has its flag (--back-cut for back_cut), negative values included.
   const std::string rf = p("rf.json");
   const CliRun rot = caps("plan new rotation-flap --model " + kModel + " --at 0,60 --radius 12 "

@@ -379,3 +379,35 @@ TEST(Compare, ConstantEqualsMeasuredWhenTheThicknessIsConstant) {
   EXPECT_EQ(diff.measured_summary.elements, diff.constant_summary.elements);  // the same mesh
   EXPECT_THROW(compare_thickness(flat, plan::place_procedure(ellipse, flat, 0, 0, 90), -1, o), InvalidInput);
 }
+
+TEST(Simulate, VYAdvancementPushesTheFlapAlongItsAxis) {
+  // A V opening superiorly (orientation 0), arms 15 mm at 50 deg, advance 5 mm, on a cylinder
+  // with 5 mm of tissue. The flap's tip P (loop point 2) must end where the stem's end J_A' (7)
+  // and J_B' (5) end, having moved along the V's axis towards the open end.
+  const PatientModel model = constant_cylinder();
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("v-y-advancement", {{"length", 15.0}, {"angle", 50.0}, {"advance", 5.0}}),
+      model, 0.0, 40.0, 0.0);
+  SimulateOptions o;
+  o.surface.size_mm = 1.5;
+  const Simulation sim = simulate(model, p, o);
+  EXPECT_LT(sim.max_suture_gap_mm, 1e-6);
+  const SurfaceMesh& S = sim.wound.surface;
+  const ContinuumMesh& C = sim.wound.continuum;
+  auto node = [&](int loop_point) { return C.skin_node[S.loop_vertex[loop_point]]; };
+  auto x0 = [&](int lp) -> Eigen::Vector3d { return C.mesh.nodes.row(node(lp)).transpose(); };
+  auto u = [&](int lp) -> Eigen::Vector3d { return sim.result.displacement_mm.row(node(lp)).transpose(); };
+  const Eigen::Vector3d axis = (0.5 * (x0(0) + x0(4)) - x0(2)).normalized();
+  const Eigen::Vector3d lateral = (x0(0) - x0(4)).normalized();
+  for (int j : {5, 7}) EXPECT_LT((x0(2) + u(2) - x0(j) - u(j)).norm(), 1e-6) << j;
+  // The stem's ends start 5 cos 25 = 4.53 mm ahead of the tip along the axis; the tip goes
+  // forward, the stem's end back, and they meet on the axis.
+  EXPECT_NEAR((x0(7) - x0(2)).dot(axis), 5 * std::cos(25 * kPi / 180), 1e-3);
+  const double tip = u(2).dot(axis), junction = u(7).dot(axis);
+  std::printf("V-Y: flap tip advances %.2f mm, the stem's end comes back %.2f mm; tip sideways %.3f mm\n",
+              tip, -junction, u(2).dot(lateral));
+  EXPECT_GT(tip, 1.0);
+  EXPECT_LT(junction, -1.0);
+  EXPECT_LT(std::abs(u(2).dot(lateral)), 0.05 * u(2).norm());
+  EXPECT_GT(sim.result.total_suture_force_n, 0.0);
+}

@@ -54,11 +54,9 @@ std::vector<SuturePair> pairs(std::initializer_list<std::array<int, 4>> q) {
 void expect_closed(const Plan& plan) {
   const BorderLoop loop = border_loop(plan);
   std::vector<int> uses(loop.size(), 0);
-  for (const auto& s : plan.sutures) {
-    const auto q = oriented_suture(s, loop.size());
-    ++uses[q[0]];
-    ++uses[q[3]];
-  }
+  for (const auto& s : plan.sutures)
+    for (const auto& side : suture_edges(oriented_suture(s, loop.size()), loop.size()))
+      for (int e : side) ++uses[e];
   for (int i = 0; i < loop.size(); ++i) EXPECT_EQ(uses[i], 1) << "border edge " << i;
 }
 
@@ -410,4 +408,55 @@ TEST(PlanLibrary, RotationFlapTurnsIntoTheDefect) {
                  {"back_cut = 6", "half the radius"});
   expect_refused([] { layout_procedure("rotation-flap", {{"arc_side", 0}}); }, {"arc_side = 0"});
   expect_refused([] { layout_procedure("rotation-flap", {{"arc_angle", 200}}); }, {"arc_angle = 200"});
+}
+
+TEST(PlanLibrary, VYAdvancementSewsEachFlapSideToTheOuterArmBeyondTheStem) {
+  // Path A0 J1 P2 J3 B4 (apex P, arms 20 mm, J at the advance, 6 mm, from P); loop 0..4 on the
+  // flap's side (inside the V, left of the path), twins 5 = J_B', 6 = P', 7 = J_A' outside.
+  const Plan plan = placed("v-y-advancement", {{"length", 20}, {"angle", 50}, {"advance", 6}});
+  const BorderLoop loop = border_loop(plan);
+  EXPECT_EQ(loop.point, (std::vector<int>{0, 1, 2, 3, 4, 3, 2, 1}));
+  // The stem (outer arms from the apex, corner P'), then each flap side P..A and P..B as a run
+  // of two edges sewn to the single outer edge J'..A and J'..B.
+  const std::vector<SuturePair> expected = {{{5, 6}, {6, 7}}, {{0, 1, 2}, {0, 7}}, {{2, 3, 4}, {5, 4}}};
+  EXPECT_EQ(plan.sutures, expected);
+  // Which nodes meet: J_B' and J_A' (the stem's end), the flap's tip P with both of them (the
+  // junction of the Y); P', A and B are closed corners.
+  EXPECT_EQ(oriented_suture(plan.sutures[0], 8), (std::array<int, 4>{5, 6, 7, 6}));
+  EXPECT_EQ(oriented_suture(plan.sutures[1], 8), (std::array<int, 4>{0, 2, 0, 7}));
+  EXPECT_EQ(oriented_suture(plan.sutures[2], 8), (std::array<int, 4>{2, 4, 5, 4}));
+  expect_closed(plan);
+  // Geometry in the local frame: the V opens along the orientation (+x), 50 deg at the apex.
+  const auto& xy = loop.local_mm;
+  EXPECT_NEAR((xy[0] - xy[2]).norm(), 20, 1e-6);
+  EXPECT_NEAR((xy[1] - xy[2]).norm(), 6, 1e-6);
+  EXPECT_NEAR(std::atan2(xy[0].y(), xy[0].x() - xy[2].x()) * 180 / kPi, 25, 1e-6);
+  EXPECT_NEAR(std::atan2(xy[4].y(), xy[4].x() - xy[2].x()) * 180 / kPi, -25, 1e-6);
+  // Flap sides of 20 mm sewn to 14 mm of outer arm: lengths on the skin, no warning at 1.43;
+  // an advance of 9 mm (ratio 1.8) is warned about; more than half the arm is refused.
+  const PlanReport r = check_plan(plan, cylinder());
+  ASSERT_EQ(r.suture_lengths.size(), 3u);
+  EXPECT_NEAR(r.suture_lengths[1].first_mm, 20, 0.05);
+  EXPECT_NEAR(r.suture_lengths[1].second_mm, 14, 0.05);
+  EXPECT_NEAR(r.suture_lengths[0].first_mm, 6, 0.05);
+  EXPECT_NEAR(r.suture_lengths[0].second_mm, 6, 0.05);
+  for (const auto& w : r.warnings) EXPECT_EQ(w.find("ratio"), std::string::npos) << w;
+  const PlanReport r9 = check_plan(placed("v-y-advancement", {{"advance", 9}}), cylinder());
+  bool warned = false;
+  for (const auto& w : r9.warnings) warned = warned || w.find("ratio 1.8") != std::string::npos;
+  EXPECT_TRUE(warned);
+  EXPECT_THROW(layout_procedure("v-y-advancement", {{"length", 20}, {"advance", 11}}), InvalidInput);
+}
+
+TEST(PlanRules, RunsAreCheckedAndOrientedLikeEdges) {
+  // Runs written either way round mean the same pair; a run must follow the loop one way.
+  EXPECT_EQ(oriented_suture({{2, 1, 0}, {7, 0}}, 8), (std::array<int, 4>{0, 2, 0, 7}));
+  EXPECT_EQ(oriented_suture({{0, 1, 2}, {0, 7}}, 8), (std::array<int, 4>{0, 2, 0, 7}));
+  EXPECT_EQ(oriented_suture({{0, 1}, {5, 6, 7}}, 8), (std::array<int, 4>{0, 1, 7, 5}));
+  EXPECT_EQ(suture_edges({0, 2, 0, 7}, 8), (std::array<std::vector<int>, 2>{{{0, 1}, {7}}}));
+  EXPECT_EQ(suture_edges({7, 1, 5, 3}, 8), (std::array<std::vector<int>, 2>{{{7, 0}, {3, 4}}}));
+  EXPECT_THROW(oriented_suture({{0, 1, 0}, {3, 4}}, 8), InvalidInput);   // turns back
+  EXPECT_THROW(oriented_suture({{0, 1, 3}, {5, 6}}, 8), InvalidInput);   // (1,3) not an edge
+  EXPECT_THROW(oriented_suture({{0}, {5, 6}}, 8), InvalidInput);         // one node
+  EXPECT_EQ(suture_text({{0, 1, 2}, {0, 7}}), "((0,1,2),(0,7))");
 }

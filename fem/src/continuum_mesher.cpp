@@ -81,6 +81,8 @@ ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& mod
   const int n_nodes = NV * per_vertex + NE * per_edge;
   mesh.nodes.resize(n_nodes, 3);
   out.node_theta_z.resize(n_nodes, 2);
+  out.skin_node.resize(NV);
+  for (int v = 0; v < NV; ++v) out.skin_node[v] = vnode(v, 0);
   out.node_level.resize(n_nodes);
   out.min_thickness_mm = 1e300;
   out.max_thickness_mm = 0;

@@ -222,6 +222,37 @@ LocalProcedure rotation_flap(std::map<std::string, double>& p) {
   return out;
 }
 
+// V-Y advancement. The V's apex P at the origin, its arms to A (left, y > 0) and B (right) at
+// half the apex angle either side of +x: the V opens along the orientation, which is the
+// direction the flap advances. Path A, J_A, P, J_B, B, with J_A and J_B on the arms at the
+// advance s from P. The path's left side is the flap (inside the V): loop 0 A, 1 J_A, 2 P,
+// 3 J_B, 4 B; the twins 5 J_B', 6 P', 7 J_A' are the outer side. Closure: the outer arms are
+// sewn together from the apex to J' (the stem of the Y, corner P'), and each side of the flap,
+// P..A, is sewn by arc length to the outer arm left beyond the stem, J'..A (a run sewn to a
+// shorter run): the flap's tip P meets J_A' and J_B' at the junction of the Y, A and B are
+// closed corners. The flap thus moves s along the orientation.
+LocalProcedure v_y(std::map<std::string, double>& p) {
+  const double L = p["length"], half = deg_to_rad(p["angle"]) / 2, s = p["advance"];
+  if (!(s <= L / 2))
+    throw InvalidInput(cat("v-y-advancement: advance = ", s, " mm is more than half the arm (",
+                           L, " mm); the stem of the Y would leave too little arm to sew the "
+                           "flap's sides to (keep advance <= length / 2; about length / 3 is usual)"));
+  const V2 arm_a(std::cos(half), std::sin(half)), arm_b(std::cos(half), -std::sin(half));
+  LocalProcedure out;
+  out.points_mm = {L * arm_a, s * arm_a, V2(0, 0), s * arm_b, L * arm_b};
+  out.paths = {{0, 1, 2, 3, 4}};
+  out.sutures = {{{5, 6}, {6, 7}},      // the stem: outer arms from P' to J'
+                 {{0, 1, 2}, {0, 7}},   // flap side P..A to the outer J_A'..A
+                 {{2, 3, 4}, {5, 4}}};  // flap side P..B to the outer J_B'..B
+  out.notes = cat("V-Y advancement: path A0 J1 P2 J3 B4 (the V's apex P, its arms ", L,
+                  " mm at ", p["angle"], " deg), loop twins J5 P6 J7 on the outer side. The outer "
+                  "arms close from the apex to J (the stem of the Y, ", s, " mm); each side of the "
+                  "flap is sewn by arc length to the outer arm beyond J, so the flap's tip P moves ",
+                  s, " mm along the orientation to the junction of the Y. Sides of ", L, " and ",
+                  L - s, " mm are sewn together: the flap's edges are gathered slightly.");
+  return out;
+}
+
 struct Template {
   ProcedureInfo info;
   LocalProcedure (*layout)(std::map<std::string, double>&);
@@ -260,6 +291,12 @@ const std::vector<Template>& templates() {
                                       "half the radius)"},
          {"arc_side", "sign", 1, -1, 1, "1: the arc sweeps to the left of the orientation, -1: right"}}},
        rotation_flap},
+      {{"v-y-advancement", "V-Y advancement: a V-shaped flap pushed along its axis, closed as a Y",
+        {{"length", "mm", 20, 5, 60, "each arm of the V, from the apex"},
+         {"angle", "deg", 50, 20, 90, "at the V's apex"},
+         {"advance", "mm", 6, 1, 30, "how far the flap moves = the stem of the Y (at most half "
+                                     "the arm)"}}},
+       v_y},
   };
   return t;
 }

@@ -10,8 +10,9 @@
 /// interface and a centre node in the middle of every layer; edge columns carry the mid-edge nodes
 /// at every interface. Elements of one column share those nodes, so neighbouring elements share
 /// faces and mid-edge nodes.
-/// Sutures: for each suture ((a,b),(c,d)) the nodes along the two border edges are paired at every
-/// depth (corners, mid-edge and centre nodes); the shared point of a closed corner is skipped.
+/// Sutures: for each suture ((a,b),(c,d)) the nodes along the two sides (border edges, or runs of
+/// them, which the surface mesher gave matching nodes by arc length) are paired at every depth
+/// (corners, mid-edge and centre nodes); the shared point of a closed corner is skipped.
 /// Fixed nodes: every bottom node that is not sutured (the bony support); with RimCondition::Fixed
 /// also every node on the outer rim (the far field is clamped), with Free the rim is traction free.
 
@@ -50,6 +51,7 @@ struct ContinuumMesh {
   Eigen::MatrixX2d node_theta_z;      ///< #N×2 (theta deg, z mm) of each node's column
   Eigen::VectorXd node_level;         ///< #N depth level: 0 skin .. n_layers bone (k + 0.5 centre)
   std::vector<int> element_polygon;   ///< element -> surface polygon
+  std::vector<int> skin_node;         ///< surface vertex -> its node on the skin
   int n_layers = 0;
   double min_thickness_mm = 0, max_thickness_mm = 0;  ///< over the mesh's sites
   double min_jacobian = 0;  ///< smallest det J over all Gauss points (mm^3 per unit volume)
