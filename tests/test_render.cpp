@@ -204,6 +204,22 @@ TEST(SkinSurface, WoundFillCollapsesWhenTheWoundCloses) {
   EXPECT_LT(post, 1e-3 * pre);
 }
 
+// A V-Y flap is an incision without excision: no hole opens, so there is nothing to fill (a fill
+// of its zero-area loop could only be a fan across the flap, visible after the closure).
+TEST(SkinSurface, AnIncisionWithoutExcisionGetsNoFill) {
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("v-y-advancement", {{"length", 15.0}, {"advance", 5.0}}),
+      round_cylinder(), 10.0, 5.0, 0.0);
+  fem::SimulateOptions o;
+  o.surface.size_mm = 3.0;
+  const fem::Simulation sim = fem::simulate(round_cylinder(), p, o);
+  const SkinSurfaces s = displaced_skin(round_cylinder(), sim.wound.continuum.mesh, &sim.result, 2);
+  int fills = 0;
+  for (Eigen::Index f = 0; f < s.pre.F.rows(); ++f) fills += s.face_part[f] == SkinPart::WoundFill;
+  EXPECT_EQ(fills, 0);
+  EXPECT_GT(s.pre.F.rows(), 1000);
+}
+
 TEST(SkinSurface, FullResolutionSubdivisionsMatchTheSampleSpacing) {
   const fem::Mesh& mesh = bumpy_sim().wound.continuum.mesh;
   const int n = full_resolution_subdivisions(bumpy(), mesh);

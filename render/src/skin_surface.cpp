@@ -327,7 +327,15 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
   for (std::size_t l = 0; l < loops.size(); ++l) {
     if (static_cast<int>(l) == rim) continue;
     std::vector<int> loop = loops[l];
-    if (signed_area(loop_xy(loop)) > 0) continue;  // a second island; leave it open
+    const std::vector<Eigen::Vector2d> xy = loop_xy(loop);
+    const double area = signed_area(xy);
+    if (area > 0) continue;  // a second island; leave it open
+    // An incision without excision (a Z-plasty, a V-Y flap) opens no hole: its lips are the skin
+    // on either side, which the closure moves onto other lips. A fill there could only be a fan
+    // across the flaps, so none is made.
+    double perimeter = 0;
+    for (std::size_t i = 0; i < xy.size(); ++i) perimeter += (xy[(i + 1) % xy.size()] - xy[i]).norm();
+    if (-area < 1e-6 * perimeter * perimeter) continue;
     std::reverse(loop.begin(), loop.end());
     auto post_area = [&](int a, int c, int d) {
       const Eigen::Vector3d& pa = b.post[loop[a]];
