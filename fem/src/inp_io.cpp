@@ -3,6 +3,7 @@
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 
+#include <cmath>
 #include <cstdio>
 #include <numeric>
 #include <set>
@@ -54,6 +55,22 @@ std::string inp_text(const Mesh& mesh) {
   for (int i = 0; i < N; ++i)
     if (find_root(parent, i) != i) members.push_back(i);
   const std::set<int> fixed(mesh.fixed_nodes.begin(), mesh.fixed_nodes.end());
+  // Prescribed values per dof (NaN = free), and per group root and component the common final
+  // position when a member's value is prescribed (as solve() does). Such a component gets no
+  // equation: CalculiX refuses an equation whose dependent dof is also in *BOUNDARY ("*ERROR in
+  // cascade"), so every member that is not prescribed itself is prescribed to meet it.
+  std::vector<double> prescribed(3 * static_cast<std::size_t>(N), NAN);
+  for (int node : fixed)
+    for (int c = 0; c < 3; ++c) prescribed[3 * node + c] = 0.0;
+  for (const auto& d : mesh.fixed_dofs) prescribed[3 * d.node + d.component] = d.value_mm;
+  std::vector<double> group_pos(3 * static_cast<std::size_t>(N), NAN);
+  for (int i = 0; i < N; ++i)
+    for (int c = 0; c < 3; ++c)
+      if (!std::isnan(prescribed[3 * i + c]) && std::isnan(group_pos[3 * find_root(parent, i) + c]))
+        group_pos[3 * find_root(parent, i) + c] = mesh.nodes(i, c) + prescribed[3 * i + c];
+  auto meets_prescribed = [&](int n, int c) {
+    return !std::isnan(group_pos[3 * find_root(parent, n) + c]);
+  };
   if (!members.empty()) {
     os << "*NODE, NSET=SUTURE_HELPERS\n";
     for (std::size_t k = 0; k < members.size(); ++k) os << N + 1 + k << ", 0, 0, 0\n";
@@ -91,10 +108,14 @@ std::string inp_text(const Mesh& mesh) {
   }
   for (std::size_t k = 0; k < members.size(); ++k) {
     const int n = members[k], m = find_root(parent, n), h = N + static_cast<int>(k);
-    os << "*EQUATION\n";
-    for (int c = 1; c <= 3; ++c)
+    bool header = false;
+    for (int c = 1; c <= 3; ++c) {
+      if (meets_prescribed(n, c - 1)) continue;
+      if (!header) os << "*EQUATION\n";
+      header = true;
       os << "3\n" << n + 1 << ", " << c << ", 1., " << m + 1 << ", " << c << ", -1., " << h + 1
          << ", " << c << ", -1.\n";
+    }
   }
   os << "*STEP\n*STATIC\n*BOUNDARY\n";
   if (!fixed.empty()) os << "FIXED, 1, 3, 0.\n";
@@ -105,9 +126,17 @@ std::string inp_text(const Mesh& mesh) {
     const int n = members[k], m = find_root(parent, n), h = N + static_cast<int>(k);
     // u_n - u_m = x_m - x_n: the group meets at the root's final position.
     for (int c = 0; c < 3; ++c)
-      os << h + 1 << ", " << c + 1 << ", " << c + 1 << ", "
-         << num(mesh.nodes(m, c) - mesh.nodes(n, c)) << "\n";
+      if (!meets_prescribed(n, c))
+        os << h + 1 << ", " << c + 1 << ", " << c + 1 << ", "
+           << num(mesh.nodes(m, c) - mesh.nodes(n, c)) << "\n";
   }
+  // Groups whose final position is prescribed: every member not prescribed itself moves there.
+  // (A node outside every suture is its own group: it meets only its own prescription.)
+  for (int i = 0; i < N; ++i)
+    for (int c = 0; c < 3; ++c)
+      if (meets_prescribed(i, c) && std::isnan(prescribed[3 * i + c]))
+        os << i + 1 << ", " << c + 1 << ", " << c + 1 << ", "
+           << num(group_pos[3 * find_root(parent, i) + c] - mesh.nodes(i, c)) << "\n";
   if (!mesh.loads.empty()) {
     os << "*CLOAD\n";
     for (const auto& l : mesh.loads)

@@ -10,8 +10,13 @@
 ///   *EQUATION  u_n,i - u_m,i - u_h,i = 0
 /// with a helper node h (unattached, ids after the mesh's) whose displacement is prescribed to
 /// x_m - x_n: the same "all members meet" condition that solve() imposes, without redundant
-/// equations. One *STATIC linear step; *NODE PRINT writes U to the .dat file and *NODE FILE U to
-/// the .frd file. Units: mm, N, MPa (consistent).
+/// equations. A component of a group with a prescribed member (fixed node or fixed dof) gets no
+/// equations; its other members are prescribed to meet it, as solve() does. One *STATIC linear
+/// step; *NODE PRINT writes U to the .dat file and *NODE FILE U to the .frd file. Units: mm, N,
+/// MPa (consistent).
+///
+/// CalculiX integrates C3D20 like caps (27 points) but C3D15 with 9 points where caps uses 21, so
+/// on meshes with Wedge15 the two codes solve slightly different discrete problems (docs/mesher.md).
 
 #include <filesystem>
 #include <string>
