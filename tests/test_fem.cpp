@@ -447,9 +447,10 @@ TEST(FemSolvers, MumpsAndCholmodAgree) {
 }
 
 // A cantilever plate 100 mm long and 2 mm thick, in 5 mm elements: the condition number is
-// about 1e9 (double precision gets a relative residual of 2e-8), beyond single precision, so the mixed solve must notice and redo it in
-// double precision, giving CHOLMOD's answer. (A stiffness contrast of 1e11 between layers is
-// not enough to need this: the single-precision factor handles it.)
+// about 1e9 (double precision gets a relative residual of 2e-8), beyond single precision, so the
+// mixed solve must notice and redo it in double precision, giving CHOLMOD's answer. (A stiffness
+// contrast of 1e11 between layers is not enough to need this: the single-precision factor
+// handles it.)
 TEST(FemSolvers, MixedPrecisionFallsBackToDoubleWhenSinglePrecisionIsNotEnough) {
   BoxOptions o;
   o.size_mm = {100, 10, 2};
