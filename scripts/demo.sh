@@ -3,9 +3,10 @@
 # installs what is missing, builds, then writes everything into out/ (or the folder given), with
 # out/index.html to open in a browser:
 #   cranium/               the patient model (measured thickness map, skin and bone surfaces)
-#   ellipse.json, z-plasty.json, *.png   two plans on the forehead and their drawings
-#   ellipse/, z-plasty/    each plan meshed, its closure solved and rendered before and after
-#   ellipse-compare/, z-plasty-compare/  measured versus constant thickness (report.html)
+#   ellipse.json, z-plasty.json, v-y-advancement.json, *.png   three plans on the forehead
+#   ellipse/, z-plasty/, v-y-advancement/   each plan meshed, its closure solved and rendered
+#                          before and after
+#   *-compare/             measured versus constant thickness (report.html)
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$here/scripts/build.sh"
@@ -17,7 +18,9 @@ mkdir -p "$out"
 # The forehead, to the patient's left of a region without bone under it (see thickness.png).
 "$caps" plan new ellipse --model "$out/cranium" --at 25,105 -o "$out/ellipse.json" --force
 "$caps" plan new z-plasty --model "$out/cranium" --at 30,110 --length 15 -o "$out/z-plasty.json" --force
-for p in ellipse z-plasty; do
+"$caps" plan new v-y-advancement --model "$out/cranium" --at 0,95 --length 15 --advance 4 \
+  -o "$out/v-y-advancement.json" --force
+for p in ellipse z-plasty v-y-advancement; do
   "$caps" plan show "$out/$p.json" -o "$out/$p.png" --force
   "$caps" simulate --model "$out/cranium" --plan "$out/$p.json" -o "$out/$p" --render --force
   "$caps" compare --model "$out/cranium" --plan "$out/$p.json" -o "$out/$p-compare" --force
@@ -29,10 +32,10 @@ cat > "$out/index.html" <<'HTML'
 <style>body{font-family:DejaVu Sans,Arial,sans-serif;max-width:1150px;margin:2em auto;color:#222}
 img{max-width:100%;border:1px solid #ddd}.row{display:flex;gap:12px}.row div{flex:1}</style></head>
 <body>
-<h1>caps demo: a patient model from CT, two plans, their closure</h1>
+<h1>caps demo: a patient model from CT, three plans, their closure</h1>
 <p>The patient: <code>Cranium.inv3</code>, a head CT from Debian's invesalius-examples. caps measured
-the soft-tissue thickness between skin and bone in the CT, planned an elliptical excision and a
-Z-plasty on the forehead, meshed each plan (20-node hexahedra and 15-node wedges down to the
+the soft-tissue thickness between skin and bone in the CT, planned an elliptical excision, a
+Z-plasty and a V-Y advancement flap on the forehead, meshed each plan (20-node hexahedra and 15-node wedges down to the
 measured bone), closed the wound with suture constraints and rendered the skin before and after at
 the CT's full resolution. Each plan is also simulated with a constant thickness (the 1992 CAPS
 assumption for surface scans) for comparison.</p>
@@ -42,7 +45,7 @@ assumption for surface scans) for comparison.</p>
 <p>Files: <code>cranium/model.json</code>, the NRRD maps (3D Slicer), <code>skin.ply</code>,
 <code>bone.ply</code> (3D Slicer, ParaView, Blender).</p>
 HTML
-for p in ellipse z-plasty; do
+for p in ellipse z-plasty v-y-advancement; do
   cat >> "$out/index.html" <<HTML
 <h2>${p}</h2>
 <div class="row"><div><p>The plan</p><img src="${p}.png" alt="${p} plan"></div>
