@@ -557,9 +557,15 @@ TEST(FemMeshIo, DirectoryRoundTripsBothElementTypes) {
     EXPECT_NE(text.find(t == ElementType::Hex20 ? "\n25\n" : "\n26\n"), std::string::npos);
     EXPECT_NE(text.find("Name=\"suture_partner\""), std::string::npos);
     // Results go next to it.
-    write_result_dir(back, solve(back), dir);
+    const SolveResult solved = solve(back);
+    write_result_dir(back, solved, dir);
     EXPECT_TRUE(std::filesystem::exists(dir / "result.vtu"));
     EXPECT_TRUE(std::filesystem::exists(dir / "result.json"));
+    // The nodal fields read back exactly (17 digits), and a wrong node count is refused.
+    EXPECT_EQ(read_result_displacement(dir, back.n_nodes()), solved.displacement_mm);
+    EXPECT_EQ(read_result_max_principal(dir, back.n_nodes()), solved.max_principal_mpa);
+    EXPECT_GT(solved.max_principal_mpa.cwiseAbs().maxCoeff(), 0.0);
+    EXPECT_THROW(read_result_max_principal(dir, back.n_nodes() + 1), InvalidInput);
     std::filesystem::remove_all(dir);
   }
 }

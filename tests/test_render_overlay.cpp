@@ -1,4 +1,5 @@
 // Overlays: projection into the image, the displacement colour map and bar, the plan's lines.
+// The tension map is tested in test_render_tension.cpp.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -38,14 +39,19 @@ TEST(Overlay, DisplacementColoursSpanTheScale) {
   s.post.V = s.pre.V;
   s.post.V(1, 0) = 2.0;  // 2 mm
   s.post.V(2, 2) = 4.0;  // 4 mm, the largest
-  double top = 0;
-  const Eigen::MatrixX3d c = displacement_colors(s, 0, top);
-  EXPECT_DOUBLE_EQ(top, 4.0);
+  const ScalarMap m = displacement_map(s);
+  EXPECT_EQ(m.name, "displacement");
+  EXPECT_EQ(m.unit, "mm");
+  EXPECT_DOUBLE_EQ(m.max_value, 4.0);
+  EXPECT_DOUBLE_EQ(m.value[1], 2.0);
+  const Eigen::MatrixX3d c = scalar_colors(m.value, m.max_value);
   EXPECT_TRUE(c.row(0).isApprox(viridis(0.0).transpose()));
   EXPECT_TRUE(c.row(1).isApprox(viridis(0.5).transpose()));
   EXPECT_TRUE(c.row(2).isApprox(viridis(1.0).transpose()));
-  displacement_colors(s, 8.0, top);
-  EXPECT_DOUBLE_EQ(top, 8.0);
+  EXPECT_DOUBLE_EQ(displacement_map(s, 8.0).max_value, 8.0);
+  // No displacement at all: a 0 .. 1 mm scale, every vertex the bottom colour.
+  s.post.V = s.pre.V;
+  EXPECT_DOUBLE_EQ(displacement_map(s).max_value, 1.0);
 }
 
 TEST(Overlay, ColourBarAndLinesDrawOnlyWhereTheyShould) {
@@ -66,6 +72,31 @@ TEST(Overlay, ColourBarAndLinesDrawOnlyWhereTheyShould) {
   EXPECT_GT(top[1], 200);
   EXPECT_LT(top[2], 90);
   EXPECT_THROW(draw_color_bar(img, 0.0, "mm", "x"), InvalidInput);
+  // A title of two lines too wide for the panel and a note: the text is moved left to stay whole
+  // (pixels change left of the bar's usual panel but not in the left third), the note is drawn
+  // under the bar, and nothing is drawn under the bar without one.
+  RgbImage noted = blank, plain = blank;
+  draw_color_bar(noted, 37.0, "kPa", "max principal stress\n(skin tension), kPa", "\u2264 0 = compression");
+  draw_color_bar(plain, 37.0, "kPa", "max principal stress\n(skin tension), kPa");
+  const int panel_x = static_cast<int>(300 - std::max(12.0, 0.025 * 300) - 0.12 * 300 - 0.4 * 12);
+  int moved = 0, far = 0, note = 0, no_note = 0;
+  const int bar_bottom = static_cast<int>(0.5 * (200 - 0.55 * 200) + 0.55 * 200);
+  for (int y = 0; y < 200; ++y)
+    for (int x = 0; x < 300; ++x) {
+      const bool changed = noted.rgb[(std::size_t(y) * 300 + x) * 3] != 30;
+      if (x < panel_x - 20 && y < 50 && changed) ++moved;
+      if (x < 100 && changed) ++far;
+      if (y > bar_bottom + 6 && x > 150 && noted.rgb[(std::size_t(y) * 300 + x) * 3] < 100 &&
+          noted.rgb[(std::size_t(y) * 300 + x) * 3] != 30)
+        ++note;
+      if (y > bar_bottom + 6 && x > 150 && plain.rgb[(std::size_t(y) * 300 + x) * 3] < 100 &&
+          plain.rgb[(std::size_t(y) * 300 + x) * 3] != 30)
+        ++no_note;
+    }
+  EXPECT_GT(moved, 20);
+  EXPECT_EQ(far, 0);
+  EXPECT_GT(note, 20);  // dark text on the white panel
+  EXPECT_EQ(no_note, 0);
   // A line across the middle of the image changes pixels on it and none far from it.
   Camera cam;
   cam.forward = {0, 1, 0};

@@ -7,8 +7,11 @@
 //   caps simulate --model /tmp/cranium --plan /tmp/e.json -o /tmp/esim
 //   caps render /tmp/esim --model /tmp/cranium -o /tmp/esim-images
 //   caps render /tmp/esim --model /tmp/cranium -o /tmp/esim-overlays --plan /tmp/e.json --displacement-map --views plan --force
+//   caps render /tmp/esim --model /tmp/cranium -o /tmp/esim-tension --tension-map --views plan,oblique --force
+//   caps render /tmp/esim --model /tmp/cranium -o /tmp/esim-tension --tension-map --tension-max-kpa 20 --views plan --force --json
 //   caps render /tmp/esim --model /tmp/cranium -o /tmp/esim-plan --views plan --size 400 --force --json
 //   caps render /tmp/esim --model /tmp/cranium -o /tmp/esim-anim --views plan --size 400 --gltf --animation --force
+#include <cmath>
 #include <filesystem>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -34,7 +37,9 @@ namespace {
 struct RenderArgs {
   std::string result, model, output, views = "front,oblique,side,plan";
   int size = 800, subdivisions = 0, frames = render::kGifDefaultFrames;
-  bool gltf = false, animation = false, views_given = false, displacement_map = false;
+  bool gltf = false, animation = false, views_given = false, displacement_map = false,
+       tension_map = false;
+  double tension_max_kpa = 0;  // top of the tension scale; 0 = the 99th percentile
   std::string plan;  // draw its cutting lines over the pre-operative images
 };
 
@@ -47,6 +52,9 @@ void run_render(const RenderArgs& a, const Common& common) {
     throw InvalidInput(cat("--size ", a.size, ": expected 16..8192 pixels"));
   if (a.frames < 2 || a.frames > 600)
     throw InvalidInput(cat("--frames ", a.frames, ": expected 2..600"));
+  if (!(a.tension_max_kpa >= 0) || !std::isfinite(a.tension_max_kpa))
+    throw InvalidInput(cat("--tension-max-kpa ", a.tension_max_kpa,
+                           ": expected a positive stress in kPa (0 = the 99th percentile)"));
   const fem::Mesh mesh = fem::read_mesh_dir(a.result);
   const Eigen::MatrixX3d u = fem::read_result_displacement(a.result, mesh.n_nodes());
   const PatientModel model = PatientModel::load(a.model);
@@ -58,7 +66,10 @@ void run_render(const RenderArgs& a, const Common& common) {
   render::RenderOptions o;
   o.width = o.height = a.size;
   render::Overlays overlays;
-  overlays.displacement_map = a.displacement_map;
+  if (a.displacement_map) overlays.scalar_maps.push_back(render::displacement_map(skin));
+  if (a.tension_map)
+    overlays.scalar_maps.push_back(render::tension_map(
+        skin, mesh, fem::read_result_max_principal(a.result, mesh.n_nodes()), a.tension_max_kpa));
   if (!a.plan.empty()) overlays.plan_lines = render::plan_lines(plan::read_plan(a.plan), model);
   const auto files = render::render_views_with_overlays(model, skin, views, o, overlays, out.path());
   if (a.gltf) render::write_gltf(skin, out.path() / "skin.glb");
@@ -78,6 +89,12 @@ void run_render(const RenderArgs& a, const Common& common) {
                    {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},
                    {"images", nlohmann::json::array()}};
   for (const auto& f : files) j["images"].push_back(f.filename().string());
+  for (const auto& m : overlays.scalar_maps)
+    if (m.name == "tension") {  // over the micropolygons (the range mesh is 0 by definition)
+      j["max_skin_tension_kpa"] = m.value.head(skin.n_micropolygon_vertices).maxCoeff();
+      j["min_skin_tension_kpa"] = m.value.head(skin.n_micropolygon_vertices).minCoeff();
+      j["tension_scale_max_kpa"] = m.max_value;
+    }
   if (a.gltf) j["gltf"] = "skin.glb";
   if (a.animation) {
     j["animations"] = nlohmann::json::array();
@@ -99,7 +116,9 @@ void add_render(CLI::App& app, Common& common, Action& action) {
   auto* cmd = app.add_subcommand(
       "render", "Pre- and post-operative images of a simulation: pre_<view>.png and "
                 "post_<view>.png, same camera, displacement-mapped skin (paper section 4); "
-                "optionally skin.glb (glTF morph target) and transition_<view>.gif.\n"
+                "optionally displacement_<view>.png (|displacement|, mm), tension_<view>.png "
+                "(skin tension: max principal stress, kPa), skin.glb (glTF morph target) and "
+                "transition_<view>.gif.\n"
                 "Example: caps render esim --model cranium -o esim-images");
   cmd->add_option("result", a->result, "a caps simulate (or caps solve) output directory")
       ->required();
@@ -114,6 +133,15 @@ void add_render(CLI::App& app, Common& common, Action& action) {
   cmd->add_flag("--displacement-map", a->displacement_map,
                 "also write displacement_<view>.png: the skin coloured by displacement, with a "
                 "colour bar in mm");
+  auto* tension = cmd->add_flag("--tension-map", a->tension_map,
+                "also write tension_<view>.png: the post-operative skin coloured by the skin "
+                "tension (maximum principal stress at the skin surface, result.vtu's "
+                "max_principal) with a colour bar in kPa; compression (<= 0) is the bottom colour");
+  cmd->add_option("--tension-max-kpa", a->tension_max_kpa,
+                  "top of the --tension-map scale (kPa); 0 = the 99th percentile over the "
+                  "skin (the peaks at sutured corners are singular and grow with refinement)")
+      ->capture_default_str()
+      ->needs(tension);
   cmd->add_flag("--gltf", a->gltf,
                 "also write skin.glb: glTF 2.0, pre-operative skin with the post-operative skin as "
                 "a morph target and a 2 s animation (metres, +Y up, face along +Z)");

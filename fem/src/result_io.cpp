@@ -6,6 +6,7 @@
 #include "vtu.hpp"
 
 #include <cmath>
+#include <string>
 
 namespace caps::fem {
 
@@ -61,24 +62,39 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
   write_text_atomic(dir / "result.json", j.dump(1) + "\n");
 }
 
-Eigen::MatrixX3d read_result_displacement(const std::filesystem::path& dir, Eigen::Index n_nodes) {
+namespace {
+
+// The point array `name` of `dir`/result.vtu as #N×components, checked for size and finiteness.
+Eigen::MatrixXd read_result_point_array(const std::filesystem::path& dir, const std::string& name,
+                                        int components, Eigen::Index n_nodes) {
   const std::filesystem::path path = dir / "result.vtu";
   if (!std::filesystem::exists(path))
     throw IoError(cat(path.string(), ": missing; pass a `caps simulate` or `caps solve` output"));
   const detail::VtuContent v = detail::read_vtu(path);
-  const auto it = v.arrays.find("displacement");
-  if (it == v.arrays.end() || v.components.at("displacement") != 3)
-    throw InvalidInput(cat(path.string(), ": no 3-component point array 'displacement'"));
-  if (v.n_points != n_nodes || static_cast<Eigen::Index>(it->second.size()) != 3 * n_nodes)
+  const auto it = v.arrays.find(name);
+  if (it == v.arrays.end() || v.components.at(name) != components)
+    throw InvalidInput(cat(path.string(), ": no ", components, "-component point array '", name,
+                           "'; rerun `caps solve` or `caps simulate` to write it"));
+  if (v.n_points != n_nodes || static_cast<Eigen::Index>(it->second.size()) != components * n_nodes)
     throw InvalidInput(cat(path.string(), ": ", v.n_points, " points, but the mesh has ", n_nodes,
                            " nodes; is it the result of this mesh?"));
-  Eigen::MatrixX3d u(n_nodes, 3);
-  for (Eigen::Index i = 0; i < 3 * n_nodes; ++i) {
+  Eigen::MatrixXd out(n_nodes, components);
+  for (Eigen::Index i = 0; i < components * n_nodes; ++i) {
     if (!std::isfinite(it->second[i]))
-      throw InvalidInput(cat(path.string(), ": displacement of node ", i / 3, " is not finite"));
-    u(i / 3, i % 3) = it->second[i];
+      throw InvalidInput(cat(path.string(), ": ", name, " of node ", i / components, " is not finite"));
+    out(i / components, i % components) = it->second[i];
   }
-  return u;
+  return out;
+}
+
+}  // namespace
+
+Eigen::MatrixX3d read_result_displacement(const std::filesystem::path& dir, Eigen::Index n_nodes) {
+  return read_result_point_array(dir, "displacement", 3, n_nodes);
+}
+
+Eigen::VectorXd read_result_max_principal(const std::filesystem::path& dir, Eigen::Index n_nodes) {
+  return read_result_point_array(dir, "max_principal", 1, n_nodes).col(0);
 }
 
 }  // namespace caps::fem

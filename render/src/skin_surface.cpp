@@ -19,19 +19,21 @@ const Eigen::Vector3d kSkinTone(0.87, 0.70, 0.60);
 
 struct Builder {
   std::vector<Eigen::Vector3d> pre, post, color, offset;
-  std::vector<Eigen::Vector2d> theta_z;
+  std::vector<Eigen::Vector2d> theta_z, natural;
   std::vector<int> element;
   std::vector<Eigen::Vector3i> faces;
   std::vector<SkinPart> part;
 
   int add(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& c,
-          const Eigen::Vector3d& d, const Eigen::Vector2d& tz, int e) {
+          const Eigen::Vector3d& d, const Eigen::Vector2d& tz, int e,
+          const Eigen::Vector2d& xi = Eigen::Vector2d::Zero()) {
     pre.push_back(p);
     post.push_back(q);
     color.push_back(c);
     offset.push_back(d);
     theta_z.push_back(tz);
     element.push_back(e);
+    natural.push_back(xi);
     return static_cast<int>(pre.size()) - 1;
   }
   void tri(int a, int b, int c, SkinPart p) {
@@ -250,7 +252,7 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
       const Eigen::Vector3d d = s - x_face;
       // post = x_face + u + d (paper section 4); pre is the same with u = 0
       const int v = b.add(x_face + d, (x_face + u) + d, color_of(c.theta_deg, c.z_mm), d,
-                          {unwrap(c.theta_deg), c.z_mm}, e);
+                          {unwrap(c.theta_deg), c.z_mm}, e, xi.head<2>());
       if (key[0] >= 0) welded.emplace(key, v);
       return v;
     };
@@ -536,6 +538,7 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
   out.range_offset_mm.resize(nv, 3);
   out.theta_z.resize(nv, 2);
   out.vertex_element.resize(nv);
+  out.vertex_natural.resize(nv, 2);
   for (Eigen::Index v = 0; v < nv; ++v) {
     out.pre.V.row(v) = b.pre[v];
     out.post.V.row(v) = b.post[v];
@@ -543,11 +546,38 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
     out.range_offset_mm.row(v) = b.offset[v];
     out.theta_z.row(v) = b.theta_z[v];
     out.vertex_element[v] = b.element[v];
+    out.vertex_natural.row(v) = b.natural[v];
   }
   out.pre.F.resize(static_cast<Eigen::Index>(b.faces.size()), 3);
   for (std::size_t f = 0; f < b.faces.size(); ++f) out.pre.F.row(static_cast<Eigen::Index>(f)) = b.faces[f];
   out.post.F = out.pre.F;
   out.face_part = std::move(b.part);
+  return out;
+}
+
+Eigen::VectorXd nodal_field_on_skin(const SkinSurfaces& skin, const fem::Mesh& mesh,
+                                    const Eigen::VectorXd& nodal, double off_mesh_value) {
+  if (nodal.size() != mesh.n_nodes())
+    throw InvalidInput(cat("render: the nodal field has ", nodal.size(), " values but the mesh has ",
+                           mesh.n_nodes(), " nodes"));
+  if (!nodal.allFinite()) throw InvalidInput("render: the nodal field has non-finite values");
+  const auto nv = skin.pre.V.rows();
+  Eigen::VectorXd out = Eigen::VectorXd::Constant(nv, off_mesh_value);
+  Eigen::VectorXd N;
+  Eigen::MatrixX3d dN;
+  for (Eigen::Index v = 0; v < nv; ++v) {
+    const int e = skin.vertex_element[v];
+    if (e < 0) continue;
+    if (e >= static_cast<int>(mesh.elements.size()))
+      throw InvalidInput(cat("render: skin vertex ", v, " comes from element ", e, " but the mesh has ",
+                             mesh.elements.size(), "; was the skin built from this mesh?"));
+    const fem::Element& el = mesh.elements[static_cast<std::size_t>(e)];
+    const Eigen::Vector3d xi(skin.vertex_natural(v, 0), skin.vertex_natural(v, 1), -1.0);
+    fem::shape_functions(el.type, xi, N, dN);
+    double f = 0;
+    for (int a = 0; a < el.n_nodes(); ++a) f += N[a] * nodal[el.nodes[a]];
+    out[v] = f;
+  }
   return out;
 }
 

@@ -95,4 +95,9 @@ void write_result_dir(const Mesh& mesh, const SolveResult& result,
 /// finite rows. Throws IoError (missing file) or InvalidInput (wrong size, missing array).
 Eigen::MatrixX3d read_result_displacement(const std::filesystem::path& dir, Eigen::Index n_nodes);
 
+/// Reads the nodal maximum principal stress (#N, MPa; SolveResult::max_principal_mpa) from
+/// `dir`/result.vtu and checks it has `n_nodes` finite entries. Throws as
+/// read_result_displacement().
+Eigen::VectorXd read_result_max_principal(const std::filesystem::path& dir, Eigen::Index n_nodes);
+
 }  // namespace caps::fem

@@ -1,27 +1,63 @@
 #pragma once
-/// @brief Overlays on the rendered skin: the displacement as a colour map with a colour bar, and
-/// the plan's cutting lines drawn over an image.
+/// @brief Overlays on the rendered skin: scalar fields (the displacement, the skin tension) as a
+/// colour map with a colour bar, and the plan's cutting lines drawn over an image.
 
 #include <Eigen/Core>
 #include <filesystem>
 #include <string>
 #include <vector>
 
+#include "caps/fem/mesh.hpp"
 #include "caps/plan/plan.hpp"
 #include "caps/render/render.hpp"
 #include "caps/render/skin_surface.hpp"
 
 namespace caps::render {
 
-/// Per-vertex colours of the displacement magnitude |post - pre| (mm), viridis from 0 to
-/// `max_mm` (0: the largest displacement). Returns #V×3 RGB in [0, 1]; `used_max_mm` receives
-/// the top of the scale.
-Eigen::MatrixX3d displacement_colors(const SkinSurfaces& skin, double max_mm, double& used_max_mm);
+/// A scalar per skin vertex shown as a colour map (viridis) with a colour bar: the displacement,
+/// the skin tension, or any other field on the displacement-mapped skin.
+struct ScalarMap {
+  std::string name;       ///< images are written as <name>_<view>.png
+  Eigen::VectorXd value;  ///< #V, one per vertex of the SkinSurfaces, in `unit`
+  /// Top of the scale (> 0): values at or above it take viridis' last colour, values at or below
+  /// 0 its first.
+  double max_value = 1;
+  std::string unit;   ///< after each tick label ("mm", "kPa")
+  std::string title;  ///< above the bar; '\n' starts a new line
+  std::string note;   ///< under the bar (may be empty); '\n' starts a new line
+};
 
-/// Draws a vertical colour bar (viridis, 0 .. max_value) with ticks and a title on the image's
-/// right side, over a white panel.
+/// The top of a colour scale: `max_value` if it is positive, else the largest of `value`, else 1
+/// (all values <= 0: the scale stays readable and every vertex takes the first colour).
+double scale_top(const Eigen::VectorXd& value, double max_value);
+
+/// Per-vertex colours viridis(clamp(value / max_value, 0, 1)): #V×3 RGB in [0, 1]. Throws
+/// InvalidInput unless max_value > 0.
+Eigen::MatrixX3d scalar_colors(const Eigen::VectorXd& value, double max_value);
+
+/// |post - pre| per skin vertex (#V, mm).
+Eigen::VectorXd displacement_magnitude_mm(const SkinSurfaces& skin);
+
+/// The displacement map ("displacement", mm): |post - pre| per vertex, scale 0 .. `max_mm`
+/// (0: the largest displacement).
+ScalarMap displacement_map(const SkinSurfaces& skin, double max_mm = 0);
+
+/// The tension map ("tension", kPa): the maximum principal stress at the skin surface. The nodal
+/// values of `mesh` (fem::SolveResult::max_principal_mpa, MPa) are carried to the skin vertices by
+/// the element's shape functions on its top face (nodal_field_on_skin) and converted to kPa
+/// (1 MPa = 1000 kPa); the range mesh off the FE mesh gets 0. Scale 0 .. `max_kpa` (0: the 99th
+/// percentile over the skin faces, as the peaks at sutured corners are singular; the note under
+/// the bar then gives the peak); compression (<= 0) takes the bottom colour.
+/// @param skin               displaced_skin() of `mesh`
+/// @param max_principal_mpa  #N nodal maximum principal stress (MPa)
+ScalarMap tension_map(const SkinSurfaces& skin, const fem::Mesh& mesh,
+                      const Eigen::VectorXd& max_principal_mpa, double max_kpa = 0);
+
+/// Draws a vertical colour bar (viridis, 0 .. max_value) with ticks labelled in `unit`, the
+/// title above it and the note under it (each may hold several lines separated by '\n') on the
+/// image's right side, over a white panel. Throws InvalidInput unless max_value > 0.
 void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
-                    const std::string& title);
+                    const std::string& title, const std::string& note = "");
 
 /// Pixel position (x right, y down) of an LPS point in an image rendered with `camera`.
 Eigen::Vector2d project(const Camera& camera, const RenderOptions& options, const Eigen::Vector3d& p_lps);
@@ -39,14 +75,14 @@ std::vector<std::vector<Eigen::Vector3d>> plan_lines(const plan::Plan& plan, con
 struct Overlays {
   /// The plan's cutting paths (LPS mm), drawn over the pre-operative images.
   std::vector<std::vector<Eigen::Vector3d>> plan_lines;
-  /// Also write displacement_<view>.png: the post-operative skin coloured by |displacement| with
-  /// a colour bar in mm.
-  bool displacement_map = false;
-  double displacement_max_mm = 0;  ///< top of the colour scale (0: the largest displacement)
+  /// Also write <name>_<view>.png for each: the post-operative skin coloured by the map, with its
+  /// colour bar (displacement_map(), tension_map()).
+  std::vector<ScalarMap> scalar_maps;
 };
 
 /// render_views() with overlays: pre_<view>.png (with the plan's lines), post_<view>.png, and
-/// displacement_<view>.png when asked. Returns the paths written.
+/// <name>_<view>.png for each scalar map (e.g. displacement_<view>.png, tension_<view>.png).
+/// Returns the paths written. Throws InvalidInput if a map's size is not the skin's vertex count.
 std::vector<std::filesystem::path> render_views_with_overlays(const PatientModel& model,
                                                               const SkinSurfaces& skin,
                                                               const std::vector<View>& views,

@@ -52,6 +52,9 @@ struct SkinSurfaces {
   Eigen::MatrixX2d theta_z;       ///< #V×2 (theta deg, z mm) where each vertex sampled the model
   Eigen::MatrixX3d range_offset_mm;  ///< #V×3 d = skin - x_face (zero off the mesh)
   Eigen::VectorXi vertex_element;    ///< #V the element a micropolygon vertex came from, else -1
+  /// #V×2 natural coordinates (xi, eta) of a micropolygon vertex on its element's top face
+  /// (zeta = -1; x_face = sum_a N_a(xi, eta, -1) X_a); 0 where vertex_element is -1
+  Eigen::MatrixX2d vertex_natural;
   std::vector<SkinPart> face_part;   ///< #F
   std::vector<int> skin_elements;    ///< elements whose top face lies on the skin
   int n_micropolygon_vertices = 0;
@@ -81,5 +84,15 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
 /// The same with a solve result (null: no displacement).
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
                             const fem::SolveResult* result, int n_subdivisions);
+
+/// A nodal field carried to the skin's vertices by the same shape functions that place the
+/// micropolygons: f(v) = sum_a N_a(xi_v, eta_v, -1) f_a over the nodes of vertex v's element.
+/// Vertices off the mesh (the range mesh, the end caps) get `off_mesh_value`.
+/// @param skin     displaced_skin() of `mesh`
+/// @param nodal    #N values, one per mesh node (any unit; the result has the same)
+/// @return         #V values
+/// Throws InvalidInput if `nodal` has the wrong size or a non-finite value.
+Eigen::VectorXd nodal_field_on_skin(const SkinSurfaces& skin, const fem::Mesh& mesh,
+                                    const Eigen::VectorXd& nodal, double off_mesh_value = 0.0);
 
 }  // namespace caps::render
