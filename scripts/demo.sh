@@ -5,7 +5,7 @@
 #   cranium/               the patient model (measured thickness map, skin and bone surfaces)
 #   ellipse.json, z-plasty.json, v-y-advancement.json, *.png   three plans on the forehead
 #   ellipse/, z-plasty/, v-y-advancement/   each plan meshed, its closure solved and rendered
-#                          before and after
+#                          before and after, with the skin tension
 #   *-compare/             measured versus constant thickness (report.html)
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -22,7 +22,7 @@ mkdir -p "$out"
   -o "$out/v-y-advancement.json" --force
 for p in ellipse z-plasty v-y-advancement; do
   "$caps" plan show "$out/$p.json" -o "$out/$p.png" --force
-  "$caps" simulate --model "$out/cranium" --plan "$out/$p.json" -o "$out/$p" --render --force
+  "$caps" simulate --model "$out/cranium" --plan "$out/$p.json" -o "$out/$p" --render --tension-map --force
   "$caps" compare --model "$out/cranium" --plan "$out/$p.json" -o "$out/$p-compare" --force
 done
 
@@ -54,6 +54,8 @@ for p in ellipse z-plasty v-y-advancement; do
 <div><p>After the closure</p><img src="${p}/post_plan.png" alt="${p} after"></div></div>
 <div class="row"><div><p>Before, oblique</p><img src="${p}/pre_oblique.png" alt="${p} before, oblique"></div>
 <div><p>After, oblique</p><img src="${p}/post_oblique.png" alt="${p} after, oblique"></div></div>
+<div class="row"><div><p>Skin tension after the closure (kPa)</p><img src="${p}/tension_plan.png" alt="${p} skin tension"></div>
+<div></div></div>
 <p><a href="${p}-compare/report.html">Measured versus constant thickness</a> &middot;
 <code>${p}/result.vtu</code> (ParaView) &middot; <code>${p}/mesh.inp</code> (CalculiX) &middot;
 <code>${p}/result.json</code> (closing force, stresses, timings)</p>

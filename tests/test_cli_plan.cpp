@@ -101,3 +101,19 @@ TEST_F(CliPlan, RefusesBadPlansWithoutOutput) {
   EXPECT_NE(r.out.find("(0,2) is not on the border"), std::string::npos) << r.out;
   expect_refused("plan show " + p("edited.json") + " -o " + p("edited.png"), p("edited.png"), "(0,2)");
 }
+
+TEST_F(CliPlan, SimulatesAVYFlapAndDrawsItsTension) {
+  const std::string plan = p("vy_sim.json"), out = p("vy_sim");
+  ASSERT_EQ(caps("plan new v-y-advancement --model " + kModel + " --at 0,60 --orientation 90 "
+                 "--length 12 --advance 3 -q -o " + plan).code, 0);
+  expect_refused("simulate --model " + kModel + " --plan " + plan + " -o " + out + " --tension-map",
+                 out, "--render");
+  const CliRun r = caps("simulate --model " + kModel + " --plan " + plan + " -o " + out +
+                        " --render --tension-map --json");
+  ASSERT_EQ(r.code, 0) << r.out;
+  for (const char* f : {"pre_plan.png", "post_plan.png", "tension_plan.png", "tension_front.png"})
+    EXPECT_GT(fs::file_size(fs::path(out) / f), 1000u) << f;
+  const auto result = nlohmann::json::parse(std::ifstream(fs::path(out) / "result.json"));
+  EXPECT_GT(result["total_suture_force_n"].get<double>(), 0.0);
+  EXPECT_EQ(result["sizes"]["dofs"].get<long>() % 3, 0);
+}

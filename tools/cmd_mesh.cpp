@@ -33,7 +33,7 @@ struct MeshArgs {
               precision = "mixed";
   int layers = 2;
   double size_mm = 2, extent_mm = 0, grading = 1, t1_deg = 30, t2_deg = 90, constant_mm = 0;
-  bool no_pictures = false;
+  bool no_pictures = false, tension_map = false;
   bool render = false;  // simulate: also the pre- and post-operative images
 };
 
@@ -94,7 +94,7 @@ void run_simulate(const MeshArgs& a, const Common& common) {
   if (a.render)
     render::render_simulation(model, sim, {render::View::Front, render::View::Oblique,
                                            render::View::Side, render::View::Plan},
-                              {}, out.path());
+                              {}, out.path(), a.tension_map);
   out.commit();
   const auto& r = sim.result;
   nlohmann::json j{{"output", a.output},
@@ -221,8 +221,12 @@ void add_mesh(CLI::App& app, Common& common, Action& action) {
   sim->add_option("--precision", b->precision,
                   "mixed (a single-precision factorization refined to double accuracy; falls back to double by itself when that is not enough) or double; MUMPS only")
       ->capture_default_str();
-  sim->add_flag("--render", b->render, "also render pre_<view>.png and post_<view>.png (front, "
+  auto* render = sim->add_flag("--render", b->render, "also render pre_<view>.png and post_<view>.png (front, "
                                        "oblique, side, plan; the same camera before and after)");
+  sim->add_flag("--tension-map", b->tension_map,
+                "with --render, also tension_<view>.png: the skin coloured by its tension (max "
+                "principal stress, kPa; the scale tops at the 99th percentile)")
+      ->needs(render);
   add_common_flags(sim, common, true);
   sim->callback([&common, &action, b] { action = [&common, b] { run_simulate(*b, common); }; });
 }

@@ -1,5 +1,7 @@
 #include "caps/render/simulation_report.hpp"
 
+#include "caps/render/overlay.hpp"
+
 #include <cmath>
 #include <cstdio>
 
@@ -42,8 +44,13 @@ SkinSurfaces simulated_skin(const PatientModel& model, const fem::Simulation& si
 
 std::vector<fs::path> render_simulation(const PatientModel& model, const fem::Simulation& sim,
                                         const std::vector<View>& views, const RenderOptions& options,
-                                        const fs::path& dir) {
-  return render_views(model, simulated_skin(model, sim), views, options, dir);
+                                        const fs::path& dir, bool tension) {
+  const SkinSurfaces skin = simulated_skin(model, sim);
+  Overlays overlays;
+  if (tension)
+    overlays.scalar_maps.push_back(
+        tension_map(skin, sim.wound.continuum.mesh, sim.result.max_principal_mpa));
+  return render_views_with_overlays(model, skin, views, options, overlays, dir);
 }
 
 void write_comparison_report(const fem::Comparison& c, const PatientModel& model,

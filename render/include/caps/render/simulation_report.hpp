@@ -21,12 +21,14 @@ std::pair<double, double> wound_fill_area_mm2(const SkinSurfaces& skin);
 /// The displacement-mapped skin of a simulation at full resolution.
 SkinSurfaces simulated_skin(const PatientModel& model, const fem::Simulation& sim);
 
-/// pre_<view>.png and post_<view>.png of a simulation in `dir` (see render_views).
+/// pre_<view>.png and post_<view>.png of a simulation in `dir` (see render_views), and with
+/// `tension_map` also tension_<view>.png (the skin tension, see tension_map() in overlay.hpp).
 std::vector<std::filesystem::path> render_simulation(const PatientModel& model,
                                                      const fem::Simulation& sim,
                                                      const std::vector<View>& views,
                                                      const RenderOptions& options,
-                                                     const std::filesystem::path& dir);
+                                                     const std::filesystem::path& dir,
+                                                     bool tension_map = false);
 
 /// Writes a comparison into an existing folder: measured/ and constant/ (fem::write_simulation
 /// plus their pre- and post-operative plan and oblique views), comparison.json, and report.html
