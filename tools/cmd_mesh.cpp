@@ -32,7 +32,8 @@ struct MeshArgs {
   std::string model, border, plan, output, rim = "fixed", solver = "mumps",
               precision = "mixed";
   int layers = 2;
-  double size_mm = 2, extent_mm = 0, grading = 1, t1_deg = 30, t2_deg = 90, constant_mm = 0;
+  double size_mm = 2, extent_mm = 0, grading = 1, t1_deg = 30, t2_deg = 90, constant_mm = 0,
+         stage1_angle_deg = 20;
   bool no_pictures = false, tension_map = false;
   bool render = false;  // simulate: also the pre- and post-operative images
 };
@@ -72,6 +73,7 @@ fem::SimulateOptions options_of(const MeshArgs& a) {
   o.surface.size_mm = a.size_mm;
   o.surface.extent_mm = a.extent_mm;
   o.surface.t1_deg = a.t1_deg;
+  o.surface.stage1_min_angle_deg = a.stage1_angle_deg;
   o.surface.t2_deg = a.t2_deg;
   o.continuum.n_layers = a.layers;
   o.continuum.grading = a.grading;
@@ -119,6 +121,7 @@ void run_mesh(const MeshArgs& a, const Common& common) {
   so.size_mm = a.size_mm;
   so.extent_mm = a.extent_mm;
   so.t1_deg = a.t1_deg;
+  so.stage1_min_angle_deg = a.stage1_angle_deg;
   so.t2_deg = a.t2_deg;
   fem::ContinuumMeshOptions co;
   co.n_layers = a.layers;
@@ -194,6 +197,10 @@ void add_mesh(CLI::App& app, Common& common, Action& action) {
   cmd->add_option("--grading", a->grading, "thickness ratio of each layer to the one above")
       ->capture_default_str();
   cmd->add_option("--t1", a->t1_deg, "stage 1: fill concave corners deeper than this (deg)")
+      ->capture_default_str();
+  cmd->add_option("--stage1-angle", a->stage1_angle_deg,
+                  "stage 1: re-triangulate regions of stage-1 triangles with corners below this "
+                  "(deg, at most 20.7) with interior points; 0 = the paper's triangles")
       ->capture_default_str();
   cmd->add_option("--t2", a->t2_deg, "stage 2: expand corners sharper than this (deg)")
       ->capture_default_str();

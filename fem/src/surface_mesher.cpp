@@ -2,10 +2,13 @@
 
 #include "caps/core/error.hpp"
 #include "caps/surface/patient_model.hpp"
+#include "stage1_region.hpp"
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <numbers>
+#include <numeric>
 
 namespace caps::fem {
 namespace {
@@ -109,6 +112,108 @@ double median_edge(const std::vector<Vec2>& P, const std::vector<int>& border) {
   return len[len.size() / 2];
 }
 
+double min_corner_deg(const std::vector<Vec2>& P, const std::vector<int>& poly) {
+  double m = 180;
+  const std::size_t n = poly.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec2 u = P[poly[(i + n - 1) % n]] - P[poly[i]], v = P[poly[(i + 1) % n]] - P[poly[i]];
+    m = std::min(m, std::atan2(std::abs(cross2(u, v)), u.dot(v)) / kDeg);
+  }
+  return m;
+}
+
+/// Re-triangulates each edge-connected region of stage-1 triangles (the only polygons so far)
+/// whose smallest corner is below `min_angle_deg`. Stage 1 fills a large flap with a ladder of
+/// thin triangles across it (3.9 deg on the V-Y template's 50 deg V of 20 mm arms); a constrained
+/// Delaunay refinement of the same region gives well-shaped triangles with interior points. The
+/// border chains are kept edge for edge; the region's front edges (the diagonals stage 1 leaves
+/// for stage 2, up to the whole base of a flap) are split into pieces of about `size_mm`, since
+/// no triangle on a long unsplit edge between short border edges can be well shaped, and the
+/// pieces join the front. A rebuild that is not better keeps stage 1's triangles.
+void rebuild_stage1(Builder& B, std::vector<int>& front, double min_angle_deg, double size_mm) {
+  auto& polys = B.out.polygons;
+  const int m = static_cast<int>(polys.size());
+  std::vector<int> parent(m);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto root = [&](int t) {
+    while (parent[t] != t) t = parent[t] = parent[parent[t]];
+    return t;
+  };
+  std::map<std::pair<int, int>, int> directed;  // edge a -> b of triangle t
+  for (int t = 0; t < m; ++t)
+    for (int i = 0; i < 3; ++i) directed[{polys[t][i], polys[t][(i + 1) % 3]}] = t;
+  for (const auto& [e, t] : directed) {
+    const auto twin = directed.find({e.second, e.first});
+    if (twin != directed.end()) parent[root(t)] = root(twin->second);
+  }
+  std::map<int, std::vector<int>> regions;
+  for (int t = 0; t < m; ++t) regions[root(t)].push_back(t);
+  // Stage 1's front edges run the same way as the region's boundary (a triangle (c, b, a) leaves
+  // the front edge a -> c).
+  std::map<std::pair<int, int>, std::vector<int>> front_split;
+  for (std::size_t i = 0; i < front.size(); ++i)
+    front_split[{front[i], front[(i + 1) % front.size()]}] = {};
+
+  std::vector<std::vector<int>> rebuilt;
+  for (const auto& [r, tris] : regions) {
+    double worst = 180;
+    for (int t : tris) worst = std::min(worst, min_corner_deg(B.P, polys[t]));
+    auto keep = [&] {
+      for (int t : tris) rebuilt.push_back(polys[t]);
+    };
+    if (!(worst < min_angle_deg)) {
+      keep();
+      continue;
+    }
+    std::vector<Vec2> Q = B.P;
+    std::vector<std::array<int, 2>> boundary;
+    std::map<std::pair<int, int>, std::vector<int>> splits;
+    for (int t : tris)
+      for (int i = 0; i < 3; ++i) {
+        const int a = polys[t][i], b = polys[t][(i + 1) % 3];
+        if (directed.count({b, a})) continue;
+        const double len = (B.P[b] - B.P[a]).norm();
+        const int k = front_split.count({a, b})
+                          ? std::max(1, static_cast<int>(std::ceil(len / size_mm - 1e-6)))
+                          : 1;
+        int prev = a;
+        for (int j = 1; j < k; ++j) {
+          Q.push_back(B.P[a] + (B.P[b] - B.P[a]) * (static_cast<double>(j) / k));
+          const int id = static_cast<int>(Q.size()) - 1;
+          splits[{a, b}].push_back(id);
+          boundary.push_back({prev, id});
+          prev = id;
+        }
+        boundary.push_back({prev, b});
+      }
+    const detail::RegionTriangulation tri =
+        detail::triangulate_region(Q, boundary, 1.25 * size_mm, min_angle_deg);
+    Q.insert(Q.end(), tri.new_points.begin(), tri.new_points.end());
+    double better = tri.triangles.empty() ? 0.0 : 180.0;
+    for (const auto& t : tri.triangles)
+      better = std::min(better, min_corner_deg(Q, {t[0], t[1], t[2]}));
+    if (better <= worst) {
+      keep();
+      continue;
+    }
+    for (std::size_t k = B.P.size(); k < Q.size(); ++k) B.add_vertex(Q[k]);
+    for (auto& [e, ids] : splits) front_split[e] = ids;
+    for (const auto& t : tri.triangles) rebuilt.push_back({t[0], t[1], t[2]});
+  }
+  B.out.polygons.clear();
+  B.out.polygon_stage.clear();
+  B.out.polygon_layer.clear();
+  B.out.polygon_expanded.clear();
+  for (auto& p : rebuilt) B.add_polygon(std::move(p), 1, 0, 0);
+  std::vector<int> next;
+  for (std::size_t i = 0; i < front.size(); ++i) {
+    next.push_back(front[i]);
+    const auto& ids = front_split[{front[i], front[(i + 1) % front.size()]}];
+    next.insert(next.end(), ids.begin(), ids.end());
+  }
+  front = std::move(next);
+}
+
 }  // namespace
 
 SurfaceQuality surface_quality(const Eigen::MatrixX2d& xy,
@@ -163,10 +268,12 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
     throw InvalidInput(cat("surface mesher: reference radius ", ref_radius_mm,
                            " mm must be positive (r_skin at the wound's centre)"));
   if (!(o.size_mm > 0) || !(o.t1_deg > 0 && o.t1_deg < 180) || !(o.t2_deg >= 0 && o.t2_deg < 180) ||
-      !(o.growth >= 1) || !(o.split_ratio > 1) || o.max_layers < 1)
+      !(o.stage1_min_angle_deg >= 0 && o.stage1_min_angle_deg <= 20.7) || !(o.growth >= 1) ||
+      !(o.split_ratio > 1) || o.max_layers < 1)
     throw InvalidInput(cat("surface mesher: options out of range (size ", o.size_mm, " mm > 0, t1 ",
-                           o.t1_deg, " in (0,180), t2 ", o.t2_deg, " in [0,180), growth ",
-                           o.growth, " >= 1, split ratio ", o.split_ratio, " > 1)"));
+                           o.t1_deg, " in (0,180), stage-1 angle ", o.stage1_min_angle_deg,
+                           " in [0,20.7], t2 ", o.t2_deg, " in [0,180), growth ", o.growth,
+                           " >= 1, split ratio ", o.split_ratio, " > 1)"));
   Builder B;
   SurfaceMesh& out = B.out;
   out.ref_radius_mm = ref_radius_mm;
@@ -315,6 +422,9 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
     B.add_polygon({front[(best + 1) % m], front[best], front[(best + m - 1) % m]}, 1, 0, 0);
     front.erase(front.begin() + static_cast<long>(best));
   }
+
+  // A ladder of thin triangles across a large flap is rebuilt with interior points.
+  if (o.stage1_min_angle_deg > 0) rebuild_stage1(B, front, o.stage1_min_angle_deg, o.size_mm);
 
   // Stage 2 and growth: layers of quadrilaterals until the extent is reached.
   const double t2 = o.t2_deg * kDeg;

@@ -8,7 +8,9 @@
 /// (counter-clockwise in (x, y)); a clockwise loop is handled by mirroring internally. A plain
 /// incision has zero area: its two lips are distinct vertices at the same place.
 ///   stage 1  while a border vertex is concave by more than t1 (hole angle > 180 + t1), add the
-///            triangle (v_{i+2}, v_{i+1}, v_i) and drop v_{i+1};
+///            triangle (v_{i+2}, v_{i+1}, v_i) and drop v_{i+1}; a region so filled whose
+///            triangles are poor (a ladder across a large flap) is then re-triangulated with
+///            interior points, its boundary kept edge for edge;
 ///   stage 2  add a layer of quadrilaterals of thickness l at a time; a vertex whose hole angle is
 ///            below t2 is "expanded" into a fan of corner quadrilaterals (one as in the paper,
 ///            two at a slit's end, where the hole angle is 0);
@@ -36,6 +38,10 @@ using WoundBorder = plan::WoundBorder;
 
 struct SurfaceMeshOptions {
   double t1_deg = 30;        ///< stage 1: fill concavities deeper than this (paper default 30)
+  /// Stage 1: a region of stage-1 triangles whose smallest corner is below this (deg, 0..20.7)
+  /// is re-triangulated with interior points (constrained Delaunay refinement, border nodes and
+  /// the front left for stage 2 unchanged); 0 keeps stage 1's triangles as the paper builds them.
+  double stage1_min_angle_deg = 20;
   double t2_deg = 90;        ///< stage 2: expand vertices whose hole angle is below this
   double size_mm = 2;        ///< target edge length on the border and first layer thickness l1
   /// Distance from the wound to the outer rim (mm); <= 0 means 3 x the wound's size (its
