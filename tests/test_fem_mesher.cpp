@@ -5,6 +5,7 @@
 
 #include "synthetic_model.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -508,4 +509,58 @@ TEST(SurfaceMesher, VYFlapIsMeshedWithoutALadder) {
   const Simulation sim = simulate(model, p, o);
   EXPECT_LT(sim.max_suture_gap_mm, 1e-6);
   EXPECT_GT(sim.wound.continuum.min_jacobian, 0);
+}
+
+TEST(ContinuumMesher, UnderminingFreesTheBaseNearTheWoundAndMakesTheForceMeshIndependent) {
+  // A Z-plasty (20 mm limbs) on the cylinder with 5 mm of tissue. Without undermining only the
+  // sutured columns are freed from the bone, a strip one element wide, so the closing force grows
+  // as the mesh is refined; undermined 5 mm around the wound it settles, and it is lower (that is
+  // why surgeons undermine).
+  const PatientModel model = constant_cylinder();
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("z-plasty", {{"length", 20.0}}), model, 0.0, 40.0, 90.0);
+  auto run = [&](double size, double undermine) {
+    SimulateOptions o;
+    o.surface.size_mm = size;
+    o.surface.extent_mm = 30;
+    o.continuum.undermine_mm = undermine;
+    return simulate(model, p, o);
+  };
+  // Which bottom nodes are fixed: exactly those farther than 5 mm from the border (in the
+  // surface's plane), except sutured ones.
+  const Simulation s = run(2.0, 5.0);
+  const SurfaceMesh& S = s.wound.surface;
+  const ContinuumMesh& C = s.wound.continuum;
+  std::set<int> fixed(C.mesh.fixed_nodes.begin(), C.mesh.fixed_nodes.end()), sutured;
+  for (const auto& q : C.mesh.sutures) sutured.insert({q.a, q.b});
+  auto distance_to_border = [&](const Eigen::Vector2d& tz) {
+    const Eigen::Vector2d x((tz[0] - S.theta_c_deg) * kPi / 180 * S.ref_radius_mm, tz[1] - S.z_c_mm);
+    double d = 1e300;
+    for (const auto& chain : S.edge_chain)
+      for (std::size_t i = 0; i + 1 < chain.size(); ++i) {
+        const Eigen::Vector2d a = S.xy_mm.row(chain[i]), b = S.xy_mm.row(chain[i + 1]);
+        const double t = std::clamp((x - a).dot(b - a) / (b - a).squaredNorm(), 0.0, 1.0);
+        d = std::min(d, (a + t * (b - a) - x).norm());
+      }
+    return d;
+  };
+  int freed = 0, held = 0;
+  for (Eigen::Index n = 0; n < C.mesh.n_nodes(); ++n) {
+    if (C.node_level[n] != C.n_layers || sutured.count(static_cast<int>(n))) continue;
+    const double d = distance_to_border(C.node_theta_z.row(n).transpose());
+    if (std::abs(d - 5.0) < 1e-6) continue;
+    EXPECT_EQ(fixed.count(static_cast<int>(n)) == 1, d > 5.0) << "node " << n << " at " << d << " mm";
+    (d > 5.0 ? held : freed) += 1;
+  }
+  EXPECT_GT(freed, 50);
+  EXPECT_GT(held, 200);
+  // The closing force: at 2 and 1.25 mm, without and with undermining.
+  const double f0 = run(2.0, 0).result.total_suture_force_n, f0_fine = run(1.25, 0).result.total_suture_force_n;
+  const double f5 = s.result.total_suture_force_n, f5_fine = run(1.25, 5.0).result.total_suture_force_n;
+  std::printf("Z-plasty closing force, size 2 / 1.25 mm: not undermined %.2f / %.2f N, undermined 5 mm %.2f / %.2f N\n",
+              f0, f0_fine, f5, f5_fine);
+  EXPECT_GT(std::abs(f0_fine - f0), 0.1 * f0);
+  EXPECT_LT(std::abs(f5_fine - f5), 0.03 * f5);
+  EXPECT_LT(f5, 0.8 * f0);
+  EXPECT_THROW(run(2.0, -1.0), InvalidInput);
 }

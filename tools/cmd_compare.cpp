@@ -21,7 +21,7 @@ namespace {
 
 struct CompareArgs {
   std::string model, plan, output, solver = "mumps", precision = "mixed";
-  double thickness_mm = 0, size_mm = 2;
+  double thickness_mm = 0, size_mm = 2, undermine_mm = 0;
   int layers = 2;
 };
 
@@ -29,6 +29,7 @@ void run_compare(const CompareArgs& a, const Common& common) {
   fem::SimulateOptions o;
   o.surface.size_mm = a.size_mm;
   o.continuum.n_layers = a.layers;
+  o.continuum.undermine_mm = a.undermine_mm;
   o.solve.solver = fem::parse_solver(a.solver);
   o.solve.mixed_precision = fem::parse_precision(a.precision);
   const plan::Plan plan = plan::read_plan(a.plan);
@@ -67,6 +68,9 @@ void add_compare(CLI::App& app, Common& common, Action& action) {
                   "the constant thickness in mm (default 0: the median measured under the wound)");
   cmd->add_option("--size", a->size_mm, "mesh size at the wound (mm)")->capture_default_str();
   cmd->add_option("--layers", a->layers, "element layers from skin to bone")->capture_default_str();
+  cmd->add_option("--undermine", a->undermine_mm,
+                  "free the tissue from the bone within this distance of the wound (mm), as a surgeon undermines; 0 = only the sutured columns (the paper)")
+      ->capture_default_str();
   cmd->add_option("--solver", a->solver, "mumps or cholmod")->capture_default_str();
   cmd->add_option("--precision", a->precision,
                   "mixed (a single-precision factorization refined to double accuracy; falls back to double by itself when that is not enough) or double; MUMPS only")

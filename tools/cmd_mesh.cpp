@@ -33,7 +33,7 @@ struct MeshArgs {
               precision = "mixed";
   int layers = 2;
   double size_mm = 2, extent_mm = 0, grading = 1, t1_deg = 30, t2_deg = 90, constant_mm = 0,
-         stage1_angle_deg = 20;
+         stage1_angle_deg = 20, undermine_mm = 0;
   bool no_pictures = false, tension_map = false;
   bool render = false;  // simulate: also the pre- and post-operative images
 };
@@ -79,6 +79,7 @@ fem::SimulateOptions options_of(const MeshArgs& a) {
   o.continuum.grading = a.grading;
   o.continuum.rim = fem::parse_rim_condition(a.rim);
   o.continuum.constant_thickness_mm = a.constant_mm;
+  o.continuum.undermine_mm = a.undermine_mm;
   o.solve.solver = fem::parse_solver(a.solver);
   o.solve.mixed_precision = fem::parse_precision(a.precision);
   return o;
@@ -128,6 +129,7 @@ void run_mesh(const MeshArgs& a, const Common& common) {
   co.grading = a.grading;
   co.rim = fem::parse_rim_condition(a.rim);
   co.constant_thickness_mm = a.constant_mm;
+  co.undermine_mm = a.undermine_mm;
   const fem::WoundBorder border = border_of(a);
   OutputDirectory out(a.output, common.force);
   const PatientModel model = PatientModel::load(a.model);
@@ -192,6 +194,9 @@ void add_mesh(CLI::App& app, Common& common, Action& action) {
       ->capture_default_str();
   cmd->add_option("--extent", a->extent_mm,
                   "distance from the wound to the outer rim (mm); 0 = 3 x the wound's size");
+  cmd->add_option("--undermine", a->undermine_mm,
+                  "free the tissue from the bone within this distance of the wound (mm), as a surgeon undermines; 0 = only the sutured columns (the paper)")
+      ->capture_default_str();
   cmd->add_option("--rim", a->rim, "outer rim: fixed (clamped) or free (traction free)")
       ->capture_default_str();
   cmd->add_option("--grading", a->grading, "thickness ratio of each layer to the one above")
@@ -221,6 +226,9 @@ void add_mesh(CLI::App& app, Common& common, Action& action) {
   sim->add_option("--layers", b->layers, "element layers from skin to bone")->capture_default_str();
   sim->add_option("--size", b->size_mm, "mesh size at the wound (mm)")->capture_default_str();
   sim->add_option("--extent", b->extent_mm, "distance from the wound to the rim (mm); 0 = 3 x wound");
+  sim->add_option("--undermine", b->undermine_mm,
+                  "free the tissue from the bone within this distance of the wound (mm), as a surgeon undermines; 0 = only the sutured columns (the paper)")
+      ->capture_default_str();
   sim->add_option("--rim", b->rim, "outer rim: fixed or free")->capture_default_str();
   sim->add_option("--constant-thickness", b->constant_mm,
                   "a constant depth (mm) instead of the model's thickness (the 1992 paper)");

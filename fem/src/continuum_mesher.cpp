@@ -46,6 +46,9 @@ ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& mod
   if (NL < 1 || NL > 50 || !(o.grading > 0) || !std::isfinite(o.grading))
     throw InvalidInput(cat("continuum mesher: layers ", NL, " must be in 1..50 and grading ",
                            o.grading, " positive"));
+  if (!(o.undermine_mm >= 0) || !std::isfinite(o.undermine_mm))
+    throw InvalidInput(cat("continuum mesher: undermining ", o.undermine_mm,
+                           " mm must be 0 (none) or a positive distance from the wound"));
   if (surface.polygons.empty())
     throw InvalidInput("continuum mesher: the surface mesh has no polygons");
   ContinuumMesh out;
@@ -188,10 +191,26 @@ ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& mod
     sutured.insert(b);
   }
 
-  // Fixed nodes: the bottom (bone), and with a fixed rim the whole outer rim, unless sutured.
+  // Fixed nodes: the bottom (bone) except where undermined, and with a fixed rim the whole
+  // outer rim, unless sutured. Undermined: the site is within undermine_mm of the wound's border
+  // (the loop's chains) in the surface mesh's plane.
+  auto undermined = [&](const Eigen::Vector2d& p) {
+    if (!(o.undermine_mm > 0)) return false;
+    for (const auto& chain : surface.edge_chain)
+      for (std::size_t i = 0; i + 1 < chain.size(); ++i) {
+        const Eigen::Vector2d a = surface.xy_mm.row(chain[i]), b = surface.xy_mm.row(chain[i + 1]);
+        const double L2 = (b - a).squaredNorm();
+        const double t = L2 > 0 ? std::clamp((p - a).dot(b - a) / L2, 0.0, 1.0) : 0.0;
+        if ((a + t * (b - a) - p).norm() < o.undermine_mm) return true;
+      }
+    return false;
+  };
   std::set<int> fixed;
-  for (int v = 0; v < NV; ++v) fixed.insert(vnode(v, 2 * NL));
-  for (int e = 0; e < NE; ++e) fixed.insert(enode(e, NL));
+  for (int v = 0; v < NV; ++v)
+    if (!undermined(surface.xy_mm.row(v).transpose())) fixed.insert(vnode(v, 2 * NL));
+  for (int e = 0; e < NE; ++e)
+    if (!undermined(0.5 * (surface.xy_mm.row(edges[e].first) + surface.xy_mm.row(edges[e].second)).transpose()))
+      fixed.insert(enode(e, NL));
   if (o.rim == RimCondition::Fixed) {
     const auto& rim = surface.outer_border;
     for (std::size_t i = 0; i < rim.size(); ++i) {

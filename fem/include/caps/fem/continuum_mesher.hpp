@@ -13,8 +13,9 @@
 /// Sutures: for each suture ((a,b),(c,d)) the nodes along the two sides (border edges, or runs of
 /// them, which the surface mesher gave matching nodes by arc length) are paired at every depth
 /// (corners, mid-edge and centre nodes); the shared point of a closed corner is skipped.
-/// Fixed nodes: every bottom node that is not sutured (the bony support); with RimCondition::Fixed
-/// also every node on the outer rim (the far field is clamped), with Free the rim is traction free.
+/// Fixed nodes: every bottom node that is not sutured (the bony support) and not within
+/// `undermine_mm` of the wound's border; with RimCondition::Fixed also every node on the outer rim
+/// (the far field is clamped), with Free the rim is traction free.
 
 #include <Eigen/Core>
 #include <string>
@@ -42,6 +43,11 @@ struct ContinuumMeshOptions {
   double min_thickness_mm = 0.5;  ///< refuse sites with less soft tissue than this
   /// > 0: a constant depth (mm) as in the 1992 paper, instead of the model's thickness map.
   double constant_thickness_mm = 0;
+  /// Undermining (mm): the base of the tissue within this distance of the wound's border (in
+  /// the skin's plane) is freed from the bone, as a surgeon undermines the wound's edges to
+  /// close it. 0 frees only the sutured columns (the paper), which makes the freed strip one
+  /// element wide and the closing force depend on the mesh size (docs/mesher.md).
+  double undermine_mm = 0;
   LinearElastic material = default_skin();  ///< used for every layer
 };
 
