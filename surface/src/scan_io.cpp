@@ -71,6 +71,25 @@ std::vector<unsigned char> read_bytes(const fs::path& path, const std::string& w
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
+// Opens a scan file and starts its ScanMesh (source and format).
+std::ifstream open_scan(const fs::path& path, const char* format, ScanMesh& s,
+                        std::ios::openmode mode = std::ios::in) {
+  std::ifstream in(path, mode);
+  if (!in) throw IoError(cat(path.string(), ": cannot open (missing or unreadable)"));
+  s.source = path.string();
+  s.format = format;
+  return in;
+}
+
+// The triangles, checked against the `n_vertices` vertices; `what` names a bad one.
+void set_faces(ScanMesh& s, const std::vector<Eigen::Vector3i>& F, Eigen::Index n_vertices,
+               const char* what = "a face refers to a vertex") {
+  s.mesh.F.resize(static_cast<Eigen::Index>(F.size()), 3);
+  for (std::size_t i = 0; i < F.size(); ++i) s.mesh.F.row(i) = F[i].transpose();
+  if (s.mesh.n_faces() > 0 && (s.mesh.F.minCoeff() < 0 || s.mesh.F.maxCoeff() >= n_vertices))
+    throw InvalidInput(cat(s.source, ": ", what, " that does not exist"));
+}
+
 // Finishes a scan: checks the texture coordinates refer to existing rows and applies flip_v.
 void finish(ScanMesh& s, const ScanReadOptions& o) {
   if (!o.texture.empty()) {
@@ -244,10 +263,7 @@ ScanMesh read_gltf(const fs::path& path, const ScanReadOptions& o) {
   }
   s.mesh.V.resize(static_cast<Eigen::Index>(V.size()), 3);
   for (std::size_t i = 0; i < V.size(); ++i) s.mesh.V.row(i) = V[i].transpose();
-  s.mesh.F.resize(static_cast<Eigen::Index>(F.size()), 3);
-  for (std::size_t i = 0; i < F.size(); ++i) s.mesh.F.row(i) = F[i].transpose();
-  if (s.mesh.n_faces() > 0 && (s.mesh.F.minCoeff() < 0 || s.mesh.F.maxCoeff() >= s.mesh.n_vertices()))
-    throw InvalidInput(cat(s.source, ": a face refers to a vertex that does not exist"));
+  set_faces(s, F, s.mesh.n_vertices());
   if (has_uv && !UV.empty()) {
     s.UV.resize(static_cast<Eigen::Index>(UV.size()), 2);
     for (std::size_t i = 0; i < UV.size(); ++i) s.UV.row(i) = UV[i].transpose();
@@ -268,11 +284,8 @@ ScanMesh read_gltf(const fs::path& path, const ScanReadOptions& o) {
 
 // ---- VTK legacy polydata (ASCII)
 ScanMesh read_vtk(const fs::path& path, const ScanReadOptions& o) {
-  std::ifstream in(path);
-  if (!in) throw IoError(cat(path.string(), ": cannot open (missing or unreadable)"));
   ScanMesh s;
-  s.source = path.string();
-  s.format = "VTK";
+  std::ifstream in = open_scan(path, "VTK", s);
   std::string line;
   std::getline(in, line);
   if (line.rfind("# vtk DataFile", 0) != 0)
@@ -344,10 +357,7 @@ ScanMesh read_vtk(const fs::path& path, const ScanReadOptions& o) {
         }
     }
   }
-  s.mesh.F.resize(static_cast<Eigen::Index>(F.size()), 3);
-  for (std::size_t i = 0; i < F.size(); ++i) s.mesh.F.row(i) = F[i].transpose();
-  if (s.mesh.n_faces() > 0 && (s.mesh.F.minCoeff() < 0 || s.mesh.F.maxCoeff() >= n_points))
-    throw InvalidInput(cat(s.source, ": a polygon refers to a point that does not exist"));
+  set_faces(s, F, n_points, "a polygon refers to a point");
   if (s.UV.rows() > 0) s.FUV = s.mesh.F;
   finish(s, o);
   return s;
@@ -355,11 +365,8 @@ ScanMesh read_vtk(const fs::path& path, const ScanReadOptions& o) {
 
 // ---- Wavefront OBJ with MTL
 ScanMesh read_obj(const fs::path& path, const ScanReadOptions& o) {
-  std::ifstream in(path);
-  if (!in) throw IoError(cat(path.string(), ": cannot open (missing or unreadable)"));
   ScanMesh s;
-  s.source = path.string();
-  s.format = "OBJ";
+  std::ifstream in = open_scan(path, "OBJ", s);
   std::vector<Eigen::Vector3d> V;
   std::vector<Eigen::Vector2d> T;
   std::vector<Eigen::Vector3i> F, FT;
@@ -408,10 +415,7 @@ ScanMesh read_obj(const fs::path& path, const ScanReadOptions& o) {
   }
   s.mesh.V.resize(static_cast<Eigen::Index>(V.size()), 3);
   for (std::size_t i = 0; i < V.size(); ++i) s.mesh.V.row(i) = V[i].transpose();
-  s.mesh.F.resize(static_cast<Eigen::Index>(F.size()), 3);
-  for (std::size_t i = 0; i < F.size(); ++i) s.mesh.F.row(i) = F[i].transpose();
-  if (s.mesh.n_faces() > 0 && (s.mesh.F.minCoeff() < 0 || s.mesh.F.maxCoeff() >= s.mesh.n_vertices()))
-    throw InvalidInput(cat(s.source, ": a face refers to a vertex that does not exist"));
+  set_faces(s, F, s.mesh.n_vertices());
   bool all_uv = !T.empty() && !FT.empty();
   for (const auto& ft : FT) all_uv = all_uv && ft.minCoeff() >= 0;
   if (all_uv) {
@@ -452,11 +456,8 @@ ScanMesh read_obj(const fs::path& path, const ScanReadOptions& o) {
 
 // ---- PLY with vertex colours and optional texture coordinates.
 ScanMesh read_ply_scan(const fs::path& path, const ScanReadOptions& o) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw IoError(cat(path.string(), ": cannot open (missing or unreadable)"));
   ScanMesh s;
-  s.source = path.string();
-  s.format = "PLY";
+  std::ifstream in = open_scan(path, "PLY", s, std::ios::binary);
   std::string line;
   std::getline(in, line);
   if (line.rfind("ply", 0) != 0) throw InvalidInput(cat(s.source, ": not a PLY file"));
@@ -544,10 +545,7 @@ ScanMesh read_ply_scan(const fs::path& path, const ScanReadOptions& o) {
   }
   if (!has_color) s.vertex_colors.resize(0, 3);
   if (!has_uv) s.UV.resize(0, 2);
-  s.mesh.F.resize(static_cast<Eigen::Index>(F.size()), 3);
-  for (std::size_t i = 0; i < F.size(); ++i) s.mesh.F.row(i) = F[i].transpose();
-  if (s.mesh.n_faces() > 0 && (s.mesh.F.minCoeff() < 0 || s.mesh.F.maxCoeff() >= s.mesh.n_vertices()))
-    throw InvalidInput(cat(s.source, ": a face refers to a vertex that does not exist"));
+  set_faces(s, F, s.mesh.n_vertices());
   if (has_uv) s.FUV = s.mesh.F;
   finish(s, o);
   return s;
