@@ -6,7 +6,6 @@
 #include "caps/surface/patient_model.hpp"
 
 #include <embree3/rtcore.h>
-#include <png.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -189,21 +188,6 @@ RgbImage render_image(const TriMesh& mesh, const Eigen::MatrixX3d& color, const 
       }
   });
   return img;
-}
-
-void write_png(const std::filesystem::path& path, const RgbImage& image) {
-  if (image.width < 1 || image.height < 1 ||
-      image.rgb.size() != static_cast<std::size_t>(image.width) * image.height * 3)
-    throw InvalidInput(cat(path.string(), ": image buffer does not match its size"));
-  write_file_atomic(path, [&](const std::filesystem::path& tmp) {
-    png_image p{};
-    p.version = PNG_IMAGE_VERSION;
-    p.width = static_cast<png_uint_32>(image.width);
-    p.height = static_cast<png_uint_32>(image.height);
-    p.format = PNG_FORMAT_RGB;
-    if (!png_image_write_to_file(&p, tmp.c_str(), 0, image.rgb.data(), 0, nullptr))
-      throw IoError(cat(path.string(), ": cannot write PNG: ", p.message));
-  });
 }
 
 std::vector<std::filesystem::path> render_views(const PatientModel& model,

@@ -90,6 +90,21 @@ RgbImage read_png(const fs::path& path) {
   return out;
 }
 
+void write_png(const fs::path& path, const RgbImage& image) {
+  if (image.width < 1 || image.height < 1 ||
+      image.rgb.size() != static_cast<std::size_t>(image.width) * image.height * 3)
+    throw InvalidInput(cat(path.string(), ": image buffer does not match its size"));
+  write_file_atomic(path, [&](const fs::path& tmp) {
+    png_image p{};
+    p.version = PNG_IMAGE_VERSION;
+    p.width = static_cast<png_uint_32>(image.width);
+    p.height = static_cast<png_uint_32>(image.height);
+    p.format = PNG_FORMAT_RGB;
+    if (!png_image_write_to_file(&p, tmp.c_str(), 0, image.rgb.data(), 0, nullptr))
+      throw IoError(cat(path.string(), ": cannot write PNG: ", p.message));
+  });
+}
+
 Eigen::Vector3d viridis(double t) {
   static const double kStops[11][3] = {
       {68, 1, 84},    {72, 36, 117},  {65, 68, 135},  {53, 95, 141},  {42, 120, 142},

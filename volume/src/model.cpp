@@ -1,7 +1,6 @@
 #include "caps/volume/model.hpp"
 
 #include <nlohmann/json.hpp>
-#include <png.h>
 
 #include <algorithm>
 #include <cmath>
@@ -68,18 +67,6 @@ json vec(const Eigen::Vector3d& v) { return json::array({v[0], v[1], v[2]}); }
 json vec(const Eigen::Vector3i& v) { return json::array({v[0], v[1], v[2]}); }
 
 double finite_or_null_guard(double x) { return std::isfinite(x) ? x : 0.0; }
-
-void write_rgb_png(const fs::path& path, const RgbImage& img) {
-  write_file_atomic(path, [&](const fs::path& tmp) {
-    png_image image{};
-    image.version = PNG_IMAGE_VERSION;
-    image.width = static_cast<png_uint_32>(img.width);
-    image.height = static_cast<png_uint_32>(img.height);
-    image.format = PNG_FORMAT_RGB;
-    if (!png_image_write_to_file(&image, tmp.c_str(), 0, img.rgb.data(), 0, nullptr))
-      throw IoError(cat(path.string(), ": cannot write PNG (", image.message, ")"));
-  });
-}
 
 }  // namespace
 
@@ -259,7 +246,7 @@ void write_model_directory(const ModelDirectoryContents& c, const fs::path& dir,
   write_thickness_png(p / "thickness.png", maps, maps.thickness,
                       cat("Soft-tissue thickness (radial), ", c.name), c.credit);
   write_skin_png(p / "skin.png", maps, cat("Skin range image (shaded), ", c.name), c.credit);
-  if (c.color) write_rgb_png(p / "color.png", *c.color);
+  if (c.color) write_png(p / "color.png", *c.color);
   progress.update(5);
   write_ply(*c.skin, p / "skin.ply");
   write_ply(*c.bone, p / "bone.ply");

@@ -56,9 +56,6 @@ Camera standard_camera(View view, const PatientModel& model, const SkinSurfaces&
 RgbImage render_image(const TriMesh& mesh, const Eigen::MatrixX3d& color, const Camera& camera,
                       const RenderOptions& options = {});
 
-/// Writes an 8-bit RGB PNG atomically. Throws IoError.
-void write_png(const std::filesystem::path& path, const RgbImage& image);
-
 /// The images of `caps render`: pre_<view>.png and post_<view>.png for each view, same camera.
 /// Returns the paths written.
 std::vector<std::filesystem::path> render_views(const PatientModel& model,

@@ -28,6 +28,10 @@ struct RgbImage {
 /// Reads a PNG (any colour type) into RGB. Throws IoError.
 RgbImage read_png(const std::filesystem::path& path);
 
+/// Writes an 8-bit RGB PNG atomically. Throws InvalidInput if the buffer does not match the
+/// size, IoError if it cannot be written.
+void write_png(const std::filesystem::path& path, const RgbImage& image);
+
 /// Perceptually uniform colour map (viridis), t in [0, 1].
 Eigen::Vector3d viridis(double t);
 
