@@ -118,18 +118,9 @@ void run_simulate(const MeshArgs& a, const Common& common) {
 }
 
 void run_mesh(const MeshArgs& a, const Common& common) {
-  fem::SurfaceMeshOptions so;
-  so.size_mm = a.size_mm;
-  so.extent_mm = a.extent_mm;
-  so.t1_deg = a.t1_deg;
-  so.stage1_min_angle_deg = a.stage1_angle_deg;
-  so.t2_deg = a.t2_deg;
-  fem::ContinuumMeshOptions co;
-  co.n_layers = a.layers;
-  co.grading = a.grading;
-  co.rim = fem::parse_rim_condition(a.rim);
-  co.constant_thickness_mm = a.constant_mm;
-  co.undermine_mm = a.undermine_mm;
+  const fem::SimulateOptions o = options_of(a);  // the meshing part of it
+  const fem::SurfaceMeshOptions& so = o.surface;
+  const fem::ContinuumMeshOptions& co = o.continuum;
   const fem::WoundBorder border = border_of(a);
   OutputDirectory out(a.output, common.force);
   const PatientModel model = PatientModel::load(a.model);
