@@ -1,37 +1,114 @@
 #pragma once
-/// @brief The `caps` subcommands. Each registers itself on the app and returns the action to run
-/// after parsing; tools/ only parses, calls one library function and prints the result.
+/// @brief The `caps` subcommands: each binds its options to an app:: request (the fields the
+/// request declares: names, help and defaults come from app/), calls one app:: function with the
+/// console reporter, and prints the result (--json: the result's JSON on stdout).
 
 #include <CLI/CLI.hpp>
 #include <functional>
+#include <iostream>
+#include <memory>
+#include <optional>
 #include <string>
+#include <vector>
+
+#include "caps/app/console_reporter.hpp"
+#include "caps/app/fields.hpp"
+#include "caps/app/plan.hpp"
 
 namespace caps::cli {
 
-/// Options every subcommand has.
+/// Options every subcommand has (besides the request's own).
 struct Common {
   bool json = false;
   bool quiet = false;
-  bool force = false;
+  std::vector<std::string> notes;  ///< e.g. an old option spelling that was used
 };
 
 using Action = std::function<void()>;
 
+/// Binds a request's fields to a CLI11 subcommand.
+class Binder {
+ public:
+  Binder(CLI::App* cmd, Common& common) : cmd_(cmd), common_(common) {}
+
+  template <class T>
+  void operator()(T& value, const app::Field& f) {
+    const std::string name = f.cli.empty() ? "--" + app::dashed(f.key) : std::string(f.cli);
+    const std::string help(f.help);
+    CLI::Option* o = nullptr;
+    if constexpr (std::is_same_v<T, bool>) {
+      o = cmd_->add_flag(name, value, help);
+    } else if constexpr (std::is_same_v<T, std::optional<double>>) {
+      o = cmd_->add_option_function<double>(name, [&value](double x) { value = x; }, help);
+    } else if constexpr (std::is_same_v<T, std::map<std::string, double>>) {
+      for (const std::string& key : app::template_parameter_names())
+        cmd_->add_option_function<double>(
+            "--" + app::dashed(key), [&value, key](double x) { value[key] = x; }, help);
+      return;
+    } else {
+      o = cmd_->add_option(name, value, help);
+      if (f.kind == app::FieldKind::Option) o->capture_default_str();
+    }
+    if (f.kind == app::FieldKind::Required || f.kind == app::FieldKind::Positional) o->required();
+    if constexpr (!std::is_same_v<T, bool> && !std::is_same_v<T, std::optional<double>>) {
+      if (f.old_cli.empty()) return;
+      const std::string old(f.old_cli), now = app::option_name(f);
+      auto& notes = common_.notes;
+      cmd_->add_option_function<T>(
+              old,
+              [&value, &notes, old, now](const T& x) {
+                value = x;
+                notes.push_back(cat(old, " is now ", now, "; the old spelling still works"));
+              },
+              help)
+          ->group("");
+    }
+  }
+
+ private:
+  CLI::App* cmd_;
+  Common& common_;
+};
+
+enum class Print { Stderr, Stdout };
+
+/// Adds a subcommand `name` that fills a Request, runs `run` and prints its result: the JSON on
+/// stdout with --json, else the summary (on stderr unless `print` is Stdout; nothing if quiet).
+template <class Request, class Result>
+CLI::App* add_verb(CLI::App* parent, const std::string& name, const std::string& description,
+                   Result (*run)(const Request&, Reporter*), Common& common, Action& action,
+                   Print print = Print::Stderr) {
+  CLI::App* cmd = parent->add_subcommand(name, description);
+  auto request = std::make_shared<Request>();
+  Request::fields(*request, Binder(cmd, common));
+  cmd->add_flag("--json", common.json, "print the result as JSON on stdout");
+  cmd->add_flag("-q,--quiet", common.quiet, "no progress bar or messages on stderr");
+  cmd->callback([&common, &action, request, run, print] {
+    action = [&common, request, run, print] {
+      app::ConsoleReporter reporter(common.quiet);
+      for (const std::string& n : common.notes) reporter.note(n);
+      const Result result = run(*request, &reporter);
+      if (common.json) {
+        std::cout << to_json(result) << "\n";
+      } else if (print == Print::Stdout) {
+        std::cout << summary(result) << "\n";
+      } else if (!common.quiet) {
+        std::cerr << summary(result) << "\n";
+      }
+    };
+  });
+  return cmd;
+}
+
 void add_phantom(CLI::App& app, Common& common, Action& action);
 void add_model(CLI::App& app, Common& common, Action& action);
 void add_volume(CLI::App& app, Common& common, Action& action);
-void add_solve(CLI::App& app, Common& common, Action& action);
 void add_plan(CLI::App& app, Common& common, Action& action);
 void add_mesh(CLI::App& app, Common& common, Action& action);
+void add_simulate(CLI::App& app, Common& common, Action& action);
+void add_solve(CLI::App& app, Common& common, Action& action);
+void add_fem(CLI::App& app, Common& common, Action& action);
 void add_render(CLI::App& app, Common& common, Action& action);
 void add_compare(CLI::App& app, Common& common, Action& action);
-/// `caps model from-scan` and `caps model pick` (tools/cmd_scan.cpp), added to the model command.
-void add_model_scan(CLI::App* model, Common& common, Action& action);
-
-/// Adds --json and --quiet (and --force when `writes`) to a subcommand.
-void add_common_flags(CLI::App* cmd, Common& common, bool writes);
-
-/// Parses "a,b,c" into three doubles; throws caps::InvalidInput naming the option.
-std::array<double, 3> parse_triple(const std::string& text, const std::string& option);
 
 }  // namespace caps::cli

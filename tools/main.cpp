@@ -3,39 +3,22 @@
 //   caps phantom -o /tmp/ct.nii.gz
 //   caps model from-volume /usr/share/doc/invesalius-examples/examples/Cranium.inv3 -o /tmp/cranium
 //   caps model info /tmp/cranium
-// Exit codes: 0 success, 2 bad input (message names the file or field), 1 internal error.
+// Exit codes: 0 success, 2 bad input (message names the file or field), 1 internal error or a
+// failed solve.
 #include <cstdio>
 #include <exception>
 
+#include "caps/app/fields.hpp"
 #include "caps/core/error.hpp"
-#include "caps/core/progress.hpp"
+#include "caps/core/reporter.hpp"
 #include "commands.hpp"
-
-namespace caps::cli {
-
-void add_common_flags(CLI::App* cmd, Common& common, bool writes) {
-  cmd->add_flag("--json", common.json, "print a machine-readable summary on stdout");
-  cmd->add_flag("-q,--quiet", common.quiet, "no progress bar or messages on stderr");
-  if (writes) cmd->add_flag("--force", common.force, "replace an existing output");
-}
-
-std::array<double, 3> parse_triple(const std::string& text, const std::string& option) {
-  std::array<double, 3> v{};
-  char c1 = 0, c2 = 0;
-  std::istringstream in(text);
-  if (!(in >> v[0] >> c1 >> v[1] >> c2 >> v[2]) || c1 != ',' || c2 != ',' || !in.eof())
-    throw InvalidInput(cat(option, " '", text, "': expected three numbers separated by commas, "
-                           "e.g. ", option, " 1,1,1"));
-  return v;
-}
-
-}  // namespace caps::cli
 
 int main(int argc, char** argv) {
   using namespace caps;
   CLI::App app{"caps: computer-aided plastic surgery planning.\n"
                "Builds patient models from CT/MR and surface scans, plans incisions, simulates "
-               "wound closure.\nExample: caps model from-volume Cranium.inv3 -o cranium"};
+               "wound closure.\nExample: caps model from-volume Cranium.inv3 -o cranium",
+               "caps"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "caps 0.1.0");
   cli::Common common;
@@ -44,8 +27,10 @@ int main(int argc, char** argv) {
   cli::add_model(app, common, action);
   cli::add_volume(app, common, action);
   cli::add_solve(app, common, action);
+  cli::add_fem(app, common, action);
   cli::add_plan(app, common, action);
   cli::add_mesh(app, common, action);
+  cli::add_simulate(app, common, action);
   cli::add_render(app, common, action);
   cli::add_compare(app, common, action);
   try {
@@ -60,16 +45,29 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "caps: %s\nRun with --help for usage.\n", e.what());
     return 2;
   }
-  set_quiet(common.quiet);
   try {
     if (action) action();
     return 0;
+  } catch (const InvalidParameter& e) {  // named as the user typed it: --apex-angle
+    const std::string m =
+        e.spelled([](const std::string& key) { return "--" + app::dashed(key); });
+    std::fprintf(stderr, "caps: error: %s\n", m.c_str());
+    return 2;
   } catch (const InvalidInput& e) {
     std::fprintf(stderr, "caps: error: %s\n", e.what());
     return 2;
   } catch (const IoError& e) {
     std::fprintf(stderr, "caps: error: %s\n", e.what());
     return 2;
+  } catch (const SolverError& e) {
+    std::fprintf(stderr, "caps: solver error: %s\n", e.what());
+    return 1;
+  } catch (const Cancelled& e) {
+    std::fprintf(stderr, "caps: %s\n", e.what());
+    return 1;
+  } catch (const Error& e) {
+    std::fprintf(stderr, "caps: error: %s\n", e.what());
+    return 1;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "caps: error: out of memory; the input may be larger than this machine "
                          "can hold\n");

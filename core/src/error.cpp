@@ -1,5 +1,38 @@
 #include "caps/core/error.hpp"
 
+namespace caps {
+
+namespace {
+
+// Replaces every {name} of `text` by spell(name).
+std::string fill(const std::string& text, const std::function<std::string(const std::string&)>& spell) {
+  std::string out;
+  for (std::size_t i = 0; i < text.size();) {
+    const std::size_t open = text.find('{', i);
+    const std::size_t close = open == std::string::npos ? open : text.find('}', open);
+    if (close == std::string::npos) {
+      out += text.substr(i);
+      break;
+    }
+    out += text.substr(i, open - i) + spell(text.substr(open + 1, close - open - 1));
+    i = close + 1;
+  }
+  return out;
+}
+
+}  // namespace
+
+InvalidParameter::InvalidParameter(const std::string& message_template)
+    : InvalidInput(fill(message_template, [](const std::string& name) { return name; })),
+      template_(message_template) {}
+
+std::string InvalidParameter::spelled(
+    const std::function<std::string(const std::string&)>& spell) const {
+  return fill(template_, spell);
+}
+
+}  // namespace caps
+
 namespace caps::detail {
 
 void assertion_failed(const char* cond, const std::string& msg, const char* file, int line) {

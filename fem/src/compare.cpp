@@ -74,25 +74,27 @@ SimulationSummary summarize(const Simulation& sim, const PatientModel& model, co
 }
 
 Comparison compare_thickness(const PatientModel& model, const plan::Plan& plan, double constant_mm,
-                             const SimulateOptions& options) {
+                             const SimulateOptions& options, Reporter* reporter) {
   if (constant_mm < 0 || constant_mm > 50)
     throw InvalidInput(cat("constant thickness ", constant_mm, " mm must be in [0, 50] (0: the median "
                            "measured under the wound)"));
   Comparison c;
   SimulateOptions measured = options;
   measured.continuum.constant_thickness_mm = 0;
-  c.measured = simulate(model, plan, measured);
+  c.measured = simulate(model, plan, measured, reporter);
   c.constant_thickness_mm =
       constant_mm > 0 ? constant_mm : median(thickness_under_wound(c.measured, model));
   SimulateOptions constant = options;
   constant.continuum.constant_thickness_mm = c.constant_thickness_mm;
   // The same surface mesh for both: fix the extent the measured run settled on.
   constant.surface.extent_mm = c.measured.wound.surface.extent_mm;
-  c.constant = simulate(model, plan, constant);
+  c.constant = simulate(model, plan, constant, reporter);
   c.measured_summary = summarize(c.measured, model, "measured thickness (volume)");
   c.constant_summary = summarize(c.constant, model,
                                  cat("constant ", fmt(c.constant_thickness_mm, 1), " mm (1992 assumption)"),
                                  c.constant_thickness_mm);
+  for (const std::string& w : c.measured.wound.continuum.mesh.warnings) c.warnings.push_back("measured: " + w);
+  for (const std::string& w : c.constant.wound.continuum.mesh.warnings) c.warnings.push_back("constant: " + w);
   return c;
 }
 
@@ -114,7 +116,8 @@ std::string comparison_json(const Comparison& c, const std::string& plan_name) {
   return nlohmann::json{{"plan", plan_name},
                         {"constant_thickness_mm", c.constant_thickness_mm},
                         {"measured", side(c.measured_summary)},
-                        {"constant", side(c.constant_summary)}}
+                        {"constant", side(c.constant_summary)},
+                        {"warnings", c.warnings}}
              .dump(2);
 }
 

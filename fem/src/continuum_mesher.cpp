@@ -1,7 +1,7 @@
 #include "caps/fem/continuum_mesher.hpp"
 
 #include "caps/core/error.hpp"
-#include "caps/core/progress.hpp"
+#include "caps/core/reporter.hpp"
 #include "caps/fem/elements.hpp"
 #include "caps/surface/patient_model.hpp"
 
@@ -242,7 +242,7 @@ ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& mod
 
 WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
                      const SurfaceMeshOptions& surface_options,
-                     const ContinuumMeshOptions& continuum_options) {
+                     const ContinuumMeshOptions& continuum_options, Reporter* reporter) {
   WoundMesh w;
   w.surface = mesh_surface(border, model, surface_options);
   if (surface_options.extent_mm > 0) {
@@ -258,10 +258,15 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
         w.surface = mesh_surface(border, model, o);
       }
       w.continuum = mesh_continuum(w.surface, model, continuum_options);
-      if (extent != full)
-        warn(cat("mesh: the extent was limited to ", extent, " mm (", extent / w.surface.wound_size_mm,
-                 " x the wound's size) to stay on valid cells of the model; the result depends more "
-                 "on the rim condition (docs/mesher.md)"));
+      if (extent != full) {
+        const std::string message =
+            cat("mesh: the extent was limited to ", extent, " mm (",
+                std::round(extent / w.surface.wound_size_mm * 100) / 100,
+                "x the wound's size) to stay on valid cells of the model; the result depends more "
+                "on the rim condition (docs/mesher.md)");
+        w.continuum.mesh.warnings.push_back(message);
+        warn(reporter, message);
+      }
       return w;
     } catch (const OffModelError&) {
       if (extent * 0.75 < surface_options.size_mm) throw;

@@ -164,6 +164,7 @@ void write_mesh_dir(const Mesh& mesh, const fs::path& dir) {
   for (const SuturePair& s : mesh.sutures) j["sutures"].push_back({s.a, s.b});
   j["model"] = mesh.model;
   j["plan"] = mesh.plan;
+  j["warnings"] = mesh.warnings;
   write_text_atomic(dir / "mesh.json", j.dump(1) + "\n");
 }
 
@@ -200,6 +201,7 @@ Mesh read_mesh_dir(const fs::path& dir) {
       mesh.sutures.push_back({s.at(0).get<int>(), s.at(1).get<int>()});
     mesh.model = j.value("model", "");
     mesh.plan = j.value("plan", "");
+    if (j.contains("warnings")) mesh.warnings = j.at("warnings").get<std::vector<std::string>>();
   } catch (const nlohmann::json::exception& e) {
     throw InvalidInput(cat(jw, ": missing or mistyped field: ", e.what()));
   }

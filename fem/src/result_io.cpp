@@ -37,6 +37,7 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
   j["units"] = {{"length", "mm"}, {"force", "N"}, {"stress", "MPa"}, {"energy", "mJ"}};
   j["model"] = mesh.model;
   j["plan"] = mesh.plan;
+  j["warnings"] = mesh.warnings;
   j["solver"] = r.solver;
   j["precision"] = {{"arithmetic", r.precision}, {"refinement_iterations", r.refinement_iterations},
                     {"fell_back_to_double", r.fell_back_to_double}};

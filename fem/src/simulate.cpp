@@ -12,11 +12,15 @@
 namespace caps::fem {
 
 Simulation simulate(const PatientModel& model, const plan::Plan& plan,
-                    const SimulateOptions& options) {
+                    const SimulateOptions& options, Reporter* reporter) {
   plan::check_plan(plan, model);
   Simulation sim;
-  sim.wound = mesh_wound(plan::wound_border(plan), model, options.surface, options.continuum);
+  Progress progress(reporter, "meshing and solving", 2);
+  sim.wound =
+      mesh_wound(plan::wound_border(plan), model, options.surface, options.continuum, reporter);
+  progress.update(1);
   sim.result = solve(sim.wound.continuum.mesh, options.solve);
+  progress.done();
   // The sutures must close: measured on the deformed positions, not assumed.
   const Mesh& mesh = sim.wound.continuum.mesh;
   const auto& u = sim.result.displacement_mm;

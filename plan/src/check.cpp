@@ -72,8 +72,9 @@ PlanReport check_plan_structure(const Plan& plan) {
   for (const auto& info : procedure_library()) {
     if (info.name != plan.procedure) continue;
     for (const auto& [k, v] : plan.parameters) {
+      const std::string& key = k;  // clang 14 cannot capture a structured binding
       auto it = std::find_if(info.parameters.begin(), info.parameters.end(),
-                             [&](const ParameterInfo& p) { return p.name == k; });
+                             [&](const ParameterInfo& p) { return p.name == key; });
       if (it == info.parameters.end()) continue;
       if (!(v >= it->min && v <= it->max))
         throw InvalidInput(cat(plan.procedure, ": parameter ", k, " = ", v, " ", it->unit,

@@ -133,4 +133,28 @@ void write_plan(const std::filesystem::path& path, const Plan& plan, const PlanR
   write_text_atomic(path, plan_to_json(plan, report));
 }
 
+WoundBorder read_wound_border(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) throw IoError(cat(path.string(), ": cannot open the wound border file"));
+  json j;
+  try {
+    in >> j;
+  } catch (const std::exception& e) {
+    throw InvalidInput(cat(path.string(), ": not valid JSON (", e.what(), ")"));
+  }
+  WoundBorder b;
+  try {
+    for (const auto& p : j.at("loop_theta_z"))
+      b.loop_theta_z.emplace_back(p.at(0).get<double>(), p.at(1).get<double>());
+    if (j.contains("sutures"))
+      for (const auto& s : j.at("sutures"))
+        b.sutures.push_back({s.at(0).get<int>(), s.at(1).get<int>(), s.at(2).get<int>(),
+                             s.at(3).get<int>()});
+  } catch (const json::exception& e) {
+    throw InvalidInput(cat(path.string(), ": expected {\"loop_theta_z\": [[theta_deg, z_mm], ...], "
+                           "\"sutures\": [[a, b, c, d], ...]} (", e.what(), ")"));
+  }
+  return b;
+}
+
 }  // namespace caps::plan

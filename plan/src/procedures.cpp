@@ -263,7 +263,7 @@ const std::vector<Template>& templates() {
       {{"ellipse", "elliptical (fusiform) excision, the paper's Figure 1",
         {{"length", "mm", 30, 5, 150, "apex to apex"},
          {"width", "mm", 10, 1, 60, "widest point (or give apex_angle)"},
-         {"apex_angle", "deg", 36.87, 15, 90, "angle at each apex; sets the width"}}},
+         {"apex_angle", "deg", 36.87, 15, 90, "angle at each apex; sets the width", "width"}}},
        ellipse},
       {{"z-plasty", "Z-plasty (transposition of two triangular flaps), the paper's Figure 2",
         {{"length", "mm", 20, 5, 80, "central limb (and each lateral limb)"},
@@ -324,19 +324,24 @@ LocalProcedure layout_procedure(const std::string& name,
   }
   std::map<std::string, double> p;
   for (const auto& info : it->info.parameters)
-    if (info.name != "apex_angle") p[info.name] = info.default_value;
+    if (info.alternative_to.empty()) p[info.name] = info.default_value;
   for (const auto& [k, v] : given) {
+    const std::string& key = k;  // clang 14 cannot capture a structured binding
     auto pi = std::find_if(it->info.parameters.begin(), it->info.parameters.end(),
-                           [&](const ParameterInfo& x) { return x.name == k; });
+                           [&](const ParameterInfo& x) { return x.name == key; });
     if (pi == it->info.parameters.end()) {
       std::string names;
-      for (const auto& x : it->info.parameters) names += (names.empty() ? "" : ", ") + x.name;
-      throw InvalidInput(cat(name, ": no parameter '", k, "'; it takes ", names));
+      for (const auto& x : it->info.parameters)
+        names += (names.empty() ? "{" : ", {") + x.name + "}";
+      throw InvalidParameter(cat(name, ": no parameter '{", k, "}'; it takes ", names));
     }
+    if (!pi->alternative_to.empty() && given.count(pi->alternative_to))
+      throw InvalidParameter(cat(name, ": give {", pi->alternative_to, "} or {", k,
+                                 "}, not both (the one sets the other)"));
     if (!(v >= pi->min && v <= pi->max))
-      throw InvalidInput(cat(name, ": ", k, " = ", v, " ", pi->unit,
-                             " is outside its clinical range [", pi->min, ", ", pi->max, "] ",
-                             pi->unit));
+      throw InvalidParameter(cat(name, ": {", k, "} = ", v, " ", pi->unit,
+                                 " is outside its clinical range [", pi->min, ", ", pi->max, "] ",
+                                 pi->unit));
     p[k] = v;
   }
   LocalProcedure out = it->layout(p);

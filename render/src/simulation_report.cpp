@@ -20,6 +20,26 @@ std::string fmt(double x, int digits = 2) {
   return buf;
 }
 
+std::string html_escape(const std::string& text) {
+  std::string out;
+  for (const char ch : text) {
+    if (ch == '<') out += "&lt;";
+    else if (ch == '>') out += "&gt;";
+    else if (ch == '&') out += "&amp;";
+    else if (ch == '"') out += "&quot;";
+    else out += ch;
+  }
+  return out;
+}
+
+// The warnings as a highlighted list (empty when there are none).
+std::string warnings_html(const std::vector<std::string>& warnings) {
+  if (warnings.empty()) return "";
+  std::string html = "<div class=\"warnings\"><b>Warnings</b><ul>\n";
+  for (const std::string& w : warnings) html += "<li>" + html_escape(w) + "</li>\n";
+  return html + "</ul></div>\n";
+}
+
 double triangle_area(const TriMesh& m, Eigen::Index f) {
   const Eigen::Vector3d p0 = m.V.row(m.F(f, 0)), p1 = m.V.row(m.F(f, 1)), p2 = m.V.row(m.F(f, 2));
   return 0.5 * (p1 - p0).cross(p2 - p0).norm();
@@ -44,8 +64,10 @@ SkinSurfaces simulated_skin(const PatientModel& model, const fem::Simulation& si
 
 std::vector<fs::path> render_simulation(const PatientModel& model, const fem::Simulation& sim,
                                         const std::vector<View>& views, const RenderOptions& options,
-                                        const fs::path& dir, bool tension) {
+                                        const fs::path& dir, bool tension, Reporter* reporter) {
+  Progress progress(reporter, "rendering the skin", 2);
   const SkinSurfaces skin = simulated_skin(model, sim);
+  progress.update(1);
   Overlays overlays;
   if (tension)
     overlays.scalar_maps.push_back(
@@ -55,7 +77,8 @@ std::vector<fs::path> render_simulation(const PatientModel& model, const fem::Si
 
 void write_comparison_report(const fem::Comparison& c, const PatientModel& model,
                              const fem::SimulateOptions& options, const fs::path& dir,
-                             const std::string& plan_name, const RenderOptions& render_options) {
+                             const std::string& plan_name, const RenderOptions& render_options,
+                             Reporter* reporter) {
   fs::create_directories(dir / "measured");
   fs::create_directories(dir / "constant");
   fem::SimulateOptions constant = options;
@@ -63,8 +86,8 @@ void write_comparison_report(const fem::Comparison& c, const PatientModel& model
   fem::write_simulation(c.measured, model, options, dir / "measured", plan_name + ", measured thickness");
   fem::write_simulation(c.constant, model, constant, dir / "constant", plan_name + ", constant thickness");
   const std::vector<View> views{View::Plan, View::Oblique};
-  render_simulation(model, c.measured, views, render_options, dir / "measured");
-  render_simulation(model, c.constant, views, render_options, dir / "constant");
+  render_simulation(model, c.measured, views, render_options, dir / "measured", false, reporter);
+  render_simulation(model, c.constant, views, render_options, dir / "constant", false, reporter);
   write_text_atomic(dir / "comparison.json", fem::comparison_json(c, plan_name) + "\n");
 
   const auto& a = c.measured_summary;
@@ -85,13 +108,15 @@ void write_comparison_report(const fem::Comparison& c, const PatientModel& model
       "</title>\n<style>body{font-family:DejaVu Sans,Arial,sans-serif;max-width:1100px;margin:2em "
       "auto;color:#222}table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:4px "
       "10px;text-align:right}td:first-child,th:first-child{text-align:left}img{max-width:100%;"
-      "border:1px solid #ddd}.pair{display:flex;gap:12px}.pair div{flex:1}</style></head><body>\n"
+      "border:1px solid #ddd}.pair{display:flex;gap:12px}.pair div{flex:1}.warnings{background:#fff4d6;border:1px solid #e0b000;padding:4px "
+      "12px;margin:1em 0}</style></head><body>\n"
       "<h1>Measured versus constant soft-tissue thickness</h1>\n<p>The plan <b>" + plan_name +
       "</b> simulated on the same skin twice: with the thickness measured in the patient's volume, "
       "and with a constant " + fmt(c.constant_thickness_mm, 1) +
       " mm (the median measured under the wound, unless given), the assumption the 1992 CAPS system "
       "made for surface scans. Both use the same surface mesh, so the results differ only in depth. "
-      "Linear elasticity; the wound closed by suture constraints (docs/fem.md).</p>\n"
+      "Linear elasticity; the wound closed by suture constraints (docs/fem.md).</p>\n" +
+      warnings_html(c.warnings) +
       "<table><tr><th>quantity</th><th>unit</th><th>measured</th><th>constant</th>"
       "<th>measured vs constant</th></tr>\n" +
       row("thickness under the wound, mean", "mm", a.thickness_mean_mm, b.thickness_mean_mm) +

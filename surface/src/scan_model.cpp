@@ -12,7 +12,7 @@
 #include <unordered_map>
 
 #include "caps/core/error.hpp"
-#include "caps/core/progress.hpp"
+#include "caps/core/reporter.hpp"
 #include "caps/core/units.hpp"
 #include "caps/surface/picking.hpp"
 #include "caps/surface/range_mesh.hpp"
@@ -153,7 +153,7 @@ void check_scan_mesh(const ScanMesh& s) {
     }
 }
 
-ScanModel build_scan_model(const ScanMesh& scan, const ScanModelOptions& o) {
+ScanModel build_scan_model(const ScanMesh& scan, const ScanModelOptions& o, Reporter* reporter) {
   check_scan_mesh(scan);
   if (!(o.thickness_mm > 0 && o.thickness_mm <= 50))
     throw InvalidInput(cat("--thickness ", o.thickness_mm, " mm: give the assumed soft-tissue "
@@ -232,11 +232,11 @@ ScanModel build_scan_model(const ScanMesh& scan, const ScanModelOptions& o) {
   const bool has_texture = !scan.texture.rgb.empty() && scan.FUV.rows() == skin.n_faces();
   const bool has_vertex_colors = scan.vertex_colors.rows() == skin.n_vertices() && skin.n_vertices() > 0;
   if (!has_texture && !has_vertex_colors)
-    warn(cat(scan.source, ": the scan has no colour (no texture with coordinates, no vertex colours); "
+    warn(reporter, cat(scan.source, ": the scan has no colour (no texture with coordinates, no vertex colours); "
              "color.png is not written. Give a texture with --texture"));
   std::vector<Eigen::Vector3f> colour(n, Eigen::Vector3f(128, 128, 128));
 
-  Progress progress("casting rays against the scan", 1.0);
+  Progress progress(reporter, "casting rays against the scan", 1.0);
   const MeshRayCaster caster(skin);
   std::atomic<std::size_t> inside_out{0};
   tbb::parallel_for(0, g.n_z, [&](int k) {
@@ -342,7 +342,7 @@ ScanModel build_scan_model(const ScanMesh& scan, const ScanModelOptions& o) {
   return out;
 }
 
-void write_scan_model(const ScanModel& m, const fs::path& dir, bool force) {
+void write_scan_model(const ScanModel& m, const fs::path& dir, bool force, Reporter* reporter) {
   const auto& o = m.options;
   ModelDirectoryContents c;
   c.maps = &m.maps;
@@ -387,7 +387,7 @@ void write_scan_model(const ScanModel& m, const fs::path& dir, bool force) {
                           {"fill", "cells without skin: r_skin filled by harmonic interpolation; "
                                    "see validity.nrrd"}}
                          .dump();
-  write_model_directory(c, dir, force);
+  write_model_directory(c, dir, force, reporter);
 }
 
 }  // namespace caps

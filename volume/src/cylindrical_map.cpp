@@ -7,7 +7,7 @@
 #include <limits>
 
 #include "caps/core/error.hpp"
-#include "caps/core/progress.hpp"
+#include "caps/core/reporter.hpp"
 #include "caps/core/units.hpp"
 #include "caps/volume/morphology.hpp"
 
@@ -273,13 +273,13 @@ void flag_grazing(CylindricalMaps& maps, double limit_deg) {
 }
 
 CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const CylinderAxis& axis,
-                                 const MapOptions& o) {
+                                 const MapOptions& o, Reporter* reporter) {
   if (o.n_theta < 8 || o.n_theta > 8192 || o.n_z < 4 || o.n_z > 8192)
     throw InvalidInput(cat("cylindrical grid ", o.n_theta, " x ", o.n_z,
                            " is out of range (theta 8..8192, z 4..8192)"));
   if (!(o.bone_cap_mm > 0 && o.bone_cap_mm <= 200))
     throw InvalidInput(cat("bone cap ", o.bone_cap_mm, " mm must be in (0, 200]"));
-  Progress progress("casting cylindrical rays", 1.0);
+  Progress progress(reporter, "casting cylindrical rays", 1.0);
   CylindricalMaps maps;
   maps.axis = axis;
   auto& grid = maps.grid;

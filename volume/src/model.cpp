@@ -10,7 +10,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
-#include "caps/core/progress.hpp"
+#include "caps/core/reporter.hpp"
 #include "caps/core/units.hpp"
 #include "caps/volume/image_io.hpp"
 #include "caps/volume/isosurface.hpp"
@@ -149,7 +149,7 @@ ModelStatistics model_statistics(const CylindricalMaps& maps) {
   return s;
 }
 
-VolumeModel build_volume_model(const Volume& v, const ModelOptions& o) {
+VolumeModel build_volume_model(const Volume& v, const ModelOptions& o, Reporter* reporter) {
   VolumeModel m;
   m.source = v.source;
   m.source_format = v.format;
@@ -157,12 +157,12 @@ VolumeModel build_volume_model(const Volume& v, const ModelOptions& o) {
   m.source_dims = v.geom.dims;
   m.source_spacing_mm = v.geom.spacing_mm;
   m.notes = v.notes;
-  m.segmentation = segment_head(v, o.segment);
+  m.segmentation = segment_head(v, o.segment, reporter);
   const CylinderAxis axis = o.axis ? *o.axis : fit_axis(m.segmentation);
-  m.maps = cylindrical_maps(v, m.segmentation, axis, o.maps);
+  m.maps = cylindrical_maps(v, m.segmentation, axis, o.maps, reporter);
   m.stats = model_statistics(m.maps);
   {
-    Progress progress("extracting skin and bone surfaces", 2);
+    Progress progress(reporter, "extracting skin and bone surfaces", 2);
     const auto& seg = m.segmentation;
     m.skin = surface_of(seg.working, seg.skin, seg.skin_threshold, true, o);
     progress.update(1);
@@ -172,12 +172,12 @@ VolumeModel build_volume_model(const Volume& v, const ModelOptions& o) {
   }
   for (const auto& n : m.segmentation.notes) m.notes.push_back(n);
   if (m.stats.valid_cells < m.stats.cells / 20)
-    warn(cat(v.source, ": only ", m.stats.valid_cells, " of ", m.stats.cells,
+    warn(reporter, cat(v.source, ": only ", m.stats.valid_cells, " of ", m.stats.cells,
              " cells have a valid thickness; check the thresholds and the bone segmentation"));
   return m;
 }
 
-void write_model(const VolumeModel& m, const fs::path& dir, bool force) {
+void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter* reporter) {
   const auto& seg = m.segmentation;
   ModelDirectoryContents c;
   c.maps = &m.maps;
@@ -211,10 +211,11 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force) {
                           {"fill", "invalid cells: r_skin and thickness filled by harmonic "
                                    "interpolation from valid cells; see validity.nrrd"}}
                          .dump();
-  write_model_directory(c, dir, force);
+  write_model_directory(c, dir, force, reporter);
 }
 
-void write_model_directory(const ModelDirectoryContents& c, const fs::path& dir, bool force) {
+void write_model_directory(const ModelDirectoryContents& c, const fs::path& dir, bool force,
+                           Reporter* reporter) {
   if (!c.maps || !c.stats || !c.skin || !c.bone)
     throw InvalidInput("write_model_directory: maps, statistics, skin and bone are required");
   const auto& maps = *c.maps;
@@ -232,7 +233,7 @@ void write_model_directory(const ModelDirectoryContents& c, const fs::path& dir,
   };
   OutputDirectory out(dir, force);
   const fs::path p = out.path();
-  Progress progress("writing the model", 8);
+  Progress progress(reporter, "writing the model", 8);
   write_map_nrrd(p / "r_skin.nrrd", maps.r_skin, g, "r_skin: skin radius", "mm");
   write_map_nrrd(p / "r_bone.nrrd", maps.r_bone, g, "r_bone: bone radius", "mm");
   write_map_nrrd(p / "thickness.nrrd", maps.thickness, g, "thickness: radial soft tissue", "mm");
@@ -294,6 +295,7 @@ void write_model_directory(const ModelDirectoryContents& c, const fs::path& dir,
                 {"area_mm2", mesh_area(*c.skin)}, {"closed", is_closed_manifold(*c.skin)}}},
       {"bone", {{"vertices", c.bone->n_vertices()}, {"faces", c.bone->n_faces()},
                 {"area_mm2", mesh_area(*c.bone)}, {"closed", is_closed_manifold(*c.bone)}}}};
+  j["warnings"] = reporter ? reporter->warnings() : std::vector<std::string>{};
   write_text_atomic(p / "model.json", j.dump(2) + "\n");
   out.commit();
 }

@@ -7,7 +7,7 @@
 #include <limits>
 
 #include "caps/core/error.hpp"
-#include "caps/core/progress.hpp"
+#include "caps/core/reporter.hpp"
 #include "caps/volume/morphology.hpp"
 
 namespace caps {
@@ -251,7 +251,7 @@ double otsu_threshold(const Volume& v) {
   return lo + (best_bin + 1) * (hi - lo) / kBins;
 }
 
-Segmentation segment_head(const Volume& v, const SegmentOptions& o) {
+Segmentation segment_head(const Volume& v, const SegmentOptions& o, Reporter* reporter) {
   if (!(o.working_voxel_mm > 0 && o.working_voxel_mm <= 10))
     throw InvalidInput(cat("segmentation: working voxel ", o.working_voxel_mm,
                            " mm must be in (0, 10]"));
@@ -262,7 +262,7 @@ Segmentation segment_head(const Volume& v, const SegmentOptions& o) {
   if (!(*hi - *lo > 1e-3f * std::max(1.0f, std::abs(*hi))))
     throw InvalidInput(cat(v.source, ": no head found: the image is uniform (every voxel is ", *lo,
                            "); check that the file holds the scan"));
-  Progress progress("segmenting skin and bone", 4);
+  Progress progress(reporter, "segmenting skin and bone", 4);
   Segmentation seg;
   Eigen::Vector3i factor;
   for (int a = 0; a < 3; ++a)
@@ -311,7 +311,7 @@ Segmentation segment_head(const Volume& v, const SegmentOptions& o) {
     seg.bone = erode(seg.skin, o.mr_scalp_mm);
     seg.bone_method = cat("approximation: skin envelope moved inward ", o.mr_scalp_mm,
                           " mm (no bone signal in MR; pass --bone-mask for a measured map)");
-    warn(cat(v.source, ": MR has no reliable bone signal; bone approximated as the skin moved "
+    warn(reporter, cat(v.source, ": MR has no reliable bone signal; bone approximated as the skin moved "
              "inward ", o.mr_scalp_mm, " mm. Pass --bone-mask for a measured thickness."));
   }
   seg.bone_volume_ml = seg.bone.count() * voxel_ml(seg.bone.geom);

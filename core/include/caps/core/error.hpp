@@ -4,6 +4,7 @@
 /// Library code throws and never aborts. Messages say what failed, where, the offending value and
 /// what to do next. The CLI maps InvalidInput and IoError to exit code 2, anything else to 1.
 
+#include <functional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -26,6 +27,19 @@ class IoError : public Error {
 class InvalidInput : public Error {
  public:
   using Error::Error;
+};
+
+/// Invalid input in named parameters. The message is a template in which each parameter's name
+/// stands in braces ("ellipse: give {width} or {apex_angle}, not both"); what() shows the names
+/// as they are (JSON keys), spelled() as a front end's user typed them (--apex-angle).
+class InvalidParameter : public InvalidInput {
+ public:
+  explicit InvalidParameter(const std::string& message_template);
+  /// The message with every {name} replaced by spell(name).
+  std::string spelled(const std::function<std::string(const std::string&)>& spell) const;
+
+ private:
+  std::string template_;
 };
 
 /// A numerical solve failed; carries where it failed.

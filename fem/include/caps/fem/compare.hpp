@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "caps/fem/simulate.hpp"
 
@@ -27,6 +28,8 @@ struct Comparison {
   Simulation measured, constant;
   SimulationSummary measured_summary, constant_summary;
   double constant_thickness_mm = 0;
+  /// The warnings of both simulations, each prefixed with its side ("measured: ...").
+  std::vector<std::string> warnings;
 };
 
 /// Summarises a simulation; `model` gives the thickness under the wound.
@@ -37,7 +40,7 @@ SimulationSummary summarize(const Simulation& sim, const PatientModel& model, co
 /// `constant_mm` > 0, or 0 for the median measured thickness under the wound, so that the
 /// comparison shows the effect of the thickness's variation rather than of its mean.
 Comparison compare_thickness(const PatientModel& model, const plan::Plan& plan, double constant_mm,
-                             const SimulateOptions& options = {});
+                             const SimulateOptions& options = {}, Reporter* reporter = nullptr);
 
 /// The comparison's table as JSON (comparison.json): the plan, the constant thickness, and each
 /// side's summary.

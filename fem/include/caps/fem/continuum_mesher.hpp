@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "caps/core/reporter.hpp"
 #include "caps/fem/material.hpp"
 #include "caps/fem/mesh.hpp"
 #include "caps/core/error.hpp"
@@ -90,6 +91,7 @@ class OffModelError : public InvalidInput {
 /// A wound whose own site is not valid is refused (OffModelError naming the place).
 WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
                      const SurfaceMeshOptions& surface_options = {},
-                     const ContinuumMeshOptions& continuum_options = {});
+                     const ContinuumMeshOptions& continuum_options = {},
+                     Reporter* reporter = nullptr);
 
 }  // namespace caps::fem

@@ -81,6 +81,7 @@ struct Mesh {
   std::vector<SuturePair> sutures;        ///< suture constraints
   std::string model;                      ///< reference to the patient model, if known
   std::string plan;                       ///< reference to the surgical plan, if known
+  std::vector<std::string> warnings;      ///< what the mesher had to give up (e.g. a limited extent)
 
   Eigen::Index n_nodes() const { return nodes.rows(); }
   std::size_t n_elements() const { return elements.size(); }

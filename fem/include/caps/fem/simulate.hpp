@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <string>
 
+#include "caps/core/reporter.hpp"
 #include "caps/fem/continuum_mesher.hpp"
 #include "caps/fem/solve.hpp"
 #include "caps/fem/surface_mesher.hpp"
@@ -34,7 +35,7 @@ struct Simulation {
 /// closure. Throws InvalidInput naming the plan's point or edge, or the mesh's place, that cannot
 /// be operated; SolverError if the solve fails.
 Simulation simulate(const PatientModel& model, const plan::Plan& plan,
-                    const SimulateOptions& options = {});
+                    const SimulateOptions& options = {}, Reporter* reporter = nullptr);
 
 /// Writes a simulation into an existing directory: mesh.vtu, mesh.json, mesh.inp, result.vtu,
 /// result.json, surface.png and section.png (titled with `name`).

@@ -24,4 +24,9 @@ Plan read_plan(const std::filesystem::path& path);
 void write_plan(const std::filesystem::path& path, const Plan& plan,
                 const PlanReport* report = nullptr);
 
+/// Reads a bare wound border file (`caps mesh --border`):
+/// {"loop_theta_z": [[theta_deg, z_mm], ...], "sutures": [[a, b, c, d], ...]}. Throws IoError
+/// (unreadable) or InvalidInput naming the file and the expected layout.
+WoundBorder read_wound_border(const std::filesystem::path& path);
+
 }  // namespace caps::plan

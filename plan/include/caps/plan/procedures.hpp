@@ -23,6 +23,8 @@ struct ParameterInfo {
   double default_value = 0;
   double min = 0, max = 0;
   std::string meaning;
+  /// Another parameter this one replaces (apex_angle sets the width): giving both is refused.
+  std::string alternative_to = {};
 };
 
 /// A template of the library.

@@ -28,13 +28,15 @@ std::vector<std::filesystem::path> render_simulation(const PatientModel& model,
                                                      const std::vector<View>& views,
                                                      const RenderOptions& options,
                                                      const std::filesystem::path& dir,
-                                                     bool tension_map = false);
+                                                     bool tension_map = false,
+                                                     Reporter* reporter = nullptr);
 
 /// Writes a comparison into an existing folder: measured/ and constant/ (fem::write_simulation
 /// plus their pre- and post-operative plan and oblique views), comparison.json, and report.html
 /// with the table of differences and the two results side by side.
 void write_comparison_report(const fem::Comparison& c, const PatientModel& model,
                              const fem::SimulateOptions& options, const std::filesystem::path& dir,
-                             const std::string& plan_name, const RenderOptions& render_options = {});
+                             const std::string& plan_name, const RenderOptions& render_options = {},
+                             Reporter* reporter = nullptr);
 
 }  // namespace caps::render

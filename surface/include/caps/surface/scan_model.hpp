@@ -61,10 +61,12 @@ void check_scan_mesh(const ScanMesh& scan);
 /// Builds the model. Throws InvalidInput for an invalid mesh, absurd units (the message names
 /// --scale / --head-height-mm), up/front that are not perpendicular, a thickness out of range,
 /// an inside-out mesh, or a scan that no ray from the axis meets.
-ScanModel build_scan_model(const ScanMesh& scan, const ScanModelOptions& options);
+ScanModel build_scan_model(const ScanMesh& scan, const ScanModelOptions& options,
+                           Reporter* reporter = nullptr);
 
 /// Writes the model directory with write_model_directory() (the same writer as volume models);
 /// model.json says source.kind = "scan" and thickness.kind = "constant".
-void write_scan_model(const ScanModel& model, const std::filesystem::path& dir, bool force);
+void write_scan_model(const ScanModel& model, const std::filesystem::path& dir, bool force,
+                      Reporter* reporter = nullptr);
 
 }  // namespace caps

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "caps/core/reporter.hpp"
 #include "caps/volume/segment.hpp"
 #include "caps/volume/volume.hpp"
 
@@ -110,6 +111,6 @@ CylinderAxis fit_axis(const Segmentation& seg);
 /// Casts one ray per grid cell from the axis outward and measures skin and bone.
 /// `v` is the full-resolution volume `seg` was computed from.
 CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const CylinderAxis& axis,
-                                 const MapOptions& options = {});
+                                 const MapOptions& options = {}, Reporter* reporter = nullptr);
 
 }  // namespace caps

@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 
+#include "caps/core/reporter.hpp"
 #include "caps/core/mesh.hpp"
 #include "caps/volume/cylindrical_map.hpp"
 #include "caps/volume/image_io.hpp"
@@ -55,14 +56,16 @@ struct VolumeModel {
 };
 
 /// Segments the volume, fits the axis, measures the maps, extracts the surfaces.
-VolumeModel build_volume_model(const Volume& v, const ModelOptions& options = {});
+VolumeModel build_volume_model(const Volume& v, const ModelOptions& options = {},
+                               Reporter* reporter = nullptr);
 
 /// Statistics of the maps (done by build_volume_model; exposed for tests and other sources).
 ModelStatistics model_statistics(const CylindricalMaps& maps);
 
 /// Writes the model directory atomically (built under a temporary name, then renamed).
 /// An existing `dir` is replaced only with `force`; otherwise InvalidInput.
-void write_model(const VolumeModel& model, const std::filesystem::path& dir, bool force);
+void write_model(const VolumeModel& model, const std::filesystem::path& dir, bool force,
+                 Reporter* reporter = nullptr);
 
 /// What a model directory holds, whatever built it (a volume or a surface scan). The pointers
 /// are not owned and must outlive the call to write_model_directory().
@@ -83,7 +86,7 @@ struct ModelDirectoryContents {
 /// scan importer both use it. An existing `dir` is replaced only with `force`; otherwise
 /// InvalidInput.
 void write_model_directory(const ModelDirectoryContents& contents, const std::filesystem::path& dir,
-                           bool force);
+                           bool force, Reporter* reporter = nullptr);
 
 /// Reads model.json of a model directory and returns it as JSON text (pretty-printed), after
 /// checking the format version and that the files it names exist.

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "caps/core/reporter.hpp"
 #include "caps/volume/volume.hpp"
 
 namespace caps {
@@ -50,7 +51,8 @@ struct Segmentation {
 
 /// Segments skin and bone. Throws InvalidInput when no head is found (nothing above the skin
 /// threshold, or the largest object is smaller than a head) or options are out of range.
-Segmentation segment_head(const Volume& v, const SegmentOptions& options = {});
+Segmentation segment_head(const Volume& v, const SegmentOptions& options = {},
+                          Reporter* reporter = nullptr);
 
 /// Otsu's threshold of the volume's intensities (256-bin histogram between min and max).
 double otsu_threshold(const Volume& v);

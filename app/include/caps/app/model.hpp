@@ -1,0 +1,233 @@
+#pragma once
+/// @brief Patient models and volumes as requests and results: `caps model from-volume`,
+/// `from-scan`, `info`, `pick`, `export-range`, `color-picture`, `caps volume info` and
+/// `caps phantom`.
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "caps/app/fields.hpp"
+#include "caps/core/reporter.hpp"
+#include "caps/surface/scan_model.hpp"
+#include "caps/volume/model.hpp"
+#include "caps/volume/phantom.hpp"
+
+namespace caps::app {
+
+/// What model-building verbs return: the model.json written (warnings included).
+struct ModelResult {
+  std::string output;
+  std::string model_json;  ///< model.json as written
+  std::string summary;     ///< the model's summary for reading (model_summary())
+  std::vector<std::string> warnings;
+};
+std::string to_json(const ModelResult& result);
+std::string summary(const ModelResult& result);
+
+// ---- caps model from-volume ---------------------------------------------------------------
+
+struct FromVolumeRequest {
+  std::string input, output, series, bone_mask, axis_origin, axis_dir, modality;
+  std::optional<double> skin_threshold, bone_threshold;
+  int n_theta = MapOptions{}.n_theta, n_z = MapOptions{}.n_z;
+  double bone_cap = MapOptions{}.bone_cap_mm;
+  double decimate = ModelOptions{}.decimate_fraction;
+  double mr_scalp = SegmentOptions{}.mr_scalp_mm;
+  bool allow_missing_slices = false, force = false;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.input, {"input", "the volume: a DICOM folder, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd or an "
+                         "InVesalius .inv3", FieldKind::Positional, "INPUT"});
+    v(r.output, {"output", "the model directory to create", FieldKind::Required, "-o,--output"});
+    v(r.series, {"series", "DICOM SeriesInstanceUID (default: the largest series)"});
+    v(r.allow_missing_slices, {"allow_missing_slices", "DICOM: interpolate across gaps where "
+                                                       "slices seem to be missing", FieldKind::Flag});
+    v(r.modality, {"modality", "override the modality: CT or MR"});
+    v(r.skin_threshold, {"skin_threshold", "tissue/air threshold (default: -400 HU for CT, Otsu "
+                                           "for MR)"});
+    v(r.bone_threshold, {"bone_threshold", "bone threshold (default: 250 HU for CT)"});
+    v(r.bone_mask, {"bone_mask", "bone mask or label volume (non-zero = bone), e.g. for MR"});
+    v(r.mr_scalp, {"mr_scalp", "MR without --bone-mask: assumed scalp depth in mm"});
+    v(r.axis_origin, {"axis_origin", "a point of the cylinder axis, LPS mm: X,Y,Z"});
+    v(r.axis_dir, {"axis_dir", "the axis direction (towards superior), LPS: X,Y,Z"});
+    v(r.n_theta, {"n_theta", "cylindrical grid: samples around"});
+    v(r.n_z, {"n_z", "cylindrical grid: samples along the axis"});
+    v(r.bone_cap, {"bone_cap", "no bone within this depth (mm) marks a cell invalid"});
+    v(r.decimate, {"decimate", "fraction of mesh faces to keep (0..1]"});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+ModelResult run_from_volume(const FromVolumeRequest& request, Reporter* reporter = nullptr);
+
+// ---- caps model from-scan -----------------------------------------------------------------
+
+struct FromScanRequest {
+  std::string input, output, texture, up = "+y", front = "+z", credit, axis_origin, color;
+  std::optional<double> thickness, scale, head_height_mm;
+  bool flip_v = false, flip_faces = false;
+  int n_theta = MapOptions{}.n_theta, n_z = MapOptions{}.n_z;
+  // Cylindrical range images (Cyberware style): a sidecar .json, or a grey PNG with these.
+  std::optional<double> r_scale, z_scale;
+  double r_offset = 0, theta_span = 360;
+  bool theta_rows = false, theta_reverse = false, bottom_first = false;
+  bool force = false;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.input, {"input", "the scan: .glb/.gltf, .ply, .obj, .vtk, or a cylindrical range image "
+                         "(sidecar .json, or a grey PNG with --r-scale and --z-scale)",
+                FieldKind::Positional, "INPUT"});
+    v(r.output, {"output", "the model directory to create", FieldKind::Required, "-o,--output"});
+    v(r.thickness, {"thickness", "constant soft-tissue thickness, mm (required)"});
+    v(r.texture, {"texture", "colour texture (JPEG or PNG) for the scan's texture coordinates, "
+                             "overriding the file's own"});
+    v(r.flip_v, {"flip_v", "flip the texture's v coordinate (v' = 1 - v)", FieldKind::Flag});
+    v(r.scale, {"scale", "millimetres per file unit (glTF default 1000: metres; other formats "
+                         "default 1: mm)"});
+    v(r.head_height_mm, {"head_height_mm", "scale the scan so it is this tall along --up (for "
+                                           "files in arbitrary units)"});
+    v(r.up, {"up", "file direction towards the top of the head: +x -x +y -y +z -z or X,Y,Z"});
+    v(r.front, {"front", "file direction the face looks along, perpendicular to --up"});
+    v(r.flip_faces, {"flip_faces", "reverse the faces of a file whose normals point into the head",
+                     FieldKind::Flag});
+    v(r.axis_origin, {"axis_origin", "a point of the cylinder axis, LPS mm: X,Y,Z (default: "
+                                     "fitted)"});
+    v(r.n_theta, {"n_theta", "cylindrical grid: samples around"});
+    v(r.n_z, {"n_z", "cylindrical grid: samples along the axis"});
+    v(r.credit, {"credit", "a credit line drawn on the model's pictures (e.g. the scan's licence)"});
+    v(r.color, {"color", "cylindrical range image: its colour image (PNG)"});
+    v(r.r_scale, {"r_scale", "cylindrical range image: mm per range value"});
+    v(r.r_offset, {"r_offset", "cylindrical range image: radius in mm for a range value of 0"});
+    v(r.z_scale, {"z_scale", "cylindrical range image: mm between neighbouring z lines"});
+    v(r.theta_span, {"theta_span", "cylindrical range image: its extent in theta, degrees"});
+    v(r.theta_rows, {"theta_rows", "cylindrical range image: theta runs down the rows (z across)",
+                     FieldKind::Flag});
+    v(r.theta_reverse, {"theta_reverse", "cylindrical range image: theta decreases along its axis",
+                        FieldKind::Flag});
+    v(r.bottom_first, {"bottom_first", "cylindrical range image: the first z line is the bottom",
+                       FieldKind::Flag});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+ModelResult run_from_scan(const FromScanRequest& request, Reporter* reporter = nullptr);
+
+// ---- caps model info / pick / export-range / color-picture --------------------------------
+
+struct ModelInfoRequest {
+  std::string model;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "a model directory", FieldKind::Positional, "MODEL_DIR"});
+  }
+};
+
+/// The model's model.json and summary (output empty).
+ModelResult run_model_info(const ModelInfoRequest& request, Reporter* reporter = nullptr);
+
+struct PickRequest {
+  std::string model, ray;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "a model directory", FieldKind::Positional, "MODEL_DIR"});
+    v(r.ray, {"ray", "origin and direction, LPS mm: OX,OY,OZ,DX,DY,DZ", FieldKind::Required});
+  }
+};
+
+struct PickResult {
+  bool hit = false;
+  Eigen::Vector3d lps{0, 0, 0};
+  double theta_deg = 0, z_mm = 0, distance_mm = 0;
+  std::string flags;
+  bool on_pole_cap = false;
+};
+
+PickResult run_pick(const PickRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const PickResult& result);
+std::string summary(const PickResult& result);
+
+struct ExportRangeRequest {
+  std::string model, output;
+  double r_scale = 0.01;
+  bool force = false;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "a model directory", FieldKind::Positional, "MODEL_DIR"});
+    v(r.output, {"output", "the folder to create", FieldKind::Required, "-o,--output"});
+    v(r.r_scale, {"r_scale", "mm per range value"});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+/// Writes range.png, color.png and range.json; returns the sidecar's path.
+struct PathResult {
+  std::string output;
+  std::vector<std::string> warnings;
+};
+std::string to_json(const PathResult& result);
+std::string summary(const PathResult& result);
+
+PathResult run_export_range(const ExportRangeRequest& request, Reporter* reporter = nullptr);
+
+struct ColorPictureRequest {
+  std::string model, output;
+  bool force = false;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "a model directory with color.png", FieldKind::Positional, "MODEL_DIR"});
+    v(r.output, {"output", "the PNG to write", FieldKind::Required, "-o,--output"});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+PathResult run_color_picture(const ColorPictureRequest& request, Reporter* reporter = nullptr);
+
+// ---- caps volume info ---------------------------------------------------------------------
+
+struct VolumeInfoRequest {
+  std::string input, series;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.input, {"input", "a DICOM folder, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .inv3",
+                FieldKind::Positional, "INPUT"});
+    v(r.series, {"series", "DICOM SeriesInstanceUID"});
+  }
+};
+
+struct VolumeInfoResult {
+  std::string json;  ///< geometry (LPS), modality, value range, notes, DICOM series
+  std::string text;  ///< the same for reading
+};
+VolumeInfoResult run_volume_info(const VolumeInfoRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const VolumeInfoResult& result);
+std::string summary(const VolumeInfoResult& result);
+
+// ---- caps phantom -------------------------------------------------------------------------
+
+struct PhantomRequest {
+  std::string output, voxels = "256,256,240", spacing = "1,1,1";
+  bool no_holder = false, force = false;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.output, {"output", "output .nii or .nii.gz", FieldKind::Required, "-o,--output"});
+    v(r.voxels, {"voxels", "voxels along L,P,S", FieldKind::Option, {}, "--size"});
+    v(r.spacing, {"spacing", "voxel size in mm along L,P,S"});
+    v(r.no_holder, {"no_holder", "leave out the head-holder arc", FieldKind::Flag});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+struct PhantomResult {
+  std::string output;
+  Eigen::Vector3i dims{0, 0, 0};
+  Eigen::Vector3d spacing_mm{0, 0, 0};
+  bool head_holder = true;
+};
+PhantomResult run_phantom(const PhantomRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const PhantomResult& result);
+std::string summary(const PhantomResult& result);
+
+}  // namespace caps::app

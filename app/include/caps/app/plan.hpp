@@ -1,0 +1,110 @@
+#pragma once
+/// @brief Plans as requests and results: `caps plan new`, `check`, `show`, `save-procedure`,
+/// `templates`.
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "caps/app/fields.hpp"
+#include "caps/core/reporter.hpp"
+
+namespace caps::app {
+
+/// A plan as written (or read) and its check.
+struct PlanResult {
+  std::string output;     ///< the file written (plan or picture), empty for check
+  std::string plan_json;  ///< the plan with its check report (edge lengths, warnings) and "ok"
+  std::string procedure;
+  int points = 0, loop_nodes = 0, suture_pairs = 0;
+  double cut_length_mm = 0;
+  std::vector<std::string> warnings;
+};
+std::string to_json(const PlanResult& result);
+std::string summary(const PlanResult& result);
+
+struct PlanNewRequest {
+  std::string procedure;  ///< a template name or a procedure file (.json)
+  std::string model, at, at_xyz, output;
+  double orientation = 0;
+  std::map<std::string, double> parameters;  ///< the template's, by name (caps plan templates)
+  bool force = false;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.procedure, {"procedure", "a template (caps plan templates) or a procedure file .json",
+                    FieldKind::Positional, "TEMPLATE"});
+    v(r.model, {"model", "the patient model directory", FieldKind::Required});
+    v(r.at, {"at", "the centre on the skin: THETA,Z (deg, mm)"});
+    v(r.at_xyz, {"at_xyz", "the centre as an LPS point X,Y,Z (mm)"});
+    v(r.orientation, {"orientation", "deg from superior towards +theta (the patient's left)"});
+    v(r.parameters, {"parameters", "template parameter (see caps plan templates)",
+                     FieldKind::Parameters});
+    v(r.output, {"output", "the plan file to write", FieldKind::Required, "-o,--output"});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+/// Lays the procedure on the model, checks it and writes the plan file.
+PlanResult run_plan_new(const PlanNewRequest& request, Reporter* reporter = nullptr);
+
+struct PlanCheckRequest {
+  std::string plan, model;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.plan, {"plan", "the plan file", FieldKind::Positional, "PLAN"});
+    v(r.model, {"model", "the model directory (default: the one the plan names)"});
+  }
+};
+
+/// Checks that the plan can be operated on its model (InvalidInput if not).
+PlanResult run_plan_check(const PlanCheckRequest& request, Reporter* reporter = nullptr);
+
+struct PlanShowRequest {
+  std::string plan, model, output;
+  bool thickness = false, force = false;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.plan, {"plan", "the plan file", FieldKind::Positional, "PLAN"});
+    v(r.model, {"model", "the model directory (default: the one the plan names)"});
+    v(r.thickness, {"thickness", "draw over the thickness map even if the model has colour",
+                    FieldKind::Flag});
+    v(r.output, {"output", "the PNG to write", FieldKind::Required, "-o,--output"});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+/// Draws the plan over the model (loop numbered, sutures marked) into a PNG.
+PlanResult run_plan_show(const PlanShowRequest& request, Reporter* reporter = nullptr);
+
+struct SaveProcedureRequest {
+  std::string plan, output;
+  bool force = false;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.plan, {"plan", "the plan file", FieldKind::Positional, "PLAN"});
+    v(r.output, {"output", "the procedure file to write", FieldKind::Required, "-o,--output"});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+/// Saves a plan's procedure (points, paths, excisions, sutures) to reuse with plan new FILE.json.
+PlanResult run_save_procedure(const SaveProcedureRequest& request, Reporter* reporter = nullptr);
+
+struct TemplatesRequest {
+  template <class Self, class V>
+  static void fields(Self&, V&&) {}
+};
+
+struct TemplatesResult {
+  std::string json;  ///< [{name, summary, parameters: [{name, unit, default, min, max, meaning}]}]
+  std::string text;  ///< the same for reading, parameters spelled as options
+};
+TemplatesResult run_templates(const TemplatesRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const TemplatesResult& result);
+std::string summary(const TemplatesResult& result);
+
+/// Every template parameter name of the library, sorted (the command line's options).
+std::vector<std::string> template_parameter_names();
+
+}  // namespace caps::app

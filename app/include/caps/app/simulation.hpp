@@ -1,0 +1,245 @@
+#pragma once
+/// @brief The mesh, solve, simulate, compare and `fem box` verbs as requests and results.
+///
+/// Every request lists its fields once (see fields.hpp); defaults come from the library's
+/// options structs (fem::SurfaceMeshOptions, fem::ContinuumMeshOptions, fem::SolveOptions).
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "caps/app/fields.hpp"
+#include "caps/core/reporter.hpp"
+#include "caps/fem/simulate.hpp"
+
+namespace caps::app {
+
+/// How a wound is meshed (caps mesh, simulate and compare share these).
+struct MeshingFields {
+  int layers = fem::ContinuumMeshOptions{}.n_layers;
+  double mesh_size = fem::SurfaceMeshOptions{}.size_mm;
+  double extent = fem::SurfaceMeshOptions{}.extent_mm;
+  double undermine = fem::ContinuumMeshOptions{}.undermine_mm;
+  std::string rim = fem::rim_condition_name(fem::ContinuumMeshOptions{}.rim);
+  double grading = fem::ContinuumMeshOptions{}.grading;
+  double t1 = fem::SurfaceMeshOptions{}.t1_deg;
+  double stage1_angle = fem::SurfaceMeshOptions{}.stage1_min_angle_deg;
+  double t2 = fem::SurfaceMeshOptions{}.t2_deg;
+  double constant_thickness = fem::ContinuumMeshOptions{}.constant_thickness_mm;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.layers, {"layers", "element layers from skin to bone"});
+    v(r.mesh_size, {"mesh_size", "mesh size at the wound and first layer thickness (mm)",
+                    FieldKind::Option, {}, "--size"});
+    v(r.extent, {"extent", "distance from the wound to the outer rim (mm); 0 = 3 x the wound's size"});
+    v(r.undermine, {"undermine", "free the tissue from the bone within this distance of the wound "
+                                 "(mm), as a surgeon undermines; 0 = only the sutured columns (the paper)"});
+    v(r.rim, {"rim", "outer rim: fixed (clamped) or free (traction free)"});
+    v(r.grading, {"grading", "thickness ratio of each layer to the one above"});
+    v(r.t1, {"t1", "stage 1: fill concave corners deeper than this (deg)"});
+    v(r.stage1_angle, {"stage1_angle", "stage 1: re-triangulate regions of stage-1 triangles with "
+                                       "corners below this (deg, at most 20.7) with interior "
+                                       "points; 0 = the paper's triangles"});
+    v(r.t2, {"t2", "stage 2: expand corners sharper than this (deg)"});
+    v(r.constant_thickness, {"constant_thickness", "mesh a constant depth (mm) instead of the "
+                                                   "model's thickness (the 1992 paper); 0 = measured"});
+  }
+};
+
+/// Which sparse solver (caps solve, simulate and compare share these).
+struct SolverFields {
+  std::string solver = fem::solver_name(fem::SolveOptions{}.solver);
+  std::string precision = fem::SolveOptions{}.mixed_precision ? "mixed" : "double";
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.solver, {"solver", "mumps or cholmod"});
+    v(r.precision, {"precision", "mixed (a single-precision factorization refined to double "
+                                 "accuracy; falls back to double by itself when that is not "
+                                 "enough) or double; MUMPS only"});
+  }
+};
+
+/// The library options of the meshing and solver fields (names checked, InvalidInput naming
+/// the option otherwise).
+fem::SimulateOptions simulate_options(const MeshingFields& meshing, const SolverFields& solver);
+
+// ---- caps mesh ----------------------------------------------------------------------------
+
+struct MeshRequest {
+  std::string model, plan, border, output;
+  MeshingFields meshing;
+  bool no_pictures = false;
+  bool force = false;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "patient model directory", FieldKind::Required});
+    v(r.plan, {"plan", "the plan (caps plan new)"});
+    v(r.border, {"border", "or a bare wound border JSON: {\"loop_theta_z\": [[deg, mm], ...], "
+                           "\"sutures\": [[a, b, c, d], ...]}"});
+    v(r.output, {"output", "mesh directory to create", FieldKind::Required, "-o,--output"});
+    MeshingFields::fields(r.meshing, v);
+    v(r.no_pictures, {"no_pictures", "skip surface.png and section.png", FieldKind::Flag});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+struct MeshResult {
+  std::string output;
+  int surface_vertices = 0, quads = 0, triangles = 0, surface_layers = 0;
+  double extent_mm = 0, wound_size_mm = 0, min_angle_deg = 0, max_angle_deg = 0;
+  double max_aspect_ratio = 0, mean_aspect_ratio = 0;
+  int nodes = 0, elements = 0, hex20 = 0, wedge15 = 0, layers = 0, fixed_nodes = 0,
+      suture_pairs = 0;
+  std::string rim;
+  double min_thickness_mm = 0, max_thickness_mm = 0, min_jacobian = 0;
+  std::vector<std::string> warnings;
+};
+
+/// Meshes the plan's (or border's) wound on the model into `output` (see docs/mesh-format.md):
+/// mesh.vtu, mesh.json, mesh.inp, surface.png, section.png, summary.json (= to_json(result)).
+MeshResult run_mesh(const MeshRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const MeshResult& result);
+std::string summary(const MeshResult& result);
+
+// ---- caps simulate ------------------------------------------------------------------------
+
+struct SimulateRequest {
+  std::string model, plan, output;
+  MeshingFields meshing;
+  SolverFields solver;
+  bool render = false, tension_map = false;
+  bool force = false;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "patient model directory", FieldKind::Required});
+    v(r.plan, {"plan", "the plan (caps plan new)", FieldKind::Required});
+    v(r.output, {"output", "result directory to create", FieldKind::Required, "-o,--output"});
+    MeshingFields::fields(r.meshing, v);
+    SolverFields::fields(r.solver, v);
+    v(r.render, {"render", "also render pre_<view>.png and post_<view>.png (front, oblique, "
+                           "side, plan; the same camera before and after)", FieldKind::Flag});
+    v(r.tension_map, {"tension_map", "with --render, also tension_<view>.png: the skin coloured "
+                                     "by its tension (max principal stress, kPa; the scale tops "
+                                     "at the 99th percentile)", FieldKind::Flag});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+struct SimulateResult {
+  std::string output;
+  int elements = 0, nodes = 0, suture_pairs = 0;
+  double max_displacement_mm = 0, closing_force_n = 0, max_suture_force_n = 0,
+         max_suture_gap_mm = 0, strain_energy_mj = 0;
+  std::vector<std::string> images;  ///< with render
+  std::vector<std::string> warnings;
+  double solve_s = 0;  ///< the solver's wall time (not reproducible: under "timings_s")
+};
+
+/// Meshes the plan on the model and solves the closure into `output`: the files of caps mesh
+/// and caps solve (result.json carries the warnings), and with `render` the images.
+SimulateResult run_simulate(const SimulateRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const SimulateResult& result);
+std::string summary(const SimulateResult& result);
+
+// ---- caps solve ---------------------------------------------------------------------------
+
+struct SolveRequest {
+  std::string mesh, output;
+  SolverFields solver;
+  std::optional<double> E;   ///< kPa, every layer
+  std::optional<double> nu;  ///< every layer
+  bool force = false;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.mesh, {"mesh", "mesh directory (mesh.json + mesh.vtu)", FieldKind::Positional, "MESH_DIR"});
+    v(r.output, {"output", "result directory to create", FieldKind::Required, "-o,--output"});
+    SolverFields::fields(r.solver, v);
+    v(r.E, {"E", "Young's modulus in kPa for every layer (overrides mesh.json)", FieldKind::Option,
+            "--E"});
+    v(r.nu, {"nu", "Poisson's ratio for every layer, 0 <= nu <= 0.499"});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+struct SolveResult {
+  std::string output, solver;
+  int equations = 0;
+  double max_displacement_mm = 0, max_von_mises_mpa = 0, total_suture_force_n = 0,
+         strain_energy_mj = 0;
+  std::vector<std::string> warnings;
+  double total_s = 0;
+};
+
+SolveResult run_solve(const SolveRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const SolveResult& result);
+std::string summary(const SolveResult& result);
+
+// ---- caps fem box -------------------------------------------------------------------------
+
+struct BoxRequest {
+  std::string output, box_size = "40,10,10", cells = "8,2,2";
+  bool slot = false, wedges = false, force = false;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.output, {"output", "mesh directory to create", FieldKind::Required, "-o,--output"});
+    v(r.box_size, {"box_size", "box size in mm along x,y,z", FieldKind::Option, {}, "--size"});
+    v(r.cells, {"cells", "cells along x,y,z"});
+    v(r.slot, {"slot", "cut a slot through the middle x column and suture it", FieldKind::Flag});
+    v(r.wedges, {"wedges", "split every cell into two Wedge15", FieldKind::Flag});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+struct BoxResult {
+  std::string output;
+  int nodes = 0, elements = 0, sutures = 0;
+};
+
+BoxResult run_box(const BoxRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const BoxResult& result);
+std::string summary(const BoxResult& result);
+
+// ---- caps compare -------------------------------------------------------------------------
+
+struct CompareRequest {
+  std::string model, plan, output;
+  double thickness = 0;
+  MeshingFields meshing;
+  SolverFields solver;
+  bool force = false;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "patient model directory (from a volume)", FieldKind::Required});
+    v(r.plan, {"plan", "the plan (caps plan new)", FieldKind::Required});
+    v(r.output, {"output", "the folder to create", FieldKind::Required, "-o,--output"});
+    v(r.thickness, {"thickness", "the constant thickness in mm (0: the median measured under the "
+                                 "wound)"});
+    MeshingFields::fields(r.meshing, v);
+    SolverFields::fields(r.solver, v);
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+struct CompareResult {
+  std::string output;
+  std::string comparison_json;  ///< comparison.json (the table, warnings included)
+  double measured_closing_force_n = 0, constant_closing_force_n = 0;
+  double measured_max_displacement_mm = 0, constant_max_displacement_mm = 0;
+  double constant_thickness_mm = 0;
+  std::vector<std::string> warnings;
+};
+
+/// Simulates the plan with the measured and with a constant thickness and writes measured/,
+/// constant/, comparison.json and report.html into `output`.
+CompareResult run_compare(const CompareRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const CompareResult& result);
+std::string summary(const CompareResult& result);
+
+}  // namespace caps::app

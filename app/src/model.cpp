@@ -1,0 +1,311 @@
+#include "caps/app/model.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "caps/core/atomic_output.hpp"
+#include "caps/core/error.hpp"
+#include "caps/surface/color_picture.hpp"
+#include "caps/surface/cylindrical_scan.hpp"
+#include "caps/surface/picking.hpp"
+#include "caps/volume/read_volume.hpp"
+#include "json_fields.hpp"
+#include "numbers.hpp"
+
+CAPS_APP_REQUEST_JSON(caps::app::FromVolumeRequest)
+CAPS_APP_REQUEST_JSON(caps::app::FromScanRequest)
+CAPS_APP_REQUEST_JSON(caps::app::ModelInfoRequest)
+CAPS_APP_REQUEST_JSON(caps::app::PickRequest)
+CAPS_APP_REQUEST_JSON(caps::app::ExportRangeRequest)
+CAPS_APP_REQUEST_JSON(caps::app::ColorPictureRequest)
+CAPS_APP_REQUEST_JSON(caps::app::VolumeInfoRequest)
+CAPS_APP_REQUEST_JSON(caps::app::PhantomRequest)
+
+namespace caps::app {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+Eigen::Vector3d triple(const std::string& s, const std::string& option, const std::string& meaning) {
+  const auto t = parse_numbers<3>(s, option, meaning);
+  return {t[0], t[1], t[2]};
+}
+
+ModelResult model_result(const std::string& dir, const std::string& output) {
+  ModelResult m;
+  m.output = output;
+  m.model_json = read_model_json(dir);
+  m.summary = model_summary(dir);
+  const json j = json::parse(m.model_json);
+  if (j.contains("warnings")) m.warnings = j.at("warnings").get<std::vector<std::string>>();
+  return m;
+}
+
+}  // namespace
+
+std::string to_json(const ModelResult& m) {
+  json j = json::parse(m.model_json);
+  if (!m.output.empty()) j["output"] = m.output;
+  return j.dump(2);
+}
+
+std::string summary(const ModelResult& m) {
+  std::string s = m.summary;
+  while (!s.empty() && s.back() == '\n') s.pop_back();
+  return s;
+}
+
+// ---- from-volume --------------------------------------------------------------------------
+
+ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
+  // Check the output and the options before the slow work, so a mistake fails at once.
+  { OutputDirectory probe(r.output, r.force); }
+  if (!(r.decimate > 0 && r.decimate <= 1))
+    throw InvalidInput(cat("--decimate ", r.decimate, ": give the fraction of faces to keep, in (0, 1]"));
+  if (!r.modality.empty() && r.modality != "CT" && r.modality != "MR")
+    throw InvalidInput(cat("--modality '", r.modality, "': use CT or MR"));
+  ModelOptions o;
+  if (r.skin_threshold) o.segment.skin_threshold = *r.skin_threshold;
+  if (r.bone_threshold) o.segment.bone_threshold = *r.bone_threshold;
+  o.segment.mr_scalp_mm = r.mr_scalp;
+  o.maps.n_theta = r.n_theta;
+  o.maps.n_z = r.n_z;
+  o.maps.bone_cap_mm = r.bone_cap;
+  o.decimate_fraction = r.decimate;
+  if (!r.axis_origin.empty() || !r.axis_dir.empty()) {
+    CylinderAxis axis;
+    if (!r.axis_origin.empty())
+      axis.origin_lps = triple(r.axis_origin, "--axis-origin", "a point of the axis, LPS mm");
+    if (!r.axis_dir.empty()) {
+      const Eigen::Vector3d d = triple(r.axis_dir, "--axis-dir", "a direction, LPS");
+      if (d.norm() < 1e-9) throw InvalidInput("--axis-dir: the direction must not be zero");
+      axis.direction = d.normalized();
+      // theta = 0 stays anterior, made perpendicular to the axis.
+      const Eigen::Vector3d anterior(0, -1, 0);
+      const Eigen::Vector3d f = anterior - anterior.dot(axis.direction) * axis.direction;
+      if (f.norm() < 1e-6)
+        throw InvalidInput("--axis-dir: the axis must not point anterior-posterior");
+      axis.front = f.normalized();
+    }
+    o.axis = axis;
+  }
+  ReadOptions ro;
+  ro.series_uid = r.series;
+  ro.allow_missing_slices = r.allow_missing_slices;
+  Volume v = read_volume(r.input, ro);
+  if (r.modality == "CT") v.modality = Modality::CT;
+  if (r.modality == "MR") v.modality = Modality::MR;
+  for (const auto& n : v.notes) note(reporter, cat(r.input, ": ", n));
+  Volume bone_mask;
+  if (!r.bone_mask.empty()) {
+    bone_mask = read_volume(r.bone_mask);
+    o.segment.bone_mask = &bone_mask;
+  }
+  const VolumeModel m = build_volume_model(v, o, reporter);
+  write_model(m, r.output, r.force, reporter);
+  return model_result(r.output, r.output);
+}
+
+// ---- from-scan ----------------------------------------------------------------------------
+
+namespace {
+
+ScanMesh read_any_scan(const FromScanRequest& r) {
+  if (fs::path(r.input).extension() == ".json")
+    return cylindrical_scan_mesh(read_cylindrical_sidecar(r.input));
+  if (r.r_scale || r.z_scale || !r.color.empty()) {
+    CylindricalScanSpec spec;
+    spec.range = r.input;
+    spec.color = r.color;
+    spec.r_scale_mm = r.r_scale.value_or(0.0);
+    spec.r_offset_mm = r.r_offset;
+    spec.z_scale_mm = r.z_scale.value_or(0.0);
+    spec.theta_span_deg = r.theta_span;
+    spec.theta_along_rows = r.theta_rows;
+    spec.theta_reverse = r.theta_reverse;
+    spec.top_first = !r.bottom_first;
+    return cylindrical_scan_mesh(spec);
+  }
+  ScanReadOptions ro;
+  ro.texture = r.texture;
+  ro.flip_v = r.flip_v;
+  return read_scan_mesh(r.input, ro);
+}
+
+}  // namespace
+
+ModelResult run_from_scan(const FromScanRequest& r, Reporter* reporter) {
+  { OutputDirectory probe(r.output, r.force); }
+  if (!r.thickness)
+    throw InvalidInput("--thickness is required: the constant soft-tissue thickness in mm "
+                       "(a scan shows no depth)");
+  ScanModelOptions o;
+  o.thickness_mm = *r.thickness;
+  o.mm_per_unit = r.scale;
+  o.head_height_mm = r.head_height_mm;
+  // Defaults: glTF is +y up with the asset facing +z; other formats are taken the same way.
+  o.up = parse_axis_name(r.up, "--up");
+  o.front = parse_axis_name(r.front, "--front");
+  o.maps.n_theta = r.n_theta;
+  o.maps.n_z = r.n_z;
+  o.credit = r.credit;
+  o.flip_faces = r.flip_faces;
+  if (!r.axis_origin.empty()) {
+    CylinderAxis axis;
+    axis.origin_lps = triple(r.axis_origin, "--axis-origin", "a point of the axis, LPS mm");
+    o.axis = axis;
+  }
+  const ScanMesh scan = read_any_scan(r);
+  const ScanModel m = build_scan_model(scan, o, reporter);
+  write_scan_model(m, r.output, r.force, reporter);
+  return model_result(r.output, r.output);
+}
+
+// ---- info, pick, export-range, color-picture ----------------------------------------------
+
+ModelResult run_model_info(const ModelInfoRequest& r, Reporter*) {
+  return model_result(r.model, "");
+}
+
+PickResult run_pick(const PickRequest& r, Reporter*) {
+  const auto v = parse_numbers<6>(r.ray, "--ray", "OX,OY,OZ,DX,DY,DZ in LPS mm");
+  const PatientModel model = PatientModel::load(r.model);
+  const Ray ray{{v[0], v[1], v[2]}, {v[3], v[4], v[5]}};
+  const SkinPicker picker(model);
+  const SkinHit h = picker.pick(ray);
+  PickResult p;
+  p.hit = h.hit;
+  if (h.hit) {
+    p.lps = h.lps;
+    p.theta_deg = h.theta_deg;
+    p.z_mm = h.z_mm;
+    p.distance_mm = h.distance_mm;
+    p.flags = describe_flags(h.flags);
+    p.on_pole_cap = h.on_pole_cap;
+  }
+  return p;
+}
+
+std::string to_json(const PickResult& p) {
+  json j = {{"hit", p.hit}};
+  if (p.hit)
+    j.update({{"lps", {p.lps[0], p.lps[1], p.lps[2]}}, {"theta_deg", p.theta_deg},
+              {"z_mm", p.z_mm}, {"distance_mm", p.distance_mm}, {"flags", p.flags},
+              {"on_pole_cap", p.on_pole_cap}});
+  return j.dump(2);
+}
+
+std::string summary(const PickResult& p) {
+  if (!p.hit) return "miss";
+  return cat("hit theta ", round_to(p.theta_deg, 2), " deg, z ", round_to(p.z_mm, 2), " mm, LPS (",
+             round_to(p.lps.x(), 2), " ", round_to(p.lps.y(), 2), " ", round_to(p.lps.z(), 2),
+             ") mm, ", p.flags);
+}
+
+std::string to_json(const PathResult& p) {
+  return json{{"output", p.output}, {"warnings", p.warnings}}.dump(2);
+}
+
+std::string summary(const PathResult& p) { return cat("-> ", p.output); }
+
+PathResult run_export_range(const ExportRangeRequest& r, Reporter*) {
+  const PatientModel model = PatientModel::load(r.model);
+  OutputDirectory out(r.output, r.force);
+  write_cylindrical_scan(model, out.path(), r.r_scale);
+  out.commit();
+  return {(fs::path(r.output) / "range.json").string(), {}};
+}
+
+PathResult run_color_picture(const ColorPictureRequest& r, Reporter*) {
+  if (fs::exists(r.output) && !r.force)
+    throw InvalidInput(cat(r.output, ": exists; pass --force to replace it"));
+  const PatientModel model = PatientModel::load(r.model);
+  const auto j = json::parse(read_model_json(r.model));
+  const std::string credit = j["source"].value("credit", std::string());
+  const std::string name = fs::path(j["source"].value("path", r.model)).filename();
+  write_color_picture(r.output, model, cat("Skin colour, ", name), credit);
+  return {r.output, {}};
+}
+
+// ---- volume info --------------------------------------------------------------------------
+
+VolumeInfoResult run_volume_info(const VolumeInfoRequest& r, Reporter*) {
+  ReadOptions ro;
+  ro.series_uid = r.series;
+  const Volume v = read_volume(r.input, ro);
+  const auto [lo, hi] = std::minmax_element(v.data.begin(), v.data.end());
+  const auto& g = v.geom;
+  json j{{"source", v.source},
+         {"format", v.format},
+         {"modality", to_string(v.modality)},
+         {"dims", {g.dims[0], g.dims[1], g.dims[2]}},
+         {"spacing_mm", {g.spacing_mm[0], g.spacing_mm[1], g.spacing_mm[2]}},
+         {"origin_lps", {g.origin_lps[0], g.origin_lps[1], g.origin_lps[2]}},
+         {"direction_columns", {{g.direction(0, 0), g.direction(1, 0), g.direction(2, 0)},
+                                {g.direction(0, 1), g.direction(1, 1), g.direction(2, 1)},
+                                {g.direction(0, 2), g.direction(1, 2), g.direction(2, 2)}}},
+         {"min", *lo},
+         {"max", *hi},
+         {"notes", v.notes}};
+  if (v.format == "DICOM") {
+    json list = json::array();
+    for (const auto& s : list_dicom_series(r.input))
+      list.push_back({{"uid", s.uid}, {"description", s.description}, {"modality", s.modality},
+                      {"files", s.n_files}});
+    j["series"] = list;
+  }
+  std::ostringstream text;
+  text << "source     " << v.source << " (" << v.format << ", " << to_string(v.modality) << ")\n"
+       << "dims       " << g.dims.transpose() << "\n"
+       << "spacing    " << g.spacing_mm.transpose() << " mm\n"
+       << "origin     " << g.origin_lps.transpose() << " mm (LPS)\n"
+       << "values     " << *lo << " .. " << *hi;
+  for (const auto& n : v.notes) text << "\nnote       " << n;
+  return {j.dump(2), text.str()};
+}
+
+std::string to_json(const VolumeInfoResult& r) { return r.json; }
+std::string summary(const VolumeInfoResult& r) { return r.text; }
+
+// ---- phantom ------------------------------------------------------------------------------
+
+PhantomResult run_phantom(const PhantomRequest& r, Reporter*) {
+  const fs::path path(r.output);
+  const std::string name = path.filename().string();
+  if (!name.ends_with(".nii.gz") && !name.ends_with(".nii"))
+    throw InvalidInput(cat(r.output, ": the phantom is written as NIfTI; name it .nii or .nii.gz"));
+  if (fs::exists(path) && !r.force)
+    throw InvalidInput(cat(r.output, ": already exists; choose another name or pass --force"));
+  PhantomOptions o;
+  const auto s = parse_numbers<3>(r.voxels, "--voxels", "voxels along L,P,S");
+  const auto h = parse_numbers<3>(r.spacing, "--spacing", "mm along L,P,S");
+  for (int a = 0; a < 3; ++a) {
+    if (s[a] != static_cast<int>(s[a]))
+      throw InvalidInput(cat("--voxels ", r.voxels, ": voxel counts must be whole numbers"));
+    o.dims[a] = static_cast<int>(s[a]);
+    o.spacing_mm[a] = h[a];
+  }
+  o.head_holder = !r.no_holder;
+  const Volume v = make_phantom(o);
+  write_nifti(v, path);
+  return {r.output, o.dims, o.spacing_mm, o.head_holder};
+}
+
+std::string to_json(const PhantomResult& p) {
+  return json{{"output", p.output},
+              {"dims", {p.dims[0], p.dims[1], p.dims[2]}},
+              {"spacing_mm", {p.spacing_mm[0], p.spacing_mm[1], p.spacing_mm[2]}},
+              {"head_holder", p.head_holder}}
+      .dump(2);
+}
+
+std::string summary(const PhantomResult& p) {
+  return cat("caps phantom: ", p.dims[0], " x ", p.dims[1], " x ", p.dims[2], " voxels -> ",
+             p.output);
+}
+
+}  // namespace caps::app

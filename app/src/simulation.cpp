@@ -1,0 +1,325 @@
+#include "caps/app/simulation.hpp"
+
+#include <algorithm>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "caps/core/atomic_output.hpp"
+#include "caps/core/error.hpp"
+#include "caps/fem/box.hpp"
+#include "caps/fem/compare.hpp"
+#include "caps/fem/inp_io.hpp"
+#include "caps/fem/mesh_io.hpp"
+#include "caps/fem/mesh_pictures.hpp"
+#include "caps/plan/plan_io.hpp"
+#include "caps/render/simulation_report.hpp"
+#include "caps/surface/patient_model.hpp"
+#include "json_fields.hpp"
+#include "numbers.hpp"
+
+CAPS_APP_REQUEST_JSON(caps::app::MeshRequest)
+CAPS_APP_REQUEST_JSON(caps::app::SimulateRequest)
+CAPS_APP_REQUEST_JSON(caps::app::SolveRequest)
+CAPS_APP_REQUEST_JSON(caps::app::BoxRequest)
+CAPS_APP_REQUEST_JSON(caps::app::CompareRequest)
+
+namespace caps::app {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+fem::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields& s) {
+  fem::SimulateOptions o;
+  o.surface.size_mm = m.mesh_size;
+  o.surface.extent_mm = m.extent;
+  o.surface.t1_deg = m.t1;
+  o.surface.stage1_min_angle_deg = m.stage1_angle;
+  o.surface.t2_deg = m.t2;
+  o.continuum.n_layers = m.layers;
+  o.continuum.grading = m.grading;
+  o.continuum.rim = fem::parse_rim_condition(m.rim);
+  o.continuum.constant_thickness_mm = m.constant_thickness;
+  o.continuum.undermine_mm = m.undermine;
+  o.solve.solver = fem::parse_solver(s.solver);
+  o.solve.mixed_precision = fem::parse_precision(s.precision);
+  return o;
+}
+
+namespace {
+
+// The plan's (or the bare border's) wound border.
+plan::WoundBorder border_of(const MeshRequest& r) {
+  if (r.plan.empty() == r.border.empty())
+    throw InvalidInput("give the wound as --plan plan.json (from caps plan new) or as --border "
+                       "border.json, one of the two");
+  return r.plan.empty() ? plan::read_wound_border(r.border)
+                        : plan::wound_border(plan::read_plan(r.plan));
+}
+
+double max_norm(const Eigen::MatrixX3d& u) { return u.rows() ? u.rowwise().norm().maxCoeff() : 0.0; }
+
+double max_suture_force(const fem::SolveResult& r) {
+  double f = 0;
+  for (const auto& s : r.suture_forces) f = std::max(f, s.magnitude_n);
+  return f;
+}
+
+}  // namespace
+
+// ---- mesh ---------------------------------------------------------------------------------
+
+MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
+  const fem::SimulateOptions o = simulate_options(r.meshing, {});
+  const fem::WoundBorder border = border_of(r);
+  OutputDirectory out(r.output, r.force);
+  const PatientModel model = PatientModel::load(r.model);
+  fem::WoundMesh w = fem::mesh_wound(border, model, o.surface, o.continuum, reporter);
+  const std::string wound = r.plan.empty() ? r.border : r.plan;
+  w.continuum.mesh.model = r.model;
+  w.continuum.mesh.plan = wound;
+  fem::write_mesh_dir(w.continuum.mesh, out.path());
+  fem::write_inp(w.continuum.mesh, out.path() / "mesh.inp");
+  if (!r.no_pictures) {
+    fem::write_surface_mesh_png(out.path() / "surface.png", w.surface,
+                                cat("caps mesh: surface mesh of ", wound));
+    fem::write_cross_section_png(out.path() / "section.png", w.surface, model, o.continuum,
+                                 cat("caps mesh: cross-section of ", wound));
+  }
+  const auto& s = w.surface;
+  const auto& c = w.continuum;
+  MeshResult m;
+  m.output = r.output;
+  m.surface_vertices = s.n_vertices();
+  m.quads = s.quality.n_quads;
+  m.triangles = s.quality.n_triangles;
+  m.surface_layers = s.n_layers;
+  m.extent_mm = s.extent_mm;
+  m.wound_size_mm = s.wound_size_mm;
+  m.min_angle_deg = s.quality.min_angle_deg;
+  m.max_angle_deg = s.quality.max_angle_deg;
+  m.max_aspect_ratio = s.quality.max_aspect_ratio;
+  m.mean_aspect_ratio = s.quality.mean_aspect_ratio;
+  m.nodes = static_cast<int>(c.mesh.n_nodes());
+  m.elements = static_cast<int>(c.mesh.n_elements());
+  for (const auto& e : c.mesh.elements) m.hex20 += e.type == fem::ElementType::Hex20;
+  m.wedge15 = m.elements - m.hex20;
+  m.layers = c.n_layers;
+  m.fixed_nodes = static_cast<int>(c.mesh.fixed_nodes.size());
+  m.suture_pairs = static_cast<int>(c.mesh.sutures.size());
+  m.rim = r.meshing.rim;
+  m.min_thickness_mm = c.min_thickness_mm;
+  m.max_thickness_mm = c.max_thickness_mm;
+  m.min_jacobian = c.min_jacobian;
+  m.warnings = c.mesh.warnings;
+  write_text_atomic(out.path() / "summary.json", to_json(m) + "\n");
+  out.commit();
+  return m;
+}
+
+std::string to_json(const MeshResult& m) {
+  json j{{"output", m.output},
+         {"surface", {{"vertices", m.surface_vertices}, {"quads", m.quads},
+                      {"triangles", m.triangles}, {"layers", m.surface_layers},
+                      {"extent_mm", m.extent_mm}, {"wound_size_mm", m.wound_size_mm},
+                      {"min_angle_deg", m.min_angle_deg}, {"max_angle_deg", m.max_angle_deg},
+                      {"max_aspect_ratio", m.max_aspect_ratio},
+                      {"mean_aspect_ratio", m.mean_aspect_ratio}}},
+         {"continuum", {{"nodes", m.nodes}, {"elements", m.elements}, {"hex20", m.hex20},
+                        {"wedge15", m.wedge15}, {"layers", m.layers},
+                        {"fixed_nodes", m.fixed_nodes}, {"suture_pairs", m.suture_pairs},
+                        {"rim", m.rim},
+                        {"thickness_mm", {m.min_thickness_mm, m.max_thickness_mm}},
+                        {"min_jacobian", m.min_jacobian}}},
+         {"warnings", m.warnings}};
+  return j.dump(2);
+}
+
+std::string summary(const MeshResult& m) {
+  return cat("caps mesh: ", m.elements, " elements (", m.hex20, " Hex20), ", m.nodes, " nodes, ",
+             m.suture_pairs, " suture pairs; corner angles ", round_to(m.min_angle_deg, 1), "-",
+             round_to(m.max_angle_deg, 1), " deg -> ", m.output);
+}
+
+// ---- simulate -----------------------------------------------------------------------------
+
+SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
+  const fem::SimulateOptions o = simulate_options(r.meshing, r.solver);
+  if (r.tension_map && !r.render)
+    throw InvalidInput("--tension-map draws on the rendered images; add --render");
+  const plan::Plan plan = plan::read_plan(r.plan);
+  OutputDirectory out(r.output, r.force);
+  const PatientModel model = PatientModel::load(r.model);
+  fem::Simulation sim = fem::simulate(model, plan, o, reporter);
+  sim.wound.continuum.mesh.model = r.model;
+  sim.wound.continuum.mesh.plan = r.plan;
+  fem::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string());
+  SimulateResult s;
+  if (r.render)
+    for (const fs::path& p : render::render_simulation(
+             model, sim,
+             {render::View::Front, render::View::Oblique, render::View::Side, render::View::Plan},
+             {}, out.path(), r.tension_map, reporter))
+      s.images.push_back(p.filename().string());
+  out.commit();
+  const auto& res = sim.result;
+  s.output = r.output;
+  s.elements = static_cast<int>(sim.wound.continuum.mesh.n_elements());
+  s.nodes = static_cast<int>(sim.wound.continuum.mesh.n_nodes());
+  s.suture_pairs = static_cast<int>(sim.wound.continuum.mesh.sutures.size());
+  s.max_displacement_mm = max_norm(res.displacement_mm);
+  s.closing_force_n = res.total_suture_force_n;
+  s.max_suture_force_n = max_suture_force(res);
+  s.max_suture_gap_mm = sim.max_suture_gap_mm;
+  s.strain_energy_mj = res.strain_energy_mj;
+  s.warnings = sim.wound.continuum.mesh.warnings;
+  s.solve_s = res.timings.total_s;
+  return s;
+}
+
+std::string to_json(const SimulateResult& s) {
+  json j{{"output", s.output},
+         {"elements", s.elements},
+         {"nodes", s.nodes},
+         {"suture_pairs", s.suture_pairs},
+         {"max_displacement_mm", s.max_displacement_mm},
+         {"closing_force_n", s.closing_force_n},
+         {"max_suture_force_n", s.max_suture_force_n},
+         {"max_suture_gap_mm", s.max_suture_gap_mm},
+         {"strain_energy_mj", s.strain_energy_mj},
+         {"images", s.images},
+         {"warnings", s.warnings},
+         {"timings_s", {{"solve", s.solve_s}}}};
+  return j.dump(2);
+}
+
+std::string summary(const SimulateResult& s) {
+  return cat("caps simulate: ", s.elements, " elements, closing force ",
+             round_to(s.closing_force_n, 2), " N, max displacement ",
+             round_to(s.max_displacement_mm, 2), " mm, suture gap after closure ",
+             s.max_suture_gap_mm < 1e-6 ? std::string("0") : cat(round_sig(s.max_suture_gap_mm, 2)),
+             " mm -> ", s.output);
+}
+
+// ---- solve --------------------------------------------------------------------------------
+
+SolveResult run_solve(const SolveRequest& r, Reporter* reporter) {
+  fem::SolveOptions o = simulate_options({}, r.solver).solve;
+  if (r.E && !(*r.E > 0 && std::isfinite(*r.E)))
+    throw InvalidInput(cat("--E ", *r.E, ": give Young's modulus in kPa, > 0"));
+  OutputDirectory out(r.output, r.force);
+  fem::Mesh mesh = fem::read_mesh_dir(r.mesh);
+  if (r.E || r.nu)
+    for (auto& [layer, m] : mesh.materials)
+      m = fem::LinearElastic(r.E ? *r.E * 1e-3 : m.E_mpa(), r.nu ? *r.nu : m.nu(), "--E/--nu");
+  Progress progress(reporter, "solving", 1);
+  const fem::SolveResult res = fem::solve(mesh, o);
+  progress.done();
+  fem::write_result_dir(mesh, res, out.path());
+  out.commit();
+  SolveResult s;
+  s.output = r.output;
+  s.solver = res.solver;
+  s.equations = static_cast<int>(res.n_equations);
+  s.max_displacement_mm = max_norm(res.displacement_mm);
+  s.max_von_mises_mpa = res.von_mises_mpa.size() ? res.von_mises_mpa.maxCoeff() : 0.0;
+  s.total_suture_force_n = res.total_suture_force_n;
+  s.strain_energy_mj = res.strain_energy_mj;
+  s.warnings = mesh.warnings;
+  s.total_s = res.timings.total_s;
+  return s;
+}
+
+std::string to_json(const SolveResult& s) {
+  json j{{"output", s.output},
+         {"solver", s.solver},
+         {"equations", s.equations},
+         {"max_displacement_mm", s.max_displacement_mm},
+         {"max_von_mises_mpa", s.max_von_mises_mpa},
+         {"total_suture_force_n", s.total_suture_force_n},
+         {"strain_energy_mj", s.strain_energy_mj},
+         {"warnings", s.warnings},
+         {"timings_s", {{"total", s.total_s}}}};
+  return j.dump(2);
+}
+
+std::string summary(const SolveResult& s) {
+  return cat("caps solve: ", s.equations, " equations (", s.solver, ") in ", round_to(s.total_s, 2),
+             " s; max displacement ", round_to(s.max_displacement_mm, 3), " mm, closing force ",
+             round_to(s.total_suture_force_n, 2), " N -> ", s.output);
+}
+
+// ---- fem box ------------------------------------------------------------------------------
+
+BoxResult run_box(const BoxRequest& r, Reporter*) {
+  fem::BoxOptions o;
+  const auto s = parse_numbers<3>(r.box_size, "--box-size", "mm along x,y,z");
+  const auto c = parse_numbers<3>(r.cells, "--cells", "cells along x,y,z");
+  for (int k = 0; k < 3; ++k) {
+    if (c[k] != static_cast<int>(c[k]))
+      throw InvalidInput(cat("--cells ", r.cells, ": cell counts must be whole numbers"));
+    o.size_mm[k] = s[k];
+    o.cells[k] = static_cast<int>(c[k]);
+  }
+  o.slot = r.slot;
+  o.wedges = r.wedges;
+  OutputDirectory out(r.output, r.force);
+  const fem::Mesh m = fem::make_box_mesh(o);
+  fem::write_mesh_dir(m, out.path());
+  out.commit();
+  return {r.output, static_cast<int>(m.n_nodes()), static_cast<int>(m.n_elements()),
+          static_cast<int>(m.sutures.size())};
+}
+
+std::string to_json(const BoxResult& b) {
+  return json{{"output", b.output}, {"nodes", b.nodes}, {"elements", b.elements},
+              {"sutures", b.sutures}}
+      .dump(2);
+}
+
+std::string summary(const BoxResult& b) {
+  return cat("caps fem box: ", b.elements, " elements, ", b.nodes, " nodes, ", b.sutures,
+             " suture pairs -> ", b.output);
+}
+
+// ---- compare ------------------------------------------------------------------------------
+
+CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
+  if (r.meshing.constant_thickness != 0)
+    throw InvalidInput("compare meshes the measured and a constant thickness itself; give the "
+                       "constant one with --thickness, not --constant-thickness");
+  const fem::SimulateOptions o = simulate_options(r.meshing, r.solver);
+  const plan::Plan plan = plan::read_plan(r.plan);
+  OutputDirectory out(r.output, r.force);
+  const PatientModel model = PatientModel::load(r.model);
+  const fem::Comparison c = fem::compare_thickness(model, plan, r.thickness, o, reporter);
+  const std::string name = fs::path(r.plan).filename().string();
+  render::write_comparison_report(c, model, o, out.path(), name, {}, reporter);
+  out.commit();
+  CompareResult s;
+  s.output = r.output;
+  s.comparison_json = fem::comparison_json(c, name);
+  s.measured_closing_force_n = c.measured_summary.closing_force_n;
+  s.constant_closing_force_n = c.constant_summary.closing_force_n;
+  s.measured_max_displacement_mm = c.measured_summary.max_displacement_mm;
+  s.constant_max_displacement_mm = c.constant_summary.max_displacement_mm;
+  s.constant_thickness_mm = c.constant_thickness_mm;
+  s.warnings = c.warnings;
+  return s;
+}
+
+std::string to_json(const CompareResult& s) {
+  json j = json::parse(s.comparison_json);
+  j["output"] = s.output;
+  return j.dump(2);
+}
+
+std::string summary(const CompareResult& s) {
+  return cat("caps compare: closing force ", round_to(s.measured_closing_force_n, 2),
+             " N (measured) vs ", round_to(s.constant_closing_force_n, 2), " N (constant ",
+             round_to(s.constant_thickness_mm, 1), " mm); largest displacement ",
+             round_to(s.measured_max_displacement_mm, 2), " vs ",
+             round_to(s.constant_max_displacement_mm, 2), " mm -> ", s.output, "/report.html");
+}
+
+}  // namespace caps::app

@@ -1,0 +1,208 @@
+// The application layer (app/): requests read and written as JSON with their declared fields;
+// one request run through app:: directly and through the caps program gives the same result
+// JSON; warnings reach the result files; the reporter sees progress and can cancel.
+#include <gtest/gtest.h>
+
+#include "caps/app/model.hpp"
+#include "caps/app/plan.hpp"
+#include "caps/app/simulation.hpp"
+#include "caps/core/error.hpp"
+#include "cli_run.hpp"
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+namespace fs = std::filesystem;
+using namespace caps;
+using nlohmann::json;
+
+namespace {
+
+const fs::path kTmp = fs::temp_directory_path() / "caps_test_app";
+const std::string kModel = (kTmp / "model").string();
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// The result JSON without what differs between two runs of the same request by design: the
+// output folder's name and the wall-clock timings.
+json comparable(json j) {
+  j.erase("output");
+  j.erase("timings_s");
+  return j;
+}
+
+class AppWithModel : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    fs::remove_all(kTmp);
+    fs::create_directories(kTmp);
+    app::PhantomRequest ph;
+    ph.output = (kTmp / "ct.nii.gz").string();
+    ph.voxels = "96,96,90";
+    ph.spacing = "2.5,2.5,2.5";
+    app::run_phantom(ph);
+    app::FromVolumeRequest fv;
+    fv.input = ph.output;
+    fv.output = kModel;
+    fv.n_theta = 128;
+    fv.n_z = 64;
+    app::run_from_volume(fv);
+  }
+};
+
+// A reporter that records what it is told, and cancels once asked to.
+class RecordingReporter : public Reporter {
+ public:
+  std::vector<std::string> steps;
+  bool cancel = false;
+  bool is_cancelled() const override { return cancel; }
+
+ protected:
+  void on_progress(const std::string& step, double) override {
+    if (steps.empty() || steps.back() != step) steps.push_back(step);
+  }
+};
+
+}  // namespace
+
+TEST(Fields, RequestJsonRoundTripKeepsEveryFieldAndTheLibraryDefaults) {
+  const auto r = app::read_request<app::MeshRequest>(
+      R"({"model": "m", "output": "o", "plan": "p.json", "mesh_size": 1.5, "rim": "free"})");
+  EXPECT_EQ(r.model, "m");
+  EXPECT_EQ(r.meshing.mesh_size, 1.5);
+  EXPECT_EQ(r.meshing.rim, "free");
+  EXPECT_EQ(r.meshing.layers, fem::ContinuumMeshOptions{}.n_layers);   // library default
+  EXPECT_EQ(r.meshing.t1, fem::SurfaceMeshOptions{}.t1_deg);
+  const auto back = app::read_request<app::MeshRequest>(app::write_request(r));
+  EXPECT_EQ(app::write_request(back), app::write_request(r));
+  const json j = json::parse(app::write_request(r));
+  EXPECT_EQ(j["mesh_size"], 1.5);
+  EXPECT_EQ(j["undermine"], 0.0);
+  EXPECT_TRUE(j.contains("stage1_angle"));
+}
+
+TEST(Fields, BadRequestsNameTheKey) {
+  auto refused = [](const std::string& text, const std::string& what) {
+    try {
+      app::read_request<app::SimulateRequest>(text, "req.json");
+      ADD_FAILURE() << "accepted: " << text;
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("req.json"), std::string::npos) << e.what();
+    }
+  };
+  refused(R"({"model": "m", "plan": "p", "output": "o", "layers": "two"})", "\"layers\" must be a whole number");
+  refused(R"({"model": "m", "plan": "p", "output": "o", "layers": 2.5})", "\"layers\" must be a whole number");
+  refused(R"({"model": "m", "plan": "p", "output": "o", "sizee": 2})", "unknown key \"sizee\"");
+  refused(R"({"model": "m", "output": "o"})", "\"plan\" is required");
+  refused(R"({"model": "m", "plan": "p", "output": "o", "render": 1})", "\"render\" must be true or false");
+  refused(R"([1, 2])", "expected a JSON object");
+  refused(R"({"model": )", "not valid JSON");
+}
+
+TEST(Fields, OptionNamesAreTheDashedKeys) {
+  EXPECT_EQ(app::option_name({"mesh_size", "", app::FieldKind::Option}), "--mesh-size");
+  EXPECT_EQ(app::option_name({"output", "", app::FieldKind::Required, "-o,--output"}), "--output");
+  EXPECT_EQ(app::option_name({"model", "", app::FieldKind::Positional, "MODEL_DIR"}), "MODEL_DIR");
+}
+
+TEST(Errors, ConflictingTemplateParametersAreRefusedAndSpelledAsTyped) {
+  app::PlanNewRequest r;
+  r.procedure = "ellipse";
+  r.model = "nowhere";
+  r.at = "0,60";
+  r.output = (kTmp / "never.json").string();
+  r.parameters = {{"width", 10}, {"apex_angle", 30}};
+  try {
+    app::run_plan_new(r);
+    ADD_FAILURE() << "accepted width and apex_angle together";
+  } catch (const InvalidParameter& e) {
+    EXPECT_EQ(std::string(e.what()), "ellipse: give width or apex_angle, not both (the one sets the other)");
+    EXPECT_EQ(e.spelled([](const std::string& k) { return "--" + app::dashed(k); }),
+              "ellipse: give --width or --apex-angle, not both (the one sets the other)");
+  }
+  EXPECT_FALSE(fs::exists(r.output));
+}
+
+TEST_F(AppWithModel, SimulateThroughAppAndThroughTheCliGivesTheSameResultJson) {
+  // plan new: the same plan file both ways.
+  app::PlanNewRequest pn;
+  pn.procedure = "v-y-advancement";
+  pn.model = kModel;
+  pn.at = "0,60";
+  pn.orientation = 90;
+  pn.parameters = {{"length", 12}, {"advance", 3}};
+  pn.output = (kTmp / "vy_app.json").string();
+  const app::PlanResult planned = app::run_plan_new(pn);
+  const std::string cli_plan = (kTmp / "vy_cli.json").string();
+  const auto p = caps_test::caps("plan new v-y-advancement --model " + kModel +
+                                 " --at 0,60 --orientation 90 --length 12 --advance 3 -q --json -o " +
+                                 cli_plan);
+  ASSERT_EQ(p.code, 0) << p.out;
+  EXPECT_EQ(json::parse(p.out), json::parse(app::to_json(planned)));
+  EXPECT_EQ(json::parse(slurp(cli_plan)), json::parse(slurp(pn.output)));
+
+  // simulate: the request built in code, and the same options typed.
+  app::SimulateRequest s;
+  s.model = kModel;
+  s.plan = pn.output;
+  s.output = (kTmp / "vy_sim").string();
+  s.meshing.mesh_size = 2.5;
+  s.meshing.undermine = 4;
+  RecordingReporter reporter;
+  const app::SimulateResult direct = app::run_simulate(s, &reporter);
+  EXPECT_GT(direct.closing_force_n, 0);
+  EXPECT_LT(direct.max_suture_gap_mm, 1e-6);
+  EXPECT_FALSE(reporter.steps.empty());  // progress was reported
+  const auto c = caps_test::caps("simulate --model " + kModel + " --plan " + pn.output + " -o " +
+                                 s.output + " --mesh-size 2.5 --undermine 4 --force -q --json");
+  ASSERT_EQ(c.code, 0) << c.out;
+  EXPECT_EQ(comparable(json::parse(c.out)), comparable(json::parse(app::to_json(direct))));
+  // The old spelling still works, with a note.
+  const auto old = caps_test::caps("simulate --model " + kModel + " --plan " + pn.output + " -o " +
+                                   s.output + " --size 2.5 --undermine 4 --force --json");
+  ASSERT_EQ(old.code, 0) << old.out;
+  EXPECT_NE(old.out.find("--size is now --mesh-size"), std::string::npos) << old.out;
+}
+
+TEST_F(AppWithModel, TheCliNamesTemplateOptionsAsTyped) {
+  const auto r = caps_test::caps("plan new ellipse --model " + kModel +
+                                 " --at 0,60 --width 10 --apex-angle 30 -o " +
+                                 (kTmp / "both.json").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("give --width or --apex-angle, not both"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(kTmp / "both.json"));
+  const auto range = caps_test::caps("plan new z-plasty --model " + kModel +
+                                     " --at 0,60 --angle 20 -o " + (kTmp / "z.json").string());
+  EXPECT_EQ(range.code, 2);
+  EXPECT_NE(range.out.find("--angle = 20 deg is outside its clinical range"), std::string::npos)
+      << range.out;
+}
+
+TEST_F(AppWithModel, ACancelledRunStopsAndLeavesNoOutput) {
+  app::SimulateRequest s;
+  s.model = kModel;
+  s.plan = (kTmp / "cancel_plan.json").string();
+  s.output = (kTmp / "cancelled").string();
+  app::PlanNewRequest pn;
+  pn.procedure = "ellipse";
+  pn.model = kModel;
+  pn.at = "0,60";
+  pn.orientation = 90;
+  pn.parameters = {{"length", 15}, {"width", 4}};
+  pn.output = s.plan;
+  pn.force = true;
+  app::run_plan_new(pn);
+  RecordingReporter reporter;
+  reporter.cancel = true;
+  EXPECT_THROW(app::run_simulate(s, &reporter), Cancelled);
+  EXPECT_FALSE(fs::exists(s.output));
+}
