@@ -206,3 +206,51 @@ TEST_F(AppWithModel, ACancelledRunStopsAndLeavesNoOutput) {
   EXPECT_THROW(app::run_simulate(s, &reporter), Cancelled);
   EXPECT_FALSE(fs::exists(s.output));
 }
+
+TEST_F(AppWithModel, WarningsReachResultJsonSummaryJsonAndTheReport) {
+  // An ellipse low on the phantom's side: the automatic extent (3 x the wound) would leave the
+  // valid cells, so the mesher limits it and warns.
+  app::PlanNewRequest pn;
+  pn.procedure = "ellipse";
+  pn.model = kModel;
+  pn.at = "90,-65";
+  pn.parameters = {{"length", 15}, {"width", 4}};
+  pn.output = (kTmp / "top.json").string();
+  app::run_plan_new(pn);
+  const std::string limited = "the extent was limited to";
+
+  app::MeshRequest m;
+  m.model = kModel;
+  m.plan = pn.output;
+  m.output = (kTmp / "top_mesh").string();
+  RecordingReporter reporter;
+  const app::MeshResult mesh = app::run_mesh(m, &reporter);
+  ASSERT_EQ(mesh.warnings.size(), 1u);
+  EXPECT_NE(mesh.warnings[0].find(limited), std::string::npos) << mesh.warnings[0];
+  EXPECT_EQ(reporter.warnings(), mesh.warnings);  // the caller heard it too
+  EXPECT_LT(mesh.extent_mm, 3 * mesh.wound_size_mm);
+  const json summary = json::parse(slurp(kTmp / "top_mesh" / "summary.json"));
+  EXPECT_EQ(summary["warnings"], json(mesh.warnings));
+  EXPECT_EQ(json::parse(slurp(kTmp / "top_mesh" / "mesh.json"))["warnings"], json(mesh.warnings));
+
+  app::SimulateRequest s;
+  s.model = kModel;
+  s.plan = pn.output;
+  s.output = (kTmp / "top_sim").string();
+  const app::SimulateResult sim = app::run_simulate(s);
+  EXPECT_EQ(sim.warnings, mesh.warnings);
+  EXPECT_EQ(json::parse(slurp(kTmp / "top_sim" / "result.json"))["warnings"], json(mesh.warnings));
+
+  app::CompareRequest c;
+  c.model = kModel;
+  c.plan = pn.output;
+  c.output = (kTmp / "top_compare").string();
+  const app::CompareResult cmp = app::run_compare(c);
+  ASSERT_FALSE(cmp.warnings.empty());
+  EXPECT_EQ(cmp.warnings[0], "measured: " + mesh.warnings[0]);
+  const std::string html = slurp(kTmp / "top_compare" / "report.html");
+  EXPECT_NE(html.find("class=\"warnings\""), std::string::npos);
+  EXPECT_NE(html.find(limited), std::string::npos);
+  EXPECT_EQ(json::parse(slurp(kTmp / "top_compare" / "comparison.json"))["warnings"],
+            json(cmp.warnings));
+}

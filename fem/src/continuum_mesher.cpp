@@ -260,7 +260,7 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
       w.continuum = mesh_continuum(w.surface, model, continuum_options);
       if (extent != full) {
         const std::string message =
-            cat("mesh: the extent was limited to ", extent, " mm (",
+            cat("mesh: the extent was limited to ", std::round(extent * 10) / 10, " mm (",
                 std::round(extent / w.surface.wound_size_mm * 100) / 100,
                 "x the wound's size) to stay on valid cells of the model; the result depends more "
                 "on the rim condition (docs/mesher.md)");

@@ -18,6 +18,7 @@ std::string plan_to_json(const Plan& plan, const PlanReport* report) {
   j["format_version"] = kPlanFormatVersion;
   j["units"] = {{"length", "mm"}, {"angle", "deg"}, {"frame", "LPS"}};
   j["model"] = plan.model;
+  if (!plan.model_hash.empty()) j["model_hash"] = plan.model_hash;
   j["procedure"] = {{"name", plan.procedure}, {"parameters", plan.parameters}};
   const auto& m = plan.frame.local_to_theta_z;
   j["frame"] = {{"theta_deg", plan.frame.theta_deg},
@@ -81,6 +82,8 @@ Plan parse_plan_json(const std::string& text, const std::string& source) {
   try {
     field = "model";
     plan.model = j.value("model", "");
+    field = "model_hash";
+    plan.model_hash = j.value("model_hash", "");
     field = "procedure";
     if (j.contains("procedure")) {
       plan.procedure = j["procedure"].value("name", "custom");
@@ -126,11 +129,28 @@ Plan read_plan(const std::filesystem::path& path) {
   if (!in) throw IoError(cat(path.string(), ": cannot read the plan file"));
   std::stringstream ss;
   ss << in.rdbuf();
-  return parse_plan_json(ss.str(), path.string());
+  Plan plan = parse_plan_json(ss.str(), path.string());
+  // "model_relative": the model's folder relative to the plan's, used when it is there (a plan
+  // copied with its model); "model" as given otherwise.
+  const json j = json::parse(ss.str());
+  if (j.contains("model_relative") && j["model_relative"].is_string()) {
+    const auto beside = (path.parent_path() / j["model_relative"].get<std::string>()).lexically_normal();
+    std::error_code ec;
+    if (std::filesystem::is_directory(beside, ec)) plan.model = beside.string();
+  }
+  return plan;
 }
 
 void write_plan(const std::filesystem::path& path, const Plan& plan, const PlanReport* report) {
-  write_text_atomic(path, plan_to_json(plan, report));
+  json j = json::parse(plan_to_json(plan, report));
+  if (!plan.model.empty()) {
+    std::error_code ec;
+    const auto folder = std::filesystem::absolute(path, ec).parent_path();
+    const auto model = std::filesystem::absolute(plan.model, ec);
+    const auto relative = model.lexically_relative(folder);
+    if (!ec && !relative.empty()) j["model_relative"] = relative.generic_string();
+  }
+  write_text_atomic(path, j.dump(2) + "\n");
 }
 
 WoundBorder read_wound_border(const std::filesystem::path& path) {

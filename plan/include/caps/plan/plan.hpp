@@ -98,7 +98,13 @@ PlanFrame make_frame(const PatientModel& model, double theta_deg, double z_mm,
 
 /// A surgical plan. Stored as JSON (docs/plan-format.md).
 struct Plan {
-  std::string model;                        ///< the patient model directory, as given
+  /// The patient model directory: as given when the plan was made; read_plan() resolves it
+  /// relative to the plan file where the file records it so (a copied plan and model folder
+  /// stay together).
+  std::string model;
+  /// The model's content identity (model.json "content_hash") when the plan was made; empty
+  /// for plans made before it existed. check_plan() refuses a model with another one.
+  std::string model_hash;
   std::string procedure = "custom";         ///< a template name, or "custom"
   std::map<std::string, double> parameters; ///< the procedure's parameters (mm, deg, counts)
   PlanFrame frame;
