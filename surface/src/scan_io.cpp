@@ -1,13 +1,11 @@
 #include "caps/surface/scan_io.hpp"
 
-#include <jpeglib.h>
 #include <tiny_gltf.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <csetjmp>
 #include <cstring>
 #include <fstream>
 #include <map>
@@ -23,52 +21,6 @@ namespace {
 std::string lower(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
   return s;
-}
-
-// ---- JPEG through libjpeg(-turbo), with errors turned into exceptions.
-struct JpegError {
-  jpeg_error_mgr mgr;
-  std::jmp_buf jump;
-  char message[JMSG_LENGTH_MAX];
-};
-
-void jpeg_error_exit(j_common_ptr cinfo) {
-  auto* err = reinterpret_cast<JpegError*>(cinfo->err);
-  (*cinfo->err->format_message)(cinfo, err->message);
-  std::longjmp(err->jump, 1);
-}
-
-RgbImage decode_jpeg(const std::vector<unsigned char>& bytes, const std::string& where) {
-  jpeg_decompress_struct cinfo;
-  JpegError err;
-  cinfo.err = jpeg_std_error(&err.mgr);
-  err.mgr.error_exit = jpeg_error_exit;
-  RgbImage img;
-  if (setjmp(err.jump)) {
-    jpeg_destroy_decompress(&cinfo);
-    throw IoError(cat(where, ": unreadable JPEG (", err.message, ")"));
-  }
-  jpeg_create_decompress(&cinfo);
-  jpeg_mem_src(&cinfo, bytes.data(), static_cast<unsigned long>(bytes.size()));
-  jpeg_read_header(&cinfo, TRUE);
-  cinfo.out_color_space = JCS_RGB;
-  jpeg_start_decompress(&cinfo);
-  img.width = static_cast<int>(cinfo.output_width);
-  img.height = static_cast<int>(cinfo.output_height);
-  img.rgb.resize(std::size_t(img.width) * img.height * 3);
-  while (cinfo.output_scanline < cinfo.output_height) {
-    JSAMPROW row = img.rgb.data() + std::size_t(cinfo.output_scanline) * img.width * 3;
-    jpeg_read_scanlines(&cinfo, &row, 1);
-  }
-  jpeg_finish_decompress(&cinfo);
-  jpeg_destroy_decompress(&cinfo);
-  return img;
-}
-
-std::vector<unsigned char> read_bytes(const fs::path& path, const std::string& what) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw IoError(cat(path.string(), ": cannot open the ", what, " (missing or unreadable)"));
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
 // Opens a scan file and starts its ScanMesh (source and format).
@@ -552,15 +504,6 @@ ScanMesh read_ply_scan(const fs::path& path, const ScanReadOptions& o) {
 }
 
 }  // namespace
-
-RgbImage read_image(const fs::path& path) {
-  const auto bytes = read_bytes(path, "texture");
-  if (bytes.size() >= 3 && bytes[0] == 0xFF && bytes[1] == 0xD8 && bytes[2] == 0xFF)
-    return decode_jpeg(bytes, path.string());
-  if (bytes.size() >= 8 && bytes[0] == 0x89 && bytes[1] == 'P' && bytes[2] == 'N' && bytes[3] == 'G')
-    return read_png(path);
-  throw IoError(cat(path.string(), ": not a JPEG or PNG image (unreadable texture)"));
-}
 
 ScanMesh read_scan_mesh(const fs::path& path, const ScanReadOptions& options) {
   if (!fs::exists(path)) throw IoError(cat(path.string(), ": no such file"));

@@ -19,7 +19,7 @@
 #include <string>
 
 #include "caps/volume/cylindrical_map.hpp"
-#include "caps/volume/image_io.hpp"
+#include "caps/image/rgb_image.hpp"
 
 namespace caps {
 
