@@ -1,6 +1,6 @@
 # caps_add_module(<name> [DEPENDS <lower caps modules>] [SOURCES <files>] [LIBS <third-party targets>])
 # Builds the library caps::<name>. A dependency must be a lower layer that was already added,
-# so the module graph cannot contain a cycle (core -> volume -> surface -> plan -> fem -> render -> tools).
+# so the module graph cannot contain a cycle (core -> image -> volume -> surface -> plan -> fem -> render -> tools).
 function(caps_add_module name)
   cmake_parse_arguments(ARG "" "" "DEPENDS;SOURCES;LIBS" ${ARGN})
   add_library(caps_${name} ${ARG_SOURCES})

@@ -6,7 +6,8 @@
 
 #include "caps/core/error.hpp"
 #include "caps/render/overlay.hpp"
-#include "caps/volume/image_io.hpp"
+#include "caps/image/colormap.hpp"
+#include "caps/image/image_io.hpp"
 
 using namespace caps;
 using namespace caps::render;

@@ -22,7 +22,8 @@
 #include "caps/render/render.hpp"
 #include "caps/render/skin_surface.hpp"
 #include "caps/surface/patient_model.hpp"
-#include "caps/volume/image_io.hpp"
+#include "caps/image/colormap.hpp"
+#include "caps/image/image_io.hpp"
 
 using namespace caps;
 using namespace caps::render;
@@ -135,9 +136,6 @@ TEST(TensionMap, ConstantStressIsTheTopColourAndTheRangeTheBottom) {
     const Eigen::Vector3d expect = on ? viridis(1.0) : viridis(0.0);
     ASSERT_LT((c.row(v).transpose() - expect).norm(), 1e-12) << "vertex " << v;
   }
-  // viridis' last colour is (253, 231, 37).
-  EXPECT_NEAR(viridis(1.0)[0] * 255, 253, 1e-9);
-  EXPECT_NEAR(viridis(1.0)[2] * 255, 37, 1e-9);
   // A user-given top of the scale: 12.3 kPa at a 24.6 kPa top is the middle colour.
   const ScalarMap half = tension_map(skin(), mesh(), f, 24.6);
   EXPECT_DOUBLE_EQ(half.max_value, 24.6);

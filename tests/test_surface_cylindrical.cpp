@@ -1,7 +1,6 @@
 // Cyberware-style cylindrical range images: export and import round trip, image layouts, and
 // bad inputs.
 #include <gtest/gtest.h>
-#include <png.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -27,12 +26,7 @@ fs::path temp_dir(const std::string& name) {
 }
 
 void write_grey16(const fs::path& p, int w, int h, const std::vector<std::uint16_t>& v) {
-  png_image image{};
-  image.version = PNG_IMAGE_VERSION;
-  image.width = w;
-  image.height = h;
-  image.format = PNG_FORMAT_LINEAR_Y;
-  ASSERT_TRUE(png_image_write_to_file(&image, p.c_str(), 0, v.data(), 0, nullptr)) << image.message;
+  write_grey16_png(p, GreyImage{w, h, v});
 }
 
 const VolumeModel& phantom_model() {
@@ -177,15 +171,7 @@ TEST(CylindricalScan, BadInputsAreRefused) {
     EXPECT_NE(std::string(e.what()).find("layout"), std::string::npos);
   }
   // A colour PNG given as the range image; a truncated PNG; a missing file.
-  {
-    png_image image{};
-    image.version = PNG_IMAGE_VERSION;
-    image.width = 4;
-    image.height = 4;
-    image.format = PNG_FORMAT_RGB;
-    std::vector<std::uint8_t> rgb(48, 100);
-    png_image_write_to_file(&image, (dir / "rgb.png").c_str(), 0, rgb.data(), 0, nullptr);
-  }
+  write_png(dir / "rgb.png", RgbImage{4, 4, std::vector<std::uint8_t>(48, 100)});
   bad = s;
   bad.range = dir / "rgb.png";
   EXPECT_THROW(cylindrical_scan_mesh(bad), InvalidInput);

@@ -9,6 +9,8 @@
 #include <unistd.h>
 #include <Eigen/Geometry>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -302,6 +304,85 @@ TEST(Ply, ReadsAsciiQuadsAndBigEndian) {
   const caps::TriMesh tri = caps::read_ply(dir / "be.ply");
   ASSERT_EQ(tri.n_faces(), 1);
   EXPECT_NEAR(caps::mesh_area(tri), 3.0, 1e-12);
+  fs::remove_all(dir);
+}
+
+TEST(Ply, ReadsColoursAndTextureCoordinatesInEveryEncoding) {
+  const fs::path dir = temp_dir();
+  // Two triangles sharing an edge; per vertex: float x y z, uchar red green blue, float s t
+  // (the scanner names), plus a property the reader must skip.
+  const float xyz[4][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  const std::uint8_t rgb[4][3] = {{255, 0, 0}, {0, 255, 0}, {0, 0, 255}, {10, 20, 30}};
+  const float st[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 0.5f}};
+  const std::string header =
+      "element vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty float s\n"
+      "property float t\nproperty short quality\nelement face 2\n"
+      "property list uchar int vertex_indices\nend_header\n";
+  auto binary = [&](bool big) {
+    std::string b = std::string("ply\nformat ") +
+                    (big ? "binary_big_endian" : "binary_little_endian") + " 1.0\n" + header;
+    auto put = [&](auto v) {
+      char bytes[sizeof(v)];
+      std::memcpy(bytes, &v, sizeof(v));
+      if (big) std::reverse(bytes, bytes + sizeof(v));  // the test machine is little-endian
+      b.append(bytes, sizeof(v));
+    };
+    for (int v = 0; v < 4; ++v) {
+      for (float x : xyz[v]) put(x);
+      for (std::uint8_t c : rgb[v]) put(c);
+      for (float x : st[v]) put(x);
+      put(std::int16_t(-7));
+    }
+    for (const auto& f : {std::array<std::int32_t, 3>{0, 1, 2}, std::array<std::int32_t, 3>{0, 2, 3}}) {
+      put(std::uint8_t(3));
+      for (std::int32_t i : f) put(i);
+    }
+    return b;
+  };
+  std::string ascii = "ply\nformat ascii 1.0\n" + header;
+  for (int v = 0; v < 4; ++v)
+    ascii += caps::cat(xyz[v][0], " ", xyz[v][1], " ", xyz[v][2], " ", int(rgb[v][0]), " ",
+                       int(rgb[v][1]), " ", int(rgb[v][2]), " ", st[v][0], " ", st[v][1], " -7\n");
+  ascii += "3 0 1 2\n3 0 2 3\n";
+  write_text(dir / "be.ply", binary(true));
+  write_text(dir / "le.ply", binary(false));
+  write_text(dir / "ascii.ply", ascii);
+  for (const char* name : {"be.ply", "le.ply", "ascii.ply"}) {
+    SCOPED_TRACE(name);
+    const caps::PlyMesh ply = caps::read_ply_with_attributes(dir / name);
+    ASSERT_EQ(ply.mesh.n_vertices(), 4);
+    ASSERT_EQ(ply.mesh.n_faces(), 2);
+    EXPECT_NEAR(caps::mesh_area(ply.mesh), 1.0, 1e-12);
+    ASSERT_EQ(ply.colors.rows(), 4);
+    ASSERT_EQ(ply.uv.rows(), 4);
+    for (int v = 0; v < 4; ++v)
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_EQ(ply.mesh.V(v, c), xyz[v][c]);
+        EXPECT_EQ(ply.colors(v, c), rgb[v][c]);
+        if (c < 2) EXPECT_EQ(ply.uv(v, c), st[v][c]);
+      }
+  }
+  // Without colour or texture properties the attributes are empty; float colours in [0, 1]
+  // are scaled to bytes.
+  write_text(dir / "plain.ply",
+             "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+             "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+             "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  const caps::PlyMesh plain = caps::read_ply_with_attributes(dir / "plain.ply");
+  EXPECT_EQ(plain.colors.rows(), 0);
+  EXPECT_EQ(plain.uv.rows(), 0);
+  write_text(dir / "unit.ply",
+             "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+             "property float z\nproperty float r\nproperty float g\nproperty float b\n"
+             "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+             "0 0 0 1 0.5 0\n1 0 0 0 0 0\n0 1 0 2 -1 0\n3 0 1 2\n");
+  const caps::PlyMesh unit = caps::read_ply_with_attributes(dir / "unit.ply");
+  ASSERT_EQ(unit.colors.rows(), 3);
+  EXPECT_EQ(unit.colors(0, 0), 255);
+  EXPECT_EQ(unit.colors(0, 1), 127);  // 127.5 truncated
+  EXPECT_EQ(unit.colors(2, 0), 255);  // clamped
+  EXPECT_EQ(unit.colors(2, 1), 0);
   fs::remove_all(dir);
 }
 

@@ -8,9 +8,11 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
-#include "caps/volume/image_io.hpp"
+#include "caps/image/image_io.hpp"
 #include "caps/volume/isosurface.hpp"
+#include "caps/volume/map_nrrd.hpp"
 #include "caps/volume/model.hpp"
+#include "caps/volume/model_dir.hpp"
 #include "caps/volume/phantom.hpp"
 
 namespace fs = std::filesystem;
@@ -327,4 +329,49 @@ TEST(Segmentation, VolumeWithoutHeadIsRefused) {
     for (int j = 10; j < 20; ++j)
       for (int i = 10; i < 20; ++i) air.at(i, j, k) = 40.0f;
   EXPECT_THROW(segment_head(air), InvalidInput);
+}
+
+TEST(ModelDirectory, ModelJsonAndMapsReadBackAsWritten) {
+  const auto& pm = phantom_model();
+  const fs::path tmp = fs::temp_directory_path() / ("caps_model_info_" + std::to_string(::getpid()));
+  fs::remove_all(tmp);
+  write_model(pm.model, tmp, false);
+  const ModelInfo info = read_model_info(tmp);
+  const auto& m = pm.model.maps;
+  EXPECT_EQ(info.format_version, kModelFormatVersion);
+  EXPECT_EQ(info.grid.n_theta, m.grid.n_theta);
+  EXPECT_EQ(info.grid.n_z, m.grid.n_z);
+  EXPECT_EQ(info.grid.theta0_deg, m.grid.theta0_deg);
+  EXPECT_EQ(info.grid.z0_mm, m.grid.z0_mm);
+  EXPECT_EQ(info.grid.dz_mm, m.grid.dz_mm);
+  EXPECT_LT((info.axis.origin_lps - m.axis.origin_lps).norm(), 1e-12);
+  EXPECT_LT((info.axis.direction - m.axis.direction).norm(), 1e-12);
+  EXPECT_LT((info.axis.front - m.axis.front).norm(), 1e-12);
+  EXPECT_EQ(info.source_kind(), "volume");
+  EXPECT_EQ(info.thickness_kind(), "measured");
+  EXPECT_FALSE(info.has_color);
+  const auto& s = pm.model.stats;
+  EXPECT_EQ(info.stats.cells, s.cells);
+  EXPECT_EQ(info.stats.valid_cells, s.valid_cells);
+  EXPECT_EQ(info.stats.undercut, s.undercut);
+  EXPECT_EQ(info.stats.thickness_median_mm, s.thickness_median_mm);
+  EXPECT_EQ(info.stats.face_theta_deg, s.face_theta_deg);
+  EXPECT_EQ(info.skin.faces, pm.model.skin.n_faces());
+  EXPECT_EQ(info.bone.vertices, pm.model.bone.n_vertices());
+  // The text written from the struct is the text read back.
+  EXPECT_EQ(model_json_text(info), model_json_text(read_model_info(tmp)));
+  const CylindricalMaps back = read_model_maps(tmp, info);
+  EXPECT_EQ(back.r_skin, m.r_skin);
+  EXPECT_EQ(back.r_bone, m.r_bone);
+  EXPECT_EQ(back.thickness, m.thickness);
+  EXPECT_EQ(back.thickness_normal, m.thickness_normal);
+  EXPECT_EQ(back.flags, m.flags);
+  EXPECT_TRUE(read_model_color(tmp, info).empty());
+  // Every file the format names is there, under the names model_dir.hpp declares.
+  for (const char* f : {model_file::kJson, model_file::kRSkin, model_file::kRBone,
+                        model_file::kThickness, model_file::kThicknessNormal, model_file::kValidity,
+                        model_file::kThicknessPng, model_file::kSkinPng, model_file::kSkinMesh,
+                        model_file::kBoneMesh})
+    EXPECT_TRUE(fs::exists(tmp / f)) << f;
+  fs::remove_all(tmp);
 }

@@ -103,6 +103,7 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
   }
   plan::Plan p = plan::place_procedure(proc, model, theta, z, r.orientation);
   p.model = r.model;
+  p.model_hash = model.content_hash();
   const plan::PlanReport report = plan::check_plan(p, model);
   plan::write_plan(r.output, p, &report);
   return plan_result(p, report, r.output, reporter);

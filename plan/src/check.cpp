@@ -181,6 +181,11 @@ PlanReport check_plan_structure(const Plan& plan) {
 
 PlanReport check_plan(const Plan& plan, const PatientModel& model) {
   PlanReport report = check_plan_structure(plan);
+  if (!plan.model_hash.empty() && plan.model_hash != model.content_hash())
+    throw InvalidInput(cat("the plan was made on another model (", plan.model.empty() ? "" : plan.model + ", ",
+                           "content ", plan.model_hash, ") than the one given (content ",
+                           model.content_hash(), "): its points would land elsewhere on this "
+                           "patient; place the procedure again with caps plan new on this model"));
   const BorderLoop loop = border_loop(plan);
   const int n = loop.size();
   const auto& g = model.grid();

@@ -1,54 +1,20 @@
 #include "caps/render/overlay.hpp"
 
-#include <cairo.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <memory>
 #include <string>
 #include <vector>
 
 #include "caps/core/error.hpp"
+#include "caps/image/canvas.hpp"
+#include "caps/image/colormap.hpp"
+#include "caps/image/image_io.hpp"
 #include "caps/render/skin_surface.hpp"
 #include "caps/surface/patient_model.hpp"
-#include "caps/volume/image_io.hpp"
 
 namespace caps::render {
 namespace {
-
-// Cairo works on ARGB32 words; the image is packed RGB. These copy between the two.
-using SurfacePtr = std::unique_ptr<cairo_surface_t, decltype(&cairo_surface_destroy)>;
-
-SurfacePtr to_surface(const RgbImage& img) {
-  SurfacePtr s(cairo_image_surface_create(CAIRO_FORMAT_RGB24, img.width, img.height),
-               cairo_surface_destroy);
-  cairo_surface_flush(s.get());
-  unsigned char* data = cairo_image_surface_get_data(s.get());
-  const int stride = cairo_image_surface_get_stride(s.get());
-  for (int y = 0; y < img.height; ++y)
-    for (int x = 0; x < img.width; ++x) {
-      const std::uint8_t* p = &img.rgb[(std::size_t(y) * img.width + x) * 3];
-      reinterpret_cast<std::uint32_t*>(data + y * stride)[x] =
-          (std::uint32_t(p[0]) << 16) | (std::uint32_t(p[1]) << 8) | p[2];
-    }
-  cairo_surface_mark_dirty(s.get());
-  return s;
-}
-
-void from_surface(cairo_surface_t* s, RgbImage& img) {
-  cairo_surface_flush(s);
-  const unsigned char* data = cairo_image_surface_get_data(s);
-  const int stride = cairo_image_surface_get_stride(s);
-  for (int y = 0; y < img.height; ++y)
-    for (int x = 0; x < img.width; ++x) {
-      const std::uint32_t w = reinterpret_cast<const std::uint32_t*>(data + y * stride)[x];
-      std::uint8_t* p = &img.rgb[(std::size_t(y) * img.width + x) * 3];
-      p[0] = (w >> 16) & 0xff;
-      p[1] = (w >> 8) & 0xff;
-      p[2] = w & 0xff;
-    }
-}
 
 double nice_step(double range) {
   const double raw = range / 5.0;
@@ -143,20 +109,16 @@ void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
                     const std::string& title, const std::string& note) {
   if (!(max_value > 0) || !std::isfinite(max_value))
     throw InvalidInput(cat("colour bar: the range ", max_value, " must be positive"));
-  SurfacePtr s = to_surface(image);
-  std::unique_ptr<cairo_t, decltype(&cairo_destroy)> cr(cairo_create(s.get()), cairo_destroy);
+  Canvas canvas(image);
   const double h = 0.55 * image.height, w = std::max(12.0, 0.025 * image.width);
   const double x0 = image.width - w - 0.12 * image.width, y0 = 0.5 * (image.height - h);
   const double font = std::max(10.0, 0.018 * image.width), line = 1.25 * font;
-  cairo_select_font_face(cr.get(), "DejaVu Sans", CAIRO_FONT_SLANT_NORMAL, CAIRO_FONT_WEIGHT_NORMAL);
-  cairo_set_font_size(cr.get(), font);
+  const TextStyle style{.size_px = font};
   // Text lines start at the bar's left; a line too wide for the image is moved left so that it
   // stays whole, and the panel grows to cover it.
   const std::vector<std::string> title_lines = lines_of(title), note_lines = lines_of(note);
   auto text_x = [&](const std::string& text) {
-    cairo_text_extents_t ext;
-    cairo_text_extents(cr.get(), text.c_str(), &ext);
-    return std::min(x0 - 0.3 * w, image.width - 4.0 - ext.x_advance);
+    return std::min(x0 - 0.3 * w, image.width - 4.0 - canvas.text_width(text, font));
   };
   double left = x0 - 0.4 * w;
   for (const auto& t : title_lines) left = std::min(left, text_x(t) - 0.3 * w);
@@ -165,28 +127,16 @@ void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
   const double n_title = std::max<double>(1, title_lines.size());
   const double top = y0 - 2.6 * font - (n_title - 1) * line;
   const double bottom = y0 + h + 1.4 * font + note_lines.size() * line;
-  cairo_set_source_rgba(cr.get(), 1, 1, 1, 0.85);
-  cairo_rectangle(cr.get(), left, top, image.width - left, bottom - top);
-  cairo_fill(cr.get());
-  for (int i = 0; i < static_cast<int>(h); ++i) {
-    const Eigen::Vector3d c = viridis(1.0 - i / h);
-    cairo_set_source_rgb(cr.get(), c[0], c[1], c[2]);
-    cairo_rectangle(cr.get(), x0, y0 + i, w, 1.0);
-    cairo_fill(cr.get());
-  }
-  cairo_set_source_rgb(cr.get(), 0.1, 0.1, 0.1);
-  cairo_set_line_width(cr.get(), 1.0);
+  canvas.fill_rect(left, top, image.width - left, bottom - top, {1, 1, 1}, 0.85);
+  canvas.colour_bar(x0, y0, w, h);
   const double step = nice_step(max_value);
   const int decimals = decimals_of(step);
   auto tick = [&](double v, int decimals) {
     const double y = y0 + h - v / max_value * h;
-    cairo_move_to(cr.get(), x0 + w, y);
-    cairo_line_to(cr.get(), x0 + w + 4, y);
-    cairo_stroke(cr.get());
+    canvas.line(Eigen::Vector2d(x0 + w, y), Eigen::Vector2d(x0 + w + 4, y));
     char label[48];
     std::snprintf(label, sizeof label, "%.*f", decimals, v);
-    cairo_move_to(cr.get(), x0 + w + 6, y + 0.35 * font);
-    cairo_show_text(cr.get(), (std::string(label) + " " + unit).c_str());
+    canvas.text(x0 + w + 6, y + 0.35 * font, std::string(label) + " " + unit, style);
   };
   int k = 0;
   for (; k * step <= max_value * (1 + 1e-9); ++k) tick(k * step, decimals);
@@ -194,16 +144,12 @@ void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
   // it, so that the largest value can be read off the bar.
   if (max_value - (k - 1) * step > 0.3 * step)
     tick(max_value, std::max(decimals, 2 - static_cast<int>(std::floor(std::log10(max_value)))));
-  for (std::size_t i = 0; i < title_lines.size(); ++i) {
-    cairo_move_to(cr.get(), text_x(title_lines[i]),
-                  y0 - 1.0 * font - double(title_lines.size() - 1 - i) * line);
-    cairo_show_text(cr.get(), title_lines[i].c_str());
-  }
-  for (std::size_t i = 0; i < note_lines.size(); ++i) {
-    cairo_move_to(cr.get(), text_x(note_lines[i]), y0 + h + 1.5 * font + double(i) * line);
-    cairo_show_text(cr.get(), note_lines[i].c_str());
-  }
-  from_surface(s.get(), image);
+  for (std::size_t i = 0; i < title_lines.size(); ++i)
+    canvas.text(text_x(title_lines[i]), y0 - 1.0 * font - double(title_lines.size() - 1 - i) * line,
+                title_lines[i], style);
+  for (std::size_t i = 0; i < note_lines.size(); ++i)
+    canvas.text(text_x(note_lines[i]), y0 + h + 1.5 * font + double(i) * line, note_lines[i], style);
+  image = canvas.image();
 }
 
 Eigen::Vector2d project(const Camera& camera, const RenderOptions& o, const Eigen::Vector3d& p) {
@@ -218,20 +164,16 @@ Eigen::Vector2d project(const Camera& camera, const RenderOptions& o, const Eige
 
 void draw_polylines(RgbImage& image, const Camera& camera, const RenderOptions& o,
                     const std::vector<std::vector<Eigen::Vector3d>>& lines) {
-  SurfacePtr s = to_surface(image);
-  std::unique_ptr<cairo_t, decltype(&cairo_destroy)> cr(cairo_create(s.get()), cairo_destroy);
-  const double dash[] = {6.0, 4.0};
-  cairo_set_dash(cr.get(), dash, 2, 0);
-  cairo_set_line_width(cr.get(), std::max(1.5, 0.003 * o.width));
-  cairo_set_source_rgb(cr.get(), 0.15, 0.1, 0.45);
+  Canvas canvas(image);
+  const Pen marker{.colour = {0.15, 0.1, 0.45},
+                   .width_px = std::max(1.5, 0.003 * o.width),
+                   .dash_px = {6.0, 4.0}};
   for (const auto& line : lines) {
-    for (std::size_t i = 0; i < line.size(); ++i) {
-      const Eigen::Vector2d q = project(camera, o, line[i]);
-      (i == 0 ? cairo_move_to : cairo_line_to)(cr.get(), q.x(), q.y());
-    }
-    cairo_stroke(cr.get());
+    std::vector<Eigen::Vector2d> px;
+    for (const auto& p : line) px.push_back(project(camera, o, p));
+    canvas.polyline(px, marker);
   }
-  from_surface(s.get(), image);
+  image = canvas.image();
 }
 
 std::vector<std::vector<Eigen::Vector3d>> plan_lines(const plan::Plan& plan, const PatientModel& model) {

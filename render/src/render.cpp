@@ -3,6 +3,7 @@
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "caps/image/image_io.hpp"
 #include "caps/surface/patient_model.hpp"
 
 #include <embree3/rtcore.h>

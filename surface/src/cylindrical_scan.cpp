@@ -1,10 +1,6 @@
 #include "caps/surface/cylindrical_scan.hpp"
 
-#include <png.h>
-
 #include <cmath>
-#include <csetjmp>
-#include <cstdio>
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -12,60 +8,12 @@
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "caps/image/image_io.hpp"
 
 namespace fs = std::filesystem;
 
 namespace caps {
 namespace {
-
-struct GreyImage {
-  int width = 0, height = 0;
-  std::vector<unsigned> value;
-};
-
-// libpng reports through these: quietly, since the exception that follows says what failed.
-void png_error_quiet(png_structp png, png_const_charp) { png_longjmp(png, 1); }
-void png_warning_quiet(png_structp, png_const_charp) {}
-
-// An 8- or 16-bit grey PNG with exact values (no gamma or colour conversion).
-GreyImage read_grey_png(const fs::path& path) {
-  std::unique_ptr<FILE, decltype(&std::fclose)> file(std::fopen(path.c_str(), "rb"), &std::fclose);
-  if (!file) throw IoError(cat(path.string(), ": cannot open the range image"));
-  png_byte signature[8];
-  if (std::fread(signature, 1, 8, file.get()) != 8 || png_sig_cmp(signature, 0, 8))
-    throw InvalidInput(cat(path.string(), ": the range image must be a PNG (8- or 16-bit grey)"));
-  png_structp png =
-      png_create_read_struct(PNG_LIBPNG_VER_STRING, nullptr, png_error_quiet, png_warning_quiet);
-  png_infop info = png ? png_create_info_struct(png) : nullptr;
-  if (!info) {
-    png_destroy_read_struct(&png, nullptr, nullptr);
-    throw Error("out of memory reading a PNG");
-  }
-  GreyImage img;
-  if (setjmp(png_jmpbuf(png))) {
-    png_destroy_read_struct(&png, &info, nullptr);
-    throw IoError(cat(path.string(), ": the range image is damaged or truncated"));
-  }
-  png_init_io(png, file.get());
-  png_set_sig_bytes(png, 8);
-  png_read_png(png, info, PNG_TRANSFORM_EXPAND | PNG_TRANSFORM_SWAP_ENDIAN, nullptr);
-  const int type = png_get_color_type(png, info), depth = png_get_bit_depth(png, info);
-  if (type != PNG_COLOR_TYPE_GRAY) {
-    png_destroy_read_struct(&png, &info, nullptr);
-    throw InvalidInput(cat(path.string(), ": the range image must be grey (one channel), not colour; "
-                           "give the colour image with --color"));
-  }
-  img.width = static_cast<int>(png_get_image_width(png, info));
-  img.height = static_cast<int>(png_get_image_height(png, info));
-  png_bytepp rows = png_get_rows(png, info);
-  img.value.resize(std::size_t(img.width) * img.height);
-  for (int y = 0; y < img.height; ++y)
-    for (int x = 0; x < img.width; ++x)
-      img.value[std::size_t(y) * img.width + x] =
-          depth == 16 ? reinterpret_cast<const std::uint16_t*>(rows[y])[x] : rows[y][x];
-  png_destroy_read_struct(&png, &info, nullptr);
-  return img;
-}
 
 void check_spec(const CylindricalScanSpec& s, const std::string& where) {
   if (!(s.r_scale_mm > 0 && s.r_scale_mm <= 100))
@@ -120,7 +68,7 @@ CylindricalScanSpec read_cylindrical_sidecar(const fs::path& json_path) {
 
 ScanMesh cylindrical_scan_mesh(const CylindricalScanSpec& s) {
   check_spec(s, s.range.string());
-  const GreyImage range = read_grey_png(s.range);
+  const GreyImage range = read_grey_png(s.range, "range image");
   ScanMesh out;
   out.source = s.range.string();
   out.format = "cylindrical range image";
@@ -192,7 +140,7 @@ fs::path write_cylindrical_scan(const PatientModel& model, const fs::path& dir, 
   const auto& maps = model.maps();
   const int w = g.n_theta, h = g.n_z;
   const int j0 = static_cast<int>(std::lround(-g.theta0_deg / g.dtheta_deg()));  // theta = 0
-  std::vector<std::uint16_t> range(std::size_t(w) * h, 0);
+  GreyImage range{w, h, std::vector<std::uint16_t>(std::size_t(w) * h, 0)};
   RgbImage color;
   if (model.has_color()) {
     color.width = w;
@@ -208,7 +156,7 @@ fs::path write_cylindrical_scan(const PatientModel& model, const fs::path& dir, 
       if (!(value >= 1 && value <= 65535))
         throw InvalidInput(cat("r_skin ", maps.r_skin[c], " mm does not fit 16 bits at ", r_scale_mm,
                                " mm per unit; choose a larger scale"));
-      range[std::size_t(row) * w + col] = static_cast<std::uint16_t>(value);
+      range.value[std::size_t(row) * w + col] = static_cast<std::uint16_t>(value);
       if (model.has_color()) {
         // color.png of a model has superior on top, like the range image.
         const auto& src = model.color();
@@ -216,15 +164,7 @@ fs::path write_cylindrical_scan(const PatientModel& model, const fs::path& dir, 
           color.rgb[(std::size_t(row) * w + col) * 3 + ch] = src.rgb[(std::size_t(row) * src.width + j) * 3 + ch];
       }
     }
-  write_file_atomic(dir / "range.png", [&](const fs::path& tmp) {
-    png_image image{};
-    image.version = PNG_IMAGE_VERSION;
-    image.width = static_cast<png_uint_32>(w);
-    image.height = static_cast<png_uint_32>(h);
-    image.format = PNG_FORMAT_LINEAR_Y;  // 16-bit grey, written as is
-    if (!png_image_write_to_file(&image, tmp.c_str(), 0, range.data(), 0, nullptr))
-      throw IoError(cat((dir / "range.png").string(), ": cannot write: ", image.message));
-  });
+  write_grey16_png(dir / "range.png", range);
   nlohmann::json j = {{"range", "range.png"},       {"r_scale_mm", r_scale_mm},
                       {"r_offset_mm", 0.0},         {"z_scale_mm", g.dz_mm},
                       {"theta_span_deg", 360.0},    {"theta_axis", "columns"},
@@ -232,15 +172,7 @@ fs::path write_cylindrical_scan(const PatientModel& model, const fs::path& dir, 
                       {"void_value", 0},
                       {"top_z_mm", g.z_mm(g.n_z - 1)}};
   if (model.has_color()) {
-    write_file_atomic(dir / "color.png", [&](const fs::path& tmp) {
-      png_image image{};
-      image.version = PNG_IMAGE_VERSION;
-      image.width = static_cast<png_uint_32>(w);
-      image.height = static_cast<png_uint_32>(h);
-      image.format = PNG_FORMAT_RGB;
-      if (!png_image_write_to_file(&image, tmp.c_str(), 0, color.rgb.data(), 0, nullptr))
-        throw IoError(cat((dir / "color.png").string(), ": cannot write: ", image.message));
-    });
+    write_png(dir / "color.png", color);
     j["color"] = "color.png";
   }
   write_text_atomic(dir / "range.json", j.dump(2) + "\n");

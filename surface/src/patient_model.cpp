@@ -1,70 +1,23 @@
 #include "caps/surface/patient_model.hpp"
 
-#include <nlohmann/json.hpp>
-
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
-#include "caps/volume/model.hpp"
+#include "caps/volume/model_dir.hpp"
 
 namespace fs = std::filesystem;
-using nlohmann::json;
 
 namespace caps {
 
 PatientModel PatientModel::load(const fs::path& dir) {
-  const json j = json::parse(read_model_json(dir));
-  CylindricalMaps maps;
-  try {
-    const auto& a = j.at("axis");
-    auto vec = [](const json& v) {
-      return Eigen::Vector3d(v.at(0).get<double>(), v.at(1).get<double>(), v.at(2).get<double>());
-    };
-    maps.axis.origin_lps = vec(a.at("origin_lps"));
-    maps.axis.direction = vec(a.at("direction")).normalized();
-    maps.axis.front = vec(a.at("front")).normalized();
-    const auto& g = j.at("grid");
-    maps.grid.n_theta = g.at("n_theta").get<int>();
-    maps.grid.n_z = g.at("n_z").get<int>();
-    maps.grid.theta0_deg = g.at("theta0_deg").get<double>();
-    maps.grid.z0_mm = g.at("z0_mm").get<double>();
-    maps.grid.dz_mm = g.at("dz_mm").get<double>();
-  } catch (const json::exception& e) {
-    throw InvalidInput(cat((dir / "model.json").string(), ": axis or grid is incomplete (",
-                           e.what(), "); rebuild the model"));
-  }
-  const auto& g = maps.grid;
-  if (g.n_theta < 4 || g.n_z < 2 || !(g.dz_mm > 0))
-    throw InvalidInput(cat((dir / "model.json").string(), ": grid ", g.n_theta, " x ", g.n_z,
-                           " with dz ", g.dz_mm, " mm is not usable; rebuild the model"));
-  maps.r_skin = read_map_nrrd(dir / "r_skin.nrrd", g);
-  maps.r_bone = read_map_nrrd(dir / "r_bone.nrrd", g);
-  maps.thickness = read_map_nrrd(dir / "thickness.nrrd", g);
-  maps.thickness_normal = read_map_nrrd(dir / "thickness_normal.nrrd", g);
-  const std::vector<float> flags = read_map_nrrd(dir / "validity.nrrd", g);
-  maps.flags.resize(flags.size());
-  maps.measured_skin.resize(flags.size());
-  maps.measured_bone.resize(flags.size());
-  for (std::size_t i = 0; i < flags.size(); ++i) {
-    maps.flags[i] = static_cast<std::uint8_t>(flags[i]);
-    maps.measured_skin[i] = !(maps.flags[i] & kNoSkin);
-    maps.measured_bone[i] = !(maps.flags[i] & (kNoSkin | kNoBone));
-  }
-  RgbImage color;
-  if (j.contains("files") && j["files"].contains("color")) {
-    color = read_png(dir / j["files"]["color"].get<std::string>());
-    if (color.width != g.n_theta || color.height != g.n_z)
-      throw InvalidInput(cat((dir / "color.png").string(), ": ", color.width, " x ", color.height,
-                             " pixels, expected the grid's ", g.n_theta, " x ", g.n_z));
-  }
-  return PatientModel(std::move(maps), std::move(color),
-                      j.at("source").value("kind", std::string("volume")),
-                      j.contains("thickness") ? j["thickness"].value("kind", std::string())
-                                              : std::string());
+  const ModelInfo info = read_model_info(dir);
+  return PatientModel(read_model_maps(dir, info), read_model_color(dir, info), info.source_kind(),
+                      info.thickness_kind());
 }
+
+std::string PatientModel::content_hash() const { return caps::content_hash(maps_); }
 
 PatientModel::PatientModel(CylindricalMaps maps, RgbImage color, std::string source_kind,
                            std::string thickness_kind)

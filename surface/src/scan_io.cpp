@@ -1,19 +1,18 @@
 #include "caps/surface/scan_io.hpp"
 
-#include <jpeglib.h>
 #include <tiny_gltf.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <csetjmp>
 #include <cstring>
 #include <fstream>
 #include <map>
 #include <sstream>
 
 #include "caps/core/error.hpp"
+#include "caps/volume/mesh_io.hpp"
 
 namespace fs = std::filesystem;
 
@@ -23,52 +22,6 @@ namespace {
 std::string lower(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
   return s;
-}
-
-// ---- JPEG through libjpeg(-turbo), with errors turned into exceptions.
-struct JpegError {
-  jpeg_error_mgr mgr;
-  std::jmp_buf jump;
-  char message[JMSG_LENGTH_MAX];
-};
-
-void jpeg_error_exit(j_common_ptr cinfo) {
-  auto* err = reinterpret_cast<JpegError*>(cinfo->err);
-  (*cinfo->err->format_message)(cinfo, err->message);
-  std::longjmp(err->jump, 1);
-}
-
-RgbImage decode_jpeg(const std::vector<unsigned char>& bytes, const std::string& where) {
-  jpeg_decompress_struct cinfo;
-  JpegError err;
-  cinfo.err = jpeg_std_error(&err.mgr);
-  err.mgr.error_exit = jpeg_error_exit;
-  RgbImage img;
-  if (setjmp(err.jump)) {
-    jpeg_destroy_decompress(&cinfo);
-    throw IoError(cat(where, ": unreadable JPEG (", err.message, ")"));
-  }
-  jpeg_create_decompress(&cinfo);
-  jpeg_mem_src(&cinfo, bytes.data(), static_cast<unsigned long>(bytes.size()));
-  jpeg_read_header(&cinfo, TRUE);
-  cinfo.out_color_space = JCS_RGB;
-  jpeg_start_decompress(&cinfo);
-  img.width = static_cast<int>(cinfo.output_width);
-  img.height = static_cast<int>(cinfo.output_height);
-  img.rgb.resize(std::size_t(img.width) * img.height * 3);
-  while (cinfo.output_scanline < cinfo.output_height) {
-    JSAMPROW row = img.rgb.data() + std::size_t(cinfo.output_scanline) * img.width * 3;
-    jpeg_read_scanlines(&cinfo, &row, 1);
-  }
-  jpeg_finish_decompress(&cinfo);
-  jpeg_destroy_decompress(&cinfo);
-  return img;
-}
-
-std::vector<unsigned char> read_bytes(const fs::path& path, const std::string& what) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw IoError(cat(path.string(), ": cannot open the ", what, " (missing or unreadable)"));
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
 // Opens a scan file and starts its ScanMesh (source and format).
@@ -454,113 +407,24 @@ ScanMesh read_obj(const fs::path& path, const ScanReadOptions& o) {
   return s;
 }
 
-// ---- PLY with vertex colours and optional texture coordinates.
+// ---- PLY with vertex colours and optional texture coordinates (the volume module's reader).
 ScanMesh read_ply_scan(const fs::path& path, const ScanReadOptions& o) {
   ScanMesh s;
-  std::ifstream in = open_scan(path, "PLY", s, std::ios::binary);
-  std::string line;
-  std::getline(in, line);
-  if (line.rfind("ply", 0) != 0) throw InvalidInput(cat(s.source, ": not a PLY file"));
-  struct Prop { std::string name, type, count_type; bool list = false; };
-  struct Element { std::string name; long count = 0; std::vector<Prop> props; };
-  std::vector<Element> elements;
-  std::string format;
-  while (std::getline(in, line)) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    std::istringstream ls(line);
-    std::string tag;
-    ls >> tag;
-    if (tag == "format") ls >> format;
-    else if (tag == "element") { Element e; ls >> e.name >> e.count; elements.push_back(e); }
-    else if (tag == "property") {
-      if (elements.empty()) throw InvalidInput(cat(s.source, ": property before any element"));
-      Prop p;
-      ls >> p.type;
-      if (p.type == "list") { p.list = true; ls >> p.count_type >> p.type; }
-      ls >> p.name;
-      elements.back().props.push_back(p);
-    } else if (tag == "end_header") break;
+  s.source = path.string();
+  s.format = "PLY";
+  PlyMesh ply = read_ply_with_attributes(path);
+  s.mesh = std::move(ply.mesh);
+  s.vertex_colors = std::move(ply.colors);
+  if (ply.uv.rows() > 0) {
+    s.UV = std::move(ply.uv);
+    s.UV.col(1) = (1.0 - s.UV.col(1).array()).matrix();  // PLY's v points up
+    s.FUV = s.mesh.F;
   }
-  if (format != "ascii" && format != "binary_little_endian")
-    throw InvalidInput(cat(s.source, ": PLY format '", format, "' is not supported (ascii or "
-                                     "binary_little_endian)"));
-  const bool ascii = format == "ascii";
-  auto size_of = [&](const std::string& t) -> int {
-    if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
-    if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
-    if (t == "int" || t == "uint" || t == "int32" || t == "uint32" || t == "float" || t == "float32") return 4;
-    if (t == "double" || t == "float64") return 8;
-    throw InvalidInput(cat(s.source, ": unknown PLY type ", t));
-  };
-  auto read_value = [&](const std::string& t) -> double {
-    if (ascii) {
-      std::string w;
-      if (!(in >> w)) throw IoError(cat(s.source, ": truncated"));
-      return std::strtod(w.c_str(), nullptr);
-    }
-    unsigned char b[8];
-    const int n = size_of(t);
-    if (!in.read(reinterpret_cast<char*>(b), n)) throw IoError(cat(s.source, ": truncated"));
-    if (t == "char" || t == "int8") return static_cast<std::int8_t>(b[0]);
-    if (t == "uchar" || t == "uint8") return b[0];
-    if (t == "short" || t == "int16") { std::int16_t v; std::memcpy(&v, b, 2); return v; }
-    if (t == "ushort" || t == "uint16") { std::uint16_t v; std::memcpy(&v, b, 2); return v; }
-    if (t == "int" || t == "int32") { std::int32_t v; std::memcpy(&v, b, 4); return v; }
-    if (t == "uint" || t == "uint32") { std::uint32_t v; std::memcpy(&v, b, 4); return v; }
-    if (t == "float" || t == "float32") { float v; std::memcpy(&v, b, 4); return v; }
-    double v; std::memcpy(&v, b, 8); return v;
-  };
-  std::vector<Eigen::Vector3i> F;
-  bool has_color = false, has_uv = false;
-  for (const auto& e : elements) {
-    if (e.name == "vertex") {
-      s.mesh.V.resize(e.count, 3);
-      s.vertex_colors.resize(e.count, 3);
-      s.UV.resize(e.count, 2);
-      for (long i = 0; i < e.count; ++i)
-        for (const auto& p : e.props) {
-          if (p.list) { const int n = int(read_value(p.count_type)); for (int k = 0; k < n; ++k) read_value(p.type); continue; }
-          const double v = read_value(p.type);
-          const double unit = p.type.find("float") != std::string::npos || p.type == "double" ? 255.0 : 1.0;
-          if (p.name == "x") s.mesh.V(i, 0) = v;
-          else if (p.name == "y") s.mesh.V(i, 1) = v;
-          else if (p.name == "z") s.mesh.V(i, 2) = v;
-          else if (p.name == "red" || p.name == "r") { s.vertex_colors(i, 0) = std::uint8_t(std::clamp(v * unit, 0.0, 255.0)); has_color = true; }
-          else if (p.name == "green" || p.name == "g") s.vertex_colors(i, 1) = std::uint8_t(std::clamp(v * unit, 0.0, 255.0));
-          else if (p.name == "blue" || p.name == "b") s.vertex_colors(i, 2) = std::uint8_t(std::clamp(v * unit, 0.0, 255.0));
-          else if (p.name == "s" || p.name == "u" || p.name == "texture_u") { s.UV(i, 0) = v; has_uv = true; }
-          else if (p.name == "t" || p.name == "v" || p.name == "texture_v") s.UV(i, 1) = 1.0 - v;  // v up
-        }
-    } else {
-      for (long i = 0; i < e.count; ++i)
-        for (const auto& p : e.props) {
-          if (!p.list) { read_value(p.type); continue; }
-          const int n = static_cast<int>(read_value(p.count_type));
-          std::vector<int> ids(std::max(0, n));
-          for (int& id : ids) id = static_cast<int>(read_value(p.type));
-          if (e.name == "face" && (p.name == "vertex_indices" || p.name == "vertex_index"))
-            for (int t = 1; t + 1 < n; ++t) F.emplace_back(ids[0], ids[t], ids[t + 1]);
-        }
-    }
-  }
-  if (!has_color) s.vertex_colors.resize(0, 3);
-  if (!has_uv) s.UV.resize(0, 2);
-  set_faces(s, F, s.mesh.n_vertices());
-  if (has_uv) s.FUV = s.mesh.F;
   finish(s, o);
   return s;
 }
 
 }  // namespace
-
-RgbImage read_image(const fs::path& path) {
-  const auto bytes = read_bytes(path, "texture");
-  if (bytes.size() >= 3 && bytes[0] == 0xFF && bytes[1] == 0xD8 && bytes[2] == 0xFF)
-    return decode_jpeg(bytes, path.string());
-  if (bytes.size() >= 8 && bytes[0] == 0x89 && bytes[1] == 'P' && bytes[2] == 'N' && bytes[3] == 'G')
-    return read_png(path);
-  throw IoError(cat(path.string(), ": not a JPEG or PNG image (unreadable texture)"));
-}
 
 ScanMesh read_scan_mesh(const fs::path& path, const ScanReadOptions& options) {
   if (!fs::exists(path)) throw IoError(cat(path.string(), ": no such file"));

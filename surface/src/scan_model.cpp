@@ -344,12 +344,7 @@ ScanModel build_scan_model(const ScanMesh& scan, const ScanModelOptions& o, Repo
 
 void write_scan_model(const ScanModel& m, const fs::path& dir, bool force, Reporter* reporter) {
   const auto& o = m.options;
-  ModelDirectoryContents c;
-  c.maps = &m.maps;
-  c.stats = &m.stats;
-  c.skin = &m.skin;
-  c.bone = &m.bone;
-  c.color = m.color.rgb.empty() ? nullptr : &m.color;
+  ModelProvenance c;
   c.name = fs::path(m.scan.source).filename().string();
   c.credit = o.credit;
   json R = json::array();
@@ -387,7 +382,7 @@ void write_scan_model(const ScanModel& m, const fs::path& dir, bool force, Repor
                           {"fill", "cells without skin: r_skin filled by harmonic interpolation; "
                                    "see validity.nrrd"}}
                          .dump();
-  write_model_directory(c, dir, force, reporter);
+  write_model_directory(m, c, dir, force, reporter);
 }
 
 }  // namespace caps

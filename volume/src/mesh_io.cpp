@@ -66,6 +66,18 @@ struct Element {
 
 enum class Format { Ascii, BinaryLE, BinaryBE };
 
+// The role of a scalar vertex property by its name (the names scanners and MeshLab write):
+// 0..2 x y z, 3..5 red green blue, 6..7 texture u v, -1 anything else.
+int vertex_role(const std::string& name) {
+  static const std::pair<std::string_view, int> kNames[] = {
+      {"x", 0},     {"y", 1},         {"z", 2},         {"red", 3},       {"r", 3},
+      {"green", 4}, {"g", 4},         {"blue", 5},      {"b", 5},         {"u", 6},
+      {"s", 6},     {"texture_u", 6}, {"v", 7},         {"t", 7},         {"texture_v", 7}};
+  for (const auto& [n, role] : kNames)
+    if (n == name) return role;
+  return -1;
+}
+
 // Reads values one after the other from the body, in whichever encoding the header declared.
 class BodyReader {
  public:
@@ -177,7 +189,9 @@ void write_ply(const TriMesh& mesh, const std::filesystem::path& path) {
   write_ply(mesh, path, nullptr);
 }
 
-TriMesh read_ply(const std::filesystem::path& path) {
+TriMesh read_ply(const std::filesystem::path& path) { return read_ply_with_attributes(path).mesh; }
+
+PlyMesh read_ply_with_attributes(const std::filesystem::path& path) {
   const std::string name = path.string();
   std::ifstream in(path, std::ios::binary);
   if (!in) throw IoError(cat(name, ": cannot open the PLY file; check the path and permissions"));
@@ -259,20 +273,27 @@ TriMesh read_ply(const std::filesystem::path& path) {
     throw IoError(cat(name, ": PLY header has no 'end_header'; the file is truncated or not PLY"));
   if (!have_format) throw InvalidInput(cat(name, ": PLY header has no 'format' line"));
 
-  TriMesh mesh;
-  bool have_vertices = false, have_faces = false;
+  PlyMesh out;
+  TriMesh& mesh = out.mesh;
+  bool have_vertices = false, have_faces = false, have_colors = false, have_uv = false;
   BodyReader body(file, std::min(pos, file.size()), fmt, name);
   std::vector<int> poly;
   std::vector<std::array<int, 3>> tris;
   for (const Element& el : elements) {
     const bool is_vertex = el.name == "vertex", is_face = el.name == "face";
     int ix = -1, iy = -1, iz = -1, ifl = -1;
+    // What each scalar vertex property is: 0..2 the coordinates, 3..5 the colour, 6..7 the
+    // texture coordinates, -1 skipped.
+    std::vector<int> role(el.props.size(), -1);
     for (int q = 0; q < int(el.props.size()); ++q) {
       const Property& p = el.props[q];
-      if (is_vertex && !p.is_list && p.name == "x") ix = q;
-      if (is_vertex && !p.is_list && p.name == "y") iy = q;
-      if (is_vertex && !p.is_list && p.name == "z") iz = q;
+      if (is_vertex && !p.is_list) role[q] = vertex_role(p.name);
       if (is_face && p.is_list && (p.name == "vertex_indices" || p.name == "vertex_index")) ifl = q;
+      if (role[q] == 0) ix = q;
+      if (role[q] == 1) iy = q;
+      if (role[q] == 2) iz = q;
+      if (role[q] == 3) have_colors = true;
+      if (role[q] == 6) have_uv = true;
     }
     if (is_vertex) {
       if (ix < 0 || iy < 0 || iz < 0)
@@ -282,6 +303,8 @@ TriMesh read_ply(const std::filesystem::path& path) {
         throw IoError(cat(name, ": PLY declares ", el.count, " vertices but only ",
                           body.remaining(), " bytes follow; the file is truncated"));
       mesh.V.resize(el.count, 3);
+      if (have_colors) out.colors.setZero(el.count, 3);
+      if (have_uv) out.uv.setZero(el.count, 2);
       have_vertices = true;
     }
     if (is_face) {
@@ -297,11 +320,18 @@ TriMesh read_ply(const std::filesystem::path& path) {
         const Property& p = el.props[q];
         if (!p.is_list) {
           const double v = body.next(p.type);
-          if (is_vertex && (q == ix || q == iy || q == iz)) {
+          if (!is_vertex || role[q] < 0) continue;
+          if (role[q] <= 2) {
             if (!std::isfinite(v))
               throw InvalidInput(cat(name, ": PLY vertex ", n, " has a non-finite coordinate (", v,
                                      "); repair the mesh in the program that wrote it"));
-            mesh.V(n, q == ix ? 0 : q == iy ? 1 : 2) = v;
+            mesh.V(n, role[q]) = v;
+          } else if (role[q] <= 5 && have_colors) {
+            const bool unit = p.type == Scalar::Float32 || p.type == Scalar::Float64;
+            out.colors(n, role[q] - 3) =
+                static_cast<std::uint8_t>(std::clamp(v * (unit ? 255.0 : 1.0), 0.0, 255.0));
+          } else if (role[q] >= 6 && have_uv) {
+            out.uv(n, role[q] - 6) = v;
           }
           continue;
         }
@@ -337,7 +367,7 @@ TriMesh read_ply(const std::filesystem::path& path) {
   mesh.F.resize(Eigen::Index(tris.size()), 3);
   for (std::size_t f = 0; f < tris.size(); ++f)
     for (int c = 0; c < 3; ++c) mesh.F(Eigen::Index(f), c) = tris[f][c];
-  return mesh;
+  return out;
 }
 
 }  // namespace caps

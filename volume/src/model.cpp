@@ -4,17 +4,14 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <limits>
 #include <numeric>
 
-#include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/reporter.hpp"
 #include "caps/core/units.hpp"
-#include "caps/volume/image_io.hpp"
 #include "caps/volume/isosurface.hpp"
-#include "caps/volume/mesh_io.hpp"
+#include "caps/volume/model_dir.hpp"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -65,8 +62,6 @@ double percentile(std::vector<double> xs, double p) {
 
 json vec(const Eigen::Vector3d& v) { return json::array({v[0], v[1], v[2]}); }
 json vec(const Eigen::Vector3i& v) { return json::array({v[0], v[1], v[2]}); }
-
-double finite_or_null_guard(double x) { return std::isfinite(x) ? x : 0.0; }
 
 }  // namespace
 
@@ -179,11 +174,7 @@ VolumeModel build_volume_model(const Volume& v, const ModelOptions& o, Reporter*
 
 void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter* reporter) {
   const auto& seg = m.segmentation;
-  ModelDirectoryContents c;
-  c.maps = &m.maps;
-  c.stats = &m.stats;
-  c.skin = &m.skin;
-  c.bone = &m.bone;
+  ModelProvenance c;
   c.name = fs::path(m.source).filename().string();
   c.source_json = json{{"kind", "volume"},
                        {"path", m.source},
@@ -211,145 +202,7 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter
                           {"fill", "invalid cells: r_skin and thickness filled by harmonic "
                                    "interpolation from valid cells; see validity.nrrd"}}
                          .dump();
-  write_model_directory(c, dir, force, reporter);
-}
-
-void write_model_directory(const ModelDirectoryContents& c, const fs::path& dir, bool force,
-                           Reporter* reporter) {
-  if (!c.maps || !c.stats || !c.skin || !c.bone)
-    throw InvalidInput("write_model_directory: maps, statistics, skin and bone are required");
-  const auto& maps = *c.maps;
-  const auto& g = maps.grid;
-  if (c.color && (c.color->width != g.n_theta || c.color->height != g.n_z ||
-                  c.color->rgb.size() != g.size() * 3))
-    throw InvalidInput(cat("write_model_directory: the colour image is ", c.color->width, " x ",
-                           c.color->height, ", expected the grid's ", g.n_theta, " x ", g.n_z));
-  auto parse = [](const std::string& text, const char* what) {
-    try {
-      return text.empty() ? json::object() : json::parse(text);
-    } catch (const json::exception& e) {
-      throw InvalidInput(cat("write_model_directory: ", what, " is not valid JSON (", e.what(), ")"));
-    }
-  };
-  OutputDirectory out(dir, force);
-  const fs::path p = out.path();
-  Progress progress(reporter, "writing the model", 8);
-  write_map_nrrd(p / "r_skin.nrrd", maps.r_skin, g, "r_skin: skin radius", "mm");
-  write_map_nrrd(p / "r_bone.nrrd", maps.r_bone, g, "r_bone: bone radius", "mm");
-  write_map_nrrd(p / "thickness.nrrd", maps.thickness, g, "thickness: radial soft tissue", "mm");
-  write_map_nrrd(p / "thickness_normal.nrrd", maps.thickness_normal, g,
-                 "thickness_normal: skin to nearest bone", "mm");
-  std::vector<float> flags(maps.flags.begin(), maps.flags.end());
-  write_map_nrrd(p / "validity.nrrd", flags, g,
-                 "validity: 0 valid; bit flags 1 no_skin, 2 no_bone, 4 undercut, 8 grazing, "
-                 "16 truncated", "flags");
-  progress.update(3);
-  write_thickness_png(p / "thickness.png", maps, maps.thickness,
-                      cat("Soft-tissue thickness (radial), ", c.name), c.credit);
-  write_skin_png(p / "skin.png", maps, cat("Skin range image (shaded), ", c.name), c.credit);
-  if (c.color) write_png(p / "color.png", *c.color);
-  progress.update(5);
-  write_ply(*c.skin, p / "skin.ply");
-  write_ply(*c.bone, p / "bone.ply");
-  progress.update(7);
-
-  const auto& s = *c.stats;
-  json j;
-  j["format"] = "caps-model";
-  j["format_version"] = kModelFormatVersion;
-  j["created_by"] = "caps 0.1.0";
-  j["units"] = {{"length", "mm"}, {"angle", "deg"}};
-  j["frame"] = "LPS";
-  j["source"] = parse(c.source_json, "source_json");
-  j["axis"] = {{"origin_lps", vec(maps.axis.origin_lps)},
-               {"direction", vec(maps.axis.direction)},
-               {"front", vec(maps.axis.front)},
-               {"left", vec(maps.axis.left())},
-               {"convention", "theta = 0 at front, increasing towards the patient's left; "
-                              "z along direction from origin_lps; r from the axis"}};
-  j["grid"] = {{"n_theta", g.n_theta}, {"n_z", g.n_z},       {"theta0_deg", g.theta0_deg},
-               {"dtheta_deg", g.dtheta_deg()}, {"z0_mm", g.z0_mm}, {"dz_mm", g.dz_mm},
-               {"layout", "theta fastest; sample (j, k) at theta0 + j dtheta, z0 + k dz"}};
-  j["segmentation"] = parse(c.segmentation_json, "segmentation_json");
-  j["thickness"] = parse(c.thickness_json, "thickness_json");
-  j["statistics"] = {
-      {"cells", s.cells},
-      {"valid_cells", s.valid_cells},
-      {"valid_fraction", s.cells ? double(s.valid_cells) / s.cells : 0.0},
-      {"flagged_cells", {{"no_skin", s.no_skin}, {"no_bone", s.no_bone}, {"undercut", s.undercut},
-                         {"grazing", s.grazing}, {"truncated", s.truncated}}},
-      {"thickness_mm", {{"mean", s.thickness_mean_mm}, {"median", s.thickness_median_mm},
-                        {"p5", s.thickness_p5_mm}, {"p95", s.thickness_p95_mm}}},
-      {"thickness_normal_median_mm", s.thickness_normal_median_mm},
-      {"forehead_thickness_mm", finite_or_null_guard(s.forehead_thickness_mm)},
-      {"face", {{"theta_deg", s.face_theta_deg}, {"z_mm", s.face_z_mm}}},
-      {"r_skin_median_mm", s.r_skin_median_mm}};
-  j["files"] = {{"r_skin", "r_skin.nrrd"},       {"r_bone", "r_bone.nrrd"},
-                {"thickness", "thickness.nrrd"}, {"thickness_normal", "thickness_normal.nrrd"},
-                {"validity", "validity.nrrd"},   {"thickness_png", "thickness.png"},
-                {"skin_png", "skin.png"},        {"skin_mesh", "skin.ply"},
-                {"bone_mesh", "bone.ply"}};
-  if (c.color) j["files"]["color"] = "color.png";
-  j["meshes"] = {
-      {"skin", {{"vertices", c.skin->n_vertices()}, {"faces", c.skin->n_faces()},
-                {"area_mm2", mesh_area(*c.skin)}, {"closed", is_closed_manifold(*c.skin)}}},
-      {"bone", {{"vertices", c.bone->n_vertices()}, {"faces", c.bone->n_faces()},
-                {"area_mm2", mesh_area(*c.bone)}, {"closed", is_closed_manifold(*c.bone)}}}};
-  j["warnings"] = reporter ? reporter->warnings() : std::vector<std::string>{};
-  write_text_atomic(p / "model.json", j.dump(2) + "\n");
-  out.commit();
-}
-
-std::string read_model_json(const fs::path& dir) {
-  const fs::path file = dir / "model.json";
-  if (!fs::is_directory(dir))
-    throw IoError(cat(dir.string(), ": not a model directory (no such folder); build one with "
-                      "`caps model from-volume`"));
-  std::ifstream in(file);
-  if (!in) throw IoError(cat(file.string(), ": missing; is ", dir.string(), " a caps model?"));
-  json j;
-  try {
-    in >> j;
-  } catch (const json::exception& e) {
-    throw InvalidInput(cat(file.string(), ": not valid JSON (", e.what(), ")"));
-  }
-  if (j.value("format", "") != "caps-model")
-    throw InvalidInput(cat(file.string(), ": 'format' is not \"caps-model\""));
-  const int version = j.value("format_version", -1);
-  if (version != kModelFormatVersion)
-    throw InvalidInput(cat(file.string(), ": format_version ", version, " is not supported (this "
-                           "caps reads version ", kModelFormatVersion, "); rebuild the model"));
-  if (j.contains("files"))
-    for (const auto& [key, name] : j["files"].items())
-      if (!fs::exists(dir / name.get<std::string>()))
-        throw InvalidInput(cat(dir.string(), ": model.json names ", key, " = ",
-                               name.get<std::string>(), " but the file is missing"));
-  return j.dump(2);
-}
-
-std::string model_summary(const fs::path& dir) {
-  const json j = json::parse(read_model_json(dir));
-  const auto& s = j["statistics"];
-  const auto& g = j["grid"];
-  std::ostringstream os;
-  os.precision(3);
-  os << "model      " << dir.string() << " (format " << j["format_version"] << ")\n"
-     << "source     " << j["source"]["path"].get<std::string>() << " ("
-     << j["source"]["format"].get<std::string>() << ", "
-     << j["source"]["modality"].get<std::string>() << ")\n"
-     << "grid       " << g["n_theta"] << " x " << g["n_z"] << " (theta x z), dz "
-     << g["dz_mm"].get<double>() << " mm, z " << g["z0_mm"].get<double>() << " .. "
-     << g["z0_mm"].get<double>() + (g["n_z"].get<int>() - 1) * g["dz_mm"].get<double>()
-     << " mm\n"
-     << "skin       " << j["segmentation"]["skin_method"].get<std::string>() << "\n"
-     << "bone       " << j["segmentation"]["bone_method"].get<std::string>() << "\n"
-     << "valid      " << 100.0 * s["valid_fraction"].get<double>() << " % of cells\n"
-     << "thickness  median " << s["thickness_mm"]["median"].get<double>() << " mm (5-95%: "
-     << s["thickness_mm"]["p5"].get<double>() << " - " << s["thickness_mm"]["p95"].get<double>()
-     << " mm), forehead " << s["forehead_thickness_mm"].get<double>() << " mm\n"
-     << "face       theta " << s["face"]["theta_deg"].get<double>() << " deg, z "
-     << s["face"]["z_mm"].get<double>() << " mm\n";
-  return os.str();
+  write_model_directory(m, c, dir, force, reporter);
 }
 
 }  // namespace caps

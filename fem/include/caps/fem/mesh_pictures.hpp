@@ -1,6 +1,6 @@
 #pragma once
-/// @brief Pictures of the meshes (PNG, cairo): the surface mesh like the paper's Figure 3 and a
-/// cross-section of the continuum mesh like its Figure 4.
+/// @brief Pictures of the meshes (PNG, drawn on a Canvas): the surface mesh like the paper's
+/// Figure 3 and a cross-section of the continuum mesh like its Figure 4.
 
 #include <filesystem>
 #include <string>

@@ -14,7 +14,7 @@
 
 #include "caps/core/mesh.hpp"
 #include "caps/render/skin_surface.hpp"
-#include "caps/volume/image_io.hpp"
+#include "caps/image/rgb_image.hpp"
 
 namespace caps {
 class PatientModel;

@@ -19,7 +19,7 @@
 #include <string>
 
 #include "caps/volume/cylindrical_map.hpp"
-#include "caps/volume/image_io.hpp"
+#include "caps/image/rgb_image.hpp"
 
 namespace caps {
 
@@ -50,6 +50,8 @@ class PatientModel {
   const RgbImage& color() const { return color_; }
   const std::string& source_kind() const { return source_kind_; }        ///< "volume" | "scan"
   const std::string& thickness_kind() const { return thickness_kind_; }  ///< e.g. "constant"
+  /// The model's identity (volume's content_hash() of its maps; model.json "content_hash").
+  std::string content_hash() const;
 
   /// Whether z (mm) lies between the first and the last row of the grid.
   bool has_z(double z_mm) const;

@@ -1,6 +1,7 @@
 #pragma once
 /// @brief Reading textured surface scans: glTF 2.0 (.gltf/.glb), PLY with vertex colours, OBJ
-/// with MTL and texture, VTK legacy polydata with texture coordinates; JPEG and PNG textures.
+/// with MTL and texture, VTK legacy polydata with texture coordinates; JPEG and PNG textures
+/// (read_image(), caps::image).
 ///
 /// Meshes are returned as stored: file units, file frame. Texture coordinates are normalised to
 /// image convention on reading (u to the right, v downward: row = v * height), so OBJ and VTK
@@ -14,7 +15,7 @@
 #include <vector>
 
 #include "caps/core/mesh.hpp"
-#include "caps/volume/image_io.hpp"
+#include "caps/image/image_io.hpp"
 
 namespace caps {
 
@@ -41,8 +42,5 @@ struct ScanReadOptions {
 /// unreadable or truncated file or texture; InvalidInput for malformed content, no faces,
 /// indices out of range or non-finite coordinates.
 ScanMesh read_scan_mesh(const std::filesystem::path& path, const ScanReadOptions& options = {});
-
-/// Reads a JPEG or PNG image into RGB (by its signature). Throws IoError.
-RgbImage read_image(const std::filesystem::path& path);
 
 }  // namespace caps

@@ -39,13 +39,9 @@ struct ScanModelOptions {
   std::string credit;                   ///< credit line for the pictures (e.g. the scan's licence)
 };
 
-/// A model built from a scan.
-struct ScanModel {
-  CylindricalMaps maps;
-  ModelStatistics stats;
-  TriMesh skin;               ///< the scan in LPS mm
-  TriMesh bone;               ///< range mesh of r_bone
-  RgbImage color;             ///< n_theta × n_z, superior on top; empty if the scan has no colour
+/// A model built from a scan: skin is the scan in LPS mm, bone the range mesh of r_bone, color
+/// the scan's colour sampled over the grid (empty if the scan has none).
+struct ScanModel : ModelContent {
   double mm_per_unit = 1;     ///< the scale used
   double height_mm = 0;       ///< the scan's extent along superior
   Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();  ///< file frame to LPS

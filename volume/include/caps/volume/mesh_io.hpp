@@ -26,14 +26,28 @@ void write_ply(const TriMesh& mesh, const std::filesystem::path& path,
 /// Writes a mesh as binary little-endian PLY without colours; see the overload above.
 void write_ply(const TriMesh& mesh, const std::filesystem::path& path);
 
+/// A PLY mesh with the per-vertex attributes scanners write.
+struct PlyMesh {
+  TriMesh mesh;  ///< V #V×3 as stored, F #F×3
+  /// #V×3 colours (red green blue or r g b; float values in [0, 1] scaled to 0..255), or empty.
+  Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 3> colors;
+  /// #V×2 texture coordinates as stored (u, v; s t or texture_u texture_v; PLY's v points up),
+  /// or empty.
+  Eigen::MatrixX2d uv;
+};
+
 /// Reads a PLY file: ascii, binary_little_endian or binary_big_endian; vertex x y z of any
-/// numeric type; faces as a vertex_indices (or vertex_index) list, polygons split into fans of
-/// triangles. Other elements and properties are skipped.
+/// numeric type, with colours and texture coordinates if present; faces as a vertex_indices (or
+/// vertex_index) list, polygons split into fans of triangles. Other elements and properties are
+/// skipped.
 /// @param path  the file
-/// @return      V #V×3 as stored (caps writes LPS mm), F #F×3
 /// Throws IoError if the file is missing, unreadable or truncated; InvalidInput (naming the file)
 /// for a malformed header, no vertex coordinates, no faces, non-finite coordinates, a face with
 /// fewer than 3 vertices or an index out of range.
+PlyMesh read_ply_with_attributes(const std::filesystem::path& path);
+
+/// read_ply_with_attributes() without the attributes.
+/// @return  V #V×3 as stored (caps writes LPS mm), F #F×3
 TriMesh read_ply(const std::filesystem::path& path);
 
 }  // namespace caps

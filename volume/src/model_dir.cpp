@@ -1,0 +1,352 @@
+#include "caps/volume/model_dir.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "caps/core/atomic_output.hpp"
+#include "caps/core/error.hpp"
+#include "caps/core/reporter.hpp"
+#include "caps/image/image_io.hpp"
+#include "caps/volume/isosurface.hpp"
+#include "caps/volume/map_nrrd.hpp"
+#include "caps/volume/mesh_io.hpp"
+#include "caps/volume/model_figures.hpp"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace caps {
+namespace {
+
+json vec(const Eigen::Vector3d& v) { return json::array({v[0], v[1], v[2]}); }
+
+Eigen::Vector3d vec3(const json& v) {
+  return {v.at(0).get<double>(), v.at(1).get<double>(), v.at(2).get<double>()};
+}
+
+double finite_or_zero(double x) { return std::isfinite(x) ? x : 0.0; }
+
+json parse_object(const std::string& text, const char* what) {
+  try {
+    return text.empty() ? json::object() : json::parse(text);
+  } catch (const json::exception& e) {
+    throw InvalidInput(cat("model.json: ", what, " is not valid JSON (", e.what(), ")"));
+  }
+}
+
+// model.json's "files": every file the directory holds, by role.
+json files_json(bool has_color) {
+  namespace f = model_file;
+  json files = {{"r_skin", f::kRSkin},          {"r_bone", f::kRBone},
+                {"thickness", f::kThickness},   {"thickness_normal", f::kThicknessNormal},
+                {"validity", f::kValidity},     {"thickness_png", f::kThicknessPng},
+                {"skin_png", f::kSkinPng},      {"skin_mesh", f::kSkinMesh},
+                {"bone_mesh", f::kBoneMesh}};
+  if (has_color) files["color"] = f::kColor;
+  return files;
+}
+
+json statistics_json(const ModelStatistics& s) {
+  return {{"cells", s.cells},
+          {"valid_cells", s.valid_cells},
+          {"valid_fraction", s.cells ? double(s.valid_cells) / s.cells : 0.0},
+          {"flagged_cells", {{"no_skin", s.no_skin}, {"no_bone", s.no_bone}, {"undercut", s.undercut},
+                             {"grazing", s.grazing}, {"truncated", s.truncated}}},
+          {"thickness_mm", {{"mean", s.thickness_mean_mm}, {"median", s.thickness_median_mm},
+                            {"p5", s.thickness_p5_mm}, {"p95", s.thickness_p95_mm}}},
+          {"thickness_normal_median_mm", s.thickness_normal_median_mm},
+          {"forehead_thickness_mm", finite_or_zero(s.forehead_thickness_mm)},
+          {"face", {{"theta_deg", s.face_theta_deg}, {"z_mm", s.face_z_mm}}},
+          {"r_skin_median_mm", s.r_skin_median_mm}};
+}
+
+// Missing statistics read as 0: they describe the model, nothing downstream depends on them.
+ModelStatistics statistics_of(const json& j) {
+  ModelStatistics s;
+  if (!j.is_object()) return s;
+  auto count = [](const json& o, const char* key) { return o.value(key, std::size_t(0)); };
+  auto num = [](const json& o, const char* key) { return o.value(key, 0.0); };
+  const json none = json::object();
+  const json& flagged = j.contains("flagged_cells") ? j["flagged_cells"] : none;
+  const json& t = j.contains("thickness_mm") ? j["thickness_mm"] : none;
+  const json& face = j.contains("face") ? j["face"] : none;
+  s.cells = count(j, "cells");
+  s.valid_cells = count(j, "valid_cells");
+  s.no_skin = count(flagged, "no_skin");
+  s.no_bone = count(flagged, "no_bone");
+  s.undercut = count(flagged, "undercut");
+  s.grazing = count(flagged, "grazing");
+  s.truncated = count(flagged, "truncated");
+  s.thickness_mean_mm = num(t, "mean");
+  s.thickness_median_mm = num(t, "median");
+  s.thickness_p5_mm = num(t, "p5");
+  s.thickness_p95_mm = num(t, "p95");
+  s.thickness_normal_median_mm = num(j, "thickness_normal_median_mm");
+  s.forehead_thickness_mm = num(j, "forehead_thickness_mm");
+  s.face_theta_deg = num(face, "theta_deg");
+  s.face_z_mm = num(face, "z_mm");
+  s.r_skin_median_mm = num(j, "r_skin_median_mm");
+  return s;
+}
+
+json mesh_json(const MeshSummary& m) {
+  return {{"vertices", m.vertices}, {"faces", m.faces}, {"area_mm2", m.area_mm2}, {"closed", m.closed}};
+}
+
+MeshSummary mesh_summary_of(const json& j) {
+  MeshSummary m;
+  if (!j.is_object()) return m;
+  m.vertices = j.value("vertices", std::int64_t(0));
+  m.faces = j.value("faces", std::int64_t(0));
+  m.area_mm2 = j.value("area_mm2", 0.0);
+  m.closed = j.value("closed", false);
+  return m;
+}
+
+MeshSummary summary_of(const TriMesh& m) {
+  return {m.n_vertices(), m.n_faces(), mesh_area(m), is_closed_manifold(m)};
+}
+
+json to_json(const ModelInfo& info) {
+  const auto& a = info.axis;
+  const auto& g = info.grid;
+  json j;
+  j["format"] = "caps-model";
+  j["format_version"] = info.format_version;
+  j["created_by"] = info.created_by;
+  j["units"] = {{"length", "mm"}, {"angle", "deg"}};
+  j["frame"] = "LPS";
+  j["source"] = parse_object(info.source_json, "source");
+  j["axis"] = {{"origin_lps", vec(a.origin_lps)},
+               {"direction", vec(a.direction)},
+               {"front", vec(a.front)},
+               {"left", vec(a.left())},
+               {"convention", "theta = 0 at front, increasing towards the patient's left; "
+                              "z along direction from origin_lps; r from the axis"}};
+  j["grid"] = {{"n_theta", g.n_theta}, {"n_z", g.n_z},       {"theta0_deg", g.theta0_deg},
+               {"dtheta_deg", g.dtheta_deg()}, {"z0_mm", g.z0_mm}, {"dz_mm", g.dz_mm},
+               {"layout", "theta fastest; sample (j, k) at theta0 + j dtheta, z0 + k dz"}};
+  j["segmentation"] = parse_object(info.segmentation_json, "segmentation");
+  j["thickness"] = parse_object(info.thickness_json, "thickness");
+  j["statistics"] = statistics_json(info.stats);
+  j["files"] = files_json(info.has_color);
+  j["meshes"] = {{"skin", mesh_json(info.skin)}, {"bone", mesh_json(info.bone)}};
+  if (!info.content_hash.empty()) j["content_hash"] = info.content_hash;
+  j["warnings"] = info.warnings;
+  return j;
+}
+
+// model.json of `dir`, with the format, the version and the files it names checked.
+json load_model_json(const fs::path& dir) {
+  const fs::path file = dir / model_file::kJson;
+  if (!fs::is_directory(dir))
+    throw IoError(cat(dir.string(), ": not a model directory (no such folder); build one with "
+                      "`caps model from-volume`"));
+  std::ifstream in(file);
+  if (!in) throw IoError(cat(file.string(), ": missing; is ", dir.string(), " a caps model?"));
+  json j;
+  try {
+    in >> j;
+  } catch (const json::exception& e) {
+    throw InvalidInput(cat(file.string(), ": not valid JSON (", e.what(), ")"));
+  }
+  if (j.value("format", "") != "caps-model")
+    throw InvalidInput(cat(file.string(), ": 'format' is not \"caps-model\""));
+  const int version = j.value("format_version", -1);
+  if (version != kModelFormatVersion)
+    throw InvalidInput(cat(file.string(), ": format_version ", version, " is not supported (this "
+                           "caps reads version ", kModelFormatVersion, "); rebuild the model"));
+  if (j.contains("files"))
+    for (const auto& [key, name] : j["files"].items())
+      if (!fs::exists(dir / name.get<std::string>()))
+        throw InvalidInput(cat(dir.string(), ": model.json names ", key, " = ",
+                               name.get<std::string>(), " but the file is missing"));
+  return j;
+}
+
+}  // namespace
+
+std::string ModelInfo::source_kind() const {
+  return parse_object(source_json, "source").value("kind", std::string("volume"));
+}
+
+std::string ModelInfo::thickness_kind() const {
+  return parse_object(thickness_json, "thickness").value("kind", std::string());
+}
+
+std::string model_json_text(const ModelInfo& info) { return to_json(info).dump(2) + "\n"; }
+
+ModelInfo read_model_info(const fs::path& dir) {
+  const json j = load_model_json(dir);
+  const fs::path file = dir / model_file::kJson;
+  ModelInfo info;
+  info.format_version = j.at("format_version").get<int>();
+  info.created_by = j.value("created_by", std::string());
+  try {
+    const auto& a = j.at("axis");
+    info.axis.origin_lps = vec3(a.at("origin_lps"));
+    info.axis.direction = vec3(a.at("direction")).normalized();
+    info.axis.front = vec3(a.at("front")).normalized();
+    const auto& g = j.at("grid");
+    info.grid.n_theta = g.at("n_theta").get<int>();
+    info.grid.n_z = g.at("n_z").get<int>();
+    info.grid.theta0_deg = g.at("theta0_deg").get<double>();
+    info.grid.z0_mm = g.at("z0_mm").get<double>();
+    info.grid.dz_mm = g.at("dz_mm").get<double>();
+  } catch (const json::exception& e) {
+    throw InvalidInput(cat(file.string(), ": axis or grid is incomplete (", e.what(),
+                           "); rebuild the model"));
+  }
+  const auto& g = info.grid;
+  if (g.n_theta < 4 || g.n_z < 2 || !(g.dz_mm > 0))
+    throw InvalidInput(cat(file.string(), ": grid ", g.n_theta, " x ", g.n_z, " with dz ",
+                           g.dz_mm, " mm is not usable; rebuild the model"));
+  auto text = [&](const char* key) { return j.contains(key) ? j[key].dump() : std::string("{}"); };
+  info.source_json = text("source");
+  info.segmentation_json = text("segmentation");
+  info.thickness_json = text("thickness");
+  info.stats = statistics_of(j.value("statistics", json::object()));
+  info.has_color = j.contains("files") && j["files"].contains("color");
+  const json meshes = j.value("meshes", json::object());
+  info.skin = mesh_summary_of(meshes.value("skin", json::object()));
+  info.bone = mesh_summary_of(meshes.value("bone", json::object()));
+  if (j.contains("content_hash") && j["content_hash"].is_string())
+    info.content_hash = j["content_hash"].get<std::string>();
+  if (j.contains("warnings") && j["warnings"].is_array())
+    for (const auto& w : j["warnings"])
+      if (w.is_string()) info.warnings.push_back(w.get<std::string>());
+  return info;
+}
+
+std::string read_model_json(const fs::path& dir) {
+  read_model_info(dir);
+  return load_model_json(dir).dump(2);
+}
+
+CylindricalMaps read_model_maps(const fs::path& dir, const ModelInfo& info) {
+  namespace f = model_file;
+  CylindricalMaps maps;
+  maps.axis = info.axis;
+  maps.grid = info.grid;
+  const auto& g = maps.grid;
+  maps.r_skin = read_map_nrrd(dir / f::kRSkin, g);
+  maps.r_bone = read_map_nrrd(dir / f::kRBone, g);
+  maps.thickness = read_map_nrrd(dir / f::kThickness, g);
+  maps.thickness_normal = read_map_nrrd(dir / f::kThicknessNormal, g);
+  const std::vector<float> flags = read_map_nrrd(dir / f::kValidity, g);
+  maps.flags.resize(flags.size());
+  maps.measured_skin.resize(flags.size());
+  maps.measured_bone.resize(flags.size());
+  for (std::size_t i = 0; i < flags.size(); ++i) {
+    maps.flags[i] = static_cast<std::uint8_t>(flags[i]);
+    maps.measured_skin[i] = !(maps.flags[i] & kNoSkin);
+    maps.measured_bone[i] = !(maps.flags[i] & (kNoSkin | kNoBone));
+  }
+  return maps;
+}
+
+RgbImage read_model_color(const fs::path& dir, const ModelInfo& info) {
+  if (!info.has_color) return {};
+  const fs::path file = dir / model_file::kColor;
+  RgbImage color = read_png(file);
+  const auto& g = info.grid;
+  if (color.width != g.n_theta || color.height != g.n_z)
+    throw InvalidInput(cat(file.string(), ": ", color.width, " x ", color.height,
+                           " pixels, expected the grid's ", g.n_theta, " x ", g.n_z));
+  return color;
+}
+
+std::string content_hash(const CylindricalMaps& maps) {
+  std::uint64_t h = 1469598103934665603ull;  // FNV-1a, 64 bit
+  auto add = [&h](const void* data, std::size_t n) {
+    const auto* b = static_cast<const unsigned char*>(data);
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ b[i]) * 1099511628211ull;
+  };
+  const auto& g = maps.grid;
+  const double grid[] = {double(g.n_theta), double(g.n_z), g.theta0_deg, g.z0_mm, g.dz_mm};
+  add(grid, sizeof grid);
+  for (const auto* v : {&maps.r_skin, &maps.r_bone, &maps.thickness})
+    add(v->data(), v->size() * sizeof(float));
+  add(maps.flags.data(), maps.flags.size() * sizeof(maps.flags[0]));
+  char text[32];
+  std::snprintf(text, sizeof text, "fnv1a64:%016llx", static_cast<unsigned long long>(h));
+  return text;
+}
+
+void write_model_directory(const ModelContent& m, const ModelProvenance& c, const fs::path& dir,
+                           bool force, Reporter* reporter) {
+  namespace f = model_file;
+  const auto& maps = m.maps;
+  const auto& g = maps.grid;
+  const bool has_color = !m.color.empty();
+  if (has_color && (m.color.width != g.n_theta || m.color.height != g.n_z ||
+                    m.color.rgb.size() != g.size() * 3))
+    throw InvalidInput(cat("write_model_directory: the colour image is ", m.color.width, " x ",
+                           m.color.height, ", expected the grid's ", g.n_theta, " x ", g.n_z));
+  ModelInfo info;
+  info.axis = maps.axis;
+  info.grid = g;
+  info.source_json = c.source_json;
+  info.segmentation_json = c.segmentation_json;
+  info.thickness_json = c.thickness_json;
+  info.stats = m.stats;
+  info.has_color = has_color;
+  info.skin = summary_of(m.skin);
+  info.bone = summary_of(m.bone);
+  info.content_hash = content_hash(maps);
+  if (reporter) info.warnings = reporter->warnings();
+  const std::string model_json = model_json_text(info);  // checks the JSON before writing
+
+  OutputDirectory out(dir, force);
+  const fs::path p = out.path();
+  Progress progress(reporter, "writing the model", 8);
+  write_map_nrrd(p / f::kRSkin, maps.r_skin, g, "r_skin: skin radius", "mm");
+  write_map_nrrd(p / f::kRBone, maps.r_bone, g, "r_bone: bone radius", "mm");
+  write_map_nrrd(p / f::kThickness, maps.thickness, g, "thickness: radial soft tissue", "mm");
+  write_map_nrrd(p / f::kThicknessNormal, maps.thickness_normal, g,
+                 "thickness_normal: skin to nearest bone", "mm");
+  std::vector<float> flags(maps.flags.begin(), maps.flags.end());
+  write_map_nrrd(p / f::kValidity, flags, g,
+                 "validity: 0 valid; bit flags 1 no_skin, 2 no_bone, 4 undercut, 8 grazing, "
+                 "16 truncated", "flags");
+  progress.update(3);
+  write_thickness_png(p / f::kThicknessPng, maps, maps.thickness,
+                      cat("Soft-tissue thickness (radial), ", c.name), c.credit);
+  write_skin_png(p / f::kSkinPng, maps, cat("Skin range image (shaded), ", c.name), c.credit);
+  if (has_color) write_png(p / f::kColor, m.color);
+  progress.update(5);
+  write_ply(m.skin, p / f::kSkinMesh);
+  write_ply(m.bone, p / f::kBoneMesh);
+  progress.update(7);
+  write_text_atomic(p / f::kJson, model_json);
+  out.commit();
+}
+
+std::string model_summary(const fs::path& dir) {
+  const ModelInfo info = read_model_info(dir);
+  const json source = parse_object(info.source_json, "source");
+  const json seg = parse_object(info.segmentation_json, "segmentation");
+  const auto& s = info.stats;
+  const auto& g = info.grid;
+  std::ostringstream os;
+  os.precision(3);
+  os << "model      " << dir.string() << " (format " << info.format_version << ")\n"
+     << "source     " << source.at("path").get<std::string>() << " ("
+     << source.at("format").get<std::string>() << ", "
+     << source.at("modality").get<std::string>() << ")\n"
+     << "grid       " << g.n_theta << " x " << g.n_z << " (theta x z), dz " << g.dz_mm
+     << " mm, z " << g.z0_mm << " .. " << g.z_mm(g.n_z - 1) << " mm\n"
+     << "skin       " << seg.at("skin_method").get<std::string>() << "\n"
+     << "bone       " << seg.at("bone_method").get<std::string>() << "\n"
+     << "valid      " << 100.0 * (s.cells ? double(s.valid_cells) / s.cells : 0.0)
+     << " % of cells\n"
+     << "thickness  median " << s.thickness_median_mm << " mm (5-95%: " << s.thickness_p5_mm
+     << " - " << s.thickness_p95_mm << " mm), forehead " << s.forehead_thickness_mm << " mm\n"
+     << "face       theta " << s.face_theta_deg << " deg, z " << s.face_z_mm << " mm\n";
+  return os.str();
+}
+
+}  // namespace caps
