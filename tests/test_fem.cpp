@@ -14,6 +14,7 @@
 #include "caps/fem/box.hpp"
 #include "caps/fem/elements.hpp"
 #include "caps/fem/mesh_io.hpp"
+#include "caps/fem/result_io.hpp"
 #include "caps/fem/solve.hpp"
 
 using namespace caps;

@@ -11,6 +11,7 @@
 #include "caps/core/error.hpp"
 #include "caps/fem/box.hpp"
 #include "caps/fem/mesh_io.hpp"
+#include "caps/fem/result_io.hpp"
 #include "caps/fem/solve.hpp"
 #include "commands.hpp"
 
