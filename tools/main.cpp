@@ -3,7 +3,8 @@
 //   caps phantom -o /tmp/ct.nii.gz
 //   caps model from-volume /usr/share/doc/invesalius-examples/examples/Cranium.inv3 -o /tmp/cranium
 //   caps model info /tmp/cranium
-// Exit codes: 0 success, 2 bad input (message names the file or field), 1 internal error.
+// Exit codes: 0 success, 2 bad input (message names the file or field), 1 a failed solve
+// (message names the element, Gauss point or iteration) or another error.
 #include <cstdio>
 #include <exception>
 
@@ -70,6 +71,12 @@ int main(int argc, char** argv) {
   } catch (const IoError& e) {
     std::fprintf(stderr, "caps: error: %s\n", e.what());
     return 2;
+  } catch (const SolverError& e) {
+    std::fprintf(stderr, "caps: solver error: %s\n", e.what());
+    return 1;
+  } catch (const Error& e) {
+    std::fprintf(stderr, "caps: error: %s\n", e.what());
+    return 1;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "caps: error: out of memory; the input may be larger than this machine "
                          "can hold\n");

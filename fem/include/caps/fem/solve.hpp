@@ -81,8 +81,11 @@ struct SolveResult {
   SolveTimings timings;
 };
 
-/// Solves the linear static problem. Throws InvalidInput for bad or under-constrained input
-/// (the message says what to fix), SolverError if the factorization fails otherwise.
+/// Solves the linear static problem. Throws InvalidInput for bad input and for parts without
+/// support against a translation or rotation (the message says what to fix); SolverError
+/// naming the element (SolverError::element) for an inverted element (with its Gauss point) or
+/// a singular stiffness the support checks cannot see (a mechanism, such as elements joined
+/// only along an edge), and SolverError for any other failure of the factorization.
 SolveResult solve(const Mesh& mesh, const SolveOptions& options = {});
 
 }  // namespace caps::fem
