@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 
 namespace fs = std::filesystem;
@@ -216,6 +217,37 @@ TEST_F(Cli, CylindricalRangeImageRoundTrip) {
   expect_refused("model from-scan " + (model / "thickness.png").string() +
                      " --r-scale 0.1 --z-scale 1 --thickness 5 -o " + (dir / "y").string(),
                  "grey", dir / "y");
+}
+
+TEST_F(Cli, SolverErrorNamesTheInvertedElementAndExitsWithOne) {
+  const fs::path mesh = dir / "inverted_mesh";
+  ASSERT_EQ(run("fem box -o " + mesh.string() + " --size 2,2,2 --cells 2,2,2 -q").code, 0);
+  // Turn cell 0 inside out: swap its top and bottom faces (Hex20 nodes 0-3 with 4-7, 8-11
+  // with 12-15) in mesh.vtu's connectivity, one line per cell.
+  std::string vtu = slurp(mesh / "mesh.vtu");
+  const std::string key = "Name=\"connectivity\" format=\"ascii\">\n";
+  const auto at = vtu.find(key);
+  ASSERT_NE(at, std::string::npos);
+  const auto begin = at + key.size(), end = vtu.find('\n', begin);
+  std::istringstream in(vtu.substr(begin, end - begin));
+  std::array<long, 20> n{};
+  for (long& id : n) in >> id;
+  for (int k = 0; k < 4; ++k) {
+    std::swap(n[k], n[4 + k]);
+    std::swap(n[8 + k], n[12 + k]);
+  }
+  std::string line;
+  for (std::size_t k = 0; k < n.size(); ++k)
+    line += std::to_string(n[k]) + (k + 1 < n.size() ? " " : "");
+  vtu.replace(begin, end - begin, line);
+  write_file(mesh / "mesh.vtu", vtu);
+  const fs::path out = dir / "inverted_result";
+  const Outcome r = run("solve " + mesh.string() + " -o " + out.string() + " -q");
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err.rfind("caps: solver error: element 0, Gauss point 0: Jacobian determinant", 0), 0u)
+      << r.err;
+  EXPECT_EQ(r.err.find("internal error"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(out));
 }
 
 TEST_F(Cli, SolvesABoxInEitherPrecisionAndRefusesBadSolverOptions) {

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <random>
 
 #include "caps/core/error.hpp"
@@ -14,6 +15,7 @@
 #include "caps/fem/box.hpp"
 #include "caps/fem/elements.hpp"
 #include "caps/fem/mesh_io.hpp"
+#include "caps/fem/result_io.hpp"
 #include "caps/fem/solve.hpp"
 
 using namespace caps;
@@ -570,6 +572,94 @@ TEST(FemMeshIo, DirectoryRoundTripsBothElementTypes) {
   }
 }
 
+// The SolverError of a solve, or nothing: the where and what of a numerical failure.
+template <typename F>
+std::optional<SolverError> solver_error_of(F&& f) {
+  try {
+    f();
+  } catch (const SolverError& e) {
+    return e;
+  }
+  return std::nullopt;
+}
+
+TEST(FemSolverError, InvertedElementNamesItsElementAndGaussPoint) {
+  // Element 2 of a 2×2×2 box turned inside out (top and bottom faces swapped): det J < 0 at
+  // every Gauss point, so the first one, 0, is the one reported.
+  Mesh m = box(ElementType::Hex20, {2, 2, 2}, {2, 2, 2}, true);
+  auto& n = m.elements[2].nodes;
+  for (int k = 0; k < 4; ++k) {
+    std::swap(n[k], n[4 + k]);
+    std::swap(n[8 + k], n[12 + k]);
+  }
+  const std::optional<SolverError> e = solver_error_of([&] { solve(m); });
+  ASSERT_TRUE(e.has_value());
+  EXPECT_EQ(e->element, 2);
+  EXPECT_EQ(e->gauss_point, 0);
+  EXPECT_EQ(e->iteration, -1);
+  const std::string what = e->what();
+  EXPECT_NE(what.find("element 2, Gauss point 0: Jacobian determinant"), std::string::npos) << what;
+  // The element kernel on its own names the element it is given.
+  const std::optional<SolverError> k = solver_error_of([&] {
+    element_stiffness(ElementType::Hex20, element_coordinates(m, 2), LinearElastic(0.1, 0.3), 7);
+  });
+  ASSERT_TRUE(k.has_value());
+  EXPECT_EQ(k->element, 7);
+  EXPECT_EQ(k->gauss_point, 0);
+}
+
+TEST(FemSolverError, MechanismNamesTheElementThatCanMove) {
+  // A fixed 2×2×2 box (1 mm cells) and one more cell, [2,3]×[0,1]×[2,3], that shares only the
+  // box's edge x = 2, z = 2 (three nodes): the support checks see one held part, but the extra
+  // cell can still turn about that edge, so the stiffness is singular and only that cell moves.
+  Mesh m = box(ElementType::Hex20, {2, 2, 2}, {2, 2, 2}, true);
+  const Eigen::RowVector3d shift(1, 0, 1);
+  int source = -1;
+  for (std::size_t e = 0; e < m.elements.size() && source < 0; ++e) {
+    Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
+    for (int a = 0; a < 8; ++a) c += m.nodes.row(m.elements[e].nodes[a]) / 8;
+    if ((c - Eigen::RowVector3d(1.5, 0.5, 1.5)).norm() < 1e-9) source = static_cast<int>(e);
+  }
+  ASSERT_GE(source, 0);
+  Element extra = m.elements[source];
+  int shared = 0;
+  for (int a = 0; a < extra.n_nodes(); ++a) {
+    const Eigen::RowVector3d p = m.nodes.row(extra.nodes[a]) + shift;
+    int id = -1;
+    for (Eigen::Index i = 0; i < m.n_nodes() && id < 0; ++i)
+      if ((m.nodes.row(i) - p).norm() < 1e-9) id = static_cast<int>(i);
+    if (id >= 0) {
+      ++shared;
+    } else {
+      id = static_cast<int>(m.n_nodes());
+      m.nodes.conservativeResize(id + 1, 3);
+      m.nodes.row(id) = p;
+    }
+    extra.nodes[a] = id;
+  }
+  ASSERT_EQ(shared, 3);
+  m.elements.push_back(extra);
+  const int moving = static_cast<int>(m.elements.size()) - 1;
+  // A force on the extra cell's last node (unloaded, the mixed-precision solve is exact with
+  // u = 0 and never meets the singularity).
+  m.loads.push_back({static_cast<int>(m.n_nodes()) - 1, Eigen::Vector3d(0.01, 0.02, 0.03)});
+  for (const bool mixed : {true, false}) {
+    SolveOptions o;
+    o.mixed_precision = mixed;
+    const std::optional<SolverError> e = solver_error_of([&] { solve(m, o); });
+    ASSERT_TRUE(e.has_value()) << (mixed ? "mixed" : "double");
+    EXPECT_EQ(e->element, moving) << e->what();
+    const std::string what = e->what();
+    EXPECT_EQ(what.rfind(cat("element ", moving, ": the stiffness matrix is singular"), 0), 0u) << what;
+    EXPECT_NE(what.find("under-constrained"), std::string::npos) << what;
+  }
+  SolveOptions o;
+  o.solver = SolverKind::Cholmod;
+  const std::optional<SolverError> e = solver_error_of([&] { solve(m, o); });
+  ASSERT_TRUE(e.has_value());
+  EXPECT_EQ(e->element, moving) << e->what();
+}
+
 TEST(FemBadInput, EachErrorIsInvalidInputNamingTheItem) {
   auto small = [] { return box(ElementType::Hex20, {2, 2, 2}, {2, 2, 2}, true); };
   // nu >= 0.5 and E out of range.
@@ -592,17 +682,6 @@ TEST(FemBadInput, EachErrorIsInvalidInputNamingTheItem) {
     Mesh m = small();
     m.elements[3].nodes[4] = 100000;
     EXPECT_NE(error_of([&] { solve(m); }).find("element 3 (Hex20) local node 4 refers to node 100000"), std::string::npos);
-  }
-  // Inverted element: swap top and bottom faces.
-  {
-    Mesh m = small();
-    auto& n = m.elements[2].nodes;
-    for (int k = 0; k < 4; ++k) {
-      std::swap(n[k], n[4 + k]);
-      std::swap(n[8 + k], n[12 + k]);
-    }
-    const std::string e = error_of([&] { solve(m); });
-    EXPECT_NE(e.find("element 2, Gauss point 0: Jacobian determinant"), std::string::npos) << e;
   }
   // No support at all, and support that still allows a rotation (one fixed node).
   for (SolverKind sk : {SolverKind::Mumps, SolverKind::Cholmod}) {

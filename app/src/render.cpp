@@ -8,7 +8,7 @@
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/fem/mesh_io.hpp"
-#include "caps/fem/solve.hpp"
+#include "caps/fem/result_io.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/render/gltf_export.hpp"
 #include "caps/render/overlay.hpp"

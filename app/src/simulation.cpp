@@ -12,6 +12,7 @@
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/mesh_pictures.hpp"
+#include "caps/fem/result_io.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/render/simulation_report.hpp"
 #include "caps/surface/patient_model.hpp"

@@ -109,9 +109,15 @@ void check_rotations(const Mesh& mesh, const DofMap& m, UnionFind& part, const s
 
 }  // namespace
 
-std::string describe_equation(const DofMap& map, int e) {
+int equation_dof(const DofMap& map, int e) {
   for (std::size_t d = 0; d < map.eq.size(); ++d)
-    if (map.eq[d] == e) return cat("node ", d / 3, " (", kAxis[d % 3], ")");
+    if (map.eq[d] == e) return static_cast<int>(d);
+  return -1;
+}
+
+std::string describe_equation(const DofMap& map, int e) {
+  const int d = equation_dof(map, e);
+  if (d >= 0) return cat("node ", d / 3, " (", kAxis[d % 3], ")");
   return cat("equation ", e);
 }
 

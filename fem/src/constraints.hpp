@@ -27,6 +27,9 @@ struct DofMap {
 /// not in any element and parts with no support in some direction.
 DofMap build_dof_map(const Mesh& mesh);
 
+/// The first node dof (3 node + component) that reduced equation `e` solves for, -1 if none.
+int equation_dof(const DofMap& map, int e);
+
 /// Names reduced equation `e` for messages: "node 12 (x)".
 std::string describe_equation(const DofMap& map, int e);
 

@@ -8,7 +8,9 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <optional>
 #include <set>
+#include <string>
 
 namespace caps::fem {
 
@@ -40,8 +42,17 @@ Eigen::VectorXd min_element_jacobians(const Mesh& mesh) {
   return out;
 }
 
-ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
-                             const ContinuumMeshOptions& o) {
+namespace {
+
+// A continuum mesh, or why the surface mesh reaches where the model has no valid tissue (the
+// message of an OffModelError): a caller with room to mesh less can try a smaller extent.
+struct ContinuumAttempt {
+  std::optional<ContinuumMesh> mesh;
+  std::string off_model;
+};
+
+ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
+                                    const ContinuumMeshOptions& o) {
   const int NL = o.n_layers;
   if (NL < 1 || NL > 50 || !(o.grading > 0) || !std::isfinite(o.grading))
     throw InvalidInput(cat("continuum mesher: layers ", NL, " must be in 1..50 and grading ",
@@ -51,7 +62,8 @@ ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& mod
                            " mm must be 0 (none) or a positive distance from the wound"));
   if (surface.polygons.empty())
     throw InvalidInput("continuum mesher: the surface mesh has no polygons");
-  ContinuumMesh out;
+  ContinuumAttempt attempt;
+  ContinuumMesh& out = attempt.mesh.emplace();
   out.n_layers = NL;
   Mesh& mesh = out.mesh;
 
@@ -90,22 +102,23 @@ ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& mod
   out.min_thickness_mm = 1e300;
   out.max_thickness_mm = 0;
 
-  auto column = [&](const Eigen::Vector2d& tz, auto&& node_of, int n_half_levels, int step) {
+  // The nodes of one column; returns why the site cannot be meshed (empty if it can).
+  auto column = [&](const Eigen::Vector2d& tz, auto&& node_of, int n_half_levels,
+                    int step) -> std::string {
     const double theta = tz.x(), z = tz.y();
     if (!model.has_z(z))
-      throw OffModelError(cat("mesh: the site at theta ", theta, " deg, z ", z, " mm lies outside "
-                             "the model's z range; use a smaller --extent or a wound further from "
-                             "the model's ends"));
+      return cat("mesh: the site at theta ", theta, " deg, z ", z, " mm lies outside the model's z "
+                 "range; use a smaller --extent or a wound further from the model's ends");
     if (const auto f = model.flags_at(theta, z); f != 0)
-      throw OffModelError(cat("mesh: the site at theta ", theta, " deg, z ", z, " mm lies on cells "
-                             "of the model that are not valid (", describe_flags(f), "); move the "
-                             "wound or use a smaller --extent"));
+      return cat("mesh: the site at theta ", theta, " deg, z ", z, " mm lies on cells of the "
+                 "model that are not valid (", describe_flags(f), "); move the wound or use a "
+                 "smaller --extent");
     const double r_top = model.r_skin(theta, z);
     const double T = o.constant_thickness_mm > 0 ? o.constant_thickness_mm : model.thickness(theta, z);
     if (!(T >= o.min_thickness_mm) || !(T < r_top))
-      throw OffModelError(cat("mesh: the soft-tissue thickness at theta ", theta, " deg, z ", z,
-                             " mm is ", T, " mm (minimum ", o.min_thickness_mm, " mm, skin radius ",
-                             r_top, " mm); there is no valid tissue layer to mesh there"));
+      return cat("mesh: the soft-tissue thickness at theta ", theta, " deg, z ", z, " mm is ", T,
+                 " mm (minimum ", o.min_thickness_mm, " mm, skin radius ", r_top,
+                 " mm); there is no valid tissue layer to mesh there");
     out.min_thickness_mm = std::min(out.min_thickness_mm, T);
     out.max_thickness_mm = std::max(out.max_thickness_mm, T);
     for (int h = 0; h <= n_half_levels; h += step) {
@@ -115,14 +128,23 @@ ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& mod
       out.node_theta_z.row(id) = tz.transpose();
       out.node_level[id] = 0.5 * h;
     }
+    return {};
+  };
+  const auto off_model = [](std::string why) {
+    return ContinuumAttempt{std::nullopt, std::move(why)};
   };
   for (int v = 0; v < NV; ++v)
-    column(surface.theta_z.row(v).transpose(), [&](int h) { return vnode(v, h); }, 2 * NL, 1);
+    if (std::string why = column(surface.theta_z.row(v).transpose(),
+                                 [&](int h) { return vnode(v, h); }, 2 * NL, 1);
+        !why.empty())
+      return off_model(std::move(why));
   for (int e = 0; e < NE; ++e) {
     // The mid-edge node of the top face: the midpoint in (theta, z), snapped to the skin.
     const Eigen::Vector2d tz =
         0.5 * (surface.theta_z.row(edges[e].first) + surface.theta_z.row(edges[e].second)).transpose();
-    column(tz, [&](int h) { return enode(e, h / 2); }, 2 * NL, 2);
+    if (std::string why = column(tz, [&](int h) { return enode(e, h / 2); }, 2 * NL, 2);
+        !why.empty())
+      return off_model(std::move(why));
   }
 
   // Elements: polygons run counter-clockwise in (theta, z), i.e. seen from outside the skin;
@@ -231,13 +253,23 @@ ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& mod
       Eigen::Vector2d c = Eigen::Vector2d::Zero();
       for (int id : poly) c += surface.theta_z.row(id).transpose();
       c /= static_cast<double>(poly.size());
-      throw InvalidInput(cat("mesh: element ", e, " (layer ", mesh.elements[e].layer,
-                             ") near theta ", c.x(), " deg, z ", c.y(), " mm is inverted or "
-                             "degenerate (smallest Jacobian ", jac[e], "); use a smaller --size or "
-                             "fewer layers there"));
+      throw InvalidParameter(cat("mesh: element ", e, " (layer ", mesh.elements[e].layer,
+                                 ") near theta ", std::round(c.x() * 10) / 10, " deg, z ",
+                                 std::round(c.y() * 10) / 10, " mm is inverted or degenerate "
+                                 "(smallest Jacobian ", jac[e], "); use a smaller {mesh_size} or "
+                                 "fewer {layers} there"));
     }
   validate(mesh, "continuum mesh");
-  return out;
+  return attempt;
+}
+
+}  // namespace
+
+ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
+                             const ContinuumMeshOptions& o) {
+  ContinuumAttempt attempt = try_mesh_continuum(surface, model, o);
+  if (!attempt.mesh) throw OffModelError(attempt.off_model);
+  return std::move(*attempt.mesh);
 }
 
 WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
@@ -252,12 +284,13 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
   const double full = w.surface.extent_mm;
   SurfaceMeshOptions o = surface_options;
   for (double extent = full;; extent *= 0.75) {
-    try {
-      if (extent != full) {
-        o.extent_mm = extent;
-        w.surface = mesh_surface(border, model, o);
-      }
-      w.continuum = mesh_continuum(w.surface, model, continuum_options);
+    if (extent != full) {
+      o.extent_mm = extent;
+      w.surface = mesh_surface(border, model, o);
+    }
+    ContinuumAttempt attempt = try_mesh_continuum(w.surface, model, continuum_options);
+    if (attempt.mesh) {
+      w.continuum = std::move(*attempt.mesh);
       if (extent != full) {
         const std::string message =
             cat("mesh: the extent was limited to ", std::round(extent * 10) / 10, " mm (",
@@ -268,9 +301,8 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
         warn(reporter, message);
       }
       return w;
-    } catch (const OffModelError&) {
-      if (extent * 0.75 < surface_options.size_mm) throw;
     }
+    if (extent * 0.75 < surface_options.size_mm) throw OffModelError(attempt.off_model);
   }
 }
 

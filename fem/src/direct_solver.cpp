@@ -4,6 +4,7 @@
 #include <dmumps_c.h>
 #include <smumps_c.h>
 
+#include <cmath>
 #include <optional>
 #include <string>
 #include <vector>
@@ -12,6 +13,51 @@
 
 namespace caps::fem::detail {
 namespace {
+
+// How a factorization ended: `ok`, or the error it stands for. A null or negative pivot is a
+// singular matrix (SingularMatrix, with the reduced equation where it showed, -1 if not known;
+// `factored`: the factor exists all the same); anything else is a failure of the solver
+// (SolverError).
+struct FactorStatus {
+  bool ok = true;
+  bool singular = false;
+  bool factored = true;
+  std::string message;
+  int equation = -1;
+
+  static FactorStatus failed(std::string message) {
+    return {false, false, false, std::move(message), -1};
+  }
+  static FactorStatus singular_at(std::string message, int equation, bool factored) {
+    return {false, true, factored, std::move(message), equation};
+  }
+  void throw_if_failed() const {
+    if (ok) return;
+    if (singular) throw SingularMatrix(message, equation);
+    throw SolverError(message);
+  }
+};
+
+// Where a singular K's null space shows: the largest entry of x = K^-1 b, solved with the
+// factor that has the round-off (or negative) pivot, for a b with no special structure. That
+// pivot's direction dominates x, so the entry is an equation of the part that can move. -1 if
+// x is zero; the first non-finite entry if there is one.
+template <class Solve>
+int dominant_equation(Eigen::Index n, Solve&& solve) {
+  Eigen::VectorXd b(n);
+  for (Eigen::Index i = 0; i < n; ++i) b[i] = 1.0 + 0.5 * std::sin(1.0 + static_cast<double>(i));
+  const Eigen::VectorXd x = solve(b);
+  int best = -1;
+  double largest = 0;
+  for (Eigen::Index i = 0; i < x.size(); ++i) {
+    if (!std::isfinite(x[i])) return static_cast<int>(i);
+    if (std::abs(x[i]) > largest) {
+      largest = std::abs(x[i]);
+      best = static_cast<int>(i);
+    }
+  }
+  return best;
+}
 
 // One MUMPS instance in double (DMUMPS) or single (SMUMPS) precision. MUMPS 5.5 users' guide,
 // sec. 5-6: SYM = 1 (symmetric positive definite), sequential host, assembled centralized input.
@@ -61,8 +107,10 @@ class Mumps {
     Call(&id_);
     check("analysis");
   }
-  /// Throws SingularMatrix for null or negative pivots, SolverError for other failures.
-  void factorize(Real* a) {
+  /// The numerical factorization of the values `a` (which must outlive the instance); reports
+  /// null or negative pivots and other failures rather than throwing them, so that a caller
+  /// can try another precision.
+  FactorStatus factorize(Real* a) {
     id_.a = a;
     for (int attempt = 0;; ++attempt) {
       id_.job = 2;
@@ -75,22 +123,37 @@ class Mumps {
       break;
     }
     if (id_.infog[0] == -10)
-      throw SingularMatrix("MUMPS: the matrix is numerically singular (INFOG(1) = -10)", -1);
-    check("factorization");
+      return FactorStatus::singular_at(
+          "MUMPS: the matrix is numerically singular (INFOG(1) = -10)", -1, false);
+    if (id_.infog[0] < 0) return FactorStatus::failed(failure("factorization"));
     if (id_.infog[27] > 0)  // INFOG(28): null pivots
-      throw SingularMatrix(cat("MUMPS found ", id_.infog[27], " null pivot(s)"),
-                           id_.pivnul_list ? id_.pivnul_list[0] - 1 : -1);
+      return FactorStatus::singular_at(cat("MUMPS found ", id_.infog[27], " null pivot(s)"),
+                                       id_.pivnul_list ? id_.pivnul_list[0] - 1 : -1, true);
     if (id_.infog[11] > 0)  // INFOG(12): negative pivots, impossible for a valid stiffness
-      throw SingularMatrix(cat("MUMPS found ", id_.infog[11], " negative pivot(s)"), -1);
+      return FactorStatus::singular_at(cat("MUMPS found ", id_.infog[11], " negative pivot(s)"),
+                                       -1, true);
+    return {};
   }
-  /// Overwrites x (the right-hand side) with the solution.
-  void solve(Real* x) {
+  /// Overwrites x (the right-hand side) with the solution; `iteration` is the refinement
+  /// iteration it serves (-1: none), named if the solve fails.
+  void solve(Real* x, int iteration = -1) {
     id_.rhs = x;
     id_.nrhs = 1;
     id_.lrhs = id_.n;
     id_.job = 3;
     Call(&id_);
-    check("solve");
+    check("solve", iteration);
+  }
+  /// The status of a factorization, with the equation of a singular K located by
+  /// dominant_equation() when MUMPS did not name it (negative pivots). Double precision only.
+  FactorStatus located(FactorStatus status) {
+    if (status.singular && status.equation < 0 && status.factored)
+      status.equation = dominant_equation(id_.n, [&](const Eigen::VectorXd& b) {
+        Eigen::VectorXd x = b;
+        solve(x.data());
+        return x;
+      });
+    return status;
   }
   long factor_nonzeros() const {
     // INFOG(29): effective entries in the factors (negative = millions).
@@ -99,11 +162,12 @@ class Mumps {
   }
 
  private:
-  void check(const char* phase) const {
-    if (id_.infog[0] < 0)
-      throw SolverError(cat("MUMPS ", phase, " failed: INFOG(1) = ", id_.infog[0],
-                            ", INFOG(2) = ", id_.infog[1],
-                            " (see the MUMPS users' guide, section 8)"));
+  std::string failure(const char* phase) const {
+    return cat("MUMPS ", phase, " failed: INFOG(1) = ", id_.infog[0], ", INFOG(2) = ", id_.infog[1],
+               " (see the MUMPS users' guide, section 8)");
+  }
+  void check(const char* phase, int iteration = -1) const {
+    if (id_.infog[0] < 0) throw SolverError(failure(phase), -1, -1, iteration);
   }
   Struc id_{};
 };
@@ -132,7 +196,7 @@ class MumpsSolver final : public DirectSolver {
     mumps_.analyze(static_cast<int>(K.rows()), in_->irn, in_->jcn, in_->blkptr);
   }
   void factorize(const Eigen::SparseMatrix<double>& K) override {
-    mumps_.factorize(const_cast<double*>(K.valuePtr()));
+    mumps_.located(mumps_.factorize(const_cast<double*>(K.valuePtr()))).throw_if_failed();
   }
   Eigen::VectorXd solve(const Eigen::VectorXd& b) override {
     Eigen::VectorXd x = b;
@@ -163,12 +227,9 @@ class MixedMumpsSolver final : public DirectSolver {
   void factorize(const Eigen::SparseMatrix<double>& K) override {
     K_ = &K;
     a_ = K.coeffs().cast<float>();
-    try {
-      if (!a_.allFinite()) throw SolverError("K does not fit single precision");
-      single_.factorize(a_.data());
-    } catch (const std::runtime_error&) {
-      fall_back();
-    }
+    // A K beyond single precision's range, or a single-precision factor that fails in any way,
+    // is factored again in double precision.
+    if (!a_.allFinite() || !single_.factorize(a_.data()).ok) fall_back();
   }
   Eigen::VectorXd solve(const Eigen::VectorXd& b) override {
     if (!double_) {
@@ -190,11 +251,11 @@ class MixedMumpsSolver final : public DirectSolver {
   void fall_back() {
     double_.emplace(ordering_, 1e-12);
     double_->analyze(static_cast<int>(K_->rows()), in_->irn, in_->jcn, in_->blkptr);
-    double_->factorize(const_cast<double*>(K_->valuePtr()));
+    double_->located(double_->factorize(const_cast<double*>(K_->valuePtr()))).throw_if_failed();
   }
-  Eigen::VectorXd precondition(const Eigen::VectorXd& r) {
+  Eigen::VectorXd precondition(const Eigen::VectorXd& r, int iteration) {
     Eigen::VectorXf z = r.cast<float>();
-    single_.solve(z.data());
+    single_.solve(z.data(), iteration);
     return z.cast<double>();
   }
   // Preconditioned CG (Saad 2003, alg. 9.1) until the recursive residual is below 1e-12 ||b||
@@ -208,7 +269,7 @@ class MixedMumpsSolver final : public DirectSolver {
     const double bn = b.norm();
     Eigen::VectorXd x = Eigen::VectorXd::Zero(b.size());
     if (bn == 0) return x;
-    Eigen::VectorXd r = b, z = precondition(r), p = z, Kp(b.size());
+    Eigen::VectorXd r = b, z = precondition(r, 0), p = z, Kp(b.size());
     double rz = r.dot(z);
     for (iterations_ = 1; iterations_ <= kMaxIterations; ++iterations_) {
       Kp.noalias() = K * p;
@@ -222,7 +283,7 @@ class MixedMumpsSolver final : public DirectSolver {
         if ((b - Kp).norm() <= kTrueTolerance * bn) return x;
         return std::nullopt;
       }
-      z = precondition(r);
+      z = precondition(r, iterations_);
       const double rz_next = r.dot(z);
       p = z + (rz_next / rz) * p;
       rz = rz_next;
@@ -271,7 +332,9 @@ class CholmodSolver final : public DirectSolver {
     // A rigid-body mode gives a pivot at round-off level rather than a negative one.
     const double rc = cholmod_rcond(L_, &c_);
     if (!(rc > 1e-14))
-      throw SingularMatrix(cat("CHOLMOD: reciprocal condition estimate ", rc), -1);
+      throw SingularMatrix(
+          cat("CHOLMOD: reciprocal condition estimate ", rc),
+          dominant_equation(K.rows(), [&](const Eigen::VectorXd& b) { return solve(b); }));
   }
   Eigen::VectorXd solve(const Eigen::VectorXd& b) override {
     cholmod_dense B{};

@@ -3,19 +3,18 @@
 
 #include <Eigen/Sparse>
 #include <memory>
-#include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "caps/core/error.hpp"
 #include "caps/fem/solve.hpp"
 
 namespace caps::fem::detail {
 
 /// Thrown by a solver when the matrix is singular or not positive definite; `equation` is a
-/// reduced equation where it showed (-1 if unknown).
-struct SingularMatrix : std::runtime_error {
-  SingularMatrix(const std::string& what, int equation)
-      : std::runtime_error(what), equation(equation) {}
+/// reduced equation where it showed (-1 if unknown). solve() names the element from it.
+struct SingularMatrix : SolverError {
+  SingularMatrix(const std::string& what, int equation) : SolverError(what), equation(equation) {}
   int equation;
 };
 

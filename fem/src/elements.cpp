@@ -150,12 +150,12 @@ double gradients(const Eigen::MatrixX3d& dN_dxi, const Eigen::MatrixX3d& X, Eige
   const double det = J.determinant();
   if (!(det > 0)) {
     const double scale = J.col(0).norm() * J.col(1).norm() * J.col(2).norm() + 1e-300;
-    throw InvalidInput(cat("element ", element,
-                           gauss_point >= 0 ? cat(", Gauss point ", gauss_point) : ", a node",
-                           ": Jacobian determinant ", det, " mm^3 (relative ", det / scale,
-                           ") is not positive; the element is inverted or degenerate: check its "
-                           "node order (0-1-2-3 must turn towards the bottom face, mesh.hpp) and "
-                           "that no nodes coincide"));
+    throw SolverError(cat(gauss_point >= 0 ? "" : "at one of its nodes, ", "Jacobian determinant ",
+                          det, " mm^3 (relative ", det / scale,
+                          ") is not positive; the element is inverted or degenerate: check its "
+                          "node order (0-1-2-3 must turn towards the bottom face, mesh.hpp) and "
+                          "that no nodes coincide"),
+                      element, gauss_point);
   }
   G.noalias() = dN_dxi * J.inverse().transpose();
   return det;

@@ -17,7 +17,8 @@ struct ShapeTable {
 };
 const ShapeTable& shape_table(ElementType type);
 
-/// G = dN/dx (#n×3); returns det J. Throws InvalidInput if det J <= 0.
+/// G = dN/dx (#n×3); returns det J. Throws SolverError naming `element` and `gauss_point`
+/// (-1: evaluated at a node) if det J <= 0.
 double gradients(const Eigen::MatrixX3d& dN_dxi, const Eigen::MatrixX3d& X, Eigen::MatrixX3d& G,
                  int element, int gauss_point);
 Eigen::Matrix3d strain_tensor(const Eigen::MatrixX3d& G, const Eigen::VectorXd& u_e);

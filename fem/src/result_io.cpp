@@ -1,8 +1,9 @@
+#include "caps/fem/result_io.hpp"
+
 #include <nlohmann/json.hpp>
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
-#include "caps/fem/solve.hpp"
 #include "vtu.hpp"
 
 #include <cmath>

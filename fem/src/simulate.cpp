@@ -6,6 +6,7 @@
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/mesh_pictures.hpp"
+#include "caps/fem/result_io.hpp"
 #include "caps/plan/check.hpp"
 #include "caps/surface/patient_model.hpp"
 

@@ -59,6 +59,17 @@ void group_pair_forces(const Mesh& mesh, const std::vector<int>& members,
   }
 }
 
+// The first element that uses `node`, -1 if none does (or node is -1).
+int first_element_using(const Mesh& mesh, int node) {
+  if (node < 0) return -1;
+  for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
+    const Element& el = mesh.elements[e];
+    for (int a = 0; a < el.n_nodes(); ++a)
+      if (el.nodes[a] == node) return static_cast<int>(e);
+  }
+  return -1;
+}
+
 }  // namespace
 
 const char* solver_name(SolverKind kind) { return kind == SolverKind::Mumps ? "mumps" : "cholmod"; }
@@ -119,11 +130,15 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
       q = solver->solve(sys.f);
       res.timings.solve_s = seconds_since(t);
     } catch (const detail::SingularMatrix& e) {
-      throw InvalidInput(cat(
-          "the stiffness matrix is singular (", e.what(),
-          e.equation >= 0 ? cat(", near ", detail::describe_equation(map, e.equation)) : "",
-          "): the mesh is under-constrained, a part can still move or rotate freely; fix at least "
-          "three non-collinear nodes of every connected part (e.g. the bottom layer on bone)"));
+      // The solver knows the equation; the message and SolverError::element name the mesh.
+      const int dof = e.equation >= 0 ? detail::equation_dof(map, e.equation) : -1;
+      throw SolverError(
+          cat("the stiffness matrix is singular (", e.what(),
+              e.equation >= 0 ? cat(", near ", detail::describe_equation(map, e.equation)) : "",
+              "): the mesh is under-constrained, a part can still move or rotate freely (a "
+              "mechanism, such as elements joined only along an edge); fix at least three "
+              "non-collinear nodes of every connected part (e.g. the bottom layer on bone)"),
+          first_element_using(mesh, dof >= 0 ? dof / 3 : -1));
     }
     res.factor_nonzeros = solver->factor_nonzeros();
     const detail::SolverReport report = solver->report();

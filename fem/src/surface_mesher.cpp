@@ -77,9 +77,10 @@ struct Builder {
       Vec2 c = Vec2::Zero();
       for (int id : ids) c += P[id];
       const Eigen::Vector2d tz = theta_z(c / ids.size());
-      throw InvalidInput(cat("surface mesh: layer ", layer, " folds over near theta ", tz.x(),
-                             " deg, z ", tz.y(), " mm (an element has no positive area); use a "
-                             "smaller --size or check the wound border there"));
+      throw InvalidParameter(cat("surface mesh: layer ", layer, " folds over near theta ",
+                                 std::round(tz.x() * 10) / 10, " deg, z ",
+                                 std::round(tz.y() * 10) / 10, " mm (an element has no positive "
+                                 "area); use a smaller {mesh_size} or check the wound border there"));
     }
     out.polygons.push_back(std::move(ids));
     out.polygon_stage.push_back(stage);
@@ -96,9 +97,11 @@ struct Builder {
         const Vec2 &q1 = P[border[j]], &q2 = P[border[(j + 1) % m]];
         if (segments_cross(p1, p2, q1, q2)) {
           const Eigen::Vector2d tz = theta_z(0.5 * (p1 + p2));
-          throw InvalidInput(cat("surface mesh: layer ", layer, " overlaps itself near theta ",
-                                 tz.x(), " deg, z ", tz.y(), " mm; use a smaller --size, a "
-                                 "smaller --extent, or a wound border without tight folds"));
+          throw InvalidParameter(cat("surface mesh: layer ", layer, " overlaps itself near theta ",
+                                     std::round(tz.x() * 10) / 10, " deg, z ",
+                                     std::round(tz.y() * 10) / 10, " mm; use a smaller "
+                                     "{mesh_size}, a smaller {extent}, or a wound border without "
+                                     "tight folds"));
         }
       }
   }
@@ -257,12 +260,12 @@ SurfaceMesh mesh_surface(const WoundBorder& border, const PatientModel& model,
   return mesh_surface(border, r, options);
 }
 
-SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
-                         const SurfaceMeshOptions& o) {
-  const auto& loop = border.loop_theta_z;
-  const int n = static_cast<int>(loop.size());
+namespace {
+
+void check_mesher_inputs(int n, double ref_radius_mm, const SurfaceMeshOptions& o) {
   if (n < 2)
-    throw InvalidInput(cat("wound border: the loop has ", n, " point(s); a wound needs at least "
+    throw InvalidInput(cat("wound border: the loop has ", n,
+                           " point(s); a wound needs at least "
                            "2 (an incision) or 3 (an excision)"));
   if (!(ref_radius_mm > 0) || !std::isfinite(ref_radius_mm))
     throw InvalidInput(cat("surface mesher: reference radius ", ref_radius_mm,
@@ -274,18 +277,21 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
                            o.t1_deg, " in (0,180), stage-1 angle ", o.stage1_min_angle_deg,
                            " in [0,20.7], t2 ", o.t2_deg, " in [0,180), growth ", o.growth,
                            " >= 1, split ratio ", o.split_ratio, " > 1)"));
-  Builder B;
-  SurfaceMesh& out = B.out;
-  out.ref_radius_mm = ref_radius_mm;
-  out.sutures = border.sutures;
+}
 
-  // Local tangent plane around the wound (the seam at +-180 is unwrapped around point 0).
+// The loop in the local tangent plane around the wound (mm; the seam at +-180 is unwrapped
+// around point 0), mirrored if it runs clockwise; sets the plane's centre, the wound's size and
+// B.mirrored.
+std::vector<Vec2> local_plane(Builder& B, const std::vector<Eigen::Vector2d>& loop,
+                              double ref_radius_mm) {
+  SurfaceMesh& out = B.out;
+  const int n = static_cast<int>(loop.size());
   std::vector<double> theta(n);
   double sx = 0, sz = 0;
   for (int i = 0; i < n; ++i) {
     if (!loop[i].allFinite())
-      throw InvalidInput(cat("wound border: point ", i, " (", loop[i].x(), ", ", loop[i].y(),
-                             ") is not finite"));
+      throw InvalidInput(
+          cat("wound border: point ", i, " (", loop[i].x(), ", ", loop[i].y(), ") is not finite"));
     theta[i] = loop[0].x() + std::remainder(loop[i].x() - loop[0].x(), 360.0);
     sx += theta[i];
     sz += loop[i].y();
@@ -301,8 +307,9 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
     area += 0.5 * cross2(a, b);
     perimeter += (b - a).norm();
     if ((b - a).norm() < 1e-6)
-      throw InvalidInput(cat("wound border: points ", i, " and ", (i + 1) % n, " coincide at theta ",
-                             loop[i].x(), " deg, z ", loop[i].y(), " mm; neighbouring loop points "
+      throw InvalidInput(cat("wound border: points ", i, " and ", (i + 1) % n,
+                             " coincide at theta ", loop[i].x(), " deg, z ", loop[i].y(),
+                             " mm; neighbouring loop points "
                              "must differ (twins are points of the other lip, not neighbours)"));
     for (int j = 0; j < n; ++j) out.wound_size_mm = std::max(out.wound_size_mm, (L[j] - a).norm());
   }
@@ -311,77 +318,99 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
   B.mirrored = area < -1e-9 * perimeter * perimeter;
   if (B.mirrored)
     for (auto& p : L) p.x() = -p.x();
-  out.extent_mm = o.extent_mm > 0 ? o.extent_mm : 3.0 * out.wound_size_mm;
+  return L;
+}
 
-  // Subdivide loop edges to the mesh size: `inner[i]` are the parameters in (0, 1) of the extra
-  // nodes on edge i. Sutured sides get matching nodes so that their nodes pair up one to one: by
-  // arc length along each side, at the loop points of both sides (a run of several edges may be
-  // sewn to one edge), and evenly between them.
+// Gives both sides of suture `s` matching nodes (`inner`, see subdivided_edges()) so that
+// they pair up one to one: by arc length along each side, at the loop points of both sides (a
+// run of several edges may be sewn to one edge), and evenly between them. `sewn_by` records
+// which suture sews each loop edge.
+void match_suture_sides(const std::vector<Vec2>& L, const std::array<int, 4>& q, std::size_t s,
+                        double size_mm, std::vector<int>& sewn_by,
+                        std::vector<std::vector<double>>& inner) {
+  const int n = static_cast<int>(L.size());
+  for (int v : q)
+    if (v < 0 || v >= n)
+      throw InvalidInput(cat("wound border: suture ", s, " names loop point ", v, "; the loop has ",
+                             n, " points"));
+  if (q[0] == q[1] || q[2] == q[3])
+    throw InvalidInput(cat("wound border: suture ", s, " (", q[0], ",", q[1], ")-(", q[2], ",",
+                           q[3],
+                           ") has a side without an edge; each side runs from one loop "
+                           "point to another"));
+  const auto sides = plan::suture_edges(q, n);
+  for (const auto& side : sides)
+    for (int e : side) {
+      if (sewn_by[e] >= 0)
+        throw InvalidInput(cat("wound border: suture ", s, " sews loop edge (", e, ",", (e + 1) % n,
+                               "), which suture ", sewn_by[e],
+                               " sews already; each edge can be sewn once"));
+      sewn_by[e] = static_cast<int>(s);
+    }
+  // Arc-length positions of each side's loop points, as fractions of the side.
+  std::array<std::vector<double>, 2> at;
+  std::array<double, 2> length{};
+  for (int k = 0; k < 2; ++k) {
+    at[k] = {0.0};
+    for (int e : sides[k]) at[k].push_back(length[k] += (L[(e + 1) % n] - L[e]).norm());
+    for (double& t : at[k]) t /= std::max(length[k], 1e-300);
+  }
+  // The second side runs against the loop: its fraction t along the suture is 1 - t along
+  // its edges.
+  for (double& t : at[1]) t = 1 - t;
+  std::vector<double> breaks = at[0];
+  breaks.insert(breaks.end(), at[1].begin(), at[1].end());
+  std::sort(breaks.begin(), breaks.end());
+  std::vector<double> T;  // the suture's nodes, fractions along it
+  for (std::size_t b = 0; b + 1 < breaks.size(); ++b) {
+    const double dt = breaks[b + 1] - breaks[b];
+    if (dt < 1e-9) continue;
+    const int k = std::max(
+        1, static_cast<int>(std::ceil(dt * std::max(length[0], length[1]) / size_mm - 1e-6)));
+    for (int j = 0; j < k; ++j) T.push_back(breaks[b] + dt * j / k);
+  }
+  T.push_back(1.0);
+  // Each edge of a side gets the nodes strictly inside its stretch, in its own parameter.
+  for (int k = 0; k < 2; ++k)
+    for (std::size_t m = 0; m < sides[k].size(); ++m) {
+      const int e = sides[k][m];
+      double t0 = at[k][m], t1 = at[k][m + 1];
+      inner[e].clear();
+      const bool backwards = t1 < t0;
+      if (backwards) std::swap(t0, t1);
+      for (double t : T)
+        if (t > t0 + 1e-9 && t < t1 - 1e-9) inner[e].push_back((t - t0) / (t1 - t0));
+      if (backwards) {
+        for (double& u : inner[e]) u = 1 - u;
+        std::reverse(inner[e].begin(), inner[e].end());
+      }
+    }
+}
+
+// Loop edges subdivided to the mesh size: `inner[i]` are the parameters in (0, 1) of the extra
+// nodes on edge i; sutured sides get matching nodes (match_suture_sides()).
+std::vector<std::vector<double>> subdivided_edges(const std::vector<Vec2>& L,
+                                                  const std::vector<std::array<int, 4>>& sutures,
+                                                  double size_mm) {
+  const int n = static_cast<int>(L.size());
   std::vector<std::vector<double>> inner(n);
   auto even = [&](int i, double len) {
-    const int k = std::max(1, static_cast<int>(std::ceil(len / o.size_mm - 1e-6)));
+    const int k = std::max(1, static_cast<int>(std::ceil(len / size_mm - 1e-6)));
     for (int j = 1; j < k; ++j) inner[i].push_back(static_cast<double>(j) / k);
   };
   for (int i = 0; i < n; ++i) even(i, (L[(i + 1) % n] - L[i]).norm());
   std::vector<int> sewn_by(n, -1);
-  for (std::size_t s = 0; s < border.sutures.size(); ++s) {
-    const auto& q = border.sutures[s];
-    for (int v : q)
-      if (v < 0 || v >= n)
-        throw InvalidInput(cat("wound border: suture ", s, " names loop point ", v, "; the loop has ",
-                               n, " points"));
-    if (q[0] == q[1] || q[2] == q[3])
-      throw InvalidInput(cat("wound border: suture ", s, " (", q[0], ",", q[1], ")-(", q[2], ",",
-                             q[3], ") has a side without an edge; each side runs from one loop "
-                             "point to another"));
-    const auto sides = plan::suture_edges(q, n);
-    for (const auto& side : sides)
-      for (int e : side) {
-        if (sewn_by[e] >= 0)
-          throw InvalidInput(cat("wound border: suture ", s, " sews loop edge (", e, ",",
-                                 (e + 1) % n, "), which suture ", sewn_by[e],
-                                 " sews already; each edge can be sewn once"));
-        sewn_by[e] = static_cast<int>(s);
-      }
-    // Arc-length positions of each side's loop points, as fractions of the side.
-    std::array<std::vector<double>, 2> at;
-    std::array<double, 2> length{};
-    for (int k = 0; k < 2; ++k) {
-      at[k] = {0.0};
-      for (int e : sides[k]) at[k].push_back(length[k] += (L[(e + 1) % n] - L[e]).norm());
-      for (double& t : at[k]) t /= std::max(length[k], 1e-300);
-    }
-    // The second side runs against the loop: its fraction t along the suture is 1 - t along
-    // its edges.
-    for (double& t : at[1]) t = 1 - t;
-    std::vector<double> breaks = at[0];
-    breaks.insert(breaks.end(), at[1].begin(), at[1].end());
-    std::sort(breaks.begin(), breaks.end());
-    std::vector<double> T;  // the suture's nodes, fractions along it
-    for (std::size_t b = 0; b + 1 < breaks.size(); ++b) {
-      const double dt = breaks[b + 1] - breaks[b];
-      if (dt < 1e-9) continue;
-      const int k = std::max(1, static_cast<int>(std::ceil(dt * std::max(length[0], length[1]) /
-                                                           o.size_mm - 1e-6)));
-      for (int j = 0; j < k; ++j) T.push_back(breaks[b] + dt * j / k);
-    }
-    T.push_back(1.0);
-    // Each edge of a side gets the nodes strictly inside its stretch, in its own parameter.
-    for (int k = 0; k < 2; ++k)
-      for (std::size_t m = 0; m < sides[k].size(); ++m) {
-        const int e = sides[k][m];
-        double t0 = at[k][m], t1 = at[k][m + 1];
-        inner[e].clear();
-        const bool backwards = t1 < t0;
-        if (backwards) std::swap(t0, t1);
-        for (double t : T)
-          if (t > t0 + 1e-9 && t < t1 - 1e-9) inner[e].push_back((t - t0) / (t1 - t0));
-        if (backwards) {
-          for (double& u : inner[e]) u = 1 - u;
-          std::reverse(inner[e].begin(), inner[e].end());
-        }
-      }
-  }
+  for (std::size_t s = 0; s < sutures.size(); ++s)
+    match_suture_sides(L, sutures[s], s, size_mm, sewn_by, inner);
+  return inner;
+}
+
+// The loop's nodes (the loop points first, then each edge's inner nodes) and each edge's
+// chain; returns the front, the loop's nodes in order.
+std::vector<int> add_loop_nodes(Builder& B, const std::vector<Vec2>& L,
+                                const std::vector<std::vector<double>>& inner) {
+  SurfaceMesh& out = B.out;
+  const int n = static_cast<int>(L.size());
   for (int i = 0; i < n; ++i) B.add_vertex(L[i]);
   out.loop_vertex.resize(n);
   for (int i = 0; i < n; ++i) out.loop_vertex[i] = i;
@@ -398,11 +427,14 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
     }
     chain.push_back(j);
   }
+  return front;
+}
 
-  // Stage 1: fill concave corners deeper than t1 with triangles (v_{i+2}, v_{i+1}, v_i). The paper
-  // walks the border in order; with subdivided edges that zips a concavity into a fan of slivers,
-  // so the sharpest corner is filled first, which zips it into a strip.
-  const double t1 = o.t1_deg * kDeg;
+// Stage 1: fill concave corners deeper than t1 with triangles (v_{i+2}, v_{i+1}, v_i). The paper
+// walks the border in order; with subdivided edges that zips a concavity into a fan of slivers,
+// so the sharpest corner is filled first, which zips it into a strip.
+void fill_concave_corners(Builder& B, std::vector<int>& front, double t1_deg) {
+  const double t1 = t1_deg * kDeg;
   while (front.size() > 3) {
     const std::size_t m = front.size();
     std::size_t best = m;
@@ -422,75 +454,87 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
     B.add_polygon({front[(best + 1) % m], front[best], front[(best + m - 1) % m]}, 1, 0, 0);
     front.erase(front.begin() + static_cast<long>(best));
   }
+}
 
-  // A ladder of thin triangles across a large flap is rebuilt with interior points.
-  if (o.stage1_min_angle_deg > 0) rebuild_stage1(B, front, o.stage1_min_angle_deg, o.size_mm);
-
-  // Stage 2 and growth: layers of quadrilaterals until the extent is reached.
+// One layer of stage 2 and growth: quadrilaterals of depth l outward from `front`, which
+// becomes the layer's outer border.
+void grow_layer(Builder& B, std::vector<int>& front, double l, int layer,
+                const SurfaceMeshOptions& o) {
   const double t2 = o.t2_deg * kDeg;
+  const std::size_t m = front.size();
+  std::vector<std::vector<int>> fan(m);
+  std::vector<int> expanded(m, 0);
+  for (std::size_t i = 0; i < m; ++i) {
+    // copies: add_vertex() below may reallocate B.P
+    const Vec2 p = B.P[front[(i + m - 1) % m]];
+    const Vec2 v = B.P[front[i]];
+    const Vec2 q = B.P[front[(i + 1) % m]];
+    const double tau = turning(p, v, q);
+    const Vec2 n1 = outward(p, v), n2 = outward(v, q);
+    const double hole_angle = kPi - tau;
+    if (hole_angle < t2 || 1 + n1.dot(n2) < 0.5) {
+      // Expanded vertex: a fan of corner quads; two at a slit's end, where one would be flat.
+      expanded[i] = 1;
+      const int nq = tau > 150 * kDeg ? 2 : 1;
+      const double step = tau / (2 * nq);
+      // The paper's diagonal vertex v + l (n1 + n2) lies 2 cos(step) l out: a square corner at
+      // step = 45 deg, a 60/120 rhombus at 60 deg (whose outer corner then turns by only
+      // 60 deg, so the next layer does not expand it again). Below 45 deg, a right-angled kite.
+      const double diag = step >= kPi / 4 ? std::max(1.0, 2 * std::cos(step)) : 1 / std::cos(step);
+      for (int k = 0; k <= 2 * nq; ++k)
+        fan[i].push_back(B.add_vertex(v + l * (k % 2 ? diag : 1.0) * rotate(n1, k * step)));
+    } else {
+      fan[i].push_back(B.add_vertex(v + l * (n1 + n2) / (1 + n1.dot(n2))));
+    }
+  }
+  std::vector<int> next;
+  for (std::size_t i = 0; i < m; ++i) {
+    const int v = front[i];
+    if (expanded[i])
+      for (std::size_t k = 0; k + 2 < fan[i].size(); k += 2)
+        B.add_polygon({v, fan[i][k], fan[i][k + 1], fan[i][k + 2]}, 2, layer, 1);
+    next.insert(next.end(), fan[i].begin(), fan[i].end());
+    const int a = v, b = front[(i + 1) % m];
+    const int a2 = fan[i].back(), b2 = fan[(i + 1) % m].front();
+    if ((B.P[b2] - B.P[a2]).norm() > o.split_ratio * l) {
+      const int mid = B.add_vertex(0.5 * (B.P[a2] + B.P[b2]));
+      B.add_polygon({a, a2, mid, b}, 2, layer, 0);
+      B.add_polygon({b, mid, b2}, 2, layer, 0);
+      next.push_back(mid);
+    } else {
+      B.add_polygon({a, a2, b2, b}, 2, layer, 0);
+    }
+  }
+  B.check_simple(next, layer);
+  front = std::move(next);
+}
+
+// Stage 2 and growth: layers of quadrilaterals until the extent is reached; returns the
+// number of layers.
+int grow_layers(Builder& B, std::vector<int>& front, const SurfaceMeshOptions& o) {
+  const double extent_mm = B.out.extent_mm;
   double l = o.size_mm, reached = 0;
   int layer = 0;
-  while (reached < out.extent_mm - 1e-9 && layer < o.max_layers) {
+  while (reached < extent_mm - 1e-9 && layer < o.max_layers) {
     ++layer;
-    const std::size_t m = front.size();
-    std::vector<std::vector<int>> fan(m);
-    std::vector<int> expanded(m, 0);
-    for (std::size_t i = 0; i < m; ++i) {
-      // copies: add_vertex() below may reallocate B.P
-      const Vec2 p = B.P[front[(i + m - 1) % m]];
-      const Vec2 v = B.P[front[i]];
-      const Vec2 q = B.P[front[(i + 1) % m]];
-      const double tau = turning(p, v, q);
-      const Vec2 n1 = outward(p, v), n2 = outward(v, q);
-      const double hole_angle = kPi - tau;
-      if (hole_angle < t2 || 1 + n1.dot(n2) < 0.5) {
-        // Expanded vertex: a fan of corner quads; two at a slit's end, where one would be flat.
-        expanded[i] = 1;
-        const int nq = tau > 150 * kDeg ? 2 : 1;
-        const double step = tau / (2 * nq);
-        // The paper's diagonal vertex v + l (n1 + n2) lies 2 cos(step) l out: a square corner at
-        // step = 45 deg, a 60/120 rhombus at 60 deg (whose outer corner then turns by only
-        // 60 deg, so the next layer does not expand it again). Below 45 deg, a right-angled kite.
-        const double diag = step >= kPi / 4 ? std::max(1.0, 2 * std::cos(step)) : 1 / std::cos(step);
-        for (int k = 0; k <= 2 * nq; ++k)
-          fan[i].push_back(B.add_vertex(v + l * (k % 2 ? diag : 1.0) * rotate(n1, k * step)));
-      } else {
-        fan[i].push_back(B.add_vertex(v + l * (n1 + n2) / (1 + n1.dot(n2))));
-      }
-    }
-    std::vector<int> next;
-    for (std::size_t i = 0; i < m; ++i) {
-      const int v = front[i];
-      if (expanded[i])
-        for (std::size_t k = 0; k + 2 < fan[i].size(); k += 2)
-          B.add_polygon({v, fan[i][k], fan[i][k + 1], fan[i][k + 2]}, 2, layer, 1);
-      next.insert(next.end(), fan[i].begin(), fan[i].end());
-      const int a = v, b = front[(i + 1) % m];
-      const int a2 = fan[i].back(), b2 = fan[(i + 1) % m].front();
-      if ((B.P[b2] - B.P[a2]).norm() > o.split_ratio * l) {
-        const int mid = B.add_vertex(0.5 * (B.P[a2] + B.P[b2]));
-        B.add_polygon({a, a2, mid, b}, 2, layer, 0);
-        B.add_polygon({b, mid, b2}, 2, layer, 0);
-        next.push_back(mid);
-      } else {
-        B.add_polygon({a, a2, b2, b}, 2, layer, 0);
-      }
-    }
-    B.check_simple(next, layer);
-    front = std::move(next);
+    grow_layer(B, front, l, layer, o);
     reached += l;
-    const double remaining = out.extent_mm - reached;
+    const double remaining = extent_mm - reached;
     double l_next = std::min(l * o.growth, std::max(l, median_edge(B.P, front)));
     if (remaining < 1.5 * l_next) l_next = remaining;
     l = l_next;
   }
-  if (reached < out.extent_mm - 1e-9)
-    throw InvalidInput(cat("surface mesher: ", o.max_layers, " layers reach only ", reached,
-                           " of the ", out.extent_mm, " mm extent; use a larger --size or a "
-                           "smaller --extent"));
-  out.n_layers = layer;
-  out.outer_border = front;
+  if (reached < extent_mm - 1e-9)
+    throw InvalidParameter(cat("surface mesher: ", o.max_layers, " layers reach only ",
+                               std::round(reached * 10) / 10, " of the ",
+                               std::round(extent_mm * 10) / 10,
+                               " mm extent; use a larger {mesh_size} or a smaller {extent}"));
+  return layer;
+}
 
+// The vertices in (theta, z) and in the plane, unmirrored, and the quality.
+void finish_surface(Builder& B) {
+  SurfaceMesh& out = B.out;
   const int nv = static_cast<int>(B.P.size());
   out.xy_mm.resize(nv, 2);
   out.theta_z.resize(nv, 2);
@@ -503,7 +547,27 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
     std::reverse(out.outer_border.begin(), out.outer_border.end());
   }
   out.quality = surface_quality(out.xy_mm, out.polygons);
-  return out;
+}
+
+}  // namespace
+
+SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
+                         const SurfaceMeshOptions& o) {
+  check_mesher_inputs(static_cast<int>(border.loop_theta_z.size()), ref_radius_mm, o);
+  Builder B;
+  SurfaceMesh& out = B.out;
+  out.ref_radius_mm = ref_radius_mm;
+  out.sutures = border.sutures;
+  const std::vector<Vec2> L = local_plane(B, border.loop_theta_z, ref_radius_mm);
+  out.extent_mm = o.extent_mm > 0 ? o.extent_mm : 3.0 * out.wound_size_mm;
+  std::vector<int> front = add_loop_nodes(B, L, subdivided_edges(L, border.sutures, o.size_mm));
+  fill_concave_corners(B, front, o.t1_deg);
+  // A ladder of thin triangles across a large flap is rebuilt with interior points.
+  if (o.stage1_min_angle_deg > 0) rebuild_stage1(B, front, o.stage1_min_angle_deg, o.size_mm);
+  out.n_layers = grow_layers(B, front, o);
+  out.outer_border = front;
+  finish_surface(B);
+  return std::move(B.out);
 }
 
 }  // namespace caps::fem

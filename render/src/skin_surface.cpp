@@ -171,9 +171,9 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
   return displaced_skin(model, mesh, result ? &result->displacement_mm : nullptr, n_subdivisions);
 }
 
-SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
-                            const Eigen::MatrixX3d* displacement_mm, int n_subdivisions) {
-  const int n = n_subdivisions;
+namespace {
+
+void check_skin_inputs(const fem::Mesh& mesh, const Eigen::MatrixX3d* displacement_mm, int n) {
   if (n < 1 || n > 64)
     throw InvalidInput(cat("render: subdivisions ", n, " must be in 1..64 per element edge"));
   if (displacement_mm) {
@@ -183,80 +183,49 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
     if (!displacement_mm->allFinite())
       throw InvalidInput("render: the displacement has non-finite values");
   }
-  const CylinderGrid& g = model.grid();
-  const bool has_color = model.has_color();
-  auto color_of = [&](double theta, double z) -> Eigen::Vector3d {
-    return has_color ? model.color_at(theta, z) : kSkinTone;
-  };
+}
 
-  SkinSurfaces out;
-  out.skin_elements = skin_elements(model, mesh);
+// The model's colour at (theta deg, z mm), or a skin tone for models without colour.
+Eigen::Vector3d skin_color(const PatientModel& model, double theta, double z) {
+  return model.has_color() ? model.color_at(theta, z) : kSkinTone;
+}
+
+// The centroid of the skin elements' top-face nodes (LPS mm).
+Eigen::Vector3d top_face_centre(const fem::Mesh& mesh, const std::vector<int>& elements) {
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
   int n_face_nodes = 0;
-  for (int e : out.skin_elements)
+  for (int e : elements)
     for (int a : top_face_local(mesh.elements[e].type)) {
       centre += mesh.nodes.row(mesh.elements[e].nodes[a]).transpose();
       ++n_face_nodes;
     }
-  centre /= n_face_nodes;
-  out.mesh_centre_lps = centre;
-  const double theta_c = model.to_cylindrical(centre).theta_deg;
-  // theta unwrapped around the mesh's centre, so a mesh across the seam (+-180) stays in one piece
-  auto unwrap = [&](double theta) { return theta_c + wrap180(theta - theta_c); };
+  return centre / n_face_nodes;
+}
 
-  // --- Micropolygons, welded along element edges.
-  Builder b;
-  std::map<std::array<long, 3>, int> welded;
-  Eigen::VectorXd N;
-  Eigen::MatrixX3d dN;
-  for (int e : out.skin_elements) {
-    const fem::Element& el = mesh.elements[e];
-    const bool hex = el.type == fem::ElementType::Hex20;
-    const Eigen::MatrixX3d X = fem::element_coordinates(mesh, e);
-    Eigen::MatrixX3d U = Eigen::MatrixX3d::Zero(el.n_nodes(), 3);
+// One skin element's top face as (n + 1)^2 (hex) or (n + 1)(n + 2)/2 (wedge) micropolygon
+// vertices, welded to those its neighbours left on shared edges, and their triangles.
+class FaceSampler {
+ public:
+  FaceSampler(Builder& b, std::map<std::array<long, 3>, int>& welded, const PatientModel& model,
+              const fem::Mesh& mesh, const Eigen::MatrixX3d* displacement_mm, int e, int n,
+              double theta_c)
+      : b_(b),
+        welded_(welded),
+        model_(model),
+        el_(mesh.elements[e]),
+        e_(e),
+        n_(n),
+        theta_c_(theta_c),
+        hex_(el_.type == fem::ElementType::Hex20),
+        X_(fem::element_coordinates(mesh, e)),
+        U_(Eigen::MatrixX3d::Zero(el_.n_nodes(), 3)) {
     if (displacement_mm)
-      for (int a = 0; a < el.n_nodes(); ++a) U.row(a) = displacement_mm->row(el.nodes[a]);
-    // key of the grid point (i, j): a corner node, an edge point (lower node id first), or none
-    auto edge_key = [&](int la, int lb, int t) -> std::array<long, 3> {
-      const long a = el.nodes[la], c = el.nodes[lb];
-      if (t == 0) return {a, -1, -1};
-      if (t == n) return {c, -1, -1};
-      return a < c ? std::array<long, 3>{a, c, t} : std::array<long, 3>{c, a, n - t};
-    };
-    auto key_of = [&](int i, int j) -> std::array<long, 3> {
-      if (hex) {
-        if (j == 0) return edge_key(0, 1, i);
-        if (i == n) return edge_key(1, 2, j);
-        if (j == n) return edge_key(3, 2, i);
-        if (i == 0) return edge_key(0, 3, j);
-      } else {
-        if (j == 0) return edge_key(0, 1, i);
-        if (i + j == n) return edge_key(1, 2, j);
-        if (i == 0) return edge_key(0, 2, j);
-      }
-      return {-1, -1, -1};
-    };
-    auto vertex = [&](int i, int j) -> int {
-      const std::array<long, 3> key = key_of(i, j);
-      if (key[0] >= 0) {
-        const auto it = welded.find(key);
-        if (it != welded.end()) return it->second;
-      }
-      const Eigen::Vector3d xi = hex ? Eigen::Vector3d(-1.0 + 2.0 * i / n, -1.0 + 2.0 * j / n, -1.0)
-                                     : Eigen::Vector3d(double(i) / n, double(j) / n, -1.0);
-      fem::shape_functions(el.type, xi, N, dN);
-      const Eigen::Vector3d x_face = X.transpose() * N;
-      const Eigen::Vector3d u = U.transpose() * N;
-      const CylindricalPoint c = model.to_cylindrical(x_face);
-      const Eigen::Vector3d s = model.skin_point(c.theta_deg, c.z_mm);
-      const Eigen::Vector3d d = s - x_face;
-      // post = x_face + u + d (paper section 4); pre is the same with u = 0
-      const int v = b.add(x_face + d, (x_face + u) + d, color_of(c.theta_deg, c.z_mm), d,
-                          {unwrap(c.theta_deg), c.z_mm}, e, xi.head<2>());
-      if (key[0] >= 0) welded.emplace(key, v);
-      return v;
-    };
-    if (hex) {
+      for (int a = 0; a < el_.n_nodes(); ++a) U_.row(a) = displacement_mm->row(el_.nodes[a]);
+  }
+
+  void add_triangles() {
+    const int n = n_;
+    if (hex_) {
       std::vector<int> id((n + 1) * (n + 1));
       for (int j = 0; j <= n; ++j)
         for (int i = 0; i <= n; ++i) id[j * (n + 1) + i] = vertex(i, j);
@@ -264,8 +233,8 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
       // the face's 0-1-2-3 normal points into the element: reverse it to face outwards
       for (int j = 0; j < n; ++j)
         for (int i = 0; i < n; ++i) {
-          b.tri(at(i, j), at(i, j + 1), at(i + 1, j + 1), SkinPart::Micropolygon);
-          b.tri(at(i, j), at(i + 1, j + 1), at(i + 1, j), SkinPart::Micropolygon);
+          b_.tri(at(i, j), at(i, j + 1), at(i + 1, j + 1), SkinPart::Micropolygon);
+          b_.tri(at(i, j), at(i + 1, j + 1), at(i + 1, j), SkinPart::Micropolygon);
         }
     } else {
       std::map<std::pair<int, int>, int> id;
@@ -273,21 +242,76 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
         for (int i = 0; i + j <= n; ++i) id[{i, j}] = vertex(i, j);
       for (int j = 0; j < n; ++j)
         for (int i = 0; i + j < n; ++i) {
-          b.tri(id[{i, j}], id[{i, j + 1}], id[{i + 1, j}], SkinPart::Micropolygon);
+          b_.tri(id[{i, j}], id[{i, j + 1}], id[{i + 1, j}], SkinPart::Micropolygon);
           if (i + j + 1 < n)
-            b.tri(id[{i + 1, j}], id[{i, j + 1}], id[{i + 1, j + 1}], SkinPart::Micropolygon);
+            b_.tri(id[{i + 1, j}], id[{i, j + 1}], id[{i + 1, j + 1}], SkinPart::Micropolygon);
         }
     }
   }
-  const int n_micro = static_cast<int>(b.pre.size());
-  out.n_micropolygon_vertices = n_micro;
-  for (int v = 0; v < n_micro; ++v)
-    out.mesh_radius_mm = std::max(out.mesh_radius_mm, (b.pre[v] - centre).norm());
 
-  // --- Border loops of the micropolygon skin: the outer rim (counter-clockwise in theta, z) and
-  // the wounds (clockwise).
+ private:
+  // key of a point t/n along the edge between local nodes la and lb (lower node id first)
+  std::array<long, 3> edge_key(int la, int lb, int t) const {
+    const long a = el_.nodes[la], c = el_.nodes[lb];
+    if (t == 0) return {a, -1, -1};
+    if (t == n_) return {c, -1, -1};
+    return a < c ? std::array<long, 3>{a, c, t} : std::array<long, 3>{c, a, n_ - t};
+  }
+  // key of the grid point (i, j): a corner node, an edge point, or none
+  std::array<long, 3> key_of(int i, int j) const {
+    const int n = n_;
+    if (hex_) {
+      if (j == 0) return edge_key(0, 1, i);
+      if (i == n) return edge_key(1, 2, j);
+      if (j == n) return edge_key(3, 2, i);
+      if (i == 0) return edge_key(0, 3, j);
+    } else {
+      if (j == 0) return edge_key(0, 1, i);
+      if (i + j == n) return edge_key(1, 2, j);
+      if (i == 0) return edge_key(0, 2, j);
+    }
+    return {-1, -1, -1};
+  }
+  int vertex(int i, int j) {
+    const int n = n_;
+    const std::array<long, 3> key = key_of(i, j);
+    if (key[0] >= 0) {
+      const auto it = welded_.find(key);
+      if (it != welded_.end()) return it->second;
+    }
+    const Eigen::Vector3d xi = hex_ ? Eigen::Vector3d(-1.0 + 2.0 * i / n, -1.0 + 2.0 * j / n, -1.0)
+                                    : Eigen::Vector3d(double(i) / n, double(j) / n, -1.0);
+    fem::shape_functions(el_.type, xi, N_, dN_);
+    const Eigen::Vector3d x_face = X_.transpose() * N_;
+    const Eigen::Vector3d u = U_.transpose() * N_;
+    const CylindricalPoint c = model_.to_cylindrical(x_face);
+    const Eigen::Vector3d s = model_.skin_point(c.theta_deg, c.z_mm);
+    const Eigen::Vector3d d = s - x_face;
+    // theta unwrapped around the mesh's centre, so a mesh across the seam (+-180) stays in one
+    // piece; post = x_face + u + d (paper section 4), pre is the same with u = 0
+    const int v = b_.add(x_face + d, (x_face + u) + d, skin_color(model_, c.theta_deg, c.z_mm), d,
+                         {theta_c_ + wrap180(c.theta_deg - theta_c_), c.z_mm}, e_, xi.head<2>());
+    if (key[0] >= 0) welded_.emplace(key, v);
+    return v;
+  }
+
+  Builder& b_;                                  // not owned; outlives the sampler
+  std::map<std::array<long, 3>, int>& welded_;  // not owned; shared by all elements
+  const PatientModel& model_;                   // not owned
+  const fem::Element& el_;                      // not owned
+  int e_, n_;
+  double theta_c_;
+  bool hex_;
+  Eigen::MatrixX3d X_, U_;
+  Eigen::VectorXd N_;
+  Eigen::MatrixX3d dN_;
+};
+
+// The border loops of the micropolygon skin, each following its faces' directed edges: the
+// outer rim runs counter-clockwise in (theta, z), the wounds clockwise.
+std::vector<std::vector<int>> border_loops(const std::vector<Eigen::Vector3i>& faces) {
   std::set<std::pair<int, int>> directed;
-  for (const auto& f : b.faces)
+  for (const auto& f : faces)
     for (int k = 0; k < 3; ++k) directed.insert({f[k], f[(k + 1) % 3]});
   std::multimap<int, int> next;
   for (const auto& [a, c] : directed)
@@ -307,109 +331,104 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
     }
     if (loop.size() >= 2) loops.push_back(std::move(loop));
   }
-  auto loop_xy = [&](const std::vector<int>& loop) {
-    std::vector<Eigen::Vector2d> p;
-    for (int v : loop) p.push_back(b.theta_z[v]);
-    return p;
-  };
+  return loops;
+}
+
+std::vector<Eigen::Vector2d> loop_theta_z(const Builder& b, const std::vector<int>& loop) {
+  std::vector<Eigen::Vector2d> p;
+  for (int v : loop) p.push_back(b.theta_z[v]);
+  return p;
+}
+
+// The loop of largest counter-clockwise area: the outer rim.
+int outer_rim(const Builder& b, const std::vector<std::vector<int>>& loops) {
   int rim = -1;
   double rim_area = 0;
   for (std::size_t l = 0; l < loops.size(); ++l) {
-    const double a = signed_area(loop_xy(loops[l]));
+    const double a = signed_area(loop_theta_z(b, loops[l]));
     if (a > rim_area) {
       rim_area = a;
       rim = static_cast<int>(l);
     }
   }
   if (rim < 0)
-    throw InvalidInput("render: the mesh's skin faces have no counter-clockwise outer rim; are "
-                       "the elements oriented as in docs/mesh-format.md?");
+    throw InvalidInput(
+        "render: the mesh's skin faces have no counter-clockwise outer rim; are "
+        "the elements oriented as in docs/mesh-format.md?");
+  return rim;
+}
 
-  // --- Wound fills.
+void add_wound_fills(Builder& b, const std::vector<std::vector<int>>& loops, int rim) {
   for (std::size_t l = 0; l < loops.size(); ++l) {
     if (static_cast<int>(l) == rim) continue;
     std::vector<int> loop = loops[l];
-    const std::vector<Eigen::Vector2d> xy = loop_xy(loop);
+    const std::vector<Eigen::Vector2d> xy = loop_theta_z(b, loop);
     const double area = signed_area(xy);
     if (area > 0) continue;  // a second island; leave it open
     // An incision without excision (a Z-plasty, a V-Y flap) opens no hole: its lips are the skin
     // on either side, which the closure moves onto other lips. A fill there could only be a fan
     // across the flaps, so none is made.
     double perimeter = 0;
-    for (std::size_t i = 0; i < xy.size(); ++i) perimeter += (xy[(i + 1) % xy.size()] - xy[i]).norm();
+    for (std::size_t i = 0; i < xy.size(); ++i)
+      perimeter += (xy[(i + 1) % xy.size()] - xy[i]).norm();
     if (-area < 1e-6 * perimeter * perimeter) continue;
     std::reverse(loop.begin(), loop.end());
     auto post_area = [&](int a, int c, int d) {
       const Eigen::Vector3d& pa = b.post[loop[a]];
       return (b.post[loop[c]] - pa).cross(b.post[loop[d]] - pa).norm();
     };
-    for (const auto& t : ear_clip(loop_xy(loop), post_area))
+    for (const auto& t : ear_clip(loop_theta_z(b, loop), post_area))
       b.tri(loop[t[0]], loop[t[1]], loop[t[2]], SkinPart::WoundFill);
   }
+}
 
-  // --- Range mesh vertices (one per sample).
-  const int nt = g.n_theta, nz = g.n_z;
-  const int range0 = static_cast<int>(b.pre.size());
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < nt; ++j) {
+// The range mesh's vertices, one per sample of the model's grid, from `first` on.
+struct RangeVertices {
+  int first = 0, nt = 0;
+  // the vertex of sample (j, k); j wraps around
+  int at(long j, long k) const {
+    const long jj = ((j % nt) + nt) % nt;
+    return first + static_cast<int>(k * nt + jj);
+  }
+};
+
+RangeVertices add_range_vertices(Builder& b, const PatientModel& model) {
+  const CylinderGrid& g = model.grid();
+  const RangeVertices range{static_cast<int>(b.pre.size()), g.n_theta};
+  for (int k = 0; k < g.n_z; ++k)
+    for (int j = 0; j < g.n_theta; ++j) {
       const double th = g.theta_deg(j), z = g.z_mm(k);
       const Eigen::Vector3d s = model.skin_point(th, z);
-      b.add(s, s, color_of(th, z), Eigen::Vector3d::Zero(), {th, z}, -1);
+      b.add(s, s, skin_color(model, th, z), Eigen::Vector3d::Zero(), {th, z}, -1);
     }
-  auto grid_vertex = [&](long j, long k) {
-    const long jj = ((j % nt) + nt) % nt;
-    return range0 + static_cast<int>(k * nt + jj);
-  };
+  return range;
+}
 
-  // --- Cells under the footprint: touching the rim polygon, dilated by one, holes filled,
-  // diagonal pinches removed so that their border is one simple loop.
-  const std::vector<Eigen::Vector2d> rim_poly = loop_xy(loops[rim]);
-  double tmin = 1e300, tmax = -1e300, zmin = 1e300, zmax = -1e300;
-  for (const auto& p : rim_poly) {
-    tmin = std::min(tmin, p.x());
-    tmax = std::max(tmax, p.x());
-    zmin = std::min(zmin, p.y());
-    zmax = std::max(zmax, p.y());
+// (theta deg, z mm) of range grid vertex (j, k), j unwrapped.
+Eigen::Vector2d grid_corner(const CylinderGrid& g, long j, long k) {
+  return Eigen::Vector2d(g.theta0_deg + j * g.dtheta_deg(), g.z0_mm + k * g.dz_mm);
+}
+
+// Range cells (j, k) removed under the mesh's footprint, in the box j0..j1 × k0..k1 of cells
+// (j unwrapped around the mesh); cell (j, k) spans grid vertices j..j+1, k..k+1.
+struct Footprint {
+  long j0 = 0, j1 = 0, k0 = 0, k1 = 0, W = 0, H = 0;
+  std::vector<char> R;
+
+  bool in_box(long j, long k) const { return j >= j0 && j <= j1 && k >= k0 && k <= k1; }
+  std::size_t index(long j, long k) const {
+    return static_cast<std::size_t>((k - k0) * W + (j - j0));
   }
-  const double dth = g.dtheta_deg();
-  const long j0 = static_cast<long>(std::floor((tmin - g.theta0_deg) / dth)) - 3;
-  const long j1 = static_cast<long>(std::floor((tmax - g.theta0_deg) / dth)) + 3;
-  const long k0 = static_cast<long>(std::floor((zmin - g.z0_mm) / g.dz_mm)) - 3;
-  const long k1 = static_cast<long>(std::floor((zmax - g.z0_mm) / g.dz_mm)) + 3;
-  if (k0 < 0 || k1 > nz - 2 || j1 - j0 >= nt - 2)
-    throw InvalidInput(cat("render: the mesh (z ", zmin, "..", zmax, " mm, theta ", tmin, "..",
-                           tmax, " deg) comes within 3 rows of the model's z range or wraps "
-                           "around the head; the skin cannot be stitched there"));
-  const long W = j1 - j0 + 1, H = k1 - k0 + 1;
-  std::vector<char> R(static_cast<std::size_t>(W * H), 0);
-  auto cell = [&](long j, long k) -> char& { return R[static_cast<std::size_t>((k - k0) * W + (j - j0))]; };
-  auto in_box = [&](long j, long k) { return j >= j0 && j <= j1 && k >= k0 && k <= k1; };
-  auto corner = [&](long j, long k) {
-    return Eigen::Vector2d(g.theta0_deg + j * dth, g.z0_mm + k * g.dz_mm);
-  };
-  std::vector<char> corner_in(static_cast<std::size_t>((W + 1) * (H + 1)));
-  for (long k = k0; k <= k1 + 1; ++k)
-    for (long j = j0; j <= j1 + 1; ++j)
-      corner_in[static_cast<std::size_t>((k - k0) * (W + 1) + (j - j0))] = inside(rim_poly, corner(j, k));
-  for (long k = k0; k <= k1; ++k)
-    for (long j = j0; j <= j1; ++j)
-      for (long dk = 0; dk <= 1; ++dk)
-        for (long dj = 0; dj <= 1; ++dj)
-          if (corner_in[static_cast<std::size_t>((k + dk - k0) * (W + 1) + (j + dj - j0))]) cell(j, k) = 1;
-  for (const auto& p : rim_poly) {
-    const long j = static_cast<long>(std::floor((p.x() - g.theta0_deg) / dth));
-    const long k = static_cast<long>(std::floor((p.y() - g.z0_mm) / g.dz_mm));
-    if (in_box(j, k)) cell(j, k) = 1;
+  char& cell(long j, long k) { return R[index(j, k)]; }
+  char cell(long j, long k) const { return R[index(j, k)]; }
+  // In the footprint in unwrapped cell indices; a cell may be reached one turn away.
+  bool removed(long j, long k, long nt) const {
+    for (long t : {j, j - nt, j + nt})
+      if (in_box(t, k) && cell(t, k)) return true;
+    return false;
   }
-  {
-    const std::vector<char> seed = R;
-    for (long k = k0 + 1; k < k1; ++k)
-      for (long j = j0 + 1; j < j1; ++j)
-        if (seed[static_cast<std::size_t>((k - k0) * W + (j - j0))])
-          for (long dk = -1; dk <= 1; ++dk)
-            for (long dj = -1; dj <= 1; ++dj) cell(j + dj, k + dk) = 1;
-  }
-  auto fill_holes = [&] {
+  // Marks every cell not reachable from the box's border through unmarked cells.
+  void fill_holes() {
     std::vector<char> outside(R.size(), 0);
     std::vector<std::pair<long, long>> stack;
     for (long k = k0; k <= k1; ++k)
@@ -418,7 +437,7 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
     while (!stack.empty()) {
       const auto [j, k] = stack.back();
       stack.pop_back();
-      const auto c = static_cast<std::size_t>((k - k0) * W + (j - j0));
+      const auto c = index(j, k);
       if (outside[c] || R[c]) continue;
       outside[c] = 1;
       for (const auto& [dj, dk] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}})
@@ -426,33 +445,82 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
     }
     for (std::size_t c = 0; c < R.size(); ++c)
       if (!outside[c]) R[c] = 1;
-  };
-  fill_holes();
+  }
+};
+
+// The cells touching the rim polygon, dilated by one, holes filled, diagonal pinches removed
+// so that their border is one simple loop.
+Footprint footprint_cells(const CylinderGrid& g, const std::vector<Eigen::Vector2d>& rim_poly) {
+  double tmin = 1e300, tmax = -1e300, zmin = 1e300, zmax = -1e300;
+  for (const auto& p : rim_poly) {
+    tmin = std::min(tmin, p.x());
+    tmax = std::max(tmax, p.x());
+    zmin = std::min(zmin, p.y());
+    zmax = std::max(zmax, p.y());
+  }
+  const double dth = g.dtheta_deg();
+  Footprint fp;
+  fp.j0 = static_cast<long>(std::floor((tmin - g.theta0_deg) / dth)) - 3;
+  fp.j1 = static_cast<long>(std::floor((tmax - g.theta0_deg) / dth)) + 3;
+  fp.k0 = static_cast<long>(std::floor((zmin - g.z0_mm) / g.dz_mm)) - 3;
+  fp.k1 = static_cast<long>(std::floor((zmax - g.z0_mm) / g.dz_mm)) + 3;
+  const long j0 = fp.j0, j1 = fp.j1, k0 = fp.k0, k1 = fp.k1;
+  if (k0 < 0 || k1 > g.n_z - 2 || j1 - j0 >= g.n_theta - 2)
+    throw InvalidInput(cat("render: the mesh (z ", zmin, "..", zmax, " mm, theta ", tmin, "..",
+                           tmax,
+                           " deg) comes within 3 rows of the model's z range or wraps "
+                           "around the head; the skin cannot be stitched there"));
+  const long W = fp.W = j1 - j0 + 1, H = fp.H = k1 - k0 + 1;
+  fp.R.assign(static_cast<std::size_t>(W * H), 0);
+  std::vector<char> corner_in(static_cast<std::size_t>((W + 1) * (H + 1)));
+  for (long k = k0; k <= k1 + 1; ++k)
+    for (long j = j0; j <= j1 + 1; ++j)
+      corner_in[static_cast<std::size_t>((k - k0) * (W + 1) + (j - j0))] =
+          inside(rim_poly, grid_corner(g, j, k));
+  for (long k = k0; k <= k1; ++k)
+    for (long j = j0; j <= j1; ++j)
+      for (long dk = 0; dk <= 1; ++dk)
+        for (long dj = 0; dj <= 1; ++dj)
+          if (corner_in[static_cast<std::size_t>((k + dk - k0) * (W + 1) + (j + dj - j0))])
+            fp.cell(j, k) = 1;
+  for (const auto& p : rim_poly) {
+    const long j = static_cast<long>(std::floor((p.x() - g.theta0_deg) / dth));
+    const long k = static_cast<long>(std::floor((p.y() - g.z0_mm) / g.dz_mm));
+    if (fp.in_box(j, k)) fp.cell(j, k) = 1;
+  }
+  const std::vector<char> seed = fp.R;
+  for (long k = k0 + 1; k < k1; ++k)
+    for (long j = j0 + 1; j < j1; ++j)
+      if (seed[fp.index(j, k)])
+        for (long dk = -1; dk <= 1; ++dk)
+          for (long dj = -1; dj <= 1; ++dj) fp.cell(j + dj, k + dk) = 1;
+  fp.fill_holes();
   for (bool changed = true; changed;) {
     changed = false;
     for (long k = k0; k < k1; ++k)
       for (long j = j0; j < j1; ++j) {
-        const char a = cell(j, k), c = cell(j + 1, k), d = cell(j, k + 1), e = cell(j + 1, k + 1);
+        const char a = fp.cell(j, k), c = fp.cell(j + 1, k), d = fp.cell(j, k + 1),
+                   e = fp.cell(j + 1, k + 1);
         if ((a && e && !c && !d) || (c && d && !a && !e)) {
-          cell(j, k) = cell(j + 1, k) = cell(j, k + 1) = cell(j + 1, k + 1) = 1;
+          fp.cell(j, k) = fp.cell(j + 1, k) = fp.cell(j, k + 1) = fp.cell(j + 1, k + 1) = 1;
           changed = true;
         }
       }
-    if (changed) fill_holes();
+    if (changed) fp.fill_holes();
   }
+  return fp;
+}
 
-  // --- Range cells outside the footprint, and the end caps.
-  auto removed = [&](long j, long k) {
-    // the footprint in unwrapped cell indices; a cell may be reached one turn away
-    for (long t : {j, j - nt, j + nt})
-      if (in_box(t, k) && cell(t, k)) return true;
-    return false;
-  };
+// The range cells outside the footprint, and the caps closing the range mesh's two ends.
+void add_range_cells(Builder& b, const PatientModel& model, const Footprint& fp,
+                     const RangeVertices& range) {
+  const CylinderGrid& g = model.grid();
+  const int nt = g.n_theta, nz = g.n_z;
   for (long k = 0; k + 1 < nz; ++k)
     for (long j = 0; j < nt; ++j) {
-      if (removed(j, k)) continue;
-      const int v00 = grid_vertex(j, k), v10 = grid_vertex(j + 1, k), v01 = grid_vertex(j, k + 1),
-                v11 = grid_vertex(j + 1, k + 1);
+      if (fp.removed(j, k, nt)) continue;
+      const int v00 = range.at(j, k), v10 = range.at(j + 1, k), v01 = range.at(j, k + 1),
+                v11 = range.at(j + 1, k + 1);
       b.tri(v00, v10, v11, SkinPart::Range);
       b.tri(v00, v11, v01, SkinPart::Range);
     }
@@ -460,48 +528,55 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
     const int k = end == 0 ? 0 : nz - 1;
     const Eigen::Vector3d c = model.to_lps(0.0, g.z_mm(k), 0.0);
     Eigen::Vector3d color = Eigen::Vector3d::Zero();
-    for (int j = 0; j < nt; ++j) color += b.color[grid_vertex(j, k)];
+    for (int j = 0; j < nt; ++j) color += b.color[range.at(j, k)];
     const int cv = b.add(c, c, color / nt, Eigen::Vector3d::Zero(), {0.0, g.z_mm(k)}, -1);
     for (int j = 0; j < nt; ++j) {
       if (end == 0)
-        b.tri(cv, grid_vertex(j + 1, k), grid_vertex(j, k), SkinPart::Range);
+        b.tri(cv, range.at(j + 1, k), range.at(j, k), SkinPart::Range);
       else
-        b.tri(cv, grid_vertex(j, k), grid_vertex(j + 1, k), SkinPart::Range);
+        b.tri(cv, range.at(j, k), range.at(j + 1, k), SkinPart::Range);
     }
   }
+}
 
-  // --- The staircase border of the removed cells, counter-clockwise around them (grid vertex
-  // coordinates, unwrapped), then the seam strip between it and the rim.
+// The staircase border of the footprint's cells, counter-clockwise around them, as grid
+// vertices (j, k) (j unwrapped).
+std::vector<std::pair<long, long>> footprint_border(const Footprint& fp) {
   std::map<std::pair<long, long>, std::pair<long, long>> step;
-  for (long k = k0; k <= k1; ++k)
-    for (long j = j0; j <= j1; ++j) {
-      if (!cell(j, k)) continue;
-      auto off = [&](long jj, long kk) { return !in_box(jj, kk) || !cell(jj, kk); };
+  for (long k = fp.k0; k <= fp.k1; ++k)
+    for (long j = fp.j0; j <= fp.j1; ++j) {
+      if (!fp.cell(j, k)) continue;
+      auto off = [&](long jj, long kk) { return !fp.in_box(jj, kk) || !fp.cell(jj, kk); };
       if (off(j, k - 1)) step[{j, k}] = {j + 1, k};
       if (off(j + 1, k)) step[{j + 1, k}] = {j + 1, k + 1};
       if (off(j, k + 1)) step[{j + 1, k + 1}] = {j, k + 1};
       if (off(j - 1, k)) step[{j, k + 1}] = {j, k};
     }
   std::vector<std::pair<long, long>> stair;
-  {
-    auto at = step.begin()->first;
-    const auto start = at;
-    do {
-      stair.push_back(at);
-      const auto it = step.find(at);
-      if (it == step.end())
-        throw Error("render: the footprint's border is not closed (internal error)");
-      at = it->second;
-    } while (at != start && stair.size() <= step.size());
-  }
-  // arc length in mm (theta as arc at the rim's radius), for the zipper
-  const double r_ref = model.r_skin(theta_c, model.to_cylindrical(centre).z_mm);
-  const double mm_per_deg = deg_to_rad(1.0) * r_ref;
-  auto to_mm = [&](const Eigen::Vector2d& tz) { return Eigen::Vector2d(tz.x() * mm_per_deg, tz.y()); };
-  const std::vector<int>& P = loops[rim];
+  auto at = step.begin()->first;
+  const auto start = at;
+  do {
+    stair.push_back(at);
+    const auto it = step.find(at);
+    if (it == step.end())
+      throw Error("render: the footprint's border is not closed (internal error)");
+    at = it->second;
+  } while (at != start && stair.size() <= step.size());
+  return stair;
+}
+
+// The seam strip between the micropolygons' rim `P` and the footprint's border `stair`,
+// zipped by arc length (theta as arc at the radius r_ref_mm).
+void add_seam(Builder& b, const CylinderGrid& g, const std::vector<int>& P,
+              const std::vector<std::pair<long, long>>& stair, const RangeVertices& range,
+              double r_ref_mm) {
+  const double mm_per_deg = deg_to_rad(1.0) * r_ref_mm;
+  auto to_mm = [&](const Eigen::Vector2d& tz) {
+    return Eigen::Vector2d(tz.x() * mm_per_deg, tz.y());
+  };
   std::vector<Eigen::Vector2d> Pm, Qm;
   for (int v : P) Pm.push_back(to_mm(b.theta_z[v]));
-  for (const auto& [j, k] : stair) Qm.push_back(to_mm(corner(j, k)));
+  for (const auto& [j, k] : stair) Qm.push_back(to_mm(grid_corner(g, j, k)));
   std::size_t q0 = 0;
   for (std::size_t q = 1; q < Qm.size(); ++q)
     if ((Qm[q] - Pm[0]).squaredNorm() < (Qm[q0] - Pm[0]).squaredNorm()) q0 = q;
@@ -517,7 +592,7 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
   auto pv = [&](std::size_t i) { return P[i % np]; };
   auto qv = [&](std::size_t i) {
     const auto& [j, k] = stair[(q0 + i) % nq];
-    return grid_vertex(j, k);
+    return range.at(j, k);
   };
   for (std::size_t i = 0, j = 0; i < np || j < nq;) {
     const bool advance_p = j == nq || (i < np && tp[i + 1] <= tq[j + 1]);
@@ -529,8 +604,9 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
       ++j;
     }
   }
+}
 
-  // --- Pack.
+void pack(Builder& b, SkinSurfaces& out) {
   const auto nv = static_cast<Eigen::Index>(b.pre.size());
   out.pre.V.resize(nv, 3);
   out.post.V.resize(nv, 3);
@@ -549,9 +625,46 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
     out.vertex_natural.row(v) = b.natural[v];
   }
   out.pre.F.resize(static_cast<Eigen::Index>(b.faces.size()), 3);
-  for (std::size_t f = 0; f < b.faces.size(); ++f) out.pre.F.row(static_cast<Eigen::Index>(f)) = b.faces[f];
+  for (std::size_t f = 0; f < b.faces.size(); ++f)
+    out.pre.F.row(static_cast<Eigen::Index>(f)) = b.faces[f];
   out.post.F = out.pre.F;
   out.face_part = std::move(b.part);
+}
+
+}  // namespace
+
+SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
+                            const Eigen::MatrixX3d* displacement_mm, int n_subdivisions) {
+  check_skin_inputs(mesh, displacement_mm, n_subdivisions);
+  SkinSurfaces out;
+  out.skin_elements = skin_elements(model, mesh);
+  const Eigen::Vector3d centre = top_face_centre(mesh, out.skin_elements);
+  out.mesh_centre_lps = centre;
+  const double theta_c = model.to_cylindrical(centre).theta_deg;
+
+  // Micropolygons, welded along element edges.
+  Builder b;
+  std::map<std::array<long, 3>, int> welded;
+  for (int e : out.skin_elements)
+    FaceSampler(b, welded, model, mesh, displacement_mm, e, n_subdivisions, theta_c)
+        .add_triangles();
+  const int n_micro = static_cast<int>(b.pre.size());
+  out.n_micropolygon_vertices = n_micro;
+  for (int v = 0; v < n_micro; ++v)
+    out.mesh_radius_mm = std::max(out.mesh_radius_mm, (b.pre[v] - centre).norm());
+
+  const std::vector<std::vector<int>> loops = border_loops(b.faces);
+  const int rim = outer_rim(b, loops);
+  add_wound_fills(b, loops, rim);
+
+  // The range mesh around the micropolygons, stitched to their rim.
+  const RangeVertices range = add_range_vertices(b, model);
+  const Footprint fp = footprint_cells(model.grid(), loop_theta_z(b, loops[rim]));
+  add_range_cells(b, model, fp, range);
+  const double r_ref = model.r_skin(theta_c, model.to_cylindrical(centre).z_mm);
+  add_seam(b, model.grid(), loops[rim], footprint_border(fp), range, r_ref);
+
+  pack(b, out);
   return out;
 }
 

@@ -272,29 +272,27 @@ void flag_grazing(CylindricalMaps& maps, double limit_deg) {
     }
 }
 
-CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const CylinderAxis& axis,
-                                 const MapOptions& o, Reporter* reporter) {
+namespace {
+
+void check_map_options(const MapOptions& o) {
   if (o.n_theta < 8 || o.n_theta > 8192 || o.n_z < 4 || o.n_z > 8192)
     throw InvalidInput(cat("cylindrical grid ", o.n_theta, " x ", o.n_z,
                            " is out of range (theta 8..8192, z 4..8192)"));
   if (!(o.bone_cap_mm > 0 && o.bone_cap_mm <= 200))
     throw InvalidInput(cat("bone cap ", o.bone_cap_mm, " mm must be in (0, 200]"));
-  Progress progress(reporter, "casting cylindrical rays", 1.0);
-  CylindricalMaps maps;
-  maps.axis = axis;
-  auto& grid = maps.grid;
-  grid.n_theta = o.n_theta;
-  grid.n_z = o.n_z;
+}
 
-  // z extent: the head's extent along the axis.
+// The grid's z rows: by default the head's extent along the axis.
+void set_z_rows(CylinderGrid& grid, const Volume& v, const Segmentation& seg,
+                const CylinderAxis& axis, const MapOptions& o) {
   const auto& wg = seg.skin.geom;
   double zlo = std::numeric_limits<double>::max(), zhi = -zlo;
   for (int k = 0; k < wg.dims[2]; ++k)
     for (int j = 0; j < wg.dims[1]; ++j)
       for (int i = 0; i < wg.dims[0]; ++i)
         if (seg.skin.at(i, j, k)) {
-          const double z = (wg.index_to_lps(Eigen::Vector3d(i, j, k)) - axis.origin_lps)
-                               .dot(axis.direction);
+          const double z =
+              (wg.index_to_lps(Eigen::Vector3d(i, j, k)) - axis.origin_lps).dot(axis.direction);
           zlo = std::min(zlo, z);
           zhi = std::max(zhi, z);
         }
@@ -305,192 +303,313 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
     throw InvalidInput(cat("cylindrical grid: z range ", zlo, " .. ", zhi, " mm is empty"));
   grid.z0_mm = zlo;
   grid.dz_mm = (zhi - zlo) / (grid.n_z - 1);
+}
 
-  // The head's largest radius near each row (within a working voxel's diagonal in z), so that
-  // every ray starts its walk just outside the head rather than at the grid's far corner.
+// The head's largest radius near each row (within a working voxel's diagonal in z), so that
+// every ray starts its walk just outside the head rather than at the grid's far corner.
+std::vector<double> row_max_radii(const CylinderGrid& grid, const Segmentation& seg,
+                                  const CylinderAxis& axis) {
+  const auto& wg = seg.skin.geom;
   std::vector<double> row_r_max(static_cast<std::size_t>(grid.n_z), 0.0);
-  {
-    const double reach = wg.spacing_mm.norm();
-    for (int k = 0; k < wg.dims[2]; ++k)
-      for (int j = 0; j < wg.dims[1]; ++j)
-        for (int i = 0; i < wg.dims[0]; ++i) {
-          if (!seg.skin.at(i, j, k)) continue;
-          const Eigen::Vector3d q = wg.index_to_lps(Eigen::Vector3d(i, j, k)) - axis.origin_lps;
-          const double z = q.dot(axis.direction);
-          const double r = (q - z * axis.direction).norm() + reach;
-          const int k0 = std::max(0, static_cast<int>(std::floor((z - reach - grid.z0_mm) / grid.dz_mm)));
-          const int k1 = std::min(grid.n_z - 1, static_cast<int>(std::ceil((z + reach - grid.z0_mm) / grid.dz_mm)));
-          for (int kk = k0; kk <= k1; ++kk) row_r_max[kk] = std::max(row_r_max[kk], r);
-        }
+  const double reach = wg.spacing_mm.norm();
+  for (int k = 0; k < wg.dims[2]; ++k)
+    for (int j = 0; j < wg.dims[1]; ++j)
+      for (int i = 0; i < wg.dims[0]; ++i) {
+        if (!seg.skin.at(i, j, k)) continue;
+        const Eigen::Vector3d q = wg.index_to_lps(Eigen::Vector3d(i, j, k)) - axis.origin_lps;
+        const double z = q.dot(axis.direction);
+        const double r = (q - z * axis.direction).norm() + reach;
+        const int k0 =
+            std::max(0, static_cast<int>(std::floor((z - reach - grid.z0_mm) / grid.dz_mm)));
+        const int k1 = std::min(grid.n_z - 1,
+                                static_cast<int>(std::ceil((z + reach - grid.z0_mm) / grid.dz_mm)));
+        for (int kk = k0; kk <= k1; ++kk) row_r_max[kk] = std::max(row_r_max[kk], r);
+      }
+  return row_r_max;
+}
+
+// A bone mask as a volume of 0 and 1, whose 0.5 level is the bone's surface (MR).
+Volume mask_as_volume(const Mask& mask) {
+  Volume out;
+  out.geom = mask.geom;
+  out.data.assign(mask.data.begin(), mask.data.end());
+  return out;
+}
+
+// A ray from the axis: centre + r d at radius r (mm).
+struct Ray {
+  Eigen::Vector3d centre, d;
+  Eigen::Vector3d at(double r) const { return Eigen::Vector3d(centre + r * d); }
+};
+
+// Casts the ray of each cell of `maps.grid` (paper section 3) and stores what it meets: the
+// skin's outermost crossing, the first bone under it and the thickness along the normal, with
+// the cell's flags. Cells are independent; cast() may run in parallel for different cells.
+class RayCaster {
+ public:
+  RayCaster(const Volume& v, const Segmentation& seg, const MapOptions& o,
+            const std::vector<double>& row_r_max, CylindricalMaps& maps)
+      : v_(v),
+        seg_(seg),
+        o_(o),
+        row_r_max_(row_r_max),
+        maps_(maps),
+        lowest_(*std::min_element(v.data.begin(), v.data.end())),
+        intensity_(v, lowest_),
+        skin_at_(seg.skin),
+        bone_at_(seg.bone),
+        bone_by_threshold_(std::isfinite(seg.bone_threshold)),
+        bone_float_(mask_as_volume(seg.bone)),
+        bone_mask_field_(bone_float_, 0.0f),
+        bone_level_default_(bone_by_threshold_ ? static_cast<float>(seg.bone_threshold) : 0.5f),
+        w_(seg.skin.geom.spacing_mm.maxCoeff()),
+        coarse_(0.5 * seg.skin.geom.spacing_mm.minCoeff()),
+        fine_(0.25 * v.geom.spacing_mm.minCoeff()),
+        edge_span_(std::max(1.5, 1.5 * v.geom.spacing_mm.maxCoeff())),
+        ramp_(v.geom.spacing_mm.maxCoeff()),
+        is_ct_(v.modality == Modality::CT),
+        skin_thr_(static_cast<float>(seg.skin_threshold)) {
+    squared_distance_mm2(seg.bone, &nearest_bone_);
   }
+  RayCaster(const RayCaster&) = delete;
+  RayCaster& operator=(const RayCaster&) = delete;
+
+  // `samples` is scratch space, one per thread.
+  void cast(int j, int k, std::vector<double>& samples) const {
+    const CylinderGrid& grid = maps_.grid;
+    const CylinderAxis& axis = maps_.axis;
+    const std::size_t c = grid.index(j, k);
+    const double theta = deg_to_rad(grid.theta_deg(j));
+    const Ray ray{axis.origin_lps + grid.z_mm(k) * axis.direction, axis.ray(theta)};
+    double t0, t1;
+    if (!clip_to_grid(seg_.skin.geom, ray.centre, ray.d, t0, t1)) {
+      maps_.flags[c] = kNoSkin;
+      return;
+    }
+    t1 = std::min(t1, std::max(t0, row_r_max_[k]));
+    const double r_entry = envelope_entry(ray, c, t0, t1);
+    if (!std::isfinite(r_entry)) {
+      maps_.flags[c] = kNoSkin;
+      return;
+    }
+    double r_s = skin_crossing(ray, r_entry);
+    double r_b = bone_crossing(ray, r_s);
+    const double bone_level = half_maximum_edges(ray, samples, r_s, r_b);
+    maps_.r_skin[c] = static_cast<float>(r_s);
+    maps_.measured_skin[c] = 1;
+    const Eigen::Vector3d p = ray.at(r_s);
+    // The skin point sits on the edge of the acquired data: a cut face, not skin.
+    if (near_data_edge(v_, p, 1.5)) maps_.flags[c] |= kTruncated;
+    if (!std::isfinite(r_b)) {
+      maps_.flags[c] |= kNoBone;
+      return;
+    }
+    maps_.r_bone[c] = static_cast<float>(r_b);
+    maps_.thickness[c] = static_cast<float>(r_s - r_b);
+    maps_.measured_bone[c] = 1;
+    maps_.thickness_normal[c] =
+        static_cast<float>(thickness_along_normal(p, r_s - r_b, bone_level));
+  }
+
+ private:
+  double bone_value(const Eigen::Vector3d& p) const {
+    return bone_by_threshold_ ? intensity_(p) : bone_mask_field_(p);
+  }
+  // The intensity seen only through the mask's boundary layer (one working voxel outward), so
+  // that an object lying just outside the head (a head holder on its pad) cannot be taken for
+  // the skin.
+  double gated_intensity(const Ray& ray, double r) const {
+    return skin_at_(ray.at(r)) || skin_at_(ray.at(r - w_)) ? intensity_(ray.at(r)) : lowest_;
+  }
+
+  // 1. Walk the envelope mask inward from t1: the outermost entry (NaN if none), and any
+  // re-entry (undercut, flagged in cell c).
+  double envelope_entry(const Ray& ray, std::size_t c, double t0, double t1) const {
+    double r_entry = std::numeric_limits<double>::quiet_NaN();
+    // A re-entry counts as an undercut only after a real air gap (kMinGapMm): a ledge in the
+    // mask between thick slices is not an ear.
+    constexpr double kMinGapMm = kUndercutMinGapMm;
+    bool inside = skin_at_(ray.at(t1));
+    if (inside) maps_.flags[c] |= kTruncated;
+    if (inside) r_entry = t1;
+    int entries = inside ? 1 : 0;
+    double r_left = t1;  // where the ray last left the mask
+    // Below the outermost skin, only the bone cap's depth matters for undercuts.
+    double r_stop = t0;
+    for (double r = t1 - coarse_; r >= r_stop; r -= coarse_) {
+      const bool now = skin_at_(ray.at(r));
+      if (now && !inside) {
+        if (entries == 0) {
+          r_entry = r + 0.5 * coarse_;
+          entries = 1;
+          r_stop = std::max(t0, r_entry - o_.bone_cap_mm);
+        } else if (r_left - r >= kMinGapMm) {
+          ++entries;
+        }
+      }
+      if (!now && inside) r_left = r;
+      inside = now;
+    }
+    if (entries == 0) return std::numeric_limits<double>::quiet_NaN();
+    if (entries > 1) maps_.flags[c] |= kUndercut;
+    return r_entry;
+  }
+
+  // 2. The skin refined on the full-resolution intensities near the mask's edge.
+  double skin_crossing(const Ray& ray, double r_entry) const {
+    const auto I_gated = [&](double r) { return gated_intensity(ray, r); };
+    double r_s = crossing_inward(I_gated, r_entry + 2 * w_, std::max(0.0, r_entry - 2 * w_), fine_,
+                                 skin_thr_);
+    if (!std::isfinite(r_s)) r_s = r_entry;
+    return r_s;
+  }
+
+  // 3. The first bone inward from the skin, within the cap (NaN if none).
+  double bone_crossing(const Ray& ray, double r_s) const {
+    double r_b = std::numeric_limits<double>::quiet_NaN();
+    for (double r = r_s; r >= std::max(0.0, r_s - o_.bone_cap_mm); r -= coarse_)
+      if (bone_at_(ray.at(r))) {
+        r_b = r;
+        break;
+      }
+    const auto B = [&](double r) { return bone_value(ray.at(r)); };
+    if (std::isfinite(r_b)) {
+      const double rb = crossing_inward(B, std::min(r_s, r_b + 2 * w_), std::max(0.0, r_b - 2 * w_),
+                                        fine_, bone_level_default_);
+      if (std::isfinite(rb)) r_b = rb;
+    }
+    return r_b;
+  }
+
+  // 4. Half-maximum edges: the threshold finds an edge, the level halfway between the
+  // plateaus on either side locates it, independent of the threshold's value. Moves r_s and
+  // r_b onto them; returns the bone's level.
+  double half_maximum_edges(const Ray& ray, std::vector<double>& samples, double& r_s,
+                            double& r_b) const {
+    const auto I = [&](double r) { return intensity_(ray.at(r)); };
+    const auto I_gated = [&](double r) { return gated_intensity(ray, r); };
+    double air = I_gated(r_s + edge_span_);
+    const double tissue = tissue_plateau(ray, samples, r_s, r_b, air);
+    if (air < skin_thr_ && tissue > skin_thr_) {
+      const double rs = crossing_inward(I_gated, r_s + edge_span_, std::max(0.0, r_s - edge_span_),
+                                        fine_, 0.5 * (air + tissue));
+      if (std::isfinite(rs)) r_s = rs;
+    }
+    double bone_level = bone_level_default_;
+    if (std::isfinite(r_b) && bone_by_threshold_) {
+      double peak = -std::numeric_limits<double>::max();
+      for (double r = r_b; r >= std::max(0.0, r_b - 4.0); r -= fine_)
+        peak = std::max<double>(peak, I(r));
+      if (tissue < bone_level_default_ && peak > bone_level_default_) {
+        const double rb =
+            crossing_inward(I, std::min(r_s, r_b + edge_span_), std::max(0.0, r_b - edge_span_),
+                            fine_, 0.5 * (tissue + peak));
+        if (std::isfinite(rb)) {
+          r_b = rb;
+          bone_level = 0.5 * (tissue + peak);
+        }
+      }
+    }
+    return bone_level;
+  }
+
+  // The soft-tissue plateau, sampled between the two edges' ramps where at least 1 mm is left
+  // free of both; thinner tissue on coarse voxels has no plateau, and CT then falls back on
+  // soft tissue's physical value. CT plateaus (and `air`) are kept within their physical ranges.
+  double tissue_plateau(const Ray& ray, std::vector<double>& samples, double r_s, double r_b,
+                        double& air) const {
+    // Physical ranges of CT plateaus (HU): air, and soft tissue from fat to muscle.
+    constexpr double kCtAirHu[2] = {-1024.0, -850.0};
+    constexpr double kCtTissueHu[2] = {-200.0, 150.0};
+    const auto I = [&](double r) { return intensity_(ray.at(r)); };
+    double tissue = std::numeric_limits<double>::quiet_NaN();
+    if (std::isfinite(r_b) && (r_s - r_b) - ramp_ >= 1.0) {
+      samples.clear();
+      // About 16 samples: a median needs no more, and thick tissue would otherwise cost 100s.
+      const double step = std::max(fine_, (r_s - r_b - ramp_) / 16.0);
+      for (double r = r_b + 0.5 * ramp_; r <= r_s - 0.5 * ramp_; r += step) samples.push_back(I(r));
+      if (samples.size() >= 3) tissue = median(samples);
+    } else if (!std::isfinite(r_b)) {
+      tissue = I(std::max(0.0, r_s - edge_span_));
+    }
+    if (is_ct_) {
+      tissue = std::isfinite(tissue) ? std::clamp(tissue, kCtTissueHu[0], kCtTissueHu[1]) : 0.0;
+      air = std::clamp(air, kCtAirHu[0], kCtAirHu[1]);
+    } else if (!std::isfinite(tissue)) {
+      tissue = I(std::max(0.0, r_s - edge_span_));
+    }
+    return tissue;
+  }
+
+  // 5. Thickness along the normal: distance from the skin point p to the nearest bone, found
+  // through the exact feature transform on the working grid and refined on the bone's edge;
+  // at most the radial thickness.
+  double thickness_along_normal(const Eigen::Vector3d& p, double radial_mm,
+                                double bone_level) const {
+    const long cell = skin_at_.index(p);
+    const std::int64_t q_idx = cell >= 0 ? nearest_bone_[static_cast<std::size_t>(cell)] : -1;
+    double tn = radial_mm;
+    if (q_idx >= 0) {
+      const auto& bg = seg_.bone.geom;
+      const int qi = static_cast<int>(q_idx % bg.dims[0]);
+      const int qj = static_cast<int>((q_idx / bg.dims[0]) % bg.dims[1]);
+      const int qk = static_cast<int>(q_idx / (std::int64_t(bg.dims[0]) * bg.dims[1]));
+      const Eigen::Vector3d q = bg.index_to_lps(Eigen::Vector3d(qi, qj, qk));
+      const double len = (q - p).norm();
+      if (len > 1e-6) {
+        const Eigen::Vector3d u = (q - p) / len;
+        const auto Bs = [&](double s) { return bone_value(Eigen::Vector3d(p + (len - s) * u)); };
+        // Parameterised so "inward" runs from the skin (s = len) to past the bone site. q is
+        // the nearest bone voxel, so the edge lies within two working voxels of it.
+        const double s = crossing_inward(Bs, std::min(len, 2 * w_), -w_, fine_, bone_level);
+        if (std::isfinite(s)) tn = std::min(tn, len - s);
+      }
+    }
+    return tn;
+  }
+
+  const Volume& v_;                       // not owned; outlives the caster
+  const Segmentation& seg_;               // not owned
+  const MapOptions& o_;                   // not owned
+  const std::vector<double>& row_r_max_;  // not owned
+  CylindricalMaps& maps_;                 // not owned; each cast() writes its own cell
+  float lowest_;
+  Field intensity_;
+  MaskAt skin_at_, bone_at_;
+  bool bone_by_threshold_;
+  Volume bone_float_;      // bone given as a mask (MR): its surface is the 0.5 level
+  Field bone_mask_field_;  // samples bone_float_
+  float bone_level_default_;
+  double w_;       // working voxel
+  double coarse_;  // mask marching step
+  double fine_;
+  double edge_span_;
+  double ramp_;  // width of an edge's partial-volume ramp
+  bool is_ct_;
+  float skin_thr_;
+  std::vector<std::int64_t> nearest_bone_;
+};
+
+}  // namespace
+
+CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const CylinderAxis& axis,
+                                 const MapOptions& o, Reporter* reporter) {
+  check_map_options(o);
+  Progress progress(reporter, "casting cylindrical rays", 1.0);
+  CylindricalMaps maps;
+  maps.axis = axis;
+  auto& grid = maps.grid;
+  grid.n_theta = o.n_theta;
+  grid.n_z = o.n_z;
+  set_z_rows(grid, v, seg, axis, o);
+  const std::vector<double> row_r_max = row_max_radii(grid, seg, axis);
 
   const std::size_t n = grid.size();
   maps.allocate();
-
-  const float lowest = *std::min_element(v.data.begin(), v.data.end());
-  const Field intensity(v, lowest);
-  const MaskAt skin_at(seg.skin), bone_at(seg.bone);
-  const bool bone_by_threshold = std::isfinite(seg.bone_threshold);
-  // Bone given as a mask (MR): its surface is the 0.5 level of the trilinearly sampled mask.
-  Volume bone_float;
-  bone_float.geom = seg.bone.geom;
-  bone_float.data.assign(seg.bone.data.begin(), seg.bone.data.end());
-  const Field bone_mask_field(bone_float, 0.0f);
-  const float bone_level_default =
-      bone_by_threshold ? static_cast<float>(seg.bone_threshold) : 0.5f;
-  auto bone_value = [&](const Eigen::Vector3d& p) {
-    return bone_by_threshold ? intensity(p) : bone_mask_field(p);
-  };
-
-  std::vector<std::int64_t> nearest_bone;
-  squared_distance_mm2(seg.bone, &nearest_bone);
-
-  const double w = wg.spacing_mm.maxCoeff();             // working voxel
-  const double coarse = 0.5 * wg.spacing_mm.minCoeff();  // mask marching step
-  const double fine = 0.25 * v.geom.spacing_mm.minCoeff();
-  const double edge_span = std::max(1.5, 1.5 * v.geom.spacing_mm.maxCoeff());
-  const double ramp = v.geom.spacing_mm.maxCoeff();  // width of an edge's partial-volume ramp
-  const bool is_ct = v.modality == Modality::CT;
-  // Physical ranges of CT plateaus (HU): air, and soft tissue from fat to muscle.
-  constexpr double kCtAirHu[2] = {-1024.0, -850.0};
-  constexpr double kCtTissueHu[2] = {-200.0, 150.0};
-  const float skin_thr = static_cast<float>(seg.skin_threshold);
-
+  const RayCaster caster(v, seg, o, row_r_max, maps);
   tbb::parallel_for(0, grid.n_z, [&](int k) {
     std::vector<double> samples;
-    for (int j = 0; j < grid.n_theta; ++j) {
-      const std::size_t c = grid.index(j, k);
-      const double theta = deg_to_rad(grid.theta_deg(j));
-      const Eigen::Vector3d centre = axis.origin_lps + grid.z_mm(k) * axis.direction;
-      const Eigen::Vector3d d = axis.ray(theta);
-      auto at = [&](double r) { return Eigen::Vector3d(centre + r * d); };
-      double t0, t1;
-      if (!clip_to_grid(wg, centre, d, t0, t1)) { maps.flags[c] = kNoSkin; continue; }
-      t1 = std::min(t1, std::max(t0, row_r_max[k]));
-      // 1. Walk the envelope mask inward: the outermost entry, and any re-entry (undercut).
-      double r_entry = std::numeric_limits<double>::quiet_NaN();
-      // A re-entry counts as an undercut only after a real air gap (kMinGapMm): a ledge in the
-      // mask between thick slices is not an ear.
-      constexpr double kMinGapMm = kUndercutMinGapMm;
-      bool inside = skin_at(at(t1));
-      if (inside) maps.flags[c] |= kTruncated;
-      if (inside) r_entry = t1;
-      int entries = inside ? 1 : 0;
-      double r_left = t1;  // where the ray last left the mask
-      // Below the outermost skin, only the bone cap's depth matters for undercuts.
-      double r_stop = t0;
-      for (double r = t1 - coarse; r >= r_stop; r -= coarse) {
-        const bool now = skin_at(at(r));
-        if (now && !inside) {
-          if (entries == 0) {
-            r_entry = r + 0.5 * coarse;
-            entries = 1;
-            r_stop = std::max(t0, r_entry - o.bone_cap_mm);
-          } else if (r_left - r >= kMinGapMm) {
-            ++entries;
-          }
-        }
-        if (!now && inside) r_left = r;
-        inside = now;
-      }
-      if (entries == 0) { maps.flags[c] = kNoSkin; continue; }
-      if (entries > 1) maps.flags[c] |= kUndercut;
-      // 2. Refine on the full-resolution intensities near the mask's edge, seen only through
-      // the mask's boundary layer (one working voxel outward), so an object lying just outside
-      // the head (a head holder on its pad) cannot be taken for the skin.
-      const auto I = [&](double r) { return intensity(at(r)); };
-      const auto I_gated = [&](double r) {
-        return skin_at(at(r)) || skin_at(at(r - w)) ? intensity(at(r)) : lowest;
-      };
-      double r_s = crossing_inward(I_gated, r_entry + 2 * w, std::max(0.0, r_entry - 2 * w), fine,
-                                   skin_thr);
-      if (!std::isfinite(r_s)) r_s = r_entry;
-      // 3. First bone inward from the skin, within the cap.
-      double r_b = std::numeric_limits<double>::quiet_NaN();
-      for (double r = r_s; r >= std::max(0.0, r_s - o.bone_cap_mm); r -= coarse)
-        if (bone_at(at(r))) { r_b = r; break; }
-      const auto B = [&](double r) { return bone_value(at(r)); };
-      if (std::isfinite(r_b)) {
-        const double rb = crossing_inward(B, std::min(r_s, r_b + 2 * w), std::max(0.0, r_b - 2 * w),
-                                          fine, bone_level_default);
-        if (std::isfinite(rb)) r_b = rb;
-      }
-      // 4. Half-maximum edges: the threshold finds an edge, the level halfway between the
-      // plateaus on either side locates it, independent of the threshold's value.
-      // The soft-tissue plateau is sampled between the two edges' ramps where at least 1 mm is
-      // left free of both; thinner tissue on coarse voxels has no plateau, and CT then falls back
-      // on soft tissue's physical value. CT plateaus are kept within their physical ranges.
-      double air = I_gated(r_s + edge_span);
-      double tissue = std::numeric_limits<double>::quiet_NaN();
-      if (std::isfinite(r_b) && (r_s - r_b) - ramp >= 1.0) {
-        samples.clear();
-        // About 16 samples: a median needs no more, and thick tissue would otherwise cost 100s.
-        const double step = std::max(fine, (r_s - r_b - ramp) / 16.0);
-        for (double r = r_b + 0.5 * ramp; r <= r_s - 0.5 * ramp; r += step) samples.push_back(I(r));
-        if (samples.size() >= 3) tissue = median(samples);
-      } else if (!std::isfinite(r_b)) {
-        tissue = I(std::max(0.0, r_s - edge_span));
-      }
-      if (is_ct) {
-        tissue = std::isfinite(tissue) ? std::clamp(tissue, kCtTissueHu[0], kCtTissueHu[1]) : 0.0;
-        air = std::clamp(air, kCtAirHu[0], kCtAirHu[1]);
-      } else if (!std::isfinite(tissue)) {
-        tissue = I(std::max(0.0, r_s - edge_span));
-      }
-      if (air < skin_thr && tissue > skin_thr) {
-        const double rs = crossing_inward(I_gated, r_s + edge_span, std::max(0.0, r_s - edge_span),
-                                          fine, 0.5 * (air + tissue));
-        if (std::isfinite(rs)) r_s = rs;
-      }
-      double bone_level = bone_level_default;
-      if (std::isfinite(r_b) && bone_by_threshold) {
-        double peak = -std::numeric_limits<double>::max();
-        for (double r = r_b; r >= std::max(0.0, r_b - 4.0); r -= fine) peak = std::max<double>(peak, I(r));
-        if (tissue < bone_level_default && peak > bone_level_default) {
-          const double rb = crossing_inward(I, std::min(r_s, r_b + edge_span),
-                                            std::max(0.0, r_b - edge_span), fine,
-                                            0.5 * (tissue + peak));
-          if (std::isfinite(rb)) {
-            r_b = rb;
-            bone_level = 0.5 * (tissue + peak);
-          }
-        }
-      }
-      maps.r_skin[c] = static_cast<float>(r_s);
-      maps.measured_skin[c] = 1;
-      const Eigen::Vector3d p = at(r_s);
-      // The skin point sits on the edge of the acquired data: a cut face, not skin.
-      if (near_data_edge(v, p, 1.5)) maps.flags[c] |= kTruncated;
-      if (!std::isfinite(r_b)) {
-        maps.flags[c] |= kNoBone;
-        continue;
-      }
-      maps.r_bone[c] = static_cast<float>(r_b);
-      maps.thickness[c] = static_cast<float>(r_s - r_b);
-      maps.measured_bone[c] = 1;
-      // 5. Thickness along the normal: distance to the nearest bone, found through the exact
-      // feature transform on the working grid and refined on the bone's edge.
-      const long cell = skin_at.index(p);
-      const std::int64_t q_idx = cell >= 0 ? nearest_bone[static_cast<std::size_t>(cell)] : -1;
-      double tn = r_s - r_b;
-      if (q_idx >= 0) {
-        const auto& bg = seg.bone.geom;
-        const int qi = static_cast<int>(q_idx % bg.dims[0]);
-        const int qj = static_cast<int>((q_idx / bg.dims[0]) % bg.dims[1]);
-        const int qk = static_cast<int>(q_idx / (std::int64_t(bg.dims[0]) * bg.dims[1]));
-        const Eigen::Vector3d q = bg.index_to_lps(Eigen::Vector3d(qi, qj, qk));
-        const double len = (q - p).norm();
-        if (len > 1e-6) {
-          const Eigen::Vector3d u = (q - p) / len;
-          const auto Bs = [&](double s) { return bone_value(Eigen::Vector3d(p + (len - s) * u)); };
-          // Parameterised so "inward" runs from the skin (s = len) to past the bone site. q is
-          // the nearest bone voxel, so the edge lies within two working voxels of it.
-          const double s = crossing_inward(Bs, std::min(len, 2 * w), -w, fine, bone_level);
-          if (std::isfinite(s)) tn = std::min(tn, len - s);
-        }
-      }
-      maps.thickness_normal[c] = static_cast<float>(tn);
-    }
+    for (int j = 0; j < grid.n_theta; ++j) caster.cast(j, k, samples);
   });
   progress.update(0.8);
 
@@ -498,7 +617,8 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
   std::size_t n_measured = 0;
   for (auto m : maps.measured_skin) n_measured += m;
   if (n_measured == 0)
-    throw InvalidInput(cat(v.source, ": no ray from the axis met the skin; the head was not found"));
+    throw InvalidInput(
+        cat(v.source, ": no ray from the axis met the skin; the head was not found"));
   harmonic_fill(maps.r_skin, maps.measured_skin, grid);
   harmonic_fill(maps.thickness, maps.measured_bone, grid);
   harmonic_fill(maps.thickness_normal, maps.measured_bone, grid);

@@ -42,14 +42,14 @@ class InvalidParameter : public InvalidInput {
   std::string template_;
 };
 
-/// A numerical solve failed; carries where it failed.
+/// A numerical solve failed; carries where it failed (-1 where not known) and names it at the
+/// start of what(): "element 3, Gauss point 0: Jacobian determinant ...".
 class SolverError : public Error {
  public:
-  SolverError(const std::string& what, int element = -1, int gauss_point = -1, int iteration = -1)
-      : Error(what), element(element), gauss_point(gauss_point), iteration(iteration) {}
-  int element;
-  int gauss_point;
-  int iteration;
+  SolverError(const std::string& what, int element = -1, int gauss_point = -1, int iteration = -1);
+  int element;      ///< index into Mesh::elements, -1 if not known
+  int gauss_point;  ///< Gauss point of that element (its quadrature order), -1 if not known
+  int iteration;    ///< iteration of an iterative refinement (0: its start), -1 if not known
 };
 
 /// Streams all arguments into one string: cat("spacing ", 0.5, " mm").

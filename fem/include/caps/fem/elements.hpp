@@ -36,7 +36,7 @@ void shape_functions(ElementType type, const Eigen::Vector3d& xi, Eigen::VectorX
 Eigen::MatrixX3d element_coordinates(const Mesh& mesh, int element);
 
 /// Element stiffness K_e (3n×3n, N/mm), dofs ordered node-major (u0x,u0y,u0z,u1x,...).
-/// Throws InvalidInput naming element `element` and the Gauss point if det J <= 0.
+/// Throws SolverError naming element `element` and the Gauss point if det J <= 0.
 Eigen::MatrixXd element_stiffness(ElementType type, const Eigen::MatrixX3d& X,
                                   const LinearElastic& material, int element = -1);
 

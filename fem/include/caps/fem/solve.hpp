@@ -6,7 +6,6 @@
 /// system is symmetric positive definite and is solved by MUMPS (default) or CHOLMOD.
 
 #include <Eigen/Core>
-#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -82,22 +81,11 @@ struct SolveResult {
   SolveTimings timings;
 };
 
-/// Solves the linear static problem. Throws InvalidInput for bad or under-constrained input
-/// (the message says what to fix), SolverError if the factorization fails otherwise.
+/// Solves the linear static problem. Throws InvalidInput for bad input and for parts without
+/// support against a translation or rotation (the message says what to fix); SolverError
+/// naming the element (SolverError::element) for an inverted element (with its Gauss point) or
+/// a singular stiffness the support checks cannot see (a mechanism, such as elements joined
+/// only along an edge), and SolverError for any other failure of the factorization.
 SolveResult solve(const Mesh& mesh, const SolveOptions& options = {});
-
-/// Writes result.vtu (deformed-ready: displacement, stresses, reactions) and result.json
-/// (summary, timings, sizes, suture forces) into an existing directory.
-void write_result_dir(const Mesh& mesh, const SolveResult& result,
-                      const std::filesystem::path& dir);
-
-/// Reads the nodal displacement (#N×3, mm) from `dir`/result.vtu and checks it has `n_nodes`
-/// finite rows. Throws IoError (missing file) or InvalidInput (wrong size, missing array).
-Eigen::MatrixX3d read_result_displacement(const std::filesystem::path& dir, Eigen::Index n_nodes);
-
-/// Reads the nodal maximum principal stress (#N, MPa; SolveResult::max_principal_mpa) from
-/// `dir`/result.vtu and checks it has `n_nodes` finite entries. Throws as
-/// read_result_displacement().
-Eigen::VectorXd read_result_max_principal(const std::filesystem::path& dir, Eigen::Index n_nodes);
 
 }  // namespace caps::fem
