@@ -254,3 +254,49 @@ TEST_F(AppWithModel, WarningsReachResultJsonSummaryJsonAndTheReport) {
   EXPECT_EQ(json::parse(slurp(kTmp / "top_compare" / "comparison.json"))["warnings"],
             json(cmp.warnings));
 }
+
+TEST_F(AppWithModel, APlanFindsItsCopiedModelAndRefusesAnother) {
+  // A plan and its model copied together: the copy is found beside the plan (model_relative),
+  // and its content hash matches.
+  const fs::path site = kTmp / "site";
+  fs::create_directories(site);
+  const fs::path model_here = site / "model";
+  fs::copy(kModel, model_here, fs::copy_options::recursive);
+  app::PlanNewRequest pn;
+  pn.procedure = "ellipse";
+  pn.model = model_here.string();
+  pn.at = "0,60";
+  pn.output = (site / "e.json").string();
+  app::run_plan_new(pn);
+  EXPECT_EQ(json::parse(slurp(pn.output))["model_relative"], "model");
+  const fs::path copy = kTmp / "copy";
+  fs::create_directories(copy);
+  fs::copy(site, copy / "site", fs::copy_options::recursive);
+  fs::remove_all(model_here);  // the original model is gone: the copy must be used
+  app::PlanCheckRequest check;
+  check.plan = (copy / "site" / "e.json").string();
+  const app::PlanResult checked = app::run_plan_check(check);
+  EXPECT_EQ(checked.procedure, "ellipse");
+
+  // Another model (another grid of the same CT): refused, naming the cause.
+  app::FromVolumeRequest fv;
+  fv.input = (kTmp / "ct.nii.gz").string();
+  fv.output = (kTmp / "other_model").string();
+  fv.n_theta = 96;
+  fv.n_z = 64;
+  app::run_from_volume(fv);
+  check.model = fv.output;
+  try {
+    app::run_plan_check(check);
+    ADD_FAILURE() << "a plan was accepted on another model";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("the plan was made on another model"), std::string::npos)
+        << e.what();
+  }
+  app::SimulateRequest s;
+  s.model = fv.output;
+  s.plan = check.plan;
+  s.output = (kTmp / "never").string();
+  EXPECT_THROW(app::run_simulate(s), InvalidInput);
+  EXPECT_FALSE(fs::exists(s.output));
+}
