@@ -182,14 +182,15 @@ TEST(Picking, SphereAndCylinderMatchAnalyticIntersections) {
 TEST(Picking, CameraRayThroughTheImageCentreHitsTheFace) {
   const PatientModel sphere(sphere_maps());
   const SkinPicker picker(sphere);
-  Camera cam;  // at (0, -600, 0) looking at the origin: the face
-  const SkinHit h = picker.pick(camera_ray(cam, cam.width / 2.0, cam.height / 2.0));
+  // at (0, -600, 0) looking at the origin: the face
+  const Camera cam = Camera::look_at({0, -600, 0}, {0, 0, 0}, {0, 0, 1}, 30, 640, 480);
+  const SkinHit h = picker.pick(cam.ray(cam.width_px / 2.0, cam.height_px / 2.0));
   ASSERT_TRUE(h.hit);
   EXPECT_NEAR(h.theta_deg, 0.0, 1e-6);
   EXPECT_NEAR(h.distance_mm, 510.0, 0.01);
   // A pixel above the centre picks a higher point; one to the right the patient's left (+theta).
-  EXPECT_GT(picker.pick(camera_ray(cam, 320, 200)).z_mm, 1.0);
-  EXPECT_GT(picker.pick(camera_ray(cam, 360, 240)).theta_deg, 1.0);
+  EXPECT_GT(picker.pick(cam.ray(320, 200)).z_mm, 1.0);
+  EXPECT_GT(picker.pick(cam.ray(360, 240)).theta_deg, 1.0);
 }
 
 TEST(Picking, NearestPlanPointAndOcclusion) {

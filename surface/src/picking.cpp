@@ -10,7 +10,6 @@
 #include <limits>
 
 #include "caps/core/error.hpp"
-#include "caps/core/units.hpp"
 
 namespace caps {
 namespace {
@@ -137,23 +136,6 @@ std::optional<MeshHit> first_hit_brute_force(const TriMesh& mesh, const Ray& ray
     best = MeshHit{t, f, o + t * d};
   }
   return best;
-}
-
-Ray camera_ray(const Camera& cam, double x, double y) {
-  const Eigen::Vector3d view = cam.target - cam.eye;
-  if (view.norm() < 1e-9) throw InvalidInput("camera: the eye and the target coincide");
-  const Eigen::Vector3d w = view.normalized();
-  Eigen::Vector3d right = w.cross(cam.up);
-  if (right.norm() < 1e-9) throw InvalidInput("camera: 'up' is parallel to the view direction");
-  right.normalize();
-  const Eigen::Vector3d up = right.cross(w);
-  if (cam.width <= 0 || cam.height <= 0 || !(cam.fov_y_deg > 0 && cam.fov_y_deg < 180))
-    throw InvalidInput(cat("camera: image ", cam.width, " x ", cam.height, " and field of view ",
-                           cam.fov_y_deg, " deg must be positive (fov < 180)"));
-  const double half_h = std::tan(0.5 * deg_to_rad(cam.fov_y_deg));
-  const double sx = (2.0 * x / cam.width - 1.0) * half_h * cam.width / cam.height;
-  const double sy = (1.0 - 2.0 * y / cam.height) * half_h;
-  return {cam.eye, (w + sx * right + sy * up).normalized()};
 }
 
 PointPick pick_nearest_point(const Eigen::MatrixX3d& points, const Ray& ray, double tolerance_mm) {
