@@ -36,7 +36,8 @@ void check_ray(const Ray& ray) {
 
 struct MeshRayCaster::Impl {
   TriMesh mesh;
-  std::vector<Triangle> triangles;
+  std::vector<Triangle> triangles;    // the mesh's triangles with an area
+  std::vector<Eigen::Index> face_of;  // #triangles: their faces in `mesh`
   Tree tree;
 
   // The hit of a CGAL intersection result: the nearest point of a point or segment.
@@ -54,7 +55,7 @@ struct MeshRayCaster::Impl {
     MeshHit h;
     h.point = p;
     h.t = (p - ray.origin).dot(ray.direction) / ray.direction.squaredNorm();
-    h.face = static_cast<Eigen::Index>(r.second - triangles.begin());
+    h.face = face_of[static_cast<std::size_t>(r.second - triangles.begin())];
     return h;
   }
 };
@@ -69,8 +70,13 @@ MeshRayCaster::MeshRayCaster(const TriMesh& mesh) : impl_(std::make_unique<Impl>
       if (mesh.F(f, c) < 0 || mesh.F(f, c) >= mesh.n_vertices())
         throw InvalidInput(cat("ray casting: face ", f, " has vertex index ", mesh.F(f, c),
                                " outside 0..", mesh.n_vertices() - 1));
-    tris.emplace_back(to_point(mesh.V.row(mesh.F(f, 0))), to_point(mesh.V.row(mesh.F(f, 1))),
-                      to_point(mesh.V.row(mesh.F(f, 2))));
+    const Triangle t(to_point(mesh.V.row(mesh.F(f, 0))), to_point(mesh.V.row(mesh.F(f, 1))),
+                     to_point(mesh.V.row(mesh.F(f, 2))));
+    // A triangle without area (e.g. a wound fill collapsed by the closure) shows nothing; a
+    // renderer does not see it, so picking must not meet it either.
+    if (t.is_degenerate()) continue;
+    tris.push_back(t);
+    impl_->face_of.push_back(f);
   }
   impl_->tree.insert(tris.cbegin(), tris.cend());
   impl_->tree.build();
@@ -84,6 +90,7 @@ const TriMesh& MeshRayCaster::mesh() const { return impl_->mesh; }
 
 std::optional<MeshHit> MeshRayCaster::first_hit(const Ray& ray) const {
   check_ray(ray);
+  if (impl_->triangles.empty()) return std::nullopt;
   const CgalRay r(to_point(ray.origin), Vector(ray.direction[0], ray.direction[1], ray.direction[2]));
   const auto result = impl_->tree.first_intersection(r);
   if (!result) return std::nullopt;
@@ -99,6 +106,7 @@ std::optional<MeshHit> MeshRayCaster::first_hit(const Ray& ray) const {
 
 std::vector<MeshHit> MeshRayCaster::all_hits(const Ray& ray) const {
   check_ray(ray);
+  if (impl_->triangles.empty()) return {};
   const CgalRay r(to_point(ray.origin), Vector(ray.direction[0], ray.direction[1], ray.direction[2]));
   using Result = Tree::Intersection_and_primitive_id<CgalRay>::Type;
   std::vector<Result> results;

@@ -25,7 +25,8 @@ struct MeshHit {
 };
 
 /// Ray casting against a fixed triangle mesh through an AABB tree (built once, in the
-/// constructor; queries are thread-safe).
+/// constructor; queries are thread-safe). Triangles without area (collinear corners) are never
+/// hit, as they are invisible in a rendered image.
 class MeshRayCaster {
  public:
   /// @param mesh  V #V×3, F #F×3; copied. Throws InvalidInput if it has no faces.
