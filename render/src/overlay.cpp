@@ -206,27 +206,20 @@ void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
   from_surface(s.get(), image);
 }
 
-Eigen::Vector2d project(const Camera& camera, const RenderOptions& o, const Eigen::Vector3d& p) {
-  // The same orthographic frame as render_image().
-  const Eigen::Vector3d fwd = camera.forward.normalized();
-  const Eigen::Vector3d up = (camera.up - camera.up.dot(fwd) * fwd).normalized();
-  const Eigen::Vector3d right = fwd.cross(up);
-  const double px = camera.width_mm / o.width;
-  const Eigen::Vector3d q = p - camera.centre;
-  return {q.dot(right) / px + 0.5 * o.width, 0.5 * o.height - q.dot(up) / px};
-}
-
-void draw_polylines(RgbImage& image, const Camera& camera, const RenderOptions& o,
+void draw_polylines(RgbImage& image, const Camera& camera,
                     const std::vector<std::vector<Eigen::Vector3d>>& lines) {
+  if (image.width != camera.width_px || image.height != camera.height_px)
+    throw InvalidInput(cat("draw_polylines: the image is ", image.width, "x", image.height,
+                           " pixels, the camera ", camera.width_px, "x", camera.height_px));
   SurfacePtr s = to_surface(image);
   std::unique_ptr<cairo_t, decltype(&cairo_destroy)> cr(cairo_create(s.get()), cairo_destroy);
   const double dash[] = {6.0, 4.0};
   cairo_set_dash(cr.get(), dash, 2, 0);
-  cairo_set_line_width(cr.get(), std::max(1.5, 0.003 * o.width));
+  cairo_set_line_width(cr.get(), std::max(1.5, 0.003 * camera.width_px));
   cairo_set_source_rgb(cr.get(), 0.15, 0.1, 0.45);
   for (const auto& line : lines) {
     for (std::size_t i = 0; i < line.size(); ++i) {
-      const Eigen::Vector2d q = project(camera, o, line[i]);
+      const Eigen::Vector2d q = camera.project(line[i]);
       (i == 0 ? cairo_move_to : cairo_line_to)(cr.get(), q.x(), q.y());
     }
     cairo_stroke(cr.get());
@@ -260,7 +253,6 @@ std::vector<std::filesystem::path> render_views_with_overlays(const PatientModel
                                                               const Overlays& overlays,
                                                               const std::filesystem::path& dir) {
   std::vector<std::filesystem::path> written;
-  const double aspect = double(options.width) / options.height;
   std::vector<Eigen::MatrixX3d> colors;
   for (const ScalarMap& m : overlays.scalar_maps) {
     if (m.value.size() != skin.post.V.rows())
@@ -269,9 +261,9 @@ std::vector<std::filesystem::path> render_views_with_overlays(const PatientModel
     colors.push_back(scalar_colors(m.value, m.max_value));
   }
   for (View v : views) {
-    const Camera cam = standard_camera(v, model, skin, aspect);
+    const Camera cam = standard_camera(v, model, skin, options.width, options.height);
     RgbImage pre = render_image(skin.pre, skin.color, cam, options);
-    if (!overlays.plan_lines.empty()) draw_polylines(pre, cam, options, overlays.plan_lines);
+    if (!overlays.plan_lines.empty()) draw_polylines(pre, cam, overlays.plan_lines);
     written.push_back(dir / cat("pre_", view_name(v), ".png"));
     write_png(written.back(), pre);
     written.push_back(dir / cat("post_", view_name(v), ".png"));
