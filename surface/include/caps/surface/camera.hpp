@@ -56,7 +56,7 @@ struct Camera {
 
   /// The eye: target − distance_mm · forward̂ (LPS mm).
   Eigen::Vector3d eye() const;
-  /// The orthonormal frame (up is forward's orthogonal part of `up`, normalised).
+  /// The orthonormal frame (its up is the part of `up` orthogonal to forward, normalised).
   CameraFrame frame() const;
   /// Orthographic: the scene's size of one pixel (mm, width_mm / width_px). Perspective: the
   /// focal length in pixels, (height_px / 2) / tan(fov_y / 2).
