@@ -47,12 +47,10 @@ std::vector<Ray> camera_rays(std::size_t count) {
   std::vector<Ray> rays;
   rays.reserve(count);
   while (rays.size() < count) {
-    Camera cam;
     const double a = angle(rng);
-    cam.eye = {500 * std::sin(a), -500 * std::cos(a), h(rng)};
-    cam.target = {0, 0, 0};
-    cam.fov_y_deg = 20;
-    for (int i = 0; i < 64; ++i) rays.push_back(camera_ray(cam, px(rng), py(rng)));
+    const Camera cam = Camera::look_at({500 * std::sin(a), -500 * std::cos(a), h(rng)}, {0, 0, 0},
+                                       {0, 0, 1}, 20, 640, 480);
+    for (int i = 0; i < 64; ++i) rays.push_back(cam.ray(px(rng), py(rng)));
   }
   return rays;
 }

@@ -148,14 +148,14 @@ TEST(RenderImage, ZeroDisplacementGivesIdenticalPreAndPostImages) {
   RenderOptions o;
   o.width = o.height = 160;
   for (View v : {View::Front, View::Plan}) {
-    const Camera cam = standard_camera(v, bumpy(), s);
+    const Camera cam = standard_camera(v, bumpy(), s, o.width, o.height);
     const RgbImage pre = render_image(s.pre, s.color, cam, o);
     const RgbImage post = render_image(s.post, s.color, cam, o);
     EXPECT_EQ(pre.rgb, post.rgb) << view_name(v);
   }
   // with the solved closure the plan view changes
   const SkinSurfaces moved = displaced_skin(bumpy(), sim.wound.continuum.mesh, &sim.result, 4);
-  const Camera cam = standard_camera(View::Plan, bumpy(), moved);
+  const Camera cam = standard_camera(View::Plan, bumpy(), moved, o.width, o.height);
   EXPECT_NE(render_image(moved.pre, moved.color, cam, o).rgb,
             render_image(moved.post, moved.color, cam, o).rgb);
 }
@@ -169,7 +169,9 @@ TEST(RenderImage, CylinderSilhouetteWidth) {
   o.height = 100;
   o.samples_per_side = 1;
   Camera cam;
-  cam.centre = Eigen::Vector3d(0, 0, 40);  // below the top cap, away from the wound (z = 5)
+  cam.width_px = o.width;
+  cam.height_px = o.height;
+  cam.target = Eigen::Vector3d(0, 0, 40);  // below the top cap, away from the wound (z = 5)
   cam.forward = Eigen::Vector3d(0, 1, 0);  // looking at the face (front = -y)
   cam.up = Eigen::Vector3d(0, 0, 1);
   cam.width_mm = 200;

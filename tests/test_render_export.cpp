@@ -299,7 +299,7 @@ TEST(TransitionGif, FirstAndLastFramesArePreAndPost) {
   const SkinSurfaces& s = closed_skin();
   RenderOptions o;
   o.width = o.height = 128;
-  const Camera cam = standard_camera(View::Plan, bumpy(), s);
+  const Camera cam = standard_camera(View::Plan, bumpy(), s, o.width, o.height);
   const fs::path path = scratch("transition.gif");
   const int frames = 5;
   write_transition_gif(s, cam, o, frames, path);
@@ -351,7 +351,7 @@ TEST(TransitionGif, ZeroDisplacementGivesIdenticalFrames) {
   RenderOptions o;
   o.width = 96;
   o.height = 64;
-  const Camera cam = standard_camera(View::Front, bumpy(), s, 96.0 / 64.0);
+  const Camera cam = standard_camera(View::Front, bumpy(), s, o.width, o.height);
   const fs::path path = scratch("still.gif");
   write_transition_gif(s, cam, o, 4, path);
   const DecodedGif gif = read_gif(path);

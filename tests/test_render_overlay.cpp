@@ -14,23 +14,22 @@ using namespace caps::render;
 
 TEST(Overlay, ProjectionMatchesTheOrthographicCamera) {
   Camera cam;
-  cam.centre = {10, 20, 30};
+  cam.target = {10, 20, 30};
   cam.forward = {0, 1, 0};  // looking posterior: the patient's face
   cam.up = {0, 0, 1};
   cam.width_mm = 200;
-  RenderOptions o;
-  o.width = 400;
-  o.height = 300;
-  const Eigen::Vector2d c = project(cam, o, cam.centre);
+  cam.width_px = 400;
+  cam.height_px = 300;
+  const Eigen::Vector2d c = cam.project(cam.target);
   EXPECT_NEAR(c.x(), 200, 1e-9);
   EXPECT_NEAR(c.y(), 150, 1e-9);
   // 50 mm up is 100 pixels up; right = forward x up = +y x +z = +x (the patient's left).
-  const Eigen::Vector2d up = project(cam, o, cam.centre + Eigen::Vector3d(0, 0, 50));
+  const Eigen::Vector2d up = cam.project(cam.target + Eigen::Vector3d(0, 0, 50));
   EXPECT_NEAR(up.y(), 50, 1e-9);
-  const Eigen::Vector2d right = project(cam, o, cam.centre + Eigen::Vector3d(25, 0, 0));
+  const Eigen::Vector2d right = cam.project(cam.target + Eigen::Vector3d(25, 0, 0));
   EXPECT_NEAR(right.x(), 250, 1e-9);
   // Depth does not move a point in an orthographic view.
-  const Eigen::Vector2d deep = project(cam, o, cam.centre + Eigen::Vector3d(0, 80, 0));
+  const Eigen::Vector2d deep = cam.project(cam.target + Eigen::Vector3d(0, 80, 0));
   EXPECT_NEAR(deep.x(), 200, 1e-9);
 }
 
@@ -103,11 +102,10 @@ TEST(Overlay, ColourBarAndLinesDrawOnlyWhereTheyShould) {
   cam.forward = {0, 1, 0};
   cam.up = {0, 0, 1};
   cam.width_mm = 300;
-  RenderOptions o;
-  o.width = 300;
-  o.height = 200;
+  cam.width_px = 300;
+  cam.height_px = 200;
   RgbImage lined = blank;
-  draw_polylines(lined, cam, o, {{Eigen::Vector3d(-100, 0, 0), Eigen::Vector3d(100, 0, 0)}});
+  draw_polylines(lined, cam, {{Eigen::Vector3d(-100, 0, 0), Eigen::Vector3d(100, 0, 0)}});
   int changed_on = 0, changed_off = 0;
   for (int x = 60; x < 240; ++x) changed_on += lined.rgb[(std::size_t(100) * 300 + x) * 3] != 30;
   for (int x = 0; x < 300; ++x) changed_off += lined.rgb[(std::size_t(20) * 300 + x) * 3] != 30;

@@ -186,10 +186,10 @@ TEST(TensionMap, ImagesShowTheFieldWhereItIs) {
   // In the image: r_mesh, the largest distance of a projected micropolygon vertex from the
   // projected mesh centre, and r_seam, that of any vertex of a seam triangle (the strip that
   // blends the rim's values into the range mesh's 0).
-  const Camera cam = standard_camera(View::Plan, round_cylinder(), skin(), 1.0);
-  const Eigen::Vector2d centre = project(cam, o, skin().mesh_centre_lps);
+  const Camera cam = standard_camera(View::Plan, round_cylinder(), skin(), o.width, o.height);
+  const Eigen::Vector2d centre = cam.project(skin().mesh_centre_lps);
   auto r_of = [&](Eigen::Index v) {
-    return (project(cam, o, skin().post.V.row(v).transpose()) - centre).norm();
+    return (cam.project(skin().post.V.row(v).transpose()) - centre).norm();
   };
   double r_px = 0, r_seam = 0;
   for (int v = 0; v < skin().n_micropolygon_vertices; ++v) r_px = std::max(r_px, r_of(v));

@@ -132,6 +132,33 @@ TEST(Picking, AgreesWithBruteForceOnRandomRays) {
   EXPECT_GT(hits, 150);
 }
 
+TEST(Picking, TrianglesWithoutAreaAreNotHit) {
+  // A unit square in z = 0 split into faces 0 and 1, and face 2 collapsed onto the segment
+  // (0.2, 0.5, 1) - (0.8, 0.5, 1) above it (as a closed wound's fill is).
+  TriMesh m;
+  m.V.resize(6, 3);
+  m.V << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0.2, 0.5, 1, 0.8, 0.5, 1;
+  m.F.resize(3, 3);
+  m.F << 0, 1, 2, 0, 2, 3, 4, 5, 5;
+  const MeshRayCaster caster(m);
+  const Ray down{{0.7, 0.5, 5}, {0, 0, -1}};  // through the segment, then face 0
+  const auto h = caster.first_hit(down);
+  ASSERT_TRUE(h);
+  EXPECT_EQ(h->face, 0);
+  EXPECT_NEAR(h->t, 5.0, 1e-12);
+  ASSERT_EQ(caster.all_hits(down).size(), 1u);
+  EXPECT_EQ(first_hit_brute_force(m, down)->face, 0);
+  // faces keep their indices in the mesh when one is left out
+  const auto right = caster.first_hit({{0.9, 0.2, 5}, {0, 0, -1}});
+  ASSERT_TRUE(right);
+  EXPECT_EQ(right->face, 0);
+  EXPECT_EQ(caster.first_hit({{0.1, 0.8, 5}, {0, 0, -1}})->face, 1);
+  // a mesh of only such triangles is never hit
+  TriMesh flat = m;
+  flat.F = m.F.bottomRows(1);
+  EXPECT_FALSE(MeshRayCaster(flat).first_hit(down));
+}
+
 TEST(Picking, SphereAndCylinderMatchAnalyticIntersections) {
   const PatientModel sphere(sphere_maps());
   const SkinPicker picker(sphere);
@@ -182,14 +209,15 @@ TEST(Picking, SphereAndCylinderMatchAnalyticIntersections) {
 TEST(Picking, CameraRayThroughTheImageCentreHitsTheFace) {
   const PatientModel sphere(sphere_maps());
   const SkinPicker picker(sphere);
-  Camera cam;  // at (0, -600, 0) looking at the origin: the face
-  const SkinHit h = picker.pick(camera_ray(cam, cam.width / 2.0, cam.height / 2.0));
+  // at (0, -600, 0) looking at the origin: the face
+  const Camera cam = Camera::look_at({0, -600, 0}, {0, 0, 0}, {0, 0, 1}, 30, 640, 480);
+  const SkinHit h = picker.pick(cam.ray(cam.width_px / 2.0, cam.height_px / 2.0));
   ASSERT_TRUE(h.hit);
   EXPECT_NEAR(h.theta_deg, 0.0, 1e-6);
   EXPECT_NEAR(h.distance_mm, 510.0, 0.01);
   // A pixel above the centre picks a higher point; one to the right the patient's left (+theta).
-  EXPECT_GT(picker.pick(camera_ray(cam, 320, 200)).z_mm, 1.0);
-  EXPECT_GT(picker.pick(camera_ray(cam, 360, 240)).theta_deg, 1.0);
+  EXPECT_GT(picker.pick(cam.ray(320, 200)).z_mm, 1.0);
+  EXPECT_GT(picker.pick(cam.ray(360, 240)).theta_deg, 1.0);
 }
 
 TEST(Picking, NearestPlanPointAndOcclusion) {

@@ -70,7 +70,8 @@ RenderResult run_render(const RenderRequest& r, Reporter* reporter) {
     overlays.scalar_maps.push_back(render::tension_map(
         skin, mesh, fem::read_result_max_principal(r.result, mesh.n_nodes()), r.tension_max_kpa));
   if (!r.plan.empty()) overlays.plan_lines = render::plan_lines(plan::read_plan(r.plan), model);
-  const auto files = render::render_views_with_overlays(model, skin, views, o, overlays, out.path());
+  const auto files = render::render_views_with_overlays(model, skin, views, o, overlays, out.path(),
+                                                         reporter);
   progress.update(2);
   if (r.gltf) render::write_gltf(skin, out.path() / "skin.glb");
   std::vector<fs::path> gifs;

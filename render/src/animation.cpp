@@ -161,7 +161,7 @@ void write_transition_gif(const SkinSurfaces& s, const Camera& camera, const Ren
   };
   const RgbImage first = frame(0), last = frame(frames - 1);
   Palette palette({&first, &last}, path);
-  const int W = options.width, H = options.height;
+  const int W = camera.width_px, H = camera.height_px;
   const int step_cs = centiseconds(kGifTransitionSeconds / (frames - 1));
 
   write_file_atomic(path, [&](const std::filesystem::path& tmp) {
@@ -223,10 +223,10 @@ std::vector<std::filesystem::path> write_transition_gifs(const PatientModel& mod
                                                          const RenderOptions& options, int frames,
                                                          const std::filesystem::path& dir) {
   std::vector<std::filesystem::path> written;
-  const double aspect = double(options.width) / options.height;
   for (View v : views) {
     const auto path = dir / cat("transition_", view_name(v), ".gif");
-    write_transition_gif(s, standard_camera(v, model, s, aspect), options, frames, path);
+    write_transition_gif(s, standard_camera(v, model, s, options.width, options.height), options,
+                         frames, path);
     written.push_back(path);
   }
   return written;

@@ -152,25 +152,18 @@ void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
   image = canvas.image();
 }
 
-Eigen::Vector2d project(const Camera& camera, const RenderOptions& o, const Eigen::Vector3d& p) {
-  // The same orthographic frame as render_image().
-  const Eigen::Vector3d fwd = camera.forward.normalized();
-  const Eigen::Vector3d up = (camera.up - camera.up.dot(fwd) * fwd).normalized();
-  const Eigen::Vector3d right = fwd.cross(up);
-  const double px = camera.width_mm / o.width;
-  const Eigen::Vector3d q = p - camera.centre;
-  return {q.dot(right) / px + 0.5 * o.width, 0.5 * o.height - q.dot(up) / px};
-}
-
-void draw_polylines(RgbImage& image, const Camera& camera, const RenderOptions& o,
+void draw_polylines(RgbImage& image, const Camera& camera,
                     const std::vector<std::vector<Eigen::Vector3d>>& lines) {
+  if (image.width != camera.width_px || image.height != camera.height_px)
+    throw InvalidInput(cat("draw_polylines: the image is ", image.width, "x", image.height,
+                           " pixels, the camera ", camera.width_px, "x", camera.height_px));
   Canvas canvas(image);
   const Pen marker{.colour = {0.15, 0.1, 0.45},
-                   .width_px = std::max(1.5, 0.003 * o.width),
+                   .width_px = std::max(1.5, 0.003 * camera.width_px),
                    .dash_px = {6.0, 4.0}};
   for (const auto& line : lines) {
     std::vector<Eigen::Vector2d> px;
-    for (const auto& p : line) px.push_back(project(camera, o, p));
+    for (const auto& p : line) px.push_back(camera.project(p));
     canvas.polyline(px, marker);
   }
   image = canvas.image();
@@ -200,9 +193,10 @@ std::vector<std::filesystem::path> render_views_with_overlays(const PatientModel
                                                               const std::vector<View>& views,
                                                               const RenderOptions& options,
                                                               const Overlays& overlays,
-                                                              const std::filesystem::path& dir) {
+                                                              const std::filesystem::path& dir,
+                                                              Reporter* reporter) {
   std::vector<std::filesystem::path> written;
-  const double aspect = double(options.width) / options.height;
+  Progress progress(reporter, "rendering the views", static_cast<double>(views.size()));
   std::vector<Eigen::MatrixX3d> colors;
   for (const ScalarMap& m : overlays.scalar_maps) {
     if (m.value.size() != skin.post.V.rows())
@@ -211,9 +205,10 @@ std::vector<std::filesystem::path> render_views_with_overlays(const PatientModel
     colors.push_back(scalar_colors(m.value, m.max_value));
   }
   for (View v : views) {
-    const Camera cam = standard_camera(v, model, skin, aspect);
+    progress.update(static_cast<double>(written.size()) / (2 + overlays.scalar_maps.size()));
+    const Camera cam = standard_camera(v, model, skin, options.width, options.height);
     RgbImage pre = render_image(skin.pre, skin.color, cam, options);
-    if (!overlays.plan_lines.empty()) draw_polylines(pre, cam, options, overlays.plan_lines);
+    if (!overlays.plan_lines.empty()) draw_polylines(pre, cam, overlays.plan_lines);
     written.push_back(dir / cat("pre_", view_name(v), ".png"));
     write_png(written.back(), pre);
     written.push_back(dir / cat("post_", view_name(v), ".png"));

@@ -39,6 +39,83 @@ Eigen::MatrixX3d vertex_normals(const TriMesh& m) {
   return N;
 }
 
+// Twice the radius of the sphere about `centre` that holds every vertex, plus 1 mm (mm): a point
+// this far from the centre is outside the mesh.
+double outside_distance_mm(const TriMesh& m, const Eigen::Vector3d& centre) {
+  return 2.0 * (m.V.rowwise() - centre.transpose()).rowwise().norm().maxCoeff() + 1.0;
+}
+
+// The Embree scene of one mesh seen by one camera, and the camera's rays in it. Embree works in
+// float: the scene is shifted to the camera's target to keep precision.
+struct Tracer {
+  const Camera& camera;  // not owned; outlives the tracer
+  CameraFrame frame;
+  bool perspective = false;
+  double back = 0;  // orthographic rays start this far before the target
+  std::unique_ptr<RTCDeviceTy, DeviceDeleter> device;
+  std::unique_ptr<RTCSceneTy, SceneDeleter> scene;
+
+  Tracer(const TriMesh& mesh, const Camera& cam) : camera(cam) {
+    if (mesh.V.rows() == 0 || mesh.F.rows() == 0) throw InvalidInput("render: the mesh is empty");
+    try {
+      camera.validate();
+    } catch (const InvalidInput& e) {
+      throw InvalidInput(cat("render: ", e.what()));
+    }
+    frame = camera.frame();
+    perspective = camera.projection == Projection::Perspective;
+    const Eigen::Vector3d& origin = camera.target;
+    // no triangle is behind an orthographic ray's origin
+    back = outside_distance_mm(mesh, origin);
+    device.reset(rtcNewDevice(nullptr));
+    if (!device) throw Error("render: Embree could not create a device");
+    scene.reset(rtcNewScene(device.get()));
+    RTCGeometry geom = rtcNewGeometry(device.get(), RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
+        geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), mesh.V.rows()));
+    auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+        geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), mesh.F.rows()));
+    for (Eigen::Index v = 0; v < mesh.V.rows(); ++v)
+      for (int c = 0; c < 3; ++c) vb[3 * v + c] = static_cast<float>(mesh.V(v, c) - origin[c]);
+    for (Eigen::Index f = 0; f < mesh.F.rows(); ++f)
+      for (int c = 0; c < 3; ++c) ib[3 * f + c] = static_cast<unsigned>(mesh.F(f, c));
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(scene.get(), geom);
+    rtcReleaseGeometry(geom);
+    rtcSetSceneBuildQuality(scene.get(), RTC_BUILD_QUALITY_HIGH);
+    rtcCommitScene(scene.get());
+  }
+
+  // The first hit of the ray through pixel (x, y) (Camera::ray, relative to the target).
+  RTCRayHit trace(RTCIntersectContext& ctx, double x, double y) const {
+    const Eigen::Vector2d q = camera.image_plane(x, y);
+    Eigen::Vector3d org, dir;
+    if (perspective) {
+      org = -camera.distance_mm * frame.forward;
+      dir = (frame.forward + q.x() * frame.right + q.y() * frame.up).normalized();
+    } else {
+      org = q.x() * frame.right + q.y() * frame.up - back * frame.forward;
+      dir = frame.forward;
+    }
+    RTCRayHit rh;
+    rh.ray.org_x = static_cast<float>(org.x());
+    rh.ray.org_y = static_cast<float>(org.y());
+    rh.ray.org_z = static_cast<float>(org.z());
+    rh.ray.dir_x = static_cast<float>(dir.x());
+    rh.ray.dir_y = static_cast<float>(dir.y());
+    rh.ray.dir_z = static_cast<float>(dir.z());
+    rh.ray.tnear = 0.0f;
+    rh.ray.tfar = std::numeric_limits<float>::infinity();
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.flags = 0;
+    rh.ray.time = 0.0f;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(scene.get(), &ctx, &rh);
+    return rh;
+  }
+};
+
 }  // namespace
 
 const char* view_name(View view) {
@@ -57,18 +134,30 @@ View parse_view(const std::string& name) {
   throw InvalidInput(cat("view '", name, "': expected front, oblique, side or plan"));
 }
 
-Camera standard_camera(View view, const PatientModel& model, const SkinSurfaces& skin,
-                       double aspect) {
+Camera standard_camera(View view, const PatientModel& model, const SkinSurfaces& skin, int width_px,
+                       int height_px) {
+  if (width_px < 1 || height_px < 1)
+    throw InvalidInput(cat("render: image size ", width_px, "x", height_px, " must be positive"));
+  if (skin.pre.V.rows() == 0) throw InvalidInput("render: the skin to frame is empty");
+  const double aspect = double(width_px) / height_px;
   const CylinderAxis& ax = model.axis();
   Camera cam;
+  cam.projection = Projection::Orthographic;
+  cam.width_px = width_px;
+  cam.height_px = height_px;
   cam.up = ax.direction;
+  // The eye outside the skin, so that a picking ray from it meets the skin first.
+  const auto eye_outside = [&](Camera& c) {
+    c.distance_mm = outside_distance_mm(skin.pre, c.target);
+  };
   if (view == View::Plan) {
     const CylindricalPoint c = model.to_cylindrical(skin.mesh_centre_lps);
     const Eigen::Vector3d n = model.skin_normal(c.theta_deg, c.z_mm);
     cam.forward = -n;
     if (std::abs(n.dot(cam.up)) > 0.95) cam.up = ax.front;
-    cam.centre = model.skin_point(c.theta_deg, c.z_mm);
+    cam.target = model.skin_point(c.theta_deg, c.z_mm);
     cam.width_mm = std::max(1.6 * 2.0 * skin.mesh_radius_mm, 10.0) * std::max(1.0, aspect);
+    eye_outside(cam);
     return cam;
   }
   const double theta_deg = view == View::Front ? 0.0 : view == View::Oblique ? 45.0 : 90.0;
@@ -87,85 +176,41 @@ Camera standard_camera(View view, const PatientModel& model, const SkinSurfaces&
   }
   mean /= static_cast<double>(skin.pre.V.rows());
   const Eigen::Vector2d mid = 0.5 * (lo + hi);
-  cam.centre = mean + (mid.x() - mean.dot(right)) * right + (mid.y() - mean.dot(up)) * up;
+  cam.target = mean + (mid.x() - mean.dot(right)) * right + (mid.y() - mean.dot(up)) * up;
   cam.width_mm = 1.08 * std::max(hi.x() - lo.x(), (hi.y() - lo.y()) * aspect);
+  eye_outside(cam);
   return cam;
 }
 
 RgbImage render_image(const TriMesh& mesh, const Eigen::MatrixX3d& color, const Camera& camera,
                       const RenderOptions& o) {
-  if (mesh.V.rows() == 0 || mesh.F.rows() == 0)
-    throw InvalidInput("render: the mesh is empty");
   if (color.rows() != mesh.V.rows())
     throw InvalidInput(cat("render: ", color.rows(), " colours for ", mesh.V.rows(), " vertices"));
-  if (o.width < 1 || o.height < 1 || o.width > 16384 || o.height > 16384 ||
-      o.samples_per_side < 1 || o.samples_per_side > 8)
-    throw InvalidInput(cat("render: image size ", o.width, "x", o.height, " (1..16384) or ",
-                           o.samples_per_side, " samples per side (1..8) out of range"));
-  if (!(camera.width_mm > 0) || !(camera.forward.norm() > 0))
-    throw InvalidInput("render: the camera needs a positive width and a viewing direction");
-
-  // Embree works in float: shift the scene to the camera's centre to keep precision.
-  const Eigen::Vector3d origin = camera.centre;
-  std::unique_ptr<RTCDeviceTy, DeviceDeleter> device(rtcNewDevice(nullptr));
-  if (!device) throw Error("render: Embree could not create a device");
-  std::unique_ptr<RTCSceneTy, SceneDeleter> scene(rtcNewScene(device.get()));
-  RTCGeometry geom = rtcNewGeometry(device.get(), RTC_GEOMETRY_TYPE_TRIANGLE);
-  auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
-      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), mesh.V.rows()));
-  auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-      geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), mesh.F.rows()));
-  for (Eigen::Index v = 0; v < mesh.V.rows(); ++v)
-    for (int c = 0; c < 3; ++c) vb[3 * v + c] = static_cast<float>(mesh.V(v, c) - origin[c]);
-  for (Eigen::Index f = 0; f < mesh.F.rows(); ++f)
-    for (int c = 0; c < 3; ++c) ib[3 * f + c] = static_cast<unsigned>(mesh.F(f, c));
-  rtcCommitGeometry(geom);
-  rtcAttachGeometry(scene.get(), geom);
-  rtcReleaseGeometry(geom);
-  rtcSetSceneBuildQuality(scene.get(), RTC_BUILD_QUALITY_HIGH);
-  rtcCommitScene(scene.get());
-
+  if (o.samples_per_side < 1 || o.samples_per_side > 8)
+    throw InvalidInput(
+        cat("render: ", o.samples_per_side, " samples per side out of range (1..8)"));
+  const Tracer tracer(mesh, camera);
   const Eigen::MatrixX3d N = vertex_normals(mesh);
-  const Eigen::Vector3d fwd = camera.forward.normalized();
-  const Eigen::Vector3d up = (camera.up - camera.up.dot(fwd) * fwd).normalized();
-  const Eigen::Vector3d right = fwd.cross(up);
-  const double px = camera.width_mm / o.width;
-  const double back = 2.0 * (mesh.V.rowwise() - origin.transpose()).rowwise().norm().maxCoeff() + 1.0;
+  const CameraFrame& fr = tracer.frame;
   // a head light (from the viewer) and a key light from the upper left of the image
-  const Eigen::Vector3d head = -fwd;
-  const Eigen::Vector3d key = (-fwd + 0.6 * up - 0.5 * right).normalized();
+  const Eigen::Vector3d head = -fr.forward;
+  const Eigen::Vector3d key = (-fr.forward + 0.6 * fr.up - 0.5 * fr.right).normalized();
   const int s = o.samples_per_side;
+  const int W = camera.width_px, H = camera.height_px;
 
   RgbImage img;
-  img.width = o.width;
-  img.height = o.height;
-  img.rgb.assign(static_cast<std::size_t>(o.width) * o.height * 3, 0);
-  tbb::parallel_for(tbb::blocked_range<int>(0, o.height), [&](const tbb::blocked_range<int>& rows) {
+  img.width = W;
+  img.height = H;
+  img.rgb.assign(static_cast<std::size_t>(W) * H * 3, 0);
+  tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& rows) {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     for (int y = rows.begin(); y < rows.end(); ++y)
-      for (int x = 0; x < o.width; ++x) {
+      for (int x = 0; x < W; ++x) {
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
         for (int sy = 0; sy < s; ++sy)
           for (int sx = 0; sx < s; ++sx) {
-            const double u = (x + (sx + 0.5) / s - 0.5 * o.width) * px;
-            const double v = (0.5 * o.height - (y + (sy + 0.5) / s)) * px;
-            const Eigen::Vector3d org = u * right + v * up - back * fwd;
-            RTCRayHit rh;
-            rh.ray.org_x = static_cast<float>(org.x());
-            rh.ray.org_y = static_cast<float>(org.y());
-            rh.ray.org_z = static_cast<float>(org.z());
-            rh.ray.dir_x = static_cast<float>(fwd.x());
-            rh.ray.dir_y = static_cast<float>(fwd.y());
-            rh.ray.dir_z = static_cast<float>(fwd.z());
-            rh.ray.tnear = 0.0f;
-            rh.ray.tfar = std::numeric_limits<float>::infinity();
-            rh.ray.mask = 0xFFFFFFFFu;
-            rh.ray.flags = 0;
-            rh.ray.time = 0.0f;
-            rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-            rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-            rtcIntersect1(scene.get(), &ctx, &rh);
+            RTCRayHit rh = tracer.trace(ctx, x + (sx + 0.5) / s, y + (sy + 0.5) / s);
             if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
               sum += o.background;
               continue;
@@ -176,19 +221,49 @@ RgbImage render_image(const TriMesh& mesh, const Eigen::MatrixX3d& color, const 
             Eigen::Vector3d n = b0 * N.row(i0) + b1 * N.row(i1) + b2 * N.row(i2);
             if (!(n.norm() > 0)) n = Eigen::Vector3d(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
             n.normalize();
-            if (n.dot(fwd) > 0) n = -n;  // two-sided
-            const Eigen::Vector3d albedo = b0 * color.row(i0) + b1 * color.row(i1) + b2 * color.row(i2);
-            const double light = o.ambient + 0.55 * std::max(0.0, n.dot(head)) +
-                                 0.35 * std::max(0.0, n.dot(key));
+            // two-sided: turned towards the viewer (orthographic: the ray's direction is forward)
+            const Eigen::Vector3d d(rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z);
+            if (n.dot(tracer.perspective ? d : fr.forward) > 0) n = -n;
+            const Eigen::Vector3d albedo =
+                b0 * color.row(i0) + b1 * color.row(i1) + b2 * color.row(i2);
+            const double light =
+                o.ambient + 0.55 * std::max(0.0, n.dot(head)) + 0.35 * std::max(0.0, n.dot(key));
             sum += albedo * light;
           }
         sum /= double(s * s);
         for (int c = 0; c < 3; ++c)
-          img.rgb[(static_cast<std::size_t>(y) * o.width + x) * 3 + c] =
+          img.rgb[(static_cast<std::size_t>(y) * W + x) * 3 + c] =
               static_cast<std::uint8_t>(std::lround(std::clamp(sum[c], 0.0, 1.0) * 255.0));
       }
   });
   return img;
+}
+
+PixelHits pixel_hits(const TriMesh& mesh, const Camera& camera) {
+  const Tracer tracer(mesh, camera);
+  const int W = camera.width_px, H = camera.height_px;
+  PixelHits out;
+  out.width = W;
+  out.height = H;
+  out.face.assign(static_cast<std::size_t>(W) * H, -1);
+  out.depth_mm.assign(out.face.size(), std::numeric_limits<double>::infinity());
+  tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& rows) {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    for (int y = rows.begin(); y < rows.end(); ++y)
+      for (int x = 0; x < W; ++x) {
+        const RTCRayHit rh = tracer.trace(ctx, x + 0.5, y + 0.5);
+        if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
+        const std::size_t i = static_cast<std::size_t>(y) * W + x;
+        out.face[i] = static_cast<int>(rh.hit.primID);
+        // the hit relative to the target; the eye's plane is distance_mm before it
+        const Eigen::Vector3d org(rh.ray.org_x, rh.ray.org_y, rh.ray.org_z),
+            dir(rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z);
+        out.depth_mm[i] =
+            (org + double(rh.ray.tfar) * dir).dot(tracer.frame.forward) + camera.distance_mm;
+      }
+  });
+  return out;
 }
 
 std::vector<std::filesystem::path> render_views(const PatientModel& model,
@@ -197,9 +272,8 @@ std::vector<std::filesystem::path> render_views(const PatientModel& model,
                                                 const RenderOptions& options,
                                                 const std::filesystem::path& dir) {
   std::vector<std::filesystem::path> written;
-  const double aspect = double(options.width) / options.height;
   for (View v : views) {
-    const Camera cam = standard_camera(v, model, skin, aspect);
+    const Camera cam = standard_camera(v, model, skin, options.width, options.height);
     for (const bool post : {false, true}) {
       const auto path = dir / cat(post ? "post_" : "pre_", view_name(v), ".png");
       write_png(path, render_image(post ? skin.post : skin.pre, skin.color, cam, options));

@@ -72,7 +72,7 @@ std::vector<fs::path> render_simulation(const PatientModel& model, const fem::Si
   if (tension)
     overlays.scalar_maps.push_back(
         tension_map(skin, sim.wound.continuum.mesh, sim.result.max_principal_mpa));
-  return render_views_with_overlays(model, skin, views, options, overlays, dir);
+  return render_views_with_overlays(model, skin, views, options, overlays, dir, reporter);
 }
 
 void write_comparison_report(const fem::Comparison& c, const PatientModel& model,

@@ -10,7 +10,6 @@
 #include <limits>
 
 #include "caps/core/error.hpp"
-#include "caps/core/units.hpp"
 
 namespace caps {
 namespace {
@@ -37,7 +36,8 @@ void check_ray(const Ray& ray) {
 
 struct MeshRayCaster::Impl {
   TriMesh mesh;
-  std::vector<Triangle> triangles;
+  std::vector<Triangle> triangles;    // the mesh's triangles with an area
+  std::vector<Eigen::Index> face_of;  // #triangles: their faces in `mesh`
   Tree tree;
 
   // The hit of a CGAL intersection result: the nearest point of a point or segment.
@@ -55,7 +55,7 @@ struct MeshRayCaster::Impl {
     MeshHit h;
     h.point = p;
     h.t = (p - ray.origin).dot(ray.direction) / ray.direction.squaredNorm();
-    h.face = static_cast<Eigen::Index>(r.second - triangles.begin());
+    h.face = face_of[static_cast<std::size_t>(r.second - triangles.begin())];
     return h;
   }
 };
@@ -70,8 +70,13 @@ MeshRayCaster::MeshRayCaster(const TriMesh& mesh) : impl_(std::make_unique<Impl>
       if (mesh.F(f, c) < 0 || mesh.F(f, c) >= mesh.n_vertices())
         throw InvalidInput(cat("ray casting: face ", f, " has vertex index ", mesh.F(f, c),
                                " outside 0..", mesh.n_vertices() - 1));
-    tris.emplace_back(to_point(mesh.V.row(mesh.F(f, 0))), to_point(mesh.V.row(mesh.F(f, 1))),
-                      to_point(mesh.V.row(mesh.F(f, 2))));
+    const Triangle t(to_point(mesh.V.row(mesh.F(f, 0))), to_point(mesh.V.row(mesh.F(f, 1))),
+                     to_point(mesh.V.row(mesh.F(f, 2))));
+    // A triangle without area (e.g. a wound fill collapsed by the closure) shows nothing; a
+    // renderer does not see it, so picking must not meet it either.
+    if (t.is_degenerate()) continue;
+    tris.push_back(t);
+    impl_->face_of.push_back(f);
   }
   impl_->tree.insert(tris.cbegin(), tris.cend());
   impl_->tree.build();
@@ -85,6 +90,7 @@ const TriMesh& MeshRayCaster::mesh() const { return impl_->mesh; }
 
 std::optional<MeshHit> MeshRayCaster::first_hit(const Ray& ray) const {
   check_ray(ray);
+  if (impl_->triangles.empty()) return std::nullopt;
   const CgalRay r(to_point(ray.origin), Vector(ray.direction[0], ray.direction[1], ray.direction[2]));
   const auto result = impl_->tree.first_intersection(r);
   if (!result) return std::nullopt;
@@ -100,6 +106,7 @@ std::optional<MeshHit> MeshRayCaster::first_hit(const Ray& ray) const {
 
 std::vector<MeshHit> MeshRayCaster::all_hits(const Ray& ray) const {
   check_ray(ray);
+  if (impl_->triangles.empty()) return {};
   const CgalRay r(to_point(ray.origin), Vector(ray.direction[0], ray.direction[1], ray.direction[2]));
   using Result = Tree::Intersection_and_primitive_id<CgalRay>::Type;
   std::vector<Result> results;
@@ -137,23 +144,6 @@ std::optional<MeshHit> first_hit_brute_force(const TriMesh& mesh, const Ray& ray
     best = MeshHit{t, f, o + t * d};
   }
   return best;
-}
-
-Ray camera_ray(const Camera& cam, double x, double y) {
-  const Eigen::Vector3d view = cam.target - cam.eye;
-  if (view.norm() < 1e-9) throw InvalidInput("camera: the eye and the target coincide");
-  const Eigen::Vector3d w = view.normalized();
-  Eigen::Vector3d right = w.cross(cam.up);
-  if (right.norm() < 1e-9) throw InvalidInput("camera: 'up' is parallel to the view direction");
-  right.normalize();
-  const Eigen::Vector3d up = right.cross(w);
-  if (cam.width <= 0 || cam.height <= 0 || !(cam.fov_y_deg > 0 && cam.fov_y_deg < 180))
-    throw InvalidInput(cat("camera: image ", cam.width, " x ", cam.height, " and field of view ",
-                           cam.fov_y_deg, " deg must be positive (fov < 180)"));
-  const double half_h = std::tan(0.5 * deg_to_rad(cam.fov_y_deg));
-  const double sx = (2.0 * x / cam.width - 1.0) * half_h * cam.width / cam.height;
-  const double sy = (1.0 - 2.0 * y / cam.height) * half_h;
-  return {cam.eye, (w + sx * right + sy * up).normalized()};
 }
 
 PointPick pick_nearest_point(const Eigen::MatrixX3d& points, const Ray& ray, double tolerance_mm) {

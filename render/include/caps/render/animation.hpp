@@ -39,8 +39,9 @@ TriMesh blend_skin(const SkinSurfaces& s, double t);
 
 /// Writes the transition as an animated GIF atomically.
 /// @param s        pre and post skin (LPS, mm) with colours
-/// @param camera   one camera for every frame (e.g. standard_camera(), framed on pre)
-/// @param options  image size, supersampling, background
+/// @param camera   one camera for every frame (e.g. standard_camera(), framed on pre); its
+///                 width_px × height_px is the GIF's size
+/// @param options  supersampling, background
 /// @param frames   number of frames (2..600): frame 0 is pre, frame frames − 1 is post
 /// @param path     the .gif to write
 /// Throws InvalidInput (bad frame count, see render_image) or IoError.

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "caps/core/reporter.hpp"
 #include "caps/fem/mesh.hpp"
 #include "caps/plan/plan.hpp"
 #include "caps/render/render.hpp"
@@ -59,12 +60,10 @@ ScalarMap tension_map(const SkinSurfaces& skin, const fem::Mesh& mesh,
 void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
                     const std::string& title, const std::string& note = "");
 
-/// Pixel position (x right, y down) of an LPS point in an image rendered with `camera`.
-Eigen::Vector2d project(const Camera& camera, const RenderOptions& options, const Eigen::Vector3d& p_lps);
-
 /// Draws polylines given in LPS mm (e.g. a plan's cutting paths) over the image, in a dashed dark
-/// line, as the surgeon's marker would.
-void draw_polylines(RgbImage& image, const Camera& camera, const RenderOptions& options,
+/// line, as the surgeon's marker would, at their pixels camera.project(p). Throws InvalidInput
+/// unless the image is the camera's size.
+void draw_polylines(RgbImage& image, const Camera& camera,
                     const std::vector<std::vector<Eigen::Vector3d>>& lines);
 
 /// The plan's cutting paths on the model's skin (LPS mm), each segment sampled along the skin
@@ -88,6 +87,7 @@ std::vector<std::filesystem::path> render_views_with_overlays(const PatientModel
                                                               const std::vector<View>& views,
                                                               const RenderOptions& options,
                                                               const Overlays& overlays,
-                                                              const std::filesystem::path& dir);
+                                                              const std::filesystem::path& dir,
+                                                              Reporter* reporter = nullptr);
 
 }  // namespace caps::render

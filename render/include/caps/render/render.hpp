@@ -1,5 +1,6 @@
 #pragma once
-/// @brief Headless images of a coloured triangle mesh: orthographic ray casting (Embree), Lambert
+/// @brief Headless images of a coloured triangle mesh: ray casting (Embree) through the pixels of
+/// a caps::Camera (surface/camera.hpp; the standard views are orthographic), Lambert
 /// shading from a head light and a key light plus a little ambient, per-vertex colours
 /// interpolated over each triangle, and PNG output.
 ///
@@ -15,6 +16,7 @@
 #include "caps/core/mesh.hpp"
 #include "caps/render/skin_surface.hpp"
 #include "caps/image/rgb_image.hpp"
+#include "caps/surface/camera.hpp"
 
 namespace caps {
 class PatientModel;
@@ -22,16 +24,12 @@ class PatientModel;
 
 namespace caps::render {
 
-/// An orthographic camera (LPS mm).
-struct Camera {
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();  ///< the point at the image's centre
-  Eigen::Vector3d forward{0, 1, 0};                  ///< unit viewing direction
-  Eigen::Vector3d up{0, 0, 1};                       ///< towards the image's top (made orthogonal)
-  double width_mm = 300;                             ///< the image's width in the scene
-};
-
+/// Shading and sampling of render_image(). The image size is the camera's (width_px ×
+/// height_px); `width` and `height` size the views that the functions framing their own cameras
+/// (render_views(), render_views_with_overlays(), write_transition_gifs()) make, through
+/// standard_camera().
 struct RenderOptions {
-  int width = 800, height = 800;  ///< pixels
+  int width = 800, height = 800;  ///< pixels of the standard views framed by the batch functions
   int samples_per_side = 2;       ///< supersampling: s × s rays per pixel, box-filtered
   Eigen::Vector3d background{0.12, 0.12, 0.14};  ///< RGB in [0, 1]
   double ambient = 0.15;
@@ -46,15 +44,34 @@ const char* view_name(View view);
 /// Parses a view name; throws InvalidInput naming the valid ones.
 View parse_view(const std::string& name);
 
-/// The camera of a standard view, framed on `skin.pre` (head views: the whole head; plan: the
-/// mesh and its surroundings, 1.6 × its diameter). Use the same camera for pre and post.
-Camera standard_camera(View view, const PatientModel& model, const SkinSurfaces& skin,
-                       double aspect = 1.0);
+/// The orthographic camera of a standard view for a width_px × height_px image, framed on
+/// `skin.pre` (head views: the whole head; plan: the mesh and its surroundings, 1.6 × its
+/// diameter). Use the same camera for pre and post, and for picking on the image: its
+/// distance_mm puts the eye outside the pre-operative skin's bounding sphere about the target.
+Camera standard_camera(View view, const PatientModel& model, const SkinSurfaces& skin, int width_px,
+                       int height_px);
 
-/// Ray-casts `mesh` (V #V×3 LPS mm, F #F×3) with per-vertex colours `color` (#V×3, [0, 1]).
-/// Throws InvalidInput for an empty mesh, mismatched colours or a bad image size.
+/// Ray-casts `mesh` (V #V×3 LPS mm, F #F×3) with per-vertex colours `color` (#V×3, [0, 1])
+/// into a camera.width_px × camera.height_px image: pixel (x, y) averages the rays
+/// camera.ray(x + (i + 0.5) / s, y + (j + 0.5) / s), i, j = 0 .. s − 1 (s = samples_per_side).
+/// Orthographic rays start outside the mesh's bounding sphere about the camera's target,
+/// whatever the camera's distance_mm. Throws InvalidInput for an empty mesh, mismatched colours,
+/// an invalid camera or a bad sample count.
 RgbImage render_image(const TriMesh& mesh, const Eigen::MatrixX3d& color, const Camera& camera,
                       const RenderOptions& options = {});
+
+/// What the renderer's ray through each pixel's centre, camera.ray(x + 0.5, y + 0.5), meets
+/// (the one sample of render_image() with samples_per_side = 1), row-major, y down.
+struct PixelHits {
+  int width = 0, height = 0;     ///< pixels
+  std::vector<int> face;         ///< #pixels: the triangle of `mesh` shaded there, −1: background
+  std::vector<double> depth_mm;  ///< #pixels: Camera::depth_mm of the hit, +inf: background
+};
+
+/// The renderer's hits at the pixel centres of `camera` on `mesh` (V #V×3 LPS mm, F #F×3),
+/// computed exactly as render_image() casts its rays (Embree, single precision). Throws
+/// InvalidInput for an empty mesh or an invalid camera.
+PixelHits pixel_hits(const TriMesh& mesh, const Camera& camera);
 
 /// The images of `caps render`: pre_<view>.png and post_<view>.png for each view, same camera.
 /// Returns the paths written.

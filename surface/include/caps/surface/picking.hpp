@@ -1,7 +1,8 @@
 #pragma once
 /// @brief Picking on the skin (CAPS 1992, section 5, "Operating on the Surface"): a ray from the
-/// camera through a pixel meets the skin's polyhedral reconstruction; the nearest plan point to
-/// a ray. Rays are tested against an AABB tree (CGAL), built once, not against every polygon.
+/// camera through a pixel (Camera::ray, camera.hpp) meets the skin's polyhedral reconstruction;
+/// the nearest plan point to a ray. Rays are tested against an AABB tree (CGAL), built once, not
+/// against every polygon.
 
 #include <Eigen/Core>
 #include <cstdint>
@@ -10,30 +11,11 @@
 #include <vector>
 
 #include "caps/core/mesh.hpp"
+#include "caps/surface/camera.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "caps/surface/range_mesh.hpp"
 
 namespace caps {
-
-/// A ray, LPS mm. `direction` need not be unit length but must not be zero.
-struct Ray {
-  Eigen::Vector3d origin{0, 0, 0};
-  Eigen::Vector3d direction{0, 0, 1};
-};
-
-/// A pinhole camera looking from `eye` at `target`; pixel (0, 0) is the top-left corner of the
-/// image, pixel centres at half-integers.
-struct Camera {
-  Eigen::Vector3d eye{0, -600, 0};  ///< LPS mm
-  Eigen::Vector3d target{0, 0, 0};  ///< LPS mm
-  Eigen::Vector3d up{0, 0, 1};      ///< towards the top of the image
-  double fov_y_deg = 30.0;          ///< vertical field of view
-  int width = 640, height = 480;    ///< pixels
-};
-
-/// The ray from the camera's eye through pixel (x, y) (pixel units, may be fractional).
-/// Throws InvalidInput for a degenerate camera (eye == target, up parallel to the view).
-Ray camera_ray(const Camera& camera, double x, double y);
 
 /// One intersection of a ray with a triangle mesh.
 struct MeshHit {
@@ -43,7 +25,8 @@ struct MeshHit {
 };
 
 /// Ray casting against a fixed triangle mesh through an AABB tree (built once, in the
-/// constructor; queries are thread-safe).
+/// constructor; queries are thread-safe). Triangles without area (collinear corners) are never
+/// hit, as they are invisible in a rendered image.
 class MeshRayCaster {
  public:
   /// @param mesh  V #V×3, F #F×3; copied. Throws InvalidInput if it has no faces.
