@@ -4,6 +4,7 @@
 // are computed.
 
 #include <Eigen/Sparse>
+#include <map>
 #include <vector>
 
 #include "caps/fem/mesh.hpp"
@@ -29,5 +30,18 @@ Assembly assemble_structure(const Mesh& mesh, const DofMap& map);
 /// Element stiffnesses into K's values and the loads and lifting (-K g) into f, colour by
 /// colour in parallel over elements.
 void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys);
+
+/// Layer id -> the material of the finite-strain solve (not owned; must outlive the assembly).
+using FiniteMaterials = std::map<int, const Material*>;
+
+/// Finite strain, at the full displacement u (3N, mm): the consistent tangent T^T K_T T into
+/// K's values (overwritten; skipped when `with_tangent` is false) and the out-of-balance force
+///   f = T^T (load_factor f_ext - f_int(u)) - T^T K_T lift     (lift: 3N mm, or empty)
+/// (the lifting term gives the predictor of a load step whose prescribed values grow by lift).
+/// Same colours and scatter as assemble_values(). Returns the strain energy (mJ). Throws
+/// SolverError (element, Gauss point) for the lowest-numbered element with det F <= 0.
+double assemble_finite(const Mesh& mesh, const DofMap& map, const FiniteMaterials& materials,
+                       const Eigen::VectorXd& u, double load_factor, const Eigen::VectorXd& lift,
+                       bool with_tangent, Assembly& sys);
 
 }  // namespace caps::fem::detail

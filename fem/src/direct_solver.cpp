@@ -162,6 +162,10 @@ class MixedMumpsSolver final : public DirectSolver {
   }
   void factorize(const Eigen::SparseMatrix<double>& K) override {
     K_ = &K;
+    if (double_) {  // a later factorization (Newton) after a fall-back stays in double precision
+      double_->factorize(const_cast<double*>(K.valuePtr()));
+      return;
+    }
     a_ = K.coeffs().cast<float>();
     try {
       if (!a_.allFinite()) throw SolverError("K does not fit single precision");

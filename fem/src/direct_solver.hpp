@@ -36,6 +36,8 @@ class DirectSolver {
   /// block_start[b] .. block_start[b+1]-1. K must stay alive and unchanged in structure until
   /// the solver is destroyed.
   virtual void analyze(const Eigen::SparseMatrix<double>& K, const std::vector<int>& block_start) = 0;
+  /// Numerical factorization of K's values; may be called again with new values of the same
+  /// structure (Newton iterations, load steps): the analysis is reused.
   virtual void factorize(const Eigen::SparseMatrix<double>& K) = 0;
   virtual Eigen::VectorXd solve(const Eigen::VectorXd& b) = 0;
   virtual long factor_nonzeros() const = 0;

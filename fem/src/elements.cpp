@@ -176,7 +176,104 @@ Vector6d stress_from_strain(const Eigen::Matrix3d& eps, double lambda, double mu
   return s;
 }
 
+Eigen::Matrix3d displacement_gradient(const Eigen::MatrixX3d& G, const Eigen::VectorXd& u_e) {
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  for (Eigen::Index a = 0; a < G.rows(); ++a) H += u_e.segment<3>(3 * a) * G.row(a);
+  return H;
+}
+
+double checked_det_F(const Eigen::Matrix3d& H, int element, int gauss_point) {
+  const double J = 1 + volume_change(H);
+  if (!(J > 0) || !std::isfinite(J))
+    throw SolverError(cat("element ", element,
+                          gauss_point >= 0 ? cat(", Gauss point ", gauss_point) : ", a node",
+                          ": det F = ", J, " (the element inverts)"),
+                      element, gauss_point);
+  return J;
+}
+
+Vector6d cauchy_from_pk2(const Eigen::Matrix3d& F, const Vector6d& S) {
+  Eigen::Matrix3d Sm;
+  Sm << S[0], S[3], S[5], S[3], S[1], S[4], S[5], S[4], S[2];
+  const Eigen::Matrix3d sigma = F * Sm * F.transpose() / F.determinant();
+  Vector6d s;
+  s << sigma(0, 0), sigma(1, 1), sigma(2, 2), sigma(0, 1), sigma(1, 2), sigma(0, 2);
+  return s;
+}
+
+double finite_kernel(ElementType type, const Eigen::MatrixX3d& X, const Material& material,
+                     const Eigen::VectorXd& u_e, int element, Eigen::VectorXd& f,
+                     Eigen::MatrixXd* K) {
+  const ShapeTable& t = shape_table(type);
+  const int n = t.n, m = 3 * n;
+  Eigen::MatrixX3d G(n, 3), FSG(n, 3);
+  Eigen::Matrix<double, 6, Eigen::Dynamic> B(6, m), CB(6, m);
+  Eigen::MatrixXd Gs(n, n);
+  Vector6d S;
+  Matrix6d C;
+  Eigen::Matrix3d Sm;
+  f.setZero(m);
+  if (K) K->setZero(m, m);
+  double energy = 0;
+  for (std::size_t q = 0; q < t.w.size(); ++q) {
+    const int gp = static_cast<int>(q);
+    const double w = t.w[q] * gradients(t.dN[q], X, G, element, gp);
+    const Eigen::Matrix3d H = displacement_gradient(G, u_e);
+    const Eigen::Matrix3d F = H + Eigen::Matrix3d::Identity();
+    checked_det_F(H, element, gp);
+    material.stress_and_tangent(H, S, C);
+    energy += w * material.strain_energy_density(H);
+    Sm << S[0], S[3], S[5], S[3], S[1], S[4], S[5], S[4], S[2];
+    FSG.noalias() = G * (Sm * F.transpose());  // row a: (F S G_a)^T
+    for (int a = 0; a < n; ++a) f.segment<3>(3 * a) += w * FSG.row(a).transpose();
+    if (!K) continue;
+    // dE = sym(F^T grad_X du): B_a rows xx yy zz, then xy yz xz with engineering shears
+    // (Bonet & Wood 2008, eq. 9.12 written for the reference configuration).
+    for (int a = 0; a < n; ++a)
+      for (int i = 0; i < 3; ++i) {
+        auto b = B.col(3 * a + i);
+        b[0] = F(i, 0) * G(a, 0);
+        b[1] = F(i, 1) * G(a, 1);
+        b[2] = F(i, 2) * G(a, 2);
+        b[3] = F(i, 0) * G(a, 1) + F(i, 1) * G(a, 0);
+        b[4] = F(i, 1) * G(a, 2) + F(i, 2) * G(a, 1);
+        b[5] = F(i, 0) * G(a, 2) + F(i, 2) * G(a, 0);
+      }
+    CB.noalias() = (w * C) * B;
+    K->noalias() += B.transpose() * CB;
+    Gs.noalias() = (w * G) * (Sm * G.transpose());  // geometric stiffness G_a . S G_b
+    for (int b = 0; b < n; ++b)
+      for (int a = 0; a < n; ++a)
+        for (int i = 0; i < 3; ++i) (*K)(3 * a + i, 3 * b + i) += Gs(a, b);
+  }
+  return energy;
+}
+
 }  // namespace detail
+
+FiniteElementResponse element_finite_response(ElementType type, const Eigen::MatrixX3d& X,
+                                              const Material& material, const Eigen::VectorXd& u_e,
+                                              int element, bool with_tangent) {
+  FiniteElementResponse r;
+  r.energy_mj = detail::finite_kernel(type, X, material, u_e, element, r.f,
+                                      with_tangent ? &r.K : nullptr);
+  return r;
+}
+
+Vector6d element_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X,
+                               const Material& material, const Eigen::VectorXd& u_e,
+                               const Eigen::Vector3d& xi, int element) {
+  Eigen::VectorXd N;
+  Eigen::MatrixX3d dN, G(X.rows(), 3);
+  shape_functions(type, xi, N, dN);
+  detail::gradients(dN, X, G, element, -1);
+  const Eigen::Matrix3d H = detail::displacement_gradient(G, u_e);
+  detail::checked_det_F(H, element, -1);
+  Vector6d S;
+  Matrix6d C;
+  material.stress_and_tangent(H, S, C);
+  return detail::cauchy_from_pk2(H + Eigen::Matrix3d::Identity(), S);
+}
 
 int n_element_nodes(ElementType type) { return type == ElementType::Hex20 ? 20 : 15; }
 const char* element_type_name(ElementType type) {

@@ -23,6 +23,22 @@ double gradients(const Eigen::MatrixX3d& dN_dxi, const Eigen::MatrixX3d& X, Eige
 Eigen::Matrix3d strain_tensor(const Eigen::MatrixX3d& G, const Eigen::VectorXd& u_e);
 Vector6d stress_from_strain(const Eigen::Matrix3d& eps, double lambda, double mu);
 
+/// Displacement gradient H = sum_a u_a (x) G_a (G = dN/dX, #n×3; u_e 3n node-major); F = I + H.
+Eigen::Matrix3d displacement_gradient(const Eigen::MatrixX3d& G, const Eigen::VectorXd& u_e);
+
+/// det F of F = I + H; throws SolverError naming the element and Gauss point if det F <= 0
+/// (or not finite).
+double checked_det_F(const Eigen::Matrix3d& H, int element, int gauss_point);
+
+/// Cauchy stress F S F^T / J (Voigt) from S (Voigt).
+Vector6d cauchy_from_pk2(const Eigen::Matrix3d& F, const Vector6d& S);
+
+/// The total-Lagrangian kernel of element_finite_response() into caller buffers (hot loop):
+/// f (3n) and, when K is not null, K (3n×3n) are overwritten; returns the strain energy (mJ).
+double finite_kernel(ElementType type, const Eigen::MatrixX3d& X, const Material& material,
+                     const Eigen::VectorXd& u_e, int element, Eigen::VectorXd& f,
+                     Eigen::MatrixXd* K);
+
 /// Isotropic stiffness without forming B: with g = vec(G) (node-major) and weights w,
 ///   A = sum w g g^T,  K_(a i)(b j) = lambda A_(a i)(b j) + mu A_(a j)(b i) + mu delta_ij tr A_ab
 /// (the three terms of int B^T D B dV for isotropic D; Hughes 2000, sec. 2.7; the trace of the
