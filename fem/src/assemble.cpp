@@ -225,31 +225,51 @@ void add_loads(const Mesh& mesh, const DofMap& map, double scale, Eigen::VectorX
 
 }  // namespace
 
-void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys) {
-  add_loads(mesh, map, 1.0, sys.f);
-  double* f = sys.f.data();
+namespace {
+
+// Per-thread buffers of one element's assembly.
+struct ElementScratch {
+  Eigen::MatrixXd Ke;
+  Eigen::VectorXd fe, ue;
+  Eigen::MatrixX3d X;
+  int eq[60], blk[20];
+  double ge[60];
+};
+
+// Runs body(e, scratch) over every element, colour by colour, in parallel within a colour (no
+// two elements of a colour share a block, so their scatters do not race); scratch.X holds the
+// element's coordinates.
+template <class Body>
+void for_each_coloured_element(const Mesh& mesh, const Assembly& sys, Body&& body) {
   const int n_colours = static_cast<int>(sys.colour_start.size()) - 1;
   for (int colour = 0; colour < n_colours; ++colour)
     tbb::parallel_for(
         tbb::blocked_range<int>(sys.colour_start[colour], sys.colour_start[colour + 1], 8),
         [&](const tbb::blocked_range<int>& r) {
-          Eigen::MatrixXd Ke;
-          Eigen::MatrixX3d X;
-          int eq[60], blk[20];
-          double ge[60];
+          ElementScratch w;
           for (int i = r.begin(); i < r.end(); ++i) {
             const int e = sys.colour_elements[i];
             const Element& el = mesh.elements[e];
-            const int nn = el.n_nodes(), m = 3 * nn;
-            X.resize(nn, 3);
-            for (int a = 0; a < nn; ++a) X.row(a) = mesh.nodes.row(el.nodes[a]);
-            const LinearElastic& mat = mesh.materials.at(el.layer);
-            stiffness_kernel(el.type, X, mat.lambda_mpa(), mat.mu_mpa(), e, Ke);
-            const bool has_g = gather_element(el, map, map.g.data(), blk, eq, ge);
-            scatter_matrix(sys, map, nn, blk, eq, Ke);
-            if (has_g) scatter_lifting(f, m, eq, Ke, ge);
+            w.X.resize(el.n_nodes(), 3);
+            for (int a = 0; a < el.n_nodes(); ++a) w.X.row(a) = mesh.nodes.row(el.nodes[a]);
+            body(e, w);
           }
         });
+}
+
+}  // namespace
+
+void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys) {
+  add_loads(mesh, map, 1.0, sys.f);
+  double* f = sys.f.data();
+  for_each_coloured_element(mesh, sys, [&](int e, ElementScratch& w) {
+    const Element& el = mesh.elements[e];
+    const LinearElastic& mat = mesh.materials.at(el.layer);
+    stiffness_kernel(el.type, w.X, mat.lambda_mpa(), mat.mu_mpa(), e, w.Ke);
+    const bool has_g = gather_element(el, map, map.g.data(), w.blk, w.eq, w.ge);
+    scatter_matrix(sys, map, el.n_nodes(), w.blk, w.eq, w.Ke);
+    if (has_g) scatter_lifting(f, 3 * el.n_nodes(), w.eq, w.Ke, w.ge);
+  });
 }
 
 double assemble_finite(const Mesh& mesh, const DofMap& map, const FiniteMaterials& materials,
@@ -263,43 +283,27 @@ double assemble_finite(const Mesh& mesh, const DofMap& map, const FiniteMaterial
   std::vector<double> energy(n_el, 0.0);
   std::vector<int> inverted_at(n_el, -1);  // Gauss point where det F <= 0
   std::vector<std::string> inverted_what(n_el);
-  const int n_colours = static_cast<int>(sys.colour_start.size()) - 1;
-  for (int colour = 0; colour < n_colours; ++colour)
-    tbb::parallel_for(
-        tbb::blocked_range<int>(sys.colour_start[colour], sys.colour_start[colour + 1], 8),
-        [&](const tbb::blocked_range<int>& r) {
-          Eigen::MatrixXd Ke;
-          Eigen::VectorXd fe, ue;
-          Eigen::MatrixX3d X;
-          int eq[60], blk[20];
-          double ge[60];
-          for (int i = r.begin(); i < r.end(); ++i) {
-            const int e = sys.colour_elements[i];
-            const Element& el = mesh.elements[e];
-            const int nn = el.n_nodes(), m = 3 * nn;
-            X.resize(nn, 3);
-            ue.resize(m);
-            for (int a = 0; a < nn; ++a) {
-              X.row(a) = mesh.nodes.row(el.nodes[a]);
-              ue.segment<3>(3 * a) = u.segment<3>(3 * static_cast<Eigen::Index>(el.nodes[a]));
-            }
-            try {
-              energy[e] = finite_kernel(el.type, X, *materials.at(el.layer), ue, e, fe,
-                                        with_tangent ? &Ke : nullptr);
-            } catch (const SolverError& err) {
-              inverted_at[e] = err.gauss_point;
-              inverted_what[e] = err.what();
-              continue;
-            }
-            const bool has_lift =
-                gather_element(el, map, lift.size() ? lift.data() : nullptr, blk, eq, ge);
-            for (int p = 0; p < m; ++p)
-              if (eq[p] >= 0) f[eq[p]] -= fe[p];
-            if (!with_tangent) continue;
-            scatter_matrix(sys, map, nn, blk, eq, Ke);
-            if (has_lift) scatter_lifting(f, m, eq, Ke, ge);
-          }
-        });
+  for_each_coloured_element(mesh, sys, [&](int e, ElementScratch& w) {
+    const Element& el = mesh.elements[e];
+    const int nn = el.n_nodes(), m = 3 * nn;
+    w.ue.resize(m);
+    for (int a = 0; a < nn; ++a)
+      w.ue.segment<3>(3 * a) = u.segment<3>(3 * static_cast<Eigen::Index>(el.nodes[a]));
+    try {
+      energy[e] = finite_kernel(el.type, w.X, *materials.at(el.layer), w.ue, e, w.fe,
+                                with_tangent ? &w.Ke : nullptr);
+    } catch (const SolverError& err) {
+      inverted_at[e] = err.gauss_point;
+      inverted_what[e] = err.what();
+      return;
+    }
+    const bool has_lift = gather_element(el, map, lift.size() ? lift.data() : nullptr, w.blk, w.eq, w.ge);
+    for (int p = 0; p < m; ++p)
+      if (w.eq[p] >= 0) f[w.eq[p]] -= w.fe[p];
+    if (!with_tangent) return;
+    scatter_matrix(sys, map, nn, w.blk, w.eq, w.Ke);
+    if (has_lift) scatter_lifting(f, m, w.eq, w.Ke, w.ge);
+  });
   for (int e = 0; e < n_el; ++e)  // the lowest element id, whatever the thread count
     if (inverted_at[e] >= 0 || !inverted_what[e].empty())
       throw SolverError(inverted_what[e], e, inverted_at[e]);

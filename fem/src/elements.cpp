@@ -118,6 +118,16 @@ std::vector<QuadraturePoint> make_wedge_rule() {
   return q;
 }
 
+// dN/dx (#n×3) at natural point xi of the element with nodes X; throws as detail::gradients().
+Eigen::MatrixX3d gradients_at(ElementType type, const Eigen::MatrixX3d& X, const Eigen::Vector3d& xi,
+                              int element) {
+  Eigen::VectorXd N;
+  Eigen::MatrixX3d dN, G(X.rows(), 3);
+  shape_functions(type, xi, N, dN);
+  detail::gradients(dN, X, G, element, -1);
+  return G;
+}
+
 }  // namespace
 
 namespace detail {
@@ -263,10 +273,7 @@ FiniteElementResponse element_finite_response(ElementType type, const Eigen::Mat
 Vector6d element_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X,
                                const Material& material, const Eigen::VectorXd& u_e,
                                const Eigen::Vector3d& xi, int element) {
-  Eigen::VectorXd N;
-  Eigen::MatrixX3d dN, G(X.rows(), 3);
-  shape_functions(type, xi, N, dN);
-  detail::gradients(dN, X, G, element, -1);
+  const Eigen::MatrixX3d G = gradients_at(type, X, xi, element);
   const Eigen::Matrix3d H = detail::displacement_gradient(G, u_e);
   detail::checked_det_F(H, element, -1);
   Vector6d S;
@@ -347,10 +354,7 @@ Eigen::VectorXd element_internal_force(ElementType type, const Eigen::MatrixX3d&
 Vector6d element_stress(ElementType type, const Eigen::MatrixX3d& X,
                         const LinearElastic& material, const Eigen::VectorXd& u_e,
                         const Eigen::Vector3d& xi, int element) {
-  Eigen::VectorXd N;
-  Eigen::MatrixX3d dN, G(X.rows(), 3);
-  shape_functions(type, xi, N, dN);
-  detail::gradients(dN, X, G, element, -1);
+  const Eigen::MatrixX3d G = gradients_at(type, X, xi, element);
   return detail::stress_from_strain(detail::strain_tensor(G, u_e), material.lambda_mpa(),
                                     material.mu_mpa());
 }

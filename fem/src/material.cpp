@@ -40,9 +40,9 @@ std::string range_text(const ParameterSpec& p) {
 }
 
 std::vector<ParameterSpec> elastic_constants() {
-  return {{"E", "MPa", 0.0, LinearElastic::kMaxE_mpa, true, false,
+  return {{"E", "MPa", 0.0, IsotropicElastic::kMaxE_mpa, true, false,
            "soft tissue is about 0.001-1 MPa (1-1000 kPa)"},
-          {"nu", "1", 0.0, LinearElastic::kMaxNu, false, false,
+          {"nu", "1", 0.0, IsotropicElastic::kMaxNu, false, false,
            "nu = 0.5 (incompressible) locks displacement elements; use 0.45-0.49 for nearly "
            "incompressible tissue"}};
 }
@@ -64,7 +64,7 @@ void Material::validate_parameters(const std::string& where) const {
 }
 
 LinearElastic::LinearElastic(double E_mpa, double nu, const std::string& where)
-    : E_mpa_(E_mpa), nu_(nu) {
+    : IsotropicElastic(E_mpa, nu) {
   if (!std::isfinite(E_mpa) || E_mpa <= 0 || E_mpa > kMaxE_mpa)
     throw InvalidInput(cat(where, ": Young's modulus E = ", E_mpa, " MPa (", E_mpa * 1e3,
                            " kPa) is out of range; it must be in (0, ", kMaxE_mpa,
@@ -81,7 +81,7 @@ LinearElastic::LinearElastic(double E_mpa, double nu, const std::string& where)
   validate_parameters(where);  // the declared ranges (the messages above say it in more words)
 }
 
-std::vector<ParameterSpec> LinearElastic::parameters() const { return elastic_constants(); }
+std::vector<ParameterSpec> IsotropicElastic::parameters() const { return elastic_constants(); }
 
 void LinearElastic::stress_and_tangent(const Eigen::Matrix3d& H, Vector6d& S, Matrix6d& C) const {
   C = isotropic_tangent(lambda_mpa(), mu_mpa());
@@ -95,14 +95,13 @@ double LinearElastic::strain_energy_density(const Eigen::Matrix3d& H) const {
   return 0.5 * lambda_mpa() * eps.trace() * eps.trace() + mu_mpa() * eps.squaredNorm();
 }
 
-NeoHookean::NeoHookean(double E_mpa, double nu, const std::string& where) : E_mpa_(E_mpa), nu_(nu) {
+NeoHookean::NeoHookean(double E_mpa, double nu, const std::string& where)
+    : IsotropicElastic(E_mpa, nu) {
   validate_parameters(where);
 }
 
 NeoHookean::NeoHookean(const LinearElastic& linear, const std::string& where)
     : NeoHookean(linear.E_mpa(), linear.nu(), where) {}
-
-std::vector<ParameterSpec> NeoHookean::parameters() const { return elastic_constants(); }
 
 void NeoHookean::stress_and_tangent(const Eigen::Matrix3d& H, Vector6d& S, Matrix6d& C) const {
   // Holzapfel 2000: S = S_iso + S_vol (eq. 6.89-6.90, 6.101), C = C_iso + C_vol (eq. 6.165-6.168)

@@ -54,22 +54,15 @@ class Material {
   void validate_parameters(const std::string& where) const;
 };
 
-/// Isotropic linear elastic material: the small-strain model (sigma = D : eps). Throws
-/// InvalidInput on construction if out of range.
+/// Base of the isotropic materials defined by the small-strain Young's modulus and Poisson's
+/// ratio. Declared parameters:
 ///   E   Young's modulus, MPa (= N/mm^2), 0 < E <= 1e3 (soft tissue is 1e-4..1 MPa)
 ///   nu  Poisson's ratio, dimensionless, 0 <= nu <= 0.499 (keeps the displacement elements free
 ///       of volumetric locking; use 0.45-0.49 for nearly incompressible tissue, never 0.5)
-/// As a Material it gives the linearized response: S = D : eps with eps = sym(H) and
-/// C = D (valid only for small strains; the linear solve uses it in its own small-strain path).
-class LinearElastic final : public Material {
+class IsotropicElastic : public Material {
  public:
   static constexpr double kMaxE_mpa = 1e3;
   static constexpr double kMaxNu = 0.499;
-
-  /// @param E_mpa  Young's modulus (MPa)
-  /// @param nu     Poisson's ratio
-  /// @param where  names the material in error messages ("layer 1", "--E")
-  LinearElastic(double E_mpa, double nu, const std::string& where = "material");
 
   double E_mpa() const { return E_mpa_; }
   double nu() const { return nu_; }
@@ -77,16 +70,34 @@ class LinearElastic final : public Material {
   double lambda_mpa() const { return E_mpa_ * nu_ / ((1 + nu_) * (1 - 2 * nu_)); }
   /// Shear modulus mu = G (MPa).
   double mu_mpa() const { return E_mpa_ / (2 * (1 + nu_)); }
+  /// Bulk modulus K (MPa).
+  double bulk_mpa() const { return E_mpa_ / (3 * (1 - 2 * nu_)); }
 
-  std::string name() const override { return "linear"; }
   std::vector<ParameterSpec> parameters() const override;
   std::vector<double> values() const override { return {E_mpa_, nu_}; }
-  void stress_and_tangent(const Eigen::Matrix3d& H, Vector6d& S, Matrix6d& C) const override;
-  double strain_energy_density(const Eigen::Matrix3d& H) const override;
+
+ protected:
+  IsotropicElastic(double E_mpa, double nu) : E_mpa_(E_mpa), nu_(nu) {}
 
  private:
   double E_mpa_;
   double nu_;
+};
+
+/// Isotropic linear elastic material: the small-strain model (sigma = D : eps). Throws
+/// InvalidInput on construction if E or nu is out of range (IsotropicElastic).
+/// As a Material it gives the linearized response: S = D : eps with eps = sym(H) and
+/// C = D (valid only for small strains; the linear solve uses it in its own small-strain path).
+class LinearElastic final : public IsotropicElastic {
+ public:
+  /// @param E_mpa  Young's modulus (MPa)
+  /// @param nu     Poisson's ratio
+  /// @param where  names the material in error messages ("layer 1", "--E")
+  LinearElastic(double E_mpa, double nu, const std::string& where = "material");
+
+  std::string name() const override { return "linear"; }
+  void stress_and_tangent(const Eigen::Matrix3d& H, Vector6d& S, Matrix6d& C) const override;
+  double strain_energy_density(const Eigen::Matrix3d& H) const override;
 };
 
 /// Compressible neo-Hookean solid in the decoupled form of Abaqus and CalculiX (*HYPERELASTIC,
@@ -94,8 +105,9 @@ class LinearElastic final : public Material {
 ///   W = mu/2 (J^(-2/3) I1 - 3) + K/2 (J - 1)^2,   C10 = mu/2, D1 = 2/K
 /// (Holzapfel 2000, sec. 6.4-6.6, eq. 6.144 with U(J) = K/2 (J-1)^2). mu and K come from the
 /// small-strain E and nu (mu = E / (2(1+nu)), K = E / (3(1-2nu))), so small loads give the
-/// linear answer. Parameters: E (MPa, 0 < E <= 1e3), nu (1, 0 <= nu <= 0.499).
-class NeoHookean final : public Material {
+/// linear answer. Parameters as IsotropicElastic; throws InvalidInput naming `where` and the
+/// parameter if one is out of range.
+class NeoHookean final : public IsotropicElastic {
  public:
   /// @param E_mpa  small-strain Young's modulus (MPa)
   /// @param nu     small-strain Poisson's ratio
@@ -104,26 +116,14 @@ class NeoHookean final : public Material {
   /// The neo-Hookean solid with the small-strain constants of `linear`.
   explicit NeoHookean(const LinearElastic& linear, const std::string& where = "material");
 
-  double E_mpa() const { return E_mpa_; }
-  double nu() const { return nu_; }
-  /// Shear modulus mu (MPa).
-  double mu_mpa() const { return E_mpa_ / (2 * (1 + nu_)); }
-  /// Bulk modulus K (MPa).
-  double bulk_mpa() const { return E_mpa_ / (3 * (1 - 2 * nu_)); }
   /// CalculiX / Abaqus C10 = mu/2 (MPa).
   double c10_mpa() const { return 0.5 * mu_mpa(); }
   /// CalculiX / Abaqus D1 = 2/K (1/MPa).
   double d1_per_mpa() const { return 2 / bulk_mpa(); }
 
   std::string name() const override { return "neo-hookean"; }
-  std::vector<ParameterSpec> parameters() const override;
-  std::vector<double> values() const override { return {E_mpa_, nu_}; }
   void stress_and_tangent(const Eigen::Matrix3d& H, Vector6d& S, Matrix6d& C) const override;
   double strain_energy_density(const Eigen::Matrix3d& H) const override;
-
- private:
-  double E_mpa_;
-  double nu_;
 };
 
 /// det(I + H) - 1 without the cancellation of det(F) - 1 at small strain:
