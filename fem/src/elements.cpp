@@ -214,11 +214,13 @@ Vector6d cauchy_from_pk2(const Eigen::Matrix3d& F, const Vector6d& S) {
 double finite_kernel(ElementType type, const Eigen::MatrixX3d& X, const Material& material,
                      const Eigen::VectorXd& u_e, int element, Eigen::VectorXd& f,
                      Eigen::MatrixXd* K) {
+  using Gradients = Eigen::Matrix<double, Eigen::Dynamic, 3, 0, 20, 3>;
+  using Block = Eigen::Matrix<double, 6, 3>;
   const ShapeTable& t = shape_table(type);
   const int n = t.n, m = 3 * n;
-  Eigen::MatrixX3d G(n, 3), FSG(n, 3);
-  Eigen::Matrix<double, 6, Eigen::Dynamic> B(6, m), CB(6, m);
-  Eigen::MatrixXd Gs(n, n);
+  Eigen::MatrixX3d G(n, 3);
+  Gradients FSG(n, 3), SG(n, 3);
+  Block B[20], CB[20];
   Vector6d S;
   Matrix6d C;
   Eigen::Matrix3d Sm;
@@ -238,24 +240,30 @@ double finite_kernel(ElementType type, const Eigen::MatrixX3d& X, const Material
     for (int a = 0; a < n; ++a) f.segment<3>(3 * a) += w * FSG.row(a).transpose();
     if (!K) continue;
     // dE = sym(F^T grad_X du): B_a rows xx yy zz, then xy yz xz with engineering shears
-    // (Bonet & Wood 2008, eq. 9.12 written for the reference configuration).
-    for (int a = 0; a < n; ++a)
+    // (Bonet & Wood 2008, eq. 9.12 written for the reference configuration). Node pairs
+    // b >= a only (K is symmetric): K_ab += B_a^T (w C B_b) + w (G_a . S G_b) I.
+    for (int a = 0; a < n; ++a) {
       for (int i = 0; i < 3; ++i) {
-        auto b = B.col(3 * a + i);
-        b[0] = F(i, 0) * G(a, 0);
-        b[1] = F(i, 1) * G(a, 1);
-        b[2] = F(i, 2) * G(a, 2);
-        b[3] = F(i, 0) * G(a, 1) + F(i, 1) * G(a, 0);
-        b[4] = F(i, 1) * G(a, 2) + F(i, 2) * G(a, 1);
-        b[5] = F(i, 0) * G(a, 2) + F(i, 2) * G(a, 0);
+        B[a](0, i) = F(i, 0) * G(a, 0);
+        B[a](1, i) = F(i, 1) * G(a, 1);
+        B[a](2, i) = F(i, 2) * G(a, 2);
+        B[a](3, i) = F(i, 0) * G(a, 1) + F(i, 1) * G(a, 0);
+        B[a](4, i) = F(i, 1) * G(a, 2) + F(i, 2) * G(a, 1);
+        B[a](5, i) = F(i, 0) * G(a, 2) + F(i, 2) * G(a, 0);
       }
-    CB.noalias() = (w * C) * B;
-    K->noalias() += B.transpose() * CB;
-    Gs.noalias() = (w * G) * (Sm * G.transpose());  // geometric stiffness G_a . S G_b
+      CB[a].noalias() = (w * C) * B[a];
+    }
+    SG.noalias() = w * G * Sm;
     for (int b = 0; b < n; ++b)
-      for (int a = 0; a < n; ++a)
-        for (int i = 0; i < 3; ++i) (*K)(3 * a + i, 3 * b + i) += Gs(a, b);
+      for (int a = 0; a <= b; ++a) {
+        auto Kab = K->block<3, 3>(3 * a, 3 * b);
+        Kab.noalias() += B[a].transpose() * CB[b];
+        Kab.diagonal().array() += SG.row(a).dot(G.row(b));
+      }
   }
+  if (K)
+    for (int b = 0; b < n; ++b)
+      for (int a = 0; a < b; ++a) K->block<3, 3>(3 * b, 3 * a) = K->block<3, 3>(3 * a, 3 * b).transpose();
   return energy;
 }
 
