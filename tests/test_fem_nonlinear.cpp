@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <random>
 #include <sstream>
 #include <tuple>
@@ -206,6 +207,33 @@ TEST(FiniteStrain, UniaxialStretchMatchesTheClosedForm) {
     EXPECT_EQ(r.kinematics, "neo-hookean");
     EXPECT_GE(r.newton_steps.size(), 10u);
   }
+}
+
+TEST(FiniteStrain, ALayerCarriesItsOwnMaterial) {
+  // Uniaxial stretch as above with the layer's finite-strain material twice as stiff as its
+  // linear constants: the stress doubles, the stretches do not change.
+  const double L = 10, l1 = 1.2;
+  Mesh m = unit_box({L, L, L}, {1, 1, 1});
+  for (int i = 0; i < m.n_nodes(); ++i)
+    for (int c = 0; c < 3; ++c)
+      if (std::abs(m.nodes(i, c)) < 1e-9) m.fixed_dofs.push_back({i, c, 0.0});
+  for (int i = 0; i < m.n_nodes(); ++i)
+    if (std::abs(m.nodes(i, 0) - L) < 1e-9) m.fixed_dofs.push_back({i, 0, (l1 - 1) * L});
+  m.finite_materials[0] = std::make_shared<NeoHookean>(2 * kE, kNu);
+  SolveOptions o = finite(2);
+  o.solver = SolverKind::Cholmod;  // (MUMPS's PORD exits the process on so small a graph)
+  const SolveResult r = solve(m, o);
+  const NeoHookean nh(kE, kNu);
+  const double l2 = lateral_stretch(l1, nh.mu_mpa(), nh.bulk_mpa());
+  const double s11 = principal_cauchy(l1, l2, nh.mu_mpa(), nh.bulk_mpa())[0];
+  EXPECT_NEAR(r.gauss_stress_mpa(0, 0), 2 * s11, 1e-6 * s11);
+  // The linear material is the small-strain model: refused as a finite-strain material, and a
+  // material CalculiX has no form for is refused by the export.
+  m.finite_materials[0] = std::make_shared<LinearElastic>(kE, kNu);
+  EXPECT_THROW(solve(m, o), InvalidInput);
+  InpOptions io;
+  io.finite_strain = true;
+  EXPECT_THROW(inp_text(m, io), InvalidInput);
 }
 
 TEST(FiniteStrain, SimpleShearMatchesTheClosedForm) {

@@ -30,6 +30,7 @@ constexpr double kDivergence = 1e8;
 struct Failure {
   std::string what;
   int element = -1, gauss_point = -1, iteration = -1;
+  double lambda = 0;  // the load factor the attempt aimed at
 };
 
 class FiniteProblem {
@@ -38,6 +39,11 @@ class FiniteProblem {
     for (const auto& [layer, linear] : mesh.materials) {
       const auto it = mesh.finite_materials.find(layer);
       if (it != mesh.finite_materials.end() && it->second) {
+        // Linear elasticity under finite kinematics is not objective (a rotation stresses it):
+        // the linear model is the small-strain solve.
+        if (dynamic_cast<const LinearElastic*>(it->second.get()))
+          throw InvalidInput(cat("layer ", layer, ": the finite-strain solve was given the linear "
+                                 "material; use neo-hookean, or the linear (small-strain) solve"));
         materials_[layer] = it->second.get();
       } else {
         owned_.push_back(std::make_unique<NeoHookean>(linear, cat("layer ", layer)));
@@ -216,6 +222,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
                             " iterations (last relative residual ",
                             record.residual_norms.empty() ? NAN : record.residual_norms.back(), ")"),
                         -1, -1, record.iterations};
+    failure->lambda = lambda_new;
     // An inverted element is the cause worth reporting: smaller steps after it often fail
     // differently (a stiffening, ill-conditioned tangent near det F = 0).
     if (failure->element >= 0 && !inverted_in_step) inverted_in_step = failure;
@@ -224,8 +231,8 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
     dlambda *= 0.5;
     if (++cutbacks > no.max_cutbacks) {
       throw SolverError(
-          cat("finite-strain solve failed at load step ", step + 1, " (lambda ", lambda, " -> ",
-              lambda + 2 * dlambda, " after ", no.max_cutbacks, " halvings), Newton iteration ",
+          cat("finite-strain solve failed at load step ", step + 1, " (from lambda ", lambda,
+              " towards ", failure->lambda, "; ", no.max_cutbacks, " halvings), Newton iteration ",
               failure->iteration, ": ", failure->what, "; the closure is too large for this mesh or material: refine the mesh, undermine "
               "more, or close the wound in more steps (n_steps)"),
           failure->element, failure->gauss_point, failure->iteration);
