@@ -42,6 +42,7 @@ void run(benchmark::State& state, const BoxOptions& o,
   if (kinematics == caps::fem::Kinematics::Finite) {
     state.counters["load_steps"] = static_cast<double>(r.newton_steps.size());
     state.counters["newton_iterations"] = r.newton_iterations;
+    state.counters["factorizations"] = r.factorizations;
   }
   state.SetLabel(so.solver == SolverKind::Cholmod ? "cholmod"
                  : r.fell_back_to_double   ? "mumps mixed (fell back to double)"

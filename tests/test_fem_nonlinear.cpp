@@ -381,7 +381,8 @@ TEST(FiniteStrain, SlotClosedBySuturesInLoadSteps) {
               << " N, linear " << lin.total_suture_force_n << " N; max |u| finite "
               << fin.displacement_mm.cwiseAbs().maxCoeff() << " linear "
               << lin.displacement_mm.cwiseAbs().maxCoeff() << " mm; time " << fin.timings.total_s
-              << " s, " << fin.newton_iterations << " Newton iterations\n";
+              << " s, " << fin.newton_iterations << " Newton iterations, " << fin.factorizations
+              << " factorizations\n";
     EXPECT_LT(max_gap(m, fin), 1e-8);
     EXPECT_GT(fin.total_suture_force_n, 0);
     if (slot < 0.1)
@@ -391,12 +392,19 @@ TEST(FiniteStrain, SlotClosedBySuturesInLoadSteps) {
 
 TEST(FiniteStrain, MumpsCholmodAndThreadsAgree) {
   const Mesh m = slotted_box(6.0);
-  SolveOptions a = finite(5), b = finite(5), c = finite(5), d = finite(5);
+  SolveOptions a = finite(5), b = finite(5), c = finite(5), d = finite(5), e = finite(5);
   b.solver = SolverKind::Cholmod;
   c.mixed_precision = false;
   d.threads = 1;
-  const SolveResult ra = solve(m, a), rb = solve(m, b), rc = solve(m, c), rd = solve(m, d);
+  e.newton.reuse_iterations = 0;  // every tangent factorized
+  const SolveResult ra = solve(m, a), rb = solve(m, b), rc = solve(m, c), rd = solve(m, d),
+                    re = solve(m, e);
   const double scale = ra.displacement_mm.cwiseAbs().maxCoeff();
+  std::cout << "factorizations: reusing " << ra.factorizations << ", not reusing "
+            << re.factorizations << " (" << ra.newton_iterations << " solves)\n";
+  EXPECT_LT(ra.factorizations, re.factorizations);
+  EXPECT_EQ(re.factorizations, re.newton_iterations);
+  EXPECT_LT((ra.displacement_mm - re.displacement_mm).cwiseAbs().maxCoeff(), 1e-8 * scale);
   EXPECT_LT((ra.displacement_mm - rb.displacement_mm).cwiseAbs().maxCoeff(), 1e-8 * scale);
   EXPECT_LT((ra.displacement_mm - rc.displacement_mm).cwiseAbs().maxCoeff(), 1e-8 * scale);
   EXPECT_LT((ra.displacement_mm - rd.displacement_mm).cwiseAbs().maxCoeff(), 1e-8 * scale);

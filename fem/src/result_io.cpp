@@ -54,7 +54,8 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
       steps.push_back({{"step", s.step}, {"lambda", s.lambda}, {"iterations", s.iterations},
                        {"cutbacks", s.cutbacks}, {"relative_residuals", s.residual_norms},
                        {"line_search", s.line_search}});
-    j["newton"] = {{"iterations", r.newton_iterations}, {"steps", steps}};
+    j["newton"] = {{"iterations", r.newton_iterations}, {"factorizations", r.factorizations},
+                   {"steps", steps}};
   }
   j["peak_memory_mb"] = r.peak_memory_mb;
   j["relative_residual"] = r.relative_residual;

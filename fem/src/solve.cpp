@@ -127,6 +127,7 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
       res.timings.analysis_s = analysis.get();
       t = Clock::now();
       solver->factorize(sys.K);
+      res.factorizations = 1;
       res.timings.factorization_s = seconds_since(t);
       t = Clock::now();
       q = solver->solve(sys.f);

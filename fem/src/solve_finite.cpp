@@ -85,7 +85,7 @@ class FiniteProblem {
 void check_options(const NewtonOptions& o) {
   if (o.n_steps < 1 || o.n_steps > 100000)
     throw InvalidInput(cat("newton: n_steps = ", o.n_steps, " must be in 1..100000"));
-  if (o.max_iterations < 1 || o.max_cutbacks < 0)
+  if (o.max_iterations < 1 || o.max_cutbacks < 0 || o.reuse_iterations < 0)
     throw InvalidInput(cat("newton: max_iterations = ", o.max_iterations, " must be >= 1 and max_cutbacks = ",
                            o.max_cutbacks, " >= 0"));
   if (!(o.residual_tolerance > 0 && o.residual_tolerance < 1) ||
@@ -120,6 +120,17 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
   auto solve_system = [&](Eigen::VectorXd& dq) -> std::optional<Failure> {
     try {
       auto t0 = Clock::now();
+      if (no.reuse_iterations > 0)
+        if (std::optional<Eigen::VectorXd> x =
+                solver->solve_reusing_factor(sys.K, sys.f, no.reuse_iterations)) {
+          dq = std::move(*x);
+          res.timings.solve_s += seconds_since(t0);
+          return dq.allFinite() ? std::nullopt
+                                : std::optional<Failure>(Failure{"the Newton correction is not finite"});
+        }
+      res.timings.solve_s += seconds_since(t0);
+      t0 = Clock::now();
+      ++res.factorizations;
       solver->factorize(sys.K);
       res.timings.factorization_s += seconds_since(t0);
       t0 = Clock::now();

@@ -48,6 +48,10 @@ struct NewtonOptions {
   int max_cutbacks = 10;                ///< halvings of a step before giving up (SolverError)
   double residual_tolerance = 1e-10;    ///< ||r|| / ||r_0|| of the step (r_0: predictor load)
   double displacement_tolerance = 1e-8; ///< ||dq|| / ||q - q_step_start||
+  /// Mixed-precision MUMPS: a new tangent is first solved by conjugate gradients preconditioned
+  /// with the last factorization, which is kept if that converges (to the accuracy of a direct
+  /// solve) within this many iterations; otherwise it is factorized. 0 = factorize every tangent.
+  int reuse_iterations = 8;
 };
 
 struct SolveOptions {
@@ -122,6 +126,7 @@ struct SolveResult {
   std::string kinematics = "linear";         ///< kinematics_name() of the solve
   std::vector<NewtonStep> newton_steps;      ///< finite strain: the converged load steps
   int newton_iterations = 0;                 ///< finite strain: total, including cut-back attempts
+  int factorizations = 0;                    ///< numerical factorizations (1 for a linear solve)
 };
 
 /// Solves the static problem (options.kinematics). Throws InvalidInput for bad or
