@@ -7,7 +7,6 @@
 #include <algorithm>
 #include <string>
 
-#include "caps/core/error.hpp"
 
 #include "caps/fem/elements.hpp"
 #include "elements_impl.hpp"
@@ -272,31 +271,25 @@ void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys) {
   });
 }
 
-double assemble_finite(const Mesh& mesh, const DofMap& map, const FiniteMaterials& materials,
-                       const Eigen::VectorXd& u, double load_factor, const Eigen::VectorXd& lift,
-                       bool with_tangent, Assembly& sys) {
+FiniteAssembly assemble_finite(const Mesh& mesh, const DofMap& map,
+                               const FiniteMaterials& materials, const Eigen::VectorXd& u,
+                               double load_factor, const Eigen::VectorXd& lift, bool with_tangent,
+                               Assembly& sys) {
   if (with_tangent) std::fill(sys.K.valuePtr(), sys.K.valuePtr() + sys.K.nonZeros(), 0.0);
   sys.f.setZero(map.n_eq);
   add_loads(mesh, map, load_factor, sys.f);
   double* f = sys.f.data();
   const int n_el = static_cast<int>(mesh.elements.size());
-  std::vector<double> energy(n_el, 0.0);
-  std::vector<int> inverted_at(n_el, -1);  // Gauss point where det F <= 0
-  std::vector<std::string> inverted_what(n_el);
+  std::vector<FiniteKernelResult> per_element(n_el);
   for_each_coloured_element(mesh, sys, [&](int e, ElementScratch& w) {
     const Element& el = mesh.elements[e];
     const int nn = el.n_nodes(), m = 3 * nn;
     w.ue.resize(m);
     for (int a = 0; a < nn; ++a)
       w.ue.segment<3>(3 * a) = u.segment<3>(3 * static_cast<Eigen::Index>(el.nodes[a]));
-    try {
-      energy[e] = finite_kernel(el.type, w.X, *materials.at(el.layer), w.ue, e, w.fe,
-                                with_tangent ? &w.Ke : nullptr);
-    } catch (const SolverError& err) {
-      inverted_at[e] = err.gauss_point;
-      inverted_what[e] = err.what();
-      return;
-    }
+    per_element[e] = finite_kernel(el.type, w.X, *materials.at(el.layer), w.ue, e, w.fe,
+                                   with_tangent ? &w.Ke : nullptr);
+    if (per_element[e].inverted_at >= 0) return;
     const bool has_lift = gather_element(el, map, lift.size() ? lift.data() : nullptr, w.blk, w.eq, w.ge);
     for (int p = 0; p < m; ++p)
       if (w.eq[p] >= 0) f[w.eq[p]] -= w.fe[p];
@@ -304,12 +297,16 @@ double assemble_finite(const Mesh& mesh, const DofMap& map, const FiniteMaterial
     scatter_matrix(sys, map, nn, w.blk, w.eq, w.Ke);
     if (has_lift) scatter_lifting(f, m, w.eq, w.Ke, w.ge);
   });
-  for (int e = 0; e < n_el; ++e)  // the lowest element id, whatever the thread count
-    if (inverted_at[e] >= 0 || !inverted_what[e].empty())
-      throw SolverError(inverted_what[e], e, inverted_at[e]);
-  double total = 0;
-  for (double v : energy) total += v;
-  return total;
+  FiniteAssembly out;
+  for (int e = 0; e < n_el; ++e) {  // the lowest element id, whatever the thread count
+    if (per_element[e].inverted_at >= 0 && out.inverted_element < 0) {
+      out.inverted_element = e;
+      out.inverted_gauss_point = per_element[e].inverted_at;
+      out.det_F = per_element[e].det_F;
+    }
+    out.energy_mj += per_element[e].energy_mj;
+  }
+  return out;
 }
 
 }  // namespace caps::fem::detail

@@ -192,13 +192,15 @@ Eigen::Matrix3d displacement_gradient(const Eigen::MatrixX3d& G, const Eigen::Ve
   return H;
 }
 
+std::string inverted_message(int element, int gauss_point, double det_F) {
+  return cat("element ", element, gauss_point >= 0 ? cat(", Gauss point ", gauss_point) : ", a node",
+             ": det F = ", det_F, " (the element inverts)");
+}
+
 double checked_det_F(const Eigen::Matrix3d& H, int element, int gauss_point) {
   const double J = 1 + volume_change(H);
   if (!(J > 0) || !std::isfinite(J))
-    throw SolverError(cat("element ", element,
-                          gauss_point >= 0 ? cat(", Gauss point ", gauss_point) : ", a node",
-                          ": det F = ", J, " (the element inverts)"),
-                      element, gauss_point);
+    throw SolverError(inverted_message(element, gauss_point, J), element, gauss_point);
   return J;
 }
 
@@ -211,9 +213,9 @@ Vector6d cauchy_from_pk2(const Eigen::Matrix3d& F, const Vector6d& S) {
   return s;
 }
 
-double finite_kernel(ElementType type, const Eigen::MatrixX3d& X, const Material& material,
-                     const Eigen::VectorXd& u_e, int element, Eigen::VectorXd& f,
-                     Eigen::MatrixXd* K) {
+FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
+                                 const Material& material, const Eigen::VectorXd& u_e,
+                                 int element, Eigen::VectorXd& f, Eigen::MatrixXd* K) {
   using Gradients = Eigen::Matrix<double, Eigen::Dynamic, 3, 0, 20, 3>;
   using Block = Eigen::Matrix<double, 6, 3>;
   const ShapeTable& t = shape_table(type);
@@ -226,15 +228,19 @@ double finite_kernel(ElementType type, const Eigen::MatrixX3d& X, const Material
   Eigen::Matrix3d Sm;
   f.setZero(m);
   if (K) K->setZero(m, m);
-  double energy = 0;
+  FiniteKernelResult out;
   for (std::size_t q = 0; q < t.w.size(); ++q) {
     const int gp = static_cast<int>(q);
     const double w = t.w[q] * gradients(t.dN[q], X, G, element, gp);
     const Eigen::Matrix3d H = displacement_gradient(G, u_e);
     const Eigen::Matrix3d F = H + Eigen::Matrix3d::Identity();
-    checked_det_F(H, element, gp);
+    if (const double J = 1 + volume_change(H); !(J > 0) || !std::isfinite(J)) {
+      out.inverted_at = gp;
+      out.det_F = J;
+      return out;
+    }
     material.stress_and_tangent(H, S, C);
-    energy += w * material.strain_energy_density(H);
+    out.energy_mj += w * material.strain_energy_density(H);
     Sm << S[0], S[3], S[5], S[3], S[1], S[4], S[5], S[4], S[2];
     FSG.noalias() = G * (Sm * F.transpose());  // row a: (F S G_a)^T
     for (int a = 0; a < n; ++a) f.segment<3>(3 * a) += w * FSG.row(a).transpose();
@@ -264,7 +270,7 @@ double finite_kernel(ElementType type, const Eigen::MatrixX3d& X, const Material
   if (K)
     for (int b = 0; b < n; ++b)
       for (int a = 0; a < b; ++a) K->block<3, 3>(3 * b, 3 * a) = K->block<3, 3>(3 * a, 3 * b).transpose();
-  return energy;
+  return out;
 }
 
 }  // namespace detail
@@ -273,8 +279,12 @@ FiniteElementResponse element_finite_response(ElementType type, const Eigen::Mat
                                               const Material& material, const Eigen::VectorXd& u_e,
                                               int element, bool with_tangent) {
   FiniteElementResponse r;
-  r.energy_mj = detail::finite_kernel(type, X, material, u_e, element, r.f,
-                                      with_tangent ? &r.K : nullptr);
+  const detail::FiniteKernelResult k =
+      detail::finite_kernel(type, X, material, u_e, element, r.f, with_tangent ? &r.K : nullptr);
+  if (k.inverted_at >= 0)
+    throw SolverError(detail::inverted_message(element, k.inverted_at, k.det_F), element,
+                      k.inverted_at);
+  r.energy_mj = k.energy_mj;
   return r;
 }
 

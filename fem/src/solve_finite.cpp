@@ -62,15 +62,15 @@ class FiniteProblem {
     return u;
   }
 
-  // Out-of-balance force (and tangent) at (q, lambda); the `lift` term gives the predictor.
-  // Returns the energy, or a failure when an element inverts.
+  // Out-of-balance force and tangent at (q, lambda); the `lift` term gives the predictor.
+  // Returns a failure when an element inverts.
   std::optional<Failure> evaluate(const Eigen::VectorXd& q, double lambda, double load_lambda,
                                   const Eigen::VectorXd& lift, Assembly& sys) const {
-    try {
-      assemble_finite(mesh_, map_, materials_, expand(q, lambda), load_lambda, lift, true, sys);
-    } catch (const SolverError& e) {
-      return Failure{e.what(), e.element, e.gauss_point};
-    }
+    const FiniteAssembly a =
+        assemble_finite(mesh_, map_, materials_, expand(q, lambda), load_lambda, lift, true, sys);
+    if (a.inverted_element >= 0)
+      return Failure{inverted_message(a.inverted_element, a.inverted_gauss_point, a.det_F),
+                     a.inverted_element, a.inverted_gauss_point};
     if (!sys.f.allFinite()) return Failure{"the out-of-balance force is not finite"};
     return std::nullopt;
   }
@@ -272,7 +272,10 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
     Eigen::VectorXd ue(3 * nn);
     for (int a = 0; a < nn; ++a) ue.segment<3>(3 * a) = u.segment<3>(3 * static_cast<Eigen::Index>(el.nodes[a]));
     Eigen::VectorXd fe;
-    out.energy_mj = finite_kernel(el.type, X, mat, ue, e, fe, nullptr);
+    const FiniteKernelResult k = finite_kernel(el.type, X, mat, ue, e, fe, nullptr);
+    if (k.inverted_at >= 0)  // not after a converged step, which evaluated this very state
+      throw SolverError(inverted_message(e, k.inverted_at, k.det_F), e, k.inverted_at);
+    out.energy_mj = k.energy_mj;
     out.f_int.resize(nn, 3);
     for (int a = 0; a < nn; ++a) out.f_int.row(a) = fe.segment<3>(3 * a).transpose();
     const auto& tab = shape_table(el.type);
