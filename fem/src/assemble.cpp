@@ -213,7 +213,8 @@ void scatter_lifting(double* f, int m, const int* eq, const Eigen::MatrixXd& Ke,
   }
 }
 
-// f_r += scale × T^T f_ext (the nodal loads).
+}  // namespace
+
 void add_loads(const Mesh& mesh, const DofMap& map, double scale, Eigen::VectorXd& f) {
   for (const NodalLoad& l : mesh.loads)
     for (int c = 0; c < 3; ++c) {
@@ -221,8 +222,6 @@ void add_loads(const Mesh& mesh, const DofMap& map, double scale, Eigen::VectorX
       if (e >= 0) f[e] += scale == 1.0 ? l.force_n[c] : scale * l.force_n[c];
     }
 }
-
-}  // namespace
 
 namespace {
 
@@ -274,9 +273,10 @@ void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys) {
 FiniteAssembly assemble_finite(const Mesh& mesh, const DofMap& map,
                                const FiniteMaterials& materials, const Eigen::VectorXd& u,
                                double load_factor, const Eigen::VectorXd& lift, bool with_tangent,
-                               Assembly& sys) {
+                               Assembly& sys, Eigen::VectorXd* unit_lift) {
   if (with_tangent) std::fill(sys.K.valuePtr(), sys.K.valuePtr() + sys.K.nonZeros(), 0.0);
   sys.f.setZero(map.n_eq);
+  if (unit_lift) unit_lift->setZero(map.n_eq);
   add_loads(mesh, map, load_factor, sys.f);
   double* f = sys.f.data();
   const int n_el = static_cast<int>(mesh.elements.size());
@@ -296,6 +296,8 @@ FiniteAssembly assemble_finite(const Mesh& mesh, const DofMap& map,
     if (!with_tangent) return;
     scatter_matrix(sys, map, nn, w.blk, w.eq, w.Ke);
     if (has_lift) scatter_lifting(f, m, w.eq, w.Ke, w.ge);
+    if (unit_lift && gather_element(el, map, map.g.data(), w.blk, w.eq, w.ge))
+      scatter_lifting(unit_lift->data(), m, w.eq, w.Ke, w.ge);
   });
   FiniteAssembly out;
   for (int e = 0; e < n_el; ++e) {  // the lowest element id, whatever the thread count

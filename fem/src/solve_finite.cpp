@@ -65,9 +65,10 @@ class FiniteProblem {
   // Out-of-balance force and tangent at (q, lambda); the `lift` term gives the predictor.
   // Returns a failure when an element inverts.
   std::optional<Failure> evaluate(const Eigen::VectorXd& q, double lambda, double load_lambda,
-                                  const Eigen::VectorXd& lift, Assembly& sys) const {
-    const FiniteAssembly a =
-        assemble_finite(mesh_, map_, materials_, expand(q, lambda), load_lambda, lift, true, sys);
+                                  const Eigen::VectorXd& lift, Assembly& sys,
+                                  Eigen::VectorXd* unit_lift = nullptr) const {
+    const FiniteAssembly a = assemble_finite(mesh_, map_, materials_, expand(q, lambda),
+                                             load_lambda, lift, true, sys, unit_lift);
     if (a.inverted_element >= 0)
       return Failure{inverted_message(a.inverted_element, a.inverted_gauss_point, a.det_F),
                      a.inverted_element, a.inverted_gauss_point};
@@ -111,6 +112,11 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
   res.timings.analysis_s = seconds_since(t);
 
   const Eigen::VectorXd no_lift;
+  Eigen::VectorXd f_ext = Eigen::VectorXd::Zero(map.n_eq), unit_lift;
+  add_loads(mesh, map, 1.0, f_ext);
+  // sys holds the tangent and out-of-balance force of the last converged state, and unit_lift
+  // its -T^T K g: the next predictor is then f + dl (f_ext + unit_lift), without an assembly.
+  bool at_converged_state = false;
   Eigen::VectorXd q = Eigen::VectorXd::Zero(map.n_eq);
   double lambda = 0, dlambda = 1.0 / no.n_steps;
   int step = 0, cutbacks = 0;
@@ -156,9 +162,14 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
 
     // Predictor: the tangent at the converged state with the increment of the prescribed values
     // lifted, K dq = lambda_new f_ext - f_int - K (dl g).
-    t = Clock::now();
-    failure = problem.evaluate(q, lambda, lambda_new, dl * map.g, sys);
-    res.timings.assembly_s += seconds_since(t);
+    if (at_converged_state) {
+      sys.f += dl * (f_ext + unit_lift);
+    } else {
+      t = Clock::now();
+      failure = problem.evaluate(q, lambda, lambda_new, dl * map.g, sys);
+      res.timings.assembly_s += seconds_since(t);
+    }
+    at_converged_state = false;
     const double r0 = failure ? 0.0 : sys.f.norm();
     bool converged = false;
     for (int it = 1; !failure && it <= no.max_iterations; ++it) {
@@ -179,7 +190,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
       bool accepted = false;
       for (int ls = 0; ls < kMaxLineSearch; ++ls) {
         t = Clock::now();
-        inverted = problem.evaluate(q + alpha * dq, lambda_new, lambda_new, no_lift, sys);
+        inverted = problem.evaluate(q + alpha * dq, lambda_new, lambda_new, no_lift, sys, &unit_lift);
         res.timings.assembly_s += seconds_since(t);
         if (inverted) {
           alpha *= 0.5;
@@ -224,6 +235,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
       lambda = lambda_new;
       cutbacks = 0;
       inverted_in_step.reset();
+      at_converged_state = record.iterations > 0 && r0 > 0;
       // Grow back towards the nominal step after an easy step.
       if (record.iterations <= 4) dlambda = std::min(2 * dlambda, 1.0 / no.n_steps);
       continue;
