@@ -3,6 +3,7 @@
 // solve, and the CalculiX deck solved by ccx against caps' own solve.
 #include <gtest/gtest.h>
 
+#include "ccx_run.hpp"
 #include "synthetic_model.hpp"
 
 #include <algorithm>
@@ -272,34 +273,7 @@ TEST(ContinuumMesher, SolvedLensClosesTheWound) {
 
 namespace {
 
-// Runs ccx on the deck of `m` and returns the nodal displacements it prints (NaN if missing).
-Eigen::MatrixX3d ccx_displacements(const Mesh& m, const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / ("caps_test_ccx_" + name);
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
-  write_inp(m, dir / "job.inp");
-  if (std::getenv("CAPS_KEEP_CCX")) write_mesh_dir(m, dir);
-  const std::string cmd = "cd '" + dir.string() + "' && ccx -i job > ccx.log 2>&1";
-  EXPECT_EQ(std::system(cmd.c_str()), 0) << "see " << (dir / "ccx.log");
-  // job.dat: "displacements (vx,vy,vz) for set NALL ..." then "node ux uy uz" rows.
-  std::ifstream dat(dir / "job.dat");
-  std::string line;
-  Eigen::MatrixX3d u = Eigen::MatrixX3d::Constant(m.n_nodes(), 3, NAN);
-  bool in_block = false;
-  while (std::getline(dat, line)) {
-    if (line.find("displacements") != std::string::npos) {
-      in_block = true;
-      continue;
-    }
-    std::istringstream is(line);
-    int id;
-    double x, y, z;
-    if (in_block && (is >> id >> x >> y >> z) && id >= 1 && id <= m.n_nodes())
-      u.row(id - 1) << x, y, z;
-  }
-  if (!std::getenv("CAPS_KEEP_CCX")) std::filesystem::remove_all(dir);
-  return u;
-}
+using test::ccx_displacements;
 
 }  // namespace
 

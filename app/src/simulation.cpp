@@ -44,6 +44,10 @@ fem::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields
   o.continuum.undermine_mm = m.undermine;
   o.solve.solver = fem::parse_solver(s.solver);
   o.solve.mixed_precision = fem::parse_precision(s.precision);
+  o.solve.kinematics = fem::parse_kinematics(s.material);
+  if (s.steps < 1 || s.steps > 1000)
+    throw InvalidParameter(cat("{steps} ", s.steps, ": give 1..1000 load steps"));
+  o.solve.newton.n_steps = s.steps;
   return o;
 }
 
@@ -174,6 +178,9 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   s.max_suture_gap_mm = sim.max_suture_gap_mm;
   s.strain_energy_mj = res.strain_energy_mj;
   s.warnings = sim.wound.continuum.mesh.warnings;
+  s.material = res.kinematics;
+  s.load_steps = static_cast<int>(res.newton_steps.size());
+  s.newton_iterations = res.newton_iterations;
   s.solve_s = res.timings.total_s;
   return s;
 }
@@ -188,6 +195,9 @@ std::string to_json(const SimulateResult& s) {
          {"max_suture_force_n", s.max_suture_force_n},
          {"max_suture_gap_mm", s.max_suture_gap_mm},
          {"strain_energy_mj", s.strain_energy_mj},
+         {"material", s.material},
+         {"load_steps", s.load_steps},
+         {"newton_iterations", s.newton_iterations},
          {"images", s.images},
          {"warnings", s.warnings},
          {"timings_s", {{"solve", s.solve_s}}}};

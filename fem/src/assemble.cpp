@@ -5,6 +5,8 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <string>
+
 
 #include "caps/fem/elements.hpp"
 #include "elements_impl.hpp"
@@ -152,74 +154,161 @@ Assembly assemble_structure(const Mesh& mesh, const DofMap& map) {
   return out;
 }
 
-void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys) {
+namespace {
+
+// The element's blocks, equations and lifting values (prescribed values and suture offsets of
+// its dofs, taken from `g`); returns whether any lifting value is nonzero.
+bool gather_element(const Element& el, const DofMap& map, const double* g, int* blk, int* eq,
+                    double* ge) {
+  bool has_g = false;
+  for (int a = 0; a < el.n_nodes(); ++a) {
+    blk[a] = map.node_block[el.nodes[a]];
+    for (int c = 0; c < 3; ++c) {
+      const std::size_t d = 3 * static_cast<std::size_t>(el.nodes[a]) + c;
+      eq[3 * a + c] = map.eq[d];
+      ge[3 * a + c] = g ? g[d] : 0.0;
+      has_g = has_g || ge[3 * a + c] != 0.0;
+    }
+  }
+  return has_g;
+}
+
+// Adds the element matrix Ke into the upper triangle of sys.K.
+void scatter_matrix(Assembly& sys, const DofMap& map, int nn, const int* blk, const int* eq,
+                    const Eigen::MatrixXd& Ke) {
+  const int* outer = sys.K.outerIndexPtr();
+  double* val = sys.K.valuePtr();
+  // Node pair (a, b) with block(a) <= block(b) adds its 3×3 block to column block(b).
+  for (int b = 0; b < nn; ++b) {
+    const int Bb = blk[b];
+    if (Bb < 0) continue;
+    const int* nb = sys.nbr.data() + sys.nbr_start[Bb];
+    const int n_nb = sys.nbr_start[Bb + 1] - sys.nbr_start[Bb];
+    for (int a = 0; a < nn; ++a) {
+      const int Ba = blk[a];
+      if (Ba < 0 || Ba > Bb) continue;
+      const int k = static_cast<int>(std::lower_bound(nb, nb + n_nb, Ba) - nb);
+      const int row0 = sys.nbr_row[sys.nbr_start[Bb] + k] - map.block_start[Ba];
+      for (int cj = 0; cj < 3; ++cj) {
+        const int j = eq[3 * b + cj];
+        if (j < 0) continue;
+        double* column = val + outer[j] + row0;
+        for (int ci = 0; ci < 3; ++ci) {
+          const int ri = eq[3 * a + ci];
+          if (ri < 0 || (Ba == Bb && ri > j)) continue;
+          column[ri] += Ke(3 * a + ci, 3 * b + cj);
+        }
+      }
+    }
+  }
+}
+
+// f_r -= T^T Ke ge (the lifting of prescribed values and suture offsets).
+void scatter_lifting(double* f, int m, const int* eq, const Eigen::MatrixXd& Ke, const double* ge) {
+  for (int p = 0; p < m; ++p) {
+    if (eq[p] < 0) continue;
+    double s = 0;
+    for (int q = 0; q < m; ++q) s += Ke(p, q) * ge[q];
+    f[eq[p]] -= s;
+  }
+}
+
+}  // namespace
+
+void add_loads(const Mesh& mesh, const DofMap& map, double scale, Eigen::VectorXd& f) {
   for (const NodalLoad& l : mesh.loads)
     for (int c = 0; c < 3; ++c) {
       const int e = map.eq[3 * static_cast<std::size_t>(l.node) + c];
-      if (e >= 0) sys.f[e] += l.force_n[c];
+      if (e >= 0) f[e] += scale == 1.0 ? l.force_n[c] : scale * l.force_n[c];
     }
-  const int* outer = sys.K.outerIndexPtr();
-  double* val = sys.K.valuePtr();
-  double* f = sys.f.data();
+}
+
+namespace {
+
+// Per-thread buffers of one element's assembly.
+struct ElementScratch {
+  Eigen::MatrixXd Ke;
+  Eigen::VectorXd fe, ue;
+  Eigen::MatrixX3d X;
+  int eq[60], blk[20];
+  double ge[60];
+};
+
+// Runs body(e, scratch) over every element, colour by colour, in parallel within a colour (no
+// two elements of a colour share a block, so their scatters do not race); scratch.X holds the
+// element's coordinates.
+template <class Body>
+void for_each_coloured_element(const Mesh& mesh, const Assembly& sys, Body&& body) {
   const int n_colours = static_cast<int>(sys.colour_start.size()) - 1;
   for (int colour = 0; colour < n_colours; ++colour)
     tbb::parallel_for(
         tbb::blocked_range<int>(sys.colour_start[colour], sys.colour_start[colour + 1], 8),
         [&](const tbb::blocked_range<int>& r) {
-          Eigen::MatrixXd Ke;
-          Eigen::MatrixX3d X;
-          int eq[60], blk[20];
-          double ge[60];
+          ElementScratch w;
           for (int i = r.begin(); i < r.end(); ++i) {
             const int e = sys.colour_elements[i];
             const Element& el = mesh.elements[e];
-            const int nn = el.n_nodes(), m = 3 * nn;
-            X.resize(nn, 3);
-            for (int a = 0; a < nn; ++a) X.row(a) = mesh.nodes.row(el.nodes[a]);
-            const LinearElastic& mat = mesh.materials.at(el.layer);
-            stiffness_kernel(el.type, X, mat.lambda_mpa(), mat.mu_mpa(), e, Ke);
-            bool has_g = false;
-            for (int a = 0; a < nn; ++a) {
-              blk[a] = map.node_block[el.nodes[a]];
-              for (int c = 0; c < 3; ++c) {
-                const std::size_t d = 3 * static_cast<std::size_t>(el.nodes[a]) + c;
-                eq[3 * a + c] = map.eq[d];
-                ge[3 * a + c] = map.g[d];
-                has_g = has_g || ge[3 * a + c] != 0.0;
-              }
-            }
-            // Node pair (a, b) with block(a) <= block(b) adds its 3×3 block to column block(b).
-            for (int b = 0; b < nn; ++b) {
-              const int Bb = blk[b];
-              if (Bb < 0) continue;
-              const int* nb = sys.nbr.data() + sys.nbr_start[Bb];
-              const int n_nb = sys.nbr_start[Bb + 1] - sys.nbr_start[Bb];
-              for (int a = 0; a < nn; ++a) {
-                const int Ba = blk[a];
-                if (Ba < 0 || Ba > Bb) continue;
-                const int k = static_cast<int>(std::lower_bound(nb, nb + n_nb, Ba) - nb);
-                const int row0 = sys.nbr_row[sys.nbr_start[Bb] + k] - map.block_start[Ba];
-                for (int cj = 0; cj < 3; ++cj) {
-                  const int j = eq[3 * b + cj];
-                  if (j < 0) continue;
-                  double* column = val + outer[j] + row0;
-                  for (int ci = 0; ci < 3; ++ci) {
-                    const int ri = eq[3 * a + ci];
-                    if (ri < 0 || (Ba == Bb && ri > j)) continue;
-                    column[ri] += Ke(3 * a + ci, 3 * b + cj);
-                  }
-                }
-              }
-            }
-            if (has_g)  // lifting: f_r -= T^T K g (prescribed values and suture offsets)
-              for (int p = 0; p < m; ++p) {
-                if (eq[p] < 0) continue;
-                double s = 0;
-                for (int q = 0; q < m; ++q) s += Ke(p, q) * ge[q];
-                f[eq[p]] -= s;
-              }
+            w.X.resize(el.n_nodes(), 3);
+            for (int a = 0; a < el.n_nodes(); ++a) w.X.row(a) = mesh.nodes.row(el.nodes[a]);
+            body(e, w);
           }
         });
+}
+
+}  // namespace
+
+void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys) {
+  add_loads(mesh, map, 1.0, sys.f);
+  double* f = sys.f.data();
+  for_each_coloured_element(mesh, sys, [&](int e, ElementScratch& w) {
+    const Element& el = mesh.elements[e];
+    const LinearElastic& mat = mesh.materials.at(el.layer);
+    stiffness_kernel(el.type, w.X, mat.lambda_mpa(), mat.mu_mpa(), e, w.Ke);
+    const bool has_g = gather_element(el, map, map.g.data(), w.blk, w.eq, w.ge);
+    scatter_matrix(sys, map, el.n_nodes(), w.blk, w.eq, w.Ke);
+    if (has_g) scatter_lifting(f, 3 * el.n_nodes(), w.eq, w.Ke, w.ge);
+  });
+}
+
+FiniteAssembly assemble_finite(const Mesh& mesh, const DofMap& map,
+                               const FiniteMaterials& materials, const Eigen::VectorXd& u,
+                               double load_factor, const Eigen::VectorXd& lift, bool with_tangent,
+                               Assembly& sys, Eigen::VectorXd* unit_lift) {
+  if (with_tangent) std::fill(sys.K.valuePtr(), sys.K.valuePtr() + sys.K.nonZeros(), 0.0);
+  sys.f.setZero(map.n_eq);
+  if (unit_lift) unit_lift->setZero(map.n_eq);
+  add_loads(mesh, map, load_factor, sys.f);
+  double* f = sys.f.data();
+  const int n_el = static_cast<int>(mesh.elements.size());
+  std::vector<FiniteKernelResult> per_element(n_el);
+  for_each_coloured_element(mesh, sys, [&](int e, ElementScratch& w) {
+    const Element& el = mesh.elements[e];
+    const int nn = el.n_nodes(), m = 3 * nn;
+    w.ue.resize(m);
+    for (int a = 0; a < nn; ++a)
+      w.ue.segment<3>(3 * a) = u.segment<3>(3 * static_cast<Eigen::Index>(el.nodes[a]));
+    per_element[e] = finite_kernel(el.type, w.X, *materials.at(el.layer), w.ue, e, w.fe,
+                                   with_tangent ? &w.Ke : nullptr);
+    if (per_element[e].inverted_at >= 0) return;
+    const bool has_lift = gather_element(el, map, lift.size() ? lift.data() : nullptr, w.blk, w.eq, w.ge);
+    for (int p = 0; p < m; ++p)
+      if (w.eq[p] >= 0) f[w.eq[p]] -= w.fe[p];
+    if (!with_tangent) return;
+    scatter_matrix(sys, map, nn, w.blk, w.eq, w.Ke);
+    if (has_lift) scatter_lifting(f, m, w.eq, w.Ke, w.ge);
+    if (unit_lift && gather_element(el, map, map.g.data(), w.blk, w.eq, w.ge))
+      scatter_lifting(unit_lift->data(), m, w.eq, w.Ke, w.ge);
+  });
+  FiniteAssembly out;
+  for (int e = 0; e < n_el; ++e) {  // the lowest element id, whatever the thread count
+    if (per_element[e].inverted_at >= 0 && out.inverted_element < 0) {
+      out.inverted_element = e;
+      out.inverted_gauss_point = per_element[e].inverted_at;
+      out.det_F = per_element[e].det_F;
+    }
+    out.energy_mj += per_element[e].energy_mj;
+  }
+  return out;
 }
 
 }  // namespace caps::fem::detail

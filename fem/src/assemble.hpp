@@ -4,6 +4,7 @@
 // are computed.
 
 #include <Eigen/Sparse>
+#include <map>
 #include <vector>
 
 #include "caps/fem/mesh.hpp"
@@ -29,5 +30,31 @@ Assembly assemble_structure(const Mesh& mesh, const DofMap& map);
 /// Element stiffnesses into K's values and the loads and lifting (-K g) into f, colour by
 /// colour in parallel over elements.
 void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys);
+
+/// f += scale × T^T f_ext (the nodal loads, N).
+void add_loads(const Mesh& mesh, const DofMap& map, double scale, Eigen::VectorXd& f);
+
+/// Layer id -> the material of the finite-strain solve (not owned; must outlive the assembly).
+using FiniteMaterials = std::map<int, const Material*>;
+
+/// What assemble_finite() found: the strain energy, or the first inverted element.
+struct FiniteAssembly {
+  double energy_mj = 0;
+  int inverted_element = -1;      ///< lowest element id with det F <= 0 at a Gauss point
+  int inverted_gauss_point = -1;
+  double det_F = 1;
+};
+
+/// Finite strain, at the full displacement u (3N, mm): the consistent tangent T^T K_T T into
+/// K's values (overwritten; skipped when `with_tangent` is false) and the out-of-balance force
+///   f = T^T (load_factor f_ext - f_int(u)) - T^T K_T lift     (lift: 3N mm, or empty)
+/// (the lifting term gives the predictor of a load step whose prescribed values grow by lift).
+/// With `unit_lift` (and the tangent), also -T^T K_T g for the full offsets g = map.g, so that
+/// the next load step's predictor needs no assembly of its own. Same colours and scatter as
+/// assemble_values(). An inverted element is reported, not thrown (K and f are then incomplete).
+FiniteAssembly assemble_finite(const Mesh& mesh, const DofMap& map,
+                               const FiniteMaterials& materials, const Eigen::VectorXd& u,
+                               double load_factor, const Eigen::VectorXd& lift, bool with_tangent,
+                               Assembly& sys, Eigen::VectorXd* unit_lift = nullptr);
 
 }  // namespace caps::fem::detail

@@ -226,14 +226,25 @@ class MixedMumpsSolver final : public DirectSolver {
   }
   void factorize(const Eigen::SparseMatrix<double>& K) override {
     K_ = &K;
+    if (double_) {  // a later factorization (Newton) after a fall-back stays in double precision
+      double_->factorize(const_cast<double*>(K.valuePtr()));
+      return;
+    }
     a_ = K.coeffs().cast<float>();
     // A K beyond single precision's range, or a single-precision factor that fails in any way,
     // is factored again in double precision.
     if (!a_.allFinite() || !single_.factorize(a_.data()).ok) fall_back();
   }
+  std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
+                                                      const Eigen::VectorXd& b,
+                                                      int max_iterations) override {
+    if (double_ || !K_) return std::nullopt;
+    K_ = &K;
+    return conjugate_gradients(b, max_iterations);
+  }
   Eigen::VectorXd solve(const Eigen::VectorXd& b) override {
     if (!double_) {
-      if (std::optional<Eigen::VectorXd> x = conjugate_gradients(b)) return *x;
+      if (std::optional<Eigen::VectorXd> x = conjugate_gradients(b, kMaxIterations)) return *x;
       fall_back();
     }
     Eigen::VectorXd x = b;
@@ -261,9 +272,10 @@ class MixedMumpsSolver final : public DirectSolver {
   // Preconditioned CG (Saad 2003, alg. 9.1) until the recursive residual is below 1e-12 ||b||
   // and then the true one, b - K x, below 1e-11 ||b|| (the recursive residual of an
   // ill-conditioned system can drop below what is achievable); empty if that does not happen
-  // in kMaxIterations: the single-precision factor is then too poor a preconditioner.
-  std::optional<Eigen::VectorXd> conjugate_gradients(const Eigen::VectorXd& b) {
-    constexpr int kMaxIterations = 40;
+  // in max_iterations: the single-precision factor (possibly of an earlier K) is then too poor a
+  // preconditioner.
+  static constexpr int kMaxIterations = 40;
+  std::optional<Eigen::VectorXd> conjugate_gradients(const Eigen::VectorXd& b, int max_iterations) {
     constexpr double kTolerance = 1e-12, kTrueTolerance = 1e-11;
     const auto K = K_->selfadjointView<Eigen::Upper>();
     const double bn = b.norm();
@@ -271,7 +283,7 @@ class MixedMumpsSolver final : public DirectSolver {
     if (bn == 0) return x;
     Eigen::VectorXd r = b, z = precondition(r, 0), p = z, Kp(b.size());
     double rz = r.dot(z);
-    for (iterations_ = 1; iterations_ <= kMaxIterations; ++iterations_) {
+    for (iterations_ = 1; iterations_ <= max_iterations; ++iterations_) {
       Kp.noalias() = K * p;
       const double pKp = p.dot(Kp);
       if (!(pKp > 0) || !(rz > 0)) return std::nullopt;  // not SPD in working precision

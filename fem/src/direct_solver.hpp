@@ -3,6 +3,8 @@
 
 #include <Eigen/Sparse>
 #include <memory>
+#include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -35,8 +37,21 @@ class DirectSolver {
   /// block_start[b] .. block_start[b+1]-1. K must stay alive and unchanged in structure until
   /// the solver is destroyed.
   virtual void analyze(const Eigen::SparseMatrix<double>& K, const std::vector<int>& block_start) = 0;
+  /// Numerical factorization of K's values; may be called again with new values of the same
+  /// structure (Newton iterations, load steps): the analysis is reused.
   virtual void factorize(const Eigen::SparseMatrix<double>& K) = 0;
   virtual Eigen::VectorXd solve(const Eigen::VectorXd& b) = 0;
+  /// Solves K x = b for K's current values by conjugate gradients preconditioned with the last
+  /// factorization (of earlier values of the same structure: a previous Newton tangent), to the
+  /// accuracy of solve(). Empty when there is no factorization to reuse, or CG needs more than
+  /// `max_iterations` (then factorize() the new values). Only the mixed-precision MUMPS solver
+  /// reuses; the others always return empty.
+  virtual std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
+                                                              const Eigen::VectorXd& b,
+                                                              int max_iterations) {
+    (void)K, (void)b, (void)max_iterations;
+    return std::nullopt;
+  }
   virtual long factor_nonzeros() const = 0;
   virtual SolverReport report() const { return {}; }
 };

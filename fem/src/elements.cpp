@@ -118,6 +118,16 @@ std::vector<QuadraturePoint> make_wedge_rule() {
   return q;
 }
 
+// dN/dx (#n×3) at natural point xi of the element with nodes X; throws as detail::gradients().
+Eigen::MatrixX3d gradients_at(ElementType type, const Eigen::MatrixX3d& X, const Eigen::Vector3d& xi,
+                              int element) {
+  Eigen::VectorXd N;
+  Eigen::MatrixX3d dN, G(X.rows(), 3);
+  shape_functions(type, xi, N, dN);
+  detail::gradients(dN, X, G, element, -1);
+  return G;
+}
+
 }  // namespace
 
 namespace detail {
@@ -176,7 +186,119 @@ Vector6d stress_from_strain(const Eigen::Matrix3d& eps, double lambda, double mu
   return s;
 }
 
+Eigen::Matrix3d displacement_gradient(const Eigen::MatrixX3d& G, const Eigen::VectorXd& u_e) {
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  for (Eigen::Index a = 0; a < G.rows(); ++a) H += u_e.segment<3>(3 * a) * G.row(a);
+  return H;
+}
+
+std::string inverted_message(int element, int gauss_point, double det_F) {
+  return cat("element ", element, gauss_point >= 0 ? cat(", Gauss point ", gauss_point) : ", a node",
+             ": det F = ", det_F, " (the element inverts)");
+}
+
+double checked_det_F(const Eigen::Matrix3d& H, int element, int gauss_point) {
+  const double J = 1 + volume_change(H);
+  if (!(J > 0) || !std::isfinite(J))
+    throw SolverError(inverted_message(element, gauss_point, J), element, gauss_point);
+  return J;
+}
+
+Vector6d cauchy_from_pk2(const Eigen::Matrix3d& F, const Vector6d& S) {
+  Eigen::Matrix3d Sm;
+  Sm << S[0], S[3], S[5], S[3], S[1], S[4], S[5], S[4], S[2];
+  const Eigen::Matrix3d sigma = F * Sm * F.transpose() / F.determinant();
+  Vector6d s;
+  s << sigma(0, 0), sigma(1, 1), sigma(2, 2), sigma(0, 1), sigma(1, 2), sigma(0, 2);
+  return s;
+}
+
+FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
+                                 const Material& material, const Eigen::VectorXd& u_e,
+                                 int element, Eigen::VectorXd& f, Eigen::MatrixXd* K) {
+  using Gradients = Eigen::Matrix<double, Eigen::Dynamic, 3, 0, 20, 3>;
+  using Block = Eigen::Matrix<double, 6, 3>;
+  const ShapeTable& t = shape_table(type);
+  const int n = t.n, m = 3 * n;
+  Eigen::MatrixX3d G(n, 3);
+  Gradients FSG(n, 3), SG(n, 3);
+  Block B[20], CB[20];
+  Vector6d S;
+  Matrix6d C;
+  Eigen::Matrix3d Sm;
+  f.setZero(m);
+  if (K) K->setZero(m, m);
+  FiniteKernelResult out;
+  for (std::size_t q = 0; q < t.w.size(); ++q) {
+    const int gp = static_cast<int>(q);
+    const double w = t.w[q] * gradients(t.dN[q], X, G, element, gp);
+    const Eigen::Matrix3d H = displacement_gradient(G, u_e);
+    const Eigen::Matrix3d F = H + Eigen::Matrix3d::Identity();
+    if (const double J = 1 + volume_change(H); !(J > 0) || !std::isfinite(J)) {
+      out.inverted_at = gp;
+      out.det_F = J;
+      return out;
+    }
+    material.stress_and_tangent(H, S, C);
+    out.energy_mj += w * material.strain_energy_density(H);
+    Sm << S[0], S[3], S[5], S[3], S[1], S[4], S[5], S[4], S[2];
+    FSG.noalias() = G * (Sm * F.transpose());  // row a: (F S G_a)^T
+    for (int a = 0; a < n; ++a) f.segment<3>(3 * a) += w * FSG.row(a).transpose();
+    if (!K) continue;
+    // dE = sym(F^T grad_X du): B_a rows xx yy zz, then xy yz xz with engineering shears
+    // (Bonet & Wood 2008, eq. 9.12 written for the reference configuration). Node pairs
+    // b >= a only (K is symmetric): K_ab += B_a^T (w C B_b) + w (G_a . S G_b) I.
+    for (int a = 0; a < n; ++a) {
+      for (int i = 0; i < 3; ++i) {
+        B[a](0, i) = F(i, 0) * G(a, 0);
+        B[a](1, i) = F(i, 1) * G(a, 1);
+        B[a](2, i) = F(i, 2) * G(a, 2);
+        B[a](3, i) = F(i, 0) * G(a, 1) + F(i, 1) * G(a, 0);
+        B[a](4, i) = F(i, 1) * G(a, 2) + F(i, 2) * G(a, 1);
+        B[a](5, i) = F(i, 0) * G(a, 2) + F(i, 2) * G(a, 0);
+      }
+      CB[a].noalias() = (w * C) * B[a];
+    }
+    SG.noalias() = w * G * Sm;
+    for (int b = 0; b < n; ++b)
+      for (int a = 0; a <= b; ++a) {
+        auto Kab = K->block<3, 3>(3 * a, 3 * b);
+        Kab.noalias() += B[a].transpose() * CB[b];
+        Kab.diagonal().array() += SG.row(a).dot(G.row(b));
+      }
+  }
+  if (K)
+    for (int b = 0; b < n; ++b)
+      for (int a = 0; a < b; ++a) K->block<3, 3>(3 * b, 3 * a) = K->block<3, 3>(3 * a, 3 * b).transpose();
+  return out;
+}
+
 }  // namespace detail
+
+FiniteElementResponse element_finite_response(ElementType type, const Eigen::MatrixX3d& X,
+                                              const Material& material, const Eigen::VectorXd& u_e,
+                                              int element, bool with_tangent) {
+  FiniteElementResponse r;
+  const detail::FiniteKernelResult k =
+      detail::finite_kernel(type, X, material, u_e, element, r.f, with_tangent ? &r.K : nullptr);
+  if (k.inverted_at >= 0)
+    throw SolverError(detail::inverted_message(element, k.inverted_at, k.det_F), element,
+                      k.inverted_at);
+  r.energy_mj = k.energy_mj;
+  return r;
+}
+
+Vector6d element_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X,
+                               const Material& material, const Eigen::VectorXd& u_e,
+                               const Eigen::Vector3d& xi, int element) {
+  const Eigen::MatrixX3d G = gradients_at(type, X, xi, element);
+  const Eigen::Matrix3d H = detail::displacement_gradient(G, u_e);
+  detail::checked_det_F(H, element, -1);
+  Vector6d S;
+  Matrix6d C;
+  material.stress_and_tangent(H, S, C);
+  return detail::cauchy_from_pk2(H + Eigen::Matrix3d::Identity(), S);
+}
 
 int n_element_nodes(ElementType type) { return type == ElementType::Hex20 ? 20 : 15; }
 const char* element_type_name(ElementType type) {
@@ -250,10 +372,7 @@ Eigen::VectorXd element_internal_force(ElementType type, const Eigen::MatrixX3d&
 Vector6d element_stress(ElementType type, const Eigen::MatrixX3d& X,
                         const LinearElastic& material, const Eigen::VectorXd& u_e,
                         const Eigen::Vector3d& xi, int element) {
-  Eigen::VectorXd N;
-  Eigen::MatrixX3d dN, G(X.rows(), 3);
-  shape_functions(type, xi, N, dN);
-  detail::gradients(dN, X, G, element, -1);
+  const Eigen::MatrixX3d G = gradients_at(type, X, xi, element);
   return detail::stress_from_strain(detail::strain_tensor(G, u_e), material.lambda_mpa(),
                                     material.mu_mpa());
 }

@@ -2,6 +2,7 @@
 // Internal element helpers shared by elements.cpp, assemble.cpp and solve.cpp.
 
 #include <Eigen/Core>
+#include <string>
 #include <vector>
 
 #include "caps/fem/elements.hpp"
@@ -23,6 +24,34 @@ double gradients(const Eigen::MatrixX3d& dN_dxi, const Eigen::MatrixX3d& X, Eige
                  int element, int gauss_point);
 Eigen::Matrix3d strain_tensor(const Eigen::MatrixX3d& G, const Eigen::VectorXd& u_e);
 Vector6d stress_from_strain(const Eigen::Matrix3d& eps, double lambda, double mu);
+
+/// Displacement gradient H = sum_a u_a (x) G_a (G = dN/dX, #n×3; u_e 3n node-major); F = I + H.
+Eigen::Matrix3d displacement_gradient(const Eigen::MatrixX3d& G, const Eigen::VectorXd& u_e);
+
+/// det F of F = I + H; throws SolverError naming the element and Gauss point if det F <= 0
+/// (or not finite).
+double checked_det_F(const Eigen::Matrix3d& H, int element, int gauss_point);
+
+/// Cauchy stress F S F^T / J (Voigt) from S (Voigt).
+Vector6d cauchy_from_pk2(const Eigen::Matrix3d& F, const Vector6d& S);
+
+/// What finite_kernel() found: the strain energy (mJ), or the first Gauss point where the
+/// element inverts (det F <= 0; f and K are then incomplete).
+struct FiniteKernelResult {
+  double energy_mj = 0;
+  int inverted_at = -1;  ///< Gauss point, -1 if none
+  double det_F = 1;      ///< det F there
+};
+
+/// The total-Lagrangian kernel of element_finite_response() into caller buffers (hot loop):
+/// f (3n) and, when K is not null, K (3n×3n) are overwritten. An inverted Gauss point is
+/// reported in the result, not thrown (the Newton solver cuts the step back).
+FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
+                                 const Material& material, const Eigen::VectorXd& u_e,
+                                 int element, Eigen::VectorXd& f, Eigen::MatrixXd* K);
+
+/// The message of an inverted element: "element 3, Gauss point 9: det F = -0.01 (...)".
+std::string inverted_message(int element, int gauss_point, double det_F);
 
 /// Isotropic stiffness without forming B: with g = vec(G) (node-major) and weights w,
 ///   A = sum w g g^T,  K_(a i)(b j) = lambda A_(a i)(b j) + mu A_(a j)(b i) + mu delta_ij tr A_ab

@@ -30,10 +30,22 @@ void id_lines(std::ostringstream& os, const std::vector<int>& ids) {
     os << ids[i] + 1 << (i + 1 == ids.size() ? "\n" : (i % 16 == 15 ? ",\n" : ", "));
 }
 
+// The layer's finite-strain material as a neo-Hookean solid (CalculiX has its NEO HOOKE form).
+NeoHookean finite_neo_hookean(const Mesh& mesh, int layer) {
+  const auto it = mesh.finite_materials.find(layer);
+  if (it == mesh.finite_materials.end() || !it->second)
+    return NeoHookean(mesh.materials.at(layer), cat("layer ", layer));
+  if (const auto* nh = dynamic_cast<const NeoHookean*>(it->second.get())) return *nh;
+  throw InvalidInput(cat("inp export: layer ", layer, " has the finite-strain material '",
+                         it->second->name(), "', which has no CalculiX form here; use neo-hookean"));
+}
+
 }  // namespace
 
-std::string inp_text(const Mesh& mesh) {
+std::string inp_text(const Mesh& mesh, const InpOptions& options) {
   validate(mesh, "inp export");
+  if (options.finite_strain && (options.increments < 1 || options.increments > 100000))
+    throw InvalidInput(cat("inp export: increments = ", options.increments, " must be in 1..100000"));
   std::ostringstream os;
   const int N = static_cast<int>(mesh.n_nodes());
   os << "** caps mesh: " << N << " nodes, " << mesh.n_elements() << " elements; units mm, N, MPa\n";
@@ -99,8 +111,14 @@ std::string inp_text(const Mesh& mesh) {
     }
   for (int layer : layers) {
     const LinearElastic& m = mesh.materials.at(layer);
-    os << "*MATERIAL, NAME=MAT" << layer << "\n*ELASTIC\n" << num(m.E_mpa()) << ", " << num(m.nu())
-       << "\n*SOLID SECTION, ELSET=LAYER" << layer << ", MATERIAL=MAT" << layer << "\n";
+    os << "*MATERIAL, NAME=MAT" << layer << "\n";
+    if (options.finite_strain) {
+      const NeoHookean nh = finite_neo_hookean(mesh, layer);
+      os << "*HYPERELASTIC, NEO HOOKE\n" << num(nh.c10_mpa()) << ", " << num(nh.d1_per_mpa()) << "\n";
+    } else {
+      os << "*ELASTIC\n" << num(m.E_mpa()) << ", " << num(m.nu()) << "\n";
+    }
+    os << "*SOLID SECTION, ELSET=LAYER" << layer << ", MATERIAL=MAT" << layer << "\n";
   }
   if (!fixed.empty()) {
     os << "*NSET, NSET=FIXED\n";
@@ -117,7 +135,13 @@ std::string inp_text(const Mesh& mesh) {
          << ", " << c << ", -1.\n";
     }
   }
-  os << "*STEP\n*STATIC\n*BOUNDARY\n";
+  if (options.finite_strain) {
+    const double inc = 1.0 / options.increments;
+    os << "*STEP, NLGEOM, INC=" << 100 * options.increments << "\n*STATIC\n" << num(inc) << ", 1., "
+       << num(inc * 1e-6) << ", " << num(inc) << "\n*BOUNDARY\n";
+  } else {
+    os << "*STEP\n*STATIC\n*BOUNDARY\n";
+  }
   if (!fixed.empty()) os << "FIXED, 1, 3, 0.\n";
   for (const auto& d : mesh.fixed_dofs)
     os << d.node + 1 << ", " << d.component + 1 << ", " << d.component + 1 << ", "
@@ -147,8 +171,8 @@ std::string inp_text(const Mesh& mesh) {
   return os.str();
 }
 
-void write_inp(const Mesh& mesh, const std::filesystem::path& path) {
-  write_text_atomic(path, inp_text(mesh));
+void write_inp(const Mesh& mesh, const std::filesystem::path& path, const InpOptions& options) {
+  write_text_atomic(path, inp_text(mesh, options));
 }
 
 }  // namespace caps::fem

@@ -1,13 +1,70 @@
 #include "caps/fem/material.hpp"
 
+#include <Eigen/Dense>
 #include <cmath>
 
 #include "caps/core/error.hpp"
 
 namespace caps::fem {
+namespace {
+
+// Voigt index I -> tensor indices (i, j), order xx yy zz xy yz xz.
+constexpr int kVoigt[6][2] = {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {1, 2}, {0, 2}};
+
+Vector6d to_voigt(const Eigen::Matrix3d& A) {
+  Vector6d v;
+  for (int I = 0; I < 6; ++I) v[I] = A(kVoigt[I][0], kVoigt[I][1]);
+  return v;
+}
+
+// (A ⊙ A)_ijkl = 1/2 (A_ik A_jl + A_il A_jk) for symmetric A, in Voigt form.
+Matrix6d odot(const Eigen::Matrix3d& A) {
+  Matrix6d M;
+  for (int I = 0; I < 6; ++I)
+    for (int J = 0; J < 6; ++J) {
+      const int i = kVoigt[I][0], j = kVoigt[I][1], k = kVoigt[J][0], l = kVoigt[J][1];
+      M(I, J) = 0.5 * (A(i, k) * A(j, l) + A(i, l) * A(j, k));
+    }
+  return M;
+}
+
+// The isotropic D: lambda I ⊗ I + 2 mu I ⊙ I.
+Matrix6d isotropic_tangent(double lambda, double mu) {
+  Matrix6d C = mu * odot(Eigen::Matrix3d::Identity()) * 2;
+  C.topLeftCorner<3, 3>().array() += lambda;
+  return C;
+}
+
+std::string range_text(const ParameterSpec& p) {
+  return cat(p.min_open ? "(" : "[", p.min, ", ", p.max, p.max_open ? ")" : "]");
+}
+
+std::vector<ParameterSpec> elastic_constants() {
+  return {{"E", "MPa", 0.0, IsotropicElastic::kMaxE_mpa, true, false,
+           "soft tissue is about 0.001-1 MPa (1-1000 kPa)"},
+          {"nu", "1", 0.0, IsotropicElastic::kMaxNu, false, false,
+           "nu = 0.5 (incompressible) locks displacement elements; use 0.45-0.49 for nearly "
+           "incompressible tissue"}};
+}
+
+}  // namespace
+
+void Material::validate_parameters(const std::string& where) const {
+  const std::vector<ParameterSpec> spec = parameters();
+  const std::vector<double> v = values();
+  for (std::size_t i = 0; i < spec.size(); ++i) {
+    const ParameterSpec& p = spec[i];
+    const bool ok = std::isfinite(v[i]) && (p.min_open ? v[i] > p.min : v[i] >= p.min) &&
+                    (p.max_open ? v[i] < p.max : v[i] <= p.max);
+    if (!ok)
+      throw InvalidInput(cat(where, ": ", name(), " parameter ", p.name, " = ", v[i], " ", p.unit,
+                             " is out of its valid range ", range_text(p), " ", p.unit, "; ",
+                             p.hint));
+  }
+}
 
 LinearElastic::LinearElastic(double E_mpa, double nu, const std::string& where)
-    : E_mpa_(E_mpa), nu_(nu) {
+    : IsotropicElastic(E_mpa, nu) {
   if (!std::isfinite(E_mpa) || E_mpa <= 0 || E_mpa > kMaxE_mpa)
     throw InvalidInput(cat(where, ": Young's modulus E = ", E_mpa, " MPa (", E_mpa * 1e3,
                            " kPa) is out of range; it must be in (0, ", kMaxE_mpa,
@@ -21,6 +78,63 @@ LinearElastic::LinearElastic(double E_mpa, double nu, const std::string& where)
     throw InvalidInput(cat(where, ": Poisson's ratio nu = ", nu, " is above ", kMaxNu,
                            "; the displacement formulation locks volumetrically this close to "
                            "0.5: use nu <= ", kMaxNu));
+  validate_parameters(where);  // the declared ranges (the messages above say it in more words)
+}
+
+std::vector<ParameterSpec> IsotropicElastic::parameters() const { return elastic_constants(); }
+
+void LinearElastic::stress_and_tangent(const Eigen::Matrix3d& H, Vector6d& S, Matrix6d& C) const {
+  C = isotropic_tangent(lambda_mpa(), mu_mpa());
+  Vector6d eps = to_voigt(0.5 * (H + H.transpose()));
+  eps.tail<3>() *= 2;  // engineering shears
+  S = C * eps;
+}
+
+double LinearElastic::strain_energy_density(const Eigen::Matrix3d& H) const {
+  const Eigen::Matrix3d eps = 0.5 * (H + H.transpose());
+  return 0.5 * lambda_mpa() * eps.trace() * eps.trace() + mu_mpa() * eps.squaredNorm();
+}
+
+NeoHookean::NeoHookean(double E_mpa, double nu, const std::string& where)
+    : IsotropicElastic(E_mpa, nu) {
+  validate_parameters(where);
+}
+
+NeoHookean::NeoHookean(const LinearElastic& linear, const std::string& where)
+    : NeoHookean(linear.E_mpa(), linear.nu(), where) {}
+
+void NeoHookean::stress_and_tangent(const Eigen::Matrix3d& H, Vector6d& S, Matrix6d& C) const {
+  // Holzapfel 2000: S = S_iso + S_vol (eq. 6.89-6.90, 6.101), C = C_iso + C_vol (eq. 6.165-6.168)
+  // for W_iso = mu/2 (I1bar - 3), U = K/2 (J-1)^2, p = U'(J), p~ = p + J U''(J). The stress is
+  // written with the Green strain E and J - 1, never with their cancelling forms:
+  // I - I1/3 C^-1 = C^-1 (C - I1/3 I) = 2 C^-1 dev E.
+  const double mu = mu_mpa(), K = bulk_mpa();
+  const Eigen::Matrix3d E = 0.5 * (H + H.transpose() + H.transpose() * H);
+  const Eigen::Matrix3d Ci = (Eigen::Matrix3d::Identity() + 2 * E).inverse();
+  const double Jm1 = volume_change(H), J = 1 + Jm1, Jm23 = std::pow(J, -2.0 / 3.0);
+  const double I1 = 3 + 2 * E.trace();
+  const Eigen::Matrix3d devE = E - E.trace() / 3 * Eigen::Matrix3d::Identity();
+  const Eigen::Matrix3d CidevE = Ci * devE;
+  const double p = K * Jm1, pt = K * (2 * J - 1);
+  const Vector6d ci = to_voigt(Ci), id = to_voigt(Eigen::Matrix3d::Identity());
+  S = mu * Jm23 * to_voigt(CidevE + CidevE.transpose()) + J * p * ci;
+  const Matrix6d cc = odot(Ci);
+  C = (2.0 / 3.0) * mu * Jm23 *
+          (-id * ci.transpose() - ci * id.transpose() + I1 / 3 * ci * ci.transpose() + I1 * cc) +
+      J * pt * ci * ci.transpose() - 2 * J * p * cc;
+}
+
+double NeoHookean::strain_energy_density(const Eigen::Matrix3d& H) const {
+  // J^(-2/3) I1 - 3 = J^(-2/3) (I1 - 3) + 3 (J^(-2/3) - 1), both terms free of cancellation.
+  const double Jm1 = volume_change(H);
+  const double I1m3 = 2 * H.trace() + H.squaredNorm();
+  const double Jm23m1 = std::expm1(-2.0 / 3.0 * std::log1p(Jm1));
+  return 0.5 * mu_mpa() * ((1 + Jm23m1) * I1m3 + 3 * Jm23m1) + 0.5 * bulk_mpa() * Jm1 * Jm1;
+}
+
+double volume_change(const Eigen::Matrix3d& H) {
+  const double tr = H.trace();
+  return tr + 0.5 * (tr * tr - (H * H).trace()) + H.determinant();
 }
 
 // Indicative values; sources and ranges in docs/fem.md.

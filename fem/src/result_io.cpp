@@ -49,6 +49,16 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
                     {"analysis", r.timings.analysis_s}, {"factorization", r.timings.factorization_s},
                     {"solve", r.timings.solve_s}, {"recovery", r.timings.recovery_s},
                     {"total", r.timings.total_s}};
+  j["kinematics"] = r.kinematics;
+  if (!r.newton_steps.empty()) {
+    nlohmann::json steps = nlohmann::json::array();
+    for (const NewtonStep& s : r.newton_steps)
+      steps.push_back({{"step", s.step}, {"lambda", s.lambda}, {"iterations", s.iterations},
+                       {"cutbacks", s.cutbacks}, {"relative_residuals", s.residual_norms},
+                       {"line_search", s.line_search}});
+    j["newton"] = {{"iterations", r.newton_iterations}, {"factorizations", r.factorizations},
+                   {"steps", steps}};
+  }
   j["peak_memory_mb"] = r.peak_memory_mb;
   j["relative_residual"] = r.relative_residual;
   j["max_displacement_mm"] = r.displacement_mm.rowwise().norm().maxCoeff();

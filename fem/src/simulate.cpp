@@ -38,7 +38,10 @@ void write_simulation(const Simulation& sim, const PatientModel& model,
                       const std::string& name) {
   const Mesh& mesh = sim.wound.continuum.mesh;
   write_mesh_dir(mesh, dir);
-  write_inp(mesh, dir / "mesh.inp");
+  InpOptions inp;
+  inp.finite_strain = options.solve.kinematics == Kinematics::Finite;
+  inp.increments = options.solve.newton.n_steps;
+  write_inp(mesh, dir / "mesh.inp", inp);
   write_result_dir(mesh, sim.result, dir);
   write_surface_mesh_png(dir / "surface.png", sim.wound.surface, cat("surface mesh of ", name));
   write_cross_section_png(dir / "section.png", sim.wound.surface, model, options.continuum,

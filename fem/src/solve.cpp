@@ -19,20 +19,14 @@
 #include "constraints.hpp"
 #include "direct_solver.hpp"
 #include "elements_impl.hpp"
+#include "solve_impl.hpp"
 
 namespace caps::fem {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
-}
-
-double peak_rss_mb() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return static_cast<double>(u.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
-}
+using detail::Clock;
+using detail::peak_rss_mb;
+using detail::seconds_since;
 
 // Pair forces of one suture group: node reactions R_n = sum over its pairs of +-lambda_k; the
 // minimum-norm lambda (unique for a single pair, a tree of pairs or a consistent cycle).
@@ -80,6 +74,18 @@ SolverKind parse_solver(const std::string& name) {
   throw InvalidInput(cat("solver '", name, "' is unknown; use mumps or cholmod"));
 }
 
+const char* kinematics_name(Kinematics kinematics) {
+  return kinematics == Kinematics::Linear ? "linear" : "neo-hookean";
+}
+
+Kinematics parse_kinematics(const std::string& name) {
+  if (name == "linear") return Kinematics::Linear;
+  if (name == "neo-hookean") return Kinematics::Finite;
+  throw InvalidInput(cat("material model '", name,
+                         "' is unknown; use linear (small strain, the 1992 model) or neo-hookean "
+                         "(finite strain)"));
+}
+
 bool parse_precision(const std::string& name) {
   if (name == "mixed") return true;
   if (name == "double") return false;
@@ -101,6 +107,13 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   res.n_dofs = 3 * n_nodes;
   res.n_equations = map.n_eq;
   if (map.n_eq == 0) throw InvalidInput("every degree of freedom is fixed; nothing to solve");
+  res.kinematics = kinematics_name(options.kinematics);
+  if (options.kinematics == Kinematics::Finite) {
+    detail::solve_finite(mesh, options, map, res);
+    res.timings.total_s = seconds_since(t_start);
+    res.peak_memory_mb = peak_rss_mb();
+    return res;
+  }
 
   // The analysis needs only K's structure: it runs on its own thread while the element
   // stiffnesses are computed and assembled (the two take about as long on this problem size).
@@ -125,6 +138,7 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
       res.timings.analysis_s = analysis.get();
       t = Clock::now();
       solver->factorize(sys.K);
+      res.factorizations = 1;
       res.timings.factorization_s = seconds_since(t);
       t = Clock::now();
       q = solver->solve(sys.f);
@@ -166,6 +180,65 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
 
   // Recovery: Gauss stresses, nodal stresses (evaluated at the element's nodes and averaged),
   // strain energy and internal forces (for the reactions), all from the same stresses.
+  detail::recover(mesh, map, [&](int e, detail::ElementRecovery& out) {
+    const Element& el = mesh.elements[e];
+    const int nn = el.n_nodes();
+    const LinearElastic& mat = mesh.materials.at(el.layer);
+    const double lam = mat.lambda_mpa(), mu = mat.mu_mpa();
+    const Eigen::MatrixX3d X = element_coordinates(mesh, e);
+    Eigen::VectorXd ue(3 * nn);
+    for (int a = 0; a < nn; ++a) ue.segment<3>(3 * a) = res.displacement_mm.row(el.nodes[a]).transpose();
+    const auto& tab = detail::shape_table(el.type);
+    Eigen::MatrixX3d G(nn, 3), F = Eigen::MatrixX3d::Zero(nn, 3);
+    out.gauss_stress.resize(static_cast<Eigen::Index>(tab.w.size()), 6);
+    double vm = 0, w_sum = 0, en = 0;
+    for (std::size_t g = 0; g < tab.w.size(); ++g) {
+      const double det = detail::gradients(tab.dN[g], X, G, e, static_cast<int>(g));
+      const Eigen::Matrix3d eps = detail::strain_tensor(G, ue);
+      const Vector6d s = detail::stress_from_strain(eps, lam, mu);
+      out.gauss_stress.row(static_cast<Eigen::Index>(g)) = s.transpose();
+      Eigen::Matrix3d S;
+      S << s[0], s[3], s[5], s[3], s[1], s[4], s[5], s[4], s[2];
+      const double w = tab.w[g] * det;
+      F += w * G * S;
+      en += 0.5 * w * (S.array() * eps.array()).sum();
+      vm += w * von_mises(s);
+      w_sum += w;
+    }
+    out.von_mises_mean = vm / w_sum;
+    out.energy_mj = en;
+    const Eigen::MatrixX3d P = natural_nodes(el.type);
+    out.nodal_stress.resize(nn, 6);
+    Eigen::VectorXd N;
+    Eigen::MatrixX3d dN;
+    for (int a = 0; a < nn; ++a) {
+      shape_functions(el.type, P.row(a).transpose(), N, dN);
+      detail::gradients(dN, X, G, e, -1);
+      out.nodal_stress.row(a) = detail::stress_from_strain(detail::strain_tensor(G, ue), lam, mu).transpose();
+    }
+    out.f_int = F;
+  }, res);
+  res.timings.recovery_s = seconds_since(t);
+  res.timings.total_s = seconds_since(t_start);
+  res.peak_memory_mb = peak_rss_mb();
+  return res;
+}
+
+namespace detail {
+
+double seconds_since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+double peak_rss_mb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return static_cast<double>(u.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
+}
+
+void recover(const Mesh& mesh, const DofMap& map, const ElementRecoveryFn& element_recovery,
+             SolveResult& res) {
+  const Eigen::Index n_nodes = mesh.n_nodes();
   const int n_el = static_cast<int>(mesh.elements.size());
   res.gauss_offset.resize(n_el + 1);
   res.gauss_offset[0] = 0;
@@ -180,46 +253,18 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   std::vector<double> energy(n_el, 0.0);
   std::vector<Eigen::MatrixXd> elem_nodal(n_el);
   tbb::parallel_for(tbb::blocked_range<int>(0, n_el, 32), [&](const tbb::blocked_range<int>& rr) {
+    ElementRecovery out;
     for (int e = rr.begin(); e < rr.end(); ++e) {
       const Element& el = mesh.elements[e];
-      const int nn = el.n_nodes();
-      const LinearElastic& mat = mesh.materials.at(el.layer);
-      const double lam = mat.lambda_mpa(), mu = mat.mu_mpa();
-      const Eigen::MatrixX3d X = element_coordinates(mesh, e);
-      Eigen::VectorXd ue(3 * nn);
-      for (int a = 0; a < nn; ++a) ue.segment<3>(3 * a) = res.displacement_mm.row(el.nodes[a]).transpose();
-      const auto& tab = detail::shape_table(el.type);
-      Eigen::MatrixX3d G(nn, 3), F = Eigen::MatrixX3d::Zero(nn, 3);
-      double vm = 0, w_sum = 0, en = 0;
-      for (std::size_t g = 0; g < tab.w.size(); ++g) {
-        const double det = detail::gradients(tab.dN[g], X, G, e, static_cast<int>(g));
-        const Eigen::Matrix3d eps = detail::strain_tensor(G, ue);
-        const Vector6d s = detail::stress_from_strain(eps, lam, mu);
-        res.gauss_stress_mpa.row(res.gauss_offset[e] + static_cast<int>(g)) = s.transpose();
-        Eigen::Matrix3d S;
-        S << s[0], s[3], s[5], s[3], s[1], s[4], s[5], s[4], s[2];
-        const double w = tab.w[g] * det;
-        F += w * G * S;
-        en += 0.5 * w * (S.array() * eps.array()).sum();
-        vm += w * von_mises(s);
-        w_sum += w;
-      }
-      res.element_von_mises_mpa[e] = vm / w_sum;
-      energy[e] = en;
-      const Eigen::MatrixX3d P = natural_nodes(el.type);
-      Eigen::MatrixXd ns(nn, 6);
-      Eigen::VectorXd N;
-      Eigen::MatrixX3d dN;
-      for (int a = 0; a < nn; ++a) {
-        shape_functions(el.type, P.row(a).transpose(), N, dN);
-        detail::gradients(dN, X, G, e, -1);
-        ns.row(a) = detail::stress_from_strain(detail::strain_tensor(G, ue), lam, mu).transpose();
-      }
-      elem_nodal[e] = std::move(ns);
-      for (int a = 0; a < nn; ++a)
+      element_recovery(e, out);
+      res.gauss_stress_mpa.middleRows(res.gauss_offset[e], out.gauss_stress.rows()) = out.gauss_stress;
+      res.element_von_mises_mpa[e] = out.von_mises_mean;
+      energy[e] = out.energy_mj;
+      elem_nodal[e] = out.nodal_stress;
+      for (int a = 0; a < el.n_nodes(); ++a)
         if (map.constrained[el.nodes[a]])
           for (int c = 0; c < 3; ++c)
-            std::atomic_ref<double>(f_int(el.nodes[a], c)).fetch_add(F(a, c), std::memory_order_relaxed);
+            std::atomic_ref<double>(f_int(el.nodes[a], c)).fetch_add(out.f_int(a, c), std::memory_order_relaxed);
     }
   });
   for (int e = 0; e < n_el; ++e) {
@@ -260,10 +305,8 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
     res.total_suture_force_n += d.norm() > 0 ? s.force_on_a_n.dot(d.normalized()) : s.magnitude_n;
     res.sum_suture_magnitudes_n += s.magnitude_n;
   }
-  res.timings.recovery_s = seconds_since(t);
-  res.timings.total_s = seconds_since(t_start);
-  res.peak_memory_mb = peak_rss_mb();
-  return res;
 }
+
+}  // namespace detail
 
 }  // namespace caps::fem

@@ -51,9 +51,15 @@ struct MeshingFields {
 struct SolverFields {
   std::string solver = fem::solver_name(fem::SolveOptions{}.solver);
   std::string precision = fem::SolveOptions{}.mixed_precision ? "mixed" : "double";
+  std::string material = fem::kinematics_name(fem::SolveOptions{}.kinematics);
+  int steps = fem::NewtonOptions{}.n_steps;
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
+    v(r.material, {"material", "linear (small strain, the 1992 model) or neo-hookean (finite "
+                               "strain, sutures closed in load steps by Newton-Raphson)"});
+    v(r.steps, {"steps", "neo-hookean: load steps that close the sutures (cut back by itself "
+                         "when a step does not converge)"});
     v(r.solver, {"solver", "mumps or cholmod"});
     v(r.precision, {"precision", "mixed (a single-precision factorization refined to double "
                                  "accuracy; falls back to double by itself when that is not "
@@ -134,6 +140,8 @@ struct SimulateResult {
   int elements = 0, nodes = 0, suture_pairs = 0;
   double max_displacement_mm = 0, closing_force_n = 0, max_suture_force_n = 0,
          max_suture_gap_mm = 0, strain_energy_mj = 0;
+  std::string material;             ///< linear or neo-hookean
+  int load_steps = 0, newton_iterations = 0;  ///< neo-hookean: converged steps, iterations
   std::vector<std::string> images;  ///< with render
   std::vector<std::string> warnings;
   double solve_s = 0;  ///< the solver's wall time (not reproducible: under "timings_s")

@@ -14,8 +14,6 @@
 
 namespace caps::fem {
 
-using Vector6d = Eigen::Matrix<double, 6, 1>;
-
 /// A quadrature point in natural coordinates with its weight.
 struct QuadraturePoint {
   Eigen::Vector3d xi;
@@ -44,6 +42,31 @@ Eigen::MatrixXd element_stiffness(ElementType type, const Eigen::MatrixX3d& X,
 Eigen::VectorXd element_internal_force(ElementType type, const Eigen::MatrixX3d& X,
                                        const LinearElastic& material, const Eigen::VectorXd& u_e,
                                        int element = -1);
+
+/// Total-Lagrangian response of one element at displacement u_e (finite strain).
+struct FiniteElementResponse {
+  Eigen::VectorXd f;      ///< 3n internal force (N): f_a = int F S dN_a/dX dV0
+  Eigen::MatrixXd K;      ///< 3n×3n consistent tangent (N/mm): material + geometric stiffness
+  double energy_mj = 0;   ///< int W dV0 (mJ)
+};
+
+/// Internal force, consistent tangent (unless `with_tangent` is false: K stays empty) and strain
+/// energy of an element in the total-Lagrangian form, with the element's Gauss rule:
+///   f_a = sum_q w_q det J_q F S G_a,  K_ab = sum_q w_q det J_q (B_a^T C B_b + (G_a . S G_b) I)
+/// (Bonet & Wood 2008, sec. 9.4; Wriggers 2008, sec. 4.2), G = dN/dX in the reference frame.
+/// @param X    reference coordinates #n×3 (mm)
+/// @param u_e  3n displacements (mm), node-major
+/// Throws SolverError(element, Gauss point) if det F <= 0 at a Gauss point (the element
+/// inverts), InvalidInput if the reference element is inverted.
+FiniteElementResponse element_finite_response(ElementType type, const Eigen::MatrixX3d& X,
+                                              const Material& material, const Eigen::VectorXd& u_e,
+                                              int element = -1, bool with_tangent = true);
+
+/// Cauchy stress sigma = F S F^T / det F (Voigt, MPa) at natural point xi of a deformed element
+/// (reference coordinates X, displacements u_e in mm). Throws as element_finite_response().
+Vector6d element_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X,
+                               const Material& material, const Eigen::VectorXd& u_e,
+                               const Eigen::Vector3d& xi, int element = -1);
 
 /// Stress (Voigt, MPa) at natural point xi for element displacements u_e (3n, mm).
 Vector6d element_stress(ElementType type, const Eigen::MatrixX3d& X,

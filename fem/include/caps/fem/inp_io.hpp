@@ -12,7 +12,10 @@
 /// x_m - x_n: the same "all members meet" condition that solve() imposes, without redundant
 /// equations. A component of a group with a prescribed member (fixed node or fixed dof) gets no
 /// equations; its other members are prescribed to meet it, as solve() does. One *STATIC linear
-/// step; *NODE PRINT writes U to the .dat file and *NODE FILE U to the .frd file. Units: mm, N,
+/// step (or, with InpOptions::finite_strain, one *STEP, NLGEOM with *HYPERELASTIC, NEO HOOKE
+/// materials, C10 = mu/2 and D1 = 2/K of each layer's finite-strain material, and the prescribed
+/// values and suture gaps ramped over the step in `increments` increments, as caps's load
+/// steps do); *NODE PRINT writes U to the .dat file and *NODE FILE U to the .frd file. Units: mm, N,
 /// MPa (consistent).
 ///
 /// CalculiX integrates C3D20 like caps (27 points) but C3D15 with 9 points where caps uses 21, so
@@ -25,11 +28,20 @@
 
 namespace caps::fem {
 
+/// What kind of analysis the deck asks for.
+struct InpOptions {
+  /// false: *ELASTIC and a linear *STATIC step. true: *HYPERELASTIC, NEO HOOKE (every layer's
+  /// Mesh::finite_materials entry must be a NeoHookean; a layer without one uses
+  /// NeoHookean(materials[layer])) and *STEP, NLGEOM.
+  bool finite_strain = false;
+  int increments = 10;  ///< initial (and largest) increment 1/increments of the NLGEOM step
+};
+
 /// Writes `mesh` as an .inp deck to `path` (atomically). Throws IoError if it cannot be written,
-/// InvalidInput if the mesh is not valid.
-void write_inp(const Mesh& mesh, const std::filesystem::path& path);
+/// InvalidInput if the mesh is not valid or a finite-strain material has no CalculiX form.
+void write_inp(const Mesh& mesh, const std::filesystem::path& path, const InpOptions& options = {});
 
 /// The deck as a string (what write_inp writes).
-std::string inp_text(const Mesh& mesh);
+std::string inp_text(const Mesh& mesh, const InpOptions& options = {});
 
 }  // namespace caps::fem

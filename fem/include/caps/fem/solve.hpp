@@ -1,5 +1,7 @@
 #pragma once
-/// @brief Linear static solve with fixed dofs and suture constraints, and its results.
+/// @brief Static solve with fixed dofs and suture constraints, and its results: the linear
+/// (small-strain, the 1992 paper's) model, or finite strain (total-Lagrangian, neo-Hookean by
+/// default) with the prescribed values and suture gaps closed in load steps by Newton-Raphson.
 ///
 /// Sutures are eliminated (master-slave): every group of nodes joined by sutures shares one
 /// final position, so u_n = u_m + (x_m - x_n) for each member n of master m's group. The reduced
@@ -24,7 +26,37 @@ SolverKind parse_solver(const std::string& name);
 /// throws InvalidInput otherwise.
 bool parse_precision(const std::string& name);
 
+/// Kinematics and material model of the solve.
+enum class Kinematics {
+  Linear,  ///< small strain, LinearElastic per layer (the 1992 model); one linear solve
+  Finite   ///< finite strain, Mesh::finite_materials per layer (neo-Hookean by default)
+};
+
+/// "linear" / "neo-hookean".
+const char* kinematics_name(Kinematics kinematics);
+/// Parses a material model name: "linear" -> Linear, "neo-hookean" -> Finite; throws
+/// InvalidInput otherwise.
+Kinematics parse_kinematics(const std::string& name);
+
+/// Load stepping and Newton-Raphson controls of the finite-strain solve. The load factor
+/// lambda goes 0 -> 1; at lambda the prescribed displacements are lambda × their value, the
+/// suture gaps lambda × x_b - x_a closed, the nodal loads lambda × f.
+struct NewtonOptions {
+  int n_steps = 10;                     ///< nominal equal load steps
+  int max_iterations = 25;              ///< per step, before the step is cut back
+  int max_cutbacks = 10;                ///< halvings of a step before giving up (SolverError)
+  double residual_tolerance = 1e-10;    ///< ||r|| / ||r_0|| of the step (r_0: predictor load)
+  double displacement_tolerance = 1e-8; ///< ||dq|| / ||q - q_step_start||
+  /// Mixed-precision MUMPS: a new tangent is first solved by conjugate gradients preconditioned
+  /// with the last factorization, which is kept if that converges (to the accuracy of a direct
+  /// solve) within this many iterations; otherwise it is factorized. 0 = factorize every tangent.
+  int reuse_iterations = 8;
+};
+
 struct SolveOptions {
+  /// Linear (default) or Finite; the finite-strain controls are in `newton`.
+  Kinematics kinematics = Kinematics::Linear;
+  NewtonOptions newton;
   SolverKind solver = SolverKind::Mumps;
   /// MUMPS ICNTL(7) ordering: 0 AMD, 2 AMF, 3 SCOTCH (if built), 4 PORD, 5 METIS (if built),
   /// 6 QAMD, 7 automatic. PORD is measured fastest here (docs/benchmarks.md).
@@ -43,6 +75,17 @@ struct SolveOptions {
 struct SolveTimings {
   double constraints_s = 0, assembly_s = 0, analysis_s = 0, factorization_s = 0, solve_s = 0,
          recovery_s = 0, total_s = 0;
+};
+
+/// One converged load step of a finite-strain solve.
+struct NewtonStep {
+  int step = 0;                        ///< 1-based, in order of convergence
+  double lambda = 0;                   ///< load factor reached (0..1]
+  int iterations = 0;                  ///< Newton iterations (solves) of the converged attempt
+  int cutbacks = 0;                    ///< failed attempts of this step before it converged
+  /// ||r|| after each solve relative to the step's predictor load ||r_0|| (first entry 1).
+  std::vector<double> residual_norms;
+  std::vector<double> line_search;     ///< accepted step length alpha of each iteration
 };
 
 /// The force one suture carries.
@@ -79,13 +122,20 @@ struct SolveResult {
   int refinement_iterations = 0;             ///< CG iterations of a mixed-precision solve
   bool fell_back_to_double = false;          ///< mixed precision was tried and not enough
   SolveTimings timings;
+  std::string kinematics = "linear";         ///< kinematics_name() of the solve
+  std::vector<NewtonStep> newton_steps;      ///< finite strain: the converged load steps
+  int newton_iterations = 0;                 ///< finite strain: total, including cut-back attempts
+  int factorizations = 0;                    ///< numerical factorizations (1 for a linear solve)
 };
 
-/// Solves the linear static problem. Throws InvalidInput for bad input and for parts without
-/// support against a translation or rotation (the message says what to fix); SolverError
-/// naming the element (SolverError::element) for an inverted element (with its Gauss point) or
-/// a singular stiffness the support checks cannot see (a mechanism, such as elements joined
-/// only along an edge), and SolverError for any other failure of the factorization.
+/// Solves the static problem (options.kinematics). Throws InvalidInput for bad input and for
+/// parts without support against a translation or rotation (the message says what to fix);
+/// SolverError naming the element (SolverError::element) for an inverted element (with its Gauss
+/// point) or a singular stiffness the support checks cannot see (a mechanism, such as elements
+/// joined only along an edge), SolverError for any other failure of the factorization and, in
+/// finite strain, if a step does not converge within max_cutbacks halvings (naming the step and
+/// iteration). Stresses are Cauchy stresses in the deformed state (finite) or the small-strain
+/// stresses (linear); reactions and suture forces are nodal forces (N).
 SolveResult solve(const Mesh& mesh, const SolveOptions& options = {});
 
 }  // namespace caps::fem

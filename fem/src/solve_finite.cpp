@@ -1,0 +1,317 @@
+// Finite-strain solve: total-Lagrangian elements, the prescribed values and suture gaps applied
+// in load steps (lambda 0 -> 1), Newton-Raphson with a line search and automatic cut-back.
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <optional>
+
+#include "caps/core/error.hpp"
+#include "caps/fem/elements.hpp"
+#include "assemble.hpp"
+#include "direct_solver.hpp"
+#include "elements_impl.hpp"
+#include "solve_impl.hpp"
+
+namespace caps::fem::detail {
+namespace {
+
+// Line search (Bonet & Wood 2008, sec. 9.6; Crisfield 1991, sec. 9.3): along the Newton
+// direction dq the energy's slope s(alpha) = dq . r(q + alpha dq) is driven towards zero; a
+// step is accepted when |s(alpha)| <= kSlopeRatio |s(0)|. An inverted element at alpha halves it.
+constexpr double kSlopeRatio = 0.8;
+constexpr int kMaxLineSearch = 6;
+// A residual this many times the step's load means the iteration diverges: cut back.
+constexpr double kDivergence = 1e8;
+
+// Why an attempt at a load step failed: an inverted element, a singular tangent or no
+// convergence.
+struct Failure {
+  std::string what;
+  int element = -1, gauss_point = -1, iteration = -1;
+  double lambda = 0;  // the load factor the attempt aimed at
+};
+
+class FiniteProblem {
+ public:
+  FiniteProblem(const Mesh& mesh, const DofMap& map) : mesh_(mesh), map_(map) {
+    for (const auto& [layer, linear] : mesh.materials) {
+      const auto it = mesh.finite_materials.find(layer);
+      if (it != mesh.finite_materials.end() && it->second) {
+        // Linear elasticity under finite kinematics is not objective (a rotation stresses it):
+        // the linear model is the small-strain solve.
+        if (dynamic_cast<const LinearElastic*>(it->second.get()))
+          throw InvalidInput(cat("layer ", layer, ": the finite-strain solve was given the linear "
+                                 "material; use neo-hookean, or the linear (small-strain) solve"));
+        materials_[layer] = it->second.get();
+      } else {
+        owned_.push_back(std::make_unique<NeoHookean>(linear, cat("layer ", layer)));
+        materials_[layer] = owned_.back().get();
+      }
+    }
+  }
+
+  const FiniteMaterials& materials() const { return materials_; }
+
+  // Full displacement u = T q + lambda g (3N, mm).
+  Eigen::VectorXd expand(const Eigen::VectorXd& q, double lambda) const {
+    Eigen::VectorXd u = lambda * map_.g;
+    for (std::size_t d = 0; d < map_.eq.size(); ++d)
+      if (map_.eq[d] >= 0) u[static_cast<Eigen::Index>(d)] += q[map_.eq[d]];
+    return u;
+  }
+
+  // Out-of-balance force and tangent at (q, lambda); the `lift` term gives the predictor.
+  // Returns a failure when an element inverts.
+  std::optional<Failure> evaluate(const Eigen::VectorXd& q, double lambda, double load_lambda,
+                                  const Eigen::VectorXd& lift, Assembly& sys,
+                                  Eigen::VectorXd* unit_lift = nullptr) const {
+    const FiniteAssembly a = assemble_finite(mesh_, map_, materials_, expand(q, lambda),
+                                             load_lambda, lift, true, sys, unit_lift);
+    if (a.inverted_element >= 0)
+      return Failure{inverted_message(a.inverted_element, a.inverted_gauss_point, a.det_F),
+                     a.inverted_element, a.inverted_gauss_point};
+    if (!sys.f.allFinite()) return Failure{"the out-of-balance force is not finite"};
+    return std::nullopt;
+  }
+
+ private:
+  const Mesh& mesh_;   // not owned; outlives the problem
+  const DofMap& map_;  // not owned; outlives the problem
+  FiniteMaterials materials_;
+  std::vector<std::unique_ptr<Material>> owned_;
+};
+
+void check_options(const NewtonOptions& o) {
+  if (o.n_steps < 1 || o.n_steps > 100000)
+    throw InvalidInput(cat("newton: n_steps = ", o.n_steps, " must be in 1..100000"));
+  if (o.max_iterations < 1 || o.max_cutbacks < 0 || o.reuse_iterations < 0)
+    throw InvalidInput(cat("newton: max_iterations = ", o.max_iterations, " must be >= 1 and max_cutbacks = ",
+                           o.max_cutbacks, " >= 0"));
+  if (!(o.residual_tolerance > 0 && o.residual_tolerance < 1) ||
+      !(o.displacement_tolerance > 0 && o.displacement_tolerance < 1))
+    throw InvalidInput(cat("newton: tolerances (", o.residual_tolerance, ", ",
+                           o.displacement_tolerance, ") must be in (0, 1)"));
+}
+
+}  // namespace
+
+void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& map,
+                  SolveResult& res) {
+  const NewtonOptions& no = options.newton;
+  check_options(no);
+  const FiniteProblem problem(mesh, map);
+  auto t = Clock::now();
+  Assembly sys = assemble_structure(mesh, map);
+  res.n_nonzeros = sys.K.nonZeros();
+  res.timings.assembly_s += seconds_since(t);
+  auto solver = make_direct_solver(options.solver, options.mumps_ordering, options.mixed_precision);
+  t = Clock::now();
+  solver->analyze(sys.K, map.block_start);  // once: every tangent has this structure
+  res.timings.analysis_s = seconds_since(t);
+
+  const Eigen::VectorXd no_lift;
+  Eigen::VectorXd f_ext = Eigen::VectorXd::Zero(map.n_eq), unit_lift;
+  add_loads(mesh, map, 1.0, f_ext);
+  // sys holds the tangent and out-of-balance force of the last converged state, and unit_lift
+  // its -T^T K g: the next predictor is then f + dl (f_ext + unit_lift), without an assembly.
+  bool at_converged_state = false;
+  Eigen::VectorXd q = Eigen::VectorXd::Zero(map.n_eq);
+  double lambda = 0, dlambda = 1.0 / no.n_steps;
+  int step = 0, cutbacks = 0;
+  std::optional<Failure> inverted_in_step;  // the first inversion among the attempts of a step
+
+  // One solve of K dq = f; a singular (not positive definite) tangent is a failure.
+  auto solve_system = [&](Eigen::VectorXd& dq) -> std::optional<Failure> {
+    try {
+      auto t0 = Clock::now();
+      if (no.reuse_iterations > 0)
+        if (std::optional<Eigen::VectorXd> x =
+                solver->solve_reusing_factor(sys.K, sys.f, no.reuse_iterations)) {
+          dq = std::move(*x);
+          res.timings.solve_s += seconds_since(t0);
+          return dq.allFinite() ? std::nullopt
+                                : std::optional<Failure>(Failure{"the Newton correction is not finite"});
+        }
+      res.timings.solve_s += seconds_since(t0);
+      t0 = Clock::now();
+      ++res.factorizations;
+      solver->factorize(sys.K);
+      res.timings.factorization_s += seconds_since(t0);
+      t0 = Clock::now();
+      dq = solver->solve(sys.f);
+      res.timings.solve_s += seconds_since(t0);
+    } catch (const SingularMatrix& e) {
+      return Failure{cat("the tangent stiffness is not positive definite (", e.what(),
+                         "): the tissue buckles or the step is too large")};
+    }
+    if (!dq.allFinite()) return Failure{"the Newton correction is not finite"};
+    return std::nullopt;
+  };
+
+  while (lambda < 1.0) {
+    const double lambda_new = 1.0 - lambda <= 1.0001 * dlambda ? 1.0 : lambda + dlambda;
+    const double dl = lambda_new - lambda;
+    const Eigen::VectorXd q_start = q;
+    NewtonStep record;
+    record.step = step + 1;
+    record.lambda = lambda_new;
+    record.cutbacks = cutbacks;
+    std::optional<Failure> failure;
+
+    // Predictor: the tangent at the converged state with the increment of the prescribed values
+    // lifted, K dq = lambda_new f_ext - f_int - K (dl g).
+    if (at_converged_state) {
+      sys.f += dl * (f_ext + unit_lift);
+    } else {
+      t = Clock::now();
+      failure = problem.evaluate(q, lambda, lambda_new, dl * map.g, sys);
+      res.timings.assembly_s += seconds_since(t);
+    }
+    at_converged_state = false;
+    const double r0 = failure ? 0.0 : sys.f.norm();
+    bool converged = false;
+    for (int it = 1; !failure && it <= no.max_iterations; ++it) {
+      ++res.newton_iterations;
+      record.iterations = it;
+      if (r0 == 0) {  // nothing to do in this step
+        converged = true;
+        break;
+      }
+      Eigen::VectorXd dq;
+      if ((failure = solve_system(dq))) {
+        failure->iteration = it;
+        break;
+      }
+      const double s0 = dq.dot(sys.f);  // slope of the energy along dq at alpha = 0 (negated)
+      double alpha = 1.0;
+      std::optional<Failure> inverted;
+      bool accepted = false;
+      for (int ls = 0; ls < kMaxLineSearch; ++ls) {
+        t = Clock::now();
+        inverted = problem.evaluate(q + alpha * dq, lambda_new, lambda_new, no_lift, sys, &unit_lift);
+        res.timings.assembly_s += seconds_since(t);
+        if (inverted) {
+          alpha *= 0.5;
+          continue;
+        }
+        const double s = dq.dot(sys.f);
+        if (std::abs(s) <= kSlopeRatio * std::abs(s0) || ls + 1 == kMaxLineSearch || s0 * s > 0) {
+          accepted = true;
+          break;
+        }
+        // The root of the linear interpolation of s between 0 and alpha, kept in [0.1, 1] alpha.
+        alpha *= std::clamp(s0 / (s0 - s), 0.1, 1.0);
+      }
+      if (!accepted) {
+        failure = inverted ? *inverted : Failure{"the line search found no admissible step"};
+        failure->iteration = it;
+        break;
+      }
+      q += alpha * dq;
+      record.line_search.push_back(alpha);
+      const double rn = sys.f.norm();
+      record.residual_norms.push_back(rn / r0);
+      if (!std::isfinite(rn) || rn > kDivergence * r0) {
+        failure = Failure{cat("the Newton iteration diverges (residual ", rn / r0,
+                              " times the step's load)"), -1, -1, it};
+        break;
+      }
+      const double du = alpha * dq.norm(), step_norm = std::max((q - q_start).norm(), 1e-300);
+      // Converged; or at the round-off floor: a correction a thousand times below the tolerance
+      // while the residual is within a hundred times of it (a residual cannot drop below the
+      // rounding of the element forces that cancel in it).
+      if ((rn <= no.residual_tolerance * r0 && du <= no.displacement_tolerance * step_norm) ||
+          (rn <= 1e2 * no.residual_tolerance * r0 && du <= 1e-3 * no.displacement_tolerance * step_norm)) {
+        converged = true;
+        break;
+      }
+    }
+    if (converged) {
+      record.residual_norms.insert(record.residual_norms.begin(), 1.0);
+      res.newton_steps.push_back(record);
+      ++step;
+      lambda = lambda_new;
+      cutbacks = 0;
+      inverted_in_step.reset();
+      at_converged_state = record.iterations > 0 && r0 > 0;
+      // Grow back towards the nominal step after an easy step.
+      if (record.iterations <= 4) dlambda = std::min(2 * dlambda, 1.0 / no.n_steps);
+      continue;
+    }
+    if (!failure)
+      failure = Failure{cat("Newton did not converge in ", no.max_iterations,
+                            " iterations (last relative residual ",
+                            record.residual_norms.empty() ? NAN : record.residual_norms.back(), ")"),
+                        -1, -1, record.iterations};
+    failure->lambda = lambda_new;
+    // An inverted element is the cause worth reporting: smaller steps after it often fail
+    // differently (a stiffening, ill-conditioned tangent near det F = 0).
+    if (failure->element >= 0 && !inverted_in_step) inverted_in_step = failure;
+    if (inverted_in_step) failure = inverted_in_step;
+    q = q_start;
+    dlambda *= 0.5;
+    if (++cutbacks > no.max_cutbacks) {
+      throw SolverError(
+          cat("finite-strain solve failed at load step ", step + 1, " (from lambda ", lambda,
+              " towards ", failure->lambda, "; ", no.max_cutbacks, " halvings), Newton iteration ",
+              failure->iteration, ": ", failure->what, "; the closure is too large for this mesh or material: refine the mesh, undermine "
+              "more, or close the wound in more steps (n_steps)"),
+          failure->element, failure->gauss_point, failure->iteration);
+    }
+  }
+  res.factor_nonzeros = solver->factor_nonzeros();
+  const SolverReport report = solver->report();
+  res.precision = report.precision;
+  res.refinement_iterations = report.iterations;
+  res.fell_back_to_double = report.fell_back_to_double;
+  // The last step's final residual relative to its load (the linear solve's measure).
+  res.relative_residual = res.newton_steps.back().residual_norms.back();
+
+  t = Clock::now();
+  const Eigen::VectorXd u = problem.expand(q, 1.0);
+  const Eigen::Index n_nodes = mesh.n_nodes();
+  res.displacement_mm.resize(n_nodes, 3);
+  for (Eigen::Index i = 0; i < n_nodes; ++i)
+    for (int c = 0; c < 3; ++c) res.displacement_mm(i, c) = u[3 * i + c];
+  const FiniteMaterials& mats = problem.materials();
+  recover(mesh, map, [&](int e, ElementRecovery& out) {
+    const Element& el = mesh.elements[e];
+    const int nn = el.n_nodes();
+    const Material& mat = *mats.at(el.layer);
+    const Eigen::MatrixX3d X = element_coordinates(mesh, e);
+    Eigen::VectorXd ue(3 * nn);
+    for (int a = 0; a < nn; ++a) ue.segment<3>(3 * a) = u.segment<3>(3 * static_cast<Eigen::Index>(el.nodes[a]));
+    Eigen::VectorXd fe;
+    const FiniteKernelResult k = finite_kernel(el.type, X, mat, ue, e, fe, nullptr);
+    if (k.inverted_at >= 0)  // not after a converged step, which evaluated this very state
+      throw SolverError(inverted_message(e, k.inverted_at, k.det_F), e, k.inverted_at);
+    out.energy_mj = k.energy_mj;
+    out.f_int.resize(nn, 3);
+    for (int a = 0; a < nn; ++a) out.f_int.row(a) = fe.segment<3>(3 * a).transpose();
+    const auto& tab = shape_table(el.type);
+    Eigen::MatrixX3d G(nn, 3);
+    out.gauss_stress.resize(static_cast<Eigen::Index>(tab.w.size()), 6);
+    Vector6d S;
+    Matrix6d C;
+    double vm = 0, w_sum = 0;
+    for (std::size_t g = 0; g < tab.w.size(); ++g) {
+      const double w = tab.w[g] * gradients(tab.dN[g], X, G, e, static_cast<int>(g));
+      const Eigen::Matrix3d H = displacement_gradient(G, ue);
+      mat.stress_and_tangent(H, S, C);
+      const Vector6d sigma = cauchy_from_pk2(H + Eigen::Matrix3d::Identity(), S);
+      out.gauss_stress.row(static_cast<Eigen::Index>(g)) = sigma.transpose();
+      vm += w * von_mises(sigma);
+      w_sum += w;
+    }
+    out.von_mises_mean = vm / w_sum;
+    const Eigen::MatrixX3d P = natural_nodes(el.type);
+    out.nodal_stress.resize(nn, 6);
+    for (int a = 0; a < nn; ++a)
+      out.nodal_stress.row(a) = element_cauchy_stress(el.type, X, mat, ue, P.row(a).transpose(), e).transpose();
+  }, res);
+  res.timings.recovery_s = seconds_since(t);
+}
+
+}  // namespace caps::fem::detail
