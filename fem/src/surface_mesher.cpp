@@ -158,7 +158,8 @@ void rebuild_stage1(Builder& B, std::vector<int>& front, double min_angle_deg, d
     front_split[{front[i], front[(i + 1) % front.size()]}] = {};
 
   std::vector<std::vector<int>> rebuilt;
-  for (const auto& [r, tris] : regions) {
+  for (const auto& region : regions) {
+    const std::vector<int>& tris = region.second;  // clang 14 cannot capture a structured binding
     double worst = 180;
     for (int t : tris) worst = std::min(worst, min_corner_deg(B.P, polys[t]));
     auto keep = [&] {
