@@ -300,3 +300,26 @@ TEST_F(AppWithModel, APlanFindsItsCopiedModelAndRefusesAnother) {
   EXPECT_THROW(app::run_simulate(s), InvalidInput);
   EXPECT_FALSE(fs::exists(s.output));
 }
+
+TEST_F(AppWithModel, AWoundNearTheModelsTopIsMeshedSoThatItCanBeDrawn) {
+  // 20 mm below the top of the phantom's grid the automatic extent would reach the last rows,
+  // where the renderer cannot stitch the skin: the mesher keeps clear of them (and says so), so
+  // the simulation renders instead of failing after the solve.
+  app::PlanNewRequest pn;
+  pn.procedure = "ellipse";
+  pn.model = kModel;
+  pn.at = "90,55";
+  pn.parameters = {{"length", 15}, {"width", 4}};
+  pn.output = (kTmp / "near_top.json").string();
+  app::run_plan_new(pn);
+  app::SimulateRequest s;
+  s.model = kModel;
+  s.plan = pn.output;
+  s.output = (kTmp / "near_top").string();
+  s.render = true;
+  const app::SimulateResult r = app::run_simulate(s);
+  EXPECT_EQ(r.images.size(), 8u);
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_NE(r.warnings[0].find("the extent was limited"), std::string::npos);
+  EXPECT_TRUE(fs::exists(kTmp / "near_top" / "post_plan.png"));
+}

@@ -106,13 +106,21 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   auto column = [&](const Eigen::Vector2d& tz, auto&& node_of, int n_half_levels,
                     int step) -> std::string {
     const double theta = tz.x(), z = tz.y();
+    const auto& g = model.grid();
+    const double margin_mm = kEndRowsKeptFree * g.dz_mm;
     if (!model.has_z(z))
-      return cat("mesh: the site at theta ", theta, " deg, z ", z, " mm lies outside the model's z "
-                 "range; use a smaller --extent or a wound further from the model's ends");
+      return cat("mesh: the site at theta ", std::round(theta * 10) / 10, " deg, z ",
+                 std::round(z * 10) / 10, " mm lies outside the model's z range; use a smaller "
+                 "{extent} or a wound further from the model's ends");
+    if (z < g.z0_mm + margin_mm || z > g.z_mm(g.n_z - 1) - margin_mm)
+      return cat("mesh: the site at theta ", std::round(theta * 10) / 10, " deg, z ",
+                 std::round(z * 10) / 10, " mm lies within ", kEndRowsKeptFree,
+                 " rows of the model's top or bottom, too close to draw the skin around it; use "
+                 "a smaller {extent} or a wound further from the model's ends");
     if (const auto f = model.flags_at(theta, z); f != 0)
-      return cat("mesh: the site at theta ", theta, " deg, z ", z, " mm lies on cells of the "
-                 "model that are not valid (", describe_flags(f), "); move the wound or use a "
-                 "smaller --extent");
+      return cat("mesh: the site at theta ", std::round(theta * 10) / 10, " deg, z ",
+                 std::round(z * 10) / 10, " mm lies on cells of the model that are not valid (",
+                 describe_flags(f), "); move the wound or use a smaller {extent}");
     const double r_top = model.r_skin(theta, z);
     const double T = o.constant_thickness_mm > 0 ? o.constant_thickness_mm : model.thickness(theta, z);
     if (!(T >= o.min_thickness_mm) || !(T < r_top))

@@ -80,10 +80,15 @@ struct WoundMesh {
 };
 /// A mesh node would stand where the model cannot carry it (an invalid cell, outside the model's
 /// z range, or tissue thinner than the minimum). The message names theta and z.
-class OffModelError : public InvalidInput {
+class OffModelError : public InvalidParameter {
  public:
-  using InvalidInput::InvalidInput;
+  using InvalidParameter::InvalidParameter;
 };
+
+/// Rows of the model's grid kept free at its top and bottom ends: the renderer stitches the
+/// displaced skin into the range image with a margin of 3 rows around the mesh (render/
+/// skin_surface.cpp), so a mesh closer to the ends could be solved but not drawn.
+inline constexpr int kEndRowsKeptFree = 4;
 
 /// Both stages. With surface_options.extent_mm == 0 (automatic: 3 x the wound's size) the extent
 /// shrinks, in steps of 0.75, down to 1 x the mesh size, while the outer layers would leave the
