@@ -288,6 +288,12 @@ TEST_F(ServerTest, BadRequestsGetTheirStatusAndTheCliMessage) {
   EXPECT_EQ(own->status, 400);
   EXPECT_NE(error_of(own).find("\"model\" is set by the server"), std::string::npos);
 
+  // No file named in a request is opened.
+  const auto file = post("/api/plan/new", R"({"procedure": "/etc/passwd.json", "at": "0,60"})");
+  ASSERT_TRUE(file);
+  EXPECT_EQ(file->status, 400);
+  EXPECT_NE(error_of(file).find("the server opens no procedure files"), std::string::npos);
+
   // A parameter outside its clinical range: the app's own message (the CLI's, keys as in JSON).
   json range = {{"procedure", "z-plasty"}, {"at", "0,60"}, {"parameters", {{"angle", 20}}}};
   app::PlanNewRequest pn;

@@ -207,6 +207,14 @@ struct PlannerServer::Impl {
     const std::string source = "plan new request";
     json j = parse_object(body, source);
     refuse_server_keys(j, {"model", "output"}, source);
+    // No file named in a request is opened: a procedure is a template of the library here.
+    if (j.contains("procedure") && j["procedure"].is_string()) {
+      const std::string procedure = j["procedure"];
+      if (procedure.find('/') != std::string::npos ||
+          fs::path(procedure).extension() == ".json")
+        throw InvalidInput(cat(source, ": \"procedure\" ", procedure, ": give a template name "
+                               "(GET /api/templates); the server opens no procedure files"));
+    }
     j["model"] = options.model_dir;
     j["output"] = (work / "plans" / cat("plan-", ++next_id, ".json")).string();
     j["force"] = true;
