@@ -9,9 +9,10 @@
 #include <httplib.h>
 #include <nlohmann/json.hpp>
 
+#include <unistd.h>
 #include <algorithm>
-#include <chrono>
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <fstream>
 #include <functional>
@@ -19,7 +20,6 @@
 #include <mutex>
 #include <sstream>
 #include <thread>
-#include <unistd.h>
 
 namespace caps::server {
 
@@ -45,14 +45,24 @@ std::string read_file(const fs::path& path) {
 
 std::string content_type(const fs::path& path) {
   static const std::map<std::string, std::string> kTypes = {
-      {".html", "text/html; charset=utf-8"}, {".js", "text/javascript; charset=utf-8"},
-      {".mjs", "text/javascript; charset=utf-8"}, {".css", "text/css; charset=utf-8"},
-      {".json", "application/json"}, {".map", "application/json"},
-      {".png", "image/png"}, {".jpg", "image/jpeg"}, {".jpeg", "image/jpeg"},
-      {".gif", "image/gif"}, {".svg", "image/svg+xml"}, {".ico", "image/x-icon"},
-      {".txt", "text/plain; charset=utf-8"}, {".wasm", "application/wasm"},
-      {".glb", "model/gltf-binary"}, {".gltf", "model/gltf+json"},
-      {".vtu", "application/xml"}, {".ply", "application/octet-stream"},
+      {".html", "text/html; charset=utf-8"},
+      {".js", "text/javascript; charset=utf-8"},
+      {".mjs", "text/javascript; charset=utf-8"},
+      {".css", "text/css; charset=utf-8"},
+      {".json", "application/json"},
+      {".map", "application/json"},
+      {".png", "image/png"},
+      {".jpg", "image/jpeg"},
+      {".jpeg", "image/jpeg"},
+      {".gif", "image/gif"},
+      {".svg", "image/svg+xml"},
+      {".ico", "image/x-icon"},
+      {".txt", "text/plain; charset=utf-8"},
+      {".wasm", "application/wasm"},
+      {".glb", "model/gltf-binary"},
+      {".gltf", "model/gltf+json"},
+      {".vtu", "application/xml"},
+      {".ply", "application/octet-stream"},
       {".woff2", "font/woff2"}};
   const auto it = kTypes.find(path.extension().string());
   return it == kTypes.end() ? "application/octet-stream" : it->second;
@@ -100,7 +110,8 @@ void refuse_server_keys(const json& j, std::initializer_list<const char*> keys,
                         const std::string& source) {
   for (const char* k : keys)
     if (j.contains(k))
-      throw InvalidInput(cat(source, ": \"", k, "\" is set by the server (its model and work "
+      throw InvalidInput(cat(source, ": \"", k,
+                             "\" is set by the server (its model and work "
                              "folder); leave it out"));
 }
 
@@ -141,7 +152,8 @@ fs::path make_work_dir() {
       return dir;
     }
   }
-  throw IoError(cat(tmp.string(), ": cannot create a work folder for the server; check that the "
+  throw IoError(cat(tmp.string(),
+                    ": cannot create a work folder for the server; check that the "
                     "temporary directory is writable (TMPDIR)"));
 }
 
@@ -210,9 +222,9 @@ struct PlannerServer::Impl {
     // No file named in a request is opened: a procedure is a template of the library here.
     if (j.contains("procedure") && j["procedure"].is_string()) {
       const std::string procedure = j["procedure"];
-      if (procedure.find('/') != std::string::npos ||
-          fs::path(procedure).extension() == ".json")
-        throw InvalidInput(cat(source, ": \"procedure\" ", procedure, ": give a template name "
+      if (procedure.find('/') != std::string::npos || fs::path(procedure).extension() == ".json")
+        throw InvalidInput(cat(source, ": \"procedure\" ", procedure,
+                               ": give a template name "
                                "(GET /api/templates); the server opens no procedure files"));
     }
     j["model"] = options.model_dir;
@@ -237,7 +249,8 @@ struct PlannerServer::Impl {
     const json j = parse_object(body, source);
     for (const auto& [key, value] : j.items())
       if (key != "plan" && key != "options")
-        throw InvalidInput(cat(source, ": unknown key \"", key, "\" (give \"plan\" and \"options\")"));
+        throw InvalidInput(
+            cat(source, ": unknown key \"", key, "\" (give \"plan\" and \"options\")"));
     if (!j.contains("plan") || !j["plan"].is_object())
       throw InvalidInput(cat(source, ": \"plan\" must be a plan file's JSON object"));
     json options_json = j.contains("options") ? j["options"] : json::object();
@@ -270,55 +283,56 @@ struct PlannerServer::Impl {
     // malformed request line) get the same {"error": ...} body as the routes' own.
     http.set_error_handler(httplib::Server::HandlerWithResponse(
         [this](const httplib::Request& req, httplib::Response& res) {
-      if (!res.body.empty()) return httplib::Server::HandlerResponse::Unhandled;
-      std::string message;
-      if (res.status == 413)
-        message = cat("the request body is larger than ", options.max_body_bytes,
-                      " bytes (the server's limit); send one plan at a time");
-      else if (res.status == 404)
-        message = cat(req.method, " ", req.path, ": no such route (see docs/planner.md)");
-      else
-        message = cat("bad request (HTTP ", res.status, ")");
-      send_json(res, json{{"error", message}}.dump());
-      return httplib::Server::HandlerResponse::Handled;
-    }));
+          if (!res.body.empty()) return httplib::Server::HandlerResponse::Unhandled;
+          std::string message;
+          if (res.status == 413)
+            message = cat("the request body is larger than ", options.max_body_bytes,
+                          " bytes (the server's limit); send one plan at a time");
+          else if (res.status == 404)
+            message = cat(req.method, " ", req.path, ": no such route (see docs/planner.md)");
+          else
+            message = cat("bad request (HTTP ", res.status, ")");
+          send_json(res, json{{"error", message}}.dump());
+          return httplib::Server::HandlerResponse::Handled;
+        }));
 
     const fs::path model_dir(options.model_dir);
     http.Get("/api/model", guarded([model_dir](const httplib::Request&, httplib::Response& res) {
-      send_file(res, file_under(model_dir, "model.json"));
-    }));
+               send_file(res, file_under(model_dir, "model.json"));
+             }));
     http.Get(R"(/api/model/(.+))",
              guarded([model_dir](const httplib::Request& req, httplib::Response& res) {
                send_file(res, file_under(model_dir, req.matches[1]));
              }));
     http.Get("/api/templates", guarded([](const httplib::Request&, httplib::Response& res) {
-      send_json(res, app::to_json(app::run_templates({})));
-    }));
+               send_json(res, app::to_json(app::run_templates({})));
+             }));
     http.Post("/api/plan/new", guarded([this](const httplib::Request& req, httplib::Response& res) {
-      send_json(res, plan_new(req.body));
-    }));
+                send_json(res, plan_new(req.body));
+              }));
     http.Post("/api/plan/check",
               guarded([this](const httplib::Request& req, httplib::Response& res) {
                 send_json(res, plan_check(req.body));
               }));
     http.Post("/api/simulate", guarded([this](const httplib::Request& req, httplib::Response& res) {
-      send_json(res, simulate(req.body));
-    }));
+                send_json(res, simulate(req.body));
+              }));
     http.Get(R"(/api/results/([0-9]+)/(.+))",
              guarded([this](const httplib::Request& req, httplib::Response& res) {
-               send_file(res, file_under(work / "results" / std::string(req.matches[1]),
-                                         req.matches[2]));
+               send_file(
+                   res, file_under(work / "results" / std::string(req.matches[1]), req.matches[2]));
              }));
     http.Get(R"(/api/.*)", guarded([](const httplib::Request& req, httplib::Response&) {
-      throw Refusal(404, cat("GET ", req.path, ": no such route (see docs/planner.md)"));
-    }));
+               throw Refusal(404, cat("GET ", req.path, ": no such route (see docs/planner.md)"));
+             }));
     http.Get(R"(/.*)", guarded([this](const httplib::Request& req, httplib::Response& res) {
-      std::string path = req.path.substr(1);
-      if (path.empty() || path.back() == '/') path += "index.html";
-      if (placeholder && path != "index.html")
-        throw Refusal(404, cat("\"", req.path, "\": no such file (the page is not built yet)"));
-      send_file(res, file_under(web, path));
-    }));
+               std::string path = req.path.substr(1);
+               if (path.empty() || path.back() == '/') path += "index.html";
+               if (placeholder && path != "index.html")
+                 throw Refusal(404,
+                               cat("\"", req.path, "\": no such file (the page is not built yet)"));
+               send_file(res, file_under(web, path));
+             }));
   }
 };
 
@@ -329,6 +343,8 @@ PlannerServer::PlannerServer(ServerOptions options, Reporter* reporter)
   if (s.options.port < 0 || s.options.port > 65535)
     throw InvalidInput(cat("--port ", s.options.port, ": give 1..65535 (0: any free port)"));
   PatientModel::load(s.options.model_dir);  // the CLI's message for a missing or broken model
+  // Plans name their model: absolute, so that a plan saved from the page works from any folder.
+  s.options.model_dir = fs::absolute(s.options.model_dir).lexically_normal().string();
   if (s.options.web_root.empty()) {
     s.web = default_web_root();
     s.placeholder = s.web == fs::path(CAPS_WEB_DIR);
@@ -350,12 +366,12 @@ PlannerServer::~PlannerServer() {
 int PlannerServer::bind() {
   Impl& s = *impl_;
   if (!is_loopback(s.options.host))
-    warn(s.reporter, cat("listening on ", s.options.host, ", not only on this machine (127.0.0.1): "
+    warn(s.reporter, cat("listening on ", s.options.host,
+                         ", not only on this machine (127.0.0.1): "
                          "anyone who can reach it can use the planner and read the model"));
-  s.port = s.options.port == 0 ? s.http.bind_to_any_port(s.options.host)
-                               : (s.http.bind_to_port(s.options.host, s.options.port)
-                                      ? s.options.port
-                                      : -1);
+  s.port = s.options.port == 0
+               ? s.http.bind_to_any_port(s.options.host)
+               : (s.http.bind_to_port(s.options.host, s.options.port) ? s.options.port : -1);
   if (s.port <= 0) {
     s.port = 0;
     throw IoError(cat("cannot listen on ", s.options.host, ":", s.options.port,

@@ -20,10 +20,12 @@ struct ServeRequest {
     using app::FieldKind;
     v(r.model, {"model", "the patient model directory", FieldKind::Positional, "MODEL_DIR"});
     v(r.port, {"port", "the TCP port to listen on (0: any free one)"});
-    v(r.host, {"host", "the address to bind; anything but 127.0.0.1 lets other machines use the "
-                       "planner and read the model (a warning is printed)"});
-    v(r.web_root, {"web_root", "serve the page from this folder (default: web/dist, else the "
-                               "placeholder page)"});
+    v(r.host, {"host",
+               "the address to bind; anything but 127.0.0.1 lets other machines use the "
+               "planner and read the model (a warning is printed)"});
+    v(r.web_root, {"web_root",
+                   "serve the page from this folder (default: web/dist, else the "
+                   "placeholder page)"});
   }
 };
 
