@@ -419,3 +419,25 @@ TEST_F(ServerTest, ANewerSimulationCancelsTheOlderOne) {
   EXPECT_EQ(second_status, 200);
   expect_still_serving();
 }
+
+TEST_F(ServerTest, WithoutAWebRootServesThePlaceholderPageOnly) {
+  server::ServerOptions o;
+  o.model_dir = kModel;
+  o.port = 0;
+  server::PlannerServer placeholder(o);
+  EXPECT_EQ(placeholder.web_root(), server::default_web_root());
+  placeholder.bind();
+  std::thread t([&] { placeholder.listen(); });
+  httplib::Client c("127.0.0.1", placeholder.port());
+  const auto index = c.Get("/");
+  const auto other = c.Get("/README.md");
+  placeholder.stop();
+  t.join();
+  ASSERT_TRUE(index);
+  EXPECT_EQ(index->status, 200);
+  EXPECT_EQ(index->get_header_value("Content-Type"), "text/html; charset=utf-8");
+  if (!fs::exists(server::default_web_root() / "dist"))
+    EXPECT_NE(index->body.find("/api/simulate"), std::string::npos);  // the API is listed
+  ASSERT_TRUE(other);
+  EXPECT_EQ(other->status, 404);
+}
