@@ -165,6 +165,21 @@ TEST(ServerDefaults, BindsLoopbackUnlessToldOtherwise) {
   EXPECT_FALSE(server::is_loopback("192.168.1.5"));
 }
 
+TEST(ServerErrors, EachErrorKindHasItsStatusAndKeepsItsMessage) {
+  EXPECT_EQ(server::error_response(InvalidInput("bad value")).status, 400);
+  EXPECT_EQ(server::error_response(InvalidInput("bad value")).message, "bad value");
+  EXPECT_EQ(server::error_response(IoError("x.json: cannot read")).status, 400);
+  const auto named = server::error_response(InvalidParameter("give {apex_angle} or {width}"));
+  EXPECT_EQ(named.status, 400);
+  EXPECT_EQ(named.message, "give apex_angle or width");  // the JSON keys
+  EXPECT_EQ(server::error_response(Cancelled("cancelled by the caller")).status, 409);
+  const SolverError solver("singular stiffness", 3, 0, 1);
+  EXPECT_EQ(server::error_response(solver).status, 422);
+  EXPECT_EQ(server::error_response(solver).message, solver.what());
+  EXPECT_EQ(server::error_response(Error("internal")).status, 500);
+  EXPECT_EQ(server::error_response(std::runtime_error("other")).status, 500);
+}
+
 TEST_F(ServerTest, ListensOnLoopbackAndWarnsForAnotherAddress) {
   EXPECT_GT(server_->port(), 0);
   EXPECT_EQ(server_->url(), "http://127.0.0.1:" + std::to_string(server_->port()) + "/");

@@ -159,6 +159,19 @@ fs::path make_work_dir() {
 
 }  // namespace
 
+ErrorResponse error_response(const std::exception& e) {
+  if (const auto* refusal = dynamic_cast<const Refusal*>(&e)) return {refusal->status, e.what()};
+  // InvalidParameter (an InvalidInput) names its parameters as JSON keys in what().
+  if (dynamic_cast<const InvalidInput*>(&e) || dynamic_cast<const IoError*>(&e))
+    return {400, e.what()};
+  if (dynamic_cast<const Cancelled*>(&e))
+    return {409, "this simulation was cancelled by a newer simulate request"};
+  if (dynamic_cast<const SolverError*>(&e)) return {422, e.what()};
+  if (dynamic_cast<const std::bad_alloc*>(&e))
+    return {500, "out of memory; the request may be larger than this machine can hold"};
+  return {500, e.what()};
+}
+
 bool is_loopback(const std::string& host) {
   return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
 }
@@ -186,31 +199,16 @@ struct PlannerServer::Impl {
 
   using Route = std::function<void(const httplib::Request&, httplib::Response&)>;
 
-  // Answers every error as {"error": message}: the CLI's message with the status its kind maps
-  // to (InvalidInput, IoError: 400; Cancelled: 409; SolverError: 422; anything else: 500).
+  // Answers every error as {"error": message} with its status (error_response()).
   Route guarded(Route route) {
     return [this, route](const httplib::Request& req, httplib::Response& res) {
       ++n_requests;
-      auto fail = [&res](int status, const std::string& message) {
-        res.status = status;
-        send_json(res, json{{"error", message}}.dump());
-      };
       try {
         route(req, res);
-      } catch (const Refusal& e) {
-        fail(e.status, e.what());
-      } catch (const InvalidInput& e) {  // InvalidParameter's what() names the JSON keys
-        fail(400, e.what());
-      } catch (const IoError& e) {
-        fail(400, e.what());
-      } catch (const Cancelled&) {
-        fail(409, "this simulation was cancelled by a newer simulate request");
-      } catch (const SolverError& e) {
-        fail(422, e.what());
-      } catch (const std::bad_alloc&) {
-        fail(500, "out of memory; the request may be larger than this machine can hold");
       } catch (const std::exception& e) {
-        fail(500, e.what());
+        const ErrorResponse error = error_response(e);
+        res.status = error.status;
+        send_json(res, json{{"error", error.message}}.dump());
       }
     };
   }

@@ -4,6 +4,7 @@
 /// {"error": <the message the command line prints>}; the server keeps serving after it.
 
 #include <cstddef>
+#include <exception>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -28,6 +29,16 @@ struct ServerOptions {
   std::string web_root;             ///< the page's folder; empty: web/dist, else the placeholder
   std::size_t max_body_bytes = kMaxBodyBytes;
 };
+
+/// An error as the server answers it: its HTTP status and the message of the body.
+struct ErrorResponse {
+  int status = 500;
+  std::string message;  ///< the message the command line prints for the same error
+};
+
+/// The status an error is answered with: InvalidInput (InvalidParameter) and IoError 400,
+/// Cancelled 409 (a newer simulate request came), SolverError 422, any other error 500.
+ErrorResponse error_response(const std::exception& error);
 
 /// True for the loopback addresses (127.0.0.0/8, ::1, localhost): reachable from this machine only.
 bool is_loopback(const std::string& host);
