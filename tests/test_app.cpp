@@ -8,6 +8,7 @@
 #include "caps/app/simulation.hpp"
 #include "caps/core/error.hpp"
 #include "cli_run.hpp"
+#include "phantom_model.hpp"
 
 #include <filesystem>
 #include <fstream>
@@ -24,12 +25,7 @@ namespace {
 const fs::path kTmp = fs::temp_directory_path() / "caps_test_app";
 const std::string kModel = (kTmp / "model").string();
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using caps_test::slurp;
 
 // The result JSON without what differs between two runs of the same request by design: the
 // output folder's name and the wall-clock timings.
@@ -44,17 +40,7 @@ class AppWithModel : public ::testing::Test {
   static void SetUpTestSuite() {
     fs::remove_all(kTmp);
     fs::create_directories(kTmp);
-    app::PhantomRequest ph;
-    ph.output = (kTmp / "ct.nii.gz").string();
-    ph.voxels = "96,96,90";
-    ph.spacing = "2.5,2.5,2.5";
-    app::run_phantom(ph);
-    app::FromVolumeRequest fv;
-    fv.input = ph.output;
-    fv.output = kModel;
-    fv.n_theta = 128;
-    fv.n_z = 64;
-    app::run_from_volume(fv);
+    caps_test::make_phantom_model(kTmp, kModel);
   }
 };
 

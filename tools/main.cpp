@@ -3,6 +3,7 @@
 //   caps phantom -o /tmp/ct.nii.gz
 //   caps model from-volume /usr/share/doc/invesalius-examples/examples/Cranium.inv3 -o /tmp/cranium
 //   caps model info /tmp/cranium
+//   caps serve /tmp/cranium
 // Exit codes: 0 success, 2 bad input (message names the file or field), 1 internal error or a
 // failed solve.
 #include <cstdio>
@@ -33,6 +34,7 @@ int main(int argc, char** argv) {
   cli::add_simulate(app, common, action);
   cli::add_render(app, common, action);
   cli::add_compare(app, common, action);
+  cli::add_serve(app, common, action);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

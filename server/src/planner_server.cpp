@@ -1,0 +1,410 @@
+#include "caps/server/planner_server.hpp"
+
+#include "caps/app/plan.hpp"
+#include "caps/app/simulation.hpp"
+#include "caps/core/atomic_output.hpp"
+#include "caps/core/error.hpp"
+#include "caps/surface/patient_model.hpp"
+
+#include <httplib.h>
+#include <nlohmann/json.hpp>
+
+#include <unistd.h>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+namespace caps::server {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+// A refusal with its HTTP status (403, 404, ...) that is no caps error kind of its own.
+class Refusal : public Error {
+ public:
+  Refusal(int status, const std::string& message) : Error(message), status(status) {}
+  int status;
+};
+
+std::string read_file(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw IoError(cat(path.string(), ": cannot read"));
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string content_type(const fs::path& path) {
+  static const std::map<std::string, std::string> kTypes = {
+      {".html", "text/html; charset=utf-8"},
+      {".js", "text/javascript; charset=utf-8"},
+      {".mjs", "text/javascript; charset=utf-8"},
+      {".css", "text/css; charset=utf-8"},
+      {".json", "application/json"},
+      {".map", "application/json"},
+      {".png", "image/png"},
+      {".jpg", "image/jpeg"},
+      {".jpeg", "image/jpeg"},
+      {".gif", "image/gif"},
+      {".svg", "image/svg+xml"},
+      {".ico", "image/x-icon"},
+      {".txt", "text/plain; charset=utf-8"},
+      {".wasm", "application/wasm"},
+      {".glb", "model/gltf-binary"},
+      {".gltf", "model/gltf+json"},
+      {".vtu", "application/xml"},
+      {".ply", "application/octet-stream"},
+      {".woff2", "font/woff2"}};
+  const auto it = kTypes.find(path.extension().string());
+  return it == kTypes.end() ? "application/octet-stream" : it->second;
+}
+
+// The regular file `relative` (a request's decoded path, '/'-separated) inside `root`, after
+// symbolic links are resolved; 403 for a path that leaves the root, 404 for no such file.
+fs::path file_under(const fs::path& root, const std::string& relative) {
+  if (relative.find('\0') != std::string::npos || relative.find('\\') != std::string::npos)
+    throw Refusal(403, cat("\"", relative, "\": not a path the server serves"));
+  const fs::path rel = fs::path(relative).relative_path();
+  for (const fs::path& part : rel)
+    if (part == "..") throw Refusal(403, cat("\"", relative, "\": leaves the served folder"));
+  std::error_code ec;
+  const fs::path base = fs::weakly_canonical(root, ec);
+  const fs::path full = fs::weakly_canonical(base / rel, ec);
+  if (ec) throw Refusal(404, cat("\"", relative, "\": no such file"));
+  const auto [b, f] = std::mismatch(base.begin(), base.end(), full.begin(), full.end());
+  if (b != base.end()) throw Refusal(403, cat("\"", relative, "\": leaves the served folder"));
+  if (!fs::is_regular_file(full)) throw Refusal(404, cat("\"", relative, "\": no such file"));
+  return full;
+}
+
+void send_file(httplib::Response& res, const fs::path& path) {
+  res.set_content(read_file(path), content_type(path).c_str());
+}
+
+void send_json(httplib::Response& res, const std::string& text) {
+  res.set_content(text, "application/json");
+}
+
+json parse_object(const std::string& body, const std::string& source) {
+  json j;
+  try {
+    j = json::parse(body);
+  } catch (const json::exception& e) {
+    throw InvalidInput(cat(source, ": not valid JSON (", e.what(), ")"));
+  }
+  if (!j.is_object()) throw InvalidInput(cat(source, ": expected a JSON object"));
+  return j;
+}
+
+// Keys the server fills itself (its model, its work folder) are refused, naming them.
+void refuse_server_keys(const json& j, std::initializer_list<const char*> keys,
+                        const std::string& source) {
+  for (const char* k : keys)
+    if (j.contains(k))
+      throw InvalidInput(cat(source, ": \"", k,
+                             "\" is set by the server (its model and work "
+                             "folder); leave it out"));
+}
+
+// Cancels a simulation once a newer simulate request has come; passes progress and warnings on.
+class SimulationReporter : public Reporter {
+ public:
+  SimulationReporter(const std::atomic<std::uint64_t>& latest, std::uint64_t ticket,
+                     Reporter* outer)
+      : latest_(latest), ticket_(ticket), outer_(outer) {}
+  bool is_cancelled() const override { return latest_.load() != ticket_; }
+
+ protected:
+  void on_warning(const std::string& m) override { caps::warn(outer_, m); }
+  void on_note(const std::string& m) override { caps::note(outer_, m); }
+  void on_progress(const std::string& step, double fraction) override {
+    if (outer_) outer_->progress(step, fraction);
+  }
+  void on_step_done(const std::string& step) override {
+    if (outer_) outer_->step_done(step);
+  }
+
+ private:
+  const std::atomic<std::uint64_t>& latest_;  // not owned; the server's, outlives this
+  std::uint64_t ticket_;
+  Reporter* outer_;  // not owned; may be null
+};
+
+// A fresh folder under the temporary directory for this server's plans and results.
+fs::path make_work_dir() {
+  static std::atomic<int> counter{0};
+  const fs::path tmp = fs::temp_directory_path();
+  for (int attempt = 0; attempt < 1000; ++attempt) {
+    const fs::path dir = tmp / cat("caps-serve-", ::getpid(), "-", counter++);
+    std::error_code ec;
+    if (fs::create_directory(dir, ec)) {
+      fs::create_directories(dir / "plans");
+      fs::create_directories(dir / "results");
+      return dir;
+    }
+  }
+  throw IoError(cat(tmp.string(),
+                    ": cannot create a work folder for the server; check that the "
+                    "temporary directory is writable (TMPDIR)"));
+}
+
+}  // namespace
+
+ErrorResponse error_response(const std::exception& e) {
+  if (const auto* refusal = dynamic_cast<const Refusal*>(&e)) return {refusal->status, e.what()};
+  // InvalidParameter (an InvalidInput) names its parameters as JSON keys in what().
+  if (dynamic_cast<const InvalidInput*>(&e) || dynamic_cast<const IoError*>(&e))
+    return {400, e.what()};
+  if (dynamic_cast<const Cancelled*>(&e))
+    return {409, "this simulation was cancelled by a newer simulate request"};
+  if (dynamic_cast<const SolverError*>(&e)) return {422, e.what()};
+  if (dynamic_cast<const std::bad_alloc*>(&e))
+    return {500, "out of memory; the request may be larger than this machine can hold"};
+  return {500, e.what()};
+}
+
+bool is_loopback(const std::string& host) {
+  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
+}
+
+fs::path default_web_root() {
+  const fs::path web(CAPS_WEB_DIR);
+  if (fs::is_regular_file(web / "dist" / "index.html")) return web / "dist";
+  return web;
+}
+
+struct PlannerServer::Impl {
+  ServerOptions options;
+  Reporter* reporter;  // not owned; may be null
+  fs::path work, web;
+  bool placeholder = false;  // serving web/ itself: only its index.html
+  httplib::Server http;
+  int port = 0;
+  std::atomic<bool> listening{false}, stop_requested{false};
+  std::atomic<long> n_requests{0};
+  std::atomic<int> next_id{0};
+  std::atomic<std::uint64_t> latest_simulation{0};
+  std::mutex simulation_mutex;  // kMaxConcurrentSimulations = 1
+
+  Impl(ServerOptions o, Reporter* r) : options(std::move(o)), reporter(r) {}
+
+  using Route = std::function<void(const httplib::Request&, httplib::Response&)>;
+
+  // Answers every error as {"error": message} with its status (error_response()).
+  Route guarded(Route route) {
+    return [this, route](const httplib::Request& req, httplib::Response& res) {
+      ++n_requests;
+      try {
+        route(req, res);
+      } catch (const std::exception& e) {
+        const ErrorResponse error = error_response(e);
+        res.status = error.status;
+        send_json(res, json{{"error", error.message}}.dump());
+      }
+    };
+  }
+
+  std::string plan_new(const std::string& body) {
+    const std::string source = "plan new request";
+    json j = parse_object(body, source);
+    refuse_server_keys(j, {"model", "output"}, source);
+    // No file named in a request is opened: a procedure is a template of the library here.
+    if (j.contains("procedure") && j["procedure"].is_string()) {
+      const std::string procedure = j["procedure"];
+      if (procedure.find('/') != std::string::npos || fs::path(procedure).extension() == ".json")
+        throw InvalidInput(cat(source, ": \"procedure\" ", procedure,
+                               ": give a template name "
+                               "(GET /api/templates); the server opens no procedure files"));
+    }
+    j["model"] = options.model_dir;
+    j["output"] = (work / "plans" / cat("plan-", ++next_id, ".json")).string();
+    j["force"] = true;
+    const auto request = app::read_request<app::PlanNewRequest>(j.dump(), source);
+    return app::to_json(app::run_plan_new(request));
+  }
+
+  std::string plan_check(const std::string& body) {
+    parse_object(body, "plan check request");
+    const fs::path plan = work / "plans" / cat("check-", ++next_id, ".json");
+    write_text_atomic(plan, body);
+    app::PlanCheckRequest request;
+    request.plan = plan.string();
+    request.model = options.model_dir;
+    return app::to_json(app::run_plan_check(request));
+  }
+
+  std::string simulate(const std::string& body) {
+    const std::string source = "simulate request";
+    const json j = parse_object(body, source);
+    for (const auto& [key, value] : j.items())
+      if (key != "plan" && key != "options")
+        throw InvalidInput(
+            cat(source, ": unknown key \"", key, "\" (give \"plan\" and \"options\")"));
+    if (!j.contains("plan") || !j["plan"].is_object())
+      throw InvalidInput(cat(source, ": \"plan\" must be a plan file's JSON object"));
+    json options_json = j.contains("options") ? j["options"] : json::object();
+    if (!options_json.is_object())
+      throw InvalidInput(cat(source, ": \"options\" must be an object of simulate options"));
+    refuse_server_keys(options_json, {"model", "plan", "output", "force"}, source);
+    const int id = ++next_id;
+    const fs::path plan = work / "plans" / cat("simulate-", id, ".json");
+    options_json["model"] = options.model_dir;
+    options_json["plan"] = plan.string();
+    options_json["output"] = (work / "results" / std::to_string(id)).string();
+    const auto request = app::read_request<app::SimulateRequest>(options_json.dump(), source);
+    write_text_atomic(plan, j["plan"].dump(2) + "\n");
+
+    // A newer request cancels this one: its ticket is no longer the latest.
+    const std::uint64_t ticket = ++latest_simulation;
+    SimulationReporter cancellable(latest_simulation, ticket, reporter);
+    std::lock_guard<std::mutex> lock(simulation_mutex);
+    cancellable.check_cancelled();
+    const app::SimulateResult result = app::run_simulate(request, &cancellable);
+    json out = json::parse(app::to_json(result));
+    out["result_id"] = id;
+    out["result_url"] = cat("/api/results/", id, "/");
+    return out.dump(2);
+  }
+
+  void add_routes() {
+    http.set_payload_max_length(options.max_body_bytes);
+    // Errors httplib answers itself (413 for a body over the limit, 404 for no route, 400 for a
+    // malformed request line) get the same {"error": ...} body as the routes' own.
+    http.set_error_handler(httplib::Server::HandlerWithResponse(
+        [this](const httplib::Request& req, httplib::Response& res) {
+          if (!res.body.empty()) return httplib::Server::HandlerResponse::Unhandled;
+          std::string message;
+          if (res.status == 413)
+            message = cat("the request body is larger than ", options.max_body_bytes,
+                          " bytes (the server's limit); send one plan at a time");
+          else if (res.status == 404)
+            message = cat(req.method, " ", req.path, ": no such route (see docs/planner.md)");
+          else
+            message = cat("bad request (HTTP ", res.status, ")");
+          send_json(res, json{{"error", message}}.dump());
+          return httplib::Server::HandlerResponse::Handled;
+        }));
+
+    const fs::path model_dir(options.model_dir);
+    http.Get("/api/model", guarded([model_dir](const httplib::Request&, httplib::Response& res) {
+               send_file(res, file_under(model_dir, "model.json"));
+             }));
+    http.Get(R"(/api/model/(.+))",
+             guarded([model_dir](const httplib::Request& req, httplib::Response& res) {
+               send_file(res, file_under(model_dir, req.matches[1]));
+             }));
+    http.Get("/api/templates", guarded([](const httplib::Request&, httplib::Response& res) {
+               send_json(res, app::to_json(app::run_templates({})));
+             }));
+    http.Post("/api/plan/new", guarded([this](const httplib::Request& req, httplib::Response& res) {
+                send_json(res, plan_new(req.body));
+              }));
+    http.Post("/api/plan/check",
+              guarded([this](const httplib::Request& req, httplib::Response& res) {
+                send_json(res, plan_check(req.body));
+              }));
+    http.Post("/api/simulate", guarded([this](const httplib::Request& req, httplib::Response& res) {
+                send_json(res, simulate(req.body));
+              }));
+    http.Get(R"(/api/results/([0-9]+)/(.+))",
+             guarded([this](const httplib::Request& req, httplib::Response& res) {
+               send_file(
+                   res, file_under(work / "results" / std::string(req.matches[1]), req.matches[2]));
+             }));
+    http.Get(R"(/api/.*)", guarded([](const httplib::Request& req, httplib::Response&) {
+               throw Refusal(404, cat("GET ", req.path, ": no such route (see docs/planner.md)"));
+             }));
+    http.Get(R"(/.*)", guarded([this](const httplib::Request& req, httplib::Response& res) {
+               std::string path = req.path.substr(1);
+               if (path.empty() || path.back() == '/') path += "index.html";
+               if (placeholder && path != "index.html")
+                 throw Refusal(404,
+                               cat("\"", req.path, "\": no such file (the page is not built yet)"));
+               send_file(res, file_under(web, path));
+             }));
+  }
+};
+
+PlannerServer::PlannerServer(ServerOptions options, Reporter* reporter)
+    : impl_(std::make_unique<Impl>(std::move(options), reporter)) {
+  Impl& s = *impl_;
+  if (s.options.host.empty()) throw InvalidInput("--host: give an address to bind, e.g. 127.0.0.1");
+  if (s.options.port < 0 || s.options.port > 65535)
+    throw InvalidInput(cat("--port ", s.options.port, ": give 1..65535 (0: any free port)"));
+  PatientModel::load(s.options.model_dir);  // the CLI's message for a missing or broken model
+  // Plans name their model: absolute, so that a plan saved from the page works from any folder.
+  s.options.model_dir = fs::absolute(s.options.model_dir).lexically_normal().string();
+  if (s.options.web_root.empty()) {
+    s.web = default_web_root();
+    s.placeholder = s.web == fs::path(CAPS_WEB_DIR);
+  } else {
+    s.web = s.options.web_root;
+    if (!fs::is_directory(s.web))
+      throw IoError(cat("--web-root ", s.options.web_root, ": no such folder"));
+  }
+  s.work = make_work_dir();
+  s.add_routes();
+}
+
+PlannerServer::~PlannerServer() {
+  stop();
+  std::error_code ec;
+  fs::remove_all(impl_->work, ec);
+}
+
+int PlannerServer::bind() {
+  Impl& s = *impl_;
+  if (!is_loopback(s.options.host))
+    warn(s.reporter, cat("listening on ", s.options.host,
+                         ", not only on this machine (127.0.0.1): "
+                         "anyone who can reach it can use the planner and read the model"));
+  s.port = s.options.port == 0
+               ? s.http.bind_to_any_port(s.options.host)
+               : (s.http.bind_to_port(s.options.host, s.options.port) ? s.options.port : -1);
+  if (s.port <= 0) {
+    s.port = 0;
+    throw IoError(cat("cannot listen on ", s.options.host, ":", s.options.port,
+                      "; is another server using the port? try --port 0 or another one"));
+  }
+  return s.port;
+}
+
+void PlannerServer::listen() {
+  Impl& s = *impl_;
+  if (s.port == 0) bind();
+  s.listening = true;
+  if (!s.stop_requested) s.http.listen_after_bind();
+  s.listening = false;
+}
+
+void PlannerServer::stop() {
+  Impl& s = *impl_;
+  s.stop_requested = true;
+  // listen() may not have started its loop yet; httplib's stop() does nothing before it has.
+  for (int i = 0; i < 200 && s.listening && !s.http.is_running(); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  s.http.stop();
+}
+
+int PlannerServer::port() const { return impl_->port; }
+
+std::string PlannerServer::url() const {
+  const std::string& h = impl_->options.host;
+  const bool v6 = h.find(':') != std::string::npos;
+  return cat("http://", v6 ? "[" + h + "]" : h, ":", impl_->port, "/");
+}
+
+const fs::path& PlannerServer::work_dir() const { return impl_->work; }
+const fs::path& PlannerServer::web_root() const { return impl_->web; }
+long PlannerServer::n_requests() const { return impl_->n_requests.load(); }
+
+}  // namespace caps::server

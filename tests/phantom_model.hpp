@@ -1,0 +1,37 @@
+#pragma once
+// The small phantom patient model the app and server tests share (96 x 96 x 90 voxels of 2.5 mm,
+// a 128 x 64 cylindrical grid), built through app:: as a user would, and a file reader.
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "caps/app/model.hpp"
+
+namespace caps_test {
+
+/// The file's text ("" if it cannot be read).
+inline std::string slurp(const std::filesystem::path& p) {
+  std::ifstream in(p);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+/// Writes the phantom CT into `folder`/ct.nii.gz and its patient model into `model`.
+inline void make_phantom_model(const std::filesystem::path& folder, const std::string& model) {
+  caps::app::PhantomRequest ph;
+  ph.output = (folder / "ct.nii.gz").string();
+  ph.voxels = "96,96,90";
+  ph.spacing = "2.5,2.5,2.5";
+  caps::app::run_phantom(ph);
+  caps::app::FromVolumeRequest fv;
+  fv.input = ph.output;
+  fv.output = model;
+  fv.n_theta = 128;
+  fv.n_z = 64;
+  caps::app::run_from_volume(fv);
+}
+
+}  // namespace caps_test

@@ -1,0 +1,458 @@
+// The planner's server (server/), run in-process on a free loopback port and driven by httplib's
+// client: a plan made and simulated through the API equals app::'s and the caps program's result
+// for the same inputs; bad requests (path traversal, an oversized body, malformed JSON, a wrong
+// field type) each get their 4xx with the CLI's message and the server keeps serving; a newer
+// simulation cancels an older one (409).
+#include <gtest/gtest.h>
+
+#include "caps/app/model.hpp"
+#include "caps/app/plan.hpp"
+#include "caps/app/simulation.hpp"
+#include "caps/core/error.hpp"
+#include "caps/server/planner_server.hpp"
+#include "caps/server/serve.hpp"
+#include "caps/surface/patient_model.hpp"
+#include "cli_run.hpp"
+#include "phantom_model.hpp"
+
+#include <httplib.h>
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <mutex>
+#include <sstream>
+#include <string>
+#include <thread>
+
+namespace fs = std::filesystem;
+using namespace caps;
+using nlohmann::json;
+
+namespace {
+
+const fs::path kTmp = fs::temp_directory_path() / "caps_test_server";
+const std::string kModel = (kTmp / "model").string();
+
+using caps_test::slurp;
+
+// Records warnings; once armed, holds the first progress report until released, so that a test
+// can send a second request while the first simulation is surely running.
+class HoldingReporter : public Reporter {
+ public:
+  void arm() {
+    std::lock_guard<std::mutex> lock(m_);
+    armed_ = true;
+    started_ = released_ = false;
+  }
+  bool wait_started() {
+    std::unique_lock<std::mutex> lock(m_);
+    return cv_.wait_for(lock, std::chrono::seconds(60), [this] { return started_; });
+  }
+  void release() {
+    std::lock_guard<std::mutex> lock(m_);
+    released_ = true;
+    cv_.notify_all();
+  }
+
+ protected:
+  void on_progress(const std::string&, double) override {
+    std::unique_lock<std::mutex> lock(m_);
+    if (!armed_) return;
+    armed_ = false;
+    started_ = true;
+    cv_.notify_all();
+    cv_.wait_for(lock, std::chrono::seconds(60), [this] { return released_; });
+  }
+
+ private:
+  std::mutex m_;
+  std::condition_variable cv_;
+  bool armed_ = false, started_ = false, released_ = false;
+};
+
+class ServerTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    fs::remove_all(kTmp);
+    fs::create_directories(kTmp / "web");
+    caps_test::make_phantom_model(kTmp, kModel);
+    std::ofstream(kTmp / "web" / "index.html") << "<!doctype html><title>planner</title>";
+    std::ofstream(kTmp / "web" / "app.js") << "export const planner = 1;\n";
+    std::ofstream(kTmp / "secret.txt") << "not to be served";
+
+    server::ServerOptions o;
+    o.model_dir = kModel;
+    o.port = 0;
+    o.web_root = (kTmp / "web").string();
+    reporter_ = std::make_unique<HoldingReporter>();
+    server_ = std::make_unique<server::PlannerServer>(o, reporter_.get());
+    server_->bind();
+    thread_ = std::thread([] { server_->listen(); });
+  }
+  static void TearDownTestSuite() {
+    server_->stop();
+    thread_.join();
+    server_.reset();
+  }
+
+  static httplib::Client client() {
+    httplib::Client c("127.0.0.1", server_->port());
+    c.set_read_timeout(300, 0);
+    c.set_url_encode(false);  // send the paths exactly as written
+    return c;
+  }
+  static httplib::Result post(const std::string& path, const std::string& body) {
+    return client().Post(path.c_str(), body, "application/json");
+  }
+  static httplib::Result get(const std::string& path) { return client().Get(path.c_str()); }
+
+  // The server still answers a good request after a bad one.
+  static void expect_still_serving() {
+    const auto r = get("/api/templates");
+    ASSERT_TRUE(r);
+    EXPECT_EQ(r->status, 200);
+    EXPECT_EQ(json::parse(r->body), json::parse(app::to_json(app::run_templates({}))));
+  }
+
+  static std::string error_of(const httplib::Result& r) {
+    return json::parse(r->body).at("error").get<std::string>();
+  }
+
+  static inline std::unique_ptr<HoldingReporter> reporter_;
+  static inline std::unique_ptr<server::PlannerServer> server_;
+  static inline std::thread thread_;
+};
+
+json plan_body() {
+  return {{"procedure", "v-y-advancement"},
+          {"at", "0,60"},
+          {"orientation", 90},
+          {"parameters", {{"length", 12}, {"advance", 3}}}};
+}
+
+// The message of the caps error `run` throws ("" if none).
+template <class F>
+std::string message_of(F&& run) {
+  try {
+    run();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+json comparable(json j) {
+  for (const char* k : {"output", "timings_s", "result_id", "result_url"}) j.erase(k);
+  return j;
+}
+
+}  // namespace
+
+TEST(ServerDefaults, BindsLoopbackUnlessToldOtherwise) {
+  EXPECT_EQ(std::string(server::kDefaultHost), "127.0.0.1");
+  EXPECT_EQ(server::ServerOptions{}.host, "127.0.0.1");
+  EXPECT_EQ(server::ServeRequest{}.host, "127.0.0.1");
+  EXPECT_EQ(server::kMaxBodyBytes, 1u << 20);
+  EXPECT_TRUE(server::is_loopback("127.0.0.1"));
+  EXPECT_TRUE(server::is_loopback("::1"));
+  EXPECT_TRUE(server::is_loopback("localhost"));
+  EXPECT_FALSE(server::is_loopback("0.0.0.0"));
+  EXPECT_FALSE(server::is_loopback("192.168.1.5"));
+}
+
+TEST(ServerErrors, EachErrorKindHasItsStatusAndKeepsItsMessage) {
+  EXPECT_EQ(server::error_response(InvalidInput("bad value")).status, 400);
+  EXPECT_EQ(server::error_response(InvalidInput("bad value")).message, "bad value");
+  EXPECT_EQ(server::error_response(IoError("x.json: cannot read")).status, 400);
+  const auto named = server::error_response(InvalidParameter("give {apex_angle} or {width}"));
+  EXPECT_EQ(named.status, 400);
+  EXPECT_EQ(named.message, "give apex_angle or width");  // the JSON keys
+  EXPECT_EQ(server::error_response(Cancelled("cancelled by the caller")).status, 409);
+  const SolverError solver("singular stiffness", 3, 0, 1);
+  EXPECT_EQ(server::error_response(solver).status, 422);
+  EXPECT_EQ(server::error_response(solver).message, solver.what());
+  EXPECT_EQ(server::error_response(Error("internal")).status, 500);
+  EXPECT_EQ(server::error_response(std::runtime_error("other")).status, 500);
+}
+
+TEST_F(ServerTest, ListensOnLoopbackAndWarnsForAnotherAddress) {
+  EXPECT_GT(server_->port(), 0);
+  EXPECT_EQ(server_->url(), "http://127.0.0.1:" + std::to_string(server_->port()) + "/");
+  Reporter reporter;
+  server::ServerOptions o;
+  o.model_dir = kModel;
+  o.port = 0;
+  server::PlannerServer quiet(o, &reporter);
+  quiet.bind();
+  EXPECT_TRUE(reporter.warnings().empty());
+  o.host = "0.0.0.0";
+  server::PlannerServer open(o, &reporter);
+  open.bind();
+  ASSERT_EQ(reporter.warnings().size(), 1u);
+  EXPECT_NE(reporter.warnings()[0].find("0.0.0.0"), std::string::npos);
+}
+
+TEST_F(ServerTest, AMissingModelIsRefusedWithTheCliMessage) {
+  server::ServerOptions o;
+  o.model_dir = (kTmp / "nowhere").string();
+  const std::string cli_message = message_of([&] { PatientModel::load(o.model_dir); });
+  ASSERT_FALSE(cli_message.empty());
+  EXPECT_EQ(message_of([&] { server::PlannerServer refused(o); }), cli_message);
+}
+
+TEST_F(ServerTest, ServesTheModelTemplatesAndStaticFilesWithTheirTypes) {
+  const auto model = get("/api/model");
+  ASSERT_TRUE(model);
+  EXPECT_EQ(model->status, 200);
+  EXPECT_EQ(model->get_header_value("Content-Type"), "application/json");
+  EXPECT_EQ(json::parse(model->body), json::parse(slurp(fs::path(kModel) / "model.json")));
+  const auto skin = get("/api/model/skin.ply");
+  ASSERT_TRUE(skin);
+  EXPECT_EQ(skin->status, 200);
+  EXPECT_EQ(skin->body, slurp(fs::path(kModel) / "skin.ply"));
+  expect_still_serving();
+  const auto index = get("/");
+  ASSERT_TRUE(index);
+  EXPECT_EQ(index->status, 200);
+  EXPECT_EQ(index->get_header_value("Content-Type"), "text/html; charset=utf-8");
+  EXPECT_NE(index->body.find("planner"), std::string::npos);
+  const auto js = get("/app.js");
+  ASSERT_TRUE(js);
+  EXPECT_EQ(js->status, 200);
+  EXPECT_EQ(js->get_header_value("Content-Type"), "text/javascript; charset=utf-8");
+  const auto none = get("/nothing.js");
+  ASSERT_TRUE(none);
+  EXPECT_EQ(none->status, 404);
+  EXPECT_NE(error_of(none).find("no such file"), std::string::npos);
+}
+
+TEST_F(ServerTest, NoPathOutsideTheWebRootIsServed) {
+  for (const std::string path :
+       {"/../../etc/passwd", "/%2e%2e/%2e%2e/etc/passwd", "/..%2f..%2fsecret.txt", "/../secret.txt",
+        "/%2E%2E/secret.txt", "/api/model/../../secret.txt", "/api/model/%2e%2e/secret.txt",
+        "/api/results/1/..%2f..%2f..%2f..%2fetc%2fpasswd"}) {
+    const auto r = get(path);
+    ASSERT_TRUE(r) << path;
+    EXPECT_EQ(r->status, 403) << path;
+    EXPECT_NE(error_of(r).find("leaves the served folder"), std::string::npos) << path;
+    EXPECT_EQ(r->body.find("root:"), std::string::npos) << path;
+    EXPECT_EQ(r->body.find("not to be served"), std::string::npos) << path;
+    expect_still_serving();
+  }
+  // A symbolic link out of the root is refused too.
+  fs::create_symlink(kTmp / "secret.txt", kTmp / "web" / "link.txt");
+  const auto link = get("/link.txt");
+  ASSERT_TRUE(link);
+  EXPECT_EQ(link->status, 403);
+  EXPECT_EQ(link->body.find("not to be served"), std::string::npos);
+  expect_still_serving();
+}
+
+TEST_F(ServerTest, BadRequestsGetTheirStatusAndTheCliMessage) {
+  // Oversized body: 413, before anything is parsed.
+  const auto big = post("/api/plan/check", std::string(server::kMaxBodyBytes + 1, ' '));
+  ASSERT_TRUE(big);
+  EXPECT_EQ(big->status, 413);
+  EXPECT_NE(error_of(big).find("larger than"), std::string::npos);
+  expect_still_serving();
+
+  // Malformed JSON: 400.
+  for (const char* path : {"/api/plan/new", "/api/plan/check", "/api/simulate"}) {
+    const auto bad = post(path, R"({"procedure": )");
+    ASSERT_TRUE(bad);
+    EXPECT_EQ(bad->status, 400) << path;
+    EXPECT_NE(error_of(bad).find("not valid JSON"), std::string::npos) << bad->body;
+    expect_still_serving();
+  }
+
+  // A wrong field type: 400 naming the key, as the JSON request reader of the CLI does.
+  json wrong = plan_body();
+  wrong["orientation"] = "ninety";
+  const auto typed = post("/api/plan/new", wrong.dump());
+  ASSERT_TRUE(typed);
+  EXPECT_EQ(typed->status, 400);
+  EXPECT_EQ(error_of(typed), "plan new request: \"orientation\" must be a number, not \"ninety\"");
+  expect_still_serving();
+  const auto sim_typed = post("/api/simulate", R"({"plan": {}, "options": {"layers": "two"}})");
+  ASSERT_TRUE(sim_typed);
+  EXPECT_EQ(sim_typed->status, 400);
+  EXPECT_NE(error_of(sim_typed).find("\"layers\" must be a whole number"), std::string::npos);
+
+  // The server's own keys are refused.
+  json with_model = plan_body();
+  with_model["model"] = "/etc";
+  const auto own = post("/api/plan/new", with_model.dump());
+  ASSERT_TRUE(own);
+  EXPECT_EQ(own->status, 400);
+  EXPECT_NE(error_of(own).find("\"model\" is set by the server"), std::string::npos);
+
+  // No file named in a request is opened.
+  const auto file = post("/api/plan/new", R"({"procedure": "/etc/passwd.json", "at": "0,60"})");
+  ASSERT_TRUE(file);
+  EXPECT_EQ(file->status, 400);
+  EXPECT_NE(error_of(file).find("the server opens no procedure files"), std::string::npos);
+
+  // A parameter outside its clinical range: the app's own message (the CLI's, keys as in JSON).
+  json range = {{"procedure", "z-plasty"}, {"at", "0,60"}, {"parameters", {{"angle", 20}}}};
+  app::PlanNewRequest pn;
+  pn.procedure = "z-plasty";
+  pn.model = kModel;
+  pn.at = "0,60";
+  pn.parameters = {{"angle", 20}};
+  pn.output = (kTmp / "refused.json").string();
+  const std::string app_message = message_of([&] { app::run_plan_new(pn); });
+  ASSERT_FALSE(app_message.empty());
+  const auto refused = post("/api/plan/new", range.dump());
+  ASSERT_TRUE(refused);
+  EXPECT_EQ(refused->status, 400);
+  EXPECT_EQ(error_of(refused), app_message);
+
+  // A plan that cannot be checked: the message of caps plan check on the same file.
+  const std::string broken = R"({"format": "caps-plan", "points": "none"})";
+  std::ofstream(kTmp / "broken.json") << broken;
+  app::PlanCheckRequest pc;
+  pc.plan = (kTmp / "broken.json").string();
+  pc.model = kModel;
+  const std::string check_message = message_of([&] { app::run_plan_check(pc); });
+  ASSERT_FALSE(check_message.empty());
+  const auto check = post("/api/plan/check", broken);
+  ASSERT_TRUE(check);
+  EXPECT_EQ(check->status, 400);
+  // The same message, naming the server's copy of the body instead of the user's file.
+  const std::string got = error_of(check);
+  EXPECT_EQ(got.substr(got.find(".json") + 5),
+            check_message.substr(check_message.find(".json") + 5));
+
+  // No such route.
+  const auto route = post("/api/nothing", "{}");
+  ASSERT_TRUE(route);
+  EXPECT_EQ(route->status, 404);
+  EXPECT_NE(error_of(route).find("no such route"), std::string::npos);
+  expect_still_serving();
+}
+
+TEST_F(ServerTest, APlanMadeAndSimulatedThroughTheApiEqualsTheAppResult) {
+  // plan new through the API and through app:: with the same inputs.
+  const auto planned = post("/api/plan/new", plan_body().dump());
+  ASSERT_TRUE(planned);
+  ASSERT_EQ(planned->status, 200) << planned->body;
+  const json plan = json::parse(planned->body);
+  app::PlanNewRequest pn;
+  pn.procedure = "v-y-advancement";
+  pn.model = kModel;
+  pn.at = "0,60";
+  pn.orientation = 90;
+  pn.parameters = {{"length", 12}, {"advance", 3}};
+  pn.output = (kTmp / "vy.json").string();
+  pn.force = true;
+  EXPECT_EQ(plan, json::parse(app::to_json(app::run_plan_new(pn))));
+  EXPECT_EQ(plan.at("ok"), true);
+
+  // plan check of the plan the API returned.
+  const auto checked = post("/api/plan/check", planned->body);
+  ASSERT_TRUE(checked);
+  ASSERT_EQ(checked->status, 200) << checked->body;
+  EXPECT_EQ(json::parse(checked->body).at("ok"), true);
+
+  // simulate through the API and through app:: with the same options.
+  const json body = {{"plan", plan}, {"options", {{"mesh_size", 2.5}, {"undermine", 4}}}};
+  const auto simulated = post("/api/simulate", body.dump());
+  ASSERT_TRUE(simulated);
+  ASSERT_EQ(simulated->status, 200) << simulated->body;
+  const json api = json::parse(simulated->body);
+  app::SimulateRequest s;
+  s.model = kModel;
+  s.plan = pn.output;
+  s.output = (kTmp / "vy_sim").string();
+  s.force = true;
+  s.meshing.mesh_size = 2.5;
+  s.meshing.undermine = 4;
+  const app::SimulateResult direct = app::run_simulate(s);
+  ASSERT_GT(direct.closing_force_n, 0);
+  EXPECT_NEAR(api.at("closing_force_n").get<double>(), direct.closing_force_n,
+              1e-9 * direct.closing_force_n);
+  EXPECT_EQ(comparable(api), comparable(json::parse(app::to_json(direct))));
+  // ... and through the caps program, on the plan file the API returned.
+  const fs::path api_plan = kTmp / "vy_api.json";
+  std::ofstream(api_plan) << planned->body;
+  const auto cli = caps_test::caps("simulate --model " + kModel + " --plan " + api_plan.string() +
+                                   " -o " + (kTmp / "vy_cli").string() +
+                                   " --mesh-size 2.5 --undermine 4 --force -q --json");
+  ASSERT_EQ(cli.code, 0) << cli.out;
+  const json typed = json::parse(cli.out);
+  EXPECT_NEAR(api.at("closing_force_n").get<double>(), typed.at("closing_force_n").get<double>(),
+              1e-9 * direct.closing_force_n);
+  EXPECT_EQ(comparable(api), comparable(typed));
+
+  // The result's files are served from the server's work folder.
+  const std::string url = api.at("result_url");
+  const auto result = get(url + "result.json");
+  ASSERT_TRUE(result);
+  EXPECT_EQ(result->status, 200);
+  EXPECT_EQ(result->get_header_value("Content-Type"), "application/json");
+  EXPECT_EQ(json::parse(result->body),
+            json::parse(slurp(fs::path(api.at("output").get<std::string>()) / "result.json")));
+  const auto vtu = get(url + "result.vtu");
+  ASSERT_TRUE(vtu);
+  EXPECT_EQ(vtu->status, 200);
+  EXPECT_TRUE(fs::path(api.at("output").get<std::string>())
+                  .string()
+                  .rfind(server_->work_dir().string(), 0) == 0);
+}
+
+TEST_F(ServerTest, ANewerSimulationCancelsTheOlderOne) {
+  const auto planned = post("/api/plan/new", plan_body().dump());
+  ASSERT_TRUE(planned);
+  ASSERT_EQ(planned->status, 200);
+  const std::string body =
+      json{{"plan", json::parse(planned->body)}, {"options", {{"mesh_size", 2.5}}}}.dump();
+  reporter_->arm();
+  int first_status = 0, second_status = 0;
+  std::string first_body;
+  std::thread first([&] {
+    const auto r = post("/api/simulate", body);
+    first_status = r ? r->status : -1;
+    first_body = r ? r->body : "";
+  });
+  ASSERT_TRUE(reporter_->wait_started());
+  std::thread second([&] {
+    const auto r = post("/api/simulate", body);
+    second_status = r ? r->status : -1;
+  });
+  // The second request is taken as soon as it arrives; then the first may go on (and stop).
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  reporter_->release();
+  first.join();
+  second.join();
+  EXPECT_EQ(first_status, 409);
+  EXPECT_NE(first_body.find("cancelled by a newer simulate request"), std::string::npos);
+  EXPECT_EQ(second_status, 200);
+  expect_still_serving();
+}
+
+TEST_F(ServerTest, WithoutAWebRootServesThePlaceholderPageOnly) {
+  server::ServerOptions o;
+  o.model_dir = kModel;
+  o.port = 0;
+  server::PlannerServer placeholder(o);
+  EXPECT_EQ(placeholder.web_root(), server::default_web_root());
+  placeholder.bind();
+  std::thread t([&] { placeholder.listen(); });
+  httplib::Client c("127.0.0.1", placeholder.port());
+  const auto index = c.Get("/");
+  const auto other = c.Get("/README.md");
+  placeholder.stop();
+  t.join();
+  ASSERT_TRUE(index);
+  EXPECT_EQ(index->status, 200);
+  EXPECT_EQ(index->get_header_value("Content-Type"), "text/html; charset=utf-8");
+  if (!fs::exists(server::default_web_root() / "dist"))
+    EXPECT_NE(index->body.find("/api/simulate"), std::string::npos);  // the API is listed
+  ASSERT_TRUE(other);
+  EXPECT_EQ(other->status, 404);
+}
