@@ -12,6 +12,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -43,6 +44,21 @@ class AppWithModel : public ::testing::Test {
     caps_test::make_phantom_model(kTmp, kModel);
   }
 };
+
+// Plans `procedure` at `at` on `model` into kTmp/`name` through app:: (replacing it).
+app::PlanResult plan_at(const std::string& procedure, const std::string& at,
+                        const std::map<std::string, double>& parameters, const std::string& name,
+                        const std::string& model = kModel, double orientation = 0) {
+  app::PlanNewRequest pn;
+  pn.procedure = procedure;
+  pn.model = model;
+  pn.at = at;
+  pn.orientation = orientation;
+  pn.parameters = parameters;
+  pn.output = (kTmp / name).string();
+  pn.force = true;
+  return app::run_plan_new(pn);
+}
 
 // A reporter that records what it is told, and cancels once asked to.
 class RecordingReporter : public Reporter {
@@ -178,15 +194,7 @@ TEST_F(AppWithModel, ACancelledRunStopsAndLeavesNoOutput) {
   s.model = kModel;
   s.plan = (kTmp / "cancel_plan.json").string();
   s.output = (kTmp / "cancelled").string();
-  app::PlanNewRequest pn;
-  pn.procedure = "ellipse";
-  pn.model = kModel;
-  pn.at = "0,60";
-  pn.orientation = 90;
-  pn.parameters = {{"length", 15}, {"width", 4}};
-  pn.output = s.plan;
-  pn.force = true;
-  app::run_plan_new(pn);
+  plan_at("ellipse", "0,60", {{"length", 15}, {"width", 4}}, "cancel_plan.json", kModel, 90);
   RecordingReporter reporter;
   reporter.cancel = true;
   EXPECT_THROW(app::run_simulate(s, &reporter), Cancelled);
@@ -196,18 +204,12 @@ TEST_F(AppWithModel, ACancelledRunStopsAndLeavesNoOutput) {
 TEST_F(AppWithModel, WarningsReachResultJsonSummaryJsonAndTheReport) {
   // An ellipse low on the phantom's side: the automatic extent (3 x the wound) would leave the
   // valid cells, so the mesher limits it and warns.
-  app::PlanNewRequest pn;
-  pn.procedure = "ellipse";
-  pn.model = kModel;
-  pn.at = "90,-65";
-  pn.parameters = {{"length", 15}, {"width", 4}};
-  pn.output = (kTmp / "top.json").string();
-  app::run_plan_new(pn);
+  const std::string plan = plan_at("ellipse", "90,-65", {{"length", 15}, {"width", 4}}, "top.json").output;
   const std::string limited = "the extent was limited to";
 
   app::MeshRequest m;
   m.model = kModel;
-  m.plan = pn.output;
+  m.plan = plan;
   m.output = (kTmp / "top_mesh").string();
   RecordingReporter reporter;
   const app::MeshResult mesh = app::run_mesh(m, &reporter);
@@ -221,7 +223,7 @@ TEST_F(AppWithModel, WarningsReachResultJsonSummaryJsonAndTheReport) {
 
   app::SimulateRequest s;
   s.model = kModel;
-  s.plan = pn.output;
+  s.plan = plan;
   s.output = (kTmp / "top_sim").string();
   const app::SimulateResult sim = app::run_simulate(s);
   EXPECT_EQ(sim.warnings, mesh.warnings);
@@ -229,7 +231,7 @@ TEST_F(AppWithModel, WarningsReachResultJsonSummaryJsonAndTheReport) {
 
   app::CompareRequest c;
   c.model = kModel;
-  c.plan = pn.output;
+  c.plan = plan;
   c.output = (kTmp / "top_compare").string();
   const app::CompareResult cmp = app::run_compare(c);
   ASSERT_FALSE(cmp.warnings.empty());
@@ -248,13 +250,8 @@ TEST_F(AppWithModel, APlanFindsItsCopiedModelAndRefusesAnother) {
   fs::create_directories(site);
   const fs::path model_here = site / "model";
   fs::copy(kModel, model_here, fs::copy_options::recursive);
-  app::PlanNewRequest pn;
-  pn.procedure = "ellipse";
-  pn.model = model_here.string();
-  pn.at = "0,60";
-  pn.output = (site / "e.json").string();
-  app::run_plan_new(pn);
-  EXPECT_EQ(json::parse(slurp(pn.output))["model_relative"], "model");
+  const std::string plan = plan_at("ellipse", "0,60", {}, "site/e.json", model_here.string()).output;
+  EXPECT_EQ(json::parse(slurp(plan))["model_relative"], "model");
   const fs::path copy = kTmp / "copy";
   fs::create_directories(copy);
   fs::copy(site, copy / "site", fs::copy_options::recursive);
@@ -291,16 +288,10 @@ TEST_F(AppWithModel, AWoundNearTheModelsTopIsMeshedSoThatItCanBeDrawn) {
   // 20 mm below the top of the phantom's grid the automatic extent would reach the last rows,
   // where the renderer cannot stitch the skin: the mesher keeps clear of them (and says so), so
   // the simulation renders instead of failing after the solve.
-  app::PlanNewRequest pn;
-  pn.procedure = "ellipse";
-  pn.model = kModel;
-  pn.at = "90,55";
-  pn.parameters = {{"length", 15}, {"width", 4}};
-  pn.output = (kTmp / "near_top.json").string();
-  app::run_plan_new(pn);
+  const std::string plan = plan_at("ellipse", "90,55", {{"length", 15}, {"width", 4}}, "near_top.json").output;
   app::SimulateRequest s;
   s.model = kModel;
-  s.plan = pn.output;
+  s.plan = plan;
   s.output = (kTmp / "near_top").string();
   s.render = true;
   const app::SimulateResult r = app::run_simulate(s);
