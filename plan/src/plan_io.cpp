@@ -6,6 +6,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 #include "suture_json.hpp"
 
 namespace caps::plan {
@@ -65,6 +66,7 @@ std::string plan_to_json(const Plan& plan, const PlanReport* report) {
 }
 
 Plan parse_plan_json(const std::string& text, const std::string& source) {
+  check_json_depth(text, source);
   json j;
   try {
     j = json::parse(text);
@@ -156,9 +158,12 @@ void write_plan(const std::filesystem::path& path, const Plan& plan, const PlanR
 WoundBorder read_wound_border(const std::filesystem::path& path) {
   std::ifstream in(path);
   if (!in) throw IoError(cat(path.string(), ": cannot open the wound border file"));
+  std::stringstream text;
+  text << in.rdbuf();
+  check_json_depth(text.str(), path.string());
   json j;
   try {
-    in >> j;
+    j = json::parse(text.str());
   } catch (const std::exception& e) {
     throw InvalidInput(cat(path.string(), ": not valid JSON (", e.what(), ")"));
   }

@@ -8,6 +8,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 #include "caps/core/reporter.hpp"
 #include "caps/image/image_io.hpp"
 #include "caps/volume/isosurface.hpp"
@@ -30,6 +31,7 @@ Eigen::Vector3d vec3(const json& v) {
 double finite_or_zero(double x) { return std::isfinite(x) ? x : 0.0; }
 
 json parse_object(const std::string& text, const char* what) {
+  check_json_depth(text, cat("model.json: ", what));
   try {
     return text.empty() ? json::object() : json::parse(text);
   } catch (const json::exception& e) {
@@ -147,9 +149,12 @@ json load_model_json(const fs::path& dir) {
                       "`caps model from-volume`"));
   std::ifstream in(file);
   if (!in) throw IoError(cat(file.string(), ": missing; is ", dir.string(), " a caps model?"));
+  std::stringstream text;
+  text << in.rdbuf();
+  check_json_depth(text.str(), file.string());
   json j;
   try {
-    in >> j;
+    j = json::parse(text.str());
   } catch (const json::exception& e) {
     throw InvalidInput(cat(file.string(), ": not valid JSON (", e.what(), ")"));
   }
