@@ -1,6 +1,8 @@
 // The caps program as a user runs it: help, exit codes, --json, refusing to clobber, and the
 // catalogue of bad inputs (each exit code 2, a message naming the file, no output left behind).
 #include <gtest/gtest.h>
+
+#include "cli_outcome.hpp"
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -17,15 +19,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Outcome {
-  int code;
-  std::string out, err;
-};
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
+using caps_test::Outcome;
+using caps_test::slurp;
+using caps_test::write_file;
 
 class Cli : public ::testing::Test {
  protected:
@@ -37,22 +33,9 @@ class Cli : public ::testing::Test {
   }
   static void TearDownTestSuite() { fs::remove_all(dir); }
 
-  static Outcome run(const std::string& args) {
-    const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-    const std::string cmd = std::string(CAPS_EXE) + " " + args + " >" + out.string() + " 2>" +
-                            err.string() + " </dev/null";
-    const int status = std::system(cmd.c_str());
-    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(out), slurp(err)};
-  }
+  static Outcome run(const std::string& args) { return caps_test::run_caps(dir, args); }
   // A small phantom CT, written once.
-  static fs::path phantom() {
-    const fs::path p = dir / "phantom.nii.gz";
-    if (!fs::exists(p)) {
-      const Outcome r = run("phantom -o " + p.string() + " --size 80,80,72 --spacing 3.2,3.2,3.2 -q");
-      EXPECT_EQ(r.code, 0) << r.err;
-    }
-    return p;
-  }
+  static fs::path phantom() { return caps_test::small_phantom(dir); }
   // Expects a refusal: exit code 2, the message names `what`, and `output` was not created.
   static void expect_refused(const std::string& args, const std::string& what,
                              const fs::path& output) {
@@ -67,8 +50,6 @@ class Cli : public ::testing::Test {
   }
 };
 fs::path Cli::dir;
-
-void write_file(const fs::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
 
 }  // namespace
 
