@@ -321,6 +321,21 @@ TEST_F(Hostile, NonFiniteSpacingAndVoxelsAreRefused) {
                      out, nan_voxel);
 }
 
+TEST_F(Hostile, NiftiIsReadFromTheFileGivenNotASameNamedOne) {
+  // a.nii.gz holds zeros; a different a.nii beside it holds 5s: the voxels come from a.nii.gz.
+  fs::create_directories(dir / "same_name");
+  const fs::path gz = dir / "same_name" / "a.nii.gz", plain = dir / "same_name" / "a.nii";
+  write_file(gz, gzip(nifti(4, 4, 4, 4, 16, 1.0f, std::string(128, '\0'))));
+  std::string fives(128, '\0');
+  for (std::size_t i = 0; i < fives.size(); i += 2) fives[i] = 5;
+  write_file(plain, nifti(4, 4, 4, 4, 16, 1.0f, fives));
+  Outcome r = run("volume info " + gz.string());
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("values     0 .. 0"), std::string::npos) << r.out;
+  r = run("volume info " + plain.string());
+  EXPECT_NE(r.out.find("values     5 .. 5"), std::string::npos) << r.out;
+}
+
 // ---- plans and outputs: a small model, a plan and a box mesh
 
 class HostileModel : public Hostile {
@@ -380,6 +395,40 @@ TEST_F(HostileModel, AnOutputThatIsOrHoldsAnInputIsRefusedEvenWithForce) {
   expect_refused("solve " + mesh.string() + "/. -o " + (mesh.parent_path() / "." / "box_mesh").string() +
                      " --force",
                  {"is the input"}, mesh, mesh);
+}
+
+TEST_F(HostileModel, JsonFieldsOfTheWrongTypeAreInputErrors) {
+  // A plan whose "format" is a number, or whose format_version is a string.
+  const std::string text = slurp(plan());
+  for (const auto& [from, to] : std::vector<std::pair<std::string, std::string>>{
+           {"\"format\": \"caps-plan\"", "\"format\": 5"},
+           {"\"format_version\": 1", "\"format_version\": \"1\""}}) {
+    const auto at = text.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    std::string bad = text;
+    bad.replace(at, from.size(), to);
+    const fs::path p = dir / "typed_plan.json";
+    write_file(p, bad);
+    expect_refused_new("plan check " + p.string(), {"typed_plan.json", "format"}, dir / "none", p);
+  }
+  // A model.json whose format_version is a string.
+  const fs::path m = dir / "typed_model";
+  fs::remove_all(m);
+  fs::copy(model(), m, fs::copy_options::recursive);
+  std::string mj = slurp(m / "model.json");
+  const auto at = mj.find("\"format_version\": 1");
+  ASSERT_NE(at, std::string::npos);
+  mj.replace(at, std::string("\"format_version\": 1").size(), "\"format_version\": \"1\"");
+  write_file(m / "model.json", mj);
+  expect_refused_new("model info " + m.string(), {"model.json", "format_version"}, dir / "none", m);
+  // files.r_skin = 5
+  mj.replace(at, std::string("\"format_version\": \"1\"").size(), "\"format_version\": 1");
+  const auto r_skin = mj.find("\"r_skin\": \"");
+  ASSERT_NE(r_skin, std::string::npos);
+  const auto value = r_skin + std::string("\"r_skin\": ").size();
+  mj.replace(value, mj.find('"', value + 1) + 1 - value, "5");
+  write_file(m / "model.json", mj);
+  expect_refused_new("model info " + m.string(), {"model.json", "r_skin"}, dir / "none", m);
 }
 
 }  // namespace

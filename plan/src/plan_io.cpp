@@ -73,11 +73,12 @@ Plan parse_plan_json(const std::string& text, const std::string& source) {
   } catch (const json::exception& e) {
     throw InvalidInput(cat(source, ": not valid JSON (", e.what(), ")"));
   }
-  if (!j.is_object() || j.value("format", "") != "caps-plan")
+  // The header's fields are read by hand: json::value() throws on a field of another type.
+  if (!j.is_object() || !j.contains("format") || j["format"] != "caps-plan")
     throw InvalidInput(cat(source, ": not a caps plan (\"format\" must be \"caps-plan\")"));
-  const int version = j.value("format_version", 0);
-  if (version != kPlanFormatVersion)
-    throw InvalidInput(cat(source, ": plan format_version ", version,
+  const json version = j.contains("format_version") ? j["format_version"] : json(0);
+  if (!version.is_number_integer() || version.get<long long>() != kPlanFormatVersion)
+    throw InvalidInput(cat(source, ": plan format_version ", version.dump(),
                            " is not supported (this caps reads version ", kPlanFormatVersion, ")"));
   Plan plan;
   std::string field;
