@@ -191,6 +191,24 @@ TEST_F(Hostile, GltfNodeThatIsItsOwnChildIsRefused) {
                      {"cycle.gltf", "cycle"}, out, gltf);
 }
 
+TEST_F(Hostile, GltfIndicesOutOfRangeAreRefused) {
+  // One triangle whose indices (uint16) are 0, 1, 7: there are 3 vertices.
+  const fs::path out = dir / "gltf_index_out";
+  const fs::path gltf = dir / "bad_index.gltf";
+  write_file(gltf,
+             "{\"asset\": {\"version\": \"2.0\"}, \"scene\": 0, \"scenes\": [{\"nodes\": [0]}], "
+             "\"nodes\": [{\"mesh\": 0}], \"meshes\": [{\"primitives\": [{\"attributes\": "
+             "{\"POSITION\": 0}, \"indices\": 1}]}], \"accessors\": [{\"bufferView\": 0, "
+             "\"componentType\": 5126, \"count\": 3, \"type\": \"VEC3\"}, {\"bufferView\": 1, "
+             "\"componentType\": 5123, \"count\": 3, \"type\": \"SCALAR\"}], \"bufferViews\": "
+             "[{\"buffer\": 0, \"byteLength\": 36}, {\"buffer\": 0, \"byteOffset\": 36, "
+             "\"byteLength\": 6}], \"buffers\": [{\"byteLength\": 42, \"uri\": "
+             "\"data:application/octet-stream;base64,"
+             "AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAABAAcA\"}]}");
+  expect_refused_new("model from-scan " + gltf.string() + " --thickness 6 -o " + out.string(),
+                     {"bad_index.gltf", "index 2", "7"}, out, gltf);
+}
+
 TEST_F(Hostile, DicomFolderWithAStrayTextFileIsReadWithAWarning) {
   const fs::path ge = fs::path(CAPS_SHARED_DATA) / "ct" / "ge-head-tilt";
   if (!fs::exists(ge)) GTEST_SKIP() << "no shared DICOM data";

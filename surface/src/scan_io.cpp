@@ -9,6 +9,7 @@
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <new>
 #include <sstream>
 
 #include "caps/core/error.hpp"
@@ -210,8 +211,13 @@ ScanMesh read_gltf(const fs::path& path, const ScanReadOptions& o) {
       }
       if (prim.indices >= 0) {
         const AccessorView I = view_of(model, prim.indices, s.source);
-        for (std::size_t i = 0; i + 2 < I.count; i += 3)
+        for (std::size_t i = 0; i + 2 < I.count; i += 3) {
+          for (int k = 0; k < 3; ++k)
+            if (!(I.get(i + k, 0) >= 0 && I.get(i + k, 0) < static_cast<double>(P.count)))
+              throw InvalidInput(cat(s.source, ": index ", i + k, " of accessor ", prim.indices, " = ",
+                                     I.get(i + k, 0), " names no vertex of its ", P.count));
           F.emplace_back(base + int(I.get(i, 0)), base + int(I.get(i + 1, 0)), base + int(I.get(i + 2, 0)));
+        }
       } else {
         for (std::size_t i = 0; i + 2 < P.count; i += 3)
           F.emplace_back(base + int(i), base + int(i + 1), base + int(i + 2));
@@ -490,10 +496,18 @@ ScanMesh read_ply_scan(const fs::path& path, const ScanReadOptions& o) {
 ScanMesh read_scan_mesh(const fs::path& path, const ScanReadOptions& options) {
   if (!fs::exists(path)) throw IoError(cat(path.string(), ": no such file"));
   const std::string ext = lower(path.extension().string());
-  if (ext == ".glb" || ext == ".gltf") return read_gltf(path, options);
-  if (ext == ".vtk") return read_vtk(path, options);
-  if (ext == ".obj") return read_obj(path, options);
-  if (ext == ".ply") return read_ply_scan(path, options);
+  // Errors of the libraries underneath (tinygltf's containers, allocation) are the file's fault.
+  try {
+    if (ext == ".glb" || ext == ".gltf") return read_gltf(path, options);
+    if (ext == ".vtk") return read_vtk(path, options);
+    if (ext == ".obj") return read_obj(path, options);
+    if (ext == ".ply") return read_ply_scan(path, options);
+  } catch (const std::bad_alloc&) {
+    throw IoError(cat(path.string(), ": not enough memory to read it; its counts are probably "
+                                     "damaged"));
+  } catch (const std::logic_error& e) {  // out_of_range, length_error, invalid_argument
+    throw InvalidInput(cat(path.string(), ": damaged or inconsistent (", e.what(), ")"));
+  }
   throw InvalidInput(cat(path.string(), ": unknown scan format '", ext, "'; use .glb, .gltf, .ply, "
                                         ".obj or .vtk"));
 }

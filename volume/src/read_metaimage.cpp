@@ -5,6 +5,7 @@
 // Position) is the LPS position of voxel (0, 0, 0). AnatomicalOrientation is informational only
 // (ITK ignores it on reading too).
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstring>
@@ -177,7 +178,7 @@ Volume read_metaimage(const fs::path& file, const ReadOptions& options) {
                                  "ElementDataFile)"));
 
   const auto ndims_v = numbers(file, "NDims", hdr["NDims"], 1);
-  const int ndims = static_cast<int>(ndims_v[0]);
+  const int ndims = ndims_v[0] == 2 ? 2 : ndims_v[0] == 3 ? 3 : 0;
   if (ndims != 2 && ndims != 3)
     throw InvalidInput(cat(name, ": NDims = ", hdr["NDims"], "; caps reads 3-D (or 2-D) images"));
   const auto dims_v = numbers(file, "DimSize", hdr["DimSize"], ndims);
@@ -185,7 +186,7 @@ Volume read_metaimage(const fs::path& file, const ReadOptions& options) {
   for (double d : dims_v) {
     if (d != std::floor(d))
       throw InvalidInput(cat(name, ": DimSize = ", hdr["DimSize"], " must hold integers"));
-    sizes.push_back(static_cast<long long>(d));
+    sizes.push_back(static_cast<long long>(std::clamp(d, -1.0, 1e12)));  // check_dims refuses both ends
   }
   if (hdr.count("ElementNumberOfChannels") &&
       numbers(file, "ElementNumberOfChannels", hdr["ElementNumberOfChannels"], 1)[0] != 1)

@@ -4,6 +4,8 @@
 #include <cctype>
 #include <cmath>
 #include <cstring>
+#include <new>
+#include <stdexcept>
 #include <fstream>
 
 #include "caps/core/error.hpp"
@@ -152,16 +154,10 @@ constexpr const char* kAccepted =
 
 }  // namespace
 
-Volume read_volume(const fs::path& input, const ReadOptions& options) {
-  if (!(options.max_voxels >= 1) || !(options.max_bytes >= 1))
-    throw InvalidInput(cat("max_voxels (", options.max_voxels, ") and max_bytes (",
-                           options.max_bytes, ") must be positive numbers"));
-  std::error_code ec;
-  const auto status = fs::status(input, ec);
-  if (ec || !fs::exists(status))
-    throw IoError(cat(input.string(), ": no such file or folder; check the path"));
-  if (fs::is_directory(status)) return detail::read_dicom(input, options);
+namespace {
 
+Volume read_by_kind(const fs::path& input, const ReadOptions& options, bool is_directory) {
+  if (is_directory) return detail::read_dicom(input, options);
   const std::string name = detail::to_lower(input.filename().string());
   auto ends_with = [&](const std::string& suffix) {
     return name.size() >= suffix.size() &&
@@ -175,6 +171,27 @@ Volume read_volume(const fs::path& input, const ReadOptions& options) {
     return detail::read_dicom(input, options);
   throw InvalidInput(cat(input.string(), ": unrecognised file type '",
                          input.extension().string(), "'; caps reads ", kAccepted));
+}
+
+}  // namespace
+
+Volume read_volume(const fs::path& input, const ReadOptions& options) {
+  if (!(options.max_voxels >= 1) || !(options.max_bytes >= 1))
+    throw InvalidInput(cat("max_voxels (", options.max_voxels, ") and max_bytes (",
+                           options.max_bytes, ") must be positive numbers"));
+  std::error_code ec;
+  const auto status = fs::status(input, ec);
+  if (ec || !fs::exists(status))
+    throw IoError(cat(input.string(), ": no such file or folder; check the path"));
+  // Errors of the libraries underneath (allocation, containers) are the file's fault.
+  try {
+    return read_by_kind(input, options, fs::is_directory(status));
+  } catch (const std::bad_alloc&) {
+    throw IoError(cat(input.string(), ": not enough memory to read it within max_bytes (",
+                      options.max_bytes, "); lower --max-bytes or free memory"));
+  } catch (const std::logic_error& e) {  // out_of_range, length_error, invalid_argument
+    throw InvalidInput(cat(input.string(), ": damaged or inconsistent (", e.what(), ")"));
+  }
 }
 
 }  // namespace caps
