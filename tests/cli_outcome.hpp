@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
@@ -27,6 +28,15 @@ inline void write_file(const std::filesystem::path& p, const std::string& bytes)
   std::ofstream(p, std::ios::binary) << bytes;
 }
 
+/// A new empty folder `prefix` + the process id under the temporary folder.
+inline std::filesystem::path fresh_temp_dir(const std::string& prefix) {
+  const std::filesystem::path d =
+      std::filesystem::temp_directory_path() / (prefix + std::to_string(::getpid()));
+  std::filesystem::remove_all(d);
+  std::filesystem::create_directories(d);
+  return d;
+}
+
 /// Runs `caps args`, its stdout and stderr captured in files under `dir`.
 inline Outcome run_caps(const std::filesystem::path& dir, const std::string& args) {
   const std::filesystem::path out = dir / "stdout.txt", err = dir / "stderr.txt";
@@ -46,5 +56,16 @@ inline std::filesystem::path small_phantom(const std::filesystem::path& dir) {
   }
   return p;
 }
+
+/// A suite of caps runs sharing one temporary folder `dir`, which the suite's SetUpTestSuite
+/// creates (fresh_temp_dir) and which is removed after the suite.
+class CliTest : public ::testing::Test {
+ protected:
+  static inline std::filesystem::path dir;
+  static void TearDownTestSuite() { std::filesystem::remove_all(dir); }
+  static Outcome run(const std::string& args) { return run_caps(dir, args); }
+  // A small phantom CT, written once.
+  static std::filesystem::path phantom() { return small_phantom(dir); }
+};
 
 }  // namespace caps_test

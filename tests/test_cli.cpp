@@ -23,19 +23,9 @@ using caps_test::Outcome;
 using caps_test::slurp;
 using caps_test::write_file;
 
-class Cli : public ::testing::Test {
+class Cli : public caps_test::CliTest {
  protected:
-  static fs::path dir;
-  static void SetUpTestSuite() {
-    dir = fs::temp_directory_path() / ("caps_cli_" + std::to_string(::getpid()));
-    fs::remove_all(dir);
-    fs::create_directories(dir);
-  }
-  static void TearDownTestSuite() { fs::remove_all(dir); }
-
-  static Outcome run(const std::string& args) { return caps_test::run_caps(dir, args); }
-  // A small phantom CT, written once.
-  static fs::path phantom() { return caps_test::small_phantom(dir); }
+  static void SetUpTestSuite() { dir = caps_test::fresh_temp_dir("caps_cli_"); }
   // Expects a refusal: exit code 2, the message names `what`, and `output` was not created.
   static void expect_refused(const std::string& args, const std::string& what,
                              const fs::path& output) {
@@ -49,7 +39,6 @@ class Cli : public ::testing::Test {
           << "temporary left behind: " << e.path();
   }
 };
-fs::path Cli::dir;
 
 }  // namespace
 

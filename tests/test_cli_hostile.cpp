@@ -55,18 +55,9 @@ std::string nested(const std::string& key, int depth) {
          std::string(depth, ']') + "}";
 }
 
-class Hostile : public ::testing::Test {
+class Hostile : public caps_test::CliTest {
  protected:
-  static fs::path dir;
-  static void SetUpTestSuite() {
-    dir = fs::temp_directory_path() / ("caps_hostile_" + std::to_string(::getpid()));
-    fs::remove_all(dir);
-    fs::create_directories(dir);
-  }
-  static void TearDownTestSuite() { fs::remove_all(dir); }
-
-  static Outcome run(const std::string& args) { return caps_test::run_caps(dir, args); }
-  static fs::path phantom() { return caps_test::small_phantom(dir); }
+  static void SetUpTestSuite() { dir = caps_test::fresh_temp_dir("caps_hostile_"); }
   // Expects a refusal of `args`: exit code 2, every key word in the message, `output` not created,
   // no temporary left beside it, and `input` (a file or folder) unchanged.
   static void expect_refused(const std::string& args, const std::vector<std::string>& words,
@@ -93,7 +84,6 @@ class Hostile : public ::testing::Test {
     EXPECT_FALSE(fs::exists(output)) << output;
   }
 };
-fs::path Hostile::dir;
 
 // ---- crashes
 
