@@ -12,7 +12,7 @@
 
 namespace caps {
 
-/// Default largest voxel count a reader accepts (2^31; all volumes of a file together).
+/// Default largest voxel count a reader accepts (2^31; caps reads the first volume of a 4-D file).
 constexpr double kDefaultMaxVoxels = 2147483648.0;
 /// Default largest memory in bytes a reader allocates for voxel data (8 GiB): the float volume
 /// (4 bytes a voxel) plus the file's raw or decompressed voxel bytes.
