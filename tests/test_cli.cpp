@@ -1,6 +1,8 @@
 // The caps program as a user runs it: help, exit codes, --json, refusing to clobber, and the
 // catalogue of bad inputs (each exit code 2, a message naming the file, no output left behind).
 #include <gtest/gtest.h>
+
+#include "cli_outcome.hpp"
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -17,42 +19,13 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Outcome {
-  int code;
-  std::string out, err;
-};
+using caps_test::Outcome;
+using caps_test::slurp;
+using caps_test::write_file;
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-class Cli : public ::testing::Test {
+class Cli : public caps_test::CliTest {
  protected:
-  static fs::path dir;
-  static void SetUpTestSuite() {
-    dir = fs::temp_directory_path() / ("caps_cli_" + std::to_string(::getpid()));
-    fs::remove_all(dir);
-    fs::create_directories(dir);
-  }
-  static void TearDownTestSuite() { fs::remove_all(dir); }
-
-  static Outcome run(const std::string& args) {
-    const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-    const std::string cmd = std::string(CAPS_EXE) + " " + args + " >" + out.string() + " 2>" +
-                            err.string() + " </dev/null";
-    const int status = std::system(cmd.c_str());
-    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(out), slurp(err)};
-  }
-  // A small phantom CT, written once.
-  static fs::path phantom() {
-    const fs::path p = dir / "phantom.nii.gz";
-    if (!fs::exists(p)) {
-      const Outcome r = run("phantom -o " + p.string() + " --size 80,80,72 --spacing 3.2,3.2,3.2 -q");
-      EXPECT_EQ(r.code, 0) << r.err;
-    }
-    return p;
-  }
+  static void SetUpTestSuite() { dir = caps_test::fresh_temp_dir("caps_cli_"); }
   // Expects a refusal: exit code 2, the message names `what`, and `output` was not created.
   static void expect_refused(const std::string& args, const std::string& what,
                              const fs::path& output) {
@@ -66,9 +39,6 @@ class Cli : public ::testing::Test {
           << "temporary left behind: " << e.path();
   }
 };
-fs::path Cli::dir;
-
-void write_file(const fs::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
 
 }  // namespace
 

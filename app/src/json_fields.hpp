@@ -9,6 +9,7 @@
 
 #include "caps/app/fields.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 
 namespace caps::app::detail {
 
@@ -99,6 +100,7 @@ namespace caps::app {
 
 template <class Request>
 Request read_request(const std::string& json_text, const std::string& source) {
+  check_json_depth(json_text, source);
   detail::json j;
   try {
     j = detail::json::parse(json_text, nullptr, true, false);

@@ -13,6 +13,7 @@
 #include "caps/volume/read_volume.hpp"
 #include "json_fields.hpp"
 #include "numbers.hpp"
+#include "output_check.hpp"
 
 CAPS_APP_REQUEST_JSON(caps::app::FromVolumeRequest)
 CAPS_APP_REQUEST_JSON(caps::app::FromScanRequest)
@@ -62,6 +63,7 @@ std::string summary(const ModelResult& m) {
 // ---- from-volume --------------------------------------------------------------------------
 
 ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
   // Check the output and the options before the slow work, so a mistake fails at once.
   { OutputDirectory probe(r.output, r.force); }
   if (!(r.decimate > 0 && r.decimate <= 1))
@@ -96,6 +98,8 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   ReadOptions ro;
   ro.series_uid = r.series;
   ro.allow_missing_slices = r.allow_missing_slices;
+  ro.max_voxels = r.max_voxels;
+  ro.max_bytes = r.max_bytes;
   Volume v = read_volume(r.input, ro);
   if (r.modality == "CT") v.modality = Modality::CT;
   if (r.modality == "MR") v.modality = Modality::MR;
@@ -139,6 +143,7 @@ ScanMesh read_any_scan(const FromScanRequest& r) {
 }  // namespace
 
 ModelResult run_from_scan(const FromScanRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
   { OutputDirectory probe(r.output, r.force); }
   if (!r.thickness)
     throw InvalidInput("--thickness is required: the constant soft-tissue thickness in mm "
@@ -213,6 +218,7 @@ std::string to_json(const PathResult& p) {
 std::string summary(const PathResult& p) { return cat("-> ", p.output); }
 
 PathResult run_export_range(const ExportRangeRequest& r, Reporter*) {
+  detail::refuse_output_over_inputs(r);
   const PatientModel model = PatientModel::load(r.model);
   OutputDirectory out(r.output, r.force);
   write_cylindrical_scan(model, out.path(), r.r_scale);
@@ -221,6 +227,7 @@ PathResult run_export_range(const ExportRangeRequest& r, Reporter*) {
 }
 
 PathResult run_color_picture(const ColorPictureRequest& r, Reporter*) {
+  detail::refuse_output_over_inputs(r);
   if (fs::exists(r.output) && !r.force)
     throw InvalidInput(cat(r.output, ": exists; pass --force to replace it"));
   const PatientModel model = PatientModel::load(r.model);
@@ -236,6 +243,8 @@ PathResult run_color_picture(const ColorPictureRequest& r, Reporter*) {
 VolumeInfoResult run_volume_info(const VolumeInfoRequest& r, Reporter*) {
   ReadOptions ro;
   ro.series_uid = r.series;
+  ro.max_voxels = r.max_voxels;
+  ro.max_bytes = r.max_bytes;
   const Volume v = read_volume(r.input, ro);
   const auto [lo, hi] = std::minmax_element(v.data.begin(), v.data.end());
   const auto& g = v.geom;

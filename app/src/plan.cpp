@@ -16,6 +16,7 @@
 #include "caps/surface/patient_model.hpp"
 #include "json_fields.hpp"
 #include "numbers.hpp"
+#include "output_check.hpp"
 
 CAPS_APP_REQUEST_JSON(caps::app::PlanNewRequest)
 CAPS_APP_REQUEST_JSON(caps::app::PlanCheckRequest)
@@ -79,6 +80,7 @@ std::string summary(const PlanResult& r) {
 }
 
 PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
   refuse_existing(r.output, r.force);
   if (r.at.empty() == r.at_xyz.empty())
     throw InvalidInput("give the centre with --at THETA,Z or --at-xyz X,Y,Z");
@@ -116,6 +118,7 @@ PlanResult run_plan_check(const PlanCheckRequest& r, Reporter* reporter) {
 }
 
 PlanResult run_plan_show(const PlanShowRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
   refuse_existing(r.output, r.force);
   const plan::Plan p = plan::read_plan(r.plan);
   const PatientModel model = PatientModel::load(model_of(r.model, p, r.plan));
@@ -127,6 +130,7 @@ PlanResult run_plan_show(const PlanShowRequest& r, Reporter* reporter) {
 }
 
 PlanResult run_save_procedure(const SaveProcedureRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
   refuse_existing(r.output, r.force);
   const plan::Plan p = plan::read_plan(r.plan);
   const plan::PlanReport report = plan::check_plan_structure(p);

@@ -17,6 +17,7 @@
 #include "caps/render/skin_surface.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "json_fields.hpp"
+#include "output_check.hpp"
 
 CAPS_APP_REQUEST_JSON(caps::app::RenderRequest)
 
@@ -50,6 +51,7 @@ void check(const RenderRequest& r) {
 }  // namespace
 
 RenderResult run_render(const RenderRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
   const std::vector<render::View> views = parse_views(r.views.empty() ? "front,oblique,side,plan" : r.views);
   check(r);
   Progress progress(reporter, "rendering", 4);

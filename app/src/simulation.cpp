@@ -18,6 +18,7 @@
 #include "caps/surface/patient_model.hpp"
 #include "json_fields.hpp"
 #include "numbers.hpp"
+#include "output_check.hpp"
 
 CAPS_APP_REQUEST_JSON(caps::app::MeshRequest)
 CAPS_APP_REQUEST_JSON(caps::app::SimulateRequest)
@@ -75,6 +76,7 @@ double max_suture_force(const fem::SolveResult& r) {
 // ---- mesh ---------------------------------------------------------------------------------
 
 MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
   const fem::SimulateOptions o = simulate_options(r.meshing, {});
   const fem::WoundBorder border = border_of(r);
   OutputDirectory out(r.output, r.force);
@@ -149,6 +151,7 @@ std::string summary(const MeshResult& m) {
 // ---- simulate -----------------------------------------------------------------------------
 
 SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
   const fem::SimulateOptions o = simulate_options(r.meshing, r.solver);
   if (r.tension_map && !r.render)
     throw InvalidInput("--tension-map draws on the rendered images; add --render");
@@ -215,6 +218,7 @@ std::string summary(const SimulateResult& s) {
 // ---- solve --------------------------------------------------------------------------------
 
 SolveResult run_solve(const SolveRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
   fem::SolveOptions o = simulate_options({}, r.solver).solve;
   if (r.E && !(*r.E > 0 && std::isfinite(*r.E)))
     throw InvalidInput(cat("--E ", *r.E, ": give Young's modulus in kPa, > 0"));
@@ -296,6 +300,7 @@ std::string summary(const BoxResult& b) {
 // ---- compare ------------------------------------------------------------------------------
 
 CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
   if (r.meshing.constant_thickness != 0)
     throw InvalidInput("compare meshes the measured and a constant thickness itself; give the "
                        "constant one with --thickness, not --constant-thickness");

@@ -7,6 +7,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 #include "vtu.hpp"
 
 namespace fs = std::filesystem;
@@ -174,9 +175,12 @@ Mesh read_mesh_dir(const fs::path& dir) {
     throw IoError(cat(dir.string(), ": not a directory; pass a mesh directory with mesh.json and mesh.vtu"));
   std::ifstream jin(jpath);
   if (!jin) throw IoError(cat(jpath.string(), ": cannot open; is this a caps mesh directory?"));
+  std::stringstream jtext;
+  jtext << jin.rdbuf();
+  check_json_depth(jtext.str(), jpath.string());
   nlohmann::json j;
   try {
-    jin >> j;
+    j = nlohmann::json::parse(jtext.str());
   } catch (const std::exception& e) {
     throw InvalidInput(cat(jpath.string(), ": not valid JSON: ", e.what()));
   }

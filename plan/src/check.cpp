@@ -13,6 +13,11 @@ namespace caps::plan {
 
 namespace {
 
+// Plan points beyond these are damage, not surgery (a head is well under a metre tall); they are
+// refused before any geometry, which would overflow or lose all precision with them.
+constexpr double kMaxAbsThetaDeg = 720.0;
+constexpr double kMaxAbsZMm = 1000.0;
+
 double cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); }
 
 // Whether segments pq and rs meet (touching or overlapping counts), in mm.
@@ -65,6 +70,11 @@ PlanReport check_plan_structure(const Plan& plan) {
   for (std::size_t i = 0; i < plan.points.size(); ++i)
     if (!std::isfinite(plan.points[i].theta_deg) || !std::isfinite(plan.points[i].z_mm))
       throw InvalidInput(cat("point ", i, ": theta and z must be finite numbers"));
+    else if (std::abs(plan.points[i].theta_deg) > kMaxAbsThetaDeg ||
+             std::abs(plan.points[i].z_mm) > kMaxAbsZMm)
+      throw InvalidInput(cat("point ", i, ": theta ", plan.points[i].theta_deg, " deg, z ",
+                             plan.points[i].z_mm, " mm is outside any head (|theta| <= ",
+                             kMaxAbsThetaDeg, " deg, |z| <= ", kMaxAbsZMm, " mm)"));
   if (!plan.frame.local_to_theta_z.allFinite() ||
       std::abs(plan.frame.local_to_theta_z.determinant()) < 1e-12)
     throw InvalidInput("the plan's frame (local_to_theta_z) is singular or not finite");

@@ -6,6 +6,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 #include "suture_json.hpp"
 
 namespace caps::plan {
@@ -65,17 +66,19 @@ std::string plan_to_json(const Plan& plan, const PlanReport* report) {
 }
 
 Plan parse_plan_json(const std::string& text, const std::string& source) {
+  check_json_depth(text, source);
   json j;
   try {
     j = json::parse(text);
   } catch (const json::exception& e) {
     throw InvalidInput(cat(source, ": not valid JSON (", e.what(), ")"));
   }
-  if (!j.is_object() || j.value("format", "") != "caps-plan")
+  // The header's fields are read by hand: json::value() throws on a field of another type.
+  if (!j.is_object() || !j.contains("format") || j["format"] != "caps-plan")
     throw InvalidInput(cat(source, ": not a caps plan (\"format\" must be \"caps-plan\")"));
-  const int version = j.value("format_version", 0);
-  if (version != kPlanFormatVersion)
-    throw InvalidInput(cat(source, ": plan format_version ", version,
+  const json version = j.contains("format_version") ? j["format_version"] : json(0);
+  if (!version.is_number_integer() || version.get<long long>() != kPlanFormatVersion)
+    throw InvalidInput(cat(source, ": plan format_version ", version.dump(),
                            " is not supported (this caps reads version ", kPlanFormatVersion, ")"));
   Plan plan;
   std::string field;
@@ -156,9 +159,12 @@ void write_plan(const std::filesystem::path& path, const Plan& plan, const PlanR
 WoundBorder read_wound_border(const std::filesystem::path& path) {
   std::ifstream in(path);
   if (!in) throw IoError(cat(path.string(), ": cannot open the wound border file"));
+  std::stringstream text;
+  text << in.rdbuf();
+  check_json_depth(text.str(), path.string());
   json j;
   try {
-    in >> j;
+    j = json::parse(text.str());
   } catch (const std::exception& e) {
     throw InvalidInput(cat(path.string(), ": not valid JSON (", e.what(), ")"));
   }

@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 #include "caps/core/units.hpp"
 #include "suture_json.hpp"
 
@@ -398,6 +399,7 @@ std::string procedure_to_json(const LocalProcedure& p) {
 }
 
 LocalProcedure parse_procedure_json(const std::string& text, const std::string& source) {
+  check_json_depth(text, source);
   json j;
   try {
     j = json::parse(text);

@@ -4,9 +4,11 @@
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 #include "caps/core/units.hpp"
 #include "caps/image/image_io.hpp"
 
@@ -33,9 +35,12 @@ void check_spec(const CylindricalScanSpec& s, const std::string& where) {
 CylindricalScanSpec read_cylindrical_sidecar(const fs::path& json_path) {
   std::ifstream in(json_path);
   if (!in) throw IoError(cat(json_path.string(), ": cannot open the sidecar"));
+  std::stringstream text;
+  text << in.rdbuf();
+  check_json_depth(text.str(), json_path.string());
   nlohmann::json j;
   try {
-    in >> j;
+    j = nlohmann::json::parse(text.str());
   } catch (const nlohmann::json::exception& e) {
     throw InvalidInput(cat(json_path.string(), ": not valid JSON (", e.what(), ")"));
   }

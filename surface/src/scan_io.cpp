@@ -9,9 +9,11 @@
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <new>
 #include <sstream>
 
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 #include "caps/volume/mesh_io.hpp"
 
 namespace fs = std::filesystem;
@@ -104,7 +106,10 @@ AccessorView view_of(const tinygltf::Model& model, int index, const std::string&
     throw InvalidInput(cat(where, ": accessor ", index, " has no buffer view (sparse accessors are "
                                "not supported)"));
   const auto& bv = model.bufferViews[acc.bufferView];
-  const auto& buf = model.buffers.at(bv.buffer);
+  if (bv.buffer < 0 || bv.buffer >= static_cast<int>(model.buffers.size()))
+    throw InvalidInput(cat(where, ": accessor ", index, " names buffer ", bv.buffer,
+                           ", which does not exist"));
+  const auto& buf = model.buffers[bv.buffer];
   AccessorView v;
   v.components = tinygltf::GetNumComponentsInType(acc.type);
   const int size = tinygltf::GetComponentSizeInBytes(acc.componentType);
@@ -113,8 +118,14 @@ AccessorView view_of(const tinygltf::Model& model, int index, const std::string&
   v.normalized = acc.normalized;
   v.count = acc.count;
   v.stride = acc.ByteStride(bv) > 0 ? acc.ByteStride(bv) : std::size_t(v.components * size);
-  const std::size_t offset = bv.byteOffset + acc.byteOffset;
-  if (v.count > 0 && offset + (v.count - 1) * v.stride + v.components * size > buf.data.size())
+  // Declared counts and offsets can be anything up to 2^64: compare without overflowing.
+  const std::size_t n = buf.data.size(), elem = std::size_t(v.components) * std::size_t(size);
+  const bool fits = bv.byteOffset <= n && acc.byteOffset <= n - bv.byteOffset &&
+                    elem <= n - bv.byteOffset - acc.byteOffset && v.stride > 0 &&
+                    (v.count == 0 ||
+                     v.count - 1 <= (n - bv.byteOffset - acc.byteOffset - elem) / v.stride);
+  const std::size_t offset = fits ? bv.byteOffset + acc.byteOffset : 0;
+  if (!fits)
     throw InvalidInput(cat(where, ": accessor ", index, " runs past the end of its buffer; the file "
                                "is truncated"));
   v.base = buf.data.data() + offset;
@@ -139,6 +150,17 @@ ScanMesh read_gltf(const fs::path& path, const ScanReadOptions& o) {
   tinygltf::Model model;
   std::string err, warn;
   const bool binary = lower(path.extension().string()) == ".glb";
+  {
+    // tinygltf parses the JSON (the chunk of a .glb) into a tree: bound its nesting first.
+    std::ifstream in(path, std::ios::binary);
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (binary && text.size() >= 20) {
+      std::uint32_t length = 0;
+      std::memcpy(&length, text.data() + 12, 4);
+      text = text.substr(20, length);
+    }
+    check_json_depth(text, path.string());
+  }
   const bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, path.string())
                          : loader.LoadASCIIFromFile(&model, &err, &warn, path.string());
   if (!ok) throw IoError(cat(path.string(), ": cannot read glTF (", err.empty() ? warn : err, ")"));
@@ -189,8 +211,13 @@ ScanMesh read_gltf(const fs::path& path, const ScanReadOptions& o) {
       }
       if (prim.indices >= 0) {
         const AccessorView I = view_of(model, prim.indices, s.source);
-        for (std::size_t i = 0; i + 2 < I.count; i += 3)
+        for (std::size_t i = 0; i + 2 < I.count; i += 3) {
+          for (int k = 0; k < 3; ++k)
+            if (!(I.get(i + k, 0) >= 0 && I.get(i + k, 0) < static_cast<double>(P.count)))
+              throw InvalidInput(cat(s.source, ": index ", i + k, " of accessor ", prim.indices, " = ",
+                                     I.get(i + k, 0), " names no vertex of its ", P.count));
           F.emplace_back(base + int(I.get(i, 0)), base + int(I.get(i + 1, 0)), base + int(I.get(i + 2, 0)));
+        }
       } else {
         for (std::size_t i = 0; i + 2 < P.count; i += 3)
           F.emplace_back(base + int(i), base + int(i + 1), base + int(i + 2));
@@ -202,15 +229,40 @@ ScanMesh read_gltf(const fs::path& path, const ScanReadOptions& o) {
     }
   };
   // Walk the default scene's node tree (or every root if there is no scene).
-  std::function<void(int, const Eigen::Matrix4d&)> walk = [&](int n, const Eigen::Matrix4d& parent) {
-    const auto& node = model.nodes.at(n);
+  // A node that is its own ancestor would recurse without end, and a very deep chain would
+  // overflow the stack: both are refused.
+  constexpr int kMaxNodeDepth = 256;
+  constexpr long kMaxNodeVisits = 1000000;
+  long n_visits = 0;
+  std::vector<char> on_path(model.nodes.size(), 0);
+  std::function<void(int, const Eigen::Matrix4d&, int)> walk = [&](int n, const Eigen::Matrix4d& parent,
+                                                                   int depth) {
+    if (n < 0 || n >= static_cast<int>(model.nodes.size()))
+      throw InvalidInput(cat(s.source, ": node ", n, " does not exist"));
+    if (on_path[n])
+      throw InvalidInput(cat(s.source, ": node ", n, " is its own ancestor (a cycle in the node "
+                                       "tree); the file is damaged"));
+    if (depth > kMaxNodeDepth)
+      throw InvalidInput(cat(s.source, ": the node tree is more than ", kMaxNodeDepth,
+                             " levels deep; the file is damaged"));
+    if (++n_visits > kMaxNodeVisits)
+      throw InvalidInput(cat(s.source, ": the node tree instances more than ", kMaxNodeVisits,
+                             " nodes (shared subtrees); the file is damaged"));
+    const auto& node = model.nodes[n];
     const Eigen::Matrix4d M = parent * node_matrix(node);
-    if (node.mesh >= 0) add_mesh(node.mesh, M);
-    for (int c : node.children) walk(c, M);
+    if (node.mesh >= 0) {
+      if (node.mesh >= static_cast<int>(model.meshes.size()))
+        throw InvalidInput(cat(s.source, ": node ", n, " names mesh ", node.mesh,
+                               ", which does not exist"));
+      add_mesh(node.mesh, M);
+    }
+    on_path[n] = 1;
+    for (int c : node.children) walk(c, M, depth + 1);
+    on_path[n] = 0;
   };
   const int scene = model.defaultScene >= 0 ? model.defaultScene : 0;
   if (scene < static_cast<int>(model.scenes.size())) {
-    for (int n : model.scenes[scene].nodes) walk(n, Eigen::Matrix4d::Identity());
+    for (int n : model.scenes[scene].nodes) walk(n, Eigen::Matrix4d::Identity(), 0);
   } else {
     for (std::size_t m = 0; m < model.meshes.size(); ++m) add_mesh(static_cast<int>(m), Eigen::Matrix4d::Identity());
   }
@@ -255,6 +307,16 @@ ScanMesh read_vtk(const fs::path& path, const ScanReadOptions& o) {
   auto need = [&](bool ok, const char* what) {
     if (!ok) throw IoError(cat(s.source, ": truncated or malformed while reading ", what));
   };
+  // Every ASCII value takes at least two bytes (a digit and a separator): a declared count that
+  // the rest of the file cannot hold is refused before anything is allocated for it.
+  std::error_code size_ec;
+  const auto file_bytes = static_cast<double>(fs::file_size(path, size_ec));
+  auto fits = [&](double n_values, const std::string& what) {
+    const double rest = file_bytes - static_cast<double>(std::max<std::streamoff>(in.tellg(), 0));
+    if (!(n_values >= 0) || 2.0 * n_values > rest + 2.0)
+      throw IoError(cat(s.source, ": ", what, " declares ", n_values, " values but only ", rest,
+                        " bytes follow; the file is truncated or the count is wrong"));
+  };
   while (in >> word) {
     if (word == "DATASET") {
       in >> word;
@@ -263,6 +325,7 @@ ScanMesh read_vtk(const fs::path& path, const ScanReadOptions& o) {
     } else if (word == "POINTS") {
       std::string type;
       need(static_cast<bool>(in >> n_points >> type), "POINTS");
+      fits(3.0 * static_cast<double>(n_points), "POINTS");
       s.mesh.V.resize(n_points, 3);
       for (Eigen::Index i = 0; i < n_points; ++i)
         for (int c = 0; c < 3; ++c) {
@@ -274,9 +337,12 @@ ScanMesh read_vtk(const fs::path& path, const ScanReadOptions& o) {
     } else if (word == "POLYGONS" || word == "TRIANGLE_STRIPS") {
       long n = 0, size = 0;
       need(static_cast<bool>(in >> n >> size), word.c_str());
+      fits(static_cast<double>(n), word);
+      fits(static_cast<double>(size), word);
       for (long c = 0; c < n; ++c) {
         int k = 0;
         need(static_cast<bool>(in >> k), word.c_str());
+        fits(static_cast<double>(k), word);
         std::vector<int> ids(k);
         for (int& id : ids) need(static_cast<bool>(in >> id), word.c_str());
         if (word == "POLYGONS") {
@@ -301,6 +367,7 @@ ScanMesh read_vtk(const fs::path& path, const ScanReadOptions& o) {
       std::string name, type;
       int dim = 0;
       need(static_cast<bool>(in >> name >> dim >> type), "TEXTURE_COORDINATES");
+      fits(2.0 * static_cast<double>(n_points), "TEXTURE_COORDINATES");
       s.UV.resize(n_points, 2);
       for (Eigen::Index i = 0; i < n_points; ++i)
         for (int c = 0; c < dim; ++c) {
@@ -429,10 +496,18 @@ ScanMesh read_ply_scan(const fs::path& path, const ScanReadOptions& o) {
 ScanMesh read_scan_mesh(const fs::path& path, const ScanReadOptions& options) {
   if (!fs::exists(path)) throw IoError(cat(path.string(), ": no such file"));
   const std::string ext = lower(path.extension().string());
-  if (ext == ".glb" || ext == ".gltf") return read_gltf(path, options);
-  if (ext == ".vtk") return read_vtk(path, options);
-  if (ext == ".obj") return read_obj(path, options);
-  if (ext == ".ply") return read_ply_scan(path, options);
+  // Errors of the libraries underneath (tinygltf's containers, allocation) are the file's fault.
+  try {
+    if (ext == ".glb" || ext == ".gltf") return read_gltf(path, options);
+    if (ext == ".vtk") return read_vtk(path, options);
+    if (ext == ".obj") return read_obj(path, options);
+    if (ext == ".ply") return read_ply_scan(path, options);
+  } catch (const std::bad_alloc&) {
+    throw IoError(cat(path.string(), ": not enough memory to read it; its counts are probably "
+                                     "damaged"));
+  } catch (const std::logic_error& e) {  // out_of_range, length_error, invalid_argument
+    throw InvalidInput(cat(path.string(), ": damaged or inconsistent (", e.what(), ")"));
+  }
   throw InvalidInput(cat(path.string(), ": unknown scan format '", ext, "'; use .glb, .gltf, .ply, "
                                         ".obj or .vtk"));
 }

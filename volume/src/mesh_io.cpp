@@ -336,9 +336,10 @@ PlyMesh read_ply_with_attributes(const std::filesystem::path& path) {
           continue;
         }
         const double cnt = body.next(p.count_type);
-        if (!(cnt >= 0) || cnt > 1e6)
-          throw InvalidInput(
-              cat(name, ": PLY ", el.name, " ", n, " has a list of ", cnt, " items"));
+        if (!(cnt >= 0) || cnt > 1e6 || cnt > double(body.remaining()))
+          throw InvalidInput(cat(name, ": PLY ", el.name, " ", n, " has a list of ", cnt,
+                                 " items, more than the ", body.remaining(),
+                                 " bytes left in the file"));
         const int m = int(cnt);
         if (is_face && q == ifl) poly.clear();
         for (int c = 0; c < m; ++c) {

@@ -8,6 +8,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 #include "caps/core/reporter.hpp"
 #include "caps/image/image_io.hpp"
 #include "caps/volume/isosurface.hpp"
@@ -30,6 +31,7 @@ Eigen::Vector3d vec3(const json& v) {
 double finite_or_zero(double x) { return std::isfinite(x) ? x : 0.0; }
 
 json parse_object(const std::string& text, const char* what) {
+  check_json_depth(text, cat("model.json: ", what));
   try {
     return text.empty() ? json::object() : json::parse(text);
   } catch (const json::exception& e) {
@@ -147,23 +149,34 @@ json load_model_json(const fs::path& dir) {
                       "`caps model from-volume`"));
   std::ifstream in(file);
   if (!in) throw IoError(cat(file.string(), ": missing; is ", dir.string(), " a caps model?"));
+  std::stringstream text;
+  text << in.rdbuf();
+  check_json_depth(text.str(), file.string());
   json j;
   try {
-    in >> j;
+    j = json::parse(text.str());
   } catch (const json::exception& e) {
     throw InvalidInput(cat(file.string(), ": not valid JSON (", e.what(), ")"));
   }
-  if (j.value("format", "") != "caps-model")
+  // Checked by hand: json::value() and get() throw on a field of another type.
+  if (!j.is_object() || !j.contains("format") || j["format"] != "caps-model")
     throw InvalidInput(cat(file.string(), ": 'format' is not \"caps-model\""));
-  const int version = j.value("format_version", -1);
-  if (version != kModelFormatVersion)
-    throw InvalidInput(cat(file.string(), ": format_version ", version, " is not supported (this "
-                           "caps reads version ", kModelFormatVersion, "); rebuild the model"));
-  if (j.contains("files"))
-    for (const auto& [key, name] : j["files"].items())
+  const json version = j.contains("format_version") ? j["format_version"] : json(-1);
+  if (!version.is_number_integer() || version.get<long long>() != kModelFormatVersion)
+    throw InvalidInput(cat(file.string(), ": format_version ", version.dump(), " is not supported "
+                           "(this caps reads version ", kModelFormatVersion, "); rebuild the model"));
+  if (j.contains("files")) {
+    if (!j["files"].is_object())
+      throw InvalidInput(cat(file.string(), ": \"files\" must be an object of file names"));
+    for (const auto& [key, name] : j["files"].items()) {
+      if (!name.is_string())
+        throw InvalidInput(cat(file.string(), ": files.", key, " = ", name.dump(),
+                               " is not a file name"));
       if (!fs::exists(dir / name.get<std::string>()))
         throw InvalidInput(cat(dir.string(), ": model.json names ", key, " = ",
                                name.get<std::string>(), " but the file is missing"));
+    }
+  }
   return j;
 }
 
@@ -179,7 +192,24 @@ std::string ModelInfo::thickness_kind() const {
 
 std::string model_json_text(const ModelInfo& info) { return to_json(info).dump(2) + "\n"; }
 
+namespace {
+
+ModelInfo read_model_info_fields(const fs::path& dir);
+
+}  // namespace
+
 ModelInfo read_model_info(const fs::path& dir) {
+  try {
+    return read_model_info_fields(dir);
+  } catch (const json::exception& e) {
+    throw InvalidInput(cat((dir / model_file::kJson).string(), ": a field is missing or of the "
+                           "wrong type (", e.what(), "); rebuild the model"));
+  }
+}
+
+namespace {
+
+ModelInfo read_model_info_fields(const fs::path& dir) {
   const json j = load_model_json(dir);
   const fs::path file = dir / model_file::kJson;
   ModelInfo info;
@@ -220,6 +250,8 @@ ModelInfo read_model_info(const fs::path& dir) {
       if (w.is_string()) info.warnings.push_back(w.get<std::string>());
   return info;
 }
+
+}  // namespace
 
 std::string read_model_json(const fs::path& dir) {
   read_model_info(dir);

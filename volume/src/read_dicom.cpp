@@ -20,6 +20,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <fstream>
 #include <map>
 #include <set>
 #include <sstream>
@@ -82,8 +84,25 @@ void quiet_gdcm() {
   gdcm::Trace::ErrorOff();
 }
 
+/// True if `file` starts like DICOM: the 'DICM' magic after the 128-byte preamble (Part 10), or,
+/// for files without one, a first element in group 0002 or 0008 (little endian). GDCM asserts
+/// (aborting the process) on some short non-DICOM files, so nothing else reaches it.
+bool looks_like_dicom(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) return false;
+  char b[132] = {};
+  in.read(b, sizeof b);
+  const std::streamsize n = in.gcount();
+  if (n == 132 && std::memcmp(b + 128, "DICM", 4) == 0) return true;
+  if (n < 132) return false;  // too short for any image header
+  const unsigned group = static_cast<unsigned char>(b[0]) | (static_cast<unsigned char>(b[1]) << 8);
+  const unsigned element = static_cast<unsigned char>(b[2]) | (static_cast<unsigned char>(b[3]) << 8);
+  return (group == 0x0002 || group == 0x0008) && element < 0x0100;
+}
+
 /// Reads the header of one file; returns false if it is not a DICOM image with a series UID.
 bool read_header(const fs::path& file, SliceHeader& h) {
+  if (!looks_like_dicom(file)) return false;
   gdcm::Reader reader;
   reader.SetFileName(file.c_str());
   const gdcm::Tag pixel_data(0x7fe0, 0x0010);
@@ -267,7 +286,10 @@ std::string fmt(double x, int digits = 2) {
   return os.str();
 }
 
-Volume read_multiframe(const SliceHeader& h) {
+Volume read_multiframe(const SliceHeader& h, const ReadOptions& options) {
+  // GDCM allocates the whole pixel data as the header declares it: check the budget first.
+  check_dims(h.file, "Columns x Rows x NumberOfFrames", {h.cols, h.rows, h.frames}, options,
+             static_cast<double>(h.cols) * h.rows * h.frames * std::max(1, h.bits_allocated / 8));
   Volume v;
   v.source = h.file.string();
   v.format = "DICOM";
@@ -421,6 +443,11 @@ Volume build_volume(std::vector<SliceHeader> slices, const std::string& where,
     v.notes.push_back(cat("missing slices interpolated across: ", list));
   }
 
+  // The per-slice pixels are held beside the volume: check both against the budget before GDCM
+  // decodes anything.
+  check_dims(s0.file, "Columns x Rows x slices", {nx, ny, static_cast<long long>(n_slices)},
+             options, 4.0 * nx * ny * static_cast<double>(n_slices));
+
   // Per-slice pixels with rescale applied.
   std::vector<std::vector<float>> pixels(n_slices);
   for (std::size_t k = 0; k < n_slices; ++k) pixels[k] = read_pixels(slices[k], 1);
@@ -455,14 +482,29 @@ Volume build_volume(std::vector<SliceHeader> slices, const std::string& where,
   // Resample onto the orthogonal grid (r, c, n).
   const double dz = gmin;
   const double span = slices.back().d - slices.front().d;
-  const int nz = static_cast<int>(std::floor(span / dz + 1e-6)) + 1;
   const double u_min = *std::min_element(off_u.begin(), off_u.end());
   const double u_max = *std::max_element(off_u.begin(), off_u.end());
   const double v_min = *std::min_element(off_v.begin(), off_v.end());
   const double v_max = *std::max_element(off_v.begin(), off_v.end());
-  const int nx_out = nx + static_cast<int>(std::ceil((u_max - u_min) / sx - 1e-6));
-  const int ny_out = ny + static_cast<int>(std::ceil((v_max - v_min) / sy - 1e-6));
-  check_dims(where, "resampled grid", {nx_out, ny_out, nz});
+  // The grid's size follows from the positions, which may be anything: size it in doubles,
+  // clamped before the cast, and check it against the budget (the volume, its acquired flags and
+  // the slices' pixels) before allocating.
+  auto clamp_count = [](double x) {
+    return static_cast<long long>(std::min(std::max(x, 0.0), 1e12));
+  };
+  const long long nz_d = clamp_count(std::floor(span / dz + 1e-6) + 1);
+  const long long nx_d = nx + clamp_count(std::ceil((u_max - u_min) / sx - 1e-6));
+  const long long ny_d = ny + clamp_count(std::ceil((v_max - v_min) / sy - 1e-6));
+  const double n_out = static_cast<double>(nx_d) * ny_d * nz_d;
+  if (n_out > 64.0 * nx * ny * static_cast<double>(n_slices) + 1e6)
+    throw InvalidInput(cat(where, ": resampling the slices onto a regular grid would take ",
+                           nx_d, "x", ny_d, "x", nz_d, " voxels from ", n_slices, " slices of ",
+                           nx, "x", ny, ": the slice positions (ImagePositionPatient) drift "
+                           "implausibly; the series is damaged or mixes acquisitions"));
+  check_dims(where, "resampled grid", {nx_d, ny_d, nz_d}, options,
+             n_out + 4.0 * nx * ny * static_cast<double>(n_slices));
+  const int nz = static_cast<int>(nz_d), nx_out = static_cast<int>(nx_d),
+            ny_out = static_cast<int>(ny_d);
   g.dims = Eigen::Vector3i(nx_out, ny_out, nz);
   g.spacing_mm = Eigen::Vector3d(sx, sy, dz);
   g.origin_lps = first + u_min * r + v_min * c;
@@ -541,7 +583,7 @@ Volume read_dicom(const fs::path& input, const ReadOptions& options) {
       throw InvalidInput(cat(input.string(), ": not a DICOM image (or it has no SeriesInstanceUID)"
                                              "; caps reads a DICOM folder or .dcm file, .nii, "
                                              ".nii.gz, .nrrd, .nhdr, .mha, .mhd or .inv3"));
-    if (h.frames > 1) return read_multiframe(h);
+    if (h.frames > 1) return read_multiframe(h, opts);
     folder = input.parent_path().empty() ? fs::path(".") : input.parent_path();
     if (opts.series_uid.empty()) opts.series_uid = h.series_uid;
     notes.push_back(cat("read the series of ", input.filename().string(), " from its folder"));
@@ -567,7 +609,7 @@ Volume read_dicom(const fs::path& input, const ReadOptions& options) {
   }
   if (n_skipped > 0) notes.push_back(cat("skipped ", n_skipped, " non-DICOM file(s)"));
   auto& files = series[uid];
-  if (files.size() == 1 && files[0].frames > 1) return read_multiframe(files[0]);
+  if (files.size() == 1 && files[0].frames > 1) return read_multiframe(files[0], opts);
   return build_volume(std::move(files), folder.string(), opts, std::move(notes));
 }
 

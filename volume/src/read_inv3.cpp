@@ -15,6 +15,7 @@
 #include <archive.h>
 #include <archive_entry.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstring>
@@ -214,9 +215,14 @@ bool extract_entry(const fs::path& file, const std::string& wanted, std::string&
     const la_int64_t size = archive_entry_size(entry);
     if (size < 0 || static_cast<std::uintmax_t>(size) > max_bytes)
       throw InvalidInput(cat(name, ": archive member ", path, " has an implausible size ", size));
-    out.resize(static_cast<std::size_t>(size));
+    // The declared size is a claim: grow the buffer with the data actually decompressed, so a
+    // tiny archive that declares gigabytes allocates no more than it holds.
+    const std::size_t declared = static_cast<std::size_t>(size);
+    out.clear();
     std::size_t got = 0;
-    while (got < out.size()) {
+    while (got < declared) {
+      if (out.size() == got)
+        out.resize(got + std::min<std::size_t>(declared - got, std::max<std::size_t>(got, 1u << 20)));
       const la_ssize_t r = archive_read_data(a.get(), out.data() + got, out.size() - got);
       if (r < 0) {
         const char* err = archive_error_string(a.get());
@@ -226,8 +232,8 @@ bool extract_entry(const fs::path& file, const std::string& wanted, std::string&
       if (r == 0) break;
       got += static_cast<std::size_t>(r);
     }
-    if (got != out.size())
-      throw IoError(cat(name, ": archive member ", path, " holds ", got, " of its ", out.size(),
+    if (got != declared)
+      throw IoError(cat(name, ": archive member ", path, " holds ", got, " of its ", declared,
                         " bytes; the project file is truncated"));
     return true;
   }
@@ -246,7 +252,7 @@ std::string numpy_type(const std::string& dtype) {
 
 }  // namespace
 
-Volume read_inv3(const fs::path& file) {
+Volume read_inv3(const fs::path& file, const ReadOptions& options) {
   file_size_or_throw(file);
   const std::string name = file.string();
 
@@ -273,11 +279,13 @@ Volume read_inv3(const fs::path& file) {
       throw InvalidInput(cat(name, ": main.plist matrix.shape holds a non-integer '", it.text, "'"));
     zyx.push_back(std::atoll(it.text.c_str()));
   }
-  check_dims(file, "matrix.shape", zyx);
   const std::string type = numpy_type(dtype->text);
   if (type.empty())
     throw InvalidInput(cat(name, ": main.plist matrix.dtype = ", dtype->text,
                            " is not supported (int8/16/32, uint8/16/32, float32/64)"));
+  check_dims(file, "matrix.shape", zyx, options,
+             static_cast<double>(zyx[0]) * static_cast<double>(zyx[1]) *
+                 static_cast<double>(zyx[2]) * static_cast<double>(type_size(type)));
 
   Volume v;
   v.source = name;

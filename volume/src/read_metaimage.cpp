@@ -5,6 +5,8 @@
 // Position) is the LPS position of voxel (0, 0, 0). AnatomicalOrientation is informational only
 // (ITK ignores it on reading too).
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -95,9 +97,47 @@ std::vector<char> inflate_all(const fs::path& file, const char* src, std::size_t
   return out;
 }
 
+// The file name for slice `i` of an ElementDataFile pattern such as "slice%03d.raw". The pattern
+// is user text, so it never reaches a printf-style formatter: exactly one %d conversion with an
+// optional 0 flag and width (ITK's form) is expanded here, "%%" is a literal %, and anything else
+// is refused.
+std::string slice_file_name(const fs::path& file, const std::string& pattern, long long i) {
+  std::string out;
+  int n_conversions = 0;
+  for (std::size_t k = 0; k < pattern.size(); ++k) {
+    if (pattern[k] != '%') {
+      out += pattern[k];
+      continue;
+    }
+    std::size_t j = k + 1;
+    if (j < pattern.size() && pattern[j] == '%') {
+      out += '%';
+      k = j;
+      continue;
+    }
+    const bool zero = j < pattern.size() && pattern[j] == '0';
+    if (zero) ++j;
+    int width = 0;
+    while (j < pattern.size() && std::isdigit(static_cast<unsigned char>(pattern[j])) && width < 100)
+      width = width * 10 + (pattern[j++] - '0');
+    if (j >= pattern.size() || pattern[j] != 'd' || width > 32 || ++n_conversions > 1)
+      throw InvalidInput(cat(file.string(), ": ElementDataFile pattern '", pattern,
+                             "' is not a file name with one %d (or %0Nd) slice number"));
+    std::string number = std::to_string(i < 0 ? -i : i);
+    const std::size_t w = static_cast<std::size_t>(width) - (i < 0 ? 1 : 0);
+    if (width > 0 && number.size() < w) number.insert(0, w - number.size(), zero ? '0' : ' ');
+    out += (i < 0 ? "-" : "") + number;
+    k = j;
+  }
+  if (n_conversions != 1)
+    throw InvalidInput(cat(file.string(), ": ElementDataFile pattern '", pattern,
+                           "' is not a file name with one %d (or %0Nd) slice number"));
+  return out;
+}
+
 }  // namespace
 
-Volume read_metaimage(const fs::path& file) {
+Volume read_metaimage(const fs::path& file, const ReadOptions& options) {
   const auto total_bytes = file_size_or_throw(file);
   const std::string name = file.string();
   std::ifstream in(file, std::ios::binary);
@@ -138,7 +178,7 @@ Volume read_metaimage(const fs::path& file) {
                                  "ElementDataFile)"));
 
   const auto ndims_v = numbers(file, "NDims", hdr["NDims"], 1);
-  const int ndims = static_cast<int>(ndims_v[0]);
+  const int ndims = ndims_v[0] == 2 ? 2 : ndims_v[0] == 3 ? 3 : 0;
   if (ndims != 2 && ndims != 3)
     throw InvalidInput(cat(name, ": NDims = ", hdr["NDims"], "; caps reads 3-D (or 2-D) images"));
   const auto dims_v = numbers(file, "DimSize", hdr["DimSize"], ndims);
@@ -146,14 +186,20 @@ Volume read_metaimage(const fs::path& file) {
   for (double d : dims_v) {
     if (d != std::floor(d))
       throw InvalidInput(cat(name, ": DimSize = ", hdr["DimSize"], " must hold integers"));
-    sizes.push_back(static_cast<long long>(d));
+    sizes.push_back(static_cast<long long>(std::clamp(d, -1.0, 1e12)));  // check_dims refuses both ends
   }
-  check_dims(file, "DimSize", sizes);
   if (hdr.count("ElementNumberOfChannels") &&
       numbers(file, "ElementNumberOfChannels", hdr["ElementNumberOfChannels"], 1)[0] != 1)
     throw InvalidInput(cat(name, ": ElementNumberOfChannels = ", hdr["ElementNumberOfChannels"],
                            "; caps reads scalar images only"));
   const std::string type = met_type(file, hdr["ElementType"]);
+  {
+    double n = 1;
+    for (long long s : sizes) n *= static_cast<double>(s);
+    // Compressed data are held compressed and inflated: at most twice the raw bytes.
+    const bool z = hdr.count("CompressedData") && is_true(hdr["CompressedData"]);
+    check_dims(file, "DimSize", sizes, options, (z ? 2.0 : 1.0) * n * type_size(type));
+  }
 
   Volume v;
   v.source = name;
@@ -189,14 +235,19 @@ Volume read_metaimage(const fs::path& file) {
   if (hdr.count("HeaderSize")) {
     const double hs = numbers(file, "HeaderSize", hdr["HeaderSize"], 1)[0];
     if (hs == -1) header_size_auto = true;
-    else if (hs >= 0) header_size = static_cast<std::uintmax_t>(hs);
-    else throw InvalidInput(cat(name, ": HeaderSize = ", hdr["HeaderSize"], " is invalid"));
+    else if (hs >= 0 && hs <= static_cast<double>(total_bytes) + 1e9)
+      header_size = static_cast<std::uintmax_t>(hs);  // larger ones fail the size checks below
+    else throw InvalidInput(cat(name, ": HeaderSize = ", hdr["HeaderSize"], " is invalid or larger "
+                                "than any file caps reads"));
   }
   std::uintmax_t compressed_size = 0;
-  if (compressed && hdr.count("CompressedDataSize"))
-    compressed_size =
-        static_cast<std::uintmax_t>(numbers(file, "CompressedDataSize", hdr["CompressedDataSize"],
-                                            1)[0]);
+  if (compressed && hdr.count("CompressedDataSize")) {
+    const double cs = numbers(file, "CompressedDataSize", hdr["CompressedDataSize"], 1)[0];
+    if (!(cs >= 0 && cs <= 1e15 && cs == std::floor(cs)))
+      throw InvalidInput(cat(name, ": CompressedDataSize = ", hdr["CompressedDataSize"],
+                             " is not a plausible byte count; the header is damaged"));
+    compressed_size = static_cast<std::uintmax_t>(cs);
+  }
 
   std::vector<fs::path> files;
   const fs::path dir = file.parent_path();
@@ -223,9 +274,7 @@ Volume read_metaimage(const fs::path& file) {
           throw InvalidInput(cat(name, ": ElementDataFile pattern '", data_file,
                                  "' has an invalid range"));
         for (long long i = first; step > 0 ? i <= last : i >= last; i += step) {
-          char buf[4096];
-          std::snprintf(buf, sizeof buf, pattern.c_str(), static_cast<int>(i));
-          files.push_back(dir / buf);
+          files.push_back(dir / slice_file_name(file, pattern, i));
         }
       } else {
         files.push_back(dir / data_file);

@@ -3,9 +3,14 @@
 // (nifti1.h, "METHOD 3 / 2 / 1"): sform if sform_code > 0, else qform if qform_code > 0, else the
 // pixdim-only Analyze fallback.
 
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "caps/core/error.hpp"
 #include "volume_io_detail.hpp"
@@ -40,9 +45,76 @@ std::string nifti_element_type(int datatype) {
 
 bool is_gz(const fs::path& file) { return to_lower(file.extension().string()) == ".gz"; }
 
+template <typename T>
+T swapped(T v, bool swap) {
+  if (swap) {
+    char b[sizeof(T)];
+    std::memcpy(b, &v, sizeof(T));
+    std::reverse(b, b + sizeof(T));
+    std::memcpy(&v, b, sizeof(T));
+  }
+  return v;
+}
+
+// pixdim[1..3] as the header stores them: nifti2_io replaces non-finite ones with 1 silently.
+std::array<double, 3> raw_pixdim(const std::string& name) {
+  znzFile f = znzopen(name.c_str(), "rb", nifti_is_gzfile(name.c_str()));
+  if (znz_isnull(f)) throw IoError(cat(name, ": cannot open the file for reading (permissions?)"));
+  char h[540] = {};
+  const std::size_t got = znzread(h, 1, sizeof h, f);
+  znzclose(f);
+  std::int32_t size = 0;
+  std::memcpy(&size, h, 4);
+  const bool swap = size != 348 && size != 540;
+  size = swapped(size, swap);
+  std::array<double, 3> out{1, 1, 1};
+  for (int d = 1; d <= 3; ++d) {
+    if (size == 348 && got >= 348) {
+      float x;
+      std::memcpy(&x, h + 76 + 4 * d, 4);
+      out[d - 1] = swapped(x, swap);
+    } else if (size == 540 && got >= 540) {
+      double x;
+      std::memcpy(&x, h + 104 + 8 * d, 8);
+      out[d - 1] = swapped(x, swap);
+    }
+  }
+  return out;
+}
+
+// The first volume's voxel bytes, read here rather than by nifti_image_load, which reads every
+// volume and replaces non-finite floats with 0 silently. A single-file image (.nii, .nii.gz) is
+// read from `name` itself, never from another file nifti2_io finds by its base name.
+std::vector<char> read_first_volume(const std::string& name, const nifti_image& nim,
+                                    std::size_t n_bytes) {
+  const bool single = nim.nifti_type == NIFTI_FTYPE_NIFTI1_1 ||
+                      nim.nifti_type == NIFTI_FTYPE_NIFTI2_1;
+  const std::string data_file = single || !nim.iname ? name : std::string(nim.iname);
+  znzFile f = znzopen(data_file.c_str(), "rb", nifti_is_gzfile(data_file.c_str()));
+  if (znz_isnull(f))
+    throw IoError(cat(data_file, ": cannot open the image data for reading (missing or permissions?)"));
+  std::vector<char> raw;
+  bool ok = znzseek(f, static_cast<znz_off_t>(nim.iname_offset), SEEK_SET) >= 0;
+  if (ok) {
+    raw.resize(n_bytes);
+    std::size_t got = 0;
+    while (ok && got < n_bytes) {
+      const std::size_t want = std::min<std::size_t>(n_bytes - got, std::size_t(1) << 28);
+      const std::size_t r = znzread(raw.data() + got, 1, want, f);
+      got += r;
+      ok = r == want;
+    }
+  }
+  znzclose(f);
+  if (!ok)
+    throw IoError(cat(name, ": the voxel data could not be read (truncated or corrupt ",
+                      is_gz(fs::path(name)) ? "gzip stream" : "file", "); re-export or re-download it"));
+  return raw;
+}
+
 }  // namespace
 
-Volume read_nifti(const fs::path& file) {
+Volume read_nifti(const fs::path& file, const ReadOptions& options) {
   const auto file_bytes = file_size_or_throw(file);
   nifti_set_debug_level(0);
   const std::string name = file.string();
@@ -56,12 +128,16 @@ Volume read_nifti(const fs::path& file) {
   if (nim->dim[0] < 1 || nim->dim[0] > 7)
     throw InvalidInput(cat(name, ": header field dim[0] = ", nim->dim[0],
                            " must be 1..7; the header is damaged"));
-  check_dims(file, "dim[1..3]", {nim->nx, nim->ny, nim->nz});
+  const auto pixdim = raw_pixdim(name);
+  for (int d = 1; d <= 3; ++d)
+    if (!std::isfinite(pixdim[d - 1]))
+      throw InvalidInput(cat(name, ": header field pixdim[", d, "] = ", pixdim[d - 1],
+                             " is not a finite number; the header is damaged"));
   Volume v;
   v.source = name;
   v.format = nim->nifti_type >= NIFTI_FTYPE_NIFTI2_1 ? "NIfTI-2" : "NIfTI-1";
-  long long extra = 1;
-  for (int d = 4; d <= nim->dim[0]; ++d) extra *= std::max<int64_t>(nim->dim[d], 1);
+  double extra = 1;  // a double: dims 4..7 are 64-bit and their product may overflow
+  for (int d = 4; d <= nim->dim[0]; ++d) extra *= static_cast<double>(std::max<int64_t>(nim->dim[d], 1));
   if (extra > 1)
     v.notes.push_back(cat("the file holds ", extra, " volumes (dims 4..7); read the first one"));
 
@@ -85,20 +161,19 @@ Volume read_nifti(const fs::path& file) {
                       nim->iname_offset, " + ", nim->nx, "x", nim->ny, "x", nim->nz,
                       " voxels of ", nim->nbyper, " bytes) but the file has ", file_bytes,
                       "; re-export or re-download it"));
-  if (extra * n3 > kMaxVoxels)
-    throw InvalidInput(cat(name, ": ", extra * n3, " voxels in all volumes is more than caps "
-                                                   "accepts; extract the first volume first"));
-
-  if (nifti_image_load(nim.get()) != 0 || nim->data == nullptr)
-    throw IoError(cat(name, ": the voxel data could not be read (truncated or corrupt ",
-                      is_gz(file) ? "gzip stream" : "file",
-                      "); re-export or re-download it"));
+  // Only the first volume is read: its raw bytes are held beside the float volume.
+  check_dims(file, "dim[1..3]", {nim->nx, nim->ny, nim->nz}, options, n3 * nim->nbyper);
 
   auto& g = v.geom;
   g.dims = Eigen::Vector3i(static_cast<int>(nim->nx), static_cast<int>(nim->ny),
                            static_cast<int>(nim->nz));
-  v.data.resize(g.n_voxels());
-  decode_to_float(static_cast<const char*>(nim->data), v.data.size(), type, false, v.data.data());
+  {
+    const std::vector<char> raw =
+        read_first_volume(name, *nim, g.n_voxels() * static_cast<std::size_t>(nim->nbyper));
+    v.data.resize(g.n_voxels());
+    decode_to_float(raw.data(), v.data.size(), type, nim->byteorder != nifti_short_order(),
+                    v.data.data());
+  }
 
   const double slope = nim->scl_slope, inter = nim->scl_inter;
   if (std::isfinite(slope) && slope != 0.0 && std::isfinite(inter) &&

@@ -56,7 +56,7 @@ std::string nrrd_element_type(int type) {
 
 }  // namespace
 
-Volume read_nrrd(const fs::path& file) {
+Volume read_nrrd(const fs::path& file, const ReadOptions& options) {
   file_size_or_throw(file);
   const std::string name = file.string();
 
@@ -73,11 +73,13 @@ Volume read_nrrd(const fs::path& file) {
                            "; caps reads scalar 3-D (or 2-D) NRRD images only"));
   std::vector<long long> sizes;
   for (unsigned a = 0; a < dim; ++a) sizes.push_back(static_cast<long long>(header->axis[a].size));
-  check_dims(file, "sizes", sizes);
   const std::string type = nrrd_element_type(header->type);
   if (type.empty())
     throw InvalidInput(cat(name, ": type ", header->type,
                            " is not a scalar numeric type; caps reads integer and float images"));
+  double n_vox = 1;
+  for (long long s : sizes) n_vox *= static_cast<double>(s);
+  check_dims(file, "sizes", sizes, options, n_vox * static_cast<double>(type_size(type)));
 
   std::unique_ptr<Nrrd, NrrdFree> nrrd(nrrdNew());
   if (nrrdLoad(nrrd.get(), name.c_str(), nullptr) != 0 || nrrd->data == nullptr)

@@ -4,6 +4,8 @@
 #include <cctype>
 #include <cmath>
 #include <cstring>
+#include <new>
+#include <stdexcept>
 #include <fstream>
 
 #include "caps/core/error.hpp"
@@ -43,7 +45,8 @@ std::vector<char> read_binary_file(const fs::path& file) {
 }
 
 void check_dims(const fs::path& file, const std::string& field,
-                const std::vector<long long>& dims) {
+                const std::vector<long long>& dims, const ReadOptions& options, double raw_bytes,
+                double n_volumes) {
   double total = 1;
   std::string shown;
   for (std::size_t a = 0; a < dims.size(); ++a) {
@@ -55,15 +58,24 @@ void check_dims(const fs::path& file, const std::string& field,
       throw InvalidInput(cat(file.string(), ": ", field, " = ", shown,
                              " has a zero or negative size; the header is damaged or the file is "
                              "not an image volume"));
-    if (d > 8192)
-      throw InvalidInput(cat(file.string(), ": ", field, " = ", shown,
-                             " exceeds 8192 voxels along an axis; the header is probably damaged"));
+    if (d > kMaxAxisVoxels)
+      throw InvalidInput(cat(file.string(), ": ", field, " = ", shown, " exceeds ", kMaxAxisVoxels,
+                             " voxels along an axis; the header is probably damaged"));
     total *= static_cast<double>(d);
   }
-  if (total > kMaxVoxels)
-    throw InvalidInput(cat(file.string(), ": ", field, " = ", shown, " is ", total,
-                           " voxels, more than caps accepts (", kMaxVoxels,
-                           "); crop or downsample the volume first"));
+  total *= std::max(1.0, n_volumes);
+  if (!(total <= options.max_voxels))
+    throw InvalidInput(cat(file.string(), ": ", field, " = ", shown,
+                           n_volumes > 1 ? cat(" x ", n_volumes, " volumes") : std::string(),
+                           " is ", total, " voxels, more than the limit of ", options.max_voxels,
+                           " (max_voxels); crop or downsample the volume, or raise --max-voxels "
+                           "if the header is right"));
+  const double bytes = 4.0 * total / std::max(1.0, n_volumes) + raw_bytes;
+  if (!(bytes <= options.max_bytes))
+    throw InvalidInput(cat(file.string(), ": ", field, " = ", shown, " needs ", bytes,
+                           " bytes of memory, more than the limit of ", options.max_bytes,
+                           " (max_bytes); crop or downsample the volume, or raise --max-bytes "
+                           "if the header is right"));
 }
 
 Modality guess_modality(const std::vector<float>& data, std::vector<std::string>& notes) {
@@ -142,26 +154,44 @@ constexpr const char* kAccepted =
 
 }  // namespace
 
-Volume read_volume(const fs::path& input, const ReadOptions& options) {
-  std::error_code ec;
-  const auto status = fs::status(input, ec);
-  if (ec || !fs::exists(status))
-    throw IoError(cat(input.string(), ": no such file or folder; check the path"));
-  if (fs::is_directory(status)) return detail::read_dicom(input, options);
+namespace {
 
+Volume read_by_kind(const fs::path& input, const ReadOptions& options, bool is_directory) {
+  if (is_directory) return detail::read_dicom(input, options);
   const std::string name = detail::to_lower(input.filename().string());
   auto ends_with = [&](const std::string& suffix) {
     return name.size() >= suffix.size() &&
            name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
   };
-  if (ends_with(".nii") || ends_with(".nii.gz")) return detail::read_nifti(input);
-  if (ends_with(".nrrd") || ends_with(".nhdr")) return detail::read_nrrd(input);
-  if (ends_with(".mha") || ends_with(".mhd")) return detail::read_metaimage(input);
-  if (ends_with(".inv3")) return detail::read_inv3(input);
+  if (ends_with(".nii") || ends_with(".nii.gz")) return detail::read_nifti(input, options);
+  if (ends_with(".nrrd") || ends_with(".nhdr")) return detail::read_nrrd(input, options);
+  if (ends_with(".mha") || ends_with(".mhd")) return detail::read_metaimage(input, options);
+  if (ends_with(".inv3")) return detail::read_inv3(input, options);
   if (ends_with(".dcm") || ends_with(".dicom") || !input.has_extension())
     return detail::read_dicom(input, options);
   throw InvalidInput(cat(input.string(), ": unrecognised file type '",
                          input.extension().string(), "'; caps reads ", kAccepted));
+}
+
+}  // namespace
+
+Volume read_volume(const fs::path& input, const ReadOptions& options) {
+  if (!(options.max_voxels >= 1) || !(options.max_bytes >= 1))
+    throw InvalidInput(cat("max_voxels (", options.max_voxels, ") and max_bytes (",
+                           options.max_bytes, ") must be positive numbers"));
+  std::error_code ec;
+  const auto status = fs::status(input, ec);
+  if (ec || !fs::exists(status))
+    throw IoError(cat(input.string(), ": no such file or folder; check the path"));
+  // Errors of the libraries underneath (allocation, containers) are the file's fault.
+  try {
+    return read_by_kind(input, options, fs::is_directory(status));
+  } catch (const std::bad_alloc&) {
+    throw IoError(cat(input.string(), ": not enough memory to read it within max_bytes (",
+                      options.max_bytes, "); lower --max-bytes or free memory"));
+  } catch (const std::logic_error& e) {  // out_of_range, length_error, invalid_argument
+    throw InvalidInput(cat(input.string(), ": damaged or inconsistent (", e.what(), ")"));
+  }
 }
 
 }  // namespace caps

@@ -11,10 +11,10 @@
 namespace caps::detail {
 
 Volume read_dicom(const std::filesystem::path& input, const ReadOptions& options);
-Volume read_nifti(const std::filesystem::path& file);
-Volume read_nrrd(const std::filesystem::path& file);
-Volume read_metaimage(const std::filesystem::path& file);
-Volume read_inv3(const std::filesystem::path& file);
+Volume read_nifti(const std::filesystem::path& file, const ReadOptions& options);
+Volume read_nrrd(const std::filesystem::path& file, const ReadOptions& options);
+Volume read_metaimage(const std::filesystem::path& file, const ReadOptions& options);
+Volume read_inv3(const std::filesystem::path& file, const ReadOptions& options);
 
 /// Size of a regular file in bytes; throws IoError naming the file if it is missing or unreadable.
 std::uintmax_t file_size_or_throw(const std::filesystem::path& file);
@@ -22,14 +22,17 @@ std::uintmax_t file_size_or_throw(const std::filesystem::path& file);
 /// Reads a whole file into memory; throws IoError.
 std::vector<char> read_binary_file(const std::filesystem::path& file);
 
-/// Largest voxel count any reader allocates (2^31 voxels, 8 GB as float): larger headers are
-/// treated as damaged rather than attempted.
-constexpr double kMaxVoxels = 2147483648.0;
+/// Largest size along one axis a reader accepts.
+constexpr long long kMaxAxisVoxels = 8192;
 
-/// Throws InvalidInput (naming `file` and `field`) unless every dim is in 1..8192 and the total
-/// voxel count is below kMaxVoxels. Called before any allocation sized by a header.
+/// Throws InvalidInput (naming `file` and `field`) unless every dim is in 1..kMaxAxisVoxels, the
+/// voxel count times `n_volumes` is at most options.max_voxels, and the memory the voxels need,
+/// 4 bytes a voxel (the float volume) plus `raw_bytes` (the file's raw or decompressed voxel
+/// data held alongside), is at most options.max_bytes. Called before any allocation sized by a
+/// header.
 void check_dims(const std::filesystem::path& file, const std::string& field,
-                const std::vector<long long>& dims);
+                const std::vector<long long>& dims, const ReadOptions& options,
+                double raw_bytes = 0, double n_volumes = 1);
 
 /// The CT heuristic for formats without a modality field: CT if the minimum is <= -900 and at
 /// least 5% of the voxels lie in [-1100, -900] (air in HU). Returns CT or Unknown and adds a

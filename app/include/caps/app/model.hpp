@@ -12,6 +12,7 @@
 #include "caps/surface/scan_model.hpp"
 #include "caps/volume/model.hpp"
 #include "caps/volume/phantom.hpp"
+#include "caps/volume/read_volume.hpp"
 
 namespace caps::app {
 
@@ -34,6 +35,7 @@ struct FromVolumeRequest {
   double bone_cap = MapOptions{}.bone_cap_mm;
   double decimate = ModelOptions{}.decimate_fraction;
   double mr_scalp = SegmentOptions{}.mr_scalp_mm;
+  double max_voxels = kDefaultMaxVoxels, max_bytes = kDefaultMaxBytes;
   bool allow_missing_slices = false, force = false;
 
   template <class Self, class V>
@@ -56,6 +58,8 @@ struct FromVolumeRequest {
     v(r.n_z, {"n_z", "cylindrical grid: samples along the axis"});
     v(r.bone_cap, {"bone_cap", "no bone within this depth (mm) marks a cell invalid"});
     v(r.decimate, {"decimate", "fraction of mesh faces to keep (0..1]"});
+    v(r.max_voxels, {"max_voxels", "refuse a volume declaring more voxels (default 2^31)"});
+    v(r.max_bytes, {"max_bytes", "refuse a volume needing more bytes of memory (default 8 GiB)"});
     v(r.force, {"force", "replace an existing output", FieldKind::Flag});
   }
 };
@@ -189,11 +193,14 @@ PathResult run_color_picture(const ColorPictureRequest& request, Reporter* repor
 
 struct VolumeInfoRequest {
   std::string input, series;
+  double max_voxels = kDefaultMaxVoxels, max_bytes = kDefaultMaxBytes;
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
     v(r.input, {"input", "a DICOM folder, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .inv3",
                 FieldKind::Positional, "INPUT"});
     v(r.series, {"series", "DICOM SeriesInstanceUID"});
+    v(r.max_voxels, {"max_voxels", "refuse a volume declaring more voxels (default 2^31)"});
+    v(r.max_bytes, {"max_bytes", "refuse a volume needing more bytes of memory (default 8 GiB)"});
   }
 };
 

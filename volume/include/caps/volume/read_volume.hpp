@@ -12,10 +12,21 @@
 
 namespace caps {
 
+/// Default largest voxel count a reader accepts (2^31; caps reads the first volume of a 4-D file).
+constexpr double kDefaultMaxVoxels = 2147483648.0;
+/// Default largest memory in bytes a reader allocates for voxel data (8 GiB): the float volume
+/// (4 bytes a voxel) plus the file's raw or decompressed voxel bytes.
+constexpr double kDefaultMaxBytes = 8589934592.0;
+
 struct ReadOptions {
   std::string series_uid;  ///< DICOM: the SeriesInstanceUID to read; empty = the largest series
   /// DICOM: interpolate across slices that look missing instead of throwing InvalidInput.
   bool allow_missing_slices = false;
+  /// A header declaring more voxels than this is refused (InvalidInput) before any allocation.
+  double max_voxels = kDefaultMaxVoxels;
+  /// A header whose voxels need more bytes than this (float volume + raw data) is refused
+  /// before any allocation.
+  double max_bytes = kDefaultMaxBytes;
 };
 
 /// One DICOM series found in a folder.

@@ -1,0 +1,442 @@
+// Hostile inputs: a catalogue of files built here that once crashed caps, made it allocate
+// gigabytes, read wrong data silently or destroy an input. Each is run through the caps program
+// as a user would: exit code 2, a message with the key words, no output left behind and the input
+// unchanged (docs/reliability.md lists the limits these cases check).
+#include <gtest/gtest.h>
+
+#include "cli_outcome.hpp"
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+using caps_test::Outcome;
+using caps_test::slurp;
+using caps_test::write_file;
+
+// A whole folder's files and contents, to check that an input was left unchanged.
+std::string snapshot(const fs::path& p) {
+  if (!fs::is_directory(p)) return fs::exists(p) ? slurp(p) : std::string("<missing>");
+  std::vector<fs::path> files;
+  for (const auto& e : fs::recursive_directory_iterator(p))
+    if (e.is_regular_file()) files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  std::string s;
+  for (const auto& f : files) s += f.string() + "\n" + slurp(f) + "\n";
+  return s;
+}
+
+// gzip-compressed bytes, through the gzip program (the test programs of the CLI link no zlib).
+std::string gzip(const std::string& data) {
+  const fs::path raw = fs::temp_directory_path() / ("caps_hostile_gz_" + std::to_string(::getpid()));
+  write_file(raw, data);
+  const int rc = std::system(("gzip -9 -f -k -n " + raw.string()).c_str());
+  EXPECT_EQ(rc, 0);
+  const fs::path gz = raw.string() + ".gz";
+  std::string out = slurp(gz);
+  fs::remove(raw);
+  fs::remove(gz);
+  return out;
+}
+
+std::string nested(const std::string& key, int depth) {
+  return "{\"format\": \"caps-plan\", \"" + key + "\": " + std::string(depth, '[') +
+         std::string(depth, ']') + "}";
+}
+
+class Hostile : public caps_test::CliTest {
+ protected:
+  static void SetUpTestSuite() { dir = caps_test::fresh_temp_dir("caps_hostile_"); }
+  // Expects a refusal of `args`: exit code 2, every key word in the message, `output` not created,
+  // no temporary left beside it, and `input` (a file or folder) unchanged.
+  static void expect_refused(const std::string& args, const std::vector<std::string>& words,
+                             const fs::path& output, const fs::path& input) {
+    const std::string before = snapshot(input);
+    const Outcome r = run(args);
+    EXPECT_EQ(r.code, 2) << args << "\n" << r.err;
+    for (const auto& w : words)
+      EXPECT_NE(r.err.find(w), std::string::npos) << args << "\nmessage lacks '" << w << "':\n" << r.err;
+    EXPECT_EQ(r.err.find("internal error"), std::string::npos) << r.err;
+    if (!output.empty()) {
+      EXPECT_FALSE(fs::exists(output) && !fs::exists(input)) << output;
+      for (const auto& e : fs::directory_iterator(output.parent_path()))
+        EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos)
+            << "temporary left behind: " << e.path();
+    }
+    EXPECT_EQ(snapshot(input), before) << args << ": the input changed";
+  }
+  // The same for a command whose output must not exist afterwards.
+  static void expect_refused_new(const std::string& args, const std::vector<std::string>& words,
+                                 const fs::path& output, const fs::path& input) {
+    fs::remove_all(output);
+    expect_refused(args, words, output, input);
+    EXPECT_FALSE(fs::exists(output)) << output;
+  }
+};
+
+// ---- crashes
+
+TEST_F(Hostile, MetaImagePatternIsNeverAFormatString) {
+  const fs::path out = dir / "mha_out";
+  for (const std::string pattern : {"slice%n%n%n%n.raw", "slice%s%s%s.raw", "slice%d%d.raw",
+                                    "slice%999999999d.raw", "slice%x.raw"}) {
+    const fs::path mhd = dir / "pattern.mhd";
+    write_file(mhd, "ObjectType = Image\nNDims = 3\nDimSize = 4 4 3\nElementType = MET_SHORT\n"
+                    "ElementSpacing = 1 1 1\nElementDataFile = " + pattern + " 1 3 1\n");
+    expect_refused_new("volume info " + mhd.string(), {"pattern.mhd", "ElementDataFile", "%d"},
+                       out, mhd);
+  }
+  // The ITK form still works: slice001.raw .. slice003.raw.
+  for (int i = 1; i <= 3; ++i) write_file(dir / ("slice00" + std::to_string(i) + ".raw"), std::string(32, '\0'));
+  write_file(dir / "good.mhd", "ObjectType = Image\nNDims = 3\nDimSize = 4 4 3\nElementType = "
+                               "MET_SHORT\nElementSpacing = 1 1 1\nElementDataFile = slice%03d.raw 1 3 1\n");
+  const Outcome r = run("volume info " + (dir / "good.mhd").string());
+  EXPECT_EQ(r.code, 0) << r.err;
+}
+
+TEST_F(Hostile, JsonNestedTooDeepIsRefusedNotACrash) {
+  const int deep = 200000;
+  // A plan.
+  const fs::path plan = dir / "deep_plan.json";
+  write_file(plan, nested("sutures", deep));
+  expect_refused_new("plan check " + plan.string(), {"deep_plan.json", "nested"}, dir / "none", plan);
+  expect_refused_new("plan show " + plan.string() + " -o " + (dir / "deep.png").string(),
+                     {"deep_plan.json", "nested"}, dir / "deep.png", plan);
+  // A model.json.
+  const fs::path model = dir / "deep_model";
+  fs::create_directories(model);
+  write_file(model / "model.json", "{\"format_version\": 1, \"axis\": " + std::string(deep, '[') +
+                                       std::string(deep, ']') + "}");
+  expect_refused_new("model info " + model.string(), {"model.json", "nested"}, dir / "none", model);
+  // A mesh.json.
+  const fs::path mesh = dir / "deep_mesh";
+  fs::create_directories(mesh);
+  write_file(mesh / "mesh.json", "{\"format\": \"caps-mesh\", \"loads_n\": " +
+                                     std::string(deep, '[') + std::string(deep, ']') + "}");
+  write_file(mesh / "mesh.vtu", "<VTKFile/>");
+  expect_refused_new("solve " + mesh.string() + " -o " + (dir / "deep_result").string(),
+                     {"mesh.json", "nested"}, dir / "deep_result", mesh);
+  // A procedure file.
+  const fs::path proc = dir / "deep_proc.json";
+  write_file(proc, "{\"format\": \"caps-procedure\", \"x\": " + std::string(deep, '{') + "}");
+  expect_refused_new("plan new " + proc.string() + " --model " + model.string() + " --at 0,60 -o " +
+                         (dir / "p.json").string(),
+                     {"deep_proc.json", "nested"}, dir / "p.json", proc);
+  // A glTF scan.
+  const fs::path gltf = dir / "deep.gltf";
+  write_file(gltf, "{\"asset\": {\"version\": \"2.0\"}, \"extras\": " + std::string(deep, '[') +
+                       std::string(deep, ']') + "}");
+  expect_refused_new("model from-scan " + gltf.string() + " --thickness 6 -o " + (dir / "s").string(),
+                     {"deep.gltf", "nested"}, dir / "s", gltf);
+  // Brackets inside strings do not count.
+  const fs::path text = dir / "brackets_plan.json";
+  write_file(text, "{\"format\": \"caps-plan\", \"notes\": [\"" + std::string(1000, '[') + "\\\"\"]}");
+  const Outcome r = run("plan check " + text.string());
+  EXPECT_EQ(r.err.find("nested"), std::string::npos) << r.err;
+}
+
+// A minimal glTF with one triangle in a data: URI; `accessor` and `nodes` replace the parts
+// under test.
+std::string gltf_with(const std::string& count, const std::string& nodes) {
+  // 3 vertices x 3 floats = 36 bytes of zeros, base64.
+  const std::string b64(48, 'A');
+  return "{\"asset\": {\"version\": \"2.0\"}, \"scene\": 0, \"scenes\": [{\"nodes\": [0]}],"
+         " \"nodes\": " + nodes + ", \"meshes\": [{\"primitives\": [{\"attributes\": "
+         "{\"POSITION\": 0}}]}], \"accessors\": [{\"bufferView\": 0, \"componentType\": 5126, "
+         "\"count\": " + count + ", \"type\": \"VEC3\"}], \"bufferViews\": [{\"buffer\": 0, "
+         "\"byteLength\": 36}], \"buffers\": [{\"byteLength\": 36, \"uri\": "
+         "\"data:application/octet-stream;base64," + b64 + "\"}]}";
+}
+
+TEST_F(Hostile, GltfCountsNearTwoToTheSixtyTwoAreRefused) {
+  const fs::path out = dir / "gltf_out";
+  for (const std::string count : {"4611686018427387904", "4611686018427387905", "18446744073709551615",
+                                  "1000"}) {
+    const fs::path gltf = dir / "huge_count.gltf";
+    write_file(gltf, gltf_with(count, "[{\"mesh\": 0}]"));
+    expect_refused_new("model from-scan " + gltf.string() + " --thickness 6 -o " + out.string(),
+                       {"huge_count.gltf"}, out, gltf);
+  }
+}
+
+TEST_F(Hostile, GltfNodeThatIsItsOwnChildIsRefused) {
+  const fs::path out = dir / "gltf_cycle_out";
+  const fs::path gltf = dir / "cycle.gltf";
+  write_file(gltf, gltf_with("3", "[{\"mesh\": 0, \"children\": [0]}]"));
+  expect_refused_new("model from-scan " + gltf.string() + " --thickness 6 -o " + out.string(),
+                     {"cycle.gltf", "node 0", "cycle"}, out, gltf);
+  write_file(gltf, gltf_with("3", "[{\"mesh\": 0, \"children\": [1]}, {\"children\": [0]}]"));
+  expect_refused_new("model from-scan " + gltf.string() + " --thickness 6 -o " + out.string(),
+                     {"cycle.gltf", "cycle"}, out, gltf);
+}
+
+TEST_F(Hostile, GltfIndicesOutOfRangeAreRefused) {
+  // One triangle whose indices (uint16) are 0, 1, 7: there are 3 vertices.
+  const fs::path out = dir / "gltf_index_out";
+  const fs::path gltf = dir / "bad_index.gltf";
+  write_file(gltf,
+             "{\"asset\": {\"version\": \"2.0\"}, \"scene\": 0, \"scenes\": [{\"nodes\": [0]}], "
+             "\"nodes\": [{\"mesh\": 0}], \"meshes\": [{\"primitives\": [{\"attributes\": "
+             "{\"POSITION\": 0}, \"indices\": 1}]}], \"accessors\": [{\"bufferView\": 0, "
+             "\"componentType\": 5126, \"count\": 3, \"type\": \"VEC3\"}, {\"bufferView\": 1, "
+             "\"componentType\": 5123, \"count\": 3, \"type\": \"SCALAR\"}], \"bufferViews\": "
+             "[{\"buffer\": 0, \"byteLength\": 36}, {\"buffer\": 0, \"byteOffset\": 36, "
+             "\"byteLength\": 6}], \"buffers\": [{\"byteLength\": 42, \"uri\": "
+             "\"data:application/octet-stream;base64,"
+             "AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAABAAcA\"}]}");
+  expect_refused_new("model from-scan " + gltf.string() + " --thickness 6 -o " + out.string(),
+                     {"bad_index.gltf", "index 2", "7"}, out, gltf);
+}
+
+TEST_F(Hostile, DicomFolderWithAStrayTextFileIsReadWithAWarning) {
+  const fs::path ge = fs::path(CAPS_SHARED_DATA) / "ct" / "ge-head-tilt";
+  if (!fs::exists(ge)) GTEST_SKIP() << "no shared DICOM data";
+  const fs::path folder = dir / "dicom_stray";
+  fs::create_directories(folder);
+  for (const auto& e : fs::directory_iterator(ge))
+    if (e.path().extension() == ".dcm") fs::copy_file(e.path(), folder / e.path().filename());
+  for (const std::string name : {"README", "notes.txt", "x.dcm"})
+    write_file(folder / name, "exported by a workstation\n");
+  write_file(folder / "empty", "");
+  const Outcome r = run("volume info " + folder.string());
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_NE((r.out + r.err).find("skipped 4 non-DICOM file"), std::string::npos) << r.out << r.err;
+  // The stray file given on its own is refused.
+  expect_refused_new("volume info " + (folder / "x.dcm").string(), {"x.dcm", "not a DICOM"},
+                     dir / "none", folder / "x.dcm");
+}
+
+// ---- unbounded allocations from tiny files
+
+// A NIfTI-1 header (348 bytes + 4 extension bytes) declaring `nx x ny x nz` voxels of `datatype`
+// (`bitpix` bits) with the given pixdim, followed by `data`.
+std::string nifti(int nx, int ny, int nz, short datatype, short bitpix, float pixdim,
+                  const std::string& data = "") {
+  std::string h(352, '\0');
+  auto put = [&](std::size_t at, const auto& v) { std::memcpy(&h[at], &v, sizeof v); };
+  put(0, std::int32_t{348});
+  const std::int16_t dim[8] = {3, static_cast<std::int16_t>(nx), static_cast<std::int16_t>(ny),
+                               static_cast<std::int16_t>(nz), 1, 1, 1, 1};
+  std::memcpy(&h[40], dim, sizeof dim);
+  put(70, datatype);
+  put(72, bitpix);
+  const float pixd[8] = {1, pixdim, pixdim, pixdim, 1, 1, 1, 1};
+  std::memcpy(&h[76], pixd, sizeof pixd);
+  put(108, 352.0f);  // vox_offset
+  put(112, 1.0f);    // scl_slope
+  std::memcpy(&h[344], "n+1", 4);
+  return h + data;
+}
+
+TEST_F(Hostile, TinyVolumeFilesDeclaringGigabytesAreRefusedBeforeAllocating) {
+  const fs::path out = dir / "budget_out";
+  // 2048 x 2048 x 512 doubles: 2^31 voxels, 24 GiB with the float volume; a 70-byte .nii.gz.
+  const fs::path nii = dir / "huge.nii.gz";
+  write_file(nii, gzip(nifti(2048, 2048, 512, 64, 64, 1.0f)));
+  EXPECT_LT(fs::file_size(nii), 200u);
+  expect_refused_new("model from-volume " + nii.string() + " -o " + out.string(),
+                     {"huge.nii.gz", "max_bytes"}, out, nii);
+  // The budget is an option: a small volume refused under a smaller limit.
+  const fs::path small = dir / "small.nii";
+  write_file(small, nifti(20, 20, 20, 4, 16, 1.0f, std::string(20 * 20 * 20 * 2, '\0')));
+  expect_refused_new("volume info " + small.string() + " --max-voxels 1000",
+                     {"small.nii", "8000", "max_voxels"}, out, small);
+  EXPECT_EQ(run("volume info " + small.string() + " --max-voxels 8000").code, 0);
+  // Gzip NRRD and zlib MetaImage headers declaring the same.
+  const fs::path nrrd = dir / "huge.nrrd";
+  write_file(nrrd, "NRRD0004\ntype: double\ndimension: 3\nsizes: 2048 2048 512\nspacings: 1 1 1\n"
+                   "encoding: gzip\nendian: little\n\n" + gzip(std::string(64, '\0')));
+  expect_refused_new("volume info " + nrrd.string(), {"huge.nrrd", "max_bytes"}, out, nrrd);
+  const fs::path mha = dir / "huge.mha";
+  write_file(mha, "ObjectType = Image\nNDims = 3\nDimSize = 2048 2048 512\nElementType = MET_DOUBLE\n"
+                  "CompressedData = True\nElementDataFile = LOCAL\n" + gzip(std::string(64, '\0')));
+  expect_refused_new("volume info " + mha.string(), {"huge.mha", "max_bytes"}, out, mha);
+  // CompressedDataSize and HeaderSize of 1e30.
+  write_file(mha, "ObjectType = Image\nNDims = 3\nDimSize = 4 4 4\nElementType = MET_SHORT\n"
+                  "CompressedData = True\nCompressedDataSize = 1e30\nElementDataFile = LOCAL\n" +
+                      gzip(std::string(128, '\0')));
+  expect_refused_new("volume info " + mha.string(), {"huge.mha", "CompressedDataSize"}, out, mha);
+  // A limit that is not a positive number.
+  expect_refused_new("volume info " + small.string() + " --max-bytes -5", {"max_bytes"}, out, small);
+}
+
+TEST_F(Hostile, MeshCountsBeyondTheFileAreRefusedBeforeAllocating) {
+  const fs::path out = dir / "mesh_count_out";
+  const fs::path ply = dir / "liar.ply";
+  write_file(ply, "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                  "property float z\nelement face 1\nproperty list uint int vertex_indices\n"
+                  "end_header\n0 0 0\n1 0 0\n0 1 0\n2000000000 0 1 2\n");
+  expect_refused_new("model from-scan " + ply.string() + " --thickness 6 -o " + out.string(),
+                     {"liar.ply", "2e+09"}, out, ply);
+  const fs::path vtk = dir / "liar.vtk";
+  const std::string head = "# vtk DataFile Version 3.0\nliar\nASCII\nDATASET POLYDATA\n";
+  write_file(vtk, head + "POINTS 3 float\n0 0 0 1 0 0 0 1 0\nPOLYGONS 1 4\n2000000000 0 1 2\n");
+  expect_refused_new("model from-scan " + vtk.string() + " --thickness 6 -o " + out.string(),
+                     {"liar.vtk", "POLYGONS"}, out, vtk);
+  write_file(vtk, head + "POINTS 2000000000 float\n0 0 0\n");
+  expect_refused_new("model from-scan " + vtk.string() + " --thickness 6 -o " + out.string(),
+                     {"liar.vtk", "POINTS"}, out, vtk);
+}
+
+TEST_F(Hostile, DicomRowsAndColumnsBeyondTheBudgetAreRefusedBeforeDecoding) {
+  const fs::path ge = fs::path(CAPS_SHARED_DATA) / "ct" / "ge-head-tilt" / "01.dcm";
+  if (!fs::exists(ge)) GTEST_SKIP() << "no shared DICOM data";
+  std::string bytes = slurp(ge);
+  // Rows (0028,0010) and Columns (0028,0011), explicit VR US, set to 65535.
+  for (const char element : {'\x10', '\x11'}) {
+    const std::string tag = std::string("\x28\x00", 2) + element + std::string("\x00US\x02\x00", 5);
+    const auto at = bytes.find(tag);
+    ASSERT_NE(at, std::string::npos);
+    bytes[at + 8] = '\xff';
+    bytes[at + 9] = '\xff';
+  }
+  const fs::path folder = dir / "dicom_huge";
+  fs::create_directories(folder);
+  write_file(folder / "01.dcm", bytes);
+  expect_refused_new("volume info " + folder.string(), {"01.dcm", "65535x65535"}, dir / "none",
+                     folder);
+}
+
+// ---- bad data accepted silently
+
+TEST_F(Hostile, NonFiniteSpacingAndVoxelsAreRefused) {
+  const fs::path out = dir / "nan_out";
+  const fs::path nan_pixdim = dir / "nan_pixdim.nii";
+  write_file(nan_pixdim, nifti(4, 4, 4, 4, 16, std::nanf(""), std::string(128, '\0')));
+  expect_refused_new("volume info " + nan_pixdim.string(), {"nan_pixdim.nii", "pixdim"}, out,
+                     nan_pixdim);
+  const fs::path inf_pixdim = dir / "inf_pixdim.nii";
+  write_file(inf_pixdim, nifti(4, 4, 4, 4, 16, INFINITY, std::string(128, '\0')));
+  expect_refused_new("volume info " + inf_pixdim.string(), {"inf_pixdim.nii", "pixdim"}, out,
+                     inf_pixdim);
+  std::string floats(64 * 4, '\0');
+  const float nan = std::nanf("");
+  std::memcpy(&floats[4 * 21], &nan, 4);  // voxel (1, 1, 1)
+  const fs::path nan_voxel = dir / "nan_voxel.nii";
+  write_file(nan_voxel, nifti(4, 4, 4, 16, 32, 1.0f, floats));
+  expect_refused_new("volume info " + nan_voxel.string(), {"nan_voxel.nii", "(1, 1, 1)", "finite"},
+                     out, nan_voxel);
+}
+
+TEST_F(Hostile, NiftiIsReadFromTheFileGivenNotASameNamedOne) {
+  // a.nii.gz holds zeros; a different a.nii beside it holds 5s: the voxels come from a.nii.gz.
+  fs::create_directories(dir / "same_name");
+  const fs::path gz = dir / "same_name" / "a.nii.gz", plain = dir / "same_name" / "a.nii";
+  write_file(gz, gzip(nifti(4, 4, 4, 4, 16, 1.0f, std::string(128, '\0'))));
+  std::string fives(128, '\0');
+  for (std::size_t i = 0; i < fives.size(); i += 2) fives[i] = 5;
+  write_file(plain, nifti(4, 4, 4, 4, 16, 1.0f, fives));
+  Outcome r = run("volume info " + gz.string());
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("values     0 .. 0"), std::string::npos) << r.out;
+  r = run("volume info " + plain.string());
+  EXPECT_NE(r.out.find("values     5 .. 5"), std::string::npos) << r.out;
+}
+
+// ---- plans and outputs: a small model, a plan and a box mesh
+
+class HostileModel : public Hostile {
+ protected:
+  static fs::path model() {
+    const fs::path m = dir / "model";
+    if (!fs::exists(m)) {
+      const Outcome r = run("model from-volume -q " + phantom().string() + " -o " + m.string() +
+                            " --n-theta 96 --n-z 48");
+      EXPECT_EQ(r.code, 0) << r.err;
+    }
+    return m;
+  }
+  static fs::path plan() {
+    const fs::path p = dir / "plan.json";
+    if (!fs::exists(p)) {
+      const Outcome r = run("plan new z-plasty -q --model " + model().string() + " --at 0,60 -o " + p.string());
+      EXPECT_EQ(r.code, 0) << r.err;
+    }
+    return p;
+  }
+};
+
+TEST_F(HostileModel, PlanPointsFarOutsideAHeadAreRefused) {
+  std::string text = slurp(plan());
+  const auto at = text.find("\"theta_deg\"", text.find("\"points\""));
+  ASSERT_NE(at, std::string::npos);
+  const auto value = text.find(':', at) + 1, end = text.find_first_of(",}", value);
+  text.replace(value, end - value, " 1e300");
+  const fs::path far = dir / "far_plan.json";
+  write_file(far, text);
+  expect_refused_new("plan check " + far.string(), {"point 0", "1e+300", "outside"},
+                     dir / "none", far);
+}
+
+TEST_F(HostileModel, AnOutputThatIsOrHoldsAnInputIsRefusedEvenWithForce) {
+  // solve mesh -o mesh
+  const fs::path mesh = dir / "box_mesh";
+  ASSERT_EQ(run("fem box -q -o " + mesh.string() + " --cells 2,1,1").code, 0);
+  expect_refused("solve " + mesh.string() + " -o " + mesh.string() + " --force",
+                 {mesh.string(), "is the input", "--force"}, mesh, mesh);
+  // plan show p.json -o p.json
+  const fs::path p = plan();
+  expect_refused("plan show " + p.string() + " -o " + p.string() + " --force",
+                 {p.string(), "is the input"}, p, p);
+  // simulate --model M -o M
+  const fs::path m = model();
+  expect_refused("simulate --model " + m.string() + " --plan " + p.string() + " -o " + m.string() +
+                     " --force",
+                 {m.string(), "--model"}, m, m);
+  // model from-scan model/skin.ply -o model
+  ASSERT_TRUE(fs::exists(m / "skin.ply"));
+  expect_refused("model from-scan " + (m / "skin.ply").string() + " --thickness 6 -o " +
+                     m.string() + " --force",
+                 {m.string(), "holds the input", "skin.ply"}, m, m);
+  // The same through a different spelling of the path.
+  expect_refused("solve " + mesh.string() + "/. -o " + (mesh.parent_path() / "." / "box_mesh").string() +
+                     " --force",
+                 {"is the input"}, mesh, mesh);
+}
+
+TEST_F(HostileModel, JsonFieldsOfTheWrongTypeAreInputErrors) {
+  // A plan whose "format" is a number, or whose format_version is a string.
+  const std::string text = slurp(plan());
+  for (const auto& [from, to] : std::vector<std::pair<std::string, std::string>>{
+           {"\"format\": \"caps-plan\"", "\"format\": 5"},
+           {"\"format_version\": 1", "\"format_version\": \"1\""}}) {
+    const auto at = text.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    std::string bad = text;
+    bad.replace(at, from.size(), to);
+    const fs::path p = dir / "typed_plan.json";
+    write_file(p, bad);
+    expect_refused_new("plan check " + p.string(), {"typed_plan.json", "format"}, dir / "none", p);
+  }
+  // A model.json whose format_version is a string.
+  const fs::path m = dir / "typed_model";
+  fs::remove_all(m);
+  fs::copy(model(), m, fs::copy_options::recursive);
+  std::string mj = slurp(m / "model.json");
+  const auto at = mj.find("\"format_version\": 1");
+  ASSERT_NE(at, std::string::npos);
+  mj.replace(at, std::string("\"format_version\": 1").size(), "\"format_version\": \"1\"");
+  write_file(m / "model.json", mj);
+  expect_refused_new("model info " + m.string(), {"model.json", "format_version"}, dir / "none", m);
+  // files.r_skin = 5
+  mj.replace(at, std::string("\"format_version\": \"1\"").size(), "\"format_version\": 1");
+  const auto r_skin = mj.find("\"r_skin\": \"");
+  ASSERT_NE(r_skin, std::string::npos);
+  const auto value = r_skin + std::string("\"r_skin\": ").size();
+  mj.replace(value, mj.find('"', value + 1) + 1 - value, "5");
+  write_file(m / "model.json", mj);
+  expect_refused_new("model info " + m.string(), {"model.json", "r_skin"}, dir / "none", m);
+}
+
+}  // namespace
