@@ -63,3 +63,4 @@ HTML
 done
 echo "</body></html>" >> "$out/index.html"
 echo "caps demo: open $out/index.html"
+echo "caps demo: the planner's server on this patient: $caps serve $out/cranium (its API: docs/planner.md)"
