@@ -6,6 +6,7 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "caps/plan/skin_walk.hpp"
 #include "suture_json.hpp"
 
 namespace caps::plan {
@@ -37,17 +38,20 @@ LocalProcedure ellipse(std::map<std::string, double>& p) {
                            "dog-ears: length about 3.5 x width)"));
   p["width"] = W;
   p["apex_angle"] = apex;
-  // The surgeon's points 0..3 along the axis; 1, 2 and their twins 5, 4 moved onto a lens
-  // (two circular arcs) of the given length and width.
-  const double R = (L * L / 4 + W * W / 4) / W;
-  const double y = std::sqrt(R * R - L * L / 36) - (R - W / 2);
+  // The surgeon's points 0..3 along the axis; 1, 2 and their twins 5, 4 moved to the sides of
+  // the fusiform: four points cannot hold a curved outline whose width and apex angle both
+  // mean what they say (a lens through points at L/6 is 0.9 W wide with a 48 deg apex at
+  // 3:1), so the outline is the rhombus of the given length, width and apex angle, with 1 at
+  // its widest point (the centre) and 2 halfway along the side to the apex 3.
   LocalProcedure out;
-  out.points_mm = {V2(-L / 2, 0), V2(-L / 6, 0), V2(L / 6, 0), V2(L / 2, 0)};
+  out.points_mm = {V2(-L / 2, 0), V2(0, 0), V2(L / 4, 0), V2(L / 2, 0)};
   out.paths = {{0, 1, 2, 3}};
-  out.excisions = {{1, V2(0, y)}, {2, V2(0, y)}, {4, V2(0, -y)}, {5, V2(0, -y)}};
+  out.excisions = {{1, V2(0, W / 2)}, {2, V2(0, W / 4)}, {4, V2(0, -W / 4)}, {5, V2(0, -W / 2)}};
   out.sutures = {sp(0, 1, 0, 5), sp(1, 2, 5, 4), sp(2, 3, 4, 3)};  // the paper's list
   out.notes = "Elliptical (fusiform) excision, CAPS 1992 Figure 1: surgeon points 0..3 along the "
-              "axis; 4 and 5 start on 2 and 1 and are moved (with 1 and 2) to enclose the lens.";
+              "axis (1 at the centre, 2 halfway to the apex 3); 4 and 5 start on 2 and 1 and are "
+              "moved (with 1 and 2) to enclose the fusiform of the given length, width and apex "
+              "angle.";
   return out;
 }
 
@@ -356,9 +360,46 @@ Plan place_procedure(const LocalProcedure& proc, const PatientModel& model, doub
   plan.procedure = proc.name.empty() ? "custom" : proc.name;
   plan.parameters = proc.parameters;
   plan.frame = make_frame(model, theta_deg, z_mm, orientation_deg);
-  for (const auto& xy : proc.points_mm) {
-    const Eigen::Vector2d tz = plan.frame.to_theta_z(xy);
-    plan.points.push_back({tz[0], tz[1], model.skin_point(tz[0], tz[1])});
+  // Each point is walked to along the skin from its neighbour on the cut, in the direction and
+  // over the length the template draws, with the frame carried along: the cut's segments keep
+  // their lengths and the angles between them on the skin (a linear map of the template would
+  // stretch and turn it where the skin curves). The walks start from the point nearest the
+  // centre; a point on no path is walked to from the centre.
+  const std::size_t np = proc.points_mm.size();
+  const SkinFrame centre = skin_frame(model, theta_deg, z_mm, orientation_deg);
+  std::vector<std::vector<int>> nb(np);
+  for (const auto& path : proc.paths)
+    for (std::size_t i = 1; i < path.size(); ++i) {
+      const int a = path[i - 1], b = path[i];
+      if (a < 0 || b < 0 || a >= static_cast<int>(np) || b >= static_cast<int>(np)) continue;
+      nb[a].push_back(b);
+      nb[b].push_back(a);
+    }
+  std::vector<SkinFrame> at(np);
+  std::vector<char> placed(np, 0);
+  for (;;) {
+    int root = -1;
+    for (std::size_t i = 0; i < np; ++i)
+      if (!placed[i] && (root < 0 || proc.points_mm[i].norm() < proc.points_mm[root].norm()))
+        root = static_cast<int>(i);
+    if (root < 0) break;
+    at[root] = walk_on_skin(model, centre, proc.points_mm[root]);
+    placed[root] = 1;
+    std::vector<int> queue{root};
+    for (std::size_t q = 0; q < queue.size(); ++q) {
+      const int u = queue[q];
+      for (int v : nb[u]) {
+        if (placed[v]) continue;
+        at[v] = walk_on_skin(model, at[u], proc.points_mm[v] - proc.points_mm[u]);
+        placed[v] = 1;
+        queue.push_back(v);
+      }
+    }
+  }
+  for (const auto& f : at) {
+    const double theta = std::remainder(f.theta_z[0], 360.0);
+    const double t = theta >= 180.0 ? theta - 360.0 : theta;
+    plan.points.push_back({t, f.theta_z[1], model.skin_point(t, f.theta_z[1])});
   }
   plan.paths = proc.paths;
   plan.excisions = proc.excisions;
