@@ -219,6 +219,22 @@ WoundBorder wound_border(const Plan& plan) {
   WoundBorder w;
   w.loop_theta_z = loop.theta_z;
   for (const auto& s : plan.sutures) w.sutures.push_back(oriented_suture(s, loop.size()));
+  const double t0 = loop.theta_z.empty() ? 0.0 : loop.theta_z[0][0];
+  for (std::size_t f = 0; f < plan.flaps.size(); ++f) {
+    const auto& flap = plan.flaps[f];
+    if (flap.size() < 3)
+      throw InvalidInput(cat("flap ", f, " has ", flap.size(), " point(s); a flap's outline needs "
+                             "at least 3"));
+    std::vector<Eigen::Vector2d> poly;
+    for (int i : flap) {
+      if (i < 0 || i >= static_cast<int>(plan.points.size()))
+        throw InvalidInput(cat("flap ", f, " names point ", i, ", but the plan has ",
+                               plan.points.size(), " points"));
+      const auto& p = plan.points[i];
+      poly.push_back({t0 + std::remainder(p.theta_deg - t0, 360.0), p.z_mm});
+    }
+    w.flaps_theta_z.push_back(std::move(poly));
+  }
   return w;
 }
 

@@ -63,6 +63,7 @@ LocalProcedure z_plasty(std::map<std::string, double>& p) {
   out.points_mm = {p1 + limb, p1, p2, p2 - limb};
   out.paths = {{0, 1, 2, 3}};
   out.sutures = {sp(5, 0, 5, 4), sp(2, 1, 2, 3), sp(0, 1, 3, 4)};  // the paper's list
+  out.flaps = {{0, 1, 2}, {3, 2, 1}};  // the two triangles, tips at 1 and 2
   out.notes = "Z-plasty, CAPS 1992 Figure 2: path 0,1,2,3 (central limb 1-2 along the "
               "orientation); loop 0..5 with 4 on 2 and 5 on 1. Flap tips at 1 and 4 transpose: "
               "0 meets 4, 1 meets 3; 2 and 5 are closed corners.";
@@ -104,6 +105,8 @@ LocalProcedure multiple_z(std::map<std::string, double>& p) {
     out.sutures.push_back({E(b, a), E(c, b)});
     out.sutures.push_back({E(b, c), E(c, d)});
     out.sutures.push_back({E(a, b), E(d, c)});
+    out.flaps.push_back({a, b, c});
+    out.flaps.push_back({d, c, b});
   }
   out.notes = cat(n, " Z-plasties in series sharing one central line; at each inner point the "
                   "limbs of two neighbouring Zs form one straight cut. Each Z is sutured like the "
@@ -147,6 +150,7 @@ LocalProcedure rhomboid(std::map<std::string, double>& p) {
   out.paths = {{0, 1, 2, 3, 4}};
   out.excisions = {{5, A - C}};  // the twin of C becomes the rhombus corner A
   out.sutures = {sp(1, 2, 5, 4), sp(3, 2, 3, 4), sp(0, 1, 6, 5), sp(7, 0, 7, 6)};
+  out.flaps = {{2, 1, 0, 3}};  // D E F C
   out.notes = "Rhomboid (Limberg) flap: loop F0 E1 D2 C3 B4 A5 D'6 E'7. The flap D-E-F-C turns "
               "60 deg about C into the defect: E meets A, D meets B, F meets D'; C and E' are "
               "closed corners.";
@@ -196,6 +200,10 @@ LocalProcedure rotation_flap(std::map<std::string, double>& p) {
   // Mirrored, the path is reversed so that the same side stays on the left.
   if (mirror) std::reverse(path.begin(), path.end());
   out.paths = {path};
+  // The flap: the sector O, S, the arc to P (and the back-cut's end B).
+  out.flaps = {{iO, iS}};
+  for (int k = 1; k <= m; ++k) out.flaps[0].push_back(A(k));
+  if (back) out.flaps[0].push_back(iB);
   const std::vector<int> loop = walk_around_cut(out.points_mm, out.paths);
   const int nl = static_cast<int>(loop.size());
   auto E = [&](int u, int v) {
@@ -248,6 +256,7 @@ LocalProcedure v_y(std::map<std::string, double>& p) {
   out.sutures = {{{5, 6}, {6, 7}},      // the stem: outer arms from P' to J'
                  {{0, 1, 2}, {0, 7}},   // flap side P..A to the outer J_A'..A
                  {{2, 3, 4}, {5, 4}}};  // flap side P..B to the outer J_B'..B
+  out.flaps = {{0, 2, 4}};  // the V: A, P, B
   out.notes = cat("V-Y advancement: path A0 J1 P2 J3 B4 (the V's apex P, its arms ", L,
                   " mm at ", p["angle"], " deg), loop twins J5 P6 J7 on the outer side. The outer "
                   "arms close from the apex to J (the stem of the Y, ", s, " mm); each side of the "
@@ -404,6 +413,7 @@ Plan place_procedure(const LocalProcedure& proc, const PatientModel& model, doub
   plan.paths = proc.paths;
   plan.excisions = proc.excisions;
   plan.sutures = proc.sutures;
+  plan.flaps = proc.flaps;
   plan.notes = proc.notes;
   return plan;
 }
@@ -434,6 +444,7 @@ std::string procedure_to_json(const LocalProcedure& p) {
   for (const auto& e : p.excisions)
     j["excisions"].push_back({{"loop_index", e.loop_index}, {"offset_mm", {e.offset_mm.x(), e.offset_mm.y()}}});
   j["sutures"] = sutures_json(p.sutures);
+  if (!p.flaps.empty()) j["flaps"] = p.flaps;
   j["notes"] = p.notes;
   return j.dump(2);
 }
@@ -460,6 +471,7 @@ LocalProcedure parse_procedure_json(const std::string& text, const std::string& 
         p.excisions.push_back({e.at("loop_index").get<int>(),
                                V2(e.at("offset_mm").at(0).get<double>(), e.at("offset_mm").at(1).get<double>())});
     for (const auto& s : j.at("sutures")) p.sutures.push_back(detail::suture_from_json(s, source));
+    if (j.contains("flaps")) p.flaps = j["flaps"].get<std::vector<std::vector<int>>>();
     p.notes = j.value("notes", "");
     return p;
   } catch (const json::exception& e) {
@@ -475,6 +487,7 @@ LocalProcedure procedure_from_plan(const Plan& plan) {
   p.paths = plan.paths;
   p.excisions = plan.excisions;
   p.sutures = plan.sutures;
+  p.flaps = plan.flaps;
   p.notes = plan.notes;
   return p;
 }
