@@ -110,6 +110,7 @@ TEST(SurfaceMesher, SquareHoleOneLayerHandCount) {
   for (int layers : {1, 2, 3}) {
     ContinuumMeshOptions o;
     o.n_layers = layers;
+    o.undermine_mm = 0;  // the paper's hand count: only sutured columns are free
     const ContinuumMesh c = mesh_continuum(s, model, o);
     // 8 vertex columns of 2N+1 nodes, 12 edge columns of N+1 nodes.
     EXPECT_EQ(c.mesh.n_nodes(), 8 * (2 * layers + 1) + 12 * (layers + 1));
@@ -121,6 +122,7 @@ TEST(SurfaceMesher, SquareHoleOneLayerHandCount) {
   ContinuumMeshOptions free;
   free.n_layers = 2;
   free.rim = RimCondition::Free;
+  free.undermine_mm = 0;
   EXPECT_EQ(mesh_continuum(s, model, free).mesh.fixed_nodes.size(), 20u);
 }
 
