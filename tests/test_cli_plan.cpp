@@ -88,7 +88,7 @@ TEST_F(CliPlan, RefusesBadPlansWithoutOutput) {
   expect_refused("plan new z-plasty" + m + " --at 0,900 -o " + out, out, "outside the model");
   expect_refused("plan new z-plasty" + m + " --at 0 -o " + out, out, "--at '0'");
   expect_refused("plan new z-plasty --model " + p("nowhere") + " --at 0,60 -o " + out, out, "nowhere");
-  expect_refused("plan new ellipse" + m + " --at 0,95 -o " + out, out, "loop node 3 (point 3)");
+  expect_refused("plan new ellipse" + m + " --at 0,95 --length 60 -o " + out, out, "loop node 3 (point 3)");
   // An existing output needs --force.
   ASSERT_EQ(caps("plan new z-plasty" + m + " --at 0,60 -q -o " + out).code, 0);
   EXPECT_EQ(caps("plan new z-plasty" + m + " --at 0,60 -q -o " + out).code, 2);

@@ -24,6 +24,7 @@
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/simulate.hpp"
+#include "caps/fem/suture_spacing.hpp"
 #include "caps/fem/solve.hpp"
 #include "caps/fem/surface_mesher.hpp"
 #include "caps/plan/procedures.hpp"
@@ -109,6 +110,7 @@ TEST(SurfaceMesher, SquareHoleOneLayerHandCount) {
   for (int layers : {1, 2, 3}) {
     ContinuumMeshOptions o;
     o.n_layers = layers;
+    o.undermine_mm = 0;  // the paper's hand count: only sutured columns are free
     const ContinuumMesh c = mesh_continuum(s, model, o);
     // 8 vertex columns of 2N+1 nodes, 12 edge columns of N+1 nodes.
     EXPECT_EQ(c.mesh.n_nodes(), 8 * (2 * layers + 1) + 12 * (layers + 1));
@@ -120,6 +122,7 @@ TEST(SurfaceMesher, SquareHoleOneLayerHandCount) {
   ContinuumMeshOptions free;
   free.n_layers = 2;
   free.rim = RimCondition::Free;
+  free.undermine_mm = 0;
   EXPECT_EQ(mesh_continuum(s, model, free).mesh.fixed_nodes.size(), 20u);
 }
 
@@ -491,8 +494,9 @@ TEST(ContinuumMesher, UnderminingFreesTheBaseNearTheWoundAndMakesTheForceMeshInd
   // as the mesh is refined; undermined 5 mm around the wound it settles, and it is lower (that is
   // why surgeons undermine).
   const PatientModel model = constant_cylinder();
-  const plan::Plan p = plan::place_procedure(
+  plan::Plan p = plan::place_procedure(
       plan::layout_procedure("z-plasty", {{"length", 20.0}}), model, 0.0, 40.0, 90.0);
+  p.flaps.clear();  // the distance rule alone (raised flaps: FlapsAreRaisedOverTheirWholeArea)
   auto run = [&](double size, double undermine) {
     SimulateOptions o;
     o.surface.size_mm = size;
@@ -537,4 +541,87 @@ TEST(ContinuumMesher, UnderminingFreesTheBaseNearTheWoundAndMakesTheForceMeshInd
   EXPECT_LT(std::abs(f5_fine - f5), 0.03 * f5);
   EXPECT_LT(f5, 0.8 * f0);
   EXPECT_THROW(run(2.0, -1.0), InvalidInput);
+}
+
+// The flaps a plan raises are freed from the bone over their whole area, whatever the
+// undermining around the wound: the Z-plasty's two triangles (0, 1, 2) and (3, 2, 1).
+TEST(ContinuumMesher, FlapsAreRaisedOverTheirWholeArea) {
+  const PatientModel model = constant_cylinder();
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("z-plasty", {{"length", 20.0}}), model, 0.0, 40.0, 90.0);
+  ASSERT_EQ(p.flaps.size(), 2u);
+  SimulateOptions o;
+  o.surface.size_mm = 2.0;
+  o.surface.extent_mm = 30;
+  o.continuum.undermine_mm = 0;
+  const WoundMesh w = mesh_wound(plan::wound_border(p), model, o.surface, o.continuum);
+  const ContinuumMesh& C = w.continuum;
+  std::set<int> fixed(C.mesh.fixed_nodes.begin(), C.mesh.fixed_nodes.end()), sutured;
+  for (const auto& q : C.mesh.sutures) sutured.insert({q.a, q.b});
+  // Barycentric inside test of a node's column against a flap triangle, (theta, z) scaled to mm.
+  auto local = [&](double t, double z) { return Eigen::Vector2d(t * kPi / 180 * kR, z); };
+  auto inside = [&](const Eigen::Vector2d& q, const std::vector<int>& tri, double margin) {
+    const Eigen::Vector2d a = local(p.points[tri[0]].theta_deg, p.points[tri[0]].z_mm);
+    const Eigen::Vector2d b = local(p.points[tri[1]].theta_deg, p.points[tri[1]].z_mm);
+    const Eigen::Vector2d c = local(p.points[tri[2]].theta_deg, p.points[tri[2]].z_mm);
+    Eigen::Matrix2d M;
+    M << b - a, c - a;
+    const Eigen::Vector2d l = M.inverse() * (q - a);
+    return l[0] > margin && l[1] > margin && 1 - l[0] - l[1] > margin;
+  };
+  int freed = 0, held = 0;
+  for (Eigen::Index n = 0; n < C.mesh.n_nodes(); ++n) {
+    if (C.node_level[n] != C.n_layers || sutured.count(static_cast<int>(n))) continue;
+    const Eigen::Vector2d q = local(C.node_theta_z(n, 0), C.node_theta_z(n, 1));
+    const bool in = inside(q, p.flaps[0], 1e-6) || inside(q, p.flaps[1], 1e-6);
+    const bool out = !inside(q, p.flaps[0], -1e-6) && !inside(q, p.flaps[1], -1e-6);
+    if (!in && !out) continue;  // on an outline
+    EXPECT_EQ(fixed.count(static_cast<int>(n)) == 1, out) << "node " << n;
+    (in ? freed : held) += 1;
+  }
+  // Two triangles of 20 mm sides (173 mm2 each) at 2 mm: dozens of bottom nodes freed.
+  EXPECT_GT(freed, 40);
+  EXPECT_GT(held, 100);
+}
+
+// The closing force in surgeons' terms: sutures every 5 mm along the closed wound of a 20 x 6 mm
+// ellipse (a rhombus: two sides of sqrt(10^2 + 3^2) = 10.44 mm close into one line of that
+// length). The sutures' forces add up to the total, the wound's length is the closed line's, and
+// one suture for the whole wound carries all of it.
+TEST(SutureSpacing, ForcePerSutureAndPerMmOfWound) {
+  const PatientModel model = constant_cylinder();
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0.0, 40.0, 90.0);
+  SimulateOptions o;
+  o.surface.size_mm = 1.5;
+  o.surface.extent_mm = 25;
+  const Simulation sim = simulate(model, p, o);
+  const SutureSpacing& s = sim.sutures;
+  const double total = sim.result.total_suture_force_n;
+  EXPECT_EQ(s.spacing_mm, 5.0);
+  EXPECT_NEAR(s.total_force_n, total, 1e-9 * std::abs(total));
+  // The closed line from apex to apex: the side's 10.44 mm, pulled straight by the closure.
+  EXPECT_GT(s.wound_length_mm, 19.0);
+  EXPECT_LT(s.wound_length_mm, 21.5);
+  EXPECT_GE(s.sutures.size(), 4u);  // 5 mm apart along about 20 mm: 4 or 5
+  EXPECT_LE(s.sutures.size(), 5u);
+  for (std::size_t i = 0; i < s.sutures.size(); ++i)
+    for (std::size_t j = i + 1; j < s.sutures.size(); ++j)
+      EXPECT_GE((s.sutures[i].position_mm - s.sutures[j].position_mm).norm(), 5.0 * (1 - 1e-9));
+  double sum = 0, max = 0;
+  int pairs = 0;
+  for (const auto& x : s.sutures) sum += x.force_n, max = std::max(max, x.force_n), pairs += x.n_pairs;
+  EXPECT_NEAR(sum, total, 1e-9 * std::abs(total));
+  EXPECT_EQ(max, s.max_suture_force_n);
+  EXPECT_EQ(pairs, static_cast<int>(sim.wound.continuum.mesh.sutures.size()));
+  EXPECT_GT(s.max_suture_force_n, total / static_cast<double>(s.sutures.size()));
+  EXPECT_LT(s.max_suture_force_n, total);
+  EXPECT_NEAR(s.force_per_mm_n, total / s.wound_length_mm, 1e-12);
+  std::printf("ellipse 20 x 6 mm: total %.3f N, %zu sutures every 5 mm, largest %.3f N, %.4f N/mm "
+              "over %.2f mm\n", total, s.sutures.size(), s.max_suture_force_n, s.force_per_mm_n,
+              s.wound_length_mm);
+  const SutureSpacing one = suture_spacing(sim.wound.continuum, sim.result, 1000.0);
+  ASSERT_EQ(one.sutures.size(), 1u);
+  EXPECT_NEAR(one.max_suture_force_n, total, 1e-9 * std::abs(total));
+  EXPECT_THROW(suture_spacing(sim.wound.continuum, sim.result, 0.0), InvalidInput);
 }

@@ -460,3 +460,97 @@ TEST(PlanRules, RunsAreCheckedAndOrientedLikeEdges) {
   EXPECT_THROW(oriented_suture({{0}, {5, 6}}, 8), InvalidInput);         // one node
   EXPECT_EQ(suture_text({{0, 1, 2}, {0, 7}}), "((0,1,2),(0,7))");
 }
+
+// Templates lay the geometry asked for, measured on the skin: lengths along the placed polyline
+// (straight in (theta, z) between points, as the mesher and check_plan() draw it) and angles
+// between the polyline's directions on the skin.
+namespace {
+
+double skin_length(const PatientModel& m, Eigen::Vector2d a, Eigen::Vector2d b) {
+  b[0] = a[0] + std::remainder(b[0] - a[0], 360.0);
+  double len = 0;
+  Eigen::Vector3d last = m.skin_point(a[0], a[1]);
+  for (int s = 1; s <= 400; ++s) {
+    const Eigen::Vector2d t = a + (b - a) * (s / 400.0);
+    const Eigen::Vector3d x = m.skin_point(t[0], t[1]);
+    len += (x - last).norm();
+    last = x;
+  }
+  return len;
+}
+
+// The direction in which the polyline leaves a towards b, on the skin (LPS unit vector).
+Eigen::Vector3d skin_direction(const PatientModel& m, Eigen::Vector2d a, Eigen::Vector2d b) {
+  b[0] = a[0] + std::remainder(b[0] - a[0], 360.0);
+  const Eigen::Vector2d t = a + (b - a) * 1e-3;
+  return (m.skin_point(t[0], t[1]) - m.skin_point(a[0], a[1])).normalized();
+}
+
+double angle_deg(const Eigen::Vector3d& u, const Eigen::Vector3d& v) {
+  return rad_to_deg(std::acos(std::clamp(u.dot(v), -1.0, 1.0)));
+}
+
+Eigen::Vector2d tz(const SkinPoint& p) { return {p.theta_deg, p.z_mm}; }
+
+// A curved head-like surface: a sphere of radius 90 mm about z = 0, flattened by 15 % across
+// theta (r depends on theta and z), 8 mm of tissue.
+const PatientModel& curved() {
+  static const PatientModel model(caps_test::synthetic_maps(
+      caps_test::grid(1440, 601, -75, 0.25),
+      [](double t, double z) {
+        return std::sqrt(90.0 * 90.0 - z * z) * (1.0 - 0.15 * std::sin(deg_to_rad(t)) * std::sin(deg_to_rad(t)));
+      },
+      [](double, double) { return 8.0; }));
+  return model;
+}
+
+void expect_z_plasty_on_skin(const PatientModel& m, double theta, double z, double orientation) {
+  for (double angle : {30.0, 45.0, 60.0, 75.0, 90.0}) {
+    const Plan p = place_procedure(layout_procedure("z-plasty", {{"length", 15}, {"angle", angle}}),
+                                   m, theta, z, orientation);
+    SCOPED_TRACE(::testing::Message() << "angle " << angle << " at " << theta << "," << z);
+    for (int i = 0; i < 3; ++i)
+      EXPECT_NEAR(skin_length(m, tz(p.points[i]), tz(p.points[i + 1])), 15.0, 0.3) << "limb " << i;
+    EXPECT_NEAR(angle_deg(skin_direction(m, tz(p.points[1]), tz(p.points[0])),
+                          skin_direction(m, tz(p.points[1]), tz(p.points[2]))), angle, 1.0);
+    EXPECT_NEAR(angle_deg(skin_direction(m, tz(p.points[2]), tz(p.points[3])),
+                          skin_direction(m, tz(p.points[2]), tz(p.points[1]))), angle, 1.0);
+  }
+}
+
+void expect_ellipse_on_skin(const PatientModel& m, double theta, double z) {
+  // Horizontal (orientation 90): 30 x 10 mm, apex angle 2 atan(1/3) = 36.87 deg.
+  const Plan q = place_procedure(layout_procedure("ellipse", {{"length", 30}, {"width", 10}}), m,
+                                 theta, z, 90);
+  const BorderLoop loop = border_loop(q);
+  const auto& n = loop.theta_z;
+  double axis_mm = 0;  // the surgeon's points 0..3 along the axis, apex to apex
+  for (int i = 0; i < 3; ++i) axis_mm += skin_length(m, tz(q.points[i]), tz(q.points[i + 1]));
+  EXPECT_NEAR(axis_mm, 30.0, 0.6);
+  EXPECT_NEAR((m.skin_point(n[1][0], n[1][1]) - m.skin_point(n[5][0], n[5][1])).norm(), 10.0, 0.2);
+  const double apex = rad_to_deg(2 * std::atan(10.0 / 30.0));
+  EXPECT_NEAR(angle_deg(skin_direction(m, n[0], n[1]), skin_direction(m, n[0], n[5])), apex, 1.0);
+  EXPECT_NEAR(angle_deg(skin_direction(m, n[3], n[2]), skin_direction(m, n[3], n[4])), apex, 1.0);
+  // Horizontal: the apices at the same height (the axis tilted less than 1 deg).
+  const Eigen::Vector3d a = m.skin_point(n[0][0], n[0][1]), b = m.skin_point(n[3][0], n[3][1]);
+  const Eigen::Vector3d axis = m.to_lps(0, 1, 0) - m.to_lps(0, 0, 0);
+  EXPECT_LT(std::abs(rad_to_deg(std::asin((b - a).normalized().dot(axis)))), 1.0);
+}
+
+}  // namespace
+
+TEST(PlanGeometry, ZPlastyLimbsAndAnglesOnACylinder) {
+  expect_z_plasty_on_skin(cylinder(), 0, 60, 90);
+  expect_z_plasty_on_skin(cylinder(), 20, 60, 35);
+}
+
+TEST(PlanGeometry, ZPlastyLimbsAndAnglesOnACurvedSkin) {
+  expect_z_plasty_on_skin(curved(), 45, 40, 90);
+  expect_z_plasty_on_skin(curved(), -120, -30, 20);
+}
+
+TEST(PlanGeometry, EllipseWidthApexAndLevelOnTheSkin) {
+  expect_ellipse_on_skin(cylinder(), 0, 60);
+  expect_ellipse_on_skin(curved(), 45, 40);
+  expect_ellipse_on_skin(curved(), 100, -35);
+}

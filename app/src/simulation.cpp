@@ -1,6 +1,7 @@
 #include "caps/app/simulation.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -152,7 +153,11 @@ std::string summary(const MeshResult& m) {
 
 SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
-  const fem::SimulateOptions o = simulate_options(r.meshing, r.solver);
+  fem::SimulateOptions o = simulate_options(r.meshing, r.solver);
+  if (!(r.suture_spacing > 0) || !std::isfinite(r.suture_spacing))
+    throw InvalidParameter(cat("{suture_spacing} ", r.suture_spacing, ": give the distance "
+                               "between sutures in mm, > 0 (e.g. 5)"));
+  o.suture_spacing_mm = r.suture_spacing;
   if (r.tension_map && !r.render)
     throw InvalidInput("--tension-map draws on the rendered images; add --render");
   const plan::Plan plan = plan::read_plan(r.plan);
@@ -184,6 +189,11 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   s.material = res.kinematics;
   s.load_steps = static_cast<int>(res.newton_steps.size());
   s.newton_iterations = res.newton_iterations;
+  s.suture_spacing_mm = sim.sutures.spacing_mm;
+  s.sutures = static_cast<int>(sim.sutures.sutures.size());
+  s.max_force_per_suture_n = sim.sutures.max_suture_force_n;
+  s.force_per_mm_n = sim.sutures.force_per_mm_n;
+  s.wound_length_mm = sim.sutures.wound_length_mm;
   s.solve_s = res.timings.total_s;
   return s;
 }
@@ -197,6 +207,11 @@ std::string to_json(const SimulateResult& s) {
          {"closing_force_n", s.closing_force_n},
          {"max_suture_force_n", s.max_suture_force_n},
          {"max_suture_gap_mm", s.max_suture_gap_mm},
+         {"sutures_at_spacing", {{"spacing_mm", s.suture_spacing_mm},
+                                 {"sutures", s.sutures},
+                                 {"max_force_per_suture_n", s.max_force_per_suture_n},
+                                 {"force_per_mm_n", s.force_per_mm_n},
+                                 {"wound_length_mm", s.wound_length_mm}}},
          {"strain_energy_mj", s.strain_energy_mj},
          {"material", s.material},
          {"load_steps", s.load_steps},
@@ -209,7 +224,9 @@ std::string to_json(const SimulateResult& s) {
 
 std::string summary(const SimulateResult& s) {
   return cat("caps simulate: ", s.elements, " elements, closing force ",
-             round_to(s.closing_force_n, 2), " N, max displacement ",
+             round_to(s.closing_force_n, 2), " N (", s.sutures, " sutures every ",
+             round_to(s.suture_spacing_mm, 1), " mm: up to ", round_to(s.max_force_per_suture_n, 2),
+             " N each; ", round_to(s.force_per_mm_n, 3), " N per mm of wound), max displacement ",
              round_to(s.max_displacement_mm, 2), " mm, suture gap after closure ",
              s.max_suture_gap_mm < 1e-6 ? std::string("0") : cat(round_sig(s.max_suture_gap_mm, 2)),
              " mm -> ", s.output);

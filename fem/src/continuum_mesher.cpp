@@ -44,6 +44,26 @@ Eigen::VectorXd min_element_jacobians(const Mesh& mesh) {
 
 namespace {
 
+// Whether q lies inside the polygon or on its outline (to 1e-9 of its size), in any plane
+// coordinates (the test is affine-invariant: theta deg and z mm may be mixed).
+bool inside_or_on(const std::vector<Eigen::Vector2d>& poly, const Eigen::Vector2d& q) {
+  const std::size_t n = poly.size();
+  bool inside = false;
+  double scale = 0;
+  for (const auto& p : poly) scale = std::max(scale, (p - poly[0]).norm());
+  const double tol = 1e-9 * std::max(scale, 1.0);
+  for (std::size_t i = 0, j = n - 1; i < n; j = i++) {
+    const Eigen::Vector2d a = poly[j], b = poly[i];
+    const double L2 = (b - a).squaredNorm();
+    const double t = L2 > 0 ? std::clamp((q - a).dot(b - a) / L2, 0.0, 1.0) : 0.0;
+    if ((a + t * (b - a) - q).norm() <= tol) return true;
+    if ((b.y() > q.y()) != (a.y() > q.y()) &&
+        q.x() < a.x() + (q.y() - a.y()) * (b.x() - a.x()) / (b.y() - a.y()))
+      inside = !inside;
+  }
+  return inside;
+}
+
 // A continuum mesh, or why the surface mesh reaches where the model has no valid tissue (the
 // message of an OffModelError): a caller with room to mesh less can try a smaller extent.
 struct ContinuumAttempt {
@@ -223,8 +243,9 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
 
   // Fixed nodes: the bottom (bone) except where undermined, and with a fixed rim the whole
   // outer rim, unless sutured. Undermined: the site is within undermine_mm of the wound's border
-  // (the loop's chains) in the surface mesh's plane.
-  auto undermined = [&](const Eigen::Vector2d& p) {
+  // (the loop's chains) in the surface mesh's plane, or inside a flap the plan raises (its whole
+  // area is dissected off the deep tissue, on its outline included).
+  auto near_border = [&](const Eigen::Vector2d& p) {
     if (!(o.undermine_mm > 0)) return false;
     for (const auto& chain : surface.edge_chain)
       for (std::size_t i = 0; i + 1 < chain.size(); ++i) {
@@ -235,12 +256,21 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
       }
     return false;
   };
+  auto in_flap = [&](const Eigen::Vector2d& tz) {
+    for (const auto& poly : surface.flaps_theta_z)
+      if (inside_or_on(poly, tz)) return true;
+    return false;
+  };
+  auto undermined = [&](int v0, int v1) {
+    const Eigen::Vector2d xy = 0.5 * (surface.xy_mm.row(v0) + surface.xy_mm.row(v1)).transpose();
+    const Eigen::Vector2d tz = 0.5 * (surface.theta_z.row(v0) + surface.theta_z.row(v1)).transpose();
+    return near_border(xy) || in_flap(tz);
+  };
   std::set<int> fixed;
   for (int v = 0; v < NV; ++v)
-    if (!undermined(surface.xy_mm.row(v).transpose())) fixed.insert(vnode(v, 2 * NL));
+    if (!undermined(v, v)) fixed.insert(vnode(v, 2 * NL));
   for (int e = 0; e < NE; ++e)
-    if (!undermined(0.5 * (surface.xy_mm.row(edges[e].first) + surface.xy_mm.row(edges[e].second)).transpose()))
-      fixed.insert(enode(e, NL));
+    if (!undermined(edges[e].first, edges[e].second)) fixed.insert(enode(e, NL));
   if (o.rim == RimCondition::Fixed) {
     const auto& rim = surface.outer_border;
     for (std::size_t i = 0; i < rim.size(); ++i) {

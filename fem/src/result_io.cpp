@@ -11,7 +11,8 @@
 
 namespace caps::fem {
 
-void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesystem::path& dir) {
+void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesystem::path& dir,
+                      const SutureSpacing* sutures) {
   const Eigen::Index n = mesh.n_nodes();
   Eigen::MatrixXd fixed = Eigen::MatrixXd::Zero(n, 1), partner = Eigen::MatrixXd::Constant(n, 1, -1);
   for (int i : mesh.fixed_nodes) fixed(i, 0) = 1;
@@ -67,6 +68,19 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
   j["strain_energy_mj"] = r.strain_energy_mj;
   j["total_suture_force_n"] = r.total_suture_force_n;
   j["sum_suture_magnitudes_n"] = r.sum_suture_magnitudes_n;
+  if (sutures) {
+    nlohmann::json row = nlohmann::json::array();
+    for (const SutureStitch& s : sutures->sutures)
+      row.push_back({{"position_mm", {s.position_mm.x(), s.position_mm.y(), s.position_mm.z()}},
+                     {"force_n", s.force_n}, {"pairs", s.n_pairs}});
+    j["sutures_at_spacing"] = {{"spacing_mm", sutures->spacing_mm},
+                               {"wound_length_mm", sutures->wound_length_mm},
+                               {"n_sutures", sutures->sutures.size()},
+                               {"max_suture_force_n", sutures->max_suture_force_n},
+                               {"mean_suture_force_n", sutures->mean_suture_force_n},
+                               {"force_per_mm_n", sutures->force_per_mm_n},
+                               {"sutures", row}};
+  }
   j["suture_forces"] = nlohmann::json::array();
   for (const SutureForce& s : r.suture_forces)
     j["suture_forces"].push_back({{"a", s.a}, {"b", s.b}, {"magnitude_n", s.magnitude_n},

@@ -30,6 +30,7 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
     const Eigen::Vector3d b = mesh.nodes.row(s.b).transpose() + u.row(s.b).transpose();
     sim.max_suture_gap_mm = std::max(sim.max_suture_gap_mm, (a - b).norm());
   }
+  sim.sutures = suture_spacing(sim.wound.continuum, sim.result, options.suture_spacing_mm);
   return sim;
 }
 
@@ -42,7 +43,7 @@ void write_simulation(const Simulation& sim, const PatientModel& model,
   inp.finite_strain = options.solve.kinematics == Kinematics::Finite;
   inp.increments = options.solve.newton.n_steps;
   write_inp(mesh, dir / "mesh.inp", inp);
-  write_result_dir(mesh, sim.result, dir);
+  write_result_dir(mesh, sim.result, dir, &sim.sutures);
   write_surface_mesh_png(dir / "surface.png", sim.wound.surface, cat("surface mesh of ", name));
   write_cross_section_png(dir / "section.png", sim.wound.surface, model, options.continuum,
                           cat("cross-section of ", name));

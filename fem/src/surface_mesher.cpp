@@ -560,6 +560,12 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
   out.ref_radius_mm = ref_radius_mm;
   out.sutures = border.sutures;
   const std::vector<Vec2> L = local_plane(B, border.loop_theta_z, ref_radius_mm);
+  for (const auto& flap : border.flaps_theta_z) {
+    out.flaps_theta_z.emplace_back();
+    for (const auto& p : flap)
+      out.flaps_theta_z.back().push_back(
+          {out.theta_c_deg + std::remainder(p.x() - out.theta_c_deg, 360.0), p.y()});
+  }
   out.extent_mm = o.extent_mm > 0 ? o.extent_mm : 3.0 * out.wound_size_mm;
   std::vector<int> front = add_loop_nodes(B, L, subdivided_edges(L, border.sutures, o.size_mm));
   fill_concave_corners(B, front, o.t1_deg);

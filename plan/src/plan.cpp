@@ -7,6 +7,7 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "caps/plan/skin_walk.hpp"
 
 namespace caps::plan {
 
@@ -35,27 +36,11 @@ PlanFrame make_frame(const PatientModel& model, double theta_deg, double z_mm,
   if (!std::isfinite(theta_deg) || !std::isfinite(z_mm) || !std::isfinite(orientation_deg))
     throw InvalidInput(cat("plan centre (theta ", theta_deg, " deg, z ", z_mm, " mm, orientation ",
                            orientation_deg, " deg) must be finite numbers"));
-  // The skin's tangent vectors per degree of theta and per mm of z (central differences over
-  // less than a grid cell, so the bilinear surface's own slopes).
-  const double ht = 0.25, hz = 0.25;
-  const Eigen::Vector3d p_theta =
-      (model.skin_point(theta_deg + ht, z_mm) - model.skin_point(theta_deg - ht, z_mm)) / (2 * ht);
-  const Eigen::Vector3d p_z =
-      (model.skin_point(theta_deg, z_mm + hz) - model.skin_point(theta_deg, z_mm - hz)) / (2 * hz);
-  const Eigen::Vector3d n = p_theta.cross(p_z);
-  if (!(n.norm() > 1e-9) || !n.allFinite())
-    throw InvalidInput(cat("the skin at theta ", theta_deg, " deg, z ", z_mm,
-                           " mm is degenerate (on the cylinder axis); pick another centre"));
-  const Eigen::Vector3d normal = n.normalized();
-  // Superior along the skin, and towards +theta; (theta, z) is right-handed seen from outside.
-  const Eigen::Vector3d up = p_z.normalized();
-  const Eigen::Vector3d right = up.cross(normal);
-  const double phi = deg_to_rad(orientation_deg);
-  const Eigen::Vector3d ex = std::cos(phi) * up + std::sin(phi) * right;
-  const Eigen::Vector3d ey = normal.cross(ex);
+  const SkinTangent t = skin_tangent(model, theta_deg, z_mm);
+  const SkinFrame axes = skin_frame(model, theta_deg, z_mm, orientation_deg);
   Eigen::Matrix<double, 3, 2> J, E;
-  J << p_theta, p_z;
-  E << ex, ey;
+  J << t.d_theta, t.d_z;
+  E << axes.ex, axes.ey;
   PlanFrame f;
   f.theta_deg = wrap_theta(theta_deg);
   f.z_mm = z_mm;
@@ -234,6 +219,22 @@ WoundBorder wound_border(const Plan& plan) {
   WoundBorder w;
   w.loop_theta_z = loop.theta_z;
   for (const auto& s : plan.sutures) w.sutures.push_back(oriented_suture(s, loop.size()));
+  const double t0 = loop.theta_z.empty() ? 0.0 : loop.theta_z[0][0];
+  for (std::size_t f = 0; f < plan.flaps.size(); ++f) {
+    const auto& flap = plan.flaps[f];
+    if (flap.size() < 3)
+      throw InvalidInput(cat("flap ", f, " has ", flap.size(), " point(s); a flap's outline needs "
+                             "at least 3"));
+    std::vector<Eigen::Vector2d> poly;
+    for (int i : flap) {
+      if (i < 0 || i >= static_cast<int>(plan.points.size()))
+        throw InvalidInput(cat("flap ", f, " names point ", i, ", but the plan has ",
+                               plan.points.size(), " points"));
+      const auto& p = plan.points[i];
+      poly.push_back({t0 + std::remainder(p.theta_deg - t0, 360.0), p.z_mm});
+    }
+    w.flaps_theta_z.push_back(std::move(poly));
+  }
   return w;
 }
 

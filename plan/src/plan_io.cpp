@@ -38,6 +38,7 @@ std::string plan_to_json(const Plan& plan, const PlanReport* report) {
   j["sutures"] = json::array();
   for (const auto& s : plan.sutures)
     j["sutures"].push_back(detail::suture_to_json(s));
+  if (!plan.flaps.empty()) j["flaps"] = plan.flaps;
   // Derived, for reading (ignored on load): the loop, its correspondence and positions.
   try {
     const BorderLoop loop = border_loop(plan);
@@ -118,6 +119,8 @@ Plan parse_plan_json(const std::string& text, const std::string& source) {
                                   {e.at("offset_mm").at(0).get<double>(), e.at("offset_mm").at(1).get<double>()}});
     field = "sutures";
     for (const auto& s : j.at("sutures")) plan.sutures.push_back(detail::suture_from_json(s, source));
+    field = "flaps";
+    if (j.contains("flaps")) plan.flaps = j["flaps"].get<std::vector<std::vector<int>>>();
     field = "notes";
     plan.notes = j.value("notes", "");
   } catch (const json::exception& e) {

@@ -7,6 +7,7 @@
 #include "caps/core/error.hpp"
 #include "caps/core/json_limits.hpp"
 #include "caps/core/units.hpp"
+#include "caps/plan/skin_walk.hpp"
 #include "suture_json.hpp"
 
 namespace caps::plan {
@@ -38,17 +39,20 @@ LocalProcedure ellipse(std::map<std::string, double>& p) {
                            "dog-ears: length about 3.5 x width)"));
   p["width"] = W;
   p["apex_angle"] = apex;
-  // The surgeon's points 0..3 along the axis; 1, 2 and their twins 5, 4 moved onto a lens
-  // (two circular arcs) of the given length and width.
-  const double R = (L * L / 4 + W * W / 4) / W;
-  const double y = std::sqrt(R * R - L * L / 36) - (R - W / 2);
+  // The surgeon's points 0..3 along the axis; 1, 2 and their twins 5, 4 moved to the sides of
+  // the fusiform: four points cannot hold a curved outline whose width and apex angle both
+  // mean what they say (a lens through points at L/6 is 0.9 W wide with a 48 deg apex at
+  // 3:1), so the outline is the rhombus of the given length, width and apex angle, with 1 at
+  // its widest point (the centre) and 2 halfway along the side to the apex 3.
   LocalProcedure out;
-  out.points_mm = {V2(-L / 2, 0), V2(-L / 6, 0), V2(L / 6, 0), V2(L / 2, 0)};
+  out.points_mm = {V2(-L / 2, 0), V2(0, 0), V2(L / 4, 0), V2(L / 2, 0)};
   out.paths = {{0, 1, 2, 3}};
-  out.excisions = {{1, V2(0, y)}, {2, V2(0, y)}, {4, V2(0, -y)}, {5, V2(0, -y)}};
+  out.excisions = {{1, V2(0, W / 2)}, {2, V2(0, W / 4)}, {4, V2(0, -W / 4)}, {5, V2(0, -W / 2)}};
   out.sutures = {sp(0, 1, 0, 5), sp(1, 2, 5, 4), sp(2, 3, 4, 3)};  // the paper's list
   out.notes = "Elliptical (fusiform) excision, CAPS 1992 Figure 1: surgeon points 0..3 along the "
-              "axis; 4 and 5 start on 2 and 1 and are moved (with 1 and 2) to enclose the lens.";
+              "axis (1 at the centre, 2 halfway to the apex 3); 4 and 5 start on 2 and 1 and are "
+              "moved (with 1 and 2) to enclose the fusiform of the given length, width and apex "
+              "angle.";
   return out;
 }
 
@@ -60,6 +64,7 @@ LocalProcedure z_plasty(std::map<std::string, double>& p) {
   out.points_mm = {p1 + limb, p1, p2, p2 - limb};
   out.paths = {{0, 1, 2, 3}};
   out.sutures = {sp(5, 0, 5, 4), sp(2, 1, 2, 3), sp(0, 1, 3, 4)};  // the paper's list
+  out.flaps = {{0, 1, 2}, {3, 2, 1}};  // the two triangles, tips at 1 and 2
   out.notes = "Z-plasty, CAPS 1992 Figure 2: path 0,1,2,3 (central limb 1-2 along the "
               "orientation); loop 0..5 with 4 on 2 and 5 on 1. Flap tips at 1 and 4 transpose: "
               "0 meets 4, 1 meets 3; 2 and 5 are closed corners.";
@@ -101,6 +106,8 @@ LocalProcedure multiple_z(std::map<std::string, double>& p) {
     out.sutures.push_back({E(b, a), E(c, b)});
     out.sutures.push_back({E(b, c), E(c, d)});
     out.sutures.push_back({E(a, b), E(d, c)});
+    out.flaps.push_back({a, b, c});
+    out.flaps.push_back({d, c, b});
   }
   out.notes = cat(n, " Z-plasties in series sharing one central line; at each inner point the "
                   "limbs of two neighbouring Zs form one straight cut. Each Z is sutured like the "
@@ -144,6 +151,7 @@ LocalProcedure rhomboid(std::map<std::string, double>& p) {
   out.paths = {{0, 1, 2, 3, 4}};
   out.excisions = {{5, A - C}};  // the twin of C becomes the rhombus corner A
   out.sutures = {sp(1, 2, 5, 4), sp(3, 2, 3, 4), sp(0, 1, 6, 5), sp(7, 0, 7, 6)};
+  out.flaps = {{2, 1, 0, 3}};  // D E F C
   out.notes = "Rhomboid (Limberg) flap: loop F0 E1 D2 C3 B4 A5 D'6 E'7. The flap D-E-F-C turns "
               "60 deg about C into the defect: E meets A, D meets B, F meets D'; C and E' are "
               "closed corners.";
@@ -193,6 +201,10 @@ LocalProcedure rotation_flap(std::map<std::string, double>& p) {
   // Mirrored, the path is reversed so that the same side stays on the left.
   if (mirror) std::reverse(path.begin(), path.end());
   out.paths = {path};
+  // The flap: the sector O, S, the arc to P (and the back-cut's end B).
+  out.flaps = {{iO, iS}};
+  for (int k = 1; k <= m; ++k) out.flaps[0].push_back(A(k));
+  if (back) out.flaps[0].push_back(iB);
   const std::vector<int> loop = walk_around_cut(out.points_mm, out.paths);
   const int nl = static_cast<int>(loop.size());
   auto E = [&](int u, int v) {
@@ -245,6 +257,7 @@ LocalProcedure v_y(std::map<std::string, double>& p) {
   out.sutures = {{{5, 6}, {6, 7}},      // the stem: outer arms from P' to J'
                  {{0, 1, 2}, {0, 7}},   // flap side P..A to the outer J_A'..A
                  {{2, 3, 4}, {5, 4}}};  // flap side P..B to the outer J_B'..B
+  out.flaps = {{0, 2, 4}};  // the V: A, P, B
   out.notes = cat("V-Y advancement: path A0 J1 P2 J3 B4 (the V's apex P, its arms ", L,
                   " mm at ", p["angle"], " deg), loop twins J5 P6 J7 on the outer side. The outer "
                   "arms close from the apex to J (the stem of the Y, ", s, " mm); each side of the "
@@ -357,13 +370,51 @@ Plan place_procedure(const LocalProcedure& proc, const PatientModel& model, doub
   plan.procedure = proc.name.empty() ? "custom" : proc.name;
   plan.parameters = proc.parameters;
   plan.frame = make_frame(model, theta_deg, z_mm, orientation_deg);
-  for (const auto& xy : proc.points_mm) {
-    const Eigen::Vector2d tz = plan.frame.to_theta_z(xy);
-    plan.points.push_back({tz[0], tz[1], model.skin_point(tz[0], tz[1])});
+  // Each point is walked to along the skin from its neighbour on the cut, in the direction and
+  // over the length the template draws, with the frame carried along: the cut's segments keep
+  // their lengths and the angles between them on the skin (a linear map of the template would
+  // stretch and turn it where the skin curves). The walks start from the point nearest the
+  // centre; a point on no path is walked to from the centre.
+  const std::size_t np = proc.points_mm.size();
+  const SkinFrame centre = skin_frame(model, theta_deg, z_mm, orientation_deg);
+  std::vector<std::vector<int>> nb(np);
+  for (const auto& path : proc.paths)
+    for (std::size_t i = 1; i < path.size(); ++i) {
+      const int a = path[i - 1], b = path[i];
+      if (a < 0 || b < 0 || a >= static_cast<int>(np) || b >= static_cast<int>(np)) continue;
+      nb[a].push_back(b);
+      nb[b].push_back(a);
+    }
+  std::vector<SkinFrame> at(np);
+  std::vector<char> placed(np, 0);
+  for (;;) {
+    int root = -1;
+    for (std::size_t i = 0; i < np; ++i)
+      if (!placed[i] && (root < 0 || proc.points_mm[i].norm() < proc.points_mm[root].norm()))
+        root = static_cast<int>(i);
+    if (root < 0) break;
+    at[root] = walk_on_skin(model, centre, proc.points_mm[root]);
+    placed[root] = 1;
+    std::vector<int> queue{root};
+    for (std::size_t q = 0; q < queue.size(); ++q) {
+      const int u = queue[q];
+      for (int v : nb[u]) {
+        if (placed[v]) continue;
+        at[v] = walk_on_skin(model, at[u], proc.points_mm[v] - proc.points_mm[u]);
+        placed[v] = 1;
+        queue.push_back(v);
+      }
+    }
+  }
+  for (const auto& f : at) {
+    const double theta = std::remainder(f.theta_z[0], 360.0);
+    const double t = theta >= 180.0 ? theta - 360.0 : theta;
+    plan.points.push_back({t, f.theta_z[1], model.skin_point(t, f.theta_z[1])});
   }
   plan.paths = proc.paths;
   plan.excisions = proc.excisions;
   plan.sutures = proc.sutures;
+  plan.flaps = proc.flaps;
   plan.notes = proc.notes;
   return plan;
 }
@@ -394,6 +445,7 @@ std::string procedure_to_json(const LocalProcedure& p) {
   for (const auto& e : p.excisions)
     j["excisions"].push_back({{"loop_index", e.loop_index}, {"offset_mm", {e.offset_mm.x(), e.offset_mm.y()}}});
   j["sutures"] = sutures_json(p.sutures);
+  if (!p.flaps.empty()) j["flaps"] = p.flaps;
   j["notes"] = p.notes;
   return j.dump(2);
 }
@@ -421,6 +473,7 @@ LocalProcedure parse_procedure_json(const std::string& text, const std::string& 
         p.excisions.push_back({e.at("loop_index").get<int>(),
                                V2(e.at("offset_mm").at(0).get<double>(), e.at("offset_mm").at(1).get<double>())});
     for (const auto& s : j.at("sutures")) p.sutures.push_back(detail::suture_from_json(s, source));
+    if (j.contains("flaps")) p.flaps = j["flaps"].get<std::vector<std::vector<int>>>();
     p.notes = j.value("notes", "");
     return p;
   } catch (const json::exception& e) {
@@ -436,6 +489,7 @@ LocalProcedure procedure_from_plan(const Plan& plan) {
   p.paths = plan.paths;
   p.excisions = plan.excisions;
   p.sutures = plan.sutures;
+  p.flaps = plan.flaps;
   p.notes = plan.notes;
   return p;
 }

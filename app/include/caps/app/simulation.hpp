@@ -34,7 +34,8 @@ struct MeshingFields {
                     FieldKind::Option, {}, "--size"});
     v(r.extent, {"extent", "distance from the wound to the outer rim (mm); 0 = 3 x the wound's size"});
     v(r.undermine, {"undermine", "free the tissue from the bone within this distance of the wound "
-                                 "(mm), as a surgeon undermines; 0 = only the sutured columns (the paper)"});
+                                 "(mm), as a surgeon undermines (default about the excision's width; "
+                                 "flaps are freed whole); 0 = only the sutured columns and flaps"});
     v(r.rim, {"rim", "outer rim: fixed (clamped) or free (traction free)"});
     v(r.grading, {"grading", "thickness ratio of each layer to the one above"});
     v(r.t1, {"t1", "stage 1: fill concave corners deeper than this (deg)"});
@@ -116,6 +117,7 @@ struct SimulateRequest {
   std::string model, plan, output;
   MeshingFields meshing;
   SolverFields solver;
+  double suture_spacing = fem::SimulateOptions{}.suture_spacing_mm;
   bool render = false, tension_map = false;
   bool force = false;
 
@@ -126,6 +128,8 @@ struct SimulateRequest {
     v(r.output, {"output", "result directory to create", FieldKind::Required, "-o,--output"});
     MeshingFields::fields(r.meshing, v);
     SolverFields::fields(r.solver, v);
+    v(r.suture_spacing, {"suture_spacing", "report the closing force per suture with sutures this "
+                                           "far apart along the wound (mm)"});
     v(r.render, {"render", "also render pre_<view>.png and post_<view>.png (front, oblique, "
                            "side, plan; the same camera before and after)", FieldKind::Flag});
     v(r.tension_map, {"tension_map", "with --render, also tension_<view>.png: the skin coloured "
@@ -142,6 +146,11 @@ struct SimulateResult {
          max_suture_gap_mm = 0, strain_energy_mj = 0;
   std::string material;             ///< linear or neo-hookean
   int load_steps = 0, newton_iterations = 0;  ///< neo-hookean: converged steps, iterations
+  /// Surgeons' terms (fem::suture_spacing()): sutures every suture_spacing_mm along the wound,
+  /// how many, the largest single-suture force, the force per mm of wound, the wound's length.
+  double suture_spacing_mm = 0, max_force_per_suture_n = 0, force_per_mm_n = 0,
+         wound_length_mm = 0;
+  int sutures = 0;
   std::vector<std::string> images;  ///< with render
   std::vector<std::string> warnings;
   double solve_s = 0;  ///< the solver's wall time (not reproducible: under "timings_s")

@@ -13,8 +13,8 @@
 /// Sutures: for each suture ((a,b),(c,d)) the nodes along the two sides (border edges, or runs of
 /// them, which the surface mesher gave matching nodes by arc length) are paired at every depth
 /// (corners, mid-edge and centre nodes); the shared point of a closed corner is skipped.
-/// Fixed nodes: every bottom node that is not sutured (the bony support) and not within
-/// `undermine_mm` of the wound's border; with RimCondition::Fixed also every node on the outer rim
+/// Fixed nodes: every bottom node that is not sutured (the bony support), not within
+/// `undermine_mm` of the wound's border and not under a flap the plan raises; with RimCondition::Fixed also every node on the outer rim
 /// (the far field is clamped), with Free the rim is traction free.
 
 #include <Eigen/Core>
@@ -46,9 +46,12 @@ struct ContinuumMeshOptions {
   double constant_thickness_mm = 0;
   /// Undermining (mm): the base of the tissue within this distance of the wound's border (in
   /// the skin's plane) is freed from the bone, as a surgeon undermines the wound's edges to
-  /// close it. 0 frees only the sutured columns (the paper), which makes the freed strip one
-  /// element wide and the closing force depend on the mesh size (docs/mesher.md).
-  double undermine_mm = 0;
+  /// close it. Default 10 mm: about the width of the usual excision, the lower end of the 1-2 cm
+  /// surgeons undermine around an ellipse (docs/fem.md, "Undermining and raised flaps"). 0 frees
+  /// only the sutured columns (the paper), which makes the freed strip one element wide and the
+  /// closing force depend on the mesh size (docs/mesher.md). The plan's flaps are freed over
+  /// their whole area whatever this is.
+  double undermine_mm = 10;
   LinearElastic material = default_skin();  ///< used for every layer
 };
 

@@ -8,13 +8,16 @@
 
 #include "caps/fem/mesh.hpp"
 #include "caps/fem/solve.hpp"
+#include "caps/fem/suture_spacing.hpp"
 
 namespace caps::fem {
 
 /// Writes result.vtu (deformed-ready: displacement, stresses, reactions) and result.json
-/// (summary, timings, sizes, suture forces) into an existing directory.
+/// (summary, timings, sizes, suture forces; with `sutures` also "sutures_at_spacing": the force
+/// per suture at that spacing, the largest, the force per mm of wound) into an existing
+/// directory.
 void write_result_dir(const Mesh& mesh, const SolveResult& result,
-                      const std::filesystem::path& dir);
+                      const std::filesystem::path& dir, const SutureSpacing* sutures = nullptr);
 
 /// Reads the nodal displacement (#N×3, mm) from `dir`/result.vtu and checks it has `n_nodes`
 /// finite rows. Throws IoError (missing file) or InvalidInput (wrong size, missing array).

@@ -10,6 +10,7 @@
 #include "caps/fem/continuum_mesher.hpp"
 #include "caps/fem/solve.hpp"
 #include "caps/fem/surface_mesher.hpp"
+#include "caps/fem/suture_spacing.hpp"
 #include "caps/plan/plan.hpp"
 
 namespace caps {
@@ -22,6 +23,8 @@ struct SimulateOptions {
   SurfaceMeshOptions surface;
   ContinuumMeshOptions continuum;
   SolveOptions solve;
+  /// The spacing of the sutures the closing force is reported per (mm; suture_spacing()).
+  double suture_spacing_mm = 5.0;
 };
 
 struct Simulation {
@@ -29,6 +32,9 @@ struct Simulation {
   SolveResult result;
   /// The largest distance (mm) between sutured nodes after the closure: 0 up to round-off.
   double max_suture_gap_mm = 0;
+  /// The closing force per suture at SimulateOptions::suture_spacing_mm, the largest one and
+  /// the force per mm of wound (suture_spacing()).
+  SutureSpacing sutures;
 };
 
 /// Checks the plan on the model (plan::check_plan), meshes its wound border and solves the

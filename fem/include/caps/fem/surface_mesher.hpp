@@ -73,6 +73,8 @@ struct SurfaceMesh {
   std::vector<int> loop_vertex;   ///< loop point i -> vertex id (distinct for twins)
   std::vector<int> outer_border;  ///< the rim, vertex ids in order
   std::vector<std::array<int, 4>> sutures;  ///< copied from the WoundBorder
+  /// The flaps' outlines, (theta deg, z mm) unwrapped like theta_z (from the WoundBorder).
+  std::vector<std::vector<Eigen::Vector2d>> flaps_theta_z;
   double theta_c_deg = 0, z_c_mm = 0, ref_radius_mm = 0;
   double extent_mm = 0;      ///< the extent actually used
   double wound_size_mm = 0;  ///< largest extent of the loop

@@ -112,6 +112,10 @@ struct Plan {
   std::vector<std::vector<int>> paths;      ///< cutting paths, as indices into `points`
   std::vector<ExcisionOffset> excisions;
   std::vector<SuturePair> sutures;
+  /// The flaps a surgeon raises (transposed, rotated or advanced tissue): each a polygon of
+  /// indices into `points`, the flap's outline through its cut sides and its uncut base. The
+  /// mesher frees the deep tissue under their whole area (docs/fem.md).
+  std::vector<std::vector<int>> flaps;
   std::string notes;
 };
 
@@ -164,9 +168,13 @@ std::array<std::vector<int>, 2> suture_edges(const std::array<int, 4>& q, int lo
 struct WoundBorder {
   std::vector<Eigen::Vector2d> loop_theta_z;
   std::vector<std::array<int, 4>> sutures;
+  /// The plan's flaps as polygons of (theta deg, z mm), theta unwrapped about the loop's first
+  /// point: the areas whose deep tissue is freed (dissected off the bone) before closing.
+  std::vector<std::vector<Eigen::Vector2d>> flaps_theta_z;
 };
 
 /// The wound border of a plan (structure checked, see border_loop() and oriented_suture()).
+/// Throws InvalidInput when a flap names a point the plan does not have or has fewer than 3.
 WoundBorder wound_border(const Plan& plan);
 
 }  // namespace caps::plan

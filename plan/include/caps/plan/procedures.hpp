@@ -45,6 +45,7 @@ struct LocalProcedure {
   std::vector<std::vector<int>> paths;
   std::vector<ExcisionOffset> excisions;
   std::vector<SuturePair> sutures;
+  std::vector<std::vector<int>> flaps;      ///< Plan::flaps: polygons of indices into points_mm
   std::string notes;
 };
 

@@ -1,0 +1,123 @@
+#include "caps/fem/suture_spacing.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <utility>
+
+#include "caps/core/error.hpp"
+
+namespace caps::fem {
+
+namespace {
+
+// The closed skin sites: for each suture pair, the deformed position of the skin node of its
+// first node's column (its column: the same (theta, z); the skin: level 0).
+std::vector<Eigen::Vector3d> pair_sites(const ContinuumMesh& cm, const Eigen::MatrixX3d& u) {
+  const Mesh& mesh = cm.mesh;
+  std::map<std::pair<double, double>, int> skin_of_column;
+  for (Eigen::Index n = 0; n < mesh.n_nodes(); ++n)
+    if (cm.node_level[n] == 0)
+      skin_of_column[{cm.node_theta_z(n, 0), cm.node_theta_z(n, 1)}] = static_cast<int>(n);
+  std::vector<Eigen::Vector3d> site;
+  for (const auto& s : mesh.sutures) {
+    const auto it = skin_of_column.find({cm.node_theta_z(s.a, 0), cm.node_theta_z(s.a, 1)});
+    const int n = it == skin_of_column.end() ? s.a : it->second;
+    site.push_back(mesh.nodes.row(n).transpose() + u.row(n).transpose());
+  }
+  return site;
+}
+
+// The length of the minimum spanning tree of the points (Prim, O(n^2)).
+double spanning_tree_length(const std::vector<Eigen::Vector3d>& p) {
+  const std::size_t n = p.size();
+  if (n < 2) return 0;
+  std::vector<double> best(n, std::numeric_limits<double>::infinity());
+  std::vector<char> in(n, 0);
+  double total = 0;
+  std::size_t cur = 0;
+  in[0] = 1;
+  for (std::size_t k = 1; k < n; ++k) {
+    std::size_t next = n;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (in[i]) continue;
+      best[i] = std::min(best[i], (p[i] - p[cur]).norm());
+      if (next == n || best[i] < best[next]) next = i;
+    }
+    total += best[next];
+    in[next] = 1;
+    cur = next;
+  }
+  return total;
+}
+
+}  // namespace
+
+SutureSpacing suture_spacing(const ContinuumMesh& cm, const SolveResult& r, double spacing_mm) {
+  if (!(spacing_mm > 0) || !std::isfinite(spacing_mm))
+    throw InvalidInput(cat("suture spacing ", spacing_mm, " mm must be > 0 (e.g. 5 mm)"));
+  const Mesh& mesh = cm.mesh;
+  if (r.displacement_mm.rows() != mesh.n_nodes() || r.suture_forces.size() != mesh.sutures.size())
+    throw InvalidInput(cat("suture spacing: the result (", r.displacement_mm.rows(), " nodes, ",
+                           r.suture_forces.size(), " suture forces) is not a solve of this mesh (",
+                           mesh.n_nodes(), " nodes, ", mesh.sutures.size(), " suture pairs)"));
+  SutureSpacing out;
+  out.spacing_mm = spacing_mm;
+  if (mesh.sutures.empty()) return out;
+  const std::vector<Eigen::Vector3d> site = pair_sites(cm, r.displacement_mm);
+  // Each pair's closing force: its force on a along the gap it closes (x_b - x_a).
+  std::vector<double> closing(mesh.sutures.size(), 0.0);
+  for (std::size_t k = 0; k < mesh.sutures.size(); ++k) {
+    const auto& s = mesh.sutures[k];
+    const Eigen::Vector3d gap = (mesh.nodes.row(s.b) - mesh.nodes.row(s.a)).transpose();
+    if (gap.norm() > 0) closing[k] = r.suture_forces[k].force_on_a_n.dot(gap.normalized());
+  }
+  // The distinct skin sites, the wound's length over them.
+  std::vector<Eigen::Vector3d> sites;
+  for (const auto& p : site) {
+    bool seen = false;
+    for (const auto& q : sites) seen |= (p - q).norm() < 1e-6;
+    if (!seen) sites.push_back(p);
+  }
+  out.wound_length_mm = spanning_tree_length(sites);
+  // Sutures spacing_mm apart: from the site farthest from the wound's centroid (an end), the
+  // next suture at the uncovered site nearest to those placed (an advancing front along the
+  // wound's lines, branches included); every pair then goes to its nearest suture.
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const auto& p : sites) centroid += p;
+  centroid /= static_cast<double>(sites.size());
+  std::size_t first = 0;
+  for (std::size_t i = 1; i < sites.size(); ++i)
+    if ((sites[i] - centroid).norm() > (sites[first] - centroid).norm()) first = i;
+  std::vector<Eigen::Vector3d> centres{sites[first]};
+  std::vector<double> nearest(sites.size(), std::numeric_limits<double>::infinity());
+  for (;;) {
+    const Eigen::Vector3d& c = centres.back();
+    for (std::size_t i = 0; i < sites.size(); ++i) nearest[i] = std::min(nearest[i], (sites[i] - c).norm());
+    std::size_t next = sites.size();
+    for (std::size_t i = 0; i < sites.size(); ++i)
+      if (nearest[i] >= spacing_mm * (1 - 1e-9) && (next == sites.size() || nearest[i] < nearest[next]))
+        next = i;
+    if (next == sites.size()) break;
+    centres.push_back(sites[next]);
+  }
+  out.sutures.resize(centres.size());
+  for (std::size_t c = 0; c < centres.size(); ++c) out.sutures[c].position_mm = centres[c];
+  for (std::size_t k = 0; k < site.size(); ++k) {
+    std::size_t best = 0;
+    for (std::size_t c = 1; c < centres.size(); ++c)
+      if ((site[k] - centres[c]).norm() < (site[k] - centres[best]).norm()) best = c;
+    out.sutures[best].force_n += closing[k];
+    out.sutures[best].n_pairs += 1;
+  }
+  for (const auto& s : out.sutures) {
+    out.total_force_n += s.force_n;
+    out.max_suture_force_n = std::max(out.max_suture_force_n, s.force_n);
+  }
+  out.mean_suture_force_n = out.total_force_n / static_cast<double>(out.sutures.size());
+  out.force_per_mm_n = out.wound_length_mm > 0 ? out.total_force_n / out.wound_length_mm : 0.0;
+  return out;
+}
+
+}  // namespace caps::fem
