@@ -17,7 +17,7 @@ mkdir -p "$out"
   -o "$out/cranium" --force
 # The forehead, to the patient's left of a region without bone under it (see thickness.png).
 "$caps" plan new ellipse --model "$out/cranium" --at 25,105 -o "$out/ellipse.json" --force
-"$caps" plan new z-plasty --model "$out/cranium" --at 30,110 --length 15 -o "$out/z-plasty.json" --force
+"$caps" plan new z-plasty --model "$out/cranium" --at 30,105 --length 15 -o "$out/z-plasty.json" --force
 "$caps" plan new v-y-advancement --model "$out/cranium" --at 0,95 --length 15 --advance 4 \
   -o "$out/v-y-advancement.json" --force
 for p in ellipse z-plasty v-y-advancement; do
