@@ -29,8 +29,8 @@ void add_simulate(CLI::App& app, Common& common, Action& action) {
 
 void add_solve(CLI::App& app, Common& common, Action& action) {
   add_verb(&app, "solve",
-           "Solve a caps-mesh directory (linear elasticity, fixed nodes, sutures); writes "
-           "result.vtu and result.json.\nExample: caps solve mesh -o result --solver mumps",
+           "Solve a caps-mesh directory (fixed nodes, sutures; small-strain linear elasticity, or "
+           "finite strain with --material neo-hookean); writes result.vtu and result.json.\nExample: caps solve mesh -o result --solver mumps",
            &app::run_solve, common, action);
 }
 
