@@ -66,12 +66,6 @@ plan::WoundBorder border_of(const MeshRequest& r) {
 
 double max_norm(const Eigen::MatrixX3d& u) { return u.rows() ? u.rowwise().norm().maxCoeff() : 0.0; }
 
-double max_suture_force(const fem::SolveResult& r) {
-  double f = 0;
-  for (const auto& s : r.suture_forces) f = std::max(f, s.magnitude_n);
-  return f;
-}
-
 }  // namespace
 
 // ---- mesh ---------------------------------------------------------------------------------
@@ -182,7 +176,7 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   s.suture_pairs = static_cast<int>(sim.wound.continuum.mesh.sutures.size());
   s.max_displacement_mm = max_norm(res.displacement_mm);
   s.closing_force_n = res.total_suture_force_n;
-  s.max_suture_force_n = max_suture_force(res);
+  s.max_suture_force_n = fem::max_suture_pair_force_n(res);
   s.max_suture_gap_mm = sim.max_suture_gap_mm;
   s.strain_energy_mj = res.strain_energy_mj;
   s.warnings = sim.wound.continuum.mesh.warnings;

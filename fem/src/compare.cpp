@@ -66,7 +66,7 @@ SimulationSummary summarize(const Simulation& sim, const PatientModel& model, co
   }
   if (near) s.mean_displacement_mm /= near;
   s.closing_force_n = r.total_suture_force_n;
-  for (const auto& f : r.suture_forces) s.max_suture_force_n = std::max(s.max_suture_force_n, f.magnitude_n);
+  s.max_suture_force_n = max_suture_pair_force_n(r);
   s.strain_energy_mj = r.strain_energy_mj;
   s.elements = static_cast<int>(c.mesh.n_elements());
   s.nodes = static_cast<int>(c.mesh.n_nodes());

@@ -120,4 +120,10 @@ SutureSpacing suture_spacing(const ContinuumMesh& cm, const SolveResult& r, doub
   return out;
 }
 
+double max_suture_pair_force_n(const SolveResult& result) {
+  double f = 0;
+  for (const auto& s : result.suture_forces) f = std::max(f, s.magnitude_n);
+  return f;
+}
+
 }  // namespace caps::fem

@@ -40,6 +40,9 @@ struct SutureSpacing {
 /// along the closed wound. The wound's length is the minimum spanning tree of the closed skin
 /// sites (the suture lines of a Z are one tree). Throws InvalidInput if spacing_mm is not > 0 or
 /// the result does not belong to the mesh; a mesh without sutures gives an empty row.
+/// The largest force on one sutured node pair (N): max over result.suture_forces of magnitude_n.
+double max_suture_pair_force_n(const SolveResult& result);
+
 SutureSpacing suture_spacing(const ContinuumMesh& mesh, const SolveResult& result,
                              double spacing_mm = 5.0);
 
