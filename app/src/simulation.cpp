@@ -44,6 +44,7 @@ fem::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields
   o.continuum.rim = fem::parse_rim_condition(m.rim);
   o.continuum.constant_thickness_mm = m.constant_thickness;
   o.continuum.undermine_mm = m.undermine;
+  o.continuum.base = fem::parse_base_condition(m.base);
   o.solve.solver = fem::parse_solver(s.solver);
   o.solve.mixed_precision = fem::parse_precision(s.precision);
   o.solve.kinematics = fem::parse_kinematics(s.material);

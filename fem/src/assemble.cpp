@@ -311,4 +311,29 @@ FiniteAssembly assemble_finite(const Mesh& mesh, const DofMap& map,
   return out;
 }
 
+double add_sliding_supports(const Mesh& mesh, const DofMap& map, const Eigen::VectorXd& w,
+                            bool with_tangent, Assembly& sys, Eigen::VectorXd* unit_lift) {
+  double energy = 0;
+  for (const SlidingNode& s : mesh.sliding) {
+    const Eigen::Index base = 3 * static_cast<Eigen::Index>(s.node);
+    const double k = s.stiffness_n_per_mm, wn = s.normal.dot(w.segment<3>(base));
+    energy += 0.5 * k * wn * wn;
+    const double gn = unit_lift ? s.normal.dot(map.g.segment<3>(base)) : 0.0;
+    for (int c = 0; c < 3; ++c) {
+      const int ec = map.eq[base + c];
+      if (ec < 0) continue;
+      sys.f[ec] -= k * wn * s.normal[c];
+      if (unit_lift) (*unit_lift)[ec] -= k * gn * s.normal[c];
+      if (!with_tangent) continue;
+      for (int d = c; d < 3; ++d) {
+        const int ed = map.eq[base + d];
+        if (ed < 0) continue;
+        const double v = k * s.normal[c] * s.normal[d];
+        sys.K.coeffRef(std::min(ec, ed), std::max(ec, ed)) += v;
+      }
+    }
+  }
+  return energy;
+}
+
 }  // namespace caps::fem::detail

@@ -31,6 +31,13 @@ Assembly assemble_structure(const Mesh& mesh, const DofMap& map);
 /// colour in parallel over elements.
 void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys);
 
+/// The sliding supports' penalty springs (Mesh::sliding) at the full displacement w (3N, mm):
+/// T^T k n n^T T into K's values (with_tangent) and -T^T k (w_i . n) n into f; with `unit_lift`,
+/// also -T^T k (g_i . n) n for the offsets g = map.g. Returns their energy 1/2 k (w_i . n)^2 (mJ).
+/// The linear solve passes w = g (the lifting term), the finite-strain one w = u + lift.
+double add_sliding_supports(const Mesh& mesh, const DofMap& map, const Eigen::VectorXd& w,
+                            bool with_tangent, Assembly& sys, Eigen::VectorXd* unit_lift = nullptr);
+
 /// f += scale × T^T f_ext (the nodal loads, N).
 void add_loads(const Mesh& mesh, const DofMap& map, double scale, Eigen::VectorXd& f);
 

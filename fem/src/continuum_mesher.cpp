@@ -18,6 +18,16 @@ const char* rim_condition_name(RimCondition rim) {
   return rim == RimCondition::Fixed ? "fixed" : "free";
 }
 
+const char* base_condition_name(BaseCondition base) {
+  return base == BaseCondition::Slide ? "slide" : "free";
+}
+
+BaseCondition parse_base_condition(const std::string& name) {
+  if (name == "slide") return BaseCondition::Slide;
+  if (name == "free") return BaseCondition::Free;
+  throw InvalidInput(cat("base condition '", name, "': expected slide or free"));
+}
+
 RimCondition parse_rim_condition(const std::string& name) {
   if (name == "fixed") return RimCondition::Fixed;
   if (name == "free") return RimCondition::Free;
@@ -281,6 +291,22 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   }
   for (int id : fixed)
     if (!sutured.count(id)) mesh.fixed_nodes.push_back(id);
+  // The freed base slides on the deep tissue: held along its column (from the bottom node up to
+  // its skin node) by a spring kSlidingStiffness x E x column height, stiff enough that the
+  // support gives way by about 1e-6 mm under the closing forces; sutured base nodes stay free
+  // (their twins across the wound lie on other normals).
+  if (o.base == BaseCondition::Slide) {
+    constexpr double kSlidingStiffness = 1e5;
+    auto slide = [&](int bottom, int top) {
+      if (fixed.count(bottom) || sutured.count(bottom)) return;
+      const Eigen::Vector3d up = (mesh.nodes.row(top) - mesh.nodes.row(bottom)).transpose();
+      const double height = up.norm();
+      if (!(height > 0)) return;
+      mesh.sliding.push_back({bottom, up / height, kSlidingStiffness * o.material.E_mpa() * height});
+    };
+    for (int v = 0; v < NV; ++v) slide(vnode(v, 2 * NL), vnode(v, 0));
+    for (int e = 0; e < NE; ++e) slide(enode(e, NL), enode(e, 0));
+  }
 
   // Every element must have a positive Jacobian at every Gauss point.
   const Eigen::VectorXd jac = min_element_jacobians(mesh);

@@ -135,6 +135,20 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
          << ", " << c << ", -1.\n";
     }
   }
+  // Sliding supports: n . u = 0 as an exact equation (caps holds it by a stiff spring, which
+  // gives way by about 1e-6 mm); the dependent dof is the normal's largest component.
+  for (const SlidingNode& s : mesh.sliding) {
+    int first = 0;
+    for (int c = 1; c < 3; ++c)
+      if (std::abs(s.normal[c]) > std::abs(s.normal[first])) first = c;
+    std::vector<int> comps{first};
+    for (int c = 0; c < 3; ++c)
+      if (c != first && std::abs(s.normal[c]) > 1e-12) comps.push_back(c);
+    os << "*EQUATION\n" << comps.size() << "\n";
+    for (std::size_t k = 0; k < comps.size(); ++k)
+      os << (k ? ", " : "") << s.node + 1 << ", " << comps[k] + 1 << ", " << num(s.normal[comps[k]]);
+    os << "\n";
+  }
   if (options.finite_strain) {
     const double inc = 1.0 / options.increments;
     os << "*STEP, NLGEOM, INC=" << 100 * options.increments << "\n*STATIC\n" << num(inc) << ", 1., "

@@ -50,6 +50,14 @@ void validate(const Mesh& mesh, const std::string& where) {
       throw InvalidInput(cat(where, ": fixed dof entry ", i, " (node ", f.node,
                              ") has a non-finite value"));
   }
+  for (std::size_t i = 0; i < mesh.sliding.size(); ++i) {
+    const SlidingNode& s = mesh.sliding[i];
+    check_node(s.node, [&] { return cat("sliding node entry ", i); });
+    if (!s.normal.allFinite() || std::abs(s.normal.norm() - 1) > 1e-6 ||
+        !(s.stiffness_n_per_mm > 0) || !std::isfinite(s.stiffness_n_per_mm) || s.stiffness_n_per_mm > 1e12)
+      throw InvalidInput(cat(where, ": sliding node entry ", i, " (node ", s.node,
+                             ") needs a unit normal and a stiffness in (0, 1e12] N/mm"));
+  }
   for (std::size_t i = 0; i < mesh.loads.size(); ++i) {
     check_node(mesh.loads[i].node, [&] { return cat("load entry ", i); });
     if (!mesh.loads[i].force_n.allFinite())

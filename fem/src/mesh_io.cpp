@@ -163,6 +163,11 @@ void write_mesh_dir(const Mesh& mesh, const fs::path& dir) {
     j["loads_n"].push_back({l.node, l.force_n.x(), l.force_n.y(), l.force_n.z()});
   j["sutures"] = nlohmann::json::array();
   for (const SuturePair& s : mesh.sutures) j["sutures"].push_back({s.a, s.b});
+  if (!mesh.sliding.empty()) {
+    j["sliding_nodes"] = nlohmann::json::array();  // node, normal x y z, stiffness N/mm
+    for (const SlidingNode& s : mesh.sliding)
+      j["sliding_nodes"].push_back({s.node, s.normal.x(), s.normal.y(), s.normal.z(), s.stiffness_n_per_mm});
+  }
   j["model"] = mesh.model;
   j["plan"] = mesh.plan;
   j["warnings"] = mesh.warnings;
@@ -203,6 +208,10 @@ Mesh read_mesh_dir(const fs::path& dir) {
                             Eigen::Vector3d(l.at(1).get<double>(), l.at(2).get<double>(), l.at(3).get<double>())});
     for (const auto& s : j.value("sutures", nlohmann::json::array()))
       mesh.sutures.push_back({s.at(0).get<int>(), s.at(1).get<int>()});
+    for (const auto& s : j.value("sliding_nodes", nlohmann::json::array()))
+      mesh.sliding.push_back({s.at(0).get<int>(),
+                              Eigen::Vector3d(s.at(1).get<double>(), s.at(2).get<double>(), s.at(3).get<double>()),
+                              s.at(4).get<double>()});
     mesh.model = j.value("model", "");
     mesh.plan = j.value("plan", "");
     if (j.contains("warnings")) mesh.warnings = j.at("warnings").get<std::vector<std::string>>();

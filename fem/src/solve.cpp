@@ -134,6 +134,7 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
       // One core for the analysis, the others for the values.
       tbb::task_arena arena(std::max(1, tbb::this_task_arena::max_concurrency() - 1));
       arena.execute([&] { detail::assemble_values(mesh, map, sys); });
+      detail::add_sliding_supports(mesh, map, map.g, true, sys);
       res.timings.assembly_s = seconds_since(t);
       res.timings.analysis_s = analysis.get();
       t = Clock::now();
@@ -285,12 +286,15 @@ void recover(const Mesh& mesh, const DofMap& map, const ElementRecoveryFn& eleme
     res.von_mises_mpa[i] = von_mises(s);
     res.max_principal_mpa[i] = max_principal(s);
   }
-  // Reactions: R = f_int - f_ext on constrained nodes (the force the supports/sutures apply).
+  // Reactions: R = f_int - f_ext on constrained and sliding nodes (the force the supports and
+  // sutures apply; a sliding support's is along its normal).
+  std::vector<char> held(map.constrained);
+  for (const SlidingNode& s : mesh.sliding) held[s.node] = 1;
   res.reaction_n = Eigen::MatrixX3d::Zero(n_nodes, 3);
   for (Eigen::Index i = 0; i < n_nodes; ++i)
-    if (map.constrained[i]) res.reaction_n.row(i) = f_int.row(i);
+    if (held[i]) res.reaction_n.row(i) = f_int.row(i);
   for (const NodalLoad& l : mesh.loads)
-    if (map.constrained[l.node]) res.reaction_n.row(l.node) -= l.force_n.transpose();
+    if (held[l.node]) res.reaction_n.row(l.node) -= l.force_n.transpose();
   res.suture_forces.resize(mesh.sutures.size());
   std::vector<std::vector<int>> group_pairs(map.groups.size());
   for (std::size_t k = 0; k < mesh.sutures.size(); ++k) {

@@ -17,11 +17,18 @@
 namespace caps::fem::detail {
 namespace {
 
-// Line search (Bonet & Wood 2008, sec. 9.6; Crisfield 1991, sec. 9.3): along the Newton
-// direction dq the energy's slope s(alpha) = dq . r(q + alpha dq) is driven towards zero; a
-// step is accepted when |s(alpha)| <= kSlopeRatio |s(0)|. An inverted element at alpha halves it.
+// Line search (Bonet & Wood 2008, sec. 9.6; Nocedal & Wright 2006, sec. 3.1 and 3.5): along the
+// Newton direction dq (a descent direction: the tangent is positive definite, shifted if need
+// be) a step alpha is accepted when the potential energy has dropped (Armijo, kArmijo) and its
+// slope s(alpha) = -dq . grad has fallen to kSlopeRatio |s(0)| or is still downhill; otherwise
+// alpha is cut back to the minimum of the quadratic through the energy at 0 and alpha and the
+// slope at 0, kept within [0.1, 0.5] alpha. An inverted element at alpha halves it. The energy
+// test keeps the iteration from bouncing between states past a buckling point; near convergence
+// the energy changes at round-off level and the slope test alone decides.
 constexpr double kSlopeRatio = 0.8;
-constexpr int kMaxLineSearch = 6;
+constexpr double kArmijo = 1e-4;
+constexpr int kMaxLineSearch = 12;
+constexpr double kShiftedStepMm = 1.0;
 // A residual this many times the step's load means the iteration diverges: cut back.
 constexpr double kDivergence = 1e8;
 
@@ -64,11 +71,19 @@ class FiniteProblem {
 
   // Out-of-balance force and tangent at (q, lambda); the `lift` term gives the predictor.
   // Returns a failure when an element inverts.
+  // `energy` (optional) receives the strain energy (mJ).
   std::optional<Failure> evaluate(const Eigen::VectorXd& q, double lambda, double load_lambda,
                                   const Eigen::VectorXd& lift, Assembly& sys,
-                                  Eigen::VectorXd* unit_lift = nullptr) const {
-    const FiniteAssembly a = assemble_finite(mesh_, map_, materials_, expand(q, lambda),
-                                             load_lambda, lift, true, sys, unit_lift);
+                                  Eigen::VectorXd* unit_lift = nullptr,
+                                  double* energy = nullptr) const {
+    const Eigen::VectorXd u = expand(q, lambda);
+    const FiniteAssembly a = assemble_finite(mesh_, map_, materials_, u, load_lambda, lift, true,
+                                             sys, unit_lift);
+    if (a.inverted_element < 0) {
+      const double sliding = add_sliding_supports(mesh_, map_, lift.size() ? Eigen::VectorXd(u + lift) : u,
+                                                  true, sys, unit_lift);
+      if (energy) *energy = a.energy_mj + sliding;
+    }
     if (a.inverted_element >= 0)
       return Failure{inverted_message(a.inverted_element, a.inverted_gauss_point, a.det_F),
                      a.inverted_element, a.inverted_gauss_point};
@@ -118,33 +133,64 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
   // its -T^T K g: the next predictor is then f + dl (f_ext + unit_lift), without an assembly.
   bool at_converged_state = false;
   Eigen::VectorXd q = Eigen::VectorXd::Zero(map.n_eq);
-  double lambda = 0, dlambda = 1.0 / no.n_steps;
+  const double nominal = 1.0 / no.n_steps;
+  double lambda = 0, dlambda = nominal;
   int step = 0, cutbacks = 0;
   std::optional<Failure> inverted_in_step;  // the first inversion among the attempts of a step
 
-  // One solve of K dq = f; a singular (not positive definite) tangent is a failure.
-  auto solve_system = [&](Eigen::VectorXd& dq) -> std::optional<Failure> {
+  // The diagonal of K's stored upper triangle (the last entry of each column), for the shift.
+  std::vector<Eigen::Index> diagonal(static_cast<std::size_t>(sys.K.cols()));
+  for (Eigen::Index j = 0; j < sys.K.cols(); ++j) diagonal[j] = sys.K.outerIndexPtr()[j + 1] - 1;
+  Eigen::VectorXd kept_diagonal(sys.K.cols());
+
+  auto factorize_and_solve = [&](Eigen::VectorXd& dq) {
+    auto t0 = Clock::now();
+    ++res.factorizations;
+    solver->factorize(sys.K);
+    res.timings.factorization_s += seconds_since(t0);
+    t0 = Clock::now();
+    dq = solver->solve(sys.f);
+    res.timings.solve_s += seconds_since(t0);
+  };
+
+  // One solve of K dq = f. Past a buckling point (the free flaps pucker under the closure's
+  // compression) the tangent is indefinite and its Newton direction need not lower the energy:
+  // the tangent is then shifted, K + mu diag(K) with mu = 1e-4, 1e-3, ... until it is positive
+  // definite (Levenberg-Marquardt; Nocedal & Wright 2006, sec. 3.4 and 6.3), which gives a
+  // descent direction and leads to a stable (minimum-energy) equilibrium rather than the
+  // unstable one. `shift` returns the mu used, 0 for the tangent itself.
+  auto solve_system = [&](Eigen::VectorXd& dq, double& shift) -> std::optional<Failure> {
+    shift = 0;
+    if (no.reuse_iterations > 0) {
+      const auto t0 = Clock::now();
+      std::optional<Eigen::VectorXd> x = solver->solve_reusing_factor(sys.K, sys.f, no.reuse_iterations);
+      res.timings.solve_s += seconds_since(t0);
+      if (x) {
+        dq = std::move(*x);
+        return dq.allFinite() ? std::nullopt
+                              : std::optional<Failure>(Failure{"the Newton correction is not finite"});
+      }
+    }
     try {
-      auto t0 = Clock::now();
-      if (no.reuse_iterations > 0)
-        if (std::optional<Eigen::VectorXd> x =
-                solver->solve_reusing_factor(sys.K, sys.f, no.reuse_iterations)) {
-          dq = std::move(*x);
-          res.timings.solve_s += seconds_since(t0);
-          return dq.allFinite() ? std::nullopt
-                                : std::optional<Failure>(Failure{"the Newton correction is not finite"});
+      factorize_and_solve(dq);
+    } catch (const SingularMatrix& first) {
+      double* values = sys.K.valuePtr();
+      for (Eigen::Index j = 0; j < sys.K.cols(); ++j) kept_diagonal[j] = values[diagonal[j]];
+      bool solved = false;
+      for (double mu = 1e-4; mu <= 1.01e2 && !solved; mu *= 10) {
+        for (Eigen::Index j = 0; j < sys.K.cols(); ++j)
+          values[diagonal[j]] = (1 + mu) * kept_diagonal[j];
+        try {
+          factorize_and_solve(dq);
+          solved = true;
+          shift = mu;
+        } catch (const SingularMatrix&) {
         }
-      res.timings.solve_s += seconds_since(t0);
-      t0 = Clock::now();
-      ++res.factorizations;
-      solver->factorize(sys.K);
-      res.timings.factorization_s += seconds_since(t0);
-      t0 = Clock::now();
-      dq = solver->solve(sys.f);
-      res.timings.solve_s += seconds_since(t0);
-    } catch (const SingularMatrix& e) {
-      return Failure{cat("the tangent stiffness is not positive definite (", e.what(),
-                         "): the tissue buckles or the step is too large")};
+      }
+      for (Eigen::Index j = 0; j < sys.K.cols(); ++j) values[diagonal[j]] = kept_diagonal[j];
+      if (!solved)
+        return Failure{cat("the tangent stiffness is not positive definite even shifted by 100 times "
+                           "its diagonal (", first.what(), ")")};
     }
     if (!dq.allFinite()) return Failure{"the Newton correction is not finite"};
     return std::nullopt;
@@ -171,6 +217,9 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
     }
     at_converged_state = false;
     const double r0 = failure ? 0.0 : sys.f.norm();
+    // The potential energy of the current iterate at lambda_new; unknown for the predictor,
+    // whose direction also moves the prescribed values (its step is judged by the slope alone).
+    double energy = NAN;
     bool converged = false;
     for (int it = 1; !failure && it <= no.max_iterations; ++it) {
       ++res.newton_iterations;
@@ -180,37 +229,59 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
         break;
       }
       Eigen::VectorXd dq;
-      if ((failure = solve_system(dq))) {
+      double shift = 0;
+      if ((failure = solve_system(dq, shift))) {
         failure->iteration = it;
         break;
       }
       const double s0 = dq.dot(sys.f);  // slope of the energy along dq at alpha = 0 (negated)
-      double alpha = 1.0;
-      std::optional<Failure> inverted;
+      // The potential at alpha = 0 (external loads do work lambda f_ext . q).
+      const double pi0 = energy - lambda_new * f_ext.dot(q);
+      // A shifted direction is long along the soft (buckling) mode: it is first cut to move no
+      // dof by more than kShiftedStepMm.
+      const double dq_max = dq.lpNorm<Eigen::Infinity>();
+      double alpha = shift > 0 && dq_max > kShiftedStepMm ? kShiftedStepMm / dq_max : 1.0;
+      std::optional<Failure> inverted, first_inverted;
       bool accepted = false;
+      double energy_at = 0;
       for (int ls = 0; ls < kMaxLineSearch; ++ls) {
         t = Clock::now();
-        inverted = problem.evaluate(q + alpha * dq, lambda_new, lambda_new, no_lift, sys, &unit_lift);
+        inverted = problem.evaluate(q + alpha * dq, lambda_new, lambda_new, no_lift, sys, &unit_lift,
+                                    &energy_at);
         res.timings.assembly_s += seconds_since(t);
         if (inverted) {
+          if (!first_inverted) first_inverted = inverted;
           alpha *= 0.5;
           continue;
         }
         const double s = dq.dot(sys.f);
-        if (std::abs(s) <= kSlopeRatio * std::abs(s0) || ls + 1 == kMaxLineSearch || s0 * s > 0) {
+        const double pi = energy_at - lambda_new * f_ext.dot(q + alpha * dq);
+        const double drop = pi0 - pi;  // > 0: the energy fell
+        const bool energy_ok = std::isnan(pi0) || drop >= kArmijo * alpha * s0 ||
+                               std::abs(drop) <= 1e-12 * std::max(std::abs(pi0), std::abs(pi));
+        if (energy_ok && (std::abs(s) <= kSlopeRatio * std::abs(s0) || s0 * s > 0)) {
           accepted = true;
           break;
         }
-        // The root of the linear interpolation of s between 0 and alpha, kept in [0.1, 1] alpha.
-        alpha *= std::clamp(s0 / (s0 - s), 0.1, 1.0);
+        if (energy_ok) {
+          // Past the minimum along dq (the slope changed sign): its root by linear interpolation.
+          alpha *= std::clamp(s0 / (s0 - s), 0.1, 1.0);
+        } else {
+          // The energy rose: the minimum of the quadratic with pi(0), slope -s0 and pi(alpha).
+          const double a_min = s0 * alpha * alpha / (2 * (s0 * alpha - drop));
+          alpha = std::clamp(a_min, 0.1 * alpha, 0.5 * alpha);
+        }
       }
       if (!accepted) {
-        failure = inverted ? *inverted : Failure{"the line search found no admissible step"};
+        failure = first_inverted ? *first_inverted
+                                 : Failure{"the line search found no step that lowers the energy"};
         failure->iteration = it;
         break;
       }
+      energy = energy_at;
       q += alpha * dq;
       record.line_search.push_back(alpha);
+      record.shifts.push_back(shift);
       const double rn = sys.f.norm();
       record.residual_norms.push_back(rn / r0);
       if (!std::isfinite(rn) || rn > kDivergence * r0) {
@@ -218,12 +289,19 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
                               " times the step's load)"), -1, -1, it};
         break;
       }
-      const double du = alpha * dq.norm(), step_norm = std::max((q - q_start).norm(), 1e-300);
+      // The tolerances are relative to the nominal step: a step cut back k times has a first
+      // residual and an increment 2^k times smaller, while the round-off in the element forces
+      // that cancel in the residual does not shrink with it (measured on the Cranium Z-plasty:
+      // halved steps stalled at 1e-8 of their own first residual against 1e-10).
+      const double scale = std::max(1.0, nominal / dl);
+      const double r_ref = scale * r0;
+      const double du = alpha * dq.norm(),
+                   step_norm = std::max(scale * (q - q_start).norm(), 1e-300);
       // Converged; or at the round-off floor: a correction a thousand times below the tolerance
       // while the residual is within a hundred times of it (a residual cannot drop below the
       // rounding of the element forces that cancel in it).
-      if ((rn <= no.residual_tolerance * r0 && du <= no.displacement_tolerance * step_norm) ||
-          (rn <= 1e2 * no.residual_tolerance * r0 && du <= 1e-3 * no.displacement_tolerance * step_norm)) {
+      if ((rn <= no.residual_tolerance * r_ref && du <= no.displacement_tolerance * step_norm) ||
+          (rn <= 1e2 * no.residual_tolerance * r_ref && du <= 1e-3 * no.displacement_tolerance * step_norm)) {
         converged = true;
         break;
       }
@@ -237,7 +315,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
       inverted_in_step.reset();
       at_converged_state = record.iterations > 0 && r0 > 0;
       // Grow back towards the nominal step after an easy step.
-      if (record.iterations <= 4) dlambda = std::min(2 * dlambda, 1.0 / no.n_steps);
+      if (record.iterations <= 4) dlambda = std::min(2 * dlambda, nominal);
       continue;
     }
     if (!failure)

@@ -21,6 +21,7 @@ struct MeshingFields {
   double extent = fem::SurfaceMeshOptions{}.extent_mm;
   double undermine = fem::ContinuumMeshOptions{}.undermine_mm;
   std::string rim = fem::rim_condition_name(fem::ContinuumMeshOptions{}.rim);
+  std::string base = fem::base_condition_name(fem::ContinuumMeshOptions{}.base);
   double grading = fem::ContinuumMeshOptions{}.grading;
   double t1 = fem::SurfaceMeshOptions{}.t1_deg;
   double stage1_angle = fem::SurfaceMeshOptions{}.stage1_min_angle_deg;
@@ -37,6 +38,8 @@ struct MeshingFields {
                                  "(mm), as a surgeon undermines (default about the excision's width; "
                                  "flaps are freed whole); 0 = only the sutured columns and flaps"});
     v(r.rim, {"rim", "outer rim: fixed (clamped) or free (traction free)"});
+    v(r.base, {"base", "undermined tissue and flaps: slide (rest on the deep tissue and slide over "
+                       "it) or free (may lift off or sink in: the 1992 model)"});
     v(r.grading, {"grading", "thickness ratio of each layer to the one above"});
     v(r.t1, {"t1", "stage 1: fill concave corners deeper than this (deg)"});
     v(r.stage1_angle, {"stage1_angle", "stage 1: re-triangulate regions of stage-1 triangles with "

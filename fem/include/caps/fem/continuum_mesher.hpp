@@ -32,6 +32,17 @@ namespace caps::fem {
 /// What holds the outer rim of the mesh.
 enum class RimCondition { Fixed, Free };
 
+/// What holds the base of undermined tissue and raised flaps (the freed bottom nodes).
+/// Slide: it rests on the deep tissue and slides over it (held along the extrusion direction
+/// only, Mesh::sliding); Free: it is free in all directions (the 1992 model), so it may lift off
+/// or sink into the bone when the closure compresses it.
+enum class BaseCondition { Slide, Free };
+
+/// "slide" / "free".
+const char* base_condition_name(BaseCondition base);
+/// Parses "slide" / "free"; throws InvalidInput otherwise.
+BaseCondition parse_base_condition(const std::string& name);
+
 /// "fixed" / "free".
 const char* rim_condition_name(RimCondition rim);
 /// Parses "fixed" / "free"; throws InvalidInput otherwise.
@@ -52,6 +63,7 @@ struct ContinuumMeshOptions {
   /// closing force depend on the mesh size (docs/mesher.md). The plan's flaps are freed over
   /// their whole area whatever this is.
   double undermine_mm = 10;
+  BaseCondition base = BaseCondition::Slide;  ///< the freed base: slides on the deep tissue or is free
   LinearElastic material = default_skin();  ///< used for every layer
 };
 

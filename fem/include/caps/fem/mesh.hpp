@@ -71,6 +71,16 @@ struct SuturePair {
   int b = 0;
 };
 
+/// A node that rests on the deep tissue but slides over it (undermined tissue lying back on the
+/// fascia: frictionless contact that stays closed, linearized about the start): its
+/// displacement along the unit `normal` is held at 0 by a penalty spring of
+/// `stiffness_n_per_mm` (N/mm); along the surface it is free.
+struct SlidingNode {
+  int node = 0;
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  double stiffness_n_per_mm = 0;
+};
+
 /// The solver's input mesh.
 struct Mesh {
   Eigen::MatrixX3d nodes;                 ///< #N×3 positions, LPS mm
@@ -84,6 +94,7 @@ struct Mesh {
   std::vector<FixedDof> fixed_dofs;       ///< single prescribed components
   std::vector<NodalLoad> loads;           ///< nodal forces
   std::vector<SuturePair> sutures;        ///< suture constraints
+  std::vector<SlidingNode> sliding;       ///< nodes held only along a normal (undermined base)
   std::string model;                      ///< reference to the patient model, if known
   std::string plan;                       ///< reference to the surgical plan, if known
   std::vector<std::string> warnings;      ///< what the mesher had to give up (e.g. a limited extent)

@@ -86,6 +86,9 @@ struct NewtonStep {
   /// ||r|| after each solve relative to the step's predictor load ||r_0|| (first entry 1).
   std::vector<double> residual_norms;
   std::vector<double> line_search;     ///< accepted step length alpha of each iteration
+  /// Per iteration, the shift mu that made the tangent positive definite (K + mu diag(K)), 0
+  /// where the tangent itself was: non-zero past a buckling point (the tissue puckers).
+  std::vector<double> shifts;
 };
 
 /// The force one suture carries.
