@@ -127,7 +127,7 @@ void write_cross_section_png(const fs::path& path, const SurfaceMesh& s, const P
   };
   double dmax = 0;
   for (int i = 0; i <= 200; ++i) dmax = std::max(dmax, depth_mm(xmin + (xmax - xmin) * i / 200));
-  const double W = 1240, left = 60, right = 30, top = 70;
+  const double W = 1240, left = 60, right = 30, top = 86;
   const double sx = (W - left - right) / (xmax - xmin);
   const double sy = sx * depth_scale;
   const double plot_h = dmax * sy + 20;
@@ -162,9 +162,9 @@ void write_cross_section_png(const fs::path& path, const SurfaceMesh& s, const P
           cat("section at z = ", std::round(s.z_c_mm * 10) / 10, " mm through the wound, skin drawn flat, depth below it x",
               depth_scale, "; ", NL, " layers, thickness ",
               o.constant_thickness_mm > 0 ? cat(o.constant_thickness_mm, " mm (constant)")
-                                          : std::string("from the model"),
-              "; bold: skin (top) and bone (bottom); dots: where the section meets element edges"),
+                                          : std::string("from the model")),
           12);
+  text(cv, left, 68, "bold: skin (top) and bone (bottom); dots: where the section meets element edges", 12);
   text(cv, left, top + plot_h + 40,
           cat("arc length (mm) from ", std::round(xmin), " to ", std::round(xmax),
               " at the reference radius ", std::round(s.ref_radius_mm), " mm"),
