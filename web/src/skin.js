@@ -1,0 +1,58 @@
+// The skin meshes: the model's skin (coloured by the model or by the soft-tissue thickness) and a
+// simulation's skin (pre-operative positions with the post-operative skin as a morph target, and
+// the tension map as a second set of colours), all read from the server's .glb files.
+import { DoubleSide } from 'three';
+import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
+import { getBinary } from './api.js';
+
+const loader = new GLTFLoader();
+const buffers = new Map();  // url -> ArrayBuffer: each file is fetched once
+
+async function loadMesh(url) {
+  if (!buffers.has(url)) buffers.set(url, getBinary(url));
+  const gltf = await loader.parseAsync(await buffers.get(url), '');
+  let mesh = null;
+  gltf.scene.traverse((o) => {
+    if (!mesh && o.isMesh) mesh = o;
+  });
+  if (!mesh) throw new Error(`${url}: no mesh in the file`);
+  mesh.removeFromParent();
+  mesh.updateMatrixWorld(true);
+  mesh.material.side = DoubleSide;
+  mesh.material.roughness = 0.7;
+  return mesh;
+}
+
+/** A mesh whose colours switch between named colour sets of the same vertices. */
+class ColouredSkin {
+  constructor(mesh) {
+    this.mesh = mesh;
+    this.colours = { skin: mesh.geometry.getAttribute('color') };
+  }
+
+  async addColours(name, url) {
+    const other = await loadMesh(url);
+    const colour = other.geometry.getAttribute('color');
+    if (colour.count !== this.colours.skin.count)
+      throw new Error(`${url}: another skin (${colour.count} vertices, not ${this.colours.skin.count})`);
+    this.colours[name] = colour;
+  }
+
+  show(name) {
+    this.mesh.geometry.setAttribute('color', this.colours[name] ?? this.colours.skin);
+  }
+}
+
+/** The model's skin (GET /api/skin): {skin: ColouredSkin with 'thickness', thicknessMax (mm)}. */
+export async function loadModelSkin(info) {
+  const skin = new ColouredSkin(await loadMesh(info.skin.url));
+  await skin.addColours('thickness', info.thickness.url);
+  return { skin, thicknessMax: info.thickness.scale_max_mm };
+}
+
+/** A simulation's skin (GET /api/results/ID/view) with its 'tension' colours; morph 0 = pre. */
+export async function loadResultSkin(view) {
+  const skin = new ColouredSkin(await loadMesh(view.skin));
+  await skin.addColours('tension', view.tension);
+  return skin;
+}
