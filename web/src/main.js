@@ -16,7 +16,8 @@ function status(text) {
 
 // Slider steps by unit: whole counts and signs, half millimetres, whole degrees.
 function stepOf(p) {
-  if (p.unit === 'count' || p.unit === 'sign') return 1;
+  if (p.unit === 'count') return 1;
+  if (p.unit === 'sign') return 2;
   if (p.unit === 'mm') return 0.5;
   return 1;
 }
@@ -35,8 +36,9 @@ function buildParameters(template, values, onInput) {
       <input type="range" id="param-${p.name}" min="${p.min}" max="${p.max}" step="${stepOf(p)}">
       <output></output>`;
     const input = row.querySelector('input'), out = row.querySelector('output');
-    input.value = values[p.name];
-    out.textContent = `${+Number(values[p.name]).toFixed(1)}${unit}`;
+    const value = values[p.name] ?? p.default;  // an alternative not given shows its default
+    input.value = value;
+    out.textContent = `${+Number(value).toFixed(1)}${unit}`;
     input.addEventListener('input', () => {
       out.textContent = `${+Number(input.value).toFixed(1)}${unit}`;
     });

@@ -32,9 +32,12 @@ export class Planner {
     this.bindPointer();
   }
 
+  // The parameters sent for a new plan: each default, except those that are an alternative to
+  // another (the ellipse's apex_angle sets its width: one of the two is given).
   defaults(name) {
     const t = this.templates.get(name);
-    return Object.fromEntries(t.parameters.map((p) => [p.name, p.default]));
+    return Object.fromEntries(t.parameters.filter((p) => !p.alternative_to)
+      .map((p) => [p.name, p.default]));
   }
 
   /** Chooses the procedure from the menu (keeps the centre and orientation if placed). */
@@ -45,6 +48,11 @@ export class Planner {
   }
 
   setParameter(name, value) {
+    // Setting one of two alternatives drops the other.
+    for (const p of this.templates.get(this.procedure).parameters) {
+      if (p.name === name && p.alternative_to) delete this.parameters[p.alternative_to];
+      if (p.alternative_to === name) delete this.parameters[p.name];
+    }
     this.parameters[name] = value;
     if (this.state) this.change({ ...this.state, parameters: { ...this.parameters } });
   }

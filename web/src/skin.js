@@ -8,8 +8,13 @@ import { getBinary } from './api.js';
 const loader = new GLTFLoader();
 const buffers = new Map();  // url -> ArrayBuffer: each file is fetched once
 
-async function loadMesh(url) {
+function fetchOnce(url) {
   if (!buffers.has(url)) buffers.set(url, getBinary(url));
+  return buffers.get(url);
+}
+
+async function loadMesh(url) {
+  fetchOnce(url);
   const gltf = await loader.parseAsync(await buffers.get(url), '');
   let mesh = null;
   gltf.scene.traverse((o) => {
@@ -45,6 +50,7 @@ class ColouredSkin {
 
 /** The model's skin (GET /api/skin): {skin: ColouredSkin with 'thickness', thicknessMax (mm)}. */
 export async function loadModelSkin(info) {
+  fetchOnce(info.thickness.url);  // both files download at once
   const skin = new ColouredSkin(await loadMesh(info.skin.url));
   await skin.addColours('thickness', info.thickness.url);
   return { skin, thicknessMax: info.thickness.scale_max_mm };
@@ -52,6 +58,7 @@ export async function loadModelSkin(info) {
 
 /** A simulation's skin (GET /api/results/ID/view) with its 'tension' colours; morph 0 = pre. */
 export async function loadResultSkin(view) {
+  fetchOnce(view.tension);  // both files download at once
   const skin = new ColouredSkin(await loadMesh(view.skin));
   await skin.addColours('tension', view.tension);
   return skin;
