@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <future>
 #include <vector>
 
 namespace caps::server::detail {
@@ -91,15 +92,19 @@ std::string write_result_skin_glbs(const PatientModel& model, const fs::path& re
   const fem::Mesh mesh = fem::read_mesh_dir(result_dir);
   const Eigen::MatrixX3d u = fem::read_result_displacement(result_dir, mesh.n_nodes());
   const int n = std::min(kMaxResultSubdivisions, render::full_resolution_subdivisions(model, mesh));
-  render::SkinSurfaces skin = render::displaced_skin(model, mesh, &u, n);
-  render::write_gltf(skin, result_dir / "skin.glb");
+  const render::SkinSurfaces skin = render::displaced_skin(model, mesh, &u, n);
+  // The two files at once (two cores): the skin as it is, and a copy coloured by the tension.
+  auto coloured = std::async(std::launch::async,
+                             [&] { render::write_gltf(skin, result_dir / "skin.glb"); });
   const render::ScalarMap tension = render::tension_map(
       skin, mesh, fem::read_result_max_principal(result_dir, mesh.n_nodes()), 0);
   const auto [fill_pre_mm2, fill_post_mm2] = render::wound_fill_area_mm2(skin);
   const Eigen::Index n_micro = skin.n_micropolygon_vertices;
   const double peak = n_micro ? tension.value.head(n_micro).maxCoeff() : 0.0;
-  skin.color = render::scalar_colors(tension.value, tension.max_value);
-  render::write_gltf(skin, result_dir / "tension.glb");
+  render::SkinSurfaces by_tension = skin;
+  by_tension.color = render::scalar_colors(tension.value, tension.max_value);
+  render::write_gltf(by_tension, result_dir / "tension.glb");
+  coloured.get();  // rethrows an error of the first file
   return json{{"skin", "skin.glb"},
               {"tension", "tension.glb"},
               {"subdivisions", n},

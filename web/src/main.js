@@ -90,7 +90,7 @@ async function main() {
   $('model-name').textContent = `${model.source?.path?.split('/').pop() ?? 'model'} · ` +
     `${model.source?.modality ?? model.source?.kind ?? ''}`;
   const { skin, thicknessMax } = await loadModelSkin(skinInfo);
-  viewA.setSkin(skin.mesh);
+  viewA.setSkin(skin.mesh, { pickable: true });
 
   const results = new Results(viewA, viewB, {
     progress: $('progress'), progressBar: $('progress-bar'), progressText: $('progress-text'),

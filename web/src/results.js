@@ -93,7 +93,7 @@ export class Results {
   showPlanning() {
     if (!this.shown[0] || !this.preSkin) return;
     this.shown[0] = null;
-    this.views[0].setSkin(this.preSkin);
+    this.views[0].setSkin(this.preSkin, { pickable: true });
     document.getElementById('label-a').textContent = '';
     this.el.result.hidden = true;
     this.renderTable();

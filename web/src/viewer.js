@@ -86,11 +86,15 @@ export class Viewer {
     this.listeners.push(f);
   }
 
-  /** Shows `mesh` as the skin (replacing the one shown) and builds its BVH for picking. */
-  setSkin(mesh) {
+  /** Shows `mesh` as the skin (replacing the one shown); with `pickable`, builds its BVH so that
+   * clicks find their point on it (the model's skin; a simulation's is only looked at). */
+  setSkin(mesh, { pickable = false } = {}) {
     if (this.skin) this.scene.remove(this.skin);
     this.skin = mesh;
-    if (!mesh.geometry.boundsTree) mesh.geometry.computeBoundsTree();
+    if (pickable) {
+      this.pickTarget = mesh;  // kept while another skin is shown: clicks land on the model's
+      if (!mesh.geometry.boundsTree) mesh.geometry.computeBoundsTree();
+    }
     this.scene.add(mesh);
     const box = new Box3().setFromObject(mesh);
     const sphere = box.getBoundingSphere(new Sphere());
@@ -141,10 +145,11 @@ export class Viewer {
     return this.raycaster.intersectObjects(objects, recursive);
   }
 
-  /** The point of the skin under the pointer event `e` (glTF frame), or null. */
+  /** The point of the pickable skin (the model's) under the pointer event `e` (glTF frame), or
+   * null. */
   pickSkin(e) {
-    if (!this.skin) return null;
-    const hit = this.hits(e, [this.skin])[0];
+    if (!this.pickTarget) return null;
+    const hit = this.hits(e, [this.pickTarget])[0];
     return hit ? hit.point : null;
   }
 
