@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <future>
 #include <vector>
 
@@ -40,6 +41,40 @@ double percentile99(std::vector<double> values) {
   const auto k = static_cast<std::ptrdiff_t>(0.99 * static_cast<double>(values.size() - 1));
   std::nth_element(values.begin(), values.begin() + k, values.end());
   return values[static_cast<std::size_t>(k)];
+}
+
+// The faces of `s` on the finite-element mesh (its micropolygons and the wound fill) with their
+// vertices, renumbered: where the simulation has a tension (the seam to the range mesh has none).
+render::SkinSurfaces mesh_part(const render::SkinSurfaces& s) {
+  std::vector<Eigen::Index> faces;
+  for (Eigen::Index f = 0; f < s.pre.n_faces(); ++f)
+    if (const render::SkinPart p = s.face_part[static_cast<std::size_t>(f)];
+        p == render::SkinPart::Micropolygon || p == render::SkinPart::WoundFill)
+      faces.push_back(f);
+  std::vector<int> index(static_cast<std::size_t>(s.pre.n_vertices()), -1);
+  std::vector<Eigen::Index> kept;
+  render::SkinSurfaces part;
+  part.pre.F.resize(static_cast<Eigen::Index>(faces.size()), 3);
+  for (std::size_t i = 0; i < faces.size(); ++i)
+    for (int c = 0; c < 3; ++c) {
+      int& v = index[static_cast<std::size_t>(s.pre.F(faces[i], c))];
+      if (v < 0) {
+        v = static_cast<int>(kept.size());
+        kept.push_back(s.pre.F(faces[i], c));
+      }
+      part.pre.F(static_cast<Eigen::Index>(i), c) = v;
+    }
+  const auto n = static_cast<Eigen::Index>(kept.size());
+  part.pre.V.resize(n, 3);
+  part.post.V.resize(n, 3);
+  part.color.resize(n, 3);
+  for (Eigen::Index v = 0; v < n; ++v) {
+    part.pre.V.row(v) = s.pre.V.row(kept[static_cast<std::size_t>(v)]);
+    part.post.V.row(v) = s.post.V.row(kept[static_cast<std::size_t>(v)]);
+    part.color.row(v) = s.color.row(kept[static_cast<std::size_t>(v)]);
+  }
+  part.post.F = part.pre.F;
+  return part;
 }
 
 }  // namespace
@@ -89,10 +124,16 @@ std::string write_model_skin_glb(const PatientModel& model, SkinColouring colour
 }
 
 std::string write_result_skin_glbs(const PatientModel& model, const fs::path& result_dir) {
+  using Clock = std::chrono::steady_clock;
+  const auto seconds = [](Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double>(b - a).count();
+  };
+  const auto t0 = Clock::now();
   const fem::Mesh mesh = fem::read_mesh_dir(result_dir);
   const Eigen::MatrixX3d u = fem::read_result_displacement(result_dir, mesh.n_nodes());
   const int n = std::min(kMaxResultSubdivisions, render::full_resolution_subdivisions(model, mesh));
   const render::SkinSurfaces skin = render::displaced_skin(model, mesh, &u, n);
+  const auto t1 = Clock::now();
   // The two files at once (two cores): the skin as it is, and a copy coloured by the tension.
   auto coloured = std::async(std::launch::async,
                              [&] { render::write_gltf(skin, result_dir / "skin.glb"); });
@@ -101,17 +142,22 @@ std::string write_result_skin_glbs(const PatientModel& model, const fs::path& re
   const auto [fill_pre_mm2, fill_post_mm2] = render::wound_fill_area_mm2(skin);
   const Eigen::Index n_micro = skin.n_micropolygon_vertices;
   const double peak = n_micro ? tension.value.head(n_micro).maxCoeff() : 0.0;
+  const auto t2 = Clock::now();
   render::SkinSurfaces by_tension = skin;
   by_tension.color = render::scalar_colors(tension.value, tension.max_value);
-  render::write_gltf(by_tension, result_dir / "tension.glb");
+  // Off the finite-element mesh the tension is 0 by definition: only the mesh's part is written.
+  render::write_gltf(mesh_part(by_tension), result_dir / "tension.glb");
   coloured.get();  // rethrows an error of the first file
+  const auto t3 = Clock::now();
   return json{{"skin", "skin.glb"},
               {"tension", "tension.glb"},
               {"subdivisions", n},
               {"vertices", skin.pre.n_vertices()},
               {"tension_scale_max_kpa", tension.max_value},
               {"max_skin_tension_kpa", peak},
-              {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}}}
+              {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},
+              {"timings_s",
+               {{"skin", seconds(t0, t1)}, {"tension", seconds(t1, t2)}, {"glb", seconds(t2, t3)}}}}
       .dump();
 }
 

@@ -78,7 +78,7 @@ export class Results {
     if (!row.skins[which]) row.skins[which] = await loadResultSkin(row.view);
     const skin = row.skins[which];
     skin.show(this.colouring === 'tension' ? 'tension' : 'skin');
-    skin.mesh.morphTargetInfluences[0] = this.morph;
+    skin.setMorph(this.morph);
     viewer.setSkin(skin.mesh);
     viewer.setOverlay(sutureObjects(row.sutures));
     this.shown[which] = row;
@@ -105,7 +105,7 @@ export class Results {
     this.el.morph.value = t;
     this.shown.forEach((row, i) => {
       if (!row) return;
-      row.skins[i].mesh.morphTargetInfluences[0] = t;
+      row.skins[i].setMorph(t);
       this.views[i].requestRender();
     });
   }

@@ -56,10 +56,26 @@ export async function loadModelSkin(info) {
   return { skin, thicknessMax: info.thickness.scale_max_mm };
 }
 
-/** A simulation's skin (GET /api/results/ID/view) with its 'tension' colours; morph 0 = pre. */
+/** A simulation's skin (GET /api/results/ID/view): the whole skin (morph 0 = pre-operative,
+ * 1 = post-operative) and, over it, the finite-element part coloured by the skin tension. */
 export async function loadResultSkin(view) {
   fetchOnce(view.tension);  // both files download at once
-  const skin = new ColouredSkin(await loadMesh(view.skin));
-  await skin.addColours('tension', view.tension);
-  return skin;
+  const mesh = await loadMesh(view.skin);
+  const tension = await loadMesh(view.tension);
+  // Drawn in front of the skin's own faces at the same place (they coincide before and after).
+  tension.material.polygonOffset = true;
+  tension.material.polygonOffsetFactor = -2;
+  tension.material.polygonOffsetUnits = -2;
+  tension.visible = false;
+  mesh.add(tension);
+  return {
+    mesh,
+    show(name) {
+      tension.visible = name === 'tension';
+    },
+    setMorph(t) {
+      mesh.morphTargetInfluences[0] = t;
+      tension.morphTargetInfluences[0] = t;
+    },
+  };
 }
