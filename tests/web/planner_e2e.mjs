@@ -1,8 +1,9 @@
 // End-to-end test of the planner page: starts `caps serve` on a model, drives Debian's chromium
 // (headless, software GL) through the page as a surgeon would — place a Z-plasty by clicking on
-// the skin, read the plan check, simulate, read the forces in the table, change the angle and
-// simulate again, show the two alternatives side by side, save the plan — and checks the saved
-// plan with `caps plan check`. Screenshots go to OUT_DIR.
+// the skin, rotate it with a key and undo, drag its handle and undo, simulate, read the forces in
+// the table, change the angle and simulate again, show the two alternatives side by side, save
+// the plan and load it back — and checks the saved plan with `caps plan check`. Screenshots go
+// to OUT_DIR.
 //
 // node planner_e2e.mjs CAPS_EXE MODEL_DIR WEB_ROOT OUT_DIR    (run by run_planner_e2e.sh)
 import assert from 'node:assert/strict';
@@ -89,6 +90,25 @@ try {
   await page.keyboard.press('Control+z');
   await page.waitForFunction(() => window.caps.planner.state.orientation === 90);
   await page.waitForSelector('body[data-check="ok"]');
+  // Drag the handle 40 pixels up: the plan moves up the skin (one undo step).
+  const before = await page.evaluate(() => window.caps.planner.plan.frame.z_mm);
+  const handle = await page.evaluate(() => {
+    const { viewA, planner } = window.caps;
+    const p = planner.handle.position.clone().project(viewA.camera);
+    const r = viewA.renderer.domElement.getBoundingClientRect();
+    return { x: r.left + ((p.x + 1) / 2) * r.width, y: r.top + ((1 - p.y) / 2) * r.height };
+  });
+  await page.mouse.move(handle.x, handle.y);
+  await page.mouse.down();
+  for (let i = 1; i <= 4; ++i) await page.mouse.move(handle.x, handle.y - 10 * i);
+  await page.mouse.up();
+  await page.waitForFunction((z) => window.caps.planner.plan?.frame.z_mm > z + 2, before);
+  await page.waitForSelector('body[data-check="ok"]');
+  const after = await page.evaluate(() => window.caps.planner.plan.frame.z_mm);
+  log(`dragged the handle: centre z ${before.toFixed(1)} -> ${after.toFixed(1)} mm`);
+  await page.keyboard.press('Control+z');
+  await page.waitForFunction((z) => Math.abs(window.caps.planner.plan?.frame.z_mm - z) < 1e-6, before);
+  await page.waitForSelector('body[data-check="ok"]');
   await page.click('[data-view="plan"]');
   await page.screenshot({ path: join(out, '2-placed.png') });
 
@@ -140,6 +160,14 @@ try {
   assert.equal(checked.procedure.parameters.angle, 45);
   assert.equal(JSON.parse(readFileSync(saved, 'utf8')).format, 'caps-plan');
   log(`saved plan accepted by caps plan check (${checked.procedure.name}, angle 45)`);
+  // Load it back after changing the angle: the page takes the file's angle again.
+  await angle.fill('75');
+  await angle.dispatchEvent('change');
+  await page.waitForFunction(() => window.caps.planner.state.parameters.angle === 75);
+  await page.setInputFiles('#load', saved);
+  await page.waitForFunction(() => window.caps.planner.state.parameters.angle === 45);
+  assert.match(await page.locator('#check').innerText(), /Can be operated/);
+  assert.equal(await page.locator('#param-angle').inputValue(), '45');
 
   assert.deepEqual(foreign, [], 'requests outside the server');
   assert.deepEqual(errors.filter((e) => !/WebGL|GPU|GL_/i.test(e)), [], 'errors on the page');
