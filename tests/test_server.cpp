@@ -19,6 +19,7 @@
 #include <httplib.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -550,6 +551,22 @@ TEST_F(ServerTest, ASimulationsSkinAndTensionAreServedAsGlb) {
   EXPECT_LE(v.at("subdivisions").get<int>(), 8);
   EXPECT_GT(v.at("tension_scale_max_kpa").get<double>(), 0);
   EXPECT_GE(v.at("max_skin_tension_kpa").get<double>(), v.at("tension_scale_max_kpa").get<double>());
+  // The model's cells the simulation's skin replaces: around the plan, not the whole head. The
+  // phantom's grid is 128 x 64 (63 rows of cells, 2.8125 deg wide); the cell under the plan's
+  // centre is one of them.
+  const json& cells = v.at("replaced_cells");
+  ASSERT_FALSE(cells.empty());
+  EXPECT_LT(cells.size(), 128u * 63u / 4u);
+  EXPECT_TRUE(std::is_sorted(cells.begin(), cells.end()));
+  EXPECT_GE(cells.front().get<int>(), 0);
+  EXPECT_LT(cells.back().get<int>(), 128 * 63);
+  const json grid = json::parse(slurp(fs::path(kModel) / "model.json")).at("grid");
+  const json frame = json::parse(planned->body).at("frame");
+  const int j = static_cast<int>(std::floor(
+      (frame["theta_deg"].get<double>() - grid["theta0_deg"].get<double>()) / 2.8125));
+  const int k = static_cast<int>(std::floor(
+      (frame["z_mm"].get<double>() - grid["z0_mm"].get<double>()) / grid["dz_mm"].get<double>()));
+  EXPECT_NE(std::find(cells.begin(), cells.end(), json(k * 128 + j)), cells.end()) << j << ", " << k;
   // A V-Y advancement excises nothing: no wound to fill before the closure.
   EXPECT_NEAR(v.at("wound_area_mm2").at("pre").get<double>(), 0.0, 1e-9);
   for (const char* k : {"skin", "tension"}) {

@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <future>
 #include <vector>
@@ -43,13 +44,15 @@ double percentile99(std::vector<double> values) {
   return values[static_cast<std::size_t>(k)];
 }
 
-// The faces of `s` on the finite-element mesh (its micropolygons and the wound fill) with their
-// vertices, renumbered: where the simulation has a tension (the seam to the range mesh has none).
-render::SkinSurfaces mesh_part(const render::SkinSurfaces& s) {
+// The faces of `s` on the finite-element mesh (its micropolygons and the wound fill) and, with
+// `seam`, the seam to the range mesh, with their vertices renumbered: the part of the skin the
+// simulation moved (the tension is on the mesh's faces only; the seam has none).
+render::SkinSurfaces mesh_part(const render::SkinSurfaces& s, bool seam) {
   std::vector<Eigen::Index> faces;
   for (Eigen::Index f = 0; f < s.pre.n_faces(); ++f)
     if (const render::SkinPart p = s.face_part[static_cast<std::size_t>(f)];
-        p == render::SkinPart::Micropolygon || p == render::SkinPart::WoundFill)
+        p == render::SkinPart::Micropolygon || p == render::SkinPart::WoundFill ||
+        (seam && p == render::SkinPart::Seam))
       faces.push_back(f);
   std::vector<int> index(static_cast<std::size_t>(s.pre.n_vertices()), -1);
   std::vector<Eigen::Index> kept;
@@ -75,6 +78,36 @@ render::SkinSurfaces mesh_part(const render::SkinSurfaces& s) {
   }
   part.post.F = part.pre.F;
   return part;
+}
+
+// The cells q = k n_theta + j of the model's range mesh (faces 2q and 2q + 1 of range_mesh())
+// that `s` leaves out around its finite-element mesh: where mesh_part(s, true) replaces the
+// model's skin. Found from the range faces `s` keeps, by the (theta, z) of their vertices.
+std::vector<int> replaced_cells(const CylinderGrid& g, const render::SkinSurfaces& s) {
+  const auto n_cells = static_cast<std::size_t>(g.n_theta) * static_cast<std::size_t>(g.n_z - 1);
+  std::vector<bool> kept(n_cells, false);
+  for (Eigen::Index f = 0; f < s.pre.n_faces(); ++f) {
+    if (s.face_part[static_cast<std::size_t>(f)] != render::SkinPart::Range) continue;
+    int j_min = g.n_theta, j_max = -1, k_min = g.n_z, k_max = -1;
+    for (int c = 0; c < 3; ++c) {
+      const Eigen::Index v = s.pre.F(f, c);
+      const long j = std::lround((s.theta_z(v, 0) - g.theta0_deg) / g.dtheta_deg());
+      const int k = static_cast<int>(std::lround((s.theta_z(v, 1) - g.z0_mm) / g.dz_mm));
+      const int jw = static_cast<int>(((j % g.n_theta) + g.n_theta) % g.n_theta);
+      j_min = std::min(j_min, jw);
+      j_max = std::max(j_max, jw);
+      k_min = std::min(k_min, k);
+      k_max = std::max(k_max, k);
+    }
+    if (k_max != k_min + 1) continue;  // a pole fan (its vertex on the axis shares the row)
+    const int j = j_max - j_min > 1 ? j_max : j_min;  // across the seam: the last column
+    kept[static_cast<std::size_t>(k_min) * static_cast<std::size_t>(g.n_theta) +
+         static_cast<std::size_t>(j)] = true;
+  }
+  std::vector<int> replaced;
+  for (std::size_t q = 0; q < n_cells; ++q)
+    if (!kept[q]) replaced.push_back(static_cast<int>(q));
+  return replaced;
 }
 
 }  // namespace
@@ -134,9 +167,11 @@ std::string write_result_skin_glbs(const PatientModel& model, const fs::path& re
   const int n = std::min(kMaxResultSubdivisions, render::full_resolution_subdivisions(model, mesh));
   const render::SkinSurfaces skin = render::displaced_skin(model, mesh, &u, n);
   const auto t1 = Clock::now();
-  // The two files at once (two cores): the skin as it is, and a copy coloured by the tension.
-  auto coloured = std::async(std::launch::async,
-                             [&] { render::write_gltf(skin, result_dir / "skin.glb"); });
+  // The two files at once (two cores): the part of the skin the simulation moved, coloured as
+  // the model, and its mesh faces coloured by the tension. The rest is the model's own skin.
+  auto coloured = std::async(std::launch::async, [&] {
+    render::write_gltf(mesh_part(skin, true), result_dir / "skin.glb");
+  });
   const render::ScalarMap tension = render::tension_map(
       skin, mesh, fem::read_result_max_principal(result_dir, mesh.n_nodes()), 0);
   const auto [fill_pre_mm2, fill_post_mm2] = render::wound_fill_area_mm2(skin);
@@ -146,13 +181,14 @@ std::string write_result_skin_glbs(const PatientModel& model, const fs::path& re
   render::SkinSurfaces by_tension = skin;
   by_tension.color = render::scalar_colors(tension.value, tension.max_value);
   // Off the finite-element mesh the tension is 0 by definition: only the mesh's part is written.
-  render::write_gltf(mesh_part(by_tension), result_dir / "tension.glb");
+  render::write_gltf(mesh_part(by_tension, false), result_dir / "tension.glb");
   coloured.get();  // rethrows an error of the first file
   const auto t3 = Clock::now();
   return json{{"skin", "skin.glb"},
               {"tension", "tension.glb"},
               {"subdivisions", n},
               {"vertices", skin.pre.n_vertices()},
+              {"replaced_cells", replaced_cells(model.grid(), skin)},
               {"tension_scale_max_kpa", tension.max_value},
               {"max_skin_tension_kpa", peak},
               {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},

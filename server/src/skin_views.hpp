@@ -27,14 +27,16 @@ std::string write_model_skin_glb(const PatientModel& model, SkinColouring colour
                                  const std::filesystem::path& path);
 
 /// The pre- and post-operative skin of the simulation in `result_dir` (caps simulate's folder)
-/// on `model` as two .glb files in `result_dir` with the post-operative skin as the morph target
-/// (render::write_gltf): skin.glb, the whole skin coloured as the model, and tension.glb, only
-/// the faces from the finite-element mesh (micropolygons and wound fill; the tension is 0
-/// elsewhere) coloured by the skin tension (render::tension_map, viridis from 0 to the 99th
-/// percentile), to be drawn over skin.glb. @return the JSON {"skin",
-/// "tension", "subdivisions", "vertices", "tension_scale_max_kpa", "max_skin_tension_kpa",
-/// "wound_area_mm2": {"pre", "post"}, "timings_s": {"skin" (reading the result and building the
-/// skin), "tension", "glb" (writing the two files)}}.
+/// on `model`, as two .glb files in `result_dir` with the post-operative skin as the morph target
+/// (render::write_gltf): skin.glb, the part of render::displaced_skin() the simulation moved (the
+/// micropolygons, the wound fill and the seam) coloured as the model, and tension.glb, its
+/// micropolygons and wound fill coloured by the skin tension (render::tension_map, viridis from 0
+/// to the 99th percentile). The rest is the model's own skin (write_model_skin_glb()) without the
+/// cells listed in "replaced_cells". @return the JSON {"skin", "tension", "replaced_cells" (cells
+/// q = k n_theta + j of range_mesh(), faces 2q and 2q + 1), "subdivisions", "vertices",
+/// "tension_scale_max_kpa", "max_skin_tension_kpa", "wound_area_mm2": {"pre", "post"},
+/// "timings_s": {"skin" (reading the result and building the skin), "tension", "glb" (writing
+/// the two files)}}.
 std::string write_result_skin_glbs(const PatientModel& model,
                                    const std::filesystem::path& result_dir);
 

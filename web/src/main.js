@@ -97,7 +97,7 @@ async function main() {
     result: $('result'), morph: $('morph'), summary: $('result-summary'), sutures: $('sutures'),
     table: $('alternatives'), tensionLegend: $('tension-legend'),
   });
-  results.preSkin = skin.mesh;
+  results.modelSkin = skin;
   results.onShowB = () => {
     $('compare').checked = true;
     setCompare(true);

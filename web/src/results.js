@@ -25,7 +25,7 @@ export class Results {
     this.el = el;
     this.rows = [];          // {n, plan, result, view, sutures, skins: [skin in A, skin in B]}
     this.shown = [null, null];
-    this.preSkin = null;     // the model's skin, shown while no result is
+    this.modelSkin = null;   // the model's ColouredSkin, shown while no result is
     this.colouring = 'skin';
     this.morph = 1;
   }
@@ -75,7 +75,7 @@ export class Results {
   async showRow(row, which) {
     const viewer = this.views[which];
     if (which === 1) this.onShowB?.();
-    if (!row.skins[which]) row.skins[which] = await loadResultSkin(row.view);
+    if (!row.skins[which]) row.skins[which] = await loadResultSkin(row.view, this.modelSkin);
     const skin = row.skins[which];
     skin.show(this.colouring === 'tension' ? 'tension' : 'skin');
     skin.setMorph(this.morph);
@@ -91,9 +91,9 @@ export class Results {
 
   /** Back to the model's skin in view A (the plan changed: the result no longer matches it). */
   showPlanning() {
-    if (!this.shown[0] || !this.preSkin) return;
+    if (!this.shown[0] || !this.modelSkin) return;
     this.shown[0] = null;
-    this.views[0].setSkin(this.preSkin, { pickable: true });
+    this.views[0].setSkin(this.modelSkin.mesh, { pickable: true });
     document.getElementById('label-a').textContent = '';
     this.el.result.hidden = true;
     this.renderTable();

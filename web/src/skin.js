@@ -1,7 +1,7 @@
 // The skin meshes: the model's skin (coloured by the model or by the soft-tissue thickness) and a
 // simulation's skin (pre-operative positions with the post-operative skin as a morph target, and
 // the tension map as a second set of colours), all read from the server's .glb files.
-import { DoubleSide } from 'three';
+import { BufferAttribute, BufferGeometry, DoubleSide, Group, Mesh } from 'three';
 import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 import { getBinary } from './api.js';
 
@@ -33,6 +33,9 @@ class ColouredSkin {
   constructor(mesh) {
     this.mesh = mesh;
     this.colours = { skin: mesh.geometry.getAttribute('color') };
+    // The triangles in the file's order (range_mesh(): cell q is faces 2q and 2q + 1), kept
+    // before three-mesh-bvh sorts the index in place for picking.
+    this.fileIndex = mesh.geometry.index.array.slice();
   }
 
   async addColours(name, url) {
@@ -56,25 +59,37 @@ export async function loadModelSkin(info) {
   return { skin, thicknessMax: info.thickness.scale_max_mm };
 }
 
-/** A simulation's skin (GET /api/results/ID/view): the whole skin (morph 0 = pre-operative,
- * 1 = post-operative) and, over it, the finite-element part coloured by the skin tension. */
-export async function loadResultSkin(view) {
+/** A simulation's skin (GET /api/results/ID/view) over the model's (`modelSkin`, a ColouredSkin):
+ * the part the simulation moved (morph 0 = pre-operative, 1 = post-operative) with, over it, its
+ * mesh faces coloured by the skin tension (hidden until shown), and the model's skin without the
+ * cells that part replaces. */
+export async function loadResultSkin(view, modelSkin) {
   fetchOnce(view.tension);  // both files download at once
-  const mesh = await loadMesh(view.skin);
+  const patch = await loadMesh(view.skin);
   const tension = await loadMesh(view.tension);
-  // Drawn in front of the skin's own faces at the same place (they coincide before and after).
+  // Drawn in front of the patch's faces at the same place (they coincide before and after).
   tension.material.polygonOffset = true;
   tension.material.polygonOffsetFactor = -2;
   tension.material.polygonOffsetUnits = -2;
   tension.visible = false;
-  mesh.add(tension);
+  patch.add(tension);
+  const base = modelSkin.mesh.geometry;
+  const index = modelSkin.fileIndex.slice();
+  for (const q of view.replaced_cells) index.fill(0, 6 * q, 6 * q + 6);  // empty triangles
+  const rest = new BufferGeometry();
+  rest.setAttribute('position', base.getAttribute('position'));
+  rest.setAttribute('normal', base.getAttribute('normal'));
+  rest.setAttribute('color', modelSkin.colours.skin);
+  rest.setIndex(new BufferAttribute(index, 1));
+  const mesh = new Group();
+  mesh.add(new Mesh(rest, modelSkin.mesh.material), patch);
   return {
     mesh,
     show(name) {
       tension.visible = name === 'tension';
     },
     setMorph(t) {
-      mesh.morphTargetInfluences[0] = t;
+      patch.morphTargetInfluences[0] = t;
       tension.morphTargetInfluences[0] = t;
     },
   };
