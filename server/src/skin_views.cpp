@@ -170,7 +170,9 @@ std::string write_result_skin_glbs(const PatientModel& model, const fs::path& re
   // The two files at once (two cores): the part of the skin the simulation moved, coloured as
   // the model, and its mesh faces coloured by the tension. The rest is the model's own skin.
   auto coloured = std::async(std::launch::async, [&] {
-    render::write_gltf(mesh_part(skin, true), result_dir / "skin.glb");
+    render::SkinSurfaces part = mesh_part(skin, true);
+    if (!model.has_color()) part.color.rowwise() = kPlainSkin.transpose();  // as the model's skin
+    render::write_gltf(part, result_dir / "skin.glb");
   });
   const render::ScalarMap tension = render::tension_map(
       skin, mesh, fem::read_result_max_principal(result_dir, mesh.n_nodes()), 0);
