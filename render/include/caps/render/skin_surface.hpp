@@ -55,6 +55,14 @@ struct SkinSurfaces {
   /// #V×2 natural coordinates (xi, eta) of a micropolygon vertex on its element's top face
   /// (zeta = -1; x_face = sum_a N_a(xi, eta, -1) X_a); 0 where vertex_element is -1
   Eigen::MatrixX2d vertex_natural;
+  /// #V×3 unit shading normals of pre (LPS): the drawn range surface's smooth normal field at
+  /// each vertex's (theta, z), the same for the range mesh, the seam and the micropolygons, so the
+  /// patch shades exactly as the skin around it. Empty: use vertex_normals(pre).
+  Eigen::MatrixX3d normal_pre;
+  /// #V×3 unit shading normals of post: unit(normal_pre + m_post - m_pre), m = vertex_normals() of
+  /// the mesh, so equal to normal_pre wherever nothing of the vertex's one-ring moved. Empty: use
+  /// vertex_normals(post).
+  Eigen::MatrixX3d normal_post;
   std::vector<SkinPart> face_part;   ///< #F
   std::vector<int> skin_elements;    ///< elements whose top face lies on the skin
   int n_micropolygon_vertices = 0;
@@ -78,12 +86,26 @@ int full_resolution_subdivisions(const PatientModel& model, const fem::Mesh& mes
 /// micropolygons along each element edge. `displacement_mm` (#N×3, mm) or null for none (then
 /// post == pre). Throws InvalidInput if no element face lies on the skin, if the displacement has
 /// the wrong size or is not finite, or if the mesh reaches the first or last row of the model.
+/// `drawn` (null: `model` itself) is the skin drawn: a model on the same grid whose r_skin and
+/// colour the micropolygons and the range mesh sample (drawn_skin_model(): resampled from the
+/// smoothed isosurface, slice terraces filtered); the skin faces are still found on `model`.
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
-                            const Eigen::MatrixX3d* displacement_mm, int n_subdivisions);
+                            const Eigen::MatrixX3d* displacement_mm, int n_subdivisions,
+                            const PatientModel* drawn = nullptr);
 
 /// The same with a solve result (null: no displacement).
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
-                            const fem::SolveResult* result, int n_subdivisions);
+                            const fem::SolveResult* result, int n_subdivisions,
+                            const PatientModel* drawn = nullptr);
+
+/// Area-weighted unit vertex normals of a mesh (V #V×3, F #F×3 counter-clockwise outward); a
+/// vertex in no non-degenerate triangle gets a zero row.
+Eigen::MatrixX3d vertex_normals(const TriMesh& mesh);
+
+/// The shading normals of the skin blended pre + t (post - pre), t in [0, 1]: unit((1 - t)
+/// normal_pre + t normal_post), or vertex_normals() of the blended mesh when the skin carries no
+/// normals. #V×3, LPS.
+Eigen::MatrixX3d shading_normals(const SkinSurfaces& skin, double t);
 
 /// A nodal field carried to the skin's vertices by the same shape functions that place the
 /// micropolygons: f(v) = sum_a N_a(xi_v, eta_v, -1) f_a over the nodes of vertex v's element.
