@@ -10,6 +10,9 @@ EmbreeScene::EmbreeScene(const TriMesh& mesh, const Eigen::Vector3d& origin) {
   device.reset(rtcNewDevice(nullptr));
   if (!device) throw Error("render: Embree could not create a device");
   scene.reset(rtcNewScene(device.get()));
+  // watertight intersection: a ray through an edge shared by two triangles meets one of them
+  // rather than slipping through to a farther surface (a speckle of the back of the head)
+  rtcSetSceneFlags(scene.get(), RTC_SCENE_FLAG_ROBUST);
   RTCGeometry geom = rtcNewGeometry(device.get(), RTC_GEOMETRY_TYPE_TRIANGLE);
   auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
       geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), mesh.V.rows()));

@@ -52,8 +52,16 @@ struct Tracer {
 
   // The first hit of the ray through pixel (x, y) (Camera::ray, relative to the target).
   RTCRayHit trace(RTCIntersectContext& ctx, double x, double y) const {
-    const Eigen::Vector2d q = camera.image_plane(x, y);
     Eigen::Vector3d org, dir;
+    ray(x, y, org, dir);
+    RTCRayHit rh = detail::make_ray(org, dir);
+    rtcIntersect1(embree->scene.get(), &ctx, &rh);
+    return rh;
+  }
+
+  // The ray through pixel (x, y) in double, relative to the target.
+  void ray(double x, double y, Eigen::Vector3d& org, Eigen::Vector3d& dir) const {
+    const Eigen::Vector2d q = camera.image_plane(x, y);
     if (perspective) {
       org = -camera.distance_mm * frame.forward;
       dir = (frame.forward + q.x() * frame.right + q.y() * frame.up).normalized();
@@ -61,9 +69,6 @@ struct Tracer {
       org = q.x() * frame.right + q.y() * frame.up - back * frame.forward;
       dir = frame.forward;
     }
-    RTCRayHit rh = detail::make_ray(org, dir);
-    rtcIntersect1(embree->scene.get(), &ctx, &rh);
-    return rh;
   }
 };
 
@@ -213,11 +218,19 @@ PixelHits pixel_hits(const TriMesh& mesh, const Camera& camera) {
         if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
         const std::size_t i = static_cast<std::size_t>(y) * W + x;
         out.face[i] = static_cast<int>(rh.hit.primID);
-        // the hit relative to the target; the eye's plane is distance_mm before it
-        const Eigen::Vector3d org(rh.ray.org_x, rh.ray.org_y, rh.ray.org_z),
-            dir(rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z);
-        out.depth_mm[i] =
-            (org + double(rh.ray.tfar) * dir).dot(tracer.frame.forward) + camera.distance_mm;
+        // the hit relative to the target; the eye's plane is distance_mm before it. The ray's
+        // parameter is recomputed in double on the triangle's plane: Embree's float t (its
+        // watertight test in particular) is good to a few 1e-3 mm at 300 mm only.
+        Eigen::Vector3d org, dir;
+        tracer.ray(x + 0.5, y + 0.5, org, dir);
+        const Eigen::Index f = rh.hit.primID;
+        const Eigen::Vector3d a = mesh.V.row(mesh.F(f, 0)).transpose() - camera.target;
+        const Eigen::Vector3d n = (mesh.V.row(mesh.F(f, 1)) - mesh.V.row(mesh.F(f, 0)))
+                                      .cross(mesh.V.row(mesh.F(f, 2)) - mesh.V.row(mesh.F(f, 0)))
+                                      .transpose();
+        const double dn = dir.dot(n);
+        const double t = std::abs(dn) > 1e-12 * n.norm() ? (a - org).dot(n) / dn : double(rh.ray.tfar);
+        out.depth_mm[i] = (org + t * dir).dot(tracer.frame.forward) + camera.distance_mm;
       }
   });
   return out;

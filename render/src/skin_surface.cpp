@@ -247,6 +247,51 @@ Eigen::Vector3d top_face_centre(const fem::Mesh& mesh, const std::vector<int>& e
   return centre / n_face_nodes;
 }
 
+// The drawn range surface's normals at its grid vertices (central differences, periodic in
+// theta, one-sided at the first and last rows), interpolated bilinearly in between: one smooth
+// normal field for the range cells, the seam and the micropolygons alike.
+class NormalField {
+ public:
+  explicit NormalField(const PatientModel& skin) : skin_(skin), g_(skin.grid()) {
+    const auto& r = skin.maps().r_skin;
+    N_.resize(g_.size());
+    const double dth = deg_to_rad(g_.dtheta_deg());
+    for (int k = 0; k < g_.n_z; ++k)
+      for (int j = 0; j < g_.n_theta; ++j) {
+        const int jp = (j + 1) % g_.n_theta, jm = (j + g_.n_theta - 1) % g_.n_theta;
+        const int kp = std::min(k + 1, g_.n_z - 1), km = std::max(k - 1, 0);
+        const double rr = r[g_.index(j, k)];
+        const double dr_dth = (r[g_.index(jp, k)] - r[g_.index(jm, k)]) / (2 * dth);
+        const double dr_dz =
+            kp > km ? (r[g_.index(j, kp)] - r[g_.index(j, km)]) / ((kp - km) * g_.dz_mm) : 0.0;
+        const Eigen::Vector3d e_r = skin.axis().ray(deg_to_rad(g_.theta_deg(j)));
+        const Eigen::Vector3d e_z = skin.axis().direction;
+        const Eigen::Vector3d e_th = e_z.cross(e_r);
+        N_[g_.index(j, k)] = (e_r - (rr > 1.0 ? dr_dth / rr : 0.0) * e_th - dr_dz * e_z).normalized();
+      }
+  }
+  Eigen::Vector3d at(double theta_deg, double z_mm) const {
+    double u = (theta_deg - g_.theta0_deg) / g_.dtheta_deg();
+    u -= g_.n_theta * std::floor(u / g_.n_theta);
+    int j0 = static_cast<int>(std::floor(u));
+    if (j0 >= g_.n_theta) j0 = 0;
+    const int j1 = (j0 + 1) % g_.n_theta;
+    const double v = std::clamp((z_mm - g_.z0_mm) / g_.dz_mm, 0.0, double(g_.n_z - 1));
+    const int k0 = std::min(static_cast<int>(std::floor(v)), std::max(g_.n_z - 2, 0));
+    const int k1 = std::min(k0 + 1, g_.n_z - 1);
+    const double fu = u - j0, fv = v - k0;
+    const Eigen::Vector3d n =
+        (1 - fv) * ((1 - fu) * N_[g_.index(j0, k0)] + fu * N_[g_.index(j1, k0)]) +
+        fv * ((1 - fu) * N_[g_.index(j0, k1)] + fu * N_[g_.index(j1, k1)]);
+    return n.normalized();
+  }
+
+ private:
+  const PatientModel& skin_;  // not owned
+  const CylinderGrid& g_;     // not owned
+  std::vector<Eigen::Vector3d> N_;
+};
+
 // One skin element's top face as (n + 1)^2 (hex) or (n + 1)(n + 2)/2 (wedge) micropolygon
 // vertices, welded to those its neighbours left on shared edges, and their triangles.
 class FaceSampler {
@@ -685,51 +730,6 @@ void add_seam(Builder& b, const CylinderGrid& g, const std::vector<int>& P, cons
   }
 }
 
-// The drawn range surface's normals at its grid vertices (central differences, periodic in
-// theta, one-sided at the first and last rows), interpolated bilinearly in between: one smooth
-// normal field for the range cells, the seam and the micropolygons alike.
-class NormalField {
- public:
-  explicit NormalField(const PatientModel& skin) : skin_(skin), g_(skin.grid()) {
-    const auto& r = skin.maps().r_skin;
-    N_.resize(g_.size());
-    const double dth = deg_to_rad(g_.dtheta_deg());
-    for (int k = 0; k < g_.n_z; ++k)
-      for (int j = 0; j < g_.n_theta; ++j) {
-        const int jp = (j + 1) % g_.n_theta, jm = (j + g_.n_theta - 1) % g_.n_theta;
-        const int kp = std::min(k + 1, g_.n_z - 1), km = std::max(k - 1, 0);
-        const double rr = r[g_.index(j, k)];
-        const double dr_dth = (r[g_.index(jp, k)] - r[g_.index(jm, k)]) / (2 * dth);
-        const double dr_dz =
-            kp > km ? (r[g_.index(j, kp)] - r[g_.index(j, km)]) / ((kp - km) * g_.dz_mm) : 0.0;
-        const Eigen::Vector3d e_r = skin.axis().ray(deg_to_rad(g_.theta_deg(j)));
-        const Eigen::Vector3d e_z = skin.axis().direction;
-        const Eigen::Vector3d e_th = e_z.cross(e_r);
-        N_[g_.index(j, k)] = (e_r - (rr > 1.0 ? dr_dth / rr : 0.0) * e_th - dr_dz * e_z).normalized();
-      }
-  }
-  Eigen::Vector3d at(double theta_deg, double z_mm) const {
-    double u = (theta_deg - g_.theta0_deg) / g_.dtheta_deg();
-    u -= g_.n_theta * std::floor(u / g_.n_theta);
-    int j0 = static_cast<int>(std::floor(u));
-    if (j0 >= g_.n_theta) j0 = 0;
-    const int j1 = (j0 + 1) % g_.n_theta;
-    const double v = std::clamp((z_mm - g_.z0_mm) / g_.dz_mm, 0.0, double(g_.n_z - 1));
-    const int k0 = std::min(static_cast<int>(std::floor(v)), std::max(g_.n_z - 2, 0));
-    const int k1 = std::min(k0 + 1, g_.n_z - 1);
-    const double fu = u - j0, fv = v - k0;
-    const Eigen::Vector3d n =
-        (1 - fv) * ((1 - fu) * N_[g_.index(j0, k0)] + fu * N_[g_.index(j1, k0)]) +
-        fv * ((1 - fu) * N_[g_.index(j0, k1)] + fu * N_[g_.index(j1, k1)]);
-    return n.normalized();
-  }
-
- private:
-  const PatientModel& skin_;  // not owned
-  const CylinderGrid& g_;     // not owned
-  std::vector<Eigen::Vector3d> N_;
-};
-
 // normal_pre: the drawn surface's normal field at each vertex's (theta, z) (the end caps' centres:
 // their mesh normal); normal_post: normal_pre turned by the change of the mesh's own normal,
 // n_post = unit(n_pre + m_post - m_pre), so that it equals normal_pre exactly wherever no vertex
@@ -821,6 +821,14 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
   pack(b, out);
   shade_normals(skin, cap_centres, out);
   return out;
+}
+
+Eigen::MatrixX3d skin_normal_field(const PatientModel& skin, const Eigen::MatrixX2d& theta_z) {
+  const NormalField field(skin);
+  Eigen::MatrixX3d N(theta_z.rows(), 3);
+  for (Eigen::Index i = 0; i < theta_z.rows(); ++i)
+    N.row(i) = field.at(theta_z(i, 0), theta_z(i, 1)).transpose();
+  return N;
 }
 
 Eigen::VectorXd nodal_field_on_skin(const SkinSurfaces& skin, const fem::Mesh& mesh,

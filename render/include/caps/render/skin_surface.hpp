@@ -102,6 +102,11 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
 /// vertex in no non-degenerate triangle gets a zero row.
 Eigen::MatrixX3d vertex_normals(const TriMesh& mesh);
 
+/// The drawn range surface's smooth normal field at (theta deg, z mm) rows of `theta_z` (#P×2):
+/// central-difference normals of skin.r_skin at the grid samples, interpolated bilinearly and
+/// normalised (the normals displaced_skin() gives the pre-operative skin). #P×3 unit, LPS.
+Eigen::MatrixX3d skin_normal_field(const PatientModel& skin, const Eigen::MatrixX2d& theta_z);
+
 /// The shading normals of the skin blended pre + t (post - pre), t in [0, 1]: unit((1 - t)
 /// normal_pre + t normal_post), or vertex_normals() of the blended mesh when the skin carries no
 /// normals. #V×3, LPS.
