@@ -44,8 +44,8 @@ const Case& the_case() {
   return c;
 }
 
-const PatientModel& drawn() {
-  static const PatientModel d = load_drawn_skin(the_case().model, g_model);
+const DrawnSkin& drawn() {
+  static const DrawnSkin d = load_drawn_skin(the_case().model, g_model);
   return d;
 }
 
@@ -129,7 +129,7 @@ void report() {
   const PatientModel& m = the_case().model;
   const PatientModel resampled = [] {
     const auto iso = read_ply(std::filesystem::path(g_model) / "skin.ply");
-    return drawn_skin_model(the_case().model, &iso);
+    return drawn_skin(the_case().model, &iso).range;
   }();
   // the forehead: 30 degrees either side of the front, z in g_forehead (mm, the model's frame)
   const double th = 0.0, z0 = g_forehead[0], z1 = g_forehead[1], face_z = 0.0;
@@ -138,7 +138,7 @@ void report() {
   std::printf("terrace RMS (%s):\n", where.c_str());
   std::printf("  r_skin as measured      %.3f deg\n", terrace_rms_deg(m, th - 30, th + 30, face_z + z0, face_z + z1));
   std::printf("  resampled (isosurface)  %.3f deg\n", terrace_rms_deg(resampled, th - 30, th + 30, face_z + z0, face_z + z1));
-  std::printf("  drawn (box filter)      %.3f deg\n", terrace_rms_deg(drawn(), th - 30, th + 30, face_z + z0, face_z + z1));
+  std::printf("  drawn (box filter)      %.3f deg\n", terrace_rms_deg(drawn().range, th - 30, th + 30, face_z + z0, face_z + z1));
   for (View v : {View::Plan, View::Oblique})
     std::printf("%s: %d pixels > 1 level, %d > 6 levels where the skin moved < 0.01 mm\n",
                 view_name(v), unmoved_differences(v, 1), unmoved_differences(v, 6));

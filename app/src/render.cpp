@@ -61,7 +61,7 @@ RenderResult run_render(const RenderRequest& r, Reporter* reporter) {
   const PatientModel model = PatientModel::load(r.model);
   const int n = r.subdivisions > 0 ? r.subdivisions
                                    : render::full_resolution_subdivisions(model, mesh);
-  const PatientModel drawn = render::load_drawn_skin(model, r.model, reporter);
+  const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);
   const render::SkinSurfaces skin = render::displaced_skin(model, mesh, &u, n, &drawn);
   progress.update(1);
   const auto [fill_pre_mm2, fill_post_mm2] = render::wound_fill_area_mm2(skin);

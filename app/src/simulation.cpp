@@ -164,7 +164,7 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   fem::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string());
   SimulateResult s;
   if (r.render) {
-    const PatientModel drawn = render::load_drawn_skin(model, r.model, reporter);
+    const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);
     render::SimulationPictures pictures;
     pictures.tension_map = r.tension_map;
     pictures.drawn = &drawn;
@@ -328,7 +328,7 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
   const PatientModel model = PatientModel::load(r.model);
   const fem::Comparison c = fem::compare_thickness(model, plan, r.thickness, o, reporter);
   const std::string name = fs::path(r.plan).filename().string();
-  const PatientModel drawn = render::load_drawn_skin(model, r.model, reporter);
+  const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);
   render::SimulationPictures pictures;
   pictures.drawn = &drawn;
   pictures.plan = &plan;

@@ -59,7 +59,7 @@ std::pair<double, double> wound_fill_area_mm2(const SkinSurfaces& skin) {
 }
 
 SkinSurfaces simulated_skin(const PatientModel& model, const fem::Simulation& sim,
-                            const PatientModel* drawn) {
+                            const DrawnSkin* drawn) {
   const fem::Mesh& mesh = sim.wound.continuum.mesh;
   return displaced_skin(model, mesh, &sim.result, full_resolution_subdivisions(model, mesh), drawn);
 }

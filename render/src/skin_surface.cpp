@@ -2,6 +2,7 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "caps/render/drawn_skin.hpp"
 #include "caps/fem/elements.hpp"
 #include "caps/surface/patient_model.hpp"
 
@@ -37,6 +38,7 @@ struct Builder {
   std::vector<Eigen::Vector3i> faces;
   std::vector<SkinPart> part;
   std::vector<int> cap_centres;  // the vertices on the axis closing the range mesh's ends
+  std::vector<std::pair<int, Eigen::Vector3d>> given_normals;  // the isosurface's vertices
 
   int add(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& c,
           const Eigen::Vector3d& d, const Eigen::Vector2d& tz, int e,
@@ -182,7 +184,7 @@ int full_resolution_subdivisions(const PatientModel& model, const fem::Mesh& mes
 
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
                             const fem::SolveResult* result, int n_subdivisions,
-                            const PatientModel* drawn) {
+                            const DrawnSkin* drawn) {
   return displaced_skin(model, mesh, result ? &result->displacement_mm : nullptr, n_subdivisions,
                         drawn);
 }
@@ -603,14 +605,16 @@ Footprint footprint_cells(const CylinderGrid& g, const std::vector<Eigen::Vector
   return fp;
 }
 
-// The range cells outside the footprint, and the caps closing the range mesh's two ends.
+// The range cells outside the footprint and the undercut cells (`undercut`: grid.size() flags or
+// empty), and the caps closing the range mesh's two ends.
 void add_range_cells(Builder& b, const PatientModel& model, const Footprint& fp,
-                     const RangeVertices& range) {
+                     const RangeVertices& range, const std::vector<std::uint8_t>& undercut) {
   const CylinderGrid& g = model.grid();
   const int nt = g.n_theta, nz = g.n_z;
   for (long k = 0; k + 1 < nz; ++k)
     for (long j = 0; j < nt; ++j) {
       if (fp.removed(j, k, nt)) continue;
+      if (!undercut.empty() && undercut[g.index(static_cast<int>(j), static_cast<int>(k))]) continue;
       const int v00 = range.at(j, k), v10 = range.at(j + 1, k), v01 = range.at(j, k + 1),
                 v11 = range.at(j + 1, k + 1);
       b.tri(v00, v10, v11, SkinPart::Range);
@@ -656,6 +660,36 @@ std::vector<std::pair<long, long>> footprint_border(const Footprint& fp) {
     at = it->second;
   } while (at != start && stair.size() <= step.size());
   return stair;
+}
+
+// The drawn skin's isosurface triangles in the undercuts, but those over the mesh's footprint.
+void add_undercuts(Builder& b, const PatientModel& skin, const DrawnSkin& drawn, const Footprint& fp,
+                   double theta_c) {
+  const CylinderGrid& g = skin.grid();
+  const TriMesh& iso = drawn.undercuts;
+  std::vector<int> index(static_cast<std::size_t>(iso.V.rows()), -1);
+  for (Eigen::Index f = 0; f < iso.F.rows(); ++f) {
+    const Eigen::Vector3d c =
+        (iso.V.row(iso.F(f, 0)) + iso.V.row(iso.F(f, 1)) + iso.V.row(iso.F(f, 2))).transpose() / 3.0;
+    const CylindricalPoint cp = skin.to_cylindrical(c);
+    const double th = theta_c + wrap180(cp.theta_deg - theta_c);
+    const long j = static_cast<long>(std::floor((th - g.theta0_deg) / g.dtheta_deg()));
+    const long k = static_cast<long>(std::floor((cp.z_mm - g.z0_mm) / g.dz_mm));
+    if (fp.removed(j, k, g.n_theta)) continue;
+    int t[3];
+    for (int a = 0; a < 3; ++a) {
+      int& id = index[static_cast<std::size_t>(iso.F(f, a))];
+      if (id < 0) {
+        const Eigen::Vector3d p = iso.V.row(iso.F(f, a)).transpose();
+        const CylindricalPoint q = skin.to_cylindrical(p);
+        id = b.add(p, p, skin_color(skin, q.theta_deg, q.z_mm), Eigen::Vector3d::Zero(),
+                   {q.theta_deg, q.z_mm}, -1);
+        b.given_normals.emplace_back(id, drawn.undercut_normals.row(iso.F(f, a)).transpose());
+      }
+      t[a] = id;
+    }
+    b.tri(t[0], t[1], t[2], SkinPart::Isosurface);
+  }
 }
 
 // Distance (in the plane) from p to the closed polyline `poly`.
@@ -735,7 +769,7 @@ void add_seam(Builder& b, const CylinderGrid& g, const std::vector<int>& P, cons
 // n_post = unit(n_pre + m_post - m_pre), so that it equals normal_pre exactly wherever no vertex
 // of the one-ring moved, and follows the deformation elsewhere.
 void shade_normals(const PatientModel& skin, const std::vector<int>& cap_centres,
-                   SkinSurfaces& out) {
+                   const std::vector<std::pair<int, Eigen::Vector3d>>& given, SkinSurfaces& out) {
   const NormalField field(skin);
   const Eigen::MatrixX3d m_pre = vertex_normals(out.pre), m_post = vertex_normals(out.post);
   const auto nv = out.pre.V.rows();
@@ -750,6 +784,7 @@ void shade_normals(const PatientModel& skin, const std::vector<int>& cap_centres
     const Eigen::Vector3d q = n + (m_post.row(v) - m_pre.row(v)).transpose();
     out.normal_post.row(v) = (q.norm() > 0 ? q.normalized() : n).transpose();
   }
+  for (const auto& [v, n] : given) out.normal_pre.row(v) = out.normal_post.row(v) = n.transpose();
 }
 
 void pack(Builder& b, SkinSurfaces& out) {
@@ -781,14 +816,14 @@ void pack(Builder& b, SkinSurfaces& out) {
 
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
                             const Eigen::MatrixX3d* displacement_mm, int n_subdivisions,
-                            const PatientModel* drawn) {
+                            const DrawnSkin* drawn) {
   check_skin_inputs(mesh, displacement_mm, n_subdivisions);
-  const PatientModel& skin = drawn ? *drawn : model;
+  const PatientModel& skin = drawn ? drawn->range : model;
   if (skin.grid().n_theta != model.grid().n_theta || skin.grid().n_z != model.grid().n_z ||
       skin.grid().theta0_deg != model.grid().theta0_deg || skin.grid().z0_mm != model.grid().z0_mm ||
       skin.grid().dz_mm != model.grid().dz_mm)
     throw InvalidInput("render: the drawn skin's grid is not the model's; build it with "
-                       "drawn_skin_model() from this model");
+                       "drawn_skin() from this model");
   SkinSurfaces out;
   out.skin_elements = skin_elements(model, mesh);
   const Eigen::Vector3d centre = top_face_centre(mesh, out.skin_elements);
@@ -813,13 +848,16 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
   // The range mesh around the micropolygons, stitched to their rim.
   const RangeVertices range = add_range_vertices(b, skin);
   const Footprint fp = footprint_cells(model.grid(), loop_theta_z(b, loops[rim]));
-  add_range_cells(b, skin, fp, range);
+  add_range_cells(b, skin, fp, range,
+                  drawn ? drawn->undercut_cells : std::vector<std::uint8_t>{});
+  if (drawn) add_undercuts(b, skin, *drawn, fp, theta_c);
   const double r_ref = skin.r_skin(theta_c, model.to_cylindrical(centre).z_mm);
   add_seam(b, model.grid(), loops[rim], fp, footprint_border(fp), range, r_ref);
 
   const std::vector<int> cap_centres = b.cap_centres;
+  const auto given_normals = b.given_normals;
   pack(b, out);
-  shade_normals(skin, cap_centres, out);
+  shade_normals(skin, cap_centres, given_normals, out);
   return out;
 }
 

@@ -10,6 +10,7 @@
 #include "caps/fem/compare.hpp"
 #include "caps/fem/simulate.hpp"
 #include "caps/plan/plan.hpp"
+#include "caps/render/drawn_skin.hpp"
 #include "caps/render/render.hpp"
 #include "caps/render/skin_surface.hpp"
 
@@ -22,12 +23,12 @@ std::pair<double, double> wound_fill_area_mm2(const SkinSurfaces& skin);
 /// The displacement-mapped skin of a simulation at full resolution, drawn on `drawn` (null: the
 /// model's range image; see displaced_skin()).
 SkinSurfaces simulated_skin(const PatientModel& model, const fem::Simulation& sim,
-                            const PatientModel* drawn = nullptr);
+                            const DrawnSkin* drawn = nullptr);
 
 /// What the pictures of a simulation show besides the skin.
 struct SimulationPictures {
   bool tension_map = false;             ///< also tension_<view>.png
-  const PatientModel* drawn = nullptr;  ///< the skin drawn (load_drawn_skin()); null: the model's
+  const DrawnSkin* drawn = nullptr;  ///< the skin drawn (load_drawn_skin()); null: the model's
   const plan::Plan* plan = nullptr;     ///< its cutting lines on the pre-operative images
 };
 

@@ -41,8 +41,11 @@ class PatientModel;
 
 namespace caps::render {
 
+struct DrawnSkin;
+
 /// What produced a triangle of the skin.
-enum class SkinPart : int { Range = 0, Micropolygon = 1, Seam = 2, WoundFill = 3 };
+/// (Isosurface: the smoothed isosurface drawn in the range image's undercuts, DrawnSkin.)
+enum class SkinPart : int { Range = 0, Micropolygon = 1, Seam = 2, WoundFill = 3, Isosurface = 4 };
 
 /// The pre- and post-operative skin, one topology.
 struct SkinSurfaces {
@@ -86,17 +89,20 @@ int full_resolution_subdivisions(const PatientModel& model, const fem::Mesh& mes
 /// micropolygons along each element edge. `displacement_mm` (#N×3, mm) or null for none (then
 /// post == pre). Throws InvalidInput if no element face lies on the skin, if the displacement has
 /// the wrong size or is not finite, or if the mesh reaches the first or last row of the model.
-/// `drawn` (null: `model` itself) is the skin drawn: a model on the same grid whose r_skin and
-/// colour the micropolygons and the range mesh sample (drawn_skin_model(): resampled from the
-/// smoothed isosurface, slice terraces filtered); the skin faces are still found on `model`.
+/// `drawn` (null: `model` itself) is the skin drawn (drawn_skin.hpp): its range, a model on the
+/// same grid whose r_skin and colour the micropolygons and the range mesh sample (resampled from
+/// the smoothed isosurface, slice terraces filtered), and the isosurface's triangles that replace
+/// the range cells in undercuts (outside the mesh's footprint; SkinPart::Isosurface, not stitched
+/// to the range cells but overlapping them, so the skin is then no longer one closed manifold).
+/// The skin faces are still found on `model`.
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
                             const Eigen::MatrixX3d* displacement_mm, int n_subdivisions,
-                            const PatientModel* drawn = nullptr);
+                            const DrawnSkin* drawn = nullptr);
 
 /// The same with a solve result (null: no displacement).
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
                             const fem::SolveResult* result, int n_subdivisions,
-                            const PatientModel* drawn = nullptr);
+                            const DrawnSkin* drawn = nullptr);
 
 /// Area-weighted unit vertex normals of a mesh (V #V×3, F #F×3 counter-clockwise outward); a
 /// vertex in no non-degenerate triangle gets a zero row.
