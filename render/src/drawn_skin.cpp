@@ -19,6 +19,8 @@
 namespace caps::render {
 namespace {
 
+constexpr double kGrazingUndercutDeg = 75.0;
+
 // Radial rays against the isosurface, from outside it towards the model's axis.
 class RadialCaster {
  public:
@@ -37,6 +39,7 @@ class RadialCaster {
     const Eigen::Vector3d e_r = ax_.ray(deg_to_rad(theta_deg));
     const Eigen::Vector3d org = z_mm * ax_.direction + start_ * e_r;
     double t_hit[3] = {0, 0, 0};
+    double first_cos = 0;  // |cos| of the angle between the ray and the surface at the first hit
     int crossings = 0;
     for (double t = 0; crossings < (undercut ? 3 : 1);) {
       RTCRayHit rh = detail::make_ray(org, -e_r);
@@ -44,10 +47,18 @@ class RadialCaster {
       rh.ray.tfar = static_cast<float>(start_);  // up to the axis
       rtcIntersect1(scene_.scene.get(), &ctx, &rh);
       if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) break;
+      if (crossings == 0) {
+        const Eigen::Vector3d ng(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
+        first_cos = ng.norm() > 0 ? std::abs(ng.normalized().dot(e_r)) : 0.0;
+      }
       t_hit[crossings++] = rh.ray.tfar;
       t = rh.ray.tfar + 1e-3;
     }
-    if (undercut) *undercut = crossings == 3 && t_hit[2] - t_hit[1] >= kUndercutMinGapMm;
+    // A ray grazing the surface (more than kGrazingUndercutDeg from its normal: the top of the
+    // head, the neck) may cross small bumps three times; that is not an undercut.
+    if (undercut)
+      *undercut = crossings == 3 && t_hit[2] - t_hit[1] >= kUndercutMinGapMm &&
+                  first_cos >= std::cos(deg_to_rad(kGrazingUndercutDeg));
     return crossings > 0 ? start_ - t_hit[0] : std::numeric_limits<double>::quiet_NaN();
   }
 

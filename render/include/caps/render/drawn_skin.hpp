@@ -21,7 +21,9 @@
 ///      in 1.5 mm any more). Without an isosurface the model's r_skin is filtered the same way,
 ///      interpolated linearly between rows.
 /// Undercuts: where a ray leaves the isosurface and meets it again after an air gap of at least
-/// kUndercutMinGapMm (ears, under the nose and the chin), the range image cannot show the skin.
+/// kUndercutMinGapMm (ears, under the nose and the chin), the range image cannot show the skin
+/// (a ray meeting the surface more than 75 degrees from its normal is grazing it, as over the top
+/// of the head, and is not taken for an undercut).
 /// Those cells, dilated by two, are not drawn from the range image: the isosurface's own
 /// triangles are (those whose centroid falls in the cells dilated by three, so that they overlap
 /// the range cells' border rather than leave a gap), with the isosurface's vertex normals.
