@@ -10,7 +10,9 @@
 #include "caps/core/units.hpp"
 #include "caps/fem/simulate.hpp"
 #include "caps/plan/procedures.hpp"
+#include "caps/core/error.hpp"
 #include "caps/render/drawn_skin.hpp"
+#include "caps/render/overlay.hpp"
 #include "caps/render/render.hpp"
 #include "caps/render/skin_surface.hpp"
 #include "caps/surface/patient_model.hpp"
@@ -155,6 +157,16 @@ const fem::Simulation& phantom_ellipse() {
   return s;
 }
 
+// The displacement-mapped skin of phantom_ellipse() at full resolution, drawn on the drawn skin.
+const SkinSurfaces& phantom_skin() {
+  static const SkinSurfaces s = [] {
+    const fem::Mesh& mesh = phantom_ellipse().wound.continuum.mesh;
+    return displaced_skin(phantom().model, mesh, &phantom_ellipse().result,
+                          full_resolution_subdivisions(phantom().model, mesh), &phantom().drawn);
+  }();
+  return s;
+}
+
 // 1 where a vertex and every vertex of its one-ring moved less than `mm`.
 std::vector<char> still_vertices(const SkinSurfaces& s, double mm) {
   const Eigen::VectorXd moved = (s.post.V - s.pre.V).rowwise().norm();
@@ -177,10 +189,7 @@ std::vector<char> still_vertices(const SkinSurfaces& s, double mm) {
 // skin around it and the seam strip folded: a lighter polygon with a jagged outline.
 TEST(DrawnSkin, UnmovedSkinShadesTheSameBeforeAndAfter) {
   const PhantomCase& c = phantom();
-  const fem::Simulation& sim = phantom_ellipse();
-  const fem::Mesh& mesh = sim.wound.continuum.mesh;
-  const SkinSurfaces s = displaced_skin(c.model, mesh, &sim.result,
-                                        full_resolution_subdivisions(c.model, mesh), &c.drawn);
+  const SkinSurfaces& s = phantom_skin();
   ASSERT_GT((s.post.V - s.pre.V).rowwise().norm().maxCoeff(), 0.5);
   const std::vector<char> still = still_vertices(s, 0.01);
   for (View v : {View::Plan, View::Oblique, View::Front}) {
@@ -220,10 +229,7 @@ TEST(DrawnSkin, UnmovedSkinShadesTheSameBeforeAndAfter) {
 // mesh with the same normal field) to 2 grey levels wherever both show skin away from silhouettes.
 TEST(DrawnSkin, NoPatchOutlineBeforeTheOperation) {
   const PhantomCase& c = phantom();
-  const fem::Simulation& sim = phantom_ellipse();
-  const fem::Mesh& mesh = sim.wound.continuum.mesh;
-  const SkinSurfaces s = displaced_skin(c.model, mesh, &sim.result,
-                                        full_resolution_subdivisions(c.model, mesh), &c.drawn);
+  const SkinSurfaces& s = phantom_skin();
   // the drawn range surface alone: one vertex per sample, two triangles per cell
   const CylinderGrid& g = c.drawn.range.grid();
   TriMesh range;
@@ -275,4 +281,56 @@ TEST(DrawnSkin, NoPatchOutlineBeforeTheOperation) {
               compared, patch, worst);
   EXPECT_GT(patch, 5000);
   EXPECT_LE(worst, 2);
+}
+
+// The suture line after the closure: one loop for the ellipse (its two lips), closed up: the area
+// it encloses, seen along the skin's normal at the mesh's centre, is under 1 mm^2 (the 20 x 6 mm
+// ellipse is about 94 mm^2).
+TEST(Overlays, TheSutureLineOfAClosedEllipseIsOneClosedUpLoop) {
+  const SkinSurfaces& s = phantom_skin();
+  const auto lines = suture_lines(s);
+  ASSERT_EQ(lines.size(), 1u);
+  const CylindricalPoint c = phantom().model.to_cylindrical(s.mesh_centre_lps);
+  const Eigen::Vector3d n = phantom().model.skin_normal(c.theta_deg, c.z_mm);
+  const Eigen::Vector3d e1 = n.unitOrthogonal(), e2 = n.cross(e1);
+  double area = 0, length = 0;
+  for (std::size_t i = 0; i + 1 < lines[0].size(); ++i) {
+    const Eigen::Vector3d& p = lines[0][i];
+    const Eigen::Vector3d& q = lines[0][i + 1];
+    area += p.dot(e1) * q.dot(e2) - q.dot(e1) * p.dot(e2);
+    length += (q - p).norm();
+  }
+  EXPECT_LT(std::abs(0.5 * area), 1.0);
+  EXPECT_GT(length, 2 * 18.0);  // both lips, each about as long as the ellipse
+  EXPECT_EQ((lines[0].front() - lines[0].back()).norm(), 0.0);
+}
+
+// The scale bar: the largest 1-2-5 length up to a fifth of the image, drawn at the camera's scale.
+TEST(Overlays, ScaleBar) {
+  EXPECT_EQ(scale_bar_length_mm(100), 20);
+  EXPECT_EQ(scale_bar_length_mm(250), 50);
+  EXPECT_EQ(scale_bar_length_mm(60), 10);
+  EXPECT_EQ(scale_bar_length_mm(9), 1);
+  EXPECT_EQ(scale_bar_length_mm(0.4), 0.05);
+  EXPECT_THROW(scale_bar_length_mm(0), InvalidInput);
+  Camera cam;
+  cam.width_px = 500;
+  cam.height_px = 300;
+  cam.width_mm = 100;  // 5 px per mm: a 20 mm bar is 100 px long
+  RgbImage img;
+  img.width = 500;
+  img.height = 300;
+  img.rgb.assign(500 * 300 * 3, 255);
+  draw_scale_bar(img, cam);
+  int longest = 0;
+  for (int y = 0; y < 300; ++y) {
+    int run = 0;
+    for (int x = 0; x < 500; ++x) {
+      run = img.rgb[(static_cast<std::size_t>(y) * 500 + x) * 3] < 40 ? run + 1 : 0;
+      longest = std::max(longest, run);
+    }
+  }
+  EXPECT_NEAR(longest, 100, 3);  // the bar (and its end ticks' width)
+  cam.projection = Projection::Perspective;
+  EXPECT_THROW(draw_scale_bar(img, cam), InvalidInput);
 }

@@ -154,38 +154,42 @@ void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
   image = canvas.image();
 }
 
-void draw_polylines(RgbImage& image, const Camera& camera,
-                    const std::vector<std::vector<Eigen::Vector3d>>& lines) {
+namespace {
+
+// Polylines in LPS mm drawn with `pen` at their pixels camera.project(p).
+void draw_projected(RgbImage& image, const Camera& camera,
+                    const std::vector<std::vector<Eigen::Vector3d>>& lines, const Pen& pen,
+                    const char* who) {
   if (image.width != camera.width_px || image.height != camera.height_px)
-    throw InvalidInput(cat("draw_polylines: the image is ", image.width, "x", image.height,
+    throw InvalidInput(cat(who, ": the image is ", image.width, "x", image.height,
                            " pixels, the camera ", camera.width_px, "x", camera.height_px));
   Canvas canvas(image);
-  const Pen marker{.colour = {0.15, 0.1, 0.45},
-                   .width_px = std::max(1.5, 0.003 * camera.width_px),
-                   .dash_px = {6.0, 4.0}};
   for (const auto& line : lines) {
     std::vector<Eigen::Vector2d> px;
     for (const auto& p : line) px.push_back(camera.project(p));
-    canvas.polyline(px, marker);
+    canvas.polyline(px, pen);
   }
   image = canvas.image();
 }
 
+}  // namespace
+
+void draw_polylines(RgbImage& image, const Camera& camera,
+                    const std::vector<std::vector<Eigen::Vector3d>>& lines) {
+  draw_projected(image, camera, lines,
+                 Pen{.colour = {0.15, 0.1, 0.45},
+                     .width_px = std::max(1.5, 0.003 * camera.width_px),
+                     .dash_px = {6.0, 4.0}},
+                 "draw_polylines");
+}
+
 void draw_suture_lines(RgbImage& image, const Camera& camera,
                        const std::vector<std::vector<Eigen::Vector3d>>& lines) {
-  if (image.width != camera.width_px || image.height != camera.height_px)
-    throw InvalidInput(cat("draw_suture_lines: the image is ", image.width, "x", image.height,
-                           " pixels, the camera ", camera.width_px, "x", camera.height_px));
-  Canvas canvas(image);
-  const Pen suture{.colour = {0.55, 0.08, 0.1},
-                   .width_px = std::max(1.2, 0.0025 * camera.width_px),
-                   .round_joins = true};
-  for (const auto& line : lines) {
-    std::vector<Eigen::Vector2d> px;
-    for (const auto& p : line) px.push_back(camera.project(p));
-    canvas.polyline(px, suture);
-  }
-  image = canvas.image();
+  draw_projected(image, camera, lines,
+                 Pen{.colour = {0.55, 0.08, 0.1},
+                     .width_px = std::max(1.2, 0.0025 * camera.width_px),
+                     .round_joins = true},
+                 "draw_suture_lines");
 }
 
 std::vector<std::vector<Eigen::Vector3d>> suture_lines(const SkinSurfaces& skin) {
