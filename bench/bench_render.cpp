@@ -1,6 +1,7 @@
 // The displacement-mapped skin of a real simulation: making the drawn skin (the range image
 // resampled from the smoothed isosurface, slice terraces filtered), building the skin, and one
-// 800 x 800 image (2 x 2 samples) of the plan and front views. Needs a model directory and a
+// 800 x 800 image (2 x 2 samples) of the plan and front views; CPU is the whole process's (both
+// cores), Time the wall clock. Needs a model directory and a
 // `caps simulate` output on it (docs/benchmarks.md, "Rendering"):
 //   build/bench/bench_render --caps_model=out/cranium --caps_result=out/ellipse
 // --caps_report also prints the pictures' measures: the terrace RMS of the forehead (range image
@@ -68,7 +69,7 @@ void BM_LoadDrawnSkin(benchmark::State& state) {
   if (!have_inputs(state)) return;
   for (auto _ : state) benchmark::DoNotOptimize(load_drawn_skin(the_case().model, g_model));
 }
-BENCHMARK(BM_LoadDrawnSkin)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_LoadDrawnSkin)->MeasureProcessCPUTime()->UseRealTime()->Unit(benchmark::kMillisecond);
 
 void BM_DisplacedSkin(benchmark::State& state) {
   if (!have_inputs(state)) return;
@@ -77,7 +78,7 @@ void BM_DisplacedSkin(benchmark::State& state) {
   for (auto _ : state) benchmark::DoNotOptimize(displaced_skin(c.model, c.mesh, &c.u, n, &drawn()));
   state.counters["triangles"] = static_cast<double>(skin().pre.F.rows());
 }
-BENCHMARK(BM_DisplacedSkin)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_DisplacedSkin)->MeasureProcessCPUTime()->UseRealTime()->Unit(benchmark::kMillisecond);
 
 void BM_RenderView800(benchmark::State& state) {
   if (!have_inputs(state)) return;
@@ -89,6 +90,8 @@ void BM_RenderView800(benchmark::State& state) {
 BENCHMARK(BM_RenderView800)
     ->Arg(static_cast<int>(View::Plan))
     ->Arg(static_cast<int>(View::Front))
+    ->MeasureProcessCPUTime()
+    ->UseRealTime()
     ->Unit(benchmark::kMillisecond);
 
 // Pixels of `view` where pre and post differ by more than `levels` grey levels (any channel)
