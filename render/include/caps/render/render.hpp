@@ -5,7 +5,8 @@
 /// interpolated over each triangle, and PNG output.
 ///
 /// Shading is two-sided (the normal is turned towards the viewer), with smooth vertex normals
-/// (area-weighted face normals). Pixels are deterministic: the same mesh and camera give the same
+/// (given, as the skin's shading normals, or area-weighted face normals). Embree runs in its
+/// robust (watertight) mode: no ray slips through an edge. Pixels are deterministic: the same mesh and camera give the same
 /// bytes, so pre- and post-operative images differ exactly where the skin moved.
 
 #include <Eigen/Core>

@@ -17,16 +17,20 @@
 /// Outside the mesh the skin is the range mesh: one vertex per (theta, z) sample, two triangles
 /// per cell, periodic in theta, closed at the first and last rows by a fan to the axis. Cells
 /// near the mesh's footprint (touching it, dilated by one cell, holes filled) are left out, and
-/// the annulus between the staircase border of those cells and the mesh's outer rim is filled by
-/// a strip of triangles that reuses the vertices of both (a zipper by arc length): every seam
-/// edge is shared by two triangles, so the seam cannot crack, whatever the rim does. The wound
+/// the annulus between the staircase border of those cells and the mesh's outer rim is a
+/// constrained Delaunay triangulation in (theta, z) of the vertices of both and of the grid
+/// vertices between them: every seam edge is shared by two triangles, so the seam cannot crack,
+/// whatever the rim does, and no seam triangle folds. The wound
 /// (the hole of an excision) is filled by an ear-clipped triangulation of its border's
 /// micropolygon vertices: pre-operatively it is the skin to be removed; when the wound closes
 /// its border vertices meet and the fill collapses onto the suture line, covering the small
 /// mismatch of the two lips' range offsets.
 ///
 /// Pre and post share one triangle list and one colour per vertex (so images, animations and
-/// morph targets can blend them); only the positions differ.
+/// morph targets can blend them); only the positions and the shading normals differ. Every
+/// vertex is shaded with one smooth normal field of the drawn range (normal_pre), turned after
+/// the closure only where its neighbourhood moved (normal_post), so the patch shades exactly as
+/// the skin around it wherever nothing moved.
 
 #include <Eigen/Core>
 #include <vector>
