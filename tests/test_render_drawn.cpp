@@ -334,3 +334,28 @@ TEST(Overlays, ScaleBar) {
   cam.projection = Projection::Perspective;
   EXPECT_THROW(draw_scale_bar(img, cam), InvalidInput);
 }
+
+// Lines behind the head are not drawn: in the front view a line across the back of the head
+// (theta 180) projects onto the one across the face (theta 0); with the hits only the front one
+// shows.
+TEST(Overlays, HiddenLinesAreLeftOut) {
+  const PatientModel& m = phantom().model;
+  const SkinSurfaces& s = phantom_skin();
+  const Camera cam = standard_camera(View::Front, m, s, 200, 200);
+  std::vector<Eigen::Vector3d> front, back;
+  for (int i = 0; i <= 20; ++i) {
+    front.push_back(m.skin_point(-10.0 + i, 40.0));
+    back.push_back(m.skin_point(170.0 + i, 40.0));
+  }
+  const PixelHits hits = pixel_hits(s.pre, cam);
+  RgbImage blank;
+  blank.width = blank.height = 200;
+  blank.rgb.assign(200 * 200 * 3, 255);
+  RgbImage both = blank, only_front = blank, unhidden = blank;
+  draw_polylines(both, cam, {front, back}, &hits);
+  draw_polylines(only_front, cam, {front}, &hits);
+  draw_polylines(unhidden, cam, {front, back});
+  EXPECT_EQ(both.rgb, only_front.rgb);
+  EXPECT_NE(unhidden.rgb, only_front.rgb);
+  EXPECT_NE(only_front.rgb, blank.rgb);
+}

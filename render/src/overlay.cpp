@@ -156,18 +156,40 @@ void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
 
 namespace {
 
-// Polylines in LPS mm drawn with `pen` at their pixels camera.project(p).
+// Polylines in LPS mm drawn with `pen` at their pixels camera.project(p); with `hits`, only the
+// runs of points not hidden by the surface (no deeper than the surface met through their pixel,
+// plus kLineDepthToleranceMm).
+constexpr double kLineDepthToleranceMm = 1.0;
+
 void draw_projected(RgbImage& image, const Camera& camera,
                     const std::vector<std::vector<Eigen::Vector3d>>& lines, const Pen& pen,
-                    const char* who) {
+                    const PixelHits* hits, const char* who) {
   if (image.width != camera.width_px || image.height != camera.height_px)
     throw InvalidInput(cat(who, ": the image is ", image.width, "x", image.height,
                            " pixels, the camera ", camera.width_px, "x", camera.height_px));
+  if (hits && (hits->width != camera.width_px || hits->height != camera.height_px))
+    throw InvalidInput(cat(who, ": the hits are ", hits->width, "x", hits->height,
+                           " pixels, the camera ", camera.width_px, "x", camera.height_px));
+  auto visible = [&](const Eigen::Vector3d& p, const Eigen::Vector2d& q) {
+    if (!hits) return true;
+    const int x = static_cast<int>(std::floor(q.x())), y = static_cast<int>(std::floor(q.y()));
+    if (x < 0 || y < 0 || x >= hits->width || y >= hits->height) return true;
+    return camera.depth_mm(p) <=
+           hits->depth_mm[static_cast<std::size_t>(y) * hits->width + x] + kLineDepthToleranceMm;
+  };
   Canvas canvas(image);
   for (const auto& line : lines) {
-    std::vector<Eigen::Vector2d> px;
-    for (const auto& p : line) px.push_back(camera.project(p));
-    canvas.polyline(px, pen);
+    std::vector<Eigen::Vector2d> run;
+    for (const auto& p : line) {
+      const Eigen::Vector2d q = camera.project(p);
+      if (visible(p, q)) {
+        run.push_back(q);
+        continue;
+      }
+      if (run.size() >= 2) canvas.polyline(run, pen);
+      run.clear();
+    }
+    if (run.size() >= 2) canvas.polyline(run, pen);
   }
   image = canvas.image();
 }
@@ -175,21 +197,23 @@ void draw_projected(RgbImage& image, const Camera& camera,
 }  // namespace
 
 void draw_polylines(RgbImage& image, const Camera& camera,
-                    const std::vector<std::vector<Eigen::Vector3d>>& lines) {
+                    const std::vector<std::vector<Eigen::Vector3d>>& lines,
+                    const PixelHits* hits) {
   draw_projected(image, camera, lines,
                  Pen{.colour = {0.15, 0.1, 0.45},
                      .width_px = std::max(1.5, 0.003 * camera.width_px),
                      .dash_px = {6.0, 4.0}},
-                 "draw_polylines");
+                 hits, "draw_polylines");
 }
 
 void draw_suture_lines(RgbImage& image, const Camera& camera,
-                       const std::vector<std::vector<Eigen::Vector3d>>& lines) {
+                       const std::vector<std::vector<Eigen::Vector3d>>& lines,
+                       const PixelHits* hits) {
   draw_projected(image, camera, lines,
                  Pen{.colour = {0.55, 0.08, 0.1},
                      .width_px = std::max(1.2, 0.0025 * camera.width_px),
                      .round_joins = true},
-                 "draw_suture_lines");
+                 hits, "draw_suture_lines");
 }
 
 std::vector<std::vector<Eigen::Vector3d>> suture_lines(const SkinSurfaces& skin) {
@@ -317,12 +341,18 @@ std::vector<std::filesystem::path> render_views_with_overlays(const PatientModel
     const Camera cam = standard_camera(v, model, skin, options.width, options.height);
     const bool bar = overlays.scale_bar && cam.projection == Projection::Orthographic;
     RgbImage pre = render_skin(skin, 0.0, skin.color, cam, options);
-    if (!overlays.plan_lines.empty()) draw_polylines(pre, cam, overlays.plan_lines);
+    if (!overlays.plan_lines.empty()) {
+      const PixelHits hits = pixel_hits(skin.pre, cam);
+      draw_polylines(pre, cam, overlays.plan_lines, &hits);
+    }
     if (bar) draw_scale_bar(pre, cam);
     written.push_back(dir / cat("pre_", view_name(v), ".png"));
     write_png(written.back(), pre);
     RgbImage post = render_skin(skin, 1.0, skin.color, cam, options);
-    if (!sutures.empty()) draw_suture_lines(post, cam, sutures);
+    if (!sutures.empty()) {
+      const PixelHits hits = pixel_hits(skin.post, cam);
+      draw_suture_lines(post, cam, sutures, &hits);
+    }
     if (bar) draw_scale_bar(post, cam);
     written.push_back(dir / cat("post_", view_name(v), ".png"));
     write_png(written.back(), post);

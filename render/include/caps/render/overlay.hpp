@@ -61,16 +61,20 @@ void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
                     const std::string& title, const std::string& note = "");
 
 /// Draws polylines given in LPS mm (e.g. a plan's cutting paths) over the image, in a dashed dark
-/// line, as the surgeon's marker would, at their pixels camera.project(p). Throws InvalidInput
-/// unless the image is the camera's size.
+/// line, as the surgeon's marker would, at their pixels camera.project(p). With `hits`
+/// (pixel_hits() of the surface drawn, same camera) the parts of the lines behind the surface
+/// (deeper than its hit in their pixel by more than 1 mm) are left out. Throws InvalidInput
+/// unless the image (and the hits) are the camera's size.
 void draw_polylines(RgbImage& image, const Camera& camera,
-                    const std::vector<std::vector<Eigen::Vector3d>>& lines);
+                    const std::vector<std::vector<Eigen::Vector3d>>& lines,
+                    const PixelHits* hits = nullptr);
 
 /// Draws the suture (scar) lines over a post-operative image: solid, dark red, at
-/// camera.project(p) of each polyline's points (LPS mm). Throws InvalidInput unless the image is
-/// the camera's size.
+/// camera.project(p) of each polyline's points (LPS mm), hidden parts left out given `hits` (see
+/// draw_polylines()). Throws InvalidInput unless the image (and the hits) are the camera's size.
 void draw_suture_lines(RgbImage& image, const Camera& camera,
-                       const std::vector<std::vector<Eigen::Vector3d>>& lines);
+                       const std::vector<std::vector<Eigen::Vector3d>>& lines,
+                       const PixelHits* hits = nullptr);
 
 /// The suture lines of the closed skin: the post-operative positions (LPS mm) of the
 /// micropolygons' border loops other than the outer rim (each wound's and incision's lips, which
