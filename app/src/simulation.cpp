@@ -15,6 +15,7 @@
 #include "caps/fem/mesh_pictures.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/plan/plan_io.hpp"
+#include "caps/render/drawn_skin.hpp"
 #include "caps/render/simulation_report.hpp"
 #include "caps/app/loaded_model.hpp"
 #include "caps/surface/patient_model.hpp"
@@ -166,12 +167,18 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   sim.wound.continuum.mesh.plan = r.plan;
   fem::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string());
   SimulateResult s;
-  if (r.render)
+  if (r.render) {
+    const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);
+    render::SimulationPictures pictures;
+    pictures.tension_map = r.tension_map;
+    pictures.drawn = &drawn;
+    pictures.plan = &plan;
     for (const fs::path& p : render::render_simulation(
              model, sim,
              {render::View::Front, render::View::Oblique, render::View::Side, render::View::Plan},
-             {}, out.path(), r.tension_map, reporter))
+             {}, out.path(), pictures, reporter))
       s.images.push_back(p.filename().string());
+  }
   out.commit();
   const auto& res = sim.result;
   s.output = r.output;
@@ -326,7 +333,11 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
   const PatientModel& model = *loaded;
   const fem::Comparison c = fem::compare_thickness(model, plan, r.thickness, o, reporter);
   const std::string name = fs::path(r.plan).filename().string();
-  render::write_comparison_report(c, model, o, out.path(), name, {}, reporter);
+  const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);
+  render::SimulationPictures pictures;
+  pictures.drawn = &drawn;
+  pictures.plan = &plan;
+  render::write_comparison_report(c, model, o, out.path(), name, {}, reporter, pictures);
   out.commit();
   CompareResult s;
   s.output = r.output;
