@@ -376,7 +376,10 @@ void write_layers(const fs::path& p, const CylindricalMaps& maps, const ModelPro
   write_layer_png(p / f::kLayerSkinPng, maps, maps.thickness_skin_normal, maps.layer_flags_normal,
                   "skin: surface to the fat (mm)",
                   cat("Skin (dermis) to the subcutaneous fat, along the normal, ", c.name), c.credit);
-  write_layer_png(p / f::kLayerFatPng, maps, maps.thickness_fat_normal, maps.layer_flags_normal,
+  // No fat seen is a measurement of the fat (0 mm), not of where the skin ends.
+  std::vector<std::uint8_t> fat_flags = maps.layer_flags_normal;
+  for (auto& fl : fat_flags) fl &= static_cast<std::uint8_t>(~kLayerNoFat);
+  write_layer_png(p / f::kLayerFatPng, maps, maps.thickness_fat_normal, fat_flags,
                   "subcutaneous fat (mm)", cat("Subcutaneous fat, along the normal, ", c.name),
                   c.credit);
   write_layer_png(p / f::kLayerDeepPng, maps, maps.thickness_deep_normal, maps.layer_flags_normal,
