@@ -14,6 +14,7 @@
 #include "caps/volume/model.hpp"
 #include "caps/volume/model_dir.hpp"
 #include "caps/volume/phantom.hpp"
+#include "caps/volume/read_volume.hpp"
 
 namespace fs = std::filesystem;
 using namespace caps;
@@ -374,4 +375,25 @@ TEST(ModelDirectory, ModelJsonAndMapsReadBackAsWritten) {
                         model_file::kBoneMesh})
     EXPECT_TRUE(fs::exists(tmp / f)) << f;
   fs::remove_all(tmp);
+}
+
+TEST(VolumeModel, SkullStrippedMrIsWarnedAbout) {
+  // ch2bet is ch2 (a T1 MR with scalp) after brain extraction: its only object is the brain.
+  const fs::path bet = "/usr/share/mricron/templates/ch2bet.nii.gz";
+  const fs::path whole = "/usr/share/mricron/templates/ch2.nii.gz";
+  if (!fs::exists(bet) || !fs::exists(whole)) GTEST_SKIP() << "mricron-data is not installed";
+  ModelOptions o;
+  o.maps.n_theta = 64;
+  o.maps.n_z = 32;
+  Reporter stripped, scalp;
+  const VolumeModel m = build_volume_model(read_volume(bet), o, &stripped);
+  std::printf("ch2bet head volume %.0f ml\n", m.segmentation.head_volume_ml);
+  int n_stripped = 0;  // the other warning: the MR's bone is an approximation
+  for (const auto& warning : stripped.warnings())
+    n_stripped += warning.find("looks skull-stripped") != std::string::npos;
+  EXPECT_EQ(n_stripped, 1);
+  const VolumeModel w = build_volume_model(read_volume(whole), o, &scalp);
+  std::printf("ch2 head volume %.0f ml\n", w.segmentation.head_volume_ml);
+  for (const auto& warning : scalp.warnings())
+    EXPECT_EQ(warning.find("skull-stripped"), std::string::npos) << warning;
 }

@@ -531,8 +531,12 @@ class RayCaster {
     const double tn = thickness_along_normal(p, r_s - r_b, bone_level, inward);
     maps_.thickness_normal[c] = static_cast<float>(tn);
     if (measure_layers_) {
-      measure_layers(c, [&](double s) { return intensity_(ray.at(r_s - s)); }, r_s - r_b, false);
-      measure_layers(c, [&](double s) { return intensity_(Eigen::Vector3d(p + s * inward)); }, tn,
+      // One pointer captured: std::function keeps it without allocating.
+      const struct { const Field& f; const Ray& ray; double r_s; const Eigen::Vector3d& p, &u; } q{
+          intensity_, ray, r_s, p, inward};
+      measure_layers(c, [x = &q](double s) { return x->f(x->ray.at(x->r_s - s)); }, r_s - r_b,
+                     false);
+      measure_layers(c, [x = &q](double s) { return x->f(Eigen::Vector3d(x->p + s * x->u)); }, tn,
                      true);
     }
   }

@@ -29,9 +29,8 @@ SignedDistanceField SignedDistanceField::from_mesh(const TriMesh& mesh, double v
   for (Eigen::Index i = 0; i < mesh.n_vertices(); ++i)
     points[i] = openvdb::Vec3s(static_cast<float>(mesh.V(i, 0)), static_cast<float>(mesh.V(i, 1)),
                                static_cast<float>(mesh.V(i, 2)));
-  // World space is LPS mm; OpenVDB's mesh conversion wants the points in index space.
+  // World space is LPS mm (the conversion maps the points to index space itself).
   const auto xform = openvdb::math::Transform::createLinearTransform(voxel_mm);
-  for (auto& p : points) p = xform->worldToIndex(p);
   std::vector<openvdb::Vec3I> tris(static_cast<std::size_t>(mesh.n_faces()));
   for (Eigen::Index f = 0; f < mesh.n_faces(); ++f)
     tris[f] = openvdb::Vec3I(mesh.F(f, 0), mesh.F(f, 1), mesh.F(f, 2));

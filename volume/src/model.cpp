@@ -192,6 +192,14 @@ VolumeModel build_volume_model(const Volume& v, const ModelOptions& o, Reporter*
   m.source_spacing_mm = v.geom.spacing_mm;
   m.notes = v.notes;
   m.segmentation = segment_head(v, o.segment, reporter);
+  // A skull-stripped MR (brain extraction) keeps only the brain: its "skin" would be the brain's
+  // surface. An adult head (even cut at the chin) holds well over 2.5 l, a brain about 1.1-1.5 l.
+  constexpr double kBrainOnlyMl = 2000.0;
+  if (v.modality != Modality::CT && m.segmentation.head_volume_ml < kBrainOnlyMl)
+    warn(reporter, cat(v.source, ": the head's volume is only ",
+                       std::lround(m.segmentation.head_volume_ml), " ml, that of a brain: the "
+                       "scan looks skull-stripped, and its \"skin\" would be the brain's surface; "
+                       "use the scan before brain extraction"));
   const CylinderAxis axis = o.axis ? *o.axis : fit_axis(m.segmentation);
   m.maps = cylindrical_maps(v, m.segmentation, axis, o.maps, reporter);
   m.layer_options = o.maps.layers;

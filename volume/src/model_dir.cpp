@@ -427,8 +427,13 @@ void write_model_directory(const ModelContent& m, const ModelProvenance& c, cons
                  "validity: 0 valid; bit flags 1 no_skin, 2 no_bone, 4 undercut, 8 grazing, "
                  "16 truncated", "flags");
   progress.update(3);
-  write_thickness_png(p / f::kThicknessPng, maps, maps.thickness,
-                      cat("Soft-tissue thickness (radial), ", c.name), c.credit);
+  // Clinicians and the soft-tissue-depth literature read the thickness along the normal.
+  const bool assumed_bone = parse_object(c.thickness_json, "thickness").value("kind", "") ==
+                            std::string("approximate");
+  write_thickness_png(p / f::kThicknessPng, maps, maps.thickness_normal,
+                      cat("Soft-tissue thickness along the normal (skin to nearest bone), ", c.name,
+                          assumed_bone ? "; bone ASSUMED (MR: no bone signal)" : ""),
+                      c.credit);
   if (maps.has_layers()) write_layers(p, maps, c);
   write_skin_png(p / f::kSkinPng, maps, cat("Skin range image (shaded), ", c.name), c.credit);
   if (has_color) write_png(p / f::kColor, m.color);
