@@ -1,6 +1,7 @@
 #include "caps/volume/cylindrical_map.hpp"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
 #include <cmath>
@@ -363,8 +364,8 @@ void fill_layers(std::vector<float>& skin, std::vector<float>& fat, std::vector<
       fat_known[c] = 1;  // seen: no fat
     }
   }
-  harmonic_fill(skin_fraction, skin_known, grid);
-  harmonic_fill(fat_fraction, fat_known, grid);
+  tbb::parallel_invoke([&] { harmonic_fill(skin_fraction, skin_known, grid); },
+                       [&] { harmonic_fill(fat_fraction, fat_known, grid); });
   for (std::size_t c = 0; c < n; ++c) {
     const double t = std::max(0.0f, total[c]);
     double s = skin[c], f = fat[c];
@@ -488,7 +489,7 @@ class RayCaster {
         is_ct_(v.modality == Modality::CT),
         skin_thr_(static_cast<float>(seg.skin_threshold)),
         measure_layers_(maps.has_layers()),
-        layer_step_(0.5 * v.geom.spacing_mm.minCoeff()) {
+        layer_step_(0.5 * v.geom.spacing_mm.maxCoeff()) {
     squared_distance_mm2(seg.bone, &nearest_bone_);
   }
   RayCaster(const RayCaster&) = delete;
@@ -732,7 +733,7 @@ class RayCaster {
   bool is_ct_;
   float skin_thr_;
   bool measure_layers_;
-  double layer_step_;  // profile sampling step of the layers
+  double layer_step_;  // profile sampling step of the layers: half the largest voxel spacing
   std::vector<std::int64_t> nearest_bone_;
 };
 
@@ -781,10 +782,16 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
         maps.layer_flags[i] |= kLayerNoThickness;
         maps.layer_flags_normal[i] |= kLayerNoThickness;
       }
-    fill_layers(maps.thickness_skin, maps.thickness_fat, maps.thickness_deep, maps.layer_flags,
-                maps.thickness, grid);
-    fill_layers(maps.thickness_skin_normal, maps.thickness_fat_normal, maps.thickness_deep_normal,
-                maps.layer_flags_normal, maps.thickness_normal, grid);
+    tbb::parallel_invoke(
+        [&] {
+          fill_layers(maps.thickness_skin, maps.thickness_fat, maps.thickness_deep,
+                      maps.layer_flags, maps.thickness, grid);
+        },
+        [&] {
+          fill_layers(maps.thickness_skin_normal, maps.thickness_fat_normal,
+                      maps.thickness_deep_normal, maps.layer_flags_normal, maps.thickness_normal,
+                      grid);
+        });
   }
   progress.done();
   return maps;

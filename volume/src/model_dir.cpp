@@ -1,6 +1,7 @@
 #include "caps/volume/model_dir.hpp"
 
 #include <nlohmann/json.hpp>
+#include <tbb/task_group.h>
 
 #include <cmath>
 #include <fstream>
@@ -434,12 +435,15 @@ void write_model_directory(const ModelContent& m, const ModelProvenance& c, cons
                       cat("Soft-tissue thickness along the normal (skin to nearest bone), ", c.name,
                           assumed_bone ? "; bone ASSUMED (MR: no bone signal)" : ""),
                       c.credit);
-  if (maps.has_layers()) write_layers(p, maps, c);
+  // The layers' maps and pictures are written beside the rest (2 s budget, docs/benchmarks.md).
+  tbb::task_group layers;
+  if (maps.has_layers()) layers.run([&] { write_layers(p, maps, c); });
   write_skin_png(p / f::kSkinPng, maps, cat("Skin range image (shaded), ", c.name), c.credit);
   if (has_color) write_png(p / f::kColor, m.color);
   progress.update(5);
   write_ply(m.skin, p / f::kSkinMesh);
   write_ply(m.bone, p / f::kBoneMesh);
+  layers.wait();
   progress.update(7);
   write_text_atomic(p / f::kJson, model_json);
   out.commit();
