@@ -9,6 +9,7 @@
 #include "caps/volume/model.hpp"
 #include "caps/volume/model_dir.hpp"
 #include "caps/volume/phantom.hpp"
+#include "phantom_crossing.hpp"
 
 namespace fs = std::filesystem;
 using namespace caps;
@@ -28,32 +29,6 @@ double profile(double s, const std::vector<Layer>& layers, double w) {
     hu += step(s - depth) * (next - layers[i].hu);
   }
   return hu;
-}
-
-// The radius along the model's ray where the phantom's surface R is crossed, from r_from
-// inward; NaN if never. As in test_volume_model.cpp.
-template <typename Radius>
-double crossing(const HeadPhantom& ph, const CylinderAxis& axis, double theta, double z, Radius&& R,
-                double r_from) {
-  const Eigen::Vector3d a = ph.axis_point();
-  auto g = [&](double r) {
-    const Eigen::Vector3d p = axis.to_lps(theta, z, r) - a;
-    return R(std::atan2(p[0], -p[1]), p[2]) - std::hypot(p[0], p[1]);  // > 0 inside
-  };
-  double prev = r_from;
-  if (g(prev) > 0) return std::nan("");
-  for (double r = r_from - 0.05; r >= 0; r -= 0.05) {
-    if (g(r) > 0) {
-      double lo = r, hi = prev;
-      for (int i = 0; i < 40; ++i) {
-        const double m = 0.5 * (lo + hi);
-        (g(m) > 0 ? lo : hi) = m;
-      }
-      return 0.5 * (lo + hi);
-    }
-    prev = r;
-  }
-  return std::nan("");
 }
 
 struct LayeredModel {
@@ -138,7 +113,9 @@ TEST(Layers, LayeredPhantomDepthsRecoveredWithinAFifthOfAMillimetre) {
       ++valid;
       if (maps.layer_flags[c] != 0) continue;
       const double th = deg_to_rad(g.theta_deg(j)), z = g.z_mm(k);
-      auto at = [&](auto R, double from) { return crossing(ph, maps.axis, th, z, R, from); };
+      auto at = [&](auto R, double from) {
+        return caps_test::analytic_crossing(ph, maps.axis, th, z, R, from);
+      };
       const double rs = at([&](double t, double zz) { return ph.skin_radius(t, zz); }, 160.0);
       const double rt = at([&](double t, double zz) { return ph.fat_top_radius(t, zz); }, rs);
       const double rf = at([&](double t, double zz) { return ph.fat_bottom_radius(t, zz); }, rt);

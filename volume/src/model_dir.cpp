@@ -90,9 +90,12 @@ ModelStatistics statistics_of(const json& j) {
   auto count = [](const json& o, const char* key) { return o.value(key, std::size_t(0)); };
   auto num = [](const json& o, const char* key) { return o.value(key, 0.0); };
   const json none = json::object();
-  const json& flagged = j.contains("flagged_cells") ? j["flagged_cells"] : none;
-  const json& t = j.contains("thickness_mm") ? j["thickness_mm"] : none;
-  const json& face = j.contains("face") ? j["face"] : none;
+  auto child = [&none](const json& o, const char* key) -> const json& {
+    return o.contains(key) ? o[key] : none;
+  };
+  const json& flagged = child(j, "flagged_cells");
+  const json& t = child(j, "thickness_mm");
+  const json& face = child(j, "face");
   s.cells = count(j, "cells");
   s.valid_cells = count(j, "valid_cells");
   s.no_skin = count(flagged, "no_skin");
@@ -109,8 +112,8 @@ ModelStatistics statistics_of(const json& j) {
   s.face_theta_deg = num(face, "theta_deg");
   s.face_z_mm = num(face, "z_mm");
   s.r_skin_median_mm = num(j, "r_skin_median_mm");
-  const json& layers = j.contains("layers") ? j["layers"] : none;
-  const json& medians = layers.contains("median_mm") ? layers["median_mm"] : none;
+  const json& layers = child(j, "layers");
+  const json& medians = child(layers, "median_mm");
   s.layer_cells = count(layers, "cells");
   s.no_fat = count(layers, "no_fat");
   s.several_fat_bands = count(layers, "several_fat_bands");
