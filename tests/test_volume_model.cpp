@@ -373,3 +373,27 @@ TEST(VolumeModel, SkullStrippedMrIsWarnedAbout) {
   for (const auto& warning : scalp.warnings())
     EXPECT_EQ(warning.find("skull-stripped"), std::string::npos) << warning;
 }
+
+TEST(VolumeModel, UnsignedCtIsShiftedWithAWarning) {
+  // The phantom stored as HU + 1024 (air near 0), as the Stanford CThead is: the model is the
+  // same as the signed phantom's, and the shift is warned about.
+  PhantomOptions po;
+  po.dims = {64, 80, 72};
+  po.spacing_mm = {3, 3, 3};
+  po.head_holder = false;
+  ModelOptions o;
+  o.maps.n_theta = 64;
+  o.maps.n_z = 32;
+  const Volume signed_ct = make_phantom(po);
+  Volume unsigned_ct = signed_ct;
+  for (float& x : unsigned_ct.data) x += 1024.0f;
+  Reporter quiet, shifted;
+  const VolumeModel a = build_volume_model(signed_ct, o, &quiet);
+  const VolumeModel b = build_volume_model(unsigned_ct, o, &shifted);
+  EXPECT_TRUE(quiet.warnings().empty());
+  ASSERT_EQ(shifted.warnings().size(), 1u);
+  EXPECT_NE(shifted.warnings()[0].find("HU + 1024"), std::string::npos);
+  EXPECT_EQ(a.stats.valid_cells, b.stats.valid_cells);
+  EXPECT_GT(b.stats.valid_cells, b.stats.cells / 2);
+  EXPECT_NEAR(a.stats.thickness_median_mm, b.stats.thickness_median_mm, 1e-6);
+}

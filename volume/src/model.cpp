@@ -183,7 +183,33 @@ ModelStatistics model_statistics(const CylindricalMaps& maps) {
   return s;
 }
 
-VolumeModel build_volume_model(const Volume& v, const ModelOptions& o, Reporter* reporter) {
+namespace {
+
+// A CT stored unsigned (HU + 1024, as the Stanford CThead is) has its air near 0 instead of
+// -1000: every threshold would then miss. Seen on a sample of the voxels (air fills most of a
+// head CT's field of view): the lowest value at or above -50 with values beyond +1000.
+bool looks_unsigned_ct(const Volume& v) {
+  if (v.modality != Modality::CT || v.data.empty()) return false;
+  float lo = v.data[0], hi = v.data[0];
+  for (std::size_t i = 0; i < v.data.size(); i += 61) {
+    lo = std::min(lo, v.data[i]);
+    hi = std::max(hi, v.data[i]);
+  }
+  return lo >= -50.0f && hi > 1000.0f;
+}
+
+}  // namespace
+
+VolumeModel build_volume_model(const Volume& input, const ModelOptions& o, Reporter* reporter) {
+  Volume shifted;
+  if (looks_unsigned_ct(input)) {
+    shifted = input;
+    for (float& x : shifted.data) x -= 1024.0f;
+    warn(reporter, cat(input.source, ": the CT's air lies near 0 instead of -1000 HU: read as "
+                       "unsigned values (HU + 1024) and shifted by -1024 HU; check the file's "
+                       "rescale intercept"));
+  }
+  const Volume& v = shifted.data.empty() ? input : shifted;
   VolumeModel m;
   m.source = v.source;
   m.source_format = v.format;
