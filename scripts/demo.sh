@@ -63,4 +63,6 @@ HTML
 done
 echo "</body></html>" >> "$out/index.html"
 echo "caps demo: open $out/index.html"
-echo "caps demo: the planner's server on this patient: $caps serve $out/cranium (its API: docs/planner.md)"
+echo "caps demo: to plan on this patient in the browser, run"
+echo "  $caps serve $out/cranium"
+echo "and open http://127.0.0.1:8765/ (click on the skin to place a procedure; docs/planner.md)"

@@ -313,9 +313,10 @@ TEST(TransitionGif, FirstAndLastFramesArePreAndPost) {
   EXPECT_EQ(gif.delays_cs.back(), 120);
   EXPECT_EQ(gif.delays_cs[1], 50);  // 2 s over 4 steps
 
-  const RgbImage pre = render_image(s.pre, s.color, cam, o);
-  const RgbImage post = render_image(s.post, s.color, cam, o);
-  const RgbImage mid = render_image(blend_skin(s, 0.5), s.color, cam, o);
+  // the skin's images (its shading normals blended like its positions)
+  const RgbImage pre = render_skin(s, 0.0, s.color, cam, o);
+  const RgbImage post = render_skin(s, 1.0, s.color, cam, o);
+  const RgbImage mid = render_skin(s, 0.5, s.color, cam, o);
   // one 256-colour palette: quantisation costs about half a level on average (measured 0.5, max 6)
   const Diff d0 = diff(gif.frames.front(), pre), d1 = diff(gif.frames.back(), post),
              dm = diff(gif.frames[2], mid);

@@ -196,8 +196,8 @@ TEST(RenderPick, TheRendererAndPickingMeetTheSameTriangleAtEveryPixel) {
           worst_depth = std::max(worst_depth, std::abs(hits.depth_mm[i] - cam.depth_mm(h->point)));
           continue;
         }
-        // Otherwise Embree's single-precision test (not its robust mode, which would change the
-        // images) let a ray through an edge of the triangle picking met, on to a farther one.
+        // Otherwise Embree's single-precision test let a ray through an edge of the triangle
+        // picking met, on to a farther one (rare since the scene is built in robust mode).
         ++through_edge;
         EXPECT_LT(distance_to_boundary(post, h->face, h->point), 1e-4)
             << what << " pixel " << x << "," << y;

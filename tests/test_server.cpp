@@ -5,6 +5,7 @@
 // simulation cancels an older one (409).
 #include <gtest/gtest.h>
 
+#include "caps/app/loaded_model.hpp"
 #include "caps/app/model.hpp"
 #include "caps/app/plan.hpp"
 #include "caps/app/simulation.hpp"
@@ -18,6 +19,7 @@
 #include <httplib.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -144,6 +146,11 @@ std::string message_of(F&& run) {
     return e.what();
   }
   return "";
+}
+
+double norm3(const json& v) {
+  return std::sqrt(v[0].get<double>() * v[0].get<double>() + v[1].get<double>() * v[1].get<double>() +
+                   v[2].get<double>() * v[2].get<double>());
 }
 
 json comparable(json j) {
@@ -451,8 +458,155 @@ TEST_F(ServerTest, WithoutAWebRootServesThePlaceholderPageOnly) {
   ASSERT_TRUE(index);
   EXPECT_EQ(index->status, 200);
   EXPECT_EQ(index->get_header_value("Content-Type"), "text/html; charset=utf-8");
-  if (!fs::exists(server::default_web_root() / "dist"))
+  if (server::default_web_root().filename() != "dist")  // the placeholder, not a built page
     EXPECT_NE(index->body.find("/api/simulate"), std::string::npos);  // the API is listed
   ASSERT_TRUE(other);
   EXPECT_EQ(other->status, 404);
+}
+
+TEST_F(ServerTest, ServesTheSkinAsGlbWithColourAndThickness) {
+  const auto info = get("/api/skin");
+  ASSERT_TRUE(info);
+  ASSERT_EQ(info->status, 200) << info->body;
+  const json j = json::parse(info->body);
+  // The range mesh of the 128 x 64 grid: a vertex per sample and the two poles; two triangles per
+  // cell around (the seam closed) over 63 rows, and a fan of 128 at each pole.
+  for (const char* k : {"skin", "thickness"}) {
+    EXPECT_EQ(j.at(k).at("vertices"), 128 * 64 + 2) << k;
+    EXPECT_EQ(j.at(k).at("faces"), 2 * 128 * 63 + 2 * 128) << k;
+  }
+  EXPECT_EQ(j.at("skin").at("has_color"), false);  // a CT: a plain skin tone
+  const double top = j.at("thickness").at("scale_max_mm");
+  // The phantom's soft tissue is a few mm to about a centimetre thick.
+  EXPECT_GT(top, 3.0);
+  EXPECT_LT(top, 20.0);
+  std::size_t size = 0;
+  for (const char* k : {"skin", "thickness"}) {
+    const auto glb = get(j.at(k).at("url").get<std::string>());
+    ASSERT_TRUE(glb);
+    ASSERT_EQ(glb->status, 200);
+    EXPECT_EQ(glb->get_header_value("Content-Type"), "model/gltf-binary");
+    EXPECT_EQ(glb->body.substr(0, 4), "glTF");  // the binary glTF magic
+    if (size) EXPECT_EQ(glb->body.size(), size);  // the same mesh, other colours
+    size = glb->body.size();
+  }
+  const auto other = get("/api/skin/bone.glb");
+  ASSERT_TRUE(other);
+  EXPECT_EQ(other->status, 404);
+  expect_still_serving();
+}
+
+TEST_F(ServerTest, PlanLinesFollowThePlanOnTheSkin) {
+  const auto planned = post("/api/plan/new", plan_body().dump());
+  ASSERT_TRUE(planned);
+  ASSERT_EQ(planned->status, 200) << planned->body;
+  const json plan = json::parse(planned->body);
+  const auto lines = post("/api/plan/lines", planned->body);
+  ASSERT_TRUE(lines);
+  ASSERT_EQ(lines->status, 200) << lines->body;
+  const json l = json::parse(lines->body);
+  // One skin point per plan point, at the plan file's own LPS point.
+  ASSERT_EQ(l.at("points_lps").size(), plan.at("points").size());
+  for (std::size_t i = 0; i < plan.at("points").size(); ++i)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(l["points_lps"][i][c].get<double>(),
+                  plan["points"][i]["lps"][c].get<double>(), 1e-6);
+  // A line per cutting path, from its first point to its last.
+  ASSERT_EQ(l.at("lines_lps").size(), plan.at("paths").size());
+  const json& path = plan["paths"][0];
+  const json& line = l["lines_lps"][0];
+  ASSERT_GE(line.size(), path.size());
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(line.front()[c].get<double>(),
+                plan["points"][path.front().get<int>()]["lps"][c].get<double>(), 1e-6);
+    EXPECT_NEAR(line.back()[c].get<double>(),
+                plan["points"][path.back().get<int>()]["lps"][c].get<double>(), 1e-6);
+  }
+  EXPECT_EQ(l["centre"]["theta_deg"], plan["frame"]["theta_deg"]);
+  EXPECT_EQ(l["centre"]["z_mm"], plan["frame"]["z_mm"]);
+  EXPECT_NEAR(norm3(l["centre"]["normal_lps"]), 1.0, 1e-9);
+  const auto bad = post("/api/plan/lines", "[1, 2]");
+  ASSERT_TRUE(bad);
+  EXPECT_EQ(bad->status, 400);
+  EXPECT_NE(error_of(bad).find("expected a JSON object"), std::string::npos);
+  expect_still_serving();
+}
+
+TEST_F(ServerTest, ASimulationsSkinAndTensionAreServedAsGlb) {
+  const auto idle = get("/api/progress");
+  ASSERT_TRUE(idle);
+  EXPECT_EQ(json::parse(idle->body).at("running"), false);
+  const auto planned = post("/api/plan/new", plan_body().dump());
+  ASSERT_TRUE(planned);
+  const json body = {{"plan", json::parse(planned->body)}, {"options", {{"mesh_size", 2.5}}}};
+  const auto simulated = post("/api/simulate", body.dump());
+  ASSERT_TRUE(simulated);
+  ASSERT_EQ(simulated->status, 200) << simulated->body;
+  const int id = json::parse(simulated->body).at("result_id");
+  const auto view = get("/api/results/" + std::to_string(id) + "/view");
+  ASSERT_TRUE(view);
+  ASSERT_EQ(view->status, 200) << view->body;
+  const json v = json::parse(view->body);
+  EXPECT_GE(v.at("subdivisions").get<int>(), 1);
+  EXPECT_LE(v.at("subdivisions").get<int>(), 8);
+  EXPECT_GT(v.at("tension_scale_max_kpa").get<double>(), 0);
+  EXPECT_GE(v.at("max_skin_tension_kpa").get<double>(), v.at("tension_scale_max_kpa").get<double>());
+  // The model's cells the simulation's skin replaces: around the plan, not the whole head. The
+  // phantom's grid is 128 x 64 (63 rows of cells, 2.8125 deg wide); the cell under the plan's
+  // centre is one of them.
+  const json& cells = v.at("replaced_cells");
+  ASSERT_FALSE(cells.empty());
+  EXPECT_LT(cells.size(), 128u * 63u / 4u);
+  EXPECT_TRUE(std::is_sorted(cells.begin(), cells.end()));
+  EXPECT_GE(cells.front().get<int>(), 0);
+  EXPECT_LT(cells.back().get<int>(), 128 * 63);
+  const json grid = json::parse(slurp(fs::path(kModel) / "model.json")).at("grid");
+  const json frame = json::parse(planned->body).at("frame");
+  const int j = static_cast<int>(std::floor(
+      (frame["theta_deg"].get<double>() - grid["theta0_deg"].get<double>()) / 2.8125));
+  const int k = static_cast<int>(std::floor(
+      (frame["z_mm"].get<double>() - grid["z0_mm"].get<double>()) / grid["dz_mm"].get<double>()));
+  EXPECT_NE(std::find(cells.begin(), cells.end(), json(k * 128 + j)), cells.end()) << j << ", " << k;
+  // A V-Y advancement excises nothing: no wound to fill before the closure.
+  EXPECT_NEAR(v.at("wound_area_mm2").at("pre").get<double>(), 0.0, 1e-9);
+  for (const char* k : {"skin", "tension"}) {
+    const auto glb = get(v.at(k).get<std::string>());
+    ASSERT_TRUE(glb);
+    ASSERT_EQ(glb->status, 200) << k;
+    EXPECT_EQ(glb->body.substr(0, 4), "glTF");
+    EXPECT_NE(glb->body.find("post-operative"), std::string::npos);  // the morph target
+  }
+  // Asked again: the same answer, from the files written the first time.
+  const auto again = get("/api/results/" + std::to_string(id) + "/view");
+  ASSERT_TRUE(again);
+  EXPECT_EQ(json::parse(again->body), v);
+  const auto none = get("/api/results/99999/view");
+  ASSERT_TRUE(none);
+  EXPECT_EQ(none->status, 404);
+  const auto after = get("/api/progress");
+  ASSERT_TRUE(after);
+  EXPECT_EQ(json::parse(after->body).at("running"), false);
+  expect_still_serving();
+}
+
+TEST(LoadedModel, IsReadOnceAndAgainWhenItsFilesChange) {
+  const fs::path dir = fs::temp_directory_path() / "caps_test_server_loaded";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string model = (dir / "model").string();
+  caps_test::make_phantom_model(dir, model);
+  const auto first = app::loaded_model(model);
+  EXPECT_EQ(app::loaded_model(model), first);  // the same object: not read again
+  EXPECT_EQ(app::loaded_model(model + "/"), first);
+  // A rewritten map (a new modification time) is read again.
+  const fs::path map = fs::path(model) / "thickness.nrrd";
+  fs::last_write_time(map, fs::last_write_time(map) + std::chrono::seconds(5));
+  const auto second = app::loaded_model(model);
+  EXPECT_NE(second, first);
+  EXPECT_EQ(second->content_hash(), first->content_hash());
+  // A broken model: PatientModel::load's message.
+  fs::remove(map);
+  const std::string load_message = message_of([&] { PatientModel::load(model); });
+  ASSERT_FALSE(load_message.empty());
+  EXPECT_EQ(message_of([&] { app::loaded_model(model); }), load_message);
 }

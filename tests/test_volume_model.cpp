@@ -14,38 +14,15 @@
 #include "caps/volume/model.hpp"
 #include "caps/volume/model_dir.hpp"
 #include "caps/volume/phantom.hpp"
+#include "caps/volume/read_volume.hpp"
+#include "phantom_crossing.hpp"
 
 namespace fs = std::filesystem;
 using namespace caps;
 
 namespace {
 
-// The radius along the model's ray (theta, z) where the phantom's surface r = R(theta', z')
-// (in the phantom's own cylindrical frame) is crossed, outermost first; NaN if never.
-template <typename Radius>
-double analytic_crossing(const HeadPhantom& ph, const CylinderAxis& axis, double theta, double z,
-                         Radius&& R, double r_from = 160.0) {
-  const Eigen::Vector3d a = ph.axis_point();
-  auto g = [&](double r) {
-    const Eigen::Vector3d p = axis.to_lps(theta, z, r) - a;
-    const double th = std::atan2(p[0], -p[1]);
-    return R(th, p[2]) - std::hypot(p[0], p[1]);  // > 0 inside
-  };
-  double prev = r_from;
-  if (g(prev) > 0) return std::nan("");
-  for (double r = r_from - 0.05; r >= 0; r -= 0.05) {
-    if (g(r) > 0) {
-      double lo = r, hi = prev;
-      for (int i = 0; i < 40; ++i) {
-        const double m = 0.5 * (lo + hi);
-        (g(m) > 0 ? lo : hi) = m;
-      }
-      return 0.5 * (lo + hi);
-    }
-    prev = r;
-  }
-  return std::nan("");
-}
+using caps_test::analytic_crossing;
 
 struct PhantomModel {
   HeadPhantom ph;
@@ -374,4 +351,49 @@ TEST(ModelDirectory, ModelJsonAndMapsReadBackAsWritten) {
                         model_file::kBoneMesh})
     EXPECT_TRUE(fs::exists(tmp / f)) << f;
   fs::remove_all(tmp);
+}
+
+TEST(VolumeModel, SkullStrippedMrIsWarnedAbout) {
+  // ch2bet is ch2 (a T1 MR with scalp) after brain extraction: its only object is the brain.
+  const fs::path bet = "/usr/share/mricron/templates/ch2bet.nii.gz";
+  const fs::path whole = "/usr/share/mricron/templates/ch2.nii.gz";
+  if (!fs::exists(bet) || !fs::exists(whole)) GTEST_SKIP() << "mricron-data is not installed";
+  ModelOptions o;
+  o.maps.n_theta = 64;
+  o.maps.n_z = 32;
+  Reporter stripped, scalp;
+  const VolumeModel m = build_volume_model(read_volume(bet), o, &stripped);
+  std::printf("ch2bet head volume %.0f ml\n", m.segmentation.head_volume_ml);
+  int n_stripped = 0;  // the other warning: the MR's bone is an approximation
+  for (const auto& warning : stripped.warnings())
+    n_stripped += warning.find("looks skull-stripped") != std::string::npos;
+  EXPECT_EQ(n_stripped, 1);
+  const VolumeModel w = build_volume_model(read_volume(whole), o, &scalp);
+  std::printf("ch2 head volume %.0f ml\n", w.segmentation.head_volume_ml);
+  for (const auto& warning : scalp.warnings())
+    EXPECT_EQ(warning.find("skull-stripped"), std::string::npos) << warning;
+}
+
+TEST(VolumeModel, UnsignedCtIsShiftedWithAWarning) {
+  // The phantom stored as HU + 1024 (air near 0), as the Stanford CThead is: the model is the
+  // same as the signed phantom's, and the shift is warned about.
+  PhantomOptions po;
+  po.dims = {64, 80, 72};
+  po.spacing_mm = {3, 3, 3};
+  po.head_holder = false;
+  ModelOptions o;
+  o.maps.n_theta = 64;
+  o.maps.n_z = 32;
+  const Volume signed_ct = make_phantom(po);
+  Volume unsigned_ct = signed_ct;
+  for (float& x : unsigned_ct.data) x += 1024.0f;
+  Reporter quiet, shifted;
+  const VolumeModel a = build_volume_model(signed_ct, o, &quiet);
+  const VolumeModel b = build_volume_model(unsigned_ct, o, &shifted);
+  EXPECT_TRUE(quiet.warnings().empty());
+  ASSERT_EQ(shifted.warnings().size(), 1u);
+  EXPECT_NE(shifted.warnings()[0].find("HU + 1024"), std::string::npos);
+  EXPECT_EQ(a.stats.valid_cells, b.stats.valid_cells);
+  EXPECT_GT(b.stats.valid_cells, b.stats.cells / 2);
+  EXPECT_NEAR(a.stats.thickness_median_mm, b.stats.thickness_median_mm, 1e-6);
 }

@@ -4,6 +4,9 @@
 #include <cmath>
 #include <random>
 
+#include "caps/core/error.hpp"
+#include "caps/volume/distance_field.hpp"
+#include "caps/volume/isosurface.hpp"
 #include "caps/volume/morphology.hpp"
 #include "caps/volume/segment.hpp"
 
@@ -182,4 +185,35 @@ TEST(Morphology, SmallRadiusStencilMatchesDefinition) {
         ASSERT_EQ(d.at(i, j, k) != 0, near_set) << i << " " << j << " " << k;
         ASSERT_EQ(e.at(i, j, k) != 0, m.at(i, j, k) && !near_unset) << i << " " << j << " " << k;
       }
+}
+
+TEST(DistanceField, SphereDistancesAreExactInTheBand) {
+  // A sphere of radius 20 mm about c, as a marching-cubes mesh of its analytic distance (1 mm
+  // voxels: the facets lie within h^2 / (8 r) = 0.006 mm of the sphere).
+  const Eigen::Vector3d c(31.0, 32.0, 30.5);
+  Volume f;
+  f.geom.dims = {64, 64, 64};
+  f.geom.spacing_mm = {1, 1, 1};
+  f.data.resize(f.geom.n_voxels());
+  for (int k = 0; k < 64; ++k)
+    for (int j = 0; j < 64; ++j)
+      for (int i = 0; i < 64; ++i)
+        f.at(i, j, k) = static_cast<float>(20.0 - (Eigen::Vector3d(i, j, k) - c).norm());
+  const TriMesh sphere = extract_isosurface(f, 0.0f);
+  const SignedDistanceField sdf = SignedDistanceField::from_mesh(sphere, 0.5, 12.0, 3.0);
+  EXPECT_DOUBLE_EQ(sdf.voxel_mm(), 0.5);
+  EXPECT_GT(sdf.n_active_voxels(), 100000u);
+  for (double r : {17.5, 19.0, 20.0, 21.3, 25.0, 31.0}) {
+    for (const Eigen::Vector3d d : {Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(0, -0.6, 0.8),
+                                    Eigen::Vector3d(0.48, 0.6, -0.64)}) {
+      const Eigen::Vector3d p = c + r * d;
+      // Trilinear between voxels of exact distances: within a few hundredths of a millimetre.
+      EXPECT_NEAR(sdf(p), r - 20.0, 0.05) << "r " << r;
+      if (r > 18.0) EXPECT_NEAR(sdf.gradient(p).dot(d), 1.0, 0.05) << "r " << r;
+    }
+  }
+  // Outside the band: the band's value.
+  EXPECT_NEAR(sdf(c + Eigen::Vector3d(40, 0, 0)), 12.0, 1e-3);
+  EXPECT_NEAR(sdf(c), -3.0, 1e-3);
+  EXPECT_THROW(SignedDistanceField::from_mesh(TriMesh{}, 1.0, 3.0, 3.0), InvalidInput);
 }

@@ -77,6 +77,10 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   o.maps.n_theta = r.n_theta;
   o.maps.n_z = r.n_z;
   o.maps.bone_cap_mm = r.bone_cap;
+  o.maps.layers.measure = !r.no_layers;
+  o.maps.layers.fat_level_hu = r.fat_level;
+  o.maps.layers.merge_gap_mm = r.fat_merge_gap;
+  o.maps.layers.min_band_mm = r.fat_min_band;
   o.decimate_fraction = r.decimate;
   if (!r.axis_origin.empty() || !r.axis_dir.empty()) {
     CylinderAxis axis;
@@ -299,16 +303,18 @@ PhantomResult run_phantom(const PhantomRequest& r, Reporter*) {
     o.spacing_mm[a] = h[a];
   }
   o.head_holder = !r.no_holder;
+  o.layered = r.layered;
   const Volume v = make_phantom(o);
   write_nifti(v, path);
-  return {r.output, o.dims, o.spacing_mm, o.head_holder};
+  return {r.output, o.dims, o.spacing_mm, o.head_holder, o.layered};
 }
 
 std::string to_json(const PhantomResult& p) {
   return json{{"output", p.output},
               {"dims", {p.dims[0], p.dims[1], p.dims[2]}},
               {"spacing_mm", {p.spacing_mm[0], p.spacing_mm[1], p.spacing_mm[2]}},
-              {"head_holder", p.head_holder}}
+              {"head_holder", p.head_holder},
+              {"layered", p.layered}}
       .dump(2);
 }
 

@@ -13,6 +13,7 @@
 #include "caps/plan/plan_figure.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/plan/procedures.hpp"
+#include "caps/app/loaded_model.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "json_fields.hpp"
 #include "numbers.hpp"
@@ -91,7 +92,8 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
     throw InvalidInput("--orientation: give an angle in degrees");
   plan::LocalProcedure proc = from_file ? plan::parse_procedure_json(read_text(r.procedure), r.procedure)
                                         : plan::layout_procedure(r.procedure, r.parameters);
-  const PatientModel model = PatientModel::load(r.model);
+  const auto loaded = loaded_model(r.model);
+  const PatientModel& model = *loaded;
   double theta = 0, z = 0;
   if (!r.at.empty()) {
     const auto tz = parse_numbers<2>(r.at, "--at", "THETA,Z in degrees and mm, e.g. --at 0,95");
@@ -113,7 +115,8 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
 
 PlanResult run_plan_check(const PlanCheckRequest& r, Reporter* reporter) {
   const plan::Plan p = plan::read_plan(r.plan);
-  const PatientModel model = PatientModel::load(model_of(r.model, p, r.plan));
+  const auto loaded = loaded_model(model_of(r.model, p, r.plan));
+  const PatientModel& model = *loaded;
   return plan_result(p, plan::check_plan(p, model), "", reporter);
 }
 
@@ -121,7 +124,8 @@ PlanResult run_plan_show(const PlanShowRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   refuse_existing(r.output, r.force);
   const plan::Plan p = plan::read_plan(r.plan);
-  const PatientModel model = PatientModel::load(model_of(r.model, p, r.plan));
+  const auto loaded = loaded_model(model_of(r.model, p, r.plan));
+  const PatientModel& model = *loaded;
   const plan::PlanReport report = plan::check_plan(p, model);
   plan::PlanFigureOptions o;
   o.use_thickness = r.thickness;

@@ -10,6 +10,7 @@
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/plan/plan_io.hpp"
+#include "caps/render/drawn_skin.hpp"
 #include "caps/render/gltf_export.hpp"
 #include "caps/render/overlay.hpp"
 #include "caps/render/render.hpp"
@@ -60,13 +61,16 @@ RenderResult run_render(const RenderRequest& r, Reporter* reporter) {
   const PatientModel model = PatientModel::load(r.model);
   const int n = r.subdivisions > 0 ? r.subdivisions
                                    : render::full_resolution_subdivisions(model, mesh);
-  const render::SkinSurfaces skin = render::displaced_skin(model, mesh, &u, n);
+  const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);
+  const render::SkinSurfaces skin = render::displaced_skin(model, mesh, &u, n, &drawn);
   progress.update(1);
   const auto [fill_pre_mm2, fill_post_mm2] = render::wound_fill_area_mm2(skin);
   OutputDirectory out(r.output, r.force);
   render::RenderOptions o;
   o.width = o.height = r.image_size;
   render::Overlays overlays;
+  overlays.suture_lines = true;
+  overlays.scale_bar = true;
   if (r.displacement_map) overlays.scalar_maps.push_back(render::displacement_map(skin));
   if (r.tension_map)
     overlays.scalar_maps.push_back(render::tension_map(

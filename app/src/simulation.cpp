@@ -15,7 +15,9 @@
 #include "caps/fem/mesh_pictures.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/plan/plan_io.hpp"
+#include "caps/render/drawn_skin.hpp"
 #include "caps/render/simulation_report.hpp"
+#include "caps/app/loaded_model.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "json_fields.hpp"
 #include "numbers.hpp"
@@ -76,7 +78,8 @@ MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
   const fem::SimulateOptions o = simulate_options(r.meshing, {});
   const fem::WoundBorder border = border_of(r);
   OutputDirectory out(r.output, r.force);
-  const PatientModel model = PatientModel::load(r.model);
+  const auto loaded = loaded_model(r.model);
+  const PatientModel& model = *loaded;
   fem::WoundMesh w = fem::mesh_wound(border, model, o.surface, o.continuum, reporter);
   const std::string wound = r.plan.empty() ? r.border : r.plan;
   w.continuum.mesh.model = r.model;
@@ -157,18 +160,25 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
     throw InvalidInput("--tension-map draws on the rendered images; add --render");
   const plan::Plan plan = plan::read_plan(r.plan);
   OutputDirectory out(r.output, r.force);
-  const PatientModel model = PatientModel::load(r.model);
+  const auto loaded = loaded_model(r.model);
+  const PatientModel& model = *loaded;
   fem::Simulation sim = fem::simulate(model, plan, o, reporter);
   sim.wound.continuum.mesh.model = r.model;
   sim.wound.continuum.mesh.plan = r.plan;
   fem::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string());
   SimulateResult s;
-  if (r.render)
+  if (r.render) {
+    const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);
+    render::SimulationPictures pictures;
+    pictures.tension_map = r.tension_map;
+    pictures.drawn = &drawn;
+    pictures.plan = &plan;
     for (const fs::path& p : render::render_simulation(
              model, sim,
              {render::View::Front, render::View::Oblique, render::View::Side, render::View::Plan},
-             {}, out.path(), r.tension_map, reporter))
+             {}, out.path(), pictures, reporter))
       s.images.push_back(p.filename().string());
+  }
   out.commit();
   const auto& res = sim.result;
   s.output = r.output;
@@ -319,10 +329,15 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
   const fem::SimulateOptions o = simulate_options(r.meshing, r.solver);
   const plan::Plan plan = plan::read_plan(r.plan);
   OutputDirectory out(r.output, r.force);
-  const PatientModel model = PatientModel::load(r.model);
+  const auto loaded = loaded_model(r.model);
+  const PatientModel& model = *loaded;
   const fem::Comparison c = fem::compare_thickness(model, plan, r.thickness, o, reporter);
   const std::string name = fs::path(r.plan).filename().string();
-  render::write_comparison_report(c, model, o, out.path(), name, {}, reporter);
+  const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);
+  render::SimulationPictures pictures;
+  pictures.drawn = &drawn;
+  pictures.plan = &plan;
+  render::write_comparison_report(c, model, o, out.path(), name, {}, reporter, pictures);
   out.commit();
   CompareResult s;
   s.output = r.output;

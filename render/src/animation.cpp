@@ -156,8 +156,8 @@ void write_transition_gif(const SkinSurfaces& s, const Camera& camera, const Ren
   if (frames < 2 || frames > 600)
     throw InvalidInput(cat(path.string(), ": ", frames, " frames; expected 2..600"));
   const auto frame = [&](int k) {
-    return render_image(blend_skin(s, k == frames - 1 ? 1.0 : double(k) / (frames - 1)), s.color,
-                        camera, options);
+    return render_skin(s, k == frames - 1 ? 1.0 : double(k) / (frames - 1), s.color, camera,
+                       options);
   };
   const RgbImage first = frame(0), last = frame(frames - 1);
   Palette palette({&first, &last}, path);

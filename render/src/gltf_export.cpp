@@ -19,21 +19,6 @@ namespace {
 
 constexpr int kFloat = TINYGLTF_COMPONENT_TYPE_FLOAT;
 
-// Area-weighted vertex normals; vertices in no (non-degenerate) triangle get a zero row.
-Eigen::MatrixX3d vertex_normals(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
-  Eigen::MatrixX3d N = Eigen::MatrixX3d::Zero(V.rows(), 3);
-  for (Eigen::Index f = 0; f < F.rows(); ++f) {
-    const Eigen::Vector3d a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
-    const Eigen::Vector3d n = (b - a).cross(c - a);
-    for (int k = 0; k < 3; ++k) N.row(F(f, k)) += n.transpose();
-  }
-  for (Eigen::Index v = 0; v < N.rows(); ++v) {
-    const double l = N.row(v).norm();
-    if (l > 0) N.row(v) /= l;
-  }
-  return N;
-}
-
 double srgb_to_linear(double c) {
   c = std::clamp(c, 0.0, 1.0);
   return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
@@ -151,8 +136,8 @@ void write_gltf(const SkinSurfaces& s, const std::filesystem::path& path) {
   model.asset.generator = "caps (caps::render::write_gltf)";
   Builder b(model);
 
-  const Eigen::MatrixX3d n_pre = gltf_normals(vertex_normals(s.pre.V, s.pre.F), nullptr);
-  const Eigen::MatrixX3d n_post = gltf_normals(vertex_normals(s.post.V, s.pre.F), &n_pre);
+  const Eigen::MatrixX3d n_pre = gltf_normals(shading_normals(s, 0.0), nullptr);
+  const Eigen::MatrixX3d n_post = gltf_normals(shading_normals(s, 1.0), &n_pre);
 
   const std::vector<float> pos = to_gltf_floats(s.pre.V);
   std::vector<float> nrm(3 * nv), col(3 * nv), dpos(3 * nv), dnrm(3 * nv);

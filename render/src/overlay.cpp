@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -152,20 +154,148 @@ void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
   image = canvas.image();
 }
 
-void draw_polylines(RgbImage& image, const Camera& camera,
-                    const std::vector<std::vector<Eigen::Vector3d>>& lines) {
+namespace {
+
+// Polylines in LPS mm drawn with `pen` at their pixels camera.project(p); with `hits`, only the
+// runs of points not hidden by the surface (no deeper than the surface met through their pixel,
+// plus kLineDepthToleranceMm).
+constexpr double kLineDepthToleranceMm = 1.0;
+
+void draw_projected(RgbImage& image, const Camera& camera,
+                    const std::vector<std::vector<Eigen::Vector3d>>& lines, const Pen& pen,
+                    const PixelHits* hits, const char* who) {
   if (image.width != camera.width_px || image.height != camera.height_px)
-    throw InvalidInput(cat("draw_polylines: the image is ", image.width, "x", image.height,
+    throw InvalidInput(cat(who, ": the image is ", image.width, "x", image.height,
                            " pixels, the camera ", camera.width_px, "x", camera.height_px));
+  if (hits && (hits->width != camera.width_px || hits->height != camera.height_px))
+    throw InvalidInput(cat(who, ": the hits are ", hits->width, "x", hits->height,
+                           " pixels, the camera ", camera.width_px, "x", camera.height_px));
+  auto visible = [&](const Eigen::Vector3d& p, const Eigen::Vector2d& q) {
+    if (!hits) return true;
+    const int x = static_cast<int>(std::floor(q.x())), y = static_cast<int>(std::floor(q.y()));
+    if (x < 0 || y < 0 || x >= hits->width || y >= hits->height) return true;
+    return camera.depth_mm(p) <=
+           hits->depth_mm[static_cast<std::size_t>(y) * hits->width + x] + kLineDepthToleranceMm;
+  };
   Canvas canvas(image);
-  const Pen marker{.colour = {0.15, 0.1, 0.45},
-                   .width_px = std::max(1.5, 0.003 * camera.width_px),
-                   .dash_px = {6.0, 4.0}};
   for (const auto& line : lines) {
-    std::vector<Eigen::Vector2d> px;
-    for (const auto& p : line) px.push_back(camera.project(p));
-    canvas.polyline(px, marker);
+    std::vector<Eigen::Vector2d> run;
+    for (const auto& p : line) {
+      const Eigen::Vector2d q = camera.project(p);
+      if (visible(p, q)) {
+        run.push_back(q);
+        continue;
+      }
+      if (run.size() >= 2) canvas.polyline(run, pen);
+      run.clear();
+    }
+    if (run.size() >= 2) canvas.polyline(run, pen);
   }
+  image = canvas.image();
+}
+
+}  // namespace
+
+void draw_polylines(RgbImage& image, const Camera& camera,
+                    const std::vector<std::vector<Eigen::Vector3d>>& lines,
+                    const PixelHits* hits) {
+  draw_projected(image, camera, lines,
+                 Pen{.colour = {0.15, 0.1, 0.45},
+                     .width_px = std::max(1.5, 0.003 * camera.width_px),
+                     .dash_px = {6.0, 4.0}},
+                 hits, "draw_polylines");
+}
+
+void draw_suture_lines(RgbImage& image, const Camera& camera,
+                       const std::vector<std::vector<Eigen::Vector3d>>& lines,
+                       const PixelHits* hits) {
+  draw_projected(image, camera, lines,
+                 Pen{.colour = {0.55, 0.08, 0.1},
+                     .width_px = std::max(1.2, 0.0025 * camera.width_px),
+                     .round_joins = true},
+                 hits, "draw_suture_lines");
+}
+
+std::vector<std::vector<Eigen::Vector3d>> suture_lines(const SkinSurfaces& skin) {
+  // directed edges of the micropolygons without their opposite: the rim and the lips
+  std::set<std::pair<int, int>> directed;
+  for (Eigen::Index f = 0; f < skin.pre.F.rows(); ++f) {
+    if (skin.face_part[static_cast<std::size_t>(f)] != SkinPart::Micropolygon) continue;
+    for (int k = 0; k < 3; ++k) directed.insert({skin.pre.F(f, k), skin.pre.F(f, (k + 1) % 3)});
+  }
+  std::map<int, int> next;
+  for (const auto& [a, b] : directed)
+    if (!directed.count({b, a})) next[a] = b;
+  std::vector<std::vector<int>> loops;
+  while (!next.empty()) {
+    std::vector<int> loop;
+    for (int v = next.begin()->first; next.count(v);) {
+      loop.push_back(v);
+      const int w = next[v];
+      next.erase(v);
+      v = w;
+    }
+    if (loop.size() >= 2) loops.push_back(std::move(loop));
+  }
+  // the outer rim: the loop of largest counter-clockwise area in (theta, z)
+  std::size_t rim = loops.size();
+  double rim_area = 0;
+  for (std::size_t l = 0; l < loops.size(); ++l) {
+    double a = 0;
+    for (std::size_t i = 0; i < loops[l].size(); ++i) {
+      const Eigen::Vector2d p = skin.theta_z.row(loops[l][i]);
+      const Eigen::Vector2d q = skin.theta_z.row(loops[l][(i + 1) % loops[l].size()]);
+      a += p.x() * q.y() - q.x() * p.y();
+    }
+    if (a > rim_area) {
+      rim_area = a;
+      rim = l;
+    }
+  }
+  std::vector<std::vector<Eigen::Vector3d>> out;
+  for (std::size_t l = 0; l < loops.size(); ++l) {
+    if (l == rim) continue;
+    std::vector<Eigen::Vector3d> line;
+    for (int v : loops[l]) line.push_back(skin.post.V.row(v).transpose());
+    line.push_back(line.front());
+    out.push_back(std::move(line));
+  }
+  return out;
+}
+
+double scale_bar_length_mm(double width_mm) {
+  if (!(width_mm > 0) || !std::isfinite(width_mm))
+    throw InvalidInput(cat("scale bar: the image width ", width_mm, " mm must be positive"));
+  const double limit = width_mm / 5.0;
+  double mag = std::pow(10.0, std::floor(std::log10(limit)));
+  double best = mag;
+  for (double m : {1.0, 2.0, 5.0})
+    if (m * mag <= limit * (1 + 1e-12)) best = m * mag;
+  return best;
+}
+
+void draw_scale_bar(RgbImage& image, const Camera& camera) {
+  if (camera.projection != Projection::Orthographic)
+    throw InvalidInput("scale bar: a perspective image has no single scale; use an orthographic camera");
+  if (image.width != camera.width_px || image.height != camera.height_px)
+    throw InvalidInput(cat("draw_scale_bar: the image is ", image.width, "x", image.height,
+                           " pixels, the camera ", camera.width_px, "x", camera.height_px));
+  const double mm = scale_bar_length_mm(camera.width_mm);
+  const double px = mm * camera.width_px / camera.width_mm;
+  Canvas canvas(image);
+  const double font = std::max(10.0, 0.018 * image.width);
+  const double margin = std::max(6.0, 0.02 * image.width);
+  const double x0 = margin + 0.5 * font, y = image.height - margin - 0.6 * font;
+  char label[32];
+  std::snprintf(label, sizeof label, "%g mm", mm);
+  const double panel_w = std::max(px, canvas.text_width(label, font)) + font;
+  canvas.fill_rect(margin, y - 2.2 * font, panel_w, 2.8 * font, {1, 1, 1}, 0.85);
+  const Pen bar{.colour = {0, 0, 0}, .width_px = std::max(2.0, 0.004 * image.width)};
+  const Pen tick{.colour = {0, 0, 0}, .width_px = std::max(1.0, 0.002 * image.width)};
+  canvas.line({x0, y}, {x0 + px, y}, bar);
+  canvas.line({x0, y - 0.4 * font}, {x0, y + 0.3 * font}, tick);
+  canvas.line({x0 + px, y - 0.4 * font}, {x0 + px, y + 0.3 * font}, tick);
+  canvas.text(x0, y - 0.7 * font, label, TextStyle{.size_px = font});
   image = canvas.image();
 }
 
@@ -204,19 +334,33 @@ std::vector<std::filesystem::path> render_views_with_overlays(const PatientModel
                              " values but the skin has ", skin.post.V.rows(), " vertices"));
     colors.push_back(scalar_colors(m.value, m.max_value));
   }
+  const std::vector<std::vector<Eigen::Vector3d>> sutures =
+      overlays.suture_lines ? suture_lines(skin) : std::vector<std::vector<Eigen::Vector3d>>{};
   for (View v : views) {
     progress.update(static_cast<double>(written.size()) / (2 + overlays.scalar_maps.size()));
     const Camera cam = standard_camera(v, model, skin, options.width, options.height);
-    RgbImage pre = render_image(skin.pre, skin.color, cam, options);
-    if (!overlays.plan_lines.empty()) draw_polylines(pre, cam, overlays.plan_lines);
+    const bool bar = overlays.scale_bar && cam.projection == Projection::Orthographic;
+    RgbImage pre = render_skin(skin, 0.0, skin.color, cam, options);
+    if (!overlays.plan_lines.empty()) {
+      const PixelHits hits = pixel_hits(skin.pre, cam);
+      draw_polylines(pre, cam, overlays.plan_lines, &hits);
+    }
+    if (bar) draw_scale_bar(pre, cam);
     written.push_back(dir / cat("pre_", view_name(v), ".png"));
     write_png(written.back(), pre);
+    RgbImage post = render_skin(skin, 1.0, skin.color, cam, options);
+    if (!sutures.empty()) {
+      const PixelHits hits = pixel_hits(skin.post, cam);
+      draw_suture_lines(post, cam, sutures, &hits);
+    }
+    if (bar) draw_scale_bar(post, cam);
     written.push_back(dir / cat("post_", view_name(v), ".png"));
-    write_png(written.back(), render_image(skin.post, skin.color, cam, options));
+    write_png(written.back(), post);
     for (std::size_t i = 0; i < overlays.scalar_maps.size(); ++i) {
       const ScalarMap& m = overlays.scalar_maps[i];
-      RgbImage map = render_image(skin.post, colors[i], cam, options);
+      RgbImage map = render_skin(skin, 1.0, colors[i], cam, options);
       draw_color_bar(map, m.max_value, m.unit, m.title, m.note);
+      if (bar) draw_scale_bar(map, cam);
       written.push_back(dir / cat(m.name, "_", view_name(v), ".png"));
       write_png(written.back(), map);
     }

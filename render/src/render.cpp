@@ -4,7 +4,9 @@
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
 #include "caps/image/image_io.hpp"
+#include "caps/render/animation.hpp"
 #include "caps/surface/patient_model.hpp"
+#include "embree_scene.hpp"
 
 #include <embree3/rtcore.h>
 #include <tbb/blocked_range.h>
@@ -17,27 +19,6 @@
 
 namespace caps::render {
 namespace {
-
-struct DeviceDeleter {
-  void operator()(RTCDeviceTy* d) const { rtcReleaseDevice(d); }
-};
-struct SceneDeleter {
-  void operator()(RTCSceneTy* s) const { rtcReleaseScene(s); }
-};
-
-Eigen::MatrixX3d vertex_normals(const TriMesh& m) {
-  Eigen::MatrixX3d N = Eigen::MatrixX3d::Zero(m.V.rows(), 3);
-  for (Eigen::Index f = 0; f < m.F.rows(); ++f) {
-    const Eigen::Vector3d a = m.V.row(m.F(f, 0)), b = m.V.row(m.F(f, 1)), c = m.V.row(m.F(f, 2));
-    const Eigen::Vector3d n = (b - a).cross(c - a);  // area-weighted
-    for (int k = 0; k < 3; ++k) N.row(m.F(f, k)) += n.transpose();
-  }
-  for (Eigen::Index v = 0; v < N.rows(); ++v) {
-    const double l = N.row(v).norm();
-    if (l > 0) N.row(v) /= l;
-  }
-  return N;
-}
 
 // Twice the radius of the sphere about `centre` that holds every vertex, plus 1 mm (mm): a point
 // this far from the centre is outside the mesh.
@@ -52,8 +33,7 @@ struct Tracer {
   CameraFrame frame;
   bool perspective = false;
   double back = 0;  // orthographic rays start this far before the target
-  std::unique_ptr<RTCDeviceTy, DeviceDeleter> device;
-  std::unique_ptr<RTCSceneTy, SceneDeleter> scene;
+  std::unique_ptr<detail::EmbreeScene> embree;
 
   Tracer(const TriMesh& mesh, const Camera& cam) : camera(cam) {
     if (mesh.V.rows() == 0 || mesh.F.rows() == 0) throw InvalidInput("render: the mesh is empty");
@@ -67,29 +47,21 @@ struct Tracer {
     const Eigen::Vector3d& origin = camera.target;
     // no triangle is behind an orthographic ray's origin
     back = outside_distance_mm(mesh, origin);
-    device.reset(rtcNewDevice(nullptr));
-    if (!device) throw Error("render: Embree could not create a device");
-    scene.reset(rtcNewScene(device.get()));
-    RTCGeometry geom = rtcNewGeometry(device.get(), RTC_GEOMETRY_TYPE_TRIANGLE);
-    auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
-        geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), mesh.V.rows()));
-    auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-        geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), mesh.F.rows()));
-    for (Eigen::Index v = 0; v < mesh.V.rows(); ++v)
-      for (int c = 0; c < 3; ++c) vb[3 * v + c] = static_cast<float>(mesh.V(v, c) - origin[c]);
-    for (Eigen::Index f = 0; f < mesh.F.rows(); ++f)
-      for (int c = 0; c < 3; ++c) ib[3 * f + c] = static_cast<unsigned>(mesh.F(f, c));
-    rtcCommitGeometry(geom);
-    rtcAttachGeometry(scene.get(), geom);
-    rtcReleaseGeometry(geom);
-    rtcSetSceneBuildQuality(scene.get(), RTC_BUILD_QUALITY_HIGH);
-    rtcCommitScene(scene.get());
+    embree = std::make_unique<detail::EmbreeScene>(mesh, origin);
   }
 
   // The first hit of the ray through pixel (x, y) (Camera::ray, relative to the target).
   RTCRayHit trace(RTCIntersectContext& ctx, double x, double y) const {
-    const Eigen::Vector2d q = camera.image_plane(x, y);
     Eigen::Vector3d org, dir;
+    ray(x, y, org, dir);
+    RTCRayHit rh = detail::make_ray(org, dir);
+    rtcIntersect1(embree->scene.get(), &ctx, &rh);
+    return rh;
+  }
+
+  // The ray through pixel (x, y) in double, relative to the target.
+  void ray(double x, double y, Eigen::Vector3d& org, Eigen::Vector3d& dir) const {
+    const Eigen::Vector2d q = camera.image_plane(x, y);
     if (perspective) {
       org = -camera.distance_mm * frame.forward;
       dir = (frame.forward + q.x() * frame.right + q.y() * frame.up).normalized();
@@ -97,22 +69,6 @@ struct Tracer {
       org = q.x() * frame.right + q.y() * frame.up - back * frame.forward;
       dir = frame.forward;
     }
-    RTCRayHit rh;
-    rh.ray.org_x = static_cast<float>(org.x());
-    rh.ray.org_y = static_cast<float>(org.y());
-    rh.ray.org_z = static_cast<float>(org.z());
-    rh.ray.dir_x = static_cast<float>(dir.x());
-    rh.ray.dir_y = static_cast<float>(dir.y());
-    rh.ray.dir_z = static_cast<float>(dir.z());
-    rh.ray.tnear = 0.0f;
-    rh.ray.tfar = std::numeric_limits<float>::infinity();
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.flags = 0;
-    rh.ray.time = 0.0f;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(scene.get(), &ctx, &rh);
-    return rh;
   }
 };
 
@@ -184,13 +140,19 @@ Camera standard_camera(View view, const PatientModel& model, const SkinSurfaces&
 
 RgbImage render_image(const TriMesh& mesh, const Eigen::MatrixX3d& color, const Camera& camera,
                       const RenderOptions& o) {
+  return render_image(mesh, color, vertex_normals(mesh), camera, o);
+}
+
+RgbImage render_image(const TriMesh& mesh, const Eigen::MatrixX3d& color,
+                      const Eigen::MatrixX3d& N, const Camera& camera, const RenderOptions& o) {
   if (color.rows() != mesh.V.rows())
     throw InvalidInput(cat("render: ", color.rows(), " colours for ", mesh.V.rows(), " vertices"));
+  if (N.rows() != mesh.V.rows())
+    throw InvalidInput(cat("render: ", N.rows(), " normals for ", mesh.V.rows(), " vertices"));
   if (o.samples_per_side < 1 || o.samples_per_side > 8)
     throw InvalidInput(
         cat("render: ", o.samples_per_side, " samples per side out of range (1..8)"));
   const Tracer tracer(mesh, camera);
-  const Eigen::MatrixX3d N = vertex_normals(mesh);
   const CameraFrame& fr = tracer.frame;
   // a head light (from the viewer) and a key light from the upper left of the image
   const Eigen::Vector3d head = -fr.forward;
@@ -256,14 +218,27 @@ PixelHits pixel_hits(const TriMesh& mesh, const Camera& camera) {
         if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
         const std::size_t i = static_cast<std::size_t>(y) * W + x;
         out.face[i] = static_cast<int>(rh.hit.primID);
-        // the hit relative to the target; the eye's plane is distance_mm before it
-        const Eigen::Vector3d org(rh.ray.org_x, rh.ray.org_y, rh.ray.org_z),
-            dir(rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z);
-        out.depth_mm[i] =
-            (org + double(rh.ray.tfar) * dir).dot(tracer.frame.forward) + camera.distance_mm;
+        // the hit relative to the target; the eye's plane is distance_mm before it. The ray's
+        // parameter is recomputed in double on the triangle's plane: Embree's float t (its
+        // watertight test in particular) is good to a few 1e-3 mm at 300 mm only.
+        Eigen::Vector3d org, dir;
+        tracer.ray(x + 0.5, y + 0.5, org, dir);
+        const Eigen::Index f = rh.hit.primID;
+        const Eigen::Vector3d a = mesh.V.row(mesh.F(f, 0)).transpose() - camera.target;
+        const Eigen::Vector3d n = (mesh.V.row(mesh.F(f, 1)) - mesh.V.row(mesh.F(f, 0)))
+                                      .cross(mesh.V.row(mesh.F(f, 2)) - mesh.V.row(mesh.F(f, 0)))
+                                      .transpose();
+        const double dn = dir.dot(n);
+        const double t = std::abs(dn) > 1e-12 * n.norm() ? (a - org).dot(n) / dn : double(rh.ray.tfar);
+        out.depth_mm[i] = (org + t * dir).dot(tracer.frame.forward) + camera.distance_mm;
       }
   });
   return out;
+}
+
+RgbImage render_skin(const SkinSurfaces& skin, double t, const Eigen::MatrixX3d& color,
+                     const Camera& camera, const RenderOptions& options) {
+  return render_image(blend_skin(skin, t), color, shading_normals(skin, t), camera, options);
 }
 
 std::vector<std::filesystem::path> render_views(const PatientModel& model,
@@ -276,7 +251,7 @@ std::vector<std::filesystem::path> render_views(const PatientModel& model,
     const Camera cam = standard_camera(v, model, skin, options.width, options.height);
     for (const bool post : {false, true}) {
       const auto path = dir / cat(post ? "post_" : "pre_", view_name(v), ".png");
-      write_png(path, render_image(post ? skin.post : skin.pre, skin.color, cam, options));
+      write_png(path, render_skin(skin, post ? 1.0 : 0.0, skin.color, cam, options));
       written.push_back(path);
     }
   }

@@ -7,6 +7,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/image/image_io.hpp"
 #include "caps/surface/patient_model.hpp"
 
 namespace fs = std::filesystem;
@@ -57,19 +58,33 @@ std::pair<double, double> wound_fill_area_mm2(const SkinSurfaces& skin) {
   return {pre, post};
 }
 
-SkinSurfaces simulated_skin(const PatientModel& model, const fem::Simulation& sim) {
+SkinSurfaces simulated_skin(const PatientModel& model, const fem::Simulation& sim,
+                            const DrawnSkin* drawn) {
   const fem::Mesh& mesh = sim.wound.continuum.mesh;
-  return displaced_skin(model, mesh, &sim.result, full_resolution_subdivisions(model, mesh));
+  return displaced_skin(model, mesh, &sim.result, full_resolution_subdivisions(model, mesh), drawn);
 }
+
+namespace {
+
+Overlays simulation_overlays(const PatientModel& model, const SimulationPictures& pictures) {
+  Overlays overlays;
+  if (pictures.plan) overlays.plan_lines = plan_lines(*pictures.plan, model);
+  overlays.suture_lines = true;
+  overlays.scale_bar = true;
+  return overlays;
+}
+
+}  // namespace
 
 std::vector<fs::path> render_simulation(const PatientModel& model, const fem::Simulation& sim,
                                         const std::vector<View>& views, const RenderOptions& options,
-                                        const fs::path& dir, bool tension, Reporter* reporter) {
+                                        const fs::path& dir, const SimulationPictures& pictures,
+                                        Reporter* reporter) {
   Progress progress(reporter, "rendering the skin", 2);
-  const SkinSurfaces skin = simulated_skin(model, sim);
+  const SkinSurfaces skin = simulated_skin(model, sim, pictures.drawn);
   progress.update(1);
-  Overlays overlays;
-  if (tension)
+  Overlays overlays = simulation_overlays(model, pictures);
+  if (pictures.tension_map)
     overlays.scalar_maps.push_back(
         tension_map(skin, sim.wound.continuum.mesh, sim.result.max_principal_mpa));
   return render_views_with_overlays(model, skin, views, options, overlays, dir, reporter);
@@ -78,7 +93,7 @@ std::vector<fs::path> render_simulation(const PatientModel& model, const fem::Si
 void write_comparison_report(const fem::Comparison& c, const PatientModel& model,
                              const fem::SimulateOptions& options, const fs::path& dir,
                              const std::string& plan_name, const RenderOptions& render_options,
-                             Reporter* reporter) {
+                             Reporter* reporter, const SimulationPictures& pictures) {
   fs::create_directories(dir / "measured");
   fs::create_directories(dir / "constant");
   fem::SimulateOptions constant = options;
@@ -86,8 +101,42 @@ void write_comparison_report(const fem::Comparison& c, const PatientModel& model
   fem::write_simulation(c.measured, model, options, dir / "measured", plan_name + ", measured thickness");
   fem::write_simulation(c.constant, model, constant, dir / "constant", plan_name + ", constant thickness");
   const std::vector<View> views{View::Plan, View::Oblique};
-  render_simulation(model, c.measured, views, render_options, dir / "measured", false, reporter);
-  render_simulation(model, c.constant, views, render_options, dir / "constant", false, reporter);
+  SimulationPictures plain = pictures;
+  plain.tension_map = false;
+  const Overlays overlays = simulation_overlays(model, plain);
+  const SkinSurfaces measured_skin = simulated_skin(model, c.measured, pictures.drawn);
+  const SkinSurfaces constant_skin = simulated_skin(model, c.constant, pictures.drawn);
+  render_views_with_overlays(model, measured_skin, views, render_options, overlays,
+                             dir / "measured", reporter);
+  render_views_with_overlays(model, constant_skin, views, render_options, overlays,
+                             dir / "constant", reporter);
+  // The difference: both simulations mesh the same surface, so their skins have the same
+  // vertices; each vertex of the measured skin is coloured by how far the constant-thickness
+  // closure put it from the measured one.
+  std::string difference_html;
+  if (measured_skin.post.V.rows() == constant_skin.post.V.rows() &&
+      measured_skin.pre.V.isApprox(constant_skin.pre.V)) {
+    ScalarMap diff;
+    diff.name = "difference";
+    diff.value = (measured_skin.post.V - constant_skin.post.V).rowwise().norm();
+    diff.max_value = scale_top(diff.value, 0);
+    diff.unit = "mm";
+    diff.title = "|measured - constant|\nafter the closure, mm";
+    const Camera cam = standard_camera(View::Plan, model, measured_skin, render_options.width,
+                                       render_options.height);
+    RgbImage img = render_skin(measured_skin, 1.0, scalar_colors(diff.value, diff.max_value), cam,
+                               render_options);
+    draw_suture_lines(img, cam, suture_lines(measured_skin));
+    draw_color_bar(img, diff.max_value, diff.unit, diff.title);
+    draw_scale_bar(img, cam);
+    write_png(dir / "difference_plan.png", img);
+    difference_html = "<h2>Where the two closures differ</h2>\n<p>The skin after the closure (measured "
+                      "thickness), coloured by the distance between the two post-operative skins: "
+                      "largest " + fmt(diff.max_value, 2) + " mm.</p>\n<img src=\"difference_plan.png\" "
+                      "alt=\"difference\" style=\"max-width:49%\">\n";
+  } else {
+    difference_html = "<p>No difference image: the two skins were not meshed alike.</p>\n";
+  }
   write_text_atomic(dir / "comparison.json", fem::comparison_json(c, plan_name) + "\n");
 
   const auto& a = c.measured_summary;
@@ -130,7 +179,7 @@ void write_comparison_report(const fem::Comparison& c, const PatientModel& model
           b.max_skin_tension_kpa, 1) +
       row("strain energy", "mJ", a.strain_energy_mj, b.strain_energy_mj) + "</table>\n" +
       pair("After the closure, looking at the wound", "post_plan.png") +
-      pair("After the closure, oblique", "post_oblique.png") +
+      pair("After the closure, oblique", "post_oblique.png") + difference_html +
       "<h2>Before (the same for both)</h2>\n<img src=\"measured/pre_plan.png\" alt=\"before\" "
       "style=\"max-width:49%\">\n" + pair("Cross-sections", "section.png") +
       "<h2>Surface mesh (the same for both)</h2>\n<img src=\"measured/surface.png\" alt=\"surface "

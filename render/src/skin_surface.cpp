@@ -2,8 +2,13 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "caps/render/drawn_skin.hpp"
 #include "caps/fem/elements.hpp"
 #include "caps/surface/patient_model.hpp"
+
+#include <CGAL/Constrained_Delaunay_triangulation_2.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Triangulation_vertex_base_with_info_2.h>
 
 #include <algorithm>
 #include <array>
@@ -14,6 +19,15 @@
 namespace caps::render {
 namespace {
 
+using CdtKernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Cdt = CGAL::Constrained_Delaunay_triangulation_2<
+    CdtKernel,
+    CGAL::Triangulation_data_structure_2<
+        CGAL::Triangulation_vertex_base_with_info_2<int, CdtKernel>,
+        CGAL::Constrained_triangulation_face_base_2<CdtKernel>>,
+    CGAL::Exact_predicates_tag>;
+using CdtPoint = CdtKernel::Point_2;
+
 // A skin tone for models without colour (CT, MR): sRGB of light skin.
 const Eigen::Vector3d kSkinTone(0.87, 0.70, 0.60);
 
@@ -23,6 +37,8 @@ struct Builder {
   std::vector<int> element;
   std::vector<Eigen::Vector3i> faces;
   std::vector<SkinPart> part;
+  std::vector<int> cap_centres;  // the vertices on the axis closing the range mesh's ends
+  std::vector<std::pair<int, Eigen::Vector3d>> given_normals;  // the isosurface's vertices
 
   int add(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& c,
           const Eigen::Vector3d& d, const Eigen::Vector2d& tz, int e,
@@ -167,8 +183,39 @@ int full_resolution_subdivisions(const PatientModel& model, const fem::Mesh& mes
 }
 
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
-                            const fem::SolveResult* result, int n_subdivisions) {
-  return displaced_skin(model, mesh, result ? &result->displacement_mm : nullptr, n_subdivisions);
+                            const fem::SolveResult* result, int n_subdivisions,
+                            const DrawnSkin* drawn) {
+  return displaced_skin(model, mesh, result ? &result->displacement_mm : nullptr, n_subdivisions,
+                        drawn);
+}
+
+Eigen::MatrixX3d vertex_normals(const TriMesh& m) {
+  Eigen::MatrixX3d N = Eigen::MatrixX3d::Zero(m.V.rows(), 3);
+  for (Eigen::Index f = 0; f < m.F.rows(); ++f) {
+    const Eigen::Vector3d a = m.V.row(m.F(f, 0)), b = m.V.row(m.F(f, 1)), c = m.V.row(m.F(f, 2));
+    const Eigen::Vector3d n = (b - a).cross(c - a);  // area-weighted
+    for (int k = 0; k < 3; ++k) N.row(m.F(f, k)) += n.transpose();
+  }
+  for (Eigen::Index v = 0; v < N.rows(); ++v) {
+    const double l = N.row(v).norm();
+    if (l > 0) N.row(v) /= l;
+  }
+  return N;
+}
+
+Eigen::MatrixX3d shading_normals(const SkinSurfaces& skin, double t) {
+  const bool given = skin.normal_pre.rows() == skin.pre.V.rows() &&
+                     skin.normal_post.rows() == skin.pre.V.rows();
+  if (!given) {
+    TriMesh m{skin.pre.V + t * (skin.post.V - skin.pre.V), skin.pre.F};
+    return vertex_normals(m);
+  }
+  Eigen::MatrixX3d N = (1.0 - t) * skin.normal_pre + t * skin.normal_post;
+  for (Eigen::Index v = 0; v < N.rows(); ++v) {
+    const double l = N.row(v).norm();
+    if (l > 0) N.row(v) /= l;
+  }
+  return N;
 }
 
 namespace {
@@ -202,16 +249,62 @@ Eigen::Vector3d top_face_centre(const fem::Mesh& mesh, const std::vector<int>& e
   return centre / n_face_nodes;
 }
 
+// The drawn range surface's normals at its grid vertices (central differences, periodic in
+// theta, one-sided at the first and last rows), interpolated bilinearly in between: one smooth
+// normal field for the range cells, the seam and the micropolygons alike.
+class NormalField {
+ public:
+  explicit NormalField(const PatientModel& skin) : skin_(skin), g_(skin.grid()) {
+    const auto& r = skin.maps().r_skin;
+    N_.resize(g_.size());
+    const double dth = deg_to_rad(g_.dtheta_deg());
+    for (int k = 0; k < g_.n_z; ++k)
+      for (int j = 0; j < g_.n_theta; ++j) {
+        const int jp = (j + 1) % g_.n_theta, jm = (j + g_.n_theta - 1) % g_.n_theta;
+        const int kp = std::min(k + 1, g_.n_z - 1), km = std::max(k - 1, 0);
+        const double rr = r[g_.index(j, k)];
+        const double dr_dth = (r[g_.index(jp, k)] - r[g_.index(jm, k)]) / (2 * dth);
+        const double dr_dz =
+            kp > km ? (r[g_.index(j, kp)] - r[g_.index(j, km)]) / ((kp - km) * g_.dz_mm) : 0.0;
+        const Eigen::Vector3d e_r = skin.axis().ray(deg_to_rad(g_.theta_deg(j)));
+        const Eigen::Vector3d e_z = skin.axis().direction;
+        const Eigen::Vector3d e_th = e_z.cross(e_r);
+        N_[g_.index(j, k)] = (e_r - (rr > 1.0 ? dr_dth / rr : 0.0) * e_th - dr_dz * e_z).normalized();
+      }
+  }
+  Eigen::Vector3d at(double theta_deg, double z_mm) const {
+    double u = (theta_deg - g_.theta0_deg) / g_.dtheta_deg();
+    u -= g_.n_theta * std::floor(u / g_.n_theta);
+    int j0 = static_cast<int>(std::floor(u));
+    if (j0 >= g_.n_theta) j0 = 0;
+    const int j1 = (j0 + 1) % g_.n_theta;
+    const double v = std::clamp((z_mm - g_.z0_mm) / g_.dz_mm, 0.0, double(g_.n_z - 1));
+    const int k0 = std::min(static_cast<int>(std::floor(v)), std::max(g_.n_z - 2, 0));
+    const int k1 = std::min(k0 + 1, g_.n_z - 1);
+    const double fu = u - j0, fv = v - k0;
+    const Eigen::Vector3d n =
+        (1 - fv) * ((1 - fu) * N_[g_.index(j0, k0)] + fu * N_[g_.index(j1, k0)]) +
+        fv * ((1 - fu) * N_[g_.index(j0, k1)] + fu * N_[g_.index(j1, k1)]);
+    return n.normalized();
+  }
+
+ private:
+  const PatientModel& skin_;  // not owned
+  const CylinderGrid& g_;     // not owned
+  std::vector<Eigen::Vector3d> N_;
+};
+
 // One skin element's top face as (n + 1)^2 (hex) or (n + 1)(n + 2)/2 (wedge) micropolygon
 // vertices, welded to those its neighbours left on shared edges, and their triangles.
 class FaceSampler {
  public:
   FaceSampler(Builder& b, std::map<std::array<long, 3>, int>& welded, const PatientModel& model,
-              const fem::Mesh& mesh, const Eigen::MatrixX3d* displacement_mm, int e, int n,
-              double theta_c)
+              const PatientModel& drawn, const fem::Mesh& mesh,
+              const Eigen::MatrixX3d* displacement_mm, int e, int n, double theta_c)
       : b_(b),
         welded_(welded),
         model_(model),
+        drawn_(drawn),
         el_(mesh.elements[e]),
         e_(e),
         n_(n),
@@ -285,11 +378,11 @@ class FaceSampler {
     const Eigen::Vector3d x_face = X_.transpose() * N_;
     const Eigen::Vector3d u = U_.transpose() * N_;
     const CylindricalPoint c = model_.to_cylindrical(x_face);
-    const Eigen::Vector3d s = model_.skin_point(c.theta_deg, c.z_mm);
+    const Eigen::Vector3d s = drawn_.skin_point(c.theta_deg, c.z_mm);
     const Eigen::Vector3d d = s - x_face;
     // theta unwrapped around the mesh's centre, so a mesh across the seam (+-180) stays in one
     // piece; post = x_face + u + d (paper section 4), pre is the same with u = 0
-    const int v = b_.add(x_face + d, (x_face + u) + d, skin_color(model_, c.theta_deg, c.z_mm), d,
+    const int v = b_.add(x_face + d, (x_face + u) + d, skin_color(drawn_, c.theta_deg, c.z_mm), d,
                          {theta_c_ + wrap180(c.theta_deg - theta_c_), c.z_mm}, e_, xi.head<2>());
     if (key[0] >= 0) welded_.emplace(key, v);
     return v;
@@ -298,6 +391,7 @@ class FaceSampler {
   Builder& b_;                                  // not owned; outlives the sampler
   std::map<std::array<long, 3>, int>& welded_;  // not owned; shared by all elements
   const PatientModel& model_;                   // not owned
+  const PatientModel& drawn_;                   // not owned: the skin drawn (model_'s grid)
   const fem::Element& el_;                      // not owned
   int e_, n_;
   double theta_c_;
@@ -511,14 +605,16 @@ Footprint footprint_cells(const CylinderGrid& g, const std::vector<Eigen::Vector
   return fp;
 }
 
-// The range cells outside the footprint, and the caps closing the range mesh's two ends.
+// The range cells outside the footprint and the undercut cells (`undercut`: grid.size() flags or
+// empty), and the caps closing the range mesh's two ends.
 void add_range_cells(Builder& b, const PatientModel& model, const Footprint& fp,
-                     const RangeVertices& range) {
+                     const RangeVertices& range, const std::vector<std::uint8_t>& undercut) {
   const CylinderGrid& g = model.grid();
   const int nt = g.n_theta, nz = g.n_z;
   for (long k = 0; k + 1 < nz; ++k)
     for (long j = 0; j < nt; ++j) {
       if (fp.removed(j, k, nt)) continue;
+      if (!undercut.empty() && undercut[g.index(static_cast<int>(j), static_cast<int>(k))]) continue;
       const int v00 = range.at(j, k), v10 = range.at(j + 1, k), v01 = range.at(j, k + 1),
                 v11 = range.at(j + 1, k + 1);
       b.tri(v00, v10, v11, SkinPart::Range);
@@ -530,6 +626,7 @@ void add_range_cells(Builder& b, const PatientModel& model, const Footprint& fp,
     Eigen::Vector3d color = Eigen::Vector3d::Zero();
     for (int j = 0; j < nt; ++j) color += b.color[range.at(j, k)];
     const int cv = b.add(c, c, color / nt, Eigen::Vector3d::Zero(), {0.0, g.z_mm(k)}, -1);
+    b.cap_centres.push_back(cv);
     for (int j = 0; j < nt; ++j) {
       if (end == 0)
         b.tri(cv, range.at(j + 1, k), range.at(j, k), SkinPart::Range);
@@ -565,45 +662,129 @@ std::vector<std::pair<long, long>> footprint_border(const Footprint& fp) {
   return stair;
 }
 
-// The seam strip between the micropolygons' rim `P` and the footprint's border `stair`,
-// zipped by arc length (theta as arc at the radius r_ref_mm).
-void add_seam(Builder& b, const CylinderGrid& g, const std::vector<int>& P,
+// The drawn skin's isosurface triangles in the undercuts, but those over the mesh's footprint.
+void add_undercuts(Builder& b, const PatientModel& skin, const DrawnSkin& drawn, const Footprint& fp,
+                   double theta_c) {
+  const CylinderGrid& g = skin.grid();
+  const TriMesh& iso = drawn.undercuts;
+  std::vector<int> index(static_cast<std::size_t>(iso.V.rows()), -1);
+  for (Eigen::Index f = 0; f < iso.F.rows(); ++f) {
+    const Eigen::Vector3d c =
+        (iso.V.row(iso.F(f, 0)) + iso.V.row(iso.F(f, 1)) + iso.V.row(iso.F(f, 2))).transpose() / 3.0;
+    const CylindricalPoint cp = skin.to_cylindrical(c);
+    const double th = theta_c + wrap180(cp.theta_deg - theta_c);
+    const long j = static_cast<long>(std::floor((th - g.theta0_deg) / g.dtheta_deg()));
+    const long k = static_cast<long>(std::floor((cp.z_mm - g.z0_mm) / g.dz_mm));
+    if (fp.removed(j, k, g.n_theta)) continue;
+    int t[3];
+    for (int a = 0; a < 3; ++a) {
+      int& id = index[static_cast<std::size_t>(iso.F(f, a))];
+      if (id < 0) {
+        const Eigen::Vector3d p = iso.V.row(iso.F(f, a)).transpose();
+        const CylindricalPoint q = skin.to_cylindrical(p);
+        id = b.add(p, p, skin_color(skin, q.theta_deg, q.z_mm), Eigen::Vector3d::Zero(),
+                   {q.theta_deg, q.z_mm}, -1);
+        b.given_normals.emplace_back(id, drawn.undercut_normals.row(iso.F(f, a)).transpose());
+      }
+      t[a] = id;
+    }
+    b.tri(t[0], t[1], t[2], SkinPart::Isosurface);
+  }
+}
+
+// Distance (in the plane) from p to the closed polyline `poly`.
+double distance_to_loop(const std::vector<Eigen::Vector2d>& poly, const Eigen::Vector2d& p) {
+  double best = 1e300;
+  for (std::size_t i = 0; i < poly.size(); ++i) {
+    const Eigen::Vector2d& a = poly[i];
+    const Eigen::Vector2d ab = poly[(i + 1) % poly.size()] - a;
+    const double t = ab.squaredNorm() > 0 ? std::clamp((p - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0)
+                                          : 0.0;
+    best = std::min(best, (a + t * ab - p).norm());
+  }
+  return best;
+}
+
+// The seam between the micropolygons' rim `P` and the footprint's border `stair`: a constrained
+// Delaunay triangulation, in (theta as arc at r_ref_mm, z) mm, of the rim's vertices, the
+// border's, and the range vertices of the footprint that lie outside the rim (those closer to the
+// rim than a quarter of the finer grid spacing are left out, so no sliver pinches). Rim and
+// border are constraints, so each of their edges is a triangle edge: the seam shares every edge
+// with the micropolygons or the range cells and cannot crack. Triangles are kept between the
+// two loops. The grid vertices keep the range image's sampling, so the skin around the patch is
+// the range surface itself rather than a strip stretched across it.
+void add_seam(Builder& b, const CylinderGrid& g, const std::vector<int>& P, const Footprint& fp,
               const std::vector<std::pair<long, long>>& stair, const RangeVertices& range,
               double r_ref_mm) {
   const double mm_per_deg = deg_to_rad(1.0) * r_ref_mm;
   auto to_mm = [&](const Eigen::Vector2d& tz) {
     return Eigen::Vector2d(tz.x() * mm_per_deg, tz.y());
   };
-  std::vector<Eigen::Vector2d> Pm, Qm;
-  for (int v : P) Pm.push_back(to_mm(b.theta_z[v]));
-  for (const auto& [j, k] : stair) Qm.push_back(to_mm(grid_corner(g, j, k)));
-  std::size_t q0 = 0;
-  for (std::size_t q = 1; q < Qm.size(); ++q)
-    if ((Qm[q] - Pm[0]).squaredNorm() < (Qm[q0] - Pm[0]).squaredNorm()) q0 = q;
-  auto params = [](const std::vector<Eigen::Vector2d>& L, std::size_t s) {
-    std::vector<double> t(L.size() + 1, 0.0);
-    for (std::size_t i = 0; i < L.size(); ++i)
-      t[i + 1] = t[i] + (L[(s + i + 1) % L.size()] - L[(s + i) % L.size()]).norm();
-    for (double& x : t) x /= t.back();
-    return t;
-  };
-  const std::vector<double> tp = params(Pm, 0), tq = params(Qm, q0);
-  const std::size_t np = P.size(), nq = stair.size();
-  auto pv = [&](std::size_t i) { return P[i % np]; };
-  auto qv = [&](std::size_t i) {
-    const auto& [j, k] = stair[(q0 + i) % nq];
-    return range.at(j, k);
-  };
-  for (std::size_t i = 0, j = 0; i < np || j < nq;) {
-    const bool advance_p = j == nq || (i < np && tp[i + 1] <= tq[j + 1]);
-    if (advance_p) {
-      b.tri(pv(i), qv(j), pv(i + 1), SkinPart::Seam);
-      ++i;
-    } else {
-      b.tri(qv(j), qv(j + 1), pv(i), SkinPart::Seam);
-      ++j;
+  std::vector<Eigen::Vector2d> rim, border;
+  for (int v : P) rim.push_back(to_mm(b.theta_z[v]));
+  for (const auto& [j, k] : stair) border.push_back(to_mm(grid_corner(g, j, k)));
+  Cdt cdt;
+  std::vector<Cdt::Vertex_handle> rim_h, border_h;
+  std::size_t n_inserted = 0;
+  auto insert = [&](const Eigen::Vector2d& p, int id) {
+    const Cdt::Vertex_handle h = cdt.insert(CdtPoint(p.x(), p.y()));
+    if (cdt.number_of_vertices() > n_inserted) {
+      h->info() = id;
+      ++n_inserted;
     }
+    return h;
+  };
+  for (std::size_t i = 0; i < P.size(); ++i) rim_h.push_back(insert(rim[i], P[i]));
+  for (std::size_t i = 0; i < stair.size(); ++i)
+    border_h.push_back(insert(border[i], range.at(stair[i].first, stair[i].second)));
+  const double keep_off_mm = 0.25 * std::min(g.dz_mm, g.dtheta_deg() * mm_per_deg);
+  for (long k = fp.k0; k <= fp.k1 + 1; ++k)
+    for (long j = fp.j0; j <= fp.j1 + 1; ++j) {
+      bool in_fp = false;  // a corner of a removed cell
+      for (long dk = -1; dk <= 0 && !in_fp; ++dk)
+        for (long dj = -1; dj <= 0 && !in_fp; ++dj)
+          in_fp = fp.in_box(j + dj, k + dk) && fp.cell(j + dj, k + dk);
+      if (!in_fp) continue;
+      const Eigen::Vector2d p = to_mm(grid_corner(g, j, k));
+      if (inside(rim, p) || distance_to_loop(rim, p) < keep_off_mm) continue;
+      insert(p, range.at(j, k));
+    }
+  for (const auto* loop : {&rim_h, &border_h})
+    for (std::size_t i = 0; i < loop->size(); ++i)
+      cdt.insert_constraint((*loop)[i], (*loop)[(i + 1) % loop->size()]);
+  if (cdt.number_of_vertices() != n_inserted)
+    throw Error(cat("render: the seam's rim and border cross (", cdt.number_of_vertices() - n_inserted,
+                    " crossings); the mesh's rim is not a simple loop (internal error)"));
+  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
+    Eigen::Vector2d c = Eigen::Vector2d::Zero();
+    for (int i = 0; i < 3; ++i) c += Eigen::Vector2d(f->vertex(i)->point().x(), f->vertex(i)->point().y());
+    c /= 3.0;
+    if (inside(rim, c) || !inside(border, c)) continue;
+    b.tri(f->vertex(0)->info(), f->vertex(1)->info(), f->vertex(2)->info(), SkinPart::Seam);
   }
+}
+
+// normal_pre: the drawn surface's normal field at each vertex's (theta, z) (the end caps' centres:
+// their mesh normal); normal_post: normal_pre turned by the change of the mesh's own normal,
+// n_post = unit(n_pre + m_post - m_pre), so that it equals normal_pre exactly wherever no vertex
+// of the one-ring moved, and follows the deformation elsewhere.
+void shade_normals(const PatientModel& skin, const std::vector<int>& cap_centres,
+                   const std::vector<std::pair<int, Eigen::Vector3d>>& given, SkinSurfaces& out) {
+  const NormalField field(skin);
+  const Eigen::MatrixX3d m_pre = vertex_normals(out.pre), m_post = vertex_normals(out.post);
+  const auto nv = out.pre.V.rows();
+  out.normal_pre.resize(nv, 3);
+  out.normal_post.resize(nv, 3);
+  std::vector<char> is_cap(static_cast<std::size_t>(nv), 0);
+  for (int v : cap_centres) is_cap[static_cast<std::size_t>(v)] = 1;
+  for (Eigen::Index v = 0; v < nv; ++v) {
+    const bool cap = is_cap[static_cast<std::size_t>(v)];
+    const Eigen::Vector3d n = cap ? Eigen::Vector3d(m_pre.row(v)) : field.at(out.theta_z(v, 0), out.theta_z(v, 1));
+    out.normal_pre.row(v) = n.transpose();
+    const Eigen::Vector3d q = n + (m_post.row(v) - m_pre.row(v)).transpose();
+    out.normal_post.row(v) = (q.norm() > 0 ? q.normalized() : n).transpose();
+  }
+  for (const auto& [v, n] : given) out.normal_pre.row(v) = out.normal_post.row(v) = n.transpose();
 }
 
 void pack(Builder& b, SkinSurfaces& out) {
@@ -634,8 +815,15 @@ void pack(Builder& b, SkinSurfaces& out) {
 }  // namespace
 
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
-                            const Eigen::MatrixX3d* displacement_mm, int n_subdivisions) {
+                            const Eigen::MatrixX3d* displacement_mm, int n_subdivisions,
+                            const DrawnSkin* drawn) {
   check_skin_inputs(mesh, displacement_mm, n_subdivisions);
+  const PatientModel& skin = drawn ? drawn->range : model;
+  if (skin.grid().n_theta != model.grid().n_theta || skin.grid().n_z != model.grid().n_z ||
+      skin.grid().theta0_deg != model.grid().theta0_deg || skin.grid().z0_mm != model.grid().z0_mm ||
+      skin.grid().dz_mm != model.grid().dz_mm)
+    throw InvalidInput("render: the drawn skin's grid is not the model's; build it with "
+                       "drawn_skin() from this model");
   SkinSurfaces out;
   out.skin_elements = skin_elements(model, mesh);
   const Eigen::Vector3d centre = top_face_centre(mesh, out.skin_elements);
@@ -646,7 +834,7 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
   Builder b;
   std::map<std::array<long, 3>, int> welded;
   for (int e : out.skin_elements)
-    FaceSampler(b, welded, model, mesh, displacement_mm, e, n_subdivisions, theta_c)
+    FaceSampler(b, welded, model, skin, mesh, displacement_mm, e, n_subdivisions, theta_c)
         .add_triangles();
   const int n_micro = static_cast<int>(b.pre.size());
   out.n_micropolygon_vertices = n_micro;
@@ -658,14 +846,27 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
   add_wound_fills(b, loops, rim);
 
   // The range mesh around the micropolygons, stitched to their rim.
-  const RangeVertices range = add_range_vertices(b, model);
+  const RangeVertices range = add_range_vertices(b, skin);
   const Footprint fp = footprint_cells(model.grid(), loop_theta_z(b, loops[rim]));
-  add_range_cells(b, model, fp, range);
-  const double r_ref = model.r_skin(theta_c, model.to_cylindrical(centre).z_mm);
-  add_seam(b, model.grid(), loops[rim], footprint_border(fp), range, r_ref);
+  add_range_cells(b, skin, fp, range,
+                  drawn ? drawn->undercut_cells : std::vector<std::uint8_t>{});
+  if (drawn) add_undercuts(b, skin, *drawn, fp, theta_c);
+  const double r_ref = skin.r_skin(theta_c, model.to_cylindrical(centre).z_mm);
+  add_seam(b, model.grid(), loops[rim], fp, footprint_border(fp), range, r_ref);
 
+  const std::vector<int> cap_centres = b.cap_centres;
+  const auto given_normals = b.given_normals;
   pack(b, out);
+  shade_normals(skin, cap_centres, given_normals, out);
   return out;
+}
+
+Eigen::MatrixX3d skin_normal_field(const PatientModel& skin, const Eigen::MatrixX2d& theta_z) {
+  const NormalField field(skin);
+  Eigen::MatrixX3d N(theta_z.rows(), 3);
+  for (Eigen::Index i = 0; i < theta_z.rows(); ++i)
+    N.row(i) = field.at(theta_z(i, 0), theta_z(i, 1)).transpose();
+  return N;
 }
 
 Eigen::VectorXd nodal_field_on_skin(const SkinSurfaces& skin, const fem::Mesh& mesh,

@@ -1,10 +1,13 @@
 #include "caps/server/planner_server.hpp"
 
+#include "caps/app/loaded_model.hpp"
 #include "caps/app/plan.hpp"
 #include "caps/app/simulation.hpp"
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/plan/plan_io.hpp"
 #include "caps/surface/patient_model.hpp"
+#include "skin_views.hpp"
 
 #include <httplib.h>
 #include <nlohmann/json.hpp>
@@ -139,6 +142,48 @@ class SimulationReporter : public Reporter {
   Reporter* outer_;  // not owned; may be null
 };
 
+// The running simulation's progress as the page polls it (GET /api/progress); passes everything on.
+class ProgressBoard : public Reporter {
+ public:
+  explicit ProgressBoard(Reporter* outer) : outer_(outer) {}
+  void start() { set("starting", 0, true); }
+  void finish() { set("", 1, false); }
+  json snapshot() const {
+    std::lock_guard<std::mutex> lock(m_);
+    return json{{"running", running_}, {"step", step_}, {"fraction", fraction_},
+                {"elapsed_s", running_ ? std::chrono::duration<double>(
+                                             std::chrono::steady_clock::now() - started_)
+                                             .count()
+                                       : 0.0}};
+  }
+
+ protected:
+  void on_warning(const std::string& m) override { caps::warn(outer_, m); }
+  void on_note(const std::string& m) override { caps::note(outer_, m); }
+  void on_progress(const std::string& step, double fraction) override {
+    set(step, fraction, true);
+    if (outer_) outer_->progress(step, fraction);
+  }
+  void on_step_done(const std::string& step) override {
+    if (outer_) outer_->step_done(step);
+  }
+
+ private:
+  void set(const std::string& step, double fraction, bool running) {
+    std::lock_guard<std::mutex> lock(m_);
+    if (running && !running_) started_ = std::chrono::steady_clock::now();
+    step_ = step;
+    fraction_ = fraction;
+    running_ = running;
+  }
+  mutable std::mutex m_;
+  std::string step_;
+  double fraction_ = 0;
+  bool running_ = false;
+  std::chrono::steady_clock::time_point started_;
+  Reporter* outer_;  // not owned; may be null
+};
+
 // A fresh folder under the temporary directory for this server's plans and results.
 fs::path make_work_dir() {
   static std::atomic<int> counter{0};
@@ -177,8 +222,17 @@ bool is_loopback(const std::string& host) {
 }
 
 fs::path default_web_root() {
+  // The page bundled by the build (the caps_web target): beside the program (build/tools/caps
+  // -> build/web/dist), else where this build wrote it, else a bundle in the source tree.
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  std::vector<fs::path> candidates;
+  if (!ec) candidates.push_back(exe.parent_path().parent_path() / "web" / "dist");
+  candidates.push_back(fs::path(CAPS_WEB_DIST));
   const fs::path web(CAPS_WEB_DIR);
-  if (fs::is_regular_file(web / "dist" / "index.html")) return web / "dist";
+  candidates.push_back(web / "dist");
+  for (const fs::path& dist : candidates)
+    if (fs::is_regular_file(dist / "index.html")) return dist.lexically_normal();
   return web;
 }
 
@@ -194,6 +248,9 @@ struct PlannerServer::Impl {
   std::atomic<int> next_id{0};
   std::atomic<std::uint64_t> latest_simulation{0};
   std::mutex simulation_mutex;  // kMaxConcurrentSimulations = 1
+  std::shared_ptr<const PatientModel> model;  // loaded once (app::loaded_model)
+  std::unique_ptr<ProgressBoard> progress;
+  std::mutex views_mutex;  // writing the skin's .glb files (once each)
 
   Impl(ServerOptions o, Reporter* r) : options(std::move(o)), reporter(r) {}
 
@@ -265,14 +322,56 @@ struct PlannerServer::Impl {
 
     // A newer request cancels this one: its ticket is no longer the latest.
     const std::uint64_t ticket = ++latest_simulation;
-    SimulationReporter cancellable(latest_simulation, ticket, reporter);
+    SimulationReporter cancellable(latest_simulation, ticket, progress.get());
     std::lock_guard<std::mutex> lock(simulation_mutex);
     cancellable.check_cancelled();
+    progress->start();
+    struct Finish {
+      ProgressBoard& board;
+      ~Finish() { board.finish(); }
+    } finish{*progress};
     const app::SimulateResult result = app::run_simulate(request, &cancellable);
     json out = json::parse(app::to_json(result));
     out["result_id"] = id;
     out["result_url"] = cat("/api/results/", id, "/");
     return out.dump(2);
+  }
+
+  // The plan in the body, read as `caps plan check` reads a plan file (from the work folder).
+  plan::Plan plan_of(const std::string& body, const std::string& source) {
+    parse_object(body, source);
+    const fs::path file = work / "plans" / cat("view-", ++next_id, ".json");
+    write_text_atomic(file, body);
+    return plan::read_plan(file);
+  }
+
+  // The model's skin as a .glb (written once into the work folder) and its JSON description.
+  json model_skin(detail::SkinColouring colouring) {
+    const std::string name = colouring == detail::SkinColouring::Skin ? "skin" : "thickness";
+    const fs::path glb = work / "skin" / (name + ".glb"), info = work / "skin" / (name + ".json");
+    std::lock_guard<std::mutex> lock(views_mutex);
+    if (!fs::is_regular_file(info)) {
+      fs::create_directories(work / "skin");
+      write_text_atomic(info, detail::write_model_skin_glb(*model, colouring, glb));
+    }
+    json j = json::parse(read_file(info));
+    j["url"] = cat("/api/skin/", name, ".glb");
+    return j;
+  }
+
+  // A simulation's skin before and after as .glb files (written once) and their description.
+  json result_view(const std::string& id) {
+    const fs::path dir = work / "results" / id;
+    if (!fs::is_regular_file(dir / "result.json"))
+      throw Refusal(404, cat("simulation ", id, ": no such result"));
+    const fs::path info = dir / "view.json";
+    std::lock_guard<std::mutex> lock(views_mutex);
+    if (!fs::is_regular_file(info))
+      write_text_atomic(info, detail::write_result_skin_glbs(*model, dir));
+    json j = json::parse(read_file(info));
+    for (const char* k : {"skin", "tension"})
+      j[k] = cat("/api/results/", id, "/", j[k].get<std::string>());
+    return j;
   }
 
   void add_routes() {
@@ -301,6 +400,29 @@ struct PlannerServer::Impl {
     http.Get(R"(/api/model/(.+))",
              guarded([model_dir](const httplib::Request& req, httplib::Response& res) {
                send_file(res, file_under(model_dir, req.matches[1]));
+             }));
+    http.Get("/api/skin", guarded([this](const httplib::Request&, httplib::Response& res) {
+               send_json(res, json{{"skin", model_skin(detail::SkinColouring::Skin)},
+                                   {"thickness", model_skin(detail::SkinColouring::Thickness)}}
+                                  .dump());
+             }));
+    http.Get(R"(/api/skin/(skin|thickness)\.glb)",
+             guarded([this](const httplib::Request& req, httplib::Response& res) {
+               const bool skin = req.matches[1] == "skin";
+               model_skin(skin ? detail::SkinColouring::Skin : detail::SkinColouring::Thickness);
+               send_file(res, work / "skin" / (skin ? "skin.glb" : "thickness.glb"));
+             }));
+    http.Get("/api/progress", guarded([this](const httplib::Request&, httplib::Response& res) {
+               send_json(res, progress->snapshot().dump());
+             }));
+    http.Post("/api/plan/lines",
+              guarded([this](const httplib::Request& req, httplib::Response& res) {
+                send_json(res, detail::plan_lines_json(plan_of(req.body, "plan lines request"),
+                                                       *model));
+              }));
+    http.Get(R"(/api/results/([0-9]+)/view)",
+             guarded([this](const httplib::Request& req, httplib::Response& res) {
+               send_json(res, result_view(req.matches[1]).dump());
              }));
     http.Get("/api/templates", guarded([](const httplib::Request&, httplib::Response& res) {
                send_json(res, app::to_json(app::run_templates({})));
@@ -340,7 +462,10 @@ PlannerServer::PlannerServer(ServerOptions options, Reporter* reporter)
   if (s.options.host.empty()) throw InvalidInput("--host: give an address to bind, e.g. 127.0.0.1");
   if (s.options.port < 0 || s.options.port > 65535)
     throw InvalidInput(cat("--port ", s.options.port, ": give 1..65535 (0: any free port)"));
-  PatientModel::load(s.options.model_dir);  // the CLI's message for a missing or broken model
+  // Loaded once and kept (the CLI's message for a missing or broken model); every request on
+  // this model reuses it while its files are unchanged.
+  s.model = app::loaded_model(s.options.model_dir);
+  s.progress = std::make_unique<ProgressBoard>(s.reporter);
   // Plans name their model: absolute, so that a plan saved from the page works from any folder.
   s.options.model_dir = fs::absolute(s.options.model_dir).lexically_normal().string();
   if (s.options.web_root.empty()) {

@@ -1,6 +1,7 @@
 #include "caps/volume/cylindrical_map.hpp"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
 #include <cmath>
@@ -34,6 +35,81 @@ void CylindricalMaps::allocate() {
   const std::size_t n = grid.size();
   for (auto* img : {&r_skin, &r_bone, &thickness, &thickness_normal}) img->assign(n, 0.0f);
   for (auto* img : {&flags, &measured_skin, &measured_bone}) img->assign(n, 0);
+}
+
+void CylindricalMaps::allocate_layers() {
+  const std::size_t n = grid.size();
+  for (auto* img : {&thickness_skin, &thickness_fat, &thickness_deep, &thickness_skin_normal,
+                    &thickness_fat_normal, &thickness_deep_normal})
+    img->assign(n, 0.0f);
+  for (auto* img : {&layer_flags, &layer_flags_normal}) img->assign(n, kLayerNoThickness);
+}
+
+std::string describe_layer_flags(std::uint8_t flags) {
+  if (flags == 0) return "measured";
+  static const std::pair<std::uint8_t, const char*> kNames[] = {
+      {kLayerNoThickness, "no_thickness"}, {kLayerNoFat, "no_fat"},
+      {kLayerSeveralBands, "several_fat_bands"}, {kLayerNoContrast, "no_contrast"},
+      {kLayerThinSkin, "thin_skin"}};
+  std::string s;
+  for (const auto& [bit, name] : kNames)
+    if (flags & bit) s += (s.empty() ? "" : "|") + std::string(name);
+  return s;
+}
+
+LayerSplit split_layers(const std::function<double(double)>& hu, double length_mm, double step_mm,
+                        double ramp_mm, const LayerOptions& o) {
+  LayerSplit out;
+  out.skin_mm = std::max(0.0, length_mm);
+  out.flags = kLayerNoFat;
+  if (!(length_mm > 0) || !(step_mm > 0)) return out;
+  const double level = o.fat_level_hu;
+  const int n = std::max(1, static_cast<int>(std::ceil(length_mm / step_mm)));
+  const double h = length_mm / n;
+  thread_local std::vector<double> f;
+  f.resize(static_cast<std::size_t>(n) + 1);
+  for (int i = 0; i <= n; ++i) f[i] = hu(i * h);
+  // The crossing of the level between samples i - 1 and i: linear interpolation, then one more
+  // interpolation inside the part of the interval that still holds the crossing.
+  auto crossing = [&](int i) {
+    double a = (i - 1) * h, b = i * h, fa = f[i - 1] - level, fb = f[i] - level;
+    const double s = a + (b - a) * fa / (fa - fb);
+    const double fs = hu(s) - level;
+    if ((fs < 0) == (fa < 0)) { a = s; fa = fs; } else { b = s; fb = fs; }
+    return fa == fb ? s : a + (b - a) * fa / (fa - fb);
+  };
+  // Past the skin's partial-volume ramp: the first rise to the level. A profile still below it
+  // two ramps and a millimetre deep has fat from the skin's ramp on: the dermis is not resolved.
+  const double window = std::min(length_mm, 2.0 * ramp_mm + 1.0);
+  int i0 = -1;
+  for (int i = 0; i <= n && i * h <= window; ++i)
+    if (f[i] >= level) { i0 = i; break; }
+  struct Band { double top, bottom; };
+  std::vector<Band> bands;
+  double top = 0.0;
+  bool in_fat = i0 < 0;
+  for (int i = std::max(1, i0 + 1); i <= n; ++i) {
+    const bool below = f[i] < level;
+    if (below && !in_fat) top = crossing(i);
+    if (!below && in_fat) bands.push_back({top, crossing(i)});
+    in_fat = below;
+  }
+  if (in_fat) bands.push_back({top, length_mm});
+  std::vector<Band> merged;
+  for (const Band& b : bands) {
+    if (!merged.empty() && b.top - merged.back().bottom < o.merge_gap_mm)
+      merged.back().bottom = b.bottom;
+    else
+      merged.push_back(b);
+  }
+  std::erase_if(merged, [&](const Band& b) { return b.bottom - b.top < o.min_band_mm; });
+  if (merged.empty()) return out;
+  out.skin_mm = merged.front().top;
+  out.fat_mm = merged.back().bottom - merged.front().top;
+  out.deep_mm = length_mm - merged.back().bottom;
+  out.flags = merged.size() > 1 ? kLayerSeveralBands : 0;
+  if (i0 < 0 && merged.front().top == 0.0) out.flags |= kLayerThinSkin;
+  return out;
 }
 
 std::string describe_flags(std::uint8_t flags) {
@@ -272,6 +348,42 @@ void flag_grazing(CylindricalMaps& maps, double limit_deg) {
     }
 }
 
+void fill_layers(std::vector<float>& skin, std::vector<float>& fat, std::vector<float>& deep,
+                 const std::vector<std::uint8_t>& layer_flags, const std::vector<float>& total,
+                 const CylinderGrid& grid) {
+  const std::size_t n = grid.size();
+  std::vector<float> skin_fraction(n, 0.0f), fat_fraction(n, 0.0f);
+  std::vector<std::uint8_t> skin_known(n, 0), fat_known(n, 0);
+  for (std::size_t c = 0; c < n; ++c) {
+    const double t = total[c];
+    if (layer_flags[c] == 0 && t > 1e-3) {
+      skin_fraction[c] = static_cast<float>(skin[c] / t);
+      fat_fraction[c] = static_cast<float>(fat[c] / t);
+      skin_known[c] = fat_known[c] = 1;
+    } else if (layer_flags[c] == kLayerNoFat) {
+      fat_known[c] = 1;  // seen: no fat
+    }
+  }
+  tbb::parallel_invoke([&] { harmonic_fill(skin_fraction, skin_known, grid); },
+                       [&] { harmonic_fill(fat_fraction, fat_known, grid); });
+  for (std::size_t c = 0; c < n; ++c) {
+    const double t = std::max(0.0f, total[c]);
+    double s = skin[c], f = fat[c];
+    if (layer_flags[c] != 0) {
+      s = std::clamp<double>(skin_fraction[c], 0.0, 1.0) * t;
+      f = std::clamp<double>(fat_fraction[c], 0.0, 1.0) * t;
+    }
+    if (s + f > t) {
+      const double k = s + f > 0 ? t / (s + f) : 0.0;
+      s *= k;
+      f *= k;
+    }
+    skin[c] = static_cast<float>(s);
+    fat[c] = static_cast<float>(f);
+    deep[c] = static_cast<float>(std::max(0.0, t - s - f));
+  }
+}
+
 namespace {
 
 void check_map_options(const MapOptions& o) {
@@ -280,6 +392,13 @@ void check_map_options(const MapOptions& o) {
                            " is out of range (theta 8..8192, z 4..8192)"));
   if (!(o.bone_cap_mm > 0 && o.bone_cap_mm <= 200))
     throw InvalidInput(cat("bone cap ", o.bone_cap_mm, " mm must be in (0, 200]"));
+  const LayerOptions& l = o.layers;
+  if (!(l.fat_level_hu >= -500 && l.fat_level_hu <= 200))
+    throw InvalidInput(cat("fat level ", l.fat_level_hu, " HU must be in [-500, 200] (halfway "
+                           "between fat, about -100, and soft tissue, about +40)"));
+  if (!(l.merge_gap_mm >= 0 && l.merge_gap_mm <= 20) || !(l.min_band_mm >= 0 && l.min_band_mm <= 20))
+    throw InvalidInput(cat("fat band merge gap ", l.merge_gap_mm, " mm and minimum band ",
+                           l.min_band_mm, " mm must be in [0, 20]"));
 }
 
 // The grid's z rows: by default the head's extent along the axis.
@@ -368,7 +487,9 @@ class RayCaster {
         edge_span_(std::max(1.5, 1.5 * v.geom.spacing_mm.maxCoeff())),
         ramp_(v.geom.spacing_mm.maxCoeff()),
         is_ct_(v.modality == Modality::CT),
-        skin_thr_(static_cast<float>(seg.skin_threshold)) {
+        skin_thr_(static_cast<float>(seg.skin_threshold)),
+        measure_layers_(maps.has_layers()),
+        layer_step_(0.5 * v.geom.spacing_mm.maxCoeff()) {
     squared_distance_mm2(seg.bone, &nearest_bone_);
   }
   RayCaster(const RayCaster&) = delete;
@@ -407,8 +528,18 @@ class RayCaster {
     maps_.r_bone[c] = static_cast<float>(r_b);
     maps_.thickness[c] = static_cast<float>(r_s - r_b);
     maps_.measured_bone[c] = 1;
-    maps_.thickness_normal[c] =
-        static_cast<float>(thickness_along_normal(p, r_s - r_b, bone_level));
+    Eigen::Vector3d inward = -ray.d;
+    const double tn = thickness_along_normal(p, r_s - r_b, bone_level, inward);
+    maps_.thickness_normal[c] = static_cast<float>(tn);
+    if (measure_layers_) {
+      // One pointer captured: std::function keeps it without allocating.
+      const struct { const Field& f; const Ray& ray; double r_s; const Eigen::Vector3d& p, &u; } q{
+          intensity_, ray, r_s, p, inward};
+      measure_layers(c, [x = &q](double s) { return x->f(x->ray.at(x->r_s - s)); }, r_s - r_b,
+                     false);
+      measure_layers(c, [x = &q](double s) { return x->f(Eigen::Vector3d(x->p + s * x->u)); }, tn,
+                     true);
+    }
   }
 
  private:
@@ -541,11 +672,22 @@ class RayCaster {
     return tissue;
   }
 
+  // 6. The tissue layers along one profile from the skin (depth 0) to the bone (depth length).
+  template <typename Profile>
+  void measure_layers(std::size_t c, const Profile& profile, double length, bool normal) const {
+    const LayerSplit l = split_layers(profile, length, layer_step_, ramp_, o_.layers);
+    (normal ? maps_.thickness_skin_normal : maps_.thickness_skin)[c] = static_cast<float>(l.skin_mm);
+    (normal ? maps_.thickness_fat_normal : maps_.thickness_fat)[c] = static_cast<float>(l.fat_mm);
+    (normal ? maps_.thickness_deep_normal : maps_.thickness_deep)[c] = static_cast<float>(l.deep_mm);
+    (normal ? maps_.layer_flags_normal : maps_.layer_flags)[c] = l.flags;
+  }
+
   // 5. Thickness along the normal: distance from the skin point p to the nearest bone, found
   // through the exact feature transform on the working grid and refined on the bone's edge;
-  // at most the radial thickness.
-  double thickness_along_normal(const Eigen::Vector3d& p, double radial_mm,
-                                double bone_level) const {
+  // at most the radial thickness. `inward` receives the unit direction from p to that bone
+  // (unchanged, the ray's, where the radial thickness is the shorter).
+  double thickness_along_normal(const Eigen::Vector3d& p, double radial_mm, double bone_level,
+                                Eigen::Vector3d& inward) const {
     const long cell = skin_at_.index(p);
     const std::int64_t q_idx = cell >= 0 ? nearest_bone_[static_cast<std::size_t>(cell)] : -1;
     double tn = radial_mm;
@@ -562,7 +704,10 @@ class RayCaster {
         // Parameterised so "inward" runs from the skin (s = len) to past the bone site. q is
         // the nearest bone voxel, so the edge lies within two working voxels of it.
         const double s = crossing_inward(Bs, std::min(len, 2 * w_), -w_, fine_, bone_level);
-        if (std::isfinite(s)) tn = std::min(tn, len - s);
+        if (std::isfinite(s) && len - s < tn) {
+          tn = len - s;
+          inward = u;
+        }
       }
     }
     return tn;
@@ -587,6 +732,8 @@ class RayCaster {
   double ramp_;  // width of an edge's partial-volume ramp
   bool is_ct_;
   float skin_thr_;
+  bool measure_layers_;
+  double layer_step_;  // profile sampling step of the layers: half the largest voxel spacing
   std::vector<std::int64_t> nearest_bone_;
 };
 
@@ -606,6 +753,8 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
 
   const std::size_t n = grid.size();
   maps.allocate();
+  // Layers are told apart by fat's CT number; MR's contrasts are not calibrated (not measured).
+  if (o.layers.measure && v.modality == Modality::CT) maps.allocate_layers();
   const RayCaster caster(v, seg, o, row_r_max, maps);
   tbb::parallel_for(0, grid.n_z, [&](int k) {
     std::vector<double> samples;
@@ -625,6 +774,24 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
   for (std::size_t i = 0; i < n; ++i) {
     maps.thickness[i] = std::max(0.0f, maps.thickness[i]);
     maps.r_bone[i] = maps.r_skin[i] - maps.thickness[i];
+  }
+  if (maps.has_layers()) {
+    // Layers of cells whose thickness is not valid are filled like the thickness itself.
+    for (std::size_t i = 0; i < n; ++i)
+      if (maps.flags[i] != 0) {
+        maps.layer_flags[i] |= kLayerNoThickness;
+        maps.layer_flags_normal[i] |= kLayerNoThickness;
+      }
+    tbb::parallel_invoke(
+        [&] {
+          fill_layers(maps.thickness_skin, maps.thickness_fat, maps.thickness_deep,
+                      maps.layer_flags, maps.thickness, grid);
+        },
+        [&] {
+          fill_layers(maps.thickness_skin_normal, maps.thickness_fat_normal,
+                      maps.thickness_deep_normal, maps.layer_flags_normal, maps.thickness_normal,
+                      grid);
+        });
   }
   progress.done();
   return maps;

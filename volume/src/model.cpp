@@ -63,6 +63,27 @@ double percentile(std::vector<double> xs, double p) {
 json vec(const Eigen::Vector3d& v) { return json::array({v[0], v[1], v[2]}); }
 json vec(const Eigen::Vector3i& v) { return json::array({v[0], v[1], v[2]}); }
 
+// model.json's thickness.layers: how the tissue layers were measured, or why they were not.
+json layers_json(const VolumeModel& m) {
+  const LayerOptions& o = m.layer_options;
+  if (m.maps.has_layers())
+    return {{"measured", true},
+            {"method", "fat = where the CT profile from skin to bone lies below the fat level; "
+                       "interfaces where it crosses the level (sub-voxel), along the ray and along "
+                       "the normal; see docs/volume.md"},
+            {"fat_level_hu", o.fat_level_hu},
+            {"merge_gap_mm", o.merge_gap_mm},
+            {"min_band_mm", o.min_band_mm},
+            {"fill", "cells with a layer flag: skin and fat filled from the measured cells' "
+                     "proportions (fat 0 where none was seen), deep = thickness - skin - fat; "
+                     "see layer_validity.nrrd"}};
+  const std::string reason =
+      !o.measure ? "not requested"
+                 : cat(to_string(m.modality), ": fat is told apart by its CT number (HU); this "
+                       "modality's intensities are not calibrated, so the layers are not measured");
+  return {{"measured", false}, {"reason", reason}};
+}
+
 }  // namespace
 
 ModelStatistics model_statistics(const CylindricalMaps& maps) {
@@ -91,6 +112,24 @@ ModelStatistics model_statistics(const CylindricalMaps& maps) {
     s.thickness_normal_median_mm = percentile(tn, 0.5);
   }
   s.r_skin_median_mm = percentile(rs, 0.5);
+  if (maps.has_layers()) {
+    std::vector<double> skin, fat, deep;
+    for (std::size_t i = 0; i < g.size(); ++i) {
+      const auto f = maps.layer_flags[i];
+      s.no_fat += (f & kLayerNoFat) != 0;
+      s.several_fat_bands += (f & kLayerSeveralBands) != 0;
+      if (f != 0) continue;
+      skin.push_back(maps.thickness_skin[i]);
+      fat.push_back(maps.thickness_fat[i]);
+      deep.push_back(maps.thickness_deep[i]);
+    }
+    s.layer_cells = skin.size();
+    if (!skin.empty()) {
+      s.skin_layer_median_mm = percentile(skin, 0.5);
+      s.fat_median_mm = percentile(fat, 0.5);
+      s.deep_median_mm = percentile(deep, 0.5);
+    }
+  }
   // The face. A head is nearly mirror-symmetric about its mid-sagittal plane, which meets the
   // cylinder in two meridians (front and back); of those, the front is the one with the most
   // prominent bump (the nose) over its surroundings 20 degrees to either side. Ears are paired
@@ -144,7 +183,33 @@ ModelStatistics model_statistics(const CylindricalMaps& maps) {
   return s;
 }
 
-VolumeModel build_volume_model(const Volume& v, const ModelOptions& o, Reporter* reporter) {
+namespace {
+
+// A CT stored unsigned (HU + 1024, as the Stanford CThead is) has its air near 0 instead of
+// -1000: every threshold would then miss. Seen on a sample of the voxels (air fills most of a
+// head CT's field of view): the lowest value at or above -50 with values beyond +1000.
+bool looks_unsigned_ct(const Volume& v) {
+  if (v.modality != Modality::CT || v.data.empty()) return false;
+  float lo = v.data[0], hi = v.data[0];
+  for (std::size_t i = 0; i < v.data.size(); i += 61) {
+    lo = std::min(lo, v.data[i]);
+    hi = std::max(hi, v.data[i]);
+  }
+  return lo >= -50.0f && hi > 1000.0f;
+}
+
+}  // namespace
+
+VolumeModel build_volume_model(const Volume& input, const ModelOptions& o, Reporter* reporter) {
+  Volume shifted;
+  if (looks_unsigned_ct(input)) {
+    shifted = input;
+    for (float& x : shifted.data) x -= 1024.0f;
+    warn(reporter, cat(input.source, ": the CT's air lies near 0 instead of -1000 HU: read as "
+                       "unsigned values (HU + 1024) and shifted by -1024 HU; check the file's "
+                       "rescale intercept"));
+  }
+  const Volume& v = shifted.data.empty() ? input : shifted;
   VolumeModel m;
   m.source = v.source;
   m.source_format = v.format;
@@ -153,8 +218,17 @@ VolumeModel build_volume_model(const Volume& v, const ModelOptions& o, Reporter*
   m.source_spacing_mm = v.geom.spacing_mm;
   m.notes = v.notes;
   m.segmentation = segment_head(v, o.segment, reporter);
+  // A skull-stripped MR (brain extraction) keeps only the brain: its "skin" would be the brain's
+  // surface. An adult head (even cut at the chin) holds well over 2.5 l, a brain about 1.1-1.5 l.
+  constexpr double kBrainOnlyMl = 2000.0;
+  if (v.modality != Modality::CT && m.segmentation.head_volume_ml < kBrainOnlyMl)
+    warn(reporter, cat(v.source, ": the head's volume is only ",
+                       std::lround(m.segmentation.head_volume_ml), " ml, that of a brain: the "
+                       "scan looks skull-stripped, and its \"skin\" would be the brain's surface; "
+                       "use the scan before brain extraction"));
   const CylinderAxis axis = o.axis ? *o.axis : fit_axis(m.segmentation);
   m.maps = cylindrical_maps(v, m.segmentation, axis, o.maps, reporter);
+  m.layer_options = o.maps.layers;
   m.stats = model_statistics(m.maps);
   {
     Progress progress(reporter, "extracting skin and bone surfaces", 2);
@@ -200,7 +274,8 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter
                           {"radial", "r_skin - r_bone along the ray from the axis"},
                           {"normal", "distance from the skin point to the nearest bone"},
                           {"fill", "invalid cells: r_skin and thickness filled by harmonic "
-                                   "interpolation from valid cells; see validity.nrrd"}}
+                                   "interpolation from valid cells; see validity.nrrd"},
+                          {"layers", layers_json(m)}}
                          .dump();
   write_model_directory(m, c, dir, force, reporter);
 }

@@ -1,10 +1,12 @@
 #include "caps/volume/model_dir.hpp"
 
 #include <nlohmann/json.hpp>
+#include <tbb/task_group.h>
 
 #include <cmath>
 #include <fstream>
 #include <sstream>
+#include <tuple>
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
@@ -40,7 +42,7 @@ json parse_object(const std::string& text, const char* what) {
 }
 
 // model.json's "files": every file the directory holds, by role.
-json files_json(bool has_color) {
+json files_json(bool has_color, bool has_layers) {
   namespace f = model_file;
   json files = {{"r_skin", f::kRSkin},          {"r_bone", f::kRBone},
                 {"thickness", f::kThickness},   {"thickness_normal", f::kThicknessNormal},
@@ -48,6 +50,18 @@ json files_json(bool has_color) {
                 {"skin_png", f::kSkinPng},      {"skin_mesh", f::kSkinMesh},
                 {"bone_mesh", f::kBoneMesh}};
   if (has_color) files["color"] = f::kColor;
+  if (has_layers)
+    files.update({{"thickness_skin", f::kThicknessSkin},
+                  {"thickness_fat", f::kThicknessFat},
+                  {"thickness_deep", f::kThicknessDeep},
+                  {"thickness_skin_normal", f::kThicknessSkinNormal},
+                  {"thickness_fat_normal", f::kThicknessFatNormal},
+                  {"thickness_deep_normal", f::kThicknessDeepNormal},
+                  {"layer_validity", f::kLayerValidity},
+                  {"layer_validity_normal", f::kLayerValidityNormal},
+                  {"layer_skin_png", f::kLayerSkinPng},
+                  {"layer_fat_png", f::kLayerFatPng},
+                  {"layer_deep_png", f::kLayerDeepPng}});
   return files;
 }
 
@@ -62,7 +76,11 @@ json statistics_json(const ModelStatistics& s) {
           {"thickness_normal_median_mm", s.thickness_normal_median_mm},
           {"forehead_thickness_mm", finite_or_zero(s.forehead_thickness_mm)},
           {"face", {{"theta_deg", s.face_theta_deg}, {"z_mm", s.face_z_mm}}},
-          {"r_skin_median_mm", s.r_skin_median_mm}};
+          {"r_skin_median_mm", s.r_skin_median_mm},
+          {"layers", {{"cells", s.layer_cells}, {"no_fat", s.no_fat},
+                      {"several_fat_bands", s.several_fat_bands},
+                      {"median_mm", {{"skin", s.skin_layer_median_mm}, {"fat", s.fat_median_mm},
+                                     {"deep", s.deep_median_mm}}}}}};
 }
 
 // Missing statistics read as 0: they describe the model, nothing downstream depends on them.
@@ -72,9 +90,12 @@ ModelStatistics statistics_of(const json& j) {
   auto count = [](const json& o, const char* key) { return o.value(key, std::size_t(0)); };
   auto num = [](const json& o, const char* key) { return o.value(key, 0.0); };
   const json none = json::object();
-  const json& flagged = j.contains("flagged_cells") ? j["flagged_cells"] : none;
-  const json& t = j.contains("thickness_mm") ? j["thickness_mm"] : none;
-  const json& face = j.contains("face") ? j["face"] : none;
+  auto child = [&none](const json& o, const char* key) -> const json& {
+    return o.contains(key) ? o[key] : none;
+  };
+  const json& flagged = child(j, "flagged_cells");
+  const json& t = child(j, "thickness_mm");
+  const json& face = child(j, "face");
   s.cells = count(j, "cells");
   s.valid_cells = count(j, "valid_cells");
   s.no_skin = count(flagged, "no_skin");
@@ -91,6 +112,14 @@ ModelStatistics statistics_of(const json& j) {
   s.face_theta_deg = num(face, "theta_deg");
   s.face_z_mm = num(face, "z_mm");
   s.r_skin_median_mm = num(j, "r_skin_median_mm");
+  const json& layers = child(j, "layers");
+  const json& medians = child(layers, "median_mm");
+  s.layer_cells = count(layers, "cells");
+  s.no_fat = count(layers, "no_fat");
+  s.several_fat_bands = count(layers, "several_fat_bands");
+  s.skin_layer_median_mm = num(medians, "skin");
+  s.fat_median_mm = num(medians, "fat");
+  s.deep_median_mm = num(medians, "deep");
   return s;
 }
 
@@ -134,7 +163,7 @@ json to_json(const ModelInfo& info) {
   j["segmentation"] = parse_object(info.segmentation_json, "segmentation");
   j["thickness"] = parse_object(info.thickness_json, "thickness");
   j["statistics"] = statistics_json(info.stats);
-  j["files"] = files_json(info.has_color);
+  j["files"] = files_json(info.has_color, info.has_layers);
   j["meshes"] = {{"skin", mesh_json(info.skin)}, {"bone", mesh_json(info.bone)}};
   if (!info.content_hash.empty()) j["content_hash"] = info.content_hash;
   j["warnings"] = info.warnings;
@@ -240,6 +269,7 @@ ModelInfo read_model_info_fields(const fs::path& dir) {
   info.thickness_json = text("thickness");
   info.stats = statistics_of(j.value("statistics", json::object()));
   info.has_color = j.contains("files") && j["files"].contains("color");
+  info.has_layers = j.contains("files") && j["files"].contains("thickness_skin");
   const json meshes = j.value("meshes", json::object());
   info.skin = mesh_summary_of(meshes.value("skin", json::object()));
   info.bone = mesh_summary_of(meshes.value("bone", json::object()));
@@ -277,6 +307,19 @@ CylindricalMaps read_model_maps(const fs::path& dir, const ModelInfo& info) {
     maps.measured_skin[i] = !(maps.flags[i] & kNoSkin);
     maps.measured_bone[i] = !(maps.flags[i] & (kNoSkin | kNoBone));
   }
+  if (info.has_layers) {
+    maps.thickness_skin = read_map_nrrd(dir / f::kThicknessSkin, g);
+    maps.thickness_fat = read_map_nrrd(dir / f::kThicknessFat, g);
+    maps.thickness_deep = read_map_nrrd(dir / f::kThicknessDeep, g);
+    maps.thickness_skin_normal = read_map_nrrd(dir / f::kThicknessSkinNormal, g);
+    maps.thickness_fat_normal = read_map_nrrd(dir / f::kThicknessFatNormal, g);
+    maps.thickness_deep_normal = read_map_nrrd(dir / f::kThicknessDeepNormal, g);
+    for (auto [file, out] : {std::pair{f::kLayerValidity, &maps.layer_flags},
+                             std::pair{f::kLayerValidityNormal, &maps.layer_flags_normal}}) {
+      const std::vector<float> v = read_map_nrrd(dir / file, g);
+      out->assign(v.begin(), v.end());
+    }
+  }
   return maps;
 }
 
@@ -308,6 +351,48 @@ std::string content_hash(const CylindricalMaps& maps) {
   return text;
 }
 
+namespace {
+
+// The tissue layer maps, their validity and a picture of each (along the normal).
+void write_layers(const fs::path& p, const CylindricalMaps& maps, const ModelProvenance& c) {
+  namespace f = model_file;
+  const auto& g = maps.grid;
+  const char* kFlags = "0 measured; bit flags 1 no_thickness, 2 no_fat, 4 several_fat_bands, "
+                       "8 no_contrast, 16 thin_skin";
+  write_map_nrrd(p / f::kThicknessSkin, maps.thickness_skin, g,
+                 "thickness_skin: skin to the top of the subcutaneous fat, radial", "mm");
+  write_map_nrrd(p / f::kThicknessFat, maps.thickness_fat, g,
+                 "thickness_fat: subcutaneous fat, radial", "mm");
+  write_map_nrrd(p / f::kThicknessDeep, maps.thickness_deep, g,
+                 "thickness_deep: the fat's bottom to the bone, radial", "mm");
+  write_map_nrrd(p / f::kThicknessSkinNormal, maps.thickness_skin_normal, g,
+                 "thickness_skin_normal: skin to the fat, towards the nearest bone", "mm");
+  write_map_nrrd(p / f::kThicknessFatNormal, maps.thickness_fat_normal, g,
+                 "thickness_fat_normal: subcutaneous fat, towards the nearest bone", "mm");
+  write_map_nrrd(p / f::kThicknessDeepNormal, maps.thickness_deep_normal, g,
+                 "thickness_deep_normal: the fat to the nearest bone", "mm");
+  for (auto [file, flags, what] :
+       {std::tuple{f::kLayerValidity, &maps.layer_flags, "layer_validity (radial)"},
+        std::tuple{f::kLayerValidityNormal, &maps.layer_flags_normal, "layer_validity_normal"}}) {
+    const std::vector<float> v(flags->begin(), flags->end());
+    write_map_nrrd(p / file, v, g, cat(what, ": ", kFlags), "flags");
+  }
+  write_layer_png(p / f::kLayerSkinPng, maps, maps.thickness_skin_normal, maps.layer_flags_normal,
+                  "skin: surface to the fat (mm)",
+                  cat("Skin (dermis) to the subcutaneous fat, along the normal, ", c.name), c.credit);
+  // No fat seen is a measurement of the fat (0 mm), not of where the skin ends.
+  std::vector<std::uint8_t> fat_flags = maps.layer_flags_normal;
+  for (auto& fl : fat_flags) fl &= static_cast<std::uint8_t>(~kLayerNoFat);
+  write_layer_png(p / f::kLayerFatPng, maps, maps.thickness_fat_normal, fat_flags,
+                  "subcutaneous fat (mm)", cat("Subcutaneous fat, along the normal, ", c.name),
+                  c.credit);
+  write_layer_png(p / f::kLayerDeepPng, maps, maps.thickness_deep_normal, maps.layer_flags_normal,
+                  "deep tissue: fat to bone (mm)",
+                  cat("Deep tissue (fat to bone), along the normal, ", c.name), c.credit);
+}
+
+}  // namespace
+
 void write_model_directory(const ModelContent& m, const ModelProvenance& c, const fs::path& dir,
                            bool force, Reporter* reporter) {
   namespace f = model_file;
@@ -326,6 +411,7 @@ void write_model_directory(const ModelContent& m, const ModelProvenance& c, cons
   info.thickness_json = c.thickness_json;
   info.stats = m.stats;
   info.has_color = has_color;
+  info.has_layers = maps.has_layers();
   info.skin = summary_of(m.skin);
   info.bone = summary_of(m.bone);
   info.content_hash = content_hash(maps);
@@ -345,13 +431,22 @@ void write_model_directory(const ModelContent& m, const ModelProvenance& c, cons
                  "validity: 0 valid; bit flags 1 no_skin, 2 no_bone, 4 undercut, 8 grazing, "
                  "16 truncated", "flags");
   progress.update(3);
-  write_thickness_png(p / f::kThicknessPng, maps, maps.thickness,
-                      cat("Soft-tissue thickness (radial), ", c.name), c.credit);
+  // Clinicians and the soft-tissue-depth literature read the thickness along the normal.
+  const bool assumed_bone = parse_object(c.thickness_json, "thickness").value("kind", "") ==
+                            std::string("approximate");
+  write_thickness_png(p / f::kThicknessPng, maps, maps.thickness_normal,
+                      cat("Soft-tissue thickness along the normal (skin to nearest bone), ", c.name,
+                          assumed_bone ? "; bone ASSUMED (MR: no bone signal)" : ""),
+                      c.credit);
+  // The layers' maps and pictures are written beside the rest (2 s budget, docs/benchmarks.md).
+  tbb::task_group layers;
+  if (maps.has_layers()) layers.run([&] { write_layers(p, maps, c); });
   write_skin_png(p / f::kSkinPng, maps, cat("Skin range image (shaded), ", c.name), c.credit);
   if (has_color) write_png(p / f::kColor, m.color);
   progress.update(5);
   write_ply(m.skin, p / f::kSkinMesh);
   write_ply(m.bone, p / f::kBoneMesh);
+  layers.wait();
   progress.update(7);
   write_text_atomic(p / f::kJson, model_json);
   out.commit();
@@ -378,6 +473,10 @@ std::string model_summary(const fs::path& dir) {
      << "thickness  median " << s.thickness_median_mm << " mm (5-95%: " << s.thickness_p5_mm
      << " - " << s.thickness_p95_mm << " mm), forehead " << s.forehead_thickness_mm << " mm\n"
      << "face       theta " << s.face_theta_deg << " deg, z " << s.face_z_mm << " mm\n";
+  if (info.has_layers)
+    os << "layers     median skin " << s.skin_layer_median_mm << " mm, fat " << s.fat_median_mm
+       << " mm, deep " << s.deep_median_mm << " mm over " << s.layer_cells << " cells (no fat "
+       << s.no_fat << ", several fat bands " << s.several_fat_bands << ")\n";
   return os.str();
 }
 

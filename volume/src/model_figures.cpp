@@ -64,18 +64,19 @@ Eigen::Vector3d hatch(int x, int y) {
   return ((x + y) / 3) % 2 ? Eigen::Vector3d(0.78, 0.78, 0.78) : Eigen::Vector3d(0.88, 0.88, 0.88);
 }
 
-}  // namespace
-
-void write_thickness_png(const fs::path& path, const CylindricalMaps& maps,
-                         const std::vector<float>& values, const std::string& title,
-                         const std::string& credit) {
+// A map of thicknesses (mm) with a colour bar; cells where `invalid` is non-zero are hatched and
+// explained by `legend`.
+void write_mm_map_png(const fs::path& path, const CylindricalMaps& maps,
+                      const std::vector<float>& values, const std::vector<std::uint8_t>& invalid,
+                      const std::string& bar_label, const std::string& legend,
+                      const std::string& title, const std::string& credit) {
   const auto& g = maps.grid;
   MapFigure fig(g);
   const int s = fig.scale;
   // Colour range: 0 to the 98th percentile of valid cells, rounded up to 5 mm.
   std::vector<float> valid;
   for (std::size_t i = 0; i < values.size(); ++i)
-    if (maps.flags[i] == 0) valid.push_back(values[i]);
+    if (invalid[i] == 0) valid.push_back(values[i]);
   double vmax = 10.0;
   if (!valid.empty()) {
     std::nth_element(valid.begin(), valid.begin() + valid.size() * 98 / 100, valid.end());
@@ -89,7 +90,7 @@ void write_thickness_png(const fs::path& path, const CylindricalMaps& maps,
         for (int dx = 0; dx < s; ++dx) {
           const int x = j * s + dx, y = (g.n_z - 1 - k) * s + dy;
           if (maps.flags[c] & kNoSkin) continue;  // stays white
-          map.set(x, y, maps.flags[c] != 0 ? hatch(x, y) : viridis(values[c] / vmax));
+          map.set(x, y, invalid[c] != 0 ? hatch(x, y) : viridis(values[c] / vmax));
         }
     }
   fig.canvas.draw_image(map, MapFigure::kLeft, MapFigure::kTop);
@@ -103,18 +104,36 @@ void write_thickness_png(const fs::path& path, const CylindricalMaps& maps,
     fig.tick(bx + bw, y, bx + bw + 5, y);
     fig.text(bx + bw + 8, y + 4, cat(static_cast<int>(v), " mm"), 11);
   }
-  fig.text(bx + bw + 60, by + 0.5 * bh, "soft-tissue thickness (mm)", 12, 0.5, -90);
+  fig.text(bx + bw + 60, by + 0.5 * bh, bar_label, 12, 0.5, -90);
   // Legend for invalid cells, and the credit line.
   const int ly = MapFigure::kTop + fig.map_h + 52;
   RgbImage swatch = make_image(18, 10);
   for (int y = 0; y < swatch.height; ++y)
     for (int x = 0; x < swatch.width; ++x) swatch.set(x, y, hatch(x, y));
   fig.canvas.draw_image(swatch, MapFigure::kLeft, ly - 9);
-  fig.text(MapFigure::kLeft + 24, ly, "no valid measurement (no bone within the cap, undercut, "
-                                      "grazing ray; filled by interpolation)", 11);
+  fig.text(MapFigure::kLeft + 24, ly, legend, 11);
   if (!credit.empty())
     fig.text(MapFigure::kLeft + fig.map_w + MapFigure::kRight - 10, ly, credit, 10, 1.0);
   fig.canvas.write_png(path);
+}
+
+}  // namespace
+
+void write_thickness_png(const fs::path& path, const CylindricalMaps& maps,
+                         const std::vector<float>& values, const std::string& title,
+                         const std::string& credit) {
+  write_mm_map_png(path, maps, values, maps.flags, "soft-tissue thickness (mm)",
+                   "no valid measurement (no bone within the cap, undercut, grazing ray; filled "
+                   "by interpolation)", title, credit);
+}
+
+void write_layer_png(const fs::path& path, const CylindricalMaps& maps,
+                     const std::vector<float>& values, const std::vector<std::uint8_t>& layer_flags,
+                     const std::string& what, const std::string& title,
+                     const std::string& credit) {
+  write_mm_map_png(path, maps, values, layer_flags, what,
+                   "layer not measured (no valid thickness, no fat seen, fat in several bands, "
+                   "skin not resolved; filled from neighbours' proportions)", title, credit);
 }
 
 void write_skin_png(const fs::path& path, const CylindricalMaps& maps, const std::string& title,

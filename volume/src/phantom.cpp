@@ -40,7 +40,7 @@ double HeadPhantom::head_radius(double theta, double z) const {
   const double ellipse = 1.0 / std::sqrt(s * s + c * c);
   const double semi = z > 0 ? kTopMm : kBottomMm;
   const double u = z / semi;
-  return u >= 1.0 ? 0.0 : ellipse * std::sqrt(1.0 - u * u);
+  return std::abs(u) >= 1.0 ? 0.0 : ellipse * std::sqrt(1.0 - u * u);
 }
 
 double HeadPhantom::skin_radius(double theta, double z) const {
@@ -53,8 +53,29 @@ double HeadPhantom::skin_radius(double theta, double z) const {
 }
 
 double HeadPhantom::thickness(double theta, double z) const {
+  if (layered_) return dermis_depth(theta, z) + fat_depth(theta, z) + deep_depth(theta, z);
   const double s = std::sin(0.5 * theta);
   return 4.0 + 3.0 * s * s + 1.5 * std::cos(z / 25.0);
+}
+
+double HeadPhantom::dermis_depth(double theta, double z) const {
+  return 1.8 + 0.4 * std::sin(theta + z / 40.0);
+}
+
+double HeadPhantom::fat_depth(double theta, double z) const {
+  return 3.0 + 2.0 * std::sin(z / 30.0 - theta);
+}
+
+double HeadPhantom::deep_depth(double theta, double z) const {
+  return 3.4 + 1.6 * std::cos(z / 25.0 + 2.0 * theta);
+}
+
+double HeadPhantom::fat_top_radius(double theta, double z) const {
+  return head_radius(theta, z) - dermis_depth(theta, z);
+}
+
+double HeadPhantom::fat_bottom_radius(double theta, double z) const {
+  return fat_top_radius(theta, z) - fat_depth(theta, z);
 }
 
 double HeadPhantom::bone_radius(double theta, double z) const {
@@ -88,12 +109,22 @@ double HeadPhantom::hu_at(const Eigen::Vector3d& p, const Eigen::Vector3d& voxel
   };
 
   const double f_skin = fraction([&](double t, double zz) { return skin_radius(t, zz); });
-  double hu = kAirHu + f_skin * (kTissueHu - kAirHu);
+  // The layered phantom: dermis under the skin, fat from its top to its bottom, muscle below;
+  // partial volumes superpose (each interface's ramp adds its step in HU).
+  const double surface_hu = layered_ ? kDermisHu : kTissueHu;
+  const double deep_hu = layered_ ? kMuscleHu : kTissueHu;
+  double hu = kAirHu + f_skin * (surface_hu - kAirHu);
   if (f_skin > 0) {
+    if (layered_) {
+      hu += fraction([&](double t, double zz) { return fat_top_radius(t, zz); }) *
+            (kFatHu - kDermisHu);
+      hu += fraction([&](double t, double zz) { return fat_bottom_radius(t, zz); }) *
+            (kMuscleHu - kFatHu);
+    }
     const double f_bone = fraction([&](double t, double zz) { return bone_radius(t, zz); });
     const double f_inner =
         fraction([&](double t, double zz) { return bone_radius(t, zz) - kSkullMm; });
-    hu += f_bone * (kBoneHu - kTissueHu) + f_inner * (kBrainHu - kBoneHu);
+    hu += f_bone * (kBoneHu - deep_hu) + f_inner * (kBrainHu - kBoneHu);
     // An enclosed air cavity (a "sinus") behind the forehead, inside the skull.
     const Eigen::Vector3d c = a + Eigen::Vector3d(0.0, -45.0, 35.0);
     const double d = (p - c).norm() - 9.0;
@@ -142,7 +173,7 @@ Volume make_phantom(const PhantomOptions& options) {
   v.source = "phantom";
   v.format = "phantom";
   v.data.resize(v.geom.n_voxels());
-  const HeadPhantom head;
+  const HeadPhantom head(options.layered);
   const auto& d = v.geom.dims;
   tbb::parallel_for(0, d[2], [&](int k) {
     for (int j = 0; j < d[1]; ++j)
@@ -154,7 +185,8 @@ Volume make_phantom(const PhantomOptions& options) {
             static_cast<float>(std::round(head.hu_at(p, options.spacing_mm, options.head_holder)));
       }
   });
-  v.notes.push_back("analytic head phantom (caps phantom)");
+  v.notes.push_back(options.layered ? "analytic layered head phantom (caps phantom --layered)"
+                                     : "analytic head phantom (caps phantom)");
   return v;
 }
 

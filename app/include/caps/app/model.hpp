@@ -35,8 +35,11 @@ struct FromVolumeRequest {
   double bone_cap = MapOptions{}.bone_cap_mm;
   double decimate = ModelOptions{}.decimate_fraction;
   double mr_scalp = SegmentOptions{}.mr_scalp_mm;
+  double fat_level = LayerOptions{}.fat_level_hu;
+  double fat_merge_gap = LayerOptions{}.merge_gap_mm;
+  double fat_min_band = LayerOptions{}.min_band_mm;
   double max_voxels = kDefaultMaxVoxels, max_bytes = kDefaultMaxBytes;
-  bool allow_missing_slices = false, force = false;
+  bool allow_missing_slices = false, no_layers = false, force = false;
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
@@ -58,6 +61,12 @@ struct FromVolumeRequest {
     v(r.n_z, {"n_z", "cylindrical grid: samples along the axis"});
     v(r.bone_cap, {"bone_cap", "no bone within this depth (mm) marks a cell invalid"});
     v(r.decimate, {"decimate", "fraction of mesh faces to keep (0..1]"});
+    v(r.fat_level, {"fat_level", "tissue layers (CT): HU level halfway between fat and soft "
+                                 "tissue; fat lies below it"});
+    v(r.fat_merge_gap, {"fat_merge_gap", "tissue layers: fat bands closer than this (mm) are one"});
+    v(r.fat_min_band, {"fat_min_band", "tissue layers: narrower dips (mm) are noise, not fat"});
+    v(r.no_layers, {"no_layers", "do not measure the tissue layers (skin, fat, deep)",
+                    FieldKind::Flag});
     v(r.max_voxels, {"max_voxels", "refuse a volume declaring more voxels (default 2^31)"});
     v(r.max_bytes, {"max_bytes", "refuse a volume needing more bytes of memory (default 8 GiB)"});
     v(r.force, {"force", "replace an existing output", FieldKind::Flag});
@@ -216,13 +225,15 @@ std::string summary(const VolumeInfoResult& result);
 
 struct PhantomRequest {
   std::string output, voxels = "256,256,240", spacing = "1,1,1";
-  bool no_holder = false, force = false;
+  bool no_holder = false, layered = false, force = false;
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
     v(r.output, {"output", "output .nii or .nii.gz", FieldKind::Required, "-o,--output"});
     v(r.voxels, {"voxels", "voxels along L,P,S", FieldKind::Option, {}, "--size"});
     v(r.spacing, {"spacing", "voxel size in mm along L,P,S"});
     v(r.no_holder, {"no_holder", "leave out the head-holder arc", FieldKind::Flag});
+    v(r.layered, {"layered", "soft tissue in three layers of known depth: dermis, fat, muscle",
+                  FieldKind::Flag});
     v(r.force, {"force", "replace an existing output", FieldKind::Flag});
   }
 };
@@ -232,6 +243,7 @@ struct PhantomResult {
   Eigen::Vector3i dims{0, 0, 0};
   Eigen::Vector3d spacing_mm{0, 0, 0};
   bool head_holder = true;
+  bool layered = false;
 };
 PhantomResult run_phantom(const PhantomRequest& request, Reporter* reporter = nullptr);
 std::string to_json(const PhantomResult& result);

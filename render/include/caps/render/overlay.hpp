@@ -61,10 +61,35 @@ void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
                     const std::string& title, const std::string& note = "");
 
 /// Draws polylines given in LPS mm (e.g. a plan's cutting paths) over the image, in a dashed dark
-/// line, as the surgeon's marker would, at their pixels camera.project(p). Throws InvalidInput
-/// unless the image is the camera's size.
+/// line, as the surgeon's marker would, at their pixels camera.project(p). With `hits`
+/// (pixel_hits() of the surface drawn, same camera) the parts of the lines behind the surface
+/// (deeper than its hit in their pixel by more than 1 mm) are left out. Throws InvalidInput
+/// unless the image (and the hits) are the camera's size.
 void draw_polylines(RgbImage& image, const Camera& camera,
-                    const std::vector<std::vector<Eigen::Vector3d>>& lines);
+                    const std::vector<std::vector<Eigen::Vector3d>>& lines,
+                    const PixelHits* hits = nullptr);
+
+/// Draws the suture (scar) lines over a post-operative image: solid, dark red, at
+/// camera.project(p) of each polyline's points (LPS mm), hidden parts left out given `hits` (see
+/// draw_polylines()). Throws InvalidInput unless the image (and the hits) are the camera's size.
+void draw_suture_lines(RgbImage& image, const Camera& camera,
+                       const std::vector<std::vector<Eigen::Vector3d>>& lines,
+                       const PixelHits* hits = nullptr);
+
+/// The suture lines of the closed skin: the post-operative positions (LPS mm) of the
+/// micropolygons' border loops other than the outer rim (each wound's and incision's lips, which
+/// the closure brings together), each loop closed.
+std::vector<std::vector<Eigen::Vector3d>> suture_lines(const SkinSurfaces& skin);
+
+/// The length (mm) of a scale bar for an image `width_mm` wide: the largest of 1, 2, 5, 10, 20,
+/// 50, 100 mm (× powers of ten) that is at most a fifth of the width.
+double scale_bar_length_mm(double width_mm);
+
+/// Draws a scale bar in the image's lower left corner over a white panel: a black bar
+/// scale_bar_length_mm() long at the camera's scale (width_mm / width_px mm per pixel) with end
+/// ticks and its length ("10 mm"). Only for orthographic cameras (a perspective image has no one
+/// scale): throws InvalidInput for a perspective camera or an image not the camera's size.
+void draw_scale_bar(RgbImage& image, const Camera& camera);
 
 /// The plan's cutting paths on the model's skin (LPS mm), each segment sampled along the skin
 /// (in theta and z, across the seam the short way) so that the line follows the surface.
@@ -74,12 +99,17 @@ std::vector<std::vector<Eigen::Vector3d>> plan_lines(const plan::Plan& plan, con
 struct Overlays {
   /// The plan's cutting paths (LPS mm), drawn over the pre-operative images.
   std::vector<std::vector<Eigen::Vector3d>> plan_lines;
+  /// Draw suture_lines() of the skin over the post-operative images.
+  bool suture_lines = false;
+  /// Draw a scale bar (mm) on every image of an orthographic view.
+  bool scale_bar = false;
   /// Also write <name>_<view>.png for each: the post-operative skin coloured by the map, with its
   /// colour bar (displacement_map(), tension_map()).
   std::vector<ScalarMap> scalar_maps;
 };
 
-/// render_views() with overlays: pre_<view>.png (with the plan's lines), post_<view>.png, and
+/// render_views() with overlays: pre_<view>.png (with the plan's lines), post_<view>.png (with the
+/// suture lines), each with the scale bar if asked, and
 /// <name>_<view>.png for each scalar map (e.g. displacement_<view>.png, tension_<view>.png).
 /// Returns the paths written. Throws InvalidInput if a map's size is not the skin's vertex count.
 std::vector<std::filesystem::path> render_views_with_overlays(const PatientModel& model,

@@ -5,7 +5,8 @@
 /// interpolated over each triangle, and PNG output.
 ///
 /// Shading is two-sided (the normal is turned towards the viewer), with smooth vertex normals
-/// (area-weighted face normals). Pixels are deterministic: the same mesh and camera give the same
+/// (given, as the skin's shading normals, or area-weighted face normals). Embree runs in its
+/// robust (watertight) mode: no ray slips through an edge. Pixels are deterministic: the same mesh and camera give the same
 /// bytes, so pre- and post-operative images differ exactly where the skin moved.
 
 #include <Eigen/Core>
@@ -59,6 +60,17 @@ Camera standard_camera(View view, const PatientModel& model, const SkinSurfaces&
 /// an invalid camera or a bad sample count.
 RgbImage render_image(const TriMesh& mesh, const Eigen::MatrixX3d& color, const Camera& camera,
                       const RenderOptions& options = {});
+
+/// render_image() with given shading normals `normals` (#V×3 unit, LPS; e.g. the skin's
+/// normal_pre / normal_post) instead of the mesh's vertex_normals().
+RgbImage render_image(const TriMesh& mesh, const Eigen::MatrixX3d& color,
+                      const Eigen::MatrixX3d& normals, const Camera& camera,
+                      const RenderOptions& options = {});
+
+/// The skin blended pre + t (post - pre) (t in [0, 1]; 0: pre, 1: post exactly) with its
+/// shading_normals(skin, t) and per-vertex colours `color` (#V×3, e.g. skin.color).
+RgbImage render_skin(const SkinSurfaces& skin, double t, const Eigen::MatrixX3d& color,
+                     const Camera& camera, const RenderOptions& options = {});
 
 /// What the renderer's ray through each pixel's centre, camera.ray(x + 0.5, y + 0.5), meets
 /// (the one sample of render_image() with samples_per_side = 1), row-major, y down.

@@ -17,16 +17,20 @@
 /// Outside the mesh the skin is the range mesh: one vertex per (theta, z) sample, two triangles
 /// per cell, periodic in theta, closed at the first and last rows by a fan to the axis. Cells
 /// near the mesh's footprint (touching it, dilated by one cell, holes filled) are left out, and
-/// the annulus between the staircase border of those cells and the mesh's outer rim is filled by
-/// a strip of triangles that reuses the vertices of both (a zipper by arc length): every seam
-/// edge is shared by two triangles, so the seam cannot crack, whatever the rim does. The wound
+/// the annulus between the staircase border of those cells and the mesh's outer rim is a
+/// constrained Delaunay triangulation in (theta, z) of the vertices of both and of the grid
+/// vertices between them: every seam edge is shared by two triangles, so the seam cannot crack,
+/// whatever the rim does, and no seam triangle folds. The wound
 /// (the hole of an excision) is filled by an ear-clipped triangulation of its border's
 /// micropolygon vertices: pre-operatively it is the skin to be removed; when the wound closes
 /// its border vertices meet and the fill collapses onto the suture line, covering the small
 /// mismatch of the two lips' range offsets.
 ///
 /// Pre and post share one triangle list and one colour per vertex (so images, animations and
-/// morph targets can blend them); only the positions differ.
+/// morph targets can blend them); only the positions and the shading normals differ. Every
+/// vertex is shaded with one smooth normal field of the drawn range (normal_pre), turned after
+/// the closure only where its neighbourhood moved (normal_post), so the patch shades exactly as
+/// the skin around it wherever nothing moved.
 
 #include <Eigen/Core>
 #include <vector>
@@ -41,8 +45,11 @@ class PatientModel;
 
 namespace caps::render {
 
+struct DrawnSkin;
+
 /// What produced a triangle of the skin.
-enum class SkinPart : int { Range = 0, Micropolygon = 1, Seam = 2, WoundFill = 3 };
+/// (Isosurface: the smoothed isosurface drawn in the range image's undercuts, DrawnSkin.)
+enum class SkinPart : int { Range = 0, Micropolygon = 1, Seam = 2, WoundFill = 3, Isosurface = 4 };
 
 /// The pre- and post-operative skin, one topology.
 struct SkinSurfaces {
@@ -55,6 +62,14 @@ struct SkinSurfaces {
   /// #V×2 natural coordinates (xi, eta) of a micropolygon vertex on its element's top face
   /// (zeta = -1; x_face = sum_a N_a(xi, eta, -1) X_a); 0 where vertex_element is -1
   Eigen::MatrixX2d vertex_natural;
+  /// #V×3 unit shading normals of pre (LPS): the drawn range surface's smooth normal field at
+  /// each vertex's (theta, z), the same for the range mesh, the seam and the micropolygons, so the
+  /// patch shades exactly as the skin around it. Empty: use vertex_normals(pre).
+  Eigen::MatrixX3d normal_pre;
+  /// #V×3 unit shading normals of post: unit(normal_pre + m_post - m_pre), m = vertex_normals() of
+  /// the mesh, so equal to normal_pre wherever nothing of the vertex's one-ring moved. Empty: use
+  /// vertex_normals(post).
+  Eigen::MatrixX3d normal_post;
   std::vector<SkinPart> face_part;   ///< #F
   std::vector<int> skin_elements;    ///< elements whose top face lies on the skin
   int n_micropolygon_vertices = 0;
@@ -78,12 +93,34 @@ int full_resolution_subdivisions(const PatientModel& model, const fem::Mesh& mes
 /// micropolygons along each element edge. `displacement_mm` (#N×3, mm) or null for none (then
 /// post == pre). Throws InvalidInput if no element face lies on the skin, if the displacement has
 /// the wrong size or is not finite, or if the mesh reaches the first or last row of the model.
+/// `drawn` (null: `model` itself) is the skin drawn (drawn_skin.hpp): its range, a model on the
+/// same grid whose r_skin and colour the micropolygons and the range mesh sample (resampled from
+/// the smoothed isosurface, slice terraces filtered), and the isosurface's triangles that replace
+/// the range cells in undercuts (outside the mesh's footprint; SkinPart::Isosurface, not stitched
+/// to the range cells but overlapping them, so the skin is then no longer one closed manifold).
+/// The skin faces are still found on `model`.
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
-                            const Eigen::MatrixX3d* displacement_mm, int n_subdivisions);
+                            const Eigen::MatrixX3d* displacement_mm, int n_subdivisions,
+                            const DrawnSkin* drawn = nullptr);
 
 /// The same with a solve result (null: no displacement).
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
-                            const fem::SolveResult* result, int n_subdivisions);
+                            const fem::SolveResult* result, int n_subdivisions,
+                            const DrawnSkin* drawn = nullptr);
+
+/// Area-weighted unit vertex normals of a mesh (V #V×3, F #F×3 counter-clockwise outward); a
+/// vertex in no non-degenerate triangle gets a zero row.
+Eigen::MatrixX3d vertex_normals(const TriMesh& mesh);
+
+/// The drawn range surface's smooth normal field at (theta deg, z mm) rows of `theta_z` (#P×2):
+/// central-difference normals of skin.r_skin at the grid samples, interpolated bilinearly and
+/// normalised (the normals displaced_skin() gives the pre-operative skin). #P×3 unit, LPS.
+Eigen::MatrixX3d skin_normal_field(const PatientModel& skin, const Eigen::MatrixX2d& theta_z);
+
+/// The shading normals of the skin blended pre + t (post - pre), t in [0, 1]: unit((1 - t)
+/// normal_pre + t normal_post), or vertex_normals() of the blended mesh when the skin carries no
+/// normals. #V×3, LPS.
+Eigen::MatrixX3d shading_normals(const SkinSurfaces& skin, double t);
 
 /// A nodal field carried to the skin's vertices by the same shape functions that place the
 /// micropolygons: f(v) = sum_a N_a(xi_v, eta_v, -1) f_a over the nodes of vertex v's element.

@@ -26,7 +26,7 @@ struct ServerOptions {
   std::string model_dir;            ///< the patient model every request works on
   std::string host = kDefaultHost;  ///< the address to bind (another than loopback: a warning)
   int port = kDefaultPort;          ///< 0: any free port (see PlannerServer::port())
-  std::string web_root;             ///< the page's folder; empty: web/dist, else the placeholder
+  std::string web_root;             ///< the page's folder; empty: default_web_root()
   std::size_t max_body_bytes = kMaxBodyBytes;
 };
 
@@ -43,8 +43,10 @@ ErrorResponse error_response(const std::exception& error);
 /// True for the loopback addresses (127.0.0.0/8, ::1, localhost): reachable from this machine only.
 bool is_loopback(const std::string& host);
 
-/// The web folder served when none is given: the source tree's web/dist if it has an
-/// index.html, else web/ (where only the placeholder index.html is served).
+/// The web folder served when none is given: the first with an index.html of the page the build
+/// bundled beside the program (<program's folder>/../web/dist: build/web/dist for build/tools/caps
+/// and for build/tests/*), the build tree's web/dist, the source tree's web/dist; else the
+/// source tree's web/ (where only the placeholder index.html is served).
 std::filesystem::path default_web_root();
 
 /// The planner's server: owns its routes, its per-server work folder (plans and results under

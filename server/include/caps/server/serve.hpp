@@ -24,8 +24,8 @@ struct ServeRequest {
                "the address to bind; anything but 127.0.0.1 lets other machines use the "
                "planner and read the model (a warning is printed)"});
     v(r.web_root, {"web_root",
-                   "serve the page from this folder (default: web/dist, else the "
-                   "placeholder page)"});
+                   "serve the page from this folder (default: the page the build bundled, "
+                   "build/web/dist, else a placeholder page)"});
   }
 };
 

@@ -10,6 +10,7 @@
 
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -62,6 +63,32 @@ enum CellFlag : std::uint8_t {
 /// Short names of the flags, e.g. "no_bone|undercut".
 std::string describe_flags(std::uint8_t flags);
 
+/// Why a cell's tissue layers (skin, fat, deep) are not measured; OR-ed, 0 means measured.
+enum LayerFlag : std::uint8_t {
+  kLayerNoThickness = 1,   ///< the cell has no measured thickness (no skin or no bone)
+  kLayerNoFat = 2,         ///< no subcutaneous fat seen: fat 0, skin and deep not told apart
+  kLayerSeveralBands = 4,  ///< fat in several bands separated by soft tissue
+  kLayerNoContrast = 8,    ///< the modality shows no fat contrast that caps uses (MR, unknown)
+  kLayerThinSkin = 16,     ///< the profile never rises above the fat level between the skin's
+                           ///< ramp and the fat: the dermis is thinner than the partial-volume
+                           ///< blur along the ray, so the skin/fat interface is not resolved
+};
+
+/// Short names of the layer flags, e.g. "no_fat".
+std::string describe_layer_flags(std::uint8_t flags);
+
+/// How the soft tissue between skin and bone is split into skin (dermis), subcutaneous fat and
+/// deep tissue (muscle, fascia, galea) along each ray, in CT. docs/volume.md says how the
+/// defaults were measured.
+struct LayerOptions {
+  bool measure = true;  ///< measure the layers (CT only; other modalities get kLayerNoContrast)
+  /// The level halfway between fat (about -100 HU) and soft tissue (about +40 HU): samples below
+  /// it are fat, and the interfaces are where the profile crosses it (sub-voxel).
+  double fat_level_hu = -30.0;
+  double merge_gap_mm = 1.5;  ///< fat bands closer than this are one band (septa, vessels)
+  double min_band_mm = 0.5;   ///< narrower dips below the level are noise, not fat
+};
+
 /// A ray that re-enters the skin after an air gap of at least this length (mm) is kUndercut.
 inline constexpr double kUndercutMinGapMm = 2.0;
 
@@ -70,6 +97,7 @@ struct MapOptions {
   int n_z = 256;
   double bone_cap_mm = 40.0;     ///< no bone deeper than this under the skin -> kNoBone
   double grazing_deg = 70.0;     ///< ray-to-normal angle beyond which a cell is kGrazing
+  LayerOptions layers;
   /// The z range of the grid (mm along the axis); by default the head's extent.
   std::optional<double> z_min_mm, z_max_mm;
 };
@@ -80,6 +108,11 @@ struct MapOptions {
 /// thickness_normal: distance from the skin point to the nearest bone (how clinicians measure).
 /// Invalid cells are filled (see docs/model-format.md): r_skin and thickness by harmonic
 /// interpolation from valid neighbours, so every value is finite; `flags` says which are measured.
+/// The tissue layers (empty when not measured, has_layers()): thickness_skin from the skin to the
+/// top of the subcutaneous fat, thickness_fat, thickness_deep from the fat to the bone, along the
+/// ray (summing to thickness) and along the normal (*_normal, summing to thickness_normal);
+/// layer_flags / layer_flags_normal (LayerFlag) say where they were measured; elsewhere they are
+/// filled from the measured cells' proportions (fat 0 where none was seen).
 struct CylindricalMaps {
   CylinderAxis axis;
   CylinderGrid grid;
@@ -87,8 +120,14 @@ struct CylindricalMaps {
   std::vector<std::uint8_t> flags;
   std::vector<std::uint8_t> measured_skin;  ///< 1 where r_skin was measured, 0 where filled
   std::vector<std::uint8_t> measured_bone;  ///< 1 where r_bone was measured, 0 where filled
+  std::vector<float> thickness_skin, thickness_fat, thickness_deep;
+  std::vector<float> thickness_skin_normal, thickness_fat_normal, thickness_deep_normal;
+  std::vector<std::uint8_t> layer_flags, layer_flags_normal;
 
   bool is_valid(int j, int k) const { return flags[grid.index(j, k)] == 0; }
+  bool has_layers() const { return !thickness_skin.empty(); }
+  /// Sizes the layer images to grid.size(), all zero, flagged kLayerNoThickness.
+  void allocate_layers();
   /// Sizes every image to grid.size(), all zero (nothing measured yet).
   void allocate();
 };
@@ -108,8 +147,33 @@ void flag_grazing(CylindricalMaps& maps, double limit_deg);
 /// area-weighted centre of the head's axial cross-sections; front = anterior (LPS -y).
 CylinderAxis fit_axis(const Segmentation& seg);
 
-/// Casts one ray per grid cell from the axis outward and measures skin and bone.
-/// `v` is the full-resolution volume `seg` was computed from.
+/// One profile split into layers: depths (mm) along it, skin + fat + deep = its length.
+struct LayerSplit {
+  double skin_mm = 0, fat_mm = 0, deep_mm = 0;
+  std::uint8_t flags = 0;  ///< LayerFlag
+};
+
+/// Splits the soft tissue between the skin (depth 0) and the bone (depth `length_mm`) into
+/// layers from the intensity profile `hu(depth_mm)` (CT, HU): the fat is where the profile lies
+/// below options.fat_level_hu, past the skin's partial-volume ramp (`ramp_mm`, about one voxel
+/// along the profile). `hu` is sampled every `step_mm`; each interface is located where the
+/// profile crosses the level, by linear interpolation between the samples and one more
+/// interpolation step on `hu` itself (sub-voxel). Bands closer than merge_gap_mm are joined and
+/// then bands narrower than min_band_mm dropped; several bands left -> kLayerSeveralBands (skin
+/// to the first band's top, fat to the last band's bottom); none -> kLayerNoFat (fat 0, skin =
+/// length, deep 0); fat from the skin's ramp on -> kLayerThinSkin (skin 0).
+LayerSplit split_layers(const std::function<double(double)>& hu, double length_mm, double step_mm,
+                        double ramp_mm, const LayerOptions& options);
+
+/// Fills cells whose layer flag is set from the proportions of measured cells (harmonic_fill of
+/// skin / thickness and fat / thickness; fat stays 0 where kLayerNoFat is the only reason) and
+/// makes every cell sum to `total`. All images hold grid.size() values.
+void fill_layers(std::vector<float>& skin, std::vector<float>& fat, std::vector<float>& deep,
+                 const std::vector<std::uint8_t>& layer_flags, const std::vector<float>& total,
+                 const CylinderGrid& grid);
+
+/// Casts one ray per grid cell from the axis outward and measures skin and bone, and the tissue
+/// layers (options.layers) in CT. `v` is the full-resolution volume `seg` was computed from.
 CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const CylinderAxis& axis,
                                  const MapOptions& options = {}, Reporter* reporter = nullptr);
 

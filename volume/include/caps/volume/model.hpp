@@ -32,6 +32,7 @@ struct VolumeModel : ModelContent {
   Eigen::Vector3i source_dims{0, 0, 0};
   Eigen::Vector3d source_spacing_mm{0, 0, 0};
   std::vector<std::string> notes;
+  LayerOptions layer_options;  ///< how the tissue layers were measured (model.json)
 };
 
 /// Segments the volume, fits the axis, measures the maps, extracts the surfaces.

@@ -30,6 +30,19 @@ inline constexpr char kSkinPng[] = "skin.png";
 inline constexpr char kSkinMesh[] = "skin.ply";
 inline constexpr char kBoneMesh[] = "bone.ply";
 inline constexpr char kColor[] = "color.png";  ///< only where the source has colour
+// The tissue layers, only where they were measured (CT): along the ray and along the normal,
+// their validity (LayerFlag), and a picture of each layer along the normal.
+inline constexpr char kThicknessSkin[] = "thickness_skin.nrrd";
+inline constexpr char kThicknessFat[] = "thickness_fat.nrrd";
+inline constexpr char kThicknessDeep[] = "thickness_deep.nrrd";
+inline constexpr char kThicknessSkinNormal[] = "thickness_skin_normal.nrrd";
+inline constexpr char kThicknessFatNormal[] = "thickness_fat_normal.nrrd";
+inline constexpr char kThicknessDeepNormal[] = "thickness_deep_normal.nrrd";
+inline constexpr char kLayerValidity[] = "layer_validity.nrrd";
+inline constexpr char kLayerValidityNormal[] = "layer_validity_normal.nrrd";
+inline constexpr char kLayerSkinPng[] = "layer_skin.png";
+inline constexpr char kLayerFatPng[] = "layer_fat.png";
+inline constexpr char kLayerDeepPng[] = "layer_deep.png";
 }  // namespace model_file
 
 /// Summary statistics of a model, as stored in model.json.
@@ -42,6 +55,10 @@ struct ModelStatistics {
   double face_z_mm = 0;           ///< its z
   double forehead_thickness_mm = 0;  ///< median over theta in [-15, 15] deg, 30..60 mm above it
   double r_skin_median_mm = 0;
+  /// Tissue layers along the ray (zero where not measured): cells with measured layers, cells
+  /// with no fat seen or fat in several bands, and medians over the measured cells.
+  std::size_t layer_cells = 0, no_fat = 0, several_fat_bands = 0;
+  double skin_layer_median_mm = 0, fat_median_mm = 0, deep_median_mm = 0;
 };
 
 /// A mesh as model.json describes it.
@@ -63,6 +80,7 @@ struct ModelInfo {
   std::string thickness_json = "{}";     ///< "thickness": kind and how it was measured
   ModelStatistics stats;
   bool has_color = false;  ///< the directory holds model_file::kColor
+  bool has_layers = false;  ///< the directory holds the tissue layer maps (model_file::kThicknessSkin...)
   MeshSummary skin, bone;
   /// The model's identity: a hash of its maps (content_hash()), so that a plan made on it can
   /// tell a copy of this model from another one. Empty for models written before it existed.
@@ -92,8 +110,9 @@ ModelInfo read_model_info(const std::filesystem::path& dir);
 /// read_model_info().
 std::string read_model_json(const std::filesystem::path& dir);
 
-/// The maps of a model directory on `info`'s axis and grid; measured_skin / measured_bone are
-/// derived from the validity flags. Throws as read_map_nrrd().
+/// The maps of a model directory on `info`'s axis and grid (with the tissue layers where
+/// info.has_layers); measured_skin / measured_bone are derived from the validity flags. Throws as
+/// read_map_nrrd().
 CylindricalMaps read_model_maps(const std::filesystem::path& dir, const ModelInfo& info);
 
 /// The model's colour image (n_theta × n_z, superior on top), or an empty image if it has none.

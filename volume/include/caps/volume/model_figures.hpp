@@ -3,6 +3,7 @@
 /// (-180 .. 180, the face in the middle) and superior at the top, with theta and z axes.
 
 #include <filesystem>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,13 @@ namespace caps {
 void write_thickness_png(const std::filesystem::path& path, const CylindricalMaps& maps,
                          const std::vector<float>& values, const std::string& title,
                          const std::string& credit = "");
+
+/// A tissue layer's figure, like write_thickness_png() but with the cells whose `layer_flags`
+/// (LayerFlag) are set hatched, and `what` naming the layer on the colour bar ("fat (mm)").
+void write_layer_png(const std::filesystem::path& path, const CylindricalMaps& maps,
+                     const std::vector<float>& values, const std::vector<std::uint8_t>& layer_flags,
+                     const std::string& what, const std::string& title,
+                     const std::string& credit = "");
 
 /// A shaded relief of the skin range image (like a Cyberware colour image), skin-toned. Written
 /// atomically.

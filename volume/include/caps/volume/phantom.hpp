@@ -11,6 +11,10 @@
 ///               soft-tissue thickness varies smoothly and is known exactly;
 ///   brain       inside the skull, with an enclosed air cavity (a "sinus");
 ///   head holder a plastic arc behind the head on a 1.5 mm foam pad, joined to it by a thin strap.
+/// The layered variant (`layered`) puts the soft tissue in three layers of known depth: dermis
+/// (kDermisHu) from the skin to R_fat_top = R_head - dermis(theta, z), subcutaneous fat (kFatHu)
+/// down to R_fat_bottom = R_fat_top - fat(theta, z), then deep tissue (muscle, kMuscleHu) down to
+/// the bone; its soft-tissue thickness is dermis + fat + deep (4.2 .. 12.2 mm).
 /// Voxels carry partial-volume values (a linear ramp one voxel wide across each interface), so
 /// sub-voxel measurements can be checked against the analytic surfaces.
 
@@ -24,13 +28,20 @@ struct PhantomOptions {
   Eigen::Vector3i dims{256, 256, 240};     ///< voxels along L, P, S
   Eigen::Vector3d spacing_mm{1.0, 1.0, 1.0};
   bool head_holder = true;                 ///< include the plastic head-holder arc
+  bool layered = false;  ///< dermis, fat and muscle instead of one soft tissue (HeadPhantom)
 };
 
 /// Analytic description of the phantom head (all lengths in mm, angles in radians).
 class HeadPhantom {
  public:
+  /// The single-tissue phantom, or with `layered` the three-layer one (dermis, fat, muscle).
+  explicit HeadPhantom(bool layered = false) : layered_(layered) {}
+
   static constexpr double kAirHu = -1000.0;
   static constexpr double kTissueHu = 40.0;
+  static constexpr double kDermisHu = 55.0;   ///< layered: dermis
+  static constexpr double kFatHu = -100.0;    ///< layered: subcutaneous fat
+  static constexpr double kMuscleHu = 45.0;   ///< layered: deep tissue (muscle, fascia)
   static constexpr double kBoneHu = 1200.0;
   static constexpr double kBrainHu = 35.0;
   static constexpr double kHolderHu = 100.0;
@@ -45,8 +56,18 @@ class HeadPhantom {
   double head_radius(double theta, double z) const;
   /// Skin radius (outer envelope) including the nose and the marker.
   double skin_radius(double theta, double z) const;
-  /// Soft-tissue thickness of the head without bumps, radially: 2.5 .. 8.5 mm.
+  bool is_layered() const { return layered_; }
+  /// Soft-tissue thickness of the head without bumps, radially: 2.5 .. 8.5 mm (layered:
+  /// dermis + fat + deep, 4.2 .. 12.2 mm).
   double thickness(double theta, double z) const;
+  /// Layered phantom: radial depths (mm) of the dermis (1.4 .. 2.2), the fat (1.0 .. 5.0) and
+  /// the deep tissue (1.8 .. 5.0) under the head radius (without the nose and marker bumps).
+  double dermis_depth(double theta, double z) const;
+  double fat_depth(double theta, double z) const;
+  double deep_depth(double theta, double z) const;
+  /// Layered phantom: radii of the top (dermis/fat) and bottom (fat/deep) of the fat.
+  double fat_top_radius(double theta, double z) const;
+  double fat_bottom_radius(double theta, double z) const;
   /// Outer bone radius: head_radius - thickness (may be <= 0 near the vertex: no bone there).
   double bone_radius(double theta, double z) const;
 
@@ -58,9 +79,13 @@ class HeadPhantom {
   static constexpr double kNoseZ = -20.0;
   static constexpr double kMarkerTheta = 1.5707963267948966;  // patient's left
   static constexpr double kMarkerZ = 50.0;
+
+ private:
+  bool layered_ = false;
 };
 
-/// Samples the phantom on a grid centred on the head, identity direction, as a CT in HU.
+/// Samples the phantom on a grid centred on the head, identity direction, as a CT in HU
+/// (options.layered: the layered HeadPhantom).
 Volume make_phantom(const PhantomOptions& options = {});
 
 }  // namespace caps

@@ -1,0 +1,22 @@
+#pragma once
+/// @brief Patient models loaded once per process: a long-lived front end (the planner's server)
+/// answers many requests on one model without reading its maps again for each.
+
+#include <memory>
+#include <string>
+
+namespace caps {
+class PatientModel;
+}
+
+namespace caps::app {
+
+/// The model in the folder `dir`, as PatientModel::load() reads it, kept in memory while none of
+/// the folder's files changes (their sizes and modification times are compared on each call, a
+/// few stat() calls); a changed or rewritten model is read again. Thread-safe. Throws what
+/// PatientModel::load() throws (IoError, InvalidInput) for a missing or broken model.
+/// @param dir  the model directory (caps model from-volume / from-scan)
+/// @return     the model, shared and read-only
+std::shared_ptr<const PatientModel> loaded_model(const std::string& dir);
+
+}  // namespace caps::app

@@ -1,0 +1,149 @@
+// The planner's latency as the page sees it, through the HTTP server on loopback (in-process
+// server, httplib client): placing or moving a template until its check and lines are back
+// (POST /api/plan/new + /api/plan/lines), checking a plan (POST /api/plan/check), and Simulate
+// until the post-operative skin can be drawn (POST /api/simulate + GET /api/results/ID/view + the
+// two .glb files), on the demo's model and its Z-plasty (scripts/demo.sh: at 30,105, length 15).
+//   scripts/demo.sh   (or build/tools/caps model from-volume .../Cranium.inv3 -o out/cranium)
+//   CAPS_BENCH_MODEL=out/cranium build/bench/bench_server_planner
+// Also: the model read from disk (what every request cost before the server kept its model).
+#include <benchmark/benchmark.h>
+
+#include "caps/core/error.hpp"
+#include "caps/server/planner_server.hpp"
+#include "caps/surface/patient_model.hpp"
+
+#include <httplib.h>
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cstdlib>
+#include <map>
+#include <memory>
+#include <string>
+#include <thread>
+
+using nlohmann::json;
+
+namespace {
+
+std::string model_dir() {
+  const char* m = std::getenv("CAPS_BENCH_MODEL");
+  return m ? m : "out/cranium";
+}
+
+// One server for the whole program, on a free loopback port.
+struct Server {
+  std::unique_ptr<caps::server::PlannerServer> server;
+  std::thread thread;
+  Server() {
+    caps::server::ServerOptions o;
+    o.model_dir = model_dir();
+    o.port = 0;
+    server = std::make_unique<caps::server::PlannerServer>(o);
+    server->bind();
+    thread = std::thread([this] { server->listen(); });
+  }
+  ~Server() {
+    server->stop();
+    thread.join();
+  }
+  httplib::Client client() const {
+    httplib::Client c("127.0.0.1", server->port());
+    c.set_read_timeout(600, 0);
+    return c;
+  }
+};
+
+Server& server() {
+  static Server s;
+  return s;
+}
+
+json z_plasty(double theta) {
+  return {{"procedure", "z-plasty"},
+          {"at", std::to_string(theta) + ",105"},
+          {"orientation", 90},
+          {"parameters", {{"length", 15}}}};
+}
+
+std::string post(httplib::Client& c, const std::string& path, const std::string& body) {
+  const auto r = c.Post(path.c_str(), body, "application/json");
+  if (!r || r->status != 200)
+    throw caps::Error(path + ": " + (r ? r->body : std::string("no answer")));
+  return r->body;
+}
+
+std::string get(httplib::Client& c, const std::string& path) {
+  const auto r = c.Get(path.c_str());
+  if (!r || r->status != 200)
+    throw caps::Error(path + ": " + (r ? r->body : std::string("no answer")));
+  return r->body;
+}
+
+// Moving a template: each iteration lays it 0.5 deg further along theta (a drag step), checks
+// it and gets its lines, as the page does on every move.
+void BM_MoveTemplateToCheckAndLines(benchmark::State& state) {
+  auto c = server().client();
+  int i = 0;
+  for (auto _ : state) {
+    const std::string plan = post(c, "/api/plan/new", z_plasty(30 + 0.5 * (i++ % 8)).dump());
+    benchmark::DoNotOptimize(post(c, "/api/plan/lines", plan));
+  }
+}
+BENCHMARK(BM_MoveTemplateToCheckAndLines)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_PlanCheck(benchmark::State& state) {
+  auto c = server().client();
+  const std::string plan = post(c, "/api/plan/new", z_plasty(30).dump());
+  for (auto _ : state) benchmark::DoNotOptimize(post(c, "/api/plan/check", plan));
+}
+BENCHMARK(BM_PlanCheck)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// What each plan request cost before the server kept its model: reading the model folder.
+void BM_ModelReadFromDisk(benchmark::State& state) {
+  for (auto _ : state) benchmark::DoNotOptimize(caps::PatientModel::load(model_dir()));
+}
+BENCHMARK(BM_ModelReadFromDisk)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Simulate until the post-operative skin can be drawn; counters split the time.
+void simulate(benchmark::State& state, const std::string& material) {
+  auto c = server().client();
+  const json plan = json::parse(post(c, "/api/plan/new", z_plasty(30).dump()));
+  double solve = 0, view = 0, files = 0, mb = 0;
+  std::map<std::string, double> parts;
+  for (auto _ : state) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const json r = json::parse(
+        post(c, "/api/simulate", json{{"plan", plan}, {"options", {{"material", material}}}}.dump()));
+    const auto t1 = std::chrono::steady_clock::now();
+    const json v = json::parse(get(c, "/api/results/" + std::to_string(r.at("result_id").get<int>()) + "/view"));
+    const auto t2 = std::chrono::steady_clock::now();
+    const std::size_t bytes = get(c, v.at("skin")).size() + get(c, v.at("tension")).size();
+    const auto t3 = std::chrono::steady_clock::now();
+    solve += std::chrono::duration<double>(t1 - t0).count();
+    view += std::chrono::duration<double>(t2 - t1).count();
+    files += std::chrono::duration<double>(t3 - t2).count();
+    mb = bytes / 1e6;
+    for (const char* k : {"skin", "tension", "glb"}) parts[k] += v.at("timings_s").at(k).get<double>();
+  }
+  const double n = static_cast<double>(state.iterations());
+  state.counters["simulate_s"] = solve / n;
+  state.counters["view_s"] = view / n;
+  state.counters["download_s"] = files / n;
+  state.counters["glb_MB"] = mb;
+  for (const auto& [k, t] : parts) state.counters["view_" + k + "_s"] = t / n;
+}
+
+void BM_SimulateToPostOperativeSkin_Linear(benchmark::State& state) { simulate(state, "linear"); }
+BENCHMARK(BM_SimulateToPostOperativeSkin_Linear)
+    ->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
+
+void BM_SimulateToPostOperativeSkin_NeoHookean(benchmark::State& state) {
+  simulate(state, "neo-hookean");
+}
+BENCHMARK(BM_SimulateToPostOperativeSkin_NeoHookean)
+    ->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
+
+}  // namespace
+
+BENCHMARK_MAIN();

@@ -1,0 +1,224 @@
+#include "skin_views.hpp"
+
+#include "caps/core/error.hpp"
+#include "caps/fem/mesh_io.hpp"
+#include "caps/fem/result_io.hpp"
+#include "caps/plan/plan.hpp"
+#include "caps/render/gltf_export.hpp"
+#include "caps/render/overlay.hpp"
+#include "caps/render/simulation_report.hpp"
+#include "caps/render/skin_surface.hpp"
+#include "caps/surface/patient_model.hpp"
+#include "caps/surface/range_mesh.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <chrono>
+#include <future>
+#include <vector>
+
+namespace caps::server::detail {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+// A light skin tone for models without colour (sRGB in [0, 1]).
+const Eigen::Vector3d kPlainSkin(0.86, 0.72, 0.62);
+// Cells flagged invalid in the thickness overlay (no plan can be placed there).
+const Eigen::Vector3d kInvalidGrey(0.55, 0.55, 0.55);
+// The micropolygons per element edge of the post-operative skin: the model's full resolution,
+// at most this many (the page shows a few hundred thousand triangles comfortably).
+constexpr int kMaxResultSubdivisions = 8;
+
+json lps_json(const Eigen::Vector3d& p) { return json::array({p.x(), p.y(), p.z()}); }
+
+// The 99th percentile of `values` (0 if empty).
+double percentile99(std::vector<double> values) {
+  if (values.empty()) return 0;
+  const auto k = static_cast<std::ptrdiff_t>(0.99 * static_cast<double>(values.size() - 1));
+  std::nth_element(values.begin(), values.begin() + k, values.end());
+  return values[static_cast<std::size_t>(k)];
+}
+
+// The faces of `s` on the finite-element mesh (its micropolygons and the wound fill) and, with
+// `seam`, the seam to the range mesh, with their vertices renumbered: the part of the skin the
+// simulation moved (the tension is on the mesh's faces only; the seam has none).
+render::SkinSurfaces mesh_part(const render::SkinSurfaces& s, bool seam) {
+  std::vector<Eigen::Index> faces;
+  for (Eigen::Index f = 0; f < s.pre.n_faces(); ++f)
+    if (const render::SkinPart p = s.face_part[static_cast<std::size_t>(f)];
+        p == render::SkinPart::Micropolygon || p == render::SkinPart::WoundFill ||
+        (seam && p == render::SkinPart::Seam))
+      faces.push_back(f);
+  std::vector<int> index(static_cast<std::size_t>(s.pre.n_vertices()), -1);
+  std::vector<Eigen::Index> kept;
+  render::SkinSurfaces part;
+  part.pre.F.resize(static_cast<Eigen::Index>(faces.size()), 3);
+  for (std::size_t i = 0; i < faces.size(); ++i)
+    for (int c = 0; c < 3; ++c) {
+      int& v = index[static_cast<std::size_t>(s.pre.F(faces[i], c))];
+      if (v < 0) {
+        v = static_cast<int>(kept.size());
+        kept.push_back(s.pre.F(faces[i], c));
+      }
+      part.pre.F(static_cast<Eigen::Index>(i), c) = v;
+    }
+  const auto n = static_cast<Eigen::Index>(kept.size());
+  part.pre.V.resize(n, 3);
+  part.post.V.resize(n, 3);
+  part.color.resize(n, 3);
+  for (Eigen::Index v = 0; v < n; ++v) {
+    part.pre.V.row(v) = s.pre.V.row(kept[static_cast<std::size_t>(v)]);
+    part.post.V.row(v) = s.post.V.row(kept[static_cast<std::size_t>(v)]);
+    part.color.row(v) = s.color.row(kept[static_cast<std::size_t>(v)]);
+  }
+  part.post.F = part.pre.F;
+  return part;
+}
+
+// The cells q = k n_theta + j of the model's range mesh (faces 2q and 2q + 1 of range_mesh())
+// that `s` leaves out around its finite-element mesh: where mesh_part(s, true) replaces the
+// model's skin. Found from the range faces `s` keeps, by the (theta, z) of their vertices.
+std::vector<int> replaced_cells(const CylinderGrid& g, const render::SkinSurfaces& s) {
+  const auto n_cells = static_cast<std::size_t>(g.n_theta) * static_cast<std::size_t>(g.n_z - 1);
+  std::vector<bool> kept(n_cells, false);
+  for (Eigen::Index f = 0; f < s.pre.n_faces(); ++f) {
+    if (s.face_part[static_cast<std::size_t>(f)] != render::SkinPart::Range) continue;
+    int j_min = g.n_theta, j_max = -1, k_min = g.n_z, k_max = -1;
+    for (int c = 0; c < 3; ++c) {
+      const Eigen::Index v = s.pre.F(f, c);
+      const long j = std::lround((s.theta_z(v, 0) - g.theta0_deg) / g.dtheta_deg());
+      const int k = static_cast<int>(std::lround((s.theta_z(v, 1) - g.z0_mm) / g.dz_mm));
+      const int jw = static_cast<int>(((j % g.n_theta) + g.n_theta) % g.n_theta);
+      j_min = std::min(j_min, jw);
+      j_max = std::max(j_max, jw);
+      k_min = std::min(k_min, k);
+      k_max = std::max(k_max, k);
+    }
+    if (k_max != k_min + 1) continue;  // a pole fan (its vertex on the axis shares the row)
+    const int j = j_max - j_min > 1 ? j_max : j_min;  // across the seam: the last column
+    kept[static_cast<std::size_t>(k_min) * static_cast<std::size_t>(g.n_theta) +
+         static_cast<std::size_t>(j)] = true;
+  }
+  std::vector<int> replaced;
+  for (std::size_t q = 0; q < n_cells; ++q)
+    if (!kept[q]) replaced.push_back(static_cast<int>(q));
+  return replaced;
+}
+
+}  // namespace
+
+std::string write_model_skin_glb(const PatientModel& model, SkinColouring colouring,
+                                 const fs::path& path) {
+  const CylinderGrid& g = model.grid();
+  render::SkinSurfaces s;
+  s.pre = range_mesh(model.maps(), RangeSurface::Skin);
+  s.post = s.pre;
+  const Eigen::Index n = s.pre.n_vertices(), n_grid = Eigen::Index{g.n_theta} * g.n_z;
+  s.color.resize(n, 3);
+  // Vertex v = k n_theta + j is sample (j, k); the two poles follow (range_mesh()).
+  auto theta_z = [&](Eigen::Index v) {
+    const Eigen::Index k = std::min(v, n_grid - 1) / g.n_theta;
+    const Eigen::Index j = v < n_grid ? v % g.n_theta : 0;
+    const Eigen::Index row = v < n_grid ? k : (v == n_grid ? 0 : g.n_z - 1);
+    return Eigen::Vector2d(g.theta0_deg + j * g.dtheta_deg(), g.z0_mm + row * g.dz_mm);
+  };
+  json info{{"colouring", colouring == SkinColouring::Skin ? "skin" : "thickness"},
+            {"vertices", n},
+            {"faces", s.pre.n_faces()},
+            {"has_color", model.has_color()}};
+  if (colouring == SkinColouring::Skin) {
+    for (Eigen::Index v = 0; v < n; ++v) {
+      const Eigen::Vector2d tz = theta_z(v);
+      s.color.row(v) = model.has_color() ? model.color_at(tz[0], tz[1]) : kPlainSkin;
+    }
+  } else {
+    Eigen::VectorXd t(n);
+    std::vector<double> valid;
+    std::vector<bool> ok(static_cast<std::size_t>(n));
+    for (Eigen::Index v = 0; v < n; ++v) {
+      const Eigen::Vector2d tz = theta_z(v);
+      t[v] = model.thickness(tz[0], tz[1]);
+      ok[static_cast<std::size_t>(v)] = model.flags_at(tz[0], tz[1]) == 0;
+      if (ok[static_cast<std::size_t>(v)]) valid.push_back(t[v]);
+    }
+    const double top = render::scale_top(Eigen::VectorXd::Constant(1, percentile99(valid)), 0);
+    s.color = render::scalar_colors(t, top);
+    for (Eigen::Index v = 0; v < n; ++v)
+      if (!ok[static_cast<std::size_t>(v)]) s.color.row(v) = kInvalidGrey;
+    info["scale_max_mm"] = top;
+  }
+  render::write_gltf(s, path);
+  return info.dump();
+}
+
+std::string write_result_skin_glbs(const PatientModel& model, const fs::path& result_dir) {
+  using Clock = std::chrono::steady_clock;
+  const auto seconds = [](Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double>(b - a).count();
+  };
+  const auto t0 = Clock::now();
+  const fem::Mesh mesh = fem::read_mesh_dir(result_dir);
+  const Eigen::MatrixX3d u = fem::read_result_displacement(result_dir, mesh.n_nodes());
+  const int n = std::min(kMaxResultSubdivisions, render::full_resolution_subdivisions(model, mesh));
+  const render::SkinSurfaces skin = render::displaced_skin(model, mesh, &u, n);
+  const auto t1 = Clock::now();
+  // The two files at once (two cores): the part of the skin the simulation moved, coloured as
+  // the model, and its mesh faces coloured by the tension. The rest is the model's own skin.
+  auto coloured = std::async(std::launch::async, [&] {
+    render::SkinSurfaces part = mesh_part(skin, true);
+    if (!model.has_color()) part.color.rowwise() = kPlainSkin.transpose();  // as the model's skin
+    render::write_gltf(part, result_dir / "skin.glb");
+  });
+  const render::ScalarMap tension = render::tension_map(
+      skin, mesh, fem::read_result_max_principal(result_dir, mesh.n_nodes()), 0);
+  const auto [fill_pre_mm2, fill_post_mm2] = render::wound_fill_area_mm2(skin);
+  const Eigen::Index n_micro = skin.n_micropolygon_vertices;
+  const double peak = n_micro ? tension.value.head(n_micro).maxCoeff() : 0.0;
+  const auto t2 = Clock::now();
+  render::SkinSurfaces by_tension = skin;
+  by_tension.color = render::scalar_colors(tension.value, tension.max_value);
+  // Off the finite-element mesh the tension is 0 by definition: only the mesh's part is written.
+  render::write_gltf(mesh_part(by_tension, false), result_dir / "tension.glb");
+  coloured.get();  // rethrows an error of the first file
+  const auto t3 = Clock::now();
+  return json{{"skin", "skin.glb"},
+              {"tension", "tension.glb"},
+              {"subdivisions", n},
+              {"vertices", skin.pre.n_vertices()},
+              {"replaced_cells", replaced_cells(model.grid(), skin)},
+              {"tension_scale_max_kpa", tension.max_value},
+              {"max_skin_tension_kpa", peak},
+              {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},
+              {"timings_s",
+               {{"skin", seconds(t0, t1)}, {"tension", seconds(t1, t2)}, {"glb", seconds(t2, t3)}}}}
+      .dump();
+}
+
+std::string plan_lines_json(const plan::Plan& plan, const PatientModel& model) {
+  json lines = json::array();
+  for (const auto& line : render::plan_lines(plan, model)) {
+    json l = json::array();
+    for (const Eigen::Vector3d& p : line) l.push_back(lps_json(p));
+    lines.push_back(std::move(l));
+  }
+  json points = json::array();
+  for (const plan::SkinPoint& p : plan.points)
+    points.push_back(lps_json(model.skin_point(p.theta_deg, p.z_mm)));
+  const plan::PlanFrame& f = plan.frame;
+  return json{{"lines_lps", lines},
+              {"points_lps", points},
+              {"centre",
+               {{"theta_deg", f.theta_deg},
+                {"z_mm", f.z_mm},
+                {"orientation_deg", f.orientation_deg},
+                {"lps", lps_json(model.skin_point(f.theta_deg, f.z_mm))},
+                {"normal_lps", lps_json(model.skin_normal(f.theta_deg, f.z_mm))}}}}
+      .dump();
+}
+
+}  // namespace caps::server::detail

@@ -1,0 +1,48 @@
+#pragma once
+// The skin as the planner page shows it: binary glTF files written by render::write_gltf (frames
+// and units in caps/render/gltf_export.hpp: glTF metres, x = L, y = S, z = A) and the plan's cutting
+// lines on the skin. Internal to the server.
+
+#include <filesystem>
+#include <string>
+
+namespace caps {
+class PatientModel;
+}
+namespace caps::plan {
+struct Plan;
+}
+
+namespace caps::server::detail {
+
+/// What the pre-operative skin is coloured by.
+enum class SkinColouring { Skin, Thickness };
+
+/// The model's skin range mesh (one vertex per (theta, z) sample, poles closed) as a .glb at
+/// `path`, coloured by the model's colour (a plain skin tone where it has none) or by the radial
+/// soft-tissue thickness (viridis from 0 to the 99th percentile over the valid cells, grey on
+/// cells flagged invalid). @return the JSON {"colouring", "scale_max_mm" (thickness), "vertices",
+/// "faces"}.
+std::string write_model_skin_glb(const PatientModel& model, SkinColouring colouring,
+                                 const std::filesystem::path& path);
+
+/// The pre- and post-operative skin of the simulation in `result_dir` (caps simulate's folder)
+/// on `model`, as two .glb files in `result_dir` with the post-operative skin as the morph target
+/// (render::write_gltf): skin.glb, the part of render::displaced_skin() the simulation moved (the
+/// micropolygons, the wound fill and the seam) coloured as the model, and tension.glb, its
+/// micropolygons and wound fill coloured by the skin tension (render::tension_map, viridis from 0
+/// to the 99th percentile). The rest is the model's own skin (write_model_skin_glb()) without the
+/// cells listed in "replaced_cells". @return the JSON {"skin", "tension", "replaced_cells" (cells
+/// q = k n_theta + j of range_mesh(), faces 2q and 2q + 1), "subdivisions", "vertices",
+/// "tension_scale_max_kpa", "max_skin_tension_kpa", "wound_area_mm2": {"pre", "post"},
+/// "timings_s": {"skin" (reading the result and building the skin), "tension", "glb" (writing
+/// the two files)}}.
+std::string write_result_skin_glbs(const PatientModel& model,
+                                   const std::filesystem::path& result_dir);
+
+/// The plan's cutting paths and points on the skin, LPS mm: {"lines_lps": [[[x, y, z], ...],
+/// ...], "points_lps": [[x, y, z], ...], "centre": {"theta_deg", "z_mm", "orientation_deg",
+/// "lps"}}.
+std::string plan_lines_json(const plan::Plan& plan, const PatientModel& model);
+
+}  // namespace caps::server::detail

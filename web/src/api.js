@@ -1,0 +1,63 @@
+// The server's JSON API (docs/planner.md). Every refusal carries {"error": message}: the message
+// the command line prints for the same input; it is thrown as an ApiError with the HTTP status.
+
+export class ApiError extends Error {
+  constructor(status, message) {
+    super(message);
+    this.status = status;
+  }
+}
+
+async function answer(response) {
+  const text = await response.text();
+  let body;
+  try {
+    body = text ? JSON.parse(text) : {};
+  } catch {
+    body = { error: text };
+  }
+  if (!response.ok) throw new ApiError(response.status, body.error ?? `HTTP ${response.status}`);
+  return body;
+}
+
+/** GET a JSON route. */
+export async function getJson(path) {
+  return answer(await fetch(path));
+}
+
+/** POST `body` (an object) as JSON; the parsed JSON answer. */
+export async function postJson(path, body, signal) {
+  return answer(
+    await fetch(path, {
+      method: 'POST',
+      headers: { 'Content-Type': 'application/json' },
+      body: JSON.stringify(body),
+      signal,
+    }),
+  );
+}
+
+/** GET a binary file as an ArrayBuffer. */
+export async function getBinary(path) {
+  const response = await fetch(path);
+  if (!response.ok) await answer(response);
+  return response.arrayBuffer();
+}
+
+export const api = {
+  model: () => getJson('/api/model'),
+  skin: () => getJson('/api/skin'),
+  templates: () => getJson('/api/templates'),
+  /** caps plan new: {procedure, at | at_xyz, orientation, parameters} -> the plan with its check. */
+  planNew: (request, signal) => postJson('/api/plan/new', request, signal),
+  /** caps plan check: a plan file's JSON -> the plan with its check. */
+  planCheck: (plan, signal) => postJson('/api/plan/check', plan, signal),
+  /** The plan's cutting lines and points on the skin (LPS mm). */
+  planLines: (plan, signal) => postJson('/api/plan/lines', plan, signal),
+  /** caps simulate: the result JSON with result_id and result_url. */
+  simulate: (plan, options) => postJson('/api/simulate', { plan, options }),
+  /** The post-operative skin (.glb with the morph target) and the tension map of a result. */
+  resultView: (id) => getJson(`/api/results/${id}/view`),
+  resultFile: (id, file) => getJson(`/api/results/${id}/${file}`),
+  progress: () => getJson('/api/progress'),
+};

@@ -1,0 +1,60 @@
+// What is drawn over the skin: the plan's cutting lines (tubes along the skin), its points, the
+// handle that moves it, and the sutures of a simulation coloured by their force.
+import {
+  CatmullRomCurve3,
+  Color,
+  Mesh,
+  MeshBasicMaterial,
+  MeshStandardMaterial,
+  SphereGeometry,
+  TubeGeometry,
+} from 'three';
+import { lpsToScene } from './frames.js';
+
+const kLineRadius = 0.0004;  // m: tubes 0.8 mm thick
+const lineMaterial = new MeshBasicMaterial({ color: 0x1030c0 });
+const refusedMaterial = new MeshBasicMaterial({ color: 0xd02020 });
+const pointMaterial = new MeshBasicMaterial({ color: 0x0a0a40 });
+const handleMaterial = new MeshStandardMaterial({ color: 0xffd21a, emissive: 0x554400 });
+
+/** Meshes for a plan's lines ({lines_lps, points_lps, centre} from /api/plan/lines). */
+export function planObjects(view, { refused = false } = {}) {
+  const objects = [];
+  for (const line of view.lines_lps) {
+    if (line.length < 2) continue;
+    const curve = new CatmullRomCurve3(line.map(lpsToScene), false, 'centripetal');
+    const tube = new TubeGeometry(curve, Math.max(8, line.length * 2), kLineRadius, 6, false);
+    objects.push(new Mesh(tube, refused ? refusedMaterial : lineMaterial));
+  }
+  const dot = new SphereGeometry(0.0009, 12, 8);
+  for (const p of view.points_lps) {
+    const m = new Mesh(dot, pointMaterial);
+    m.position.copy(lpsToScene(p));
+    objects.push(m);
+  }
+  return objects;
+}
+
+/** The yellow handle at the plan's centre (dragged to move the plan). */
+export function handleObject(centreLps) {
+  const m = new Mesh(new SphereGeometry(0.002, 20, 14), handleMaterial);
+  m.position.copy(lpsToScene(centreLps));
+  m.name = 'handle';
+  return m;
+}
+
+/** A colour from blue (0) to red (1) for a force relative to the largest. */
+export function forceColour(fraction) {
+  return new Color().setHSL((1 - Math.min(1, Math.max(0, fraction))) * 0.66, 0.85, 0.5);
+}
+
+/** Spheres at the sutures ({position_mm, force_n}, LPS on the closed skin), coloured by force. */
+export function sutureObjects(sutures) {
+  const max = Math.max(1e-12, ...sutures.map((s) => s.force_n));
+  const ball = new SphereGeometry(0.0012, 14, 10);
+  return sutures.map((s) => {
+    const m = new Mesh(ball, new MeshBasicMaterial({ color: forceColour(s.force_n / max) }));
+    m.position.copy(lpsToScene(s.position_mm));
+    return m;
+  });
+}

@@ -1,0 +1,179 @@
+// Simulations and the alternatives: Simulate sends the checked plan to POST /api/simulate (the
+// result `caps simulate --json` prints), shows progress while it runs, then the post-operative
+// skin as a morph (pre -> post slider, Play), the tension map and the force of each suture. Every
+// simulated plan is kept as a row of the alternatives table; two of them can be shown side by
+// side in two views that move together.
+import { api } from './api.js';
+import { sutureObjects } from './overlays.js';
+import { loadResultSkin } from './skin.js';
+
+const kPollMs = 250;
+const kPlaySeconds = 2;
+
+const fmt = (v, digits = 2) => (Number.isFinite(v) ? v.toFixed(digits) : '–');
+
+/** A short name for a plan: the procedure and its parameters. */
+export function planLabel(plan) {
+  const p = plan.procedure ?? {};
+  const params = Object.entries(p.parameters ?? {}).map(([k, v]) => `${k} ${+v.toFixed(1)}`);
+  return `${p.name ?? 'custom'} (${params.join(', ')}; ${+plan.frame.orientation_deg.toFixed(0)}°)`;
+}
+
+export class Results {
+  constructor(viewA, viewB, el) {
+    this.views = [viewA, viewB];
+    this.el = el;
+    this.rows = [];          // {n, plan, result, view, sutures, skins: [skin in A, skin in B]}
+    this.shown = [null, null];
+    this.modelSkin = null;   // the model's ColouredSkin, shown while no result is
+    this.colouring = 'skin';
+    this.morph = 1;
+  }
+
+  /** Runs the simulation of `plan` with `options`; adds its row and shows it in view A. */
+  async simulate(plan, options) {
+    const e = this.el;
+    e.progress.hidden = false;
+    e.progressText.textContent = 'starting…';
+    e.progressBar.removeAttribute('value');
+    document.body.dataset.simulation = 'running';
+    const poll = setInterval(async () => {
+      try {
+        const p = await api.progress();
+        if (!p.running) return;
+        e.progressBar.value = p.fraction;
+        e.progressText.textContent = `${p.step} ${Math.round(p.fraction * 100)} % (${p.elapsed_s.toFixed(1)} s)`;
+      } catch { /* the next poll tries again */ }
+    }, kPollMs);
+    const t0 = performance.now();
+    try {
+      const result = await api.simulate(plan, options);
+      e.progressText.textContent = 'loading the post-operative skin…';
+      const view = await api.resultView(result.result_id);
+      const file = await api.resultFile(result.result_id, 'result.json');
+      const row = {
+        n: this.rows.length + 1, plan, result, view,
+        sutures: file.sutures_at_spacing?.sutures ?? [],
+        skins: [null, null],
+        seconds: (performance.now() - t0) / 1000,
+      };
+      this.rows.push(row);
+      await this.showRow(row, 0);
+      this.renderTable();
+      document.body.dataset.simulation = 'done';
+      return row;
+    } catch (err) {
+      document.body.dataset.simulation = 'failed';
+      throw err;
+    } finally {
+      clearInterval(poll);
+      e.progress.hidden = true;
+    }
+  }
+
+  /** Shows a row's result in view `which` (0: A, 1: B). */
+  async showRow(row, which) {
+    const viewer = this.views[which];
+    if (which === 1) this.onShowB?.();
+    if (!row.skins[which]) row.skins[which] = await loadResultSkin(row.view, this.modelSkin);
+    const skin = row.skins[which];
+    skin.show(this.colouring === 'tension' ? 'tension' : 'skin');
+    skin.setMorph(this.morph);
+    viewer.setSkin(skin.mesh);
+    viewer.setOverlay(sutureObjects(row.sutures));
+    this.shown[which] = row;
+    document.getElementById(which ? 'label-b' : 'label-a').textContent =
+      `${which ? 'B' : 'A'}: #${row.n} ${planLabel(row.plan)}`;
+    if (which === 0) this.showSummary(row);
+    this.el.result.hidden = false;
+    this.renderTable();
+  }
+
+  /** Back to the model's skin in view A (the plan changed: the result no longer matches it). */
+  showPlanning() {
+    if (!this.shown[0] || !this.modelSkin) return;
+    this.shown[0] = null;
+    this.views[0].setSkin(this.modelSkin.mesh, { pickable: true });
+    document.getElementById('label-a').textContent = '';
+    this.el.result.hidden = true;
+    this.renderTable();
+  }
+
+  /** Pre (0) to post (1) on every result shown. */
+  setMorph(t) {
+    this.morph = t;
+    this.el.morph.value = t;
+    this.shown.forEach((row, i) => {
+      if (!row) return;
+      row.skins[i].setMorph(t);
+      this.views[i].requestRender();
+    });
+  }
+
+  /** Animates the morph from pre to post over kPlaySeconds. */
+  play() {
+    const start = performance.now();
+    const step = (now) => {
+      const t = Math.min(1, (now - start) / (kPlaySeconds * 1000));
+      this.setMorph(t);
+      if (t < 1) requestAnimationFrame(step);
+    };
+    requestAnimationFrame(step);
+  }
+
+  setTension(on) {
+    this.colouring = on ? 'tension' : 'skin';
+    this.shown.forEach((row, i) => {
+      if (!row) return;
+      row.skins[i].show(on ? 'tension' : 'skin');
+      this.views[i].requestRender();
+    });
+    const row = this.shown[0];
+    this.el.tensionLegend.hidden = !on || !row;
+    if (row)
+      this.el.tensionLegend.innerHTML =
+        `0<span class="bar"></span>${fmt(row.view.tension_scale_max_kpa, 1)} kPa`;
+  }
+
+  showSummary(row) {
+    const r = row.result, s = r.sutures_at_spacing ?? {};
+    const warnings = (r.warnings ?? []).map((w) => `<li>${escapeHtml(w)}</li>`).join('');
+    this.el.summary.innerHTML = `
+      <p>Closing force <b id="closing-force">${fmt(r.closing_force_n)} N</b>; ${s.sutures ?? 0}
+        sutures every ${fmt(s.spacing_mm, 1)} mm, the largest <b>${fmt(s.max_force_per_suture_n)} N</b>
+        (${fmt(s.force_per_mm_n, 3)} N per mm of wound).</p>
+      <p>Skin tension ${fmt(row.view.tension_scale_max_kpa, 1)} kPa (99th percentile; peak
+        ${fmt(row.view.max_skin_tension_kpa, 1)} kPa at a sutured corner); largest displacement
+        ${fmt(r.max_displacement_mm)} mm; ${r.elements} elements, ${r.material}; ${fmt(row.seconds, 1)} s.</p>
+      ${warnings ? `<ul class="warnings">${warnings}</ul>` : ''}`;
+    const rows = row.sutures.map((x, i) =>
+      `<tr><td>${i + 1}</td><td>${fmt(x.force_n, 3)} N</td><td>${x.pairs}</td></tr>`).join('');
+    this.el.sutures.innerHTML = `<tr><th>suture</th><th>force</th><th>node pairs</th></tr>${rows}`;
+    this.setTension(this.colouring === 'tension');
+  }
+
+  renderTable() {
+    const body = this.el.table.querySelector('tbody');
+    body.innerHTML = '';
+    for (const row of this.rows) {
+      const r = row.result;
+      const tr = document.createElement('tr');
+      tr.dataset.row = row.n;
+      if (this.shown[0] === row) tr.classList.add('shown-a');
+      if (this.shown[1] === row) tr.classList.add('shown-b');
+      tr.innerHTML = `<td>${row.n}</td><td>${escapeHtml(planLabel(row.plan))}</td>
+        <td class="closing">${fmt(r.closing_force_n)}</td>
+        <td class="largest">${fmt(r.sutures_at_spacing?.max_force_per_suture_n)}</td>
+        <td>${fmt(row.view.tension_scale_max_kpa, 1)}</td>
+        <td>${fmt(row.view.wound_area_mm2?.pre, 1)}</td>
+        <td><button data-show="0" title="Show in view A">A</button><button data-show="1" title="Show in view B">B</button></td>`;
+      tr.querySelectorAll('button').forEach((b) =>
+        b.addEventListener('click', () => this.showRow(row, Number(b.dataset.show))));
+      body.appendChild(tr);
+    }
+  }
+}
+
+export function escapeHtml(s) {
+  return String(s).replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
+}

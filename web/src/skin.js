@@ -1,0 +1,96 @@
+// The skin meshes: the model's skin (coloured by the model or by the soft-tissue thickness) and a
+// simulation's skin (pre-operative positions with the post-operative skin as a morph target, and
+// the tension map as a second set of colours), all read from the server's .glb files.
+import { BufferAttribute, BufferGeometry, DoubleSide, Group, Mesh } from 'three';
+import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
+import { getBinary } from './api.js';
+
+const loader = new GLTFLoader();
+const buffers = new Map();  // url -> ArrayBuffer: each file is fetched once
+
+function fetchOnce(url) {
+  if (!buffers.has(url)) buffers.set(url, getBinary(url));
+  return buffers.get(url);
+}
+
+async function loadMesh(url) {
+  fetchOnce(url);
+  const gltf = await loader.parseAsync(await buffers.get(url), '');
+  let mesh = null;
+  gltf.scene.traverse((o) => {
+    if (!mesh && o.isMesh) mesh = o;
+  });
+  if (!mesh) throw new Error(`${url}: no mesh in the file`);
+  mesh.removeFromParent();
+  mesh.updateMatrixWorld(true);
+  mesh.material.side = DoubleSide;
+  mesh.material.roughness = 0.7;
+  return mesh;
+}
+
+/** A mesh whose colours switch between named colour sets of the same vertices. */
+class ColouredSkin {
+  constructor(mesh) {
+    this.mesh = mesh;
+    this.colours = { skin: mesh.geometry.getAttribute('color') };
+    // The triangles in the file's order (range_mesh(): cell q is faces 2q and 2q + 1), kept
+    // before three-mesh-bvh sorts the index in place for picking.
+    this.fileIndex = mesh.geometry.index.array.slice();
+  }
+
+  async addColours(name, url) {
+    const other = await loadMesh(url);
+    const colour = other.geometry.getAttribute('color');
+    if (colour.count !== this.colours.skin.count)
+      throw new Error(`${url}: another skin (${colour.count} vertices, not ${this.colours.skin.count})`);
+    this.colours[name] = colour;
+  }
+
+  show(name) {
+    this.mesh.geometry.setAttribute('color', this.colours[name] ?? this.colours.skin);
+  }
+}
+
+/** The model's skin (GET /api/skin): {skin: ColouredSkin with 'thickness', thicknessMax (mm)}. */
+export async function loadModelSkin(info) {
+  fetchOnce(info.thickness.url);  // both files download at once
+  const skin = new ColouredSkin(await loadMesh(info.skin.url));
+  await skin.addColours('thickness', info.thickness.url);
+  return { skin, thicknessMax: info.thickness.scale_max_mm };
+}
+
+/** A simulation's skin (GET /api/results/ID/view) over the model's (`modelSkin`, a ColouredSkin):
+ * the part the simulation moved (morph 0 = pre-operative, 1 = post-operative) with, over it, its
+ * mesh faces coloured by the skin tension (hidden until shown), and the model's skin without the
+ * cells that part replaces. */
+export async function loadResultSkin(view, modelSkin) {
+  fetchOnce(view.tension);  // both files download at once
+  const patch = await loadMesh(view.skin);
+  const tension = await loadMesh(view.tension);
+  // Drawn in front of the patch's faces at the same place (they coincide before and after).
+  tension.material.polygonOffset = true;
+  tension.material.polygonOffsetFactor = -2;
+  tension.material.polygonOffsetUnits = -2;
+  tension.visible = false;
+  patch.add(tension);
+  const base = modelSkin.mesh.geometry;
+  const index = modelSkin.fileIndex.slice();
+  for (const q of view.replaced_cells) index.fill(0, 6 * q, 6 * q + 6);  // empty triangles
+  const rest = new BufferGeometry();
+  rest.setAttribute('position', base.getAttribute('position'));
+  rest.setAttribute('normal', base.getAttribute('normal'));
+  rest.setAttribute('color', modelSkin.colours.skin);
+  rest.setIndex(new BufferAttribute(index, 1));
+  const mesh = new Group();
+  mesh.add(new Mesh(rest, modelSkin.mesh.material), patch);
+  return {
+    mesh,
+    show(name) {
+      tension.visible = name === 'tension';
+    },
+    setMorph(t) {
+      patch.morphTargetInfluences[0] = t;
+      tension.morphTargetInfluences[0] = t;
+    },
+  };
+}
