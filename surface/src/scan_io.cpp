@@ -12,7 +12,9 @@
 #include <new>
 #include <sstream>
 
+#include "caps/core/checked_numbers.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/file_access.hpp"
 #include "caps/core/json_limits.hpp"
 #include "caps/volume/mesh_io.hpp"
 
@@ -29,6 +31,7 @@ std::string lower(std::string s) {
 // Opens a scan file and starts its ScanMesh (source and format).
 std::ifstream open_scan(const fs::path& path, const char* format, ScanMesh& s,
                         std::ios::openmode mode = std::ios::in) {
+  require_readable(path, false, "check the path and its permissions");
   std::ifstream in(path, mode);
   if (!in) throw IoError(cat(path.string(), ": cannot open (missing or unreadable)"));
   s.source = path.string();
@@ -203,7 +206,7 @@ ScanMesh read_gltf(const fs::path& path, const ScanReadOptions& o) {
         for (std::size_t i = 0; i < P.count; ++i) {
           std::array<std::uint8_t, 3> c{};
           for (int k = 0; k < 3; ++k)
-            c[k] = static_cast<std::uint8_t>(std::clamp(C.get(i, k) * (unit ? 255.0 : 1.0), 0.0, 255.0));
+            c[k] = channel_byte(C.get(i, k) * (unit ? 255.0 : 1.0));
           colors.push_back(c);
         }
       } else {
@@ -404,9 +407,7 @@ ScanMesh read_obj(const fs::path& path, const ScanReadOptions& o) {
       V.push_back(p);
       double r, g, b;
       if (ls >> r >> g >> b)
-        colors.push_back({static_cast<std::uint8_t>(std::clamp(r * 255, 0.0, 255.0)),
-                          static_cast<std::uint8_t>(std::clamp(g * 255, 0.0, 255.0)),
-                          static_cast<std::uint8_t>(std::clamp(b * 255, 0.0, 255.0))});
+        colors.push_back({channel_byte(r * 255), channel_byte(g * 255), channel_byte(b * 255)});
     } else if (tag == "vt") {
       double u = 0, v = 0;
       ls >> u >> v;
@@ -494,7 +495,7 @@ ScanMesh read_ply_scan(const fs::path& path, const ScanReadOptions& o) {
 }  // namespace
 
 ScanMesh read_scan_mesh(const fs::path& path, const ScanReadOptions& options) {
-  if (!fs::exists(path)) throw IoError(cat(path.string(), ": no such file"));
+  require_readable(path, false, "check the path and its permissions");
   const std::string ext = lower(path.extension().string());
   // Errors of the libraries underneath (tinygltf's containers, allocation) are the file's fault.
   try {
