@@ -13,6 +13,7 @@ packages=(
   libcpp-httplib-dev
   invesalius-examples mricron-data
   calculix-ccx
+  clang libclang-rt-14-dev
 )
 
 missing=()
