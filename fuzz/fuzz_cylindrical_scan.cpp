@@ -5,9 +5,6 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace caps_fuzz;
-  const auto parts = split(data, size);
-  fresh_dir();
-  if (parts.size() > 1) put("range.png", parts[1]);
-  const fs::path sidecar = put("range.json", parts[0]);
+  const fs::path sidecar = put_parts(data, size, {"range.json", "range.png"}) / "range.json";
   return answer([&] { (void)caps::cylindrical_scan_mesh(caps::read_cylindrical_sidecar(sidecar)); });
 }

@@ -67,6 +67,16 @@ inline fs::path put(const std::string& name, std::string_view bytes) {
   return p;
 }
 
+/// Empties the work folder and writes the input's parts (split()) as the files `names`, as many
+/// as there are parts; returns the folder.
+inline const fs::path& put_parts(const std::uint8_t* data, std::size_t size,
+                                 const std::vector<std::string>& names) {
+  const auto parts = split(data, size, names.size());
+  const fs::path& dir = fresh_dir();
+  for (std::size_t i = 0; i < parts.size(); ++i) put(names[i], parts[i]);
+  return dir;
+}
+
 /// Runs `f`, swallowing caps errors (a refusal is the right answer to a hostile input).
 template <class F>
 int answer(F&& f) {

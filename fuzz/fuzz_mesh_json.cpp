@@ -4,9 +4,6 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace caps_fuzz;
-  const auto parts = split(data, size);
-  const fs::path& dir = fresh_dir();
-  put("mesh.json", parts[0]);
-  if (parts.size() > 1) put("mesh.vtu", parts[1]);
+  const fs::path& dir = put_parts(data, size, {"mesh.json", "mesh.vtu"});
   return answer([&] { (void)caps::fem::read_mesh_dir(dir); });
 }

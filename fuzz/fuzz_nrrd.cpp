@@ -2,10 +2,5 @@
 #include "fuzz_volume.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  using namespace caps_fuzz;
-  const auto parts = split(data, size);
-  fresh_dir();
-  if (parts.size() == 1) return read_volume_answer(put("in.nrrd", parts[0]));
-  put("data.raw", parts[1]);
-  return read_volume_answer(put("in.nhdr", parts[0]));
+  return caps_fuzz::read_attached_or_detached(data, size, "in.nrrd", "in.nhdr");
 }

@@ -21,4 +21,15 @@ inline int read_volume_answer(const fs::path& path) {
   return answer([&] { (void)caps::read_volume(path, small_budget()); });
 }
 
+/// A format kept in one file (`attached`, e.g. in.nrrd) or, when the input has two parts, in a
+/// header (`detached`, e.g. in.nhdr) naming its data file data.raw (the second part).
+inline int read_attached_or_detached(const std::uint8_t* data, std::size_t size,
+                                     const std::string& attached, const std::string& detached) {
+  const auto parts = split(data, size);
+  fresh_dir();
+  if (parts.size() == 1) return read_volume_answer(put(attached, parts[0]));
+  put("data.raw", parts[1]);
+  return read_volume_answer(put(detached, parts[0]));
+}
+
 }  // namespace caps_fuzz

@@ -68,6 +68,9 @@ void finish(ScanMesh& s, const ScanReadOptions& o) {
 }
 
 // ---- glTF 2.0
+
+// The most vertices a glTF scene may add up to over all its mesh instances (24 bytes each).
+constexpr std::size_t kMaxGltfVertices = 10'000'000;
 Eigen::Matrix4d node_matrix(const tinygltf::Node& n) {
   Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
   if (n.matrix.size() == 16) {
@@ -89,7 +92,10 @@ struct AccessorView {
   std::size_t stride = 0, count = 0;
   int components = 0, type = 0;
   bool normalized = false;
+  /// NaN for a component the accessor does not have (a VEC2 read as a position; the callers
+  /// refuse non-finite values): reading it would run past the element (found by fuzz_gltf).
   double get(std::size_t i, int c) const {
+    if (c < 0 || c >= components || i >= count) return std::nan("");
     const unsigned char* p = base + i * stride;
     switch (type) {
       case TINYGLTF_COMPONENT_TYPE_FLOAT: { float v; std::memcpy(&v, p + 4 * c, 4); return v; }
@@ -188,6 +194,13 @@ ScanMesh read_gltf(const fs::path& path, const ScanReadOptions& o) {
       const auto pos = prim.attributes.find("POSITION");
       if (pos == prim.attributes.end()) continue;
       const AccessorView P = view_of(model, pos->second, s.source);
+      if (P.components < 3)
+        throw InvalidInput(cat(s.source, ": the POSITION accessor ", pos->second, " has ",
+                               P.components, " component(s) a vertex; a position needs 3 (VEC3)"));
+      // Nodes may share a mesh (a scene graph is a DAG): bound what the instances add up to.
+      if (V.size() + P.count > kMaxGltfVertices)
+        throw InvalidInput(cat(s.source, ": the scene's mesh instances hold more than ",
+                               kMaxGltfVertices, " vertices; export the scan as one mesh"));
       const int base = static_cast<int>(V.size());
       for (std::size_t i = 0; i < P.count; ++i)
         V.push_back((M * Eigen::Vector4d(P.get(i, 0), P.get(i, 1), P.get(i, 2), 1.0)).head<3>());

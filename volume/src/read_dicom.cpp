@@ -133,6 +133,11 @@ bool lengths_fit(std::ifstream& in, std::uint64_t start, std::uint64_t size, boo
       const std::string vr(reinterpret_cast<const char*>(b + 4), 2);
       static const std::set<std::string> long_vrs = {"OB", "OD", "OF", "OL", "OV", "OW", "SQ",
                                                      "SV", "UC", "UN", "UR", "UT", "UV"};
+      static const std::set<std::string> short_vrs = {"AE", "AS", "AT", "CS", "DA", "DS", "DT",
+                                                      "FL", "FD", "IS", "LO", "LT", "PN", "SH",
+                                                      "SL", "SS", "ST", "TM", "UI", "UL", "US"};
+      // GDCM reads an unknown VR with a 4-byte length, which this walk cannot follow: damaged.
+      if (!long_vrs.count(vr) && !short_vrs.count(vr)) return false;
       if (long_vrs.count(vr)) {
         if (at + 12 > size || !in.read(reinterpret_cast<char*>(b + 8), 4)) return false;
         header = 12;
