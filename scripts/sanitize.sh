@@ -16,7 +16,7 @@ launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
 data=()
 [ -n "${CAPS_SHARED_DATA:-}" ] && data=(-DCAPS_SHARED_DATA="$CAPS_SHARED_DATA")
-CC=clang CXX=clang++ cmake -S "$here" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCAPS_FUZZ=ON \
+CC=clang CXX=clang++ cmake -S "$here" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCAPS_FUZZ=ON -DCAPS_BUILD_TESTS=ON \
   "${launcher[@]}" "${data[@]}" >/dev/null
 programs=(test_volume_io test_surface test_plan test_fem)
 t0=$(date +%s)
