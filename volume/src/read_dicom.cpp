@@ -189,7 +189,11 @@ bool declared_lengths_fit(const fs::path& file) {
 
 /// Reads the header of one file; returns false if it is not a DICOM image with a series UID.
 bool read_header(const fs::path& file, SliceHeader& h) {
-  if (!looks_like_dicom(file) || !declared_lengths_fit(file)) return false;
+  if (!looks_like_dicom(file)) return false;
+  if (!declared_lengths_fit(file))
+    throw IoError(cat(file.string(), ": the DICOM file is truncated or damaged (an element "
+                      "declares more bytes than the file holds, or an unknown value "
+                      "representation); export the series again"));
   gdcm::Reader reader;
   reader.SetFileName(file.c_str());
   const gdcm::Tag pixel_data(0x7fe0, 0x0010);
