@@ -45,8 +45,9 @@ failed=0
 for t in "${targets[@]}"; do
   corpus="$out/corpus/$t"
   mkdir -p "$corpus"
-  seeds="$build/fuzz/seeds/$t"
-  [ -d "$seeds" ] || seeds=""
+  # The seeds, and the inputs of past findings (fuzz/regressions/<target>/), all run first.
+  seeds=""
+  for d in "$build/fuzz/seeds/$t" "$here/fuzz/regressions/$t"; do [ -d "$d" ] && seeds="$seeds $d"; done
   start=$(date +%s)
   rc=0
   # 64 MiB is what the volume targets allow a reader (fuzz_volume.hpp); an allocation above

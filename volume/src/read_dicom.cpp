@@ -179,6 +179,9 @@ bool declared_lengths_fit(const fs::path& file) {
   const std::uint64_t start = in && std::memcmp(magic, "DICM", 4) == 0 ? 132 : 0;
   std::string syntax;
   if (!lengths_fit(in, start, size, true, false, &syntax)) return false;
+  // A Part 10 file (DICM) must start with its meta group and name its transfer syntax; GDCM
+  // asserts on one that does not (found by fuzz_dicom).
+  if (start == 132 && syntax.empty()) return false;
   if (syntax.empty())
     return lengths_fit(in, start, size, false, false, nullptr) ||
            lengths_fit(in, start, size, true, false, nullptr);
@@ -206,6 +209,11 @@ bool read_header(const fs::path& file, SliceHeader& h) {
     const gdcm::Tag t(g, e);
     return ds.FindDataElement(t) ? trim(sf.ToString(t)) : std::string();
   };
+  // GDCM asserts (aborting the process) on SamplesPerPixel above 4 (found by fuzz_dicom).
+  const std::string spp = str(0x0028, 0x0002);
+  if (!spp.empty() && !(std::atoi(spp.c_str()) >= 1 && std::atoi(spp.c_str()) <= 4))
+    throw InvalidInput(cat(file.string(), ": SamplesPerPixel (0028,0002) = ", spp,
+                           " is not 1 to 4; the file is damaged"));
   h.file = file;
   h.series_uid = str(0x0020, 0x000e);
   if (h.series_uid.empty()) return false;
