@@ -14,6 +14,7 @@ packages=(
   invesalius-examples mricron-data
   calculix-ccx
   chromium
+  clang libclang-rt-14-dev
 )
 # node and npm bundle the planner page (web/); Debian's only when no node is installed already.
 if ! command -v node >/dev/null 2>&1; then packages+=(nodejs npm); fi

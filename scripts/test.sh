@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# The whole test suite on a fresh Debian 12 machine: installs what is missing, builds, runs ctest.
+# The whole test suite on a fresh Debian 12 machine: installs what is missing, builds, runs ctest,
+# then the hostile-input checks (scripts/sanitize.sh: the reader, plan and fem tests under
+# ASan + UBSan built with clang, and every fuzz target for a bounded time). Any failure fails.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$here/scripts/build.sh"
-cd "$here/build"
-ctest --output-on-failure -j"$(nproc)"
+(cd "$here/build" && ctest --output-on-failure -j"$(nproc)")
+bash "$here/scripts/sanitize.sh" --seconds "${CAPS_FUZZ_SECONDS:-20}"

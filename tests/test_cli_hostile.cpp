@@ -5,16 +5,20 @@
 #include <gtest/gtest.h>
 
 #include "cli_outcome.hpp"
+#include <nlohmann/json.hpp>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 namespace fs = std::filesystem;
@@ -181,6 +185,18 @@ TEST_F(Hostile, GltfNodeThatIsItsOwnChildIsRefused) {
                      {"cycle.gltf", "cycle"}, out, gltf);
 }
 
+TEST_F(Hostile, GltfPositionsWithTooFewComponentsAreRefused) {
+  // A POSITION accessor of type VEC2: reading three components ran past each element (ASan
+  // found a heap overflow with fuzz/fuzz_gltf.cpp).
+  const fs::path out = dir / "gltf_vec2_out";
+  const fs::path gltf = dir / "vec2.gltf";
+  std::string text = gltf_with("3", "[{\"mesh\": 0}]");
+  text.replace(text.find("\"VEC3\""), 6, "\"VEC2\"");
+  write_file(gltf, text);
+  expect_refused_new("model from-scan " + gltf.string() + " --thickness 6 -o " + out.string(),
+                     {"vec2.gltf", "POSITION", "VEC3"}, out, gltf);
+}
+
 TEST_F(Hostile, GltfIndicesOutOfRangeAreRefused) {
   // One triangle whose indices (uint16) are 0, 1, 7: there are 3 vertices.
   const fs::path out = dir / "gltf_index_out";
@@ -344,6 +360,158 @@ TEST_F(Hostile, NiftiIsReadFromTheFileGivenNotASameNamedOne) {
   EXPECT_NE(r.out.find("values     5 .. 5"), std::string::npos) << r.out;
 }
 
+TEST_F(Hostile, NrrdSpacingThatIsNotANumberIsRefused) {
+  // teem reads "nan" as an unknown spacing, which caps used to take as 1 mm.
+  const std::string raw(4 * 4 * 4 * 2, '\0');
+  const fs::path nrrd = dir / "nan_spacing.nrrd";
+  write_file(nrrd, "NRRD0004\ntype: short\ndimension: 3\nsizes: 4 4 4\nspacings: nan 1 1\n"
+                   "encoding: raw\nendian: little\n\n" + raw);
+  expect_refused_new("volume info " + nrrd.string(), {"nan_spacing.nrrd", "spacings", "finite"},
+                     dir / "none", nrrd);
+  write_file(nrrd, "NRRD0004\ntype: short\ndimension: 3\nsizes: 4 4 4\nspace: "
+                   "left-posterior-superior\nspace directions: (1,0,0) (0,NaN,0) (0,0,1)\n"
+                   "encoding: raw\nendian: little\n\n" + raw);
+  expect_refused_new("volume info " + nrrd.string(), {"nan_spacing.nrrd", "space directions"},
+                     dir / "none", nrrd);
+  // The same with numbers is read.
+  write_file(nrrd, "NRRD0004\ntype: short\ndimension: 3\nsizes: 4 4 4\nspacings: 2 1 1\n"
+                   "encoding: raw\nendian: little\n\n" + raw);
+  EXPECT_EQ(run("volume info " + nrrd.string()).code, 0);
+}
+
+TEST_F(Hostile, DetachedNrrdDataLargerThanTheHeaderSaysIsRefused) {
+  // 4 x 4 x 4 shorts are 128 bytes; the data file holds 256 (e.g. a 4 x 4 x 8 volume).
+  const fs::path folder = dir / "detached";
+  fs::create_directories(folder);
+  write_file(folder / "data.raw", std::string(256, '\1'));
+  const fs::path nhdr = folder / "liar.nhdr";
+  write_file(nhdr, "NRRD0004\ntype: short\ndimension: 3\nsizes: 4 4 4\nspacings: 1 1 1\n"
+                   "encoding: raw\nendian: little\ndata file: data.raw\n");
+  expect_refused_new("volume info " + nhdr.string(), {"liar.nhdr", "data.raw", "256 bytes", "128"},
+                     dir / "none", folder);
+  // Exactly the size the header says is read.
+  write_file(folder / "data.raw", std::string(128, '\1'));
+  EXPECT_EQ(run("volume info " + nhdr.string()).code, 0);
+  // A "data file" pattern reaches teem's sprintf only as a plain %d pattern.
+  write_file(nhdr, "NRRD0004\ntype: short\ndimension: 3\nsizes: 4 4 4\nspacings: 1 1 1\n"
+                   "encoding: raw\nendian: little\ndata file: slice%n%s%d.raw 1 4 1 2\n");
+  expect_refused_new("volume info " + nhdr.string(), {"liar.nhdr", "data file", "%d"},
+                     dir / "none", folder);
+}
+
+// ---- files the system refuses to open, odd names, killed runs
+
+// Runs `caps args` as the user nobody when the tests run as root (root reads any file), so that
+// a file without read permission is unreadable.
+Outcome run_unprivileged(const fs::path& dir, const std::string& args) {
+  const std::string as = ::geteuid() == 0 ? "setpriv --reuid=65534 --regid=65534 --clear-groups " : "";
+  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
+  const int status = std::system((as + CAPS_EXE + " " + args + " >" + out.string() + " 2>" +
+                                  err.string() + " </dev/null").c_str());
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(out), slurp(err)};
+}
+
+TEST_F(Hostile, PermissionDeniedAndSymlinkLoopsAreReportedAsSuch) {
+  // A symbolic link loop: a volume, a scan, a model folder, a plan.
+  const fs::path loops = dir / "loops";
+  fs::create_directories(loops);
+  for (const std::string name : {"ct.nii", "scan.ply", "model", "plan.json"}) {
+    fs::remove(loops / name);
+    fs::create_symlink(name, loops / name);  // points at itself
+  }
+  // What must stay unchanged (a snapshot cannot walk the loops themselves).
+  const fs::path kept = loops / "README";
+  write_file(kept, "links that point at themselves\n");
+  expect_refused_new("volume info " + (loops / "ct.nii").string(), {"ct.nii", "symbolic link loop"},
+                     dir / "none", kept);
+  expect_refused_new("model from-scan " + (loops / "scan.ply").string() + " --thickness 6 -o " +
+                         (dir / "loop_out").string(),
+                     {"scan.ply", "symbolic link loop"}, dir / "loop_out", kept);
+  expect_refused_new("model info " + (loops / "model").string(), {"model", "symbolic link loop"},
+                     dir / "none", kept);
+  expect_refused_new("plan check " + (loops / "plan.json").string(),
+                     {"plan.json", "symbolic link loop"}, dir / "none", kept);
+  // A file without read permission: not a damaged header, not a missing file.
+  const fs::path locked = dir / "locked";
+  fs::create_directories(locked);
+  fs::permissions(locked, fs::perms::all);
+  fs::permissions(dir, fs::perms::owner_all | fs::perms::group_read | fs::perms::group_exec |
+                           fs::perms::others_read | fs::perms::others_exec);
+  write_file(locked / "ct.nii", nifti(4, 4, 4, 4, 16, 1.0f, std::string(128, '\0')));
+  write_file(locked / "scan.ply", "ply\nformat ascii 1.0\nend_header\n");
+  fs::create_directories(locked / "model");
+  for (const std::string name : {"ct.nii", "scan.ply", "model"})
+    fs::permissions(locked / name, fs::perms::owner_write);
+  for (const auto& [args, file] : std::vector<std::pair<std::string, std::string>>{
+           {"volume info " + (locked / "ct.nii").string(), "ct.nii"},
+           {"model from-scan " + (locked / "scan.ply").string() + " --thickness 6 -o " +
+                (locked / "out").string(), "scan.ply"},
+           {"model info " + (locked / "model").string(), "model"}}) {
+    const Outcome r = run_unprivileged(dir, args);
+    EXPECT_EQ(r.code, 2) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find(file), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("permission denied"), std::string::npos) << args << "\n" << r.err;
+    EXPECT_EQ(r.err.find("internal error"), std::string::npos) << r.err;
+  }
+  EXPECT_FALSE(fs::exists(locked / "out"));
+  for (const std::string name : {"ct.nii", "scan.ply", "model"})
+    fs::permissions(locked / name, fs::perms::owner_all);
+}
+
+TEST_F(Hostile, TemporariesOfAKilledRunAreRemovedByTheNextRun) {
+  // A run killed while writing leaves <output>.tmp-<pid>-<hex>: a folder, or a file, and the
+  // .old of a replacement. The next run writing the same output removes those of dead processes
+  // (pid 4194305 is above Linux's largest pid) and keeps those of a live one (this test's).
+  const fs::path out = dir / "box_out";
+  const std::string dead = "box_out.tmp-4194305-", live = "box_out.tmp-" + std::to_string(::getpid()) + "-";
+  fs::create_directories(dir / (dead + "1a2b") / "sub");
+  write_file(dir / (dead + "1a2b") / "sub" / "mesh.vtu", "partial");
+  write_file(dir / (dead + "3c4d"), "partial file");
+  fs::create_directories(dir / (dead + "5e6f.old"));
+  fs::create_directories(dir / (live + "7a8b"));
+  const Outcome r = run("fem box -q -o " + out.string() + " --cells 2,1,1");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(out / "mesh.json"));
+  for (const std::string& name : {dead + "1a2b", dead + "3c4d", dead + "5e6f.old"})
+    EXPECT_FALSE(fs::exists(dir / name)) << name << " was left behind";
+  EXPECT_TRUE(fs::exists(dir / (live + "7a8b"))) << "a live run's temporary was removed";
+  fs::remove_all(dir / (live + "7a8b"));
+  // A run really killed (SIGKILL) in the middle of writing a model, then the same command again.
+  const fs::path model_out = dir / "killed_model";
+  const std::string cmd = std::string(CAPS_EXE) + " model from-volume -q " + phantom().string() +
+                          " -o " + model_out.string() + " --n-theta 96 --n-z 48 >/dev/null 2>&1 & "
+                          "pid=$!; sleep 1; kill -9 $pid; wait $pid";
+  std::system(cmd.c_str());
+  const Outcome again = run("model from-volume -q " + phantom().string() + " -o " +
+                            model_out.string() + " --n-theta 96 --n-z 48 --force");
+  EXPECT_EQ(again.code, 0) << again.err;
+  for (const auto& e : fs::directory_iterator(dir))
+    EXPECT_EQ(e.path().filename().string().find("killed_model.tmp-"), std::string::npos)
+        << "left behind: " << e.path();
+}
+
+TEST_F(Hostile, FileNamesThatAreNotUtf8AreHandled) {
+  // Latin-1 names (a byte 0xE9), as an old workstation may write them.
+  const fs::path folder = dir / "latin1";
+  fs::create_directories(folder);
+  const fs::path ct = folder / "caf\xe9.nii";
+  fs::copy_file(phantom(), folder / "p.nii.gz", fs::copy_options::overwrite_existing);
+  write_file(ct, nifti(8, 8, 8, 4, 16, 1.0f, std::string(8 * 8 * 8 * 2, '\0')));
+  Outcome r = run("volume info " + ct.string() + " --json");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(r.err.find("internal error"), std::string::npos) << r.err;
+  EXPECT_TRUE(nlohmann::json::accept(r.out)) << r.out;
+  const fs::path model = folder / "mod\xe8le";
+  r = run("model from-volume -q " + (folder / "p.nii.gz").string() + " -o " + model.string() +
+          " --n-theta 96 --n-z 48 --json");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(r.err.find("internal error"), std::string::npos) << r.err;
+  EXPECT_TRUE(nlohmann::json::accept(slurp(model / "model.json")));
+  r = run("model info " + model.string() + " --json");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(nlohmann::json::accept(r.out)) << r.out;
+}
+
 // ---- plans and outputs: a small model, a plan and a box mesh
 
 class HostileModel : public Hostile {
@@ -437,6 +605,117 @@ TEST_F(HostileModel, JsonFieldsOfTheWrongTypeAreInputErrors) {
   mj.replace(value, mj.find('"', value + 1) + 1 - value, "5");
   write_file(m / "model.json", mj);
   expect_refused_new("model info " + m.string(), {"model.json", "r_skin"}, dir / "none", m);
+}
+
+TEST_F(HostileModel, ABowTieFlapIsRefusedByThePlanCheck) {
+  // The Z-plasty's four points listed around a flap in an order whose sides cross (a bow-tie):
+  // of the three cyclic orders of four points, the one whose sides (a,b) and (c,d) or (b,c) and
+  // (d,a) cross properly.
+  nlohmann::json j = nlohmann::json::parse(slurp(plan()));
+  std::vector<std::array<double, 2>> p;
+  for (const auto& x : j["points"]) p.push_back({x["theta_deg"].get<double>(), x["z_mm"].get<double>()});
+  ASSERT_GE(p.size(), 4u);
+  auto side = [&](int a, int b, int c) {
+    return (p[b][0] - p[a][0]) * (p[c][1] - p[a][1]) - (p[b][1] - p[a][1]) * (p[c][0] - p[a][0]);
+  };
+  auto cross = [&](int a, int b, int c, int d) {
+    return side(a, b, c) * side(a, b, d) < 0 && side(c, d, a) * side(c, d, b) < 0;
+  };
+  std::vector<int> bow;
+  for (const auto& order : std::vector<std::vector<int>>{{0, 1, 2, 3}, {0, 2, 1, 3}, {0, 1, 3, 2}})
+    if (cross(order[0], order[1], order[2], order[3]) || cross(order[1], order[2], order[3], order[0]))
+      bow = order;
+  ASSERT_FALSE(bow.empty()) << "no bow-tie order among the first four points";
+  j["flaps"] = nlohmann::json::array({bow});
+  const fs::path bad = dir / "bowtie_plan.json";
+  write_file(bad, j.dump(1));
+  expect_refused_new("plan check " + bad.string(), {"flap 0", "crosses itself", "bow-tie"},
+                     dir / "none", bad);
+  // The same four points in a crossing-free order are accepted.
+  std::vector<int> ok = bow;
+  std::swap(ok[1], ok[2]);
+  if (cross(ok[0], ok[1], ok[2], ok[3]) || cross(ok[1], ok[2], ok[3], ok[0])) std::swap(ok[2], ok[3]);
+  j["flaps"] = nlohmann::json::array({ok});
+  write_file(bad, j.dump(1));
+  const Outcome r = run("plan check " + bad.string());
+  EXPECT_EQ(r.err.find("flap 0"), std::string::npos) << r.err;
+}
+
+TEST_F(HostileModel, JsonFieldsAreCheckedAndNamed) {
+  // Plans: indices that are not whole numbers, or beyond int; a number of the wrong type.
+  const nlohmann::json good = nlohmann::json::parse(slurp(plan()));
+  const fs::path p = dir / "schema_plan.json";
+  for (const auto& [pointer, value, words] :
+       std::vector<std::tuple<std::string, nlohmann::json, std::vector<std::string>>>{
+           {"/paths/0/1", 1.5, {"paths[0][1]", "1.5", "whole number"}},
+           {"/paths/0/0", 1e300, {"paths[0][0]", "1e+300"}},
+           {"/sutures/0/0/0", -1e20, {"sutures", "whole number"}},
+           {"/points/1/z_mm", "sixty", {"/points/1/z_mm", "number"}},
+           {"/frame/theta_deg", nlohmann::json::array(), {"/frame/theta_deg"}}}) {
+    nlohmann::json j = good;
+    j[nlohmann::json::json_pointer(pointer)] = value;
+    write_file(p, j.dump(1));
+    expect_refused_new("plan check " + p.string(), words, dir / "none", p);
+  }
+  // model.json: counts and the grid.
+  const fs::path m = dir / "schema_model";
+  const nlohmann::json mj = nlohmann::json::parse(slurp(model() / "model.json"));
+  for (const auto& [pointer, value, words] :
+       std::vector<std::tuple<std::string, nlohmann::json, std::vector<std::string>>>{
+           {"/grid/n_theta", 1e300, {"model.json", "grid.n_theta", "whole number"}},
+           {"/statistics/cells", -1, {"model.json", "statistics.cells", "not a count"}},
+           {"/meshes/skin/faces", 2.5, {"model.json", "meshes.skin.faces"}},
+           {"/axis/origin_lps", "here", {"model.json", "/axis/origin_lps"}}}) {
+    fs::remove_all(m);
+    fs::copy(model(), m, fs::copy_options::recursive);
+    nlohmann::json j = mj;
+    j[nlohmann::json::json_pointer(pointer)] = value;
+    write_file(m / "model.json", j.dump(1));
+    expect_refused_new("model info " + m.string(), words, dir / "none", m);
+  }
+  // mesh.json and mesh.vtu: indices and connectivity that are not whole numbers.
+  const fs::path mesh = dir / "schema_mesh";
+  fs::remove_all(mesh);
+  ASSERT_EQ(run("fem box -q -o " + mesh.string() + " --cells 2,1,1").code, 0);
+  const std::string json_text = slurp(mesh / "mesh.json"), vtu = slurp(mesh / "mesh.vtu");
+  for (const auto& [pointer, value, words] :
+       std::vector<std::tuple<std::string, nlohmann::json, std::vector<std::string>>>{
+           {"/fixed_nodes/0", 1e300, {"mesh.json", "fixed_nodes[0]", "whole number"}},
+           {"/sutures", nlohmann::json::array({{0.5, 1}}), {"mesh.json", "sutures[0][0]"}},
+           {"/materials/0/E_kpa", "soft", {"mesh.json", "/materials/0/E_kpa"}}}) {
+    nlohmann::json j = nlohmann::json::parse(json_text);
+    j[nlohmann::json::json_pointer(pointer)] = value;
+    write_file(mesh / "mesh.json", j.dump(1));
+    expect_refused_new("solve " + mesh.string() + " -o " + (dir / "schema_result").string(), words,
+                       dir / "schema_result", mesh);
+  }
+  write_file(mesh / "mesh.json", json_text);
+  // Connectivity 1 written as 1.5: a non-integer node id.
+  const auto conn = vtu.find("Name=\"connectivity\"");
+  ASSERT_NE(conn, std::string::npos);
+  const auto first = vtu.find('>', conn) + 1;
+  std::string bad_vtu = vtu;
+  bad_vtu.insert(vtu.find_first_of(" \n", vtu.find_first_not_of(" \n", first)), ".5");
+  write_file(mesh / "mesh.vtu", bad_vtu);
+  expect_refused_new("solve " + mesh.string() + " -o " + (dir / "schema_result").string(),
+                     {"mesh.vtu", "connectivity[0]", "whole number"}, dir / "schema_result", mesh);
+  write_file(mesh / "mesh.vtu", vtu);
+}
+
+TEST_F(HostileModel, NodalLoadsOfAbsurdSizeAreRefused) {
+  const fs::path mesh = dir / "load_mesh";
+  fs::remove_all(mesh);
+  ASSERT_EQ(run("fem box -q -o " + mesh.string() + " --cells 2,1,1").code, 0);
+  nlohmann::json j = nlohmann::json::parse(slurp(mesh / "mesh.json"));
+  j["loads_n"] = nlohmann::json::array({{3, 0.0, 1e308, 0.0}});
+  write_file(mesh / "mesh.json", j.dump(1));
+  expect_refused_new("solve " + mesh.string() + " -o " + (dir / "load_result").string(),
+                     {"mesh.json", "loads_n[0]", "1e+308", "N"}, dir / "load_result", mesh);
+  // A load of 1 N is solved.
+  j["loads_n"] = nlohmann::json::array({{3, 0.0, 1.0, 0.0}});
+  write_file(mesh / "mesh.json", j.dump(1));
+  const Outcome r = run("solve -q " + mesh.string() + " -o " + (dir / "load_result").string());
+  EXPECT_EQ(r.code, 0) << r.err;
 }
 
 }  // namespace

@@ -42,7 +42,7 @@ class JsonReader {
 
  private:
   [[noreturn]] void wrong(const std::string& key, const char* expected, const json& v) const {
-    throw InvalidInput(cat(source_, ": \"", key, "\" must be ", expected, ", not ", v.dump()));
+    throw InvalidInput(cat(source_, ": \"", key, "\" must be ", expected, ", not ", v.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)));
   }
   void read(const json& v, std::string& x, const std::string& k) {
     if (!v.is_string()) wrong(k, "a string", v);
@@ -119,7 +119,7 @@ template <class Request>
 std::string write_request(const Request& request) {
   detail::JsonWriter w;
   Request::fields(request, w);
-  return w.j.dump(2);
+  return w.j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 }  // namespace caps::app

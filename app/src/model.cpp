@@ -51,7 +51,7 @@ ModelResult model_result(const std::string& dir, const std::string& output) {
 std::string to_json(const ModelResult& m) {
   json j = json::parse(m.model_json);
   if (!m.output.empty()) j["output"] = m.output;
-  return j.dump(2);
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const ModelResult& m) {
@@ -205,7 +205,7 @@ std::string to_json(const PickResult& p) {
     j.update({{"lps", {p.lps[0], p.lps[1], p.lps[2]}}, {"theta_deg", p.theta_deg},
               {"z_mm", p.z_mm}, {"distance_mm", p.distance_mm}, {"flags", p.flags},
               {"on_pole_cap", p.on_pole_cap}});
-  return j.dump(2);
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const PickResult& p) {
@@ -216,7 +216,7 @@ std::string summary(const PickResult& p) {
 }
 
 std::string to_json(const PathResult& p) {
-  return json{{"output", p.output}, {"warnings", p.warnings}}.dump(2);
+  return json{{"output", p.output}, {"warnings", p.warnings}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const PathResult& p) { return cat("-> ", p.output); }
@@ -278,7 +278,7 @@ VolumeInfoResult run_volume_info(const VolumeInfoRequest& r, Reporter*) {
        << "origin     " << g.origin_lps.transpose() << " mm (LPS)\n"
        << "values     " << *lo << " .. " << *hi;
   for (const auto& n : v.notes) text << "\nnote       " << n;
-  return {j.dump(2), text.str()};
+  return {j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace), text.str()};
 }
 
 std::string to_json(const VolumeInfoResult& r) { return r.json; }
@@ -315,7 +315,7 @@ std::string to_json(const PhantomResult& p) {
               {"spacing_mm", {p.spacing_mm[0], p.spacing_mm[1], p.spacing_mm[2]}},
               {"head_holder", p.head_holder},
               {"layered", p.layered}}
-      .dump(2);
+      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const PhantomResult& p) {

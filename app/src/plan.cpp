@@ -51,7 +51,7 @@ PlanResult plan_result(const plan::Plan& p, const plan::PlanReport& r, const std
   s.output = output;
   json j = json::parse(plan::plan_to_json(p, &r));
   j["ok"] = true;
-  s.plan_json = j.dump(2);
+  s.plan_json = j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
   s.procedure = p.procedure;
   s.points = r.n_points;
   s.loop_nodes = r.n_loop;
@@ -159,7 +159,7 @@ TemplatesResult run_templates(const TemplatesRequest&, Reporter*) {
   }
   text << "every template: --at THETA,Z (or --at-xyz X,Y,Z) and --orientation DEG (from superior "
           "towards +theta)";
-  return {j.dump(2), text.str()};
+  return {j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace), text.str()};
 }
 
 std::string to_json(const TemplatesResult& r) { return r.json; }

@@ -133,7 +133,7 @@ std::string to_json(const RenderResult& s) {
     j["animations"] = s.animations;
     j["frames"] = s.frames;
   }
-  return j.dump(2);
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const RenderResult& s) {

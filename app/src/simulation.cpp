@@ -138,7 +138,7 @@ std::string to_json(const MeshResult& m) {
                         {"thickness_mm", {m.min_thickness_mm, m.max_thickness_mm}},
                         {"min_jacobian", m.min_jacobian}}},
          {"warnings", m.warnings}};
-  return j.dump(2);
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const MeshResult& m) {
@@ -224,7 +224,7 @@ std::string to_json(const SimulateResult& s) {
          {"images", s.images},
          {"warnings", s.warnings},
          {"timings_s", {{"solve", s.solve_s}}}};
-  return j.dump(2);
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const SimulateResult& s) {
@@ -277,7 +277,7 @@ std::string to_json(const SolveResult& s) {
          {"strain_energy_mj", s.strain_energy_mj},
          {"warnings", s.warnings},
          {"timings_s", {{"total", s.total_s}}}};
-  return j.dump(2);
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const SolveResult& s) {
@@ -311,7 +311,7 @@ BoxResult run_box(const BoxRequest& r, Reporter*) {
 std::string to_json(const BoxResult& b) {
   return json{{"output", b.output}, {"nodes", b.nodes}, {"elements", b.elements},
               {"sutures", b.sutures}}
-      .dump(2);
+      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const BoxResult& b) {
@@ -354,7 +354,7 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
 std::string to_json(const CompareResult& s) {
   json j = json::parse(s.comparison_json);
   j["output"] = s.output;
-  return j.dump(2);
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const CompareResult& s) {

@@ -1,6 +1,9 @@
 #include "caps/core/atomic_output.hpp"
 
+#include <signal.h>
 #include <unistd.h>
+
+#include <cerrno>
 
 #include <fstream>
 #include <random>
@@ -32,11 +35,34 @@ void require_writable_dir(const fs::path& dir, const fs::path& target) {
                       " is not writable; choose another output path"));
 }
 
+// Removes the temporaries that an earlier run writing `target` left behind when it was killed
+// (`<name>.tmp-<pid>-<hex>`, and `.old` ones of a replacement): those whose process no longer
+// exists. Another live run's temporaries are left alone.
+void remove_stale_temporaries(const fs::path& dir, const fs::path& target) {
+  const std::string prefix = target.filename().string() + ".tmp-";
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.compare(0, prefix.size(), prefix) != 0) continue;
+    std::size_t at = prefix.size();
+    long long pid = 0;
+    while (at < name.size() && name[at] >= '0' && name[at] <= '9' && pid < (1LL << 40))
+      pid = pid * 10 + (name[at++] - '0');
+    if (at == prefix.size() || at >= name.size() || name[at] != '-' || pid <= 0 ||
+        pid > (1LL << 31) || pid == ::getpid())
+      continue;
+    if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // still running
+    std::error_code rm;
+    fs::remove_all(it->path(), rm);
+  }
+}
+
 }  // namespace
 
 void write_file_atomic(const fs::path& path, const std::function<void(const fs::path&)>& write) {
   const fs::path dir = parent_of(path);
   require_writable_dir(dir, path);
+  remove_stale_temporaries(dir, path);
   const fs::path tmp = dir / (path.filename().string() + unique_suffix());
   try {
     write(tmp);
@@ -72,6 +98,7 @@ OutputDirectory::OutputDirectory(fs::path final_path, bool force)
                            "output path"));
   const fs::path dir = parent_of(final_);
   require_writable_dir(dir, final_);
+  remove_stale_temporaries(dir, final_);
   tmp_ = dir / (final_.filename().string() + unique_suffix());
   if (!fs::create_directory(tmp_, ec) || ec)
     throw IoError(cat(final_.string(), ": cannot create a folder in ", dir.string(), ": ",

@@ -6,13 +6,23 @@
 #include <sstream>
 
 #include "caps/core/atomic_output.hpp"
+#include "caps/core/checked_numbers.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/file_access.hpp"
 #include "caps/core/json_limits.hpp"
 #include "vtu.hpp"
 
 namespace fs = std::filesystem;
 
 namespace caps::fem {
+namespace {
+
+// The largest nodal load component accepted from a mesh file: 1e6 N is far beyond any load on
+// skin, and values near 1e308 overflow the solver's arithmetic.
+constexpr double kMaxNodalLoadN = 1e6;
+
+}  // namespace
+
 namespace detail {
 namespace {
 
@@ -171,13 +181,13 @@ void write_mesh_dir(const Mesh& mesh, const fs::path& dir) {
   j["model"] = mesh.model;
   j["plan"] = mesh.plan;
   j["warnings"] = mesh.warnings;
-  write_text_atomic(dir / "mesh.json", j.dump(1) + "\n");
+  write_text_atomic(dir / "mesh.json", j.dump(1, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
 }
 
 Mesh read_mesh_dir(const fs::path& dir) {
   const fs::path jpath = dir / "mesh.json", vpath = dir / "mesh.vtu";
-  if (!fs::is_directory(dir))
-    throw IoError(cat(dir.string(), ": not a directory; pass a mesh directory with mesh.json and mesh.vtu"));
+  require_readable(dir, true, "pass a mesh directory with mesh.json and mesh.vtu");
+  require_readable(jpath, false, "is this a caps mesh directory?");
   std::ifstream jin(jpath);
   if (!jin) throw IoError(cat(jpath.string(), ": cannot open; is this a caps mesh directory?"));
   std::stringstream jtext;
@@ -192,24 +202,44 @@ Mesh read_mesh_dir(const fs::path& dir) {
   Mesh mesh;
   const std::string jw = jpath.string();
   try {
-    if (j.value("format", "") != "caps-mesh" || j.value("version", 0) != 1)
+    if (!j.is_object() || j.value("format", "") != "caps-mesh" || j.value("version", 0.0) != 1.0)
       throw InvalidInput(cat(jw, ": format must be \"caps-mesh\" version 1"));
+    // Integers are read as doubles and checked (a cast of 1e300 to int is undefined).
+    const auto integer = [&](const nlohmann::json& v, const std::string& field) {
+      return to_int(v.get<double>(), cat(jw, ": ", field));
+    };
+    const auto entries = [&](const char* key) {
+      const nlohmann::json a = j.value(key, nlohmann::json::array());
+      if (!a.is_array()) throw InvalidInput(cat(jw, ": ", key, " must be an array"));
+      return a;
+    };
     for (const auto& m : j.at("materials")) {
-      const int layer = m.at("layer").get<int>();
+      const int layer = integer(m.at("layer"), "materials: layer");
       mesh.materials.emplace(layer, LinearElastic(m.at("E_kpa").get<double>() * 1e-3,
                                                   m.at("nu").get<double>(),
                                                   cat(jw, ": material of layer ", layer)));
     }
-    mesh.fixed_nodes = j.value("fixed_nodes", std::vector<int>{});
-    for (const auto& f : j.value("fixed_dofs", nlohmann::json::array()))
-      mesh.fixed_dofs.push_back({f.at(0).get<int>(), f.at(1).get<int>(), f.at(2).get<double>()});
-    for (const auto& l : j.value("loads_n", nlohmann::json::array()))
-      mesh.loads.push_back({l.at(0).get<int>(),
+    const nlohmann::json fixed = entries("fixed_nodes");
+    for (std::size_t i = 0; i < fixed.size(); ++i)
+      mesh.fixed_nodes.push_back(integer(fixed[i], cat("fixed_nodes[", i, "]")));
+    for (const auto& f : entries("fixed_dofs"))
+      mesh.fixed_dofs.push_back({integer(f.at(0), cat("fixed_dofs[", mesh.fixed_dofs.size(), "][0]")),
+                                 integer(f.at(1), cat("fixed_dofs[", mesh.fixed_dofs.size(), "][1]")),
+                                 f.at(2).get<double>()});
+    for (const auto& l : entries("loads_n")) {
+      mesh.loads.push_back({integer(l.at(0), cat("loads_n[", mesh.loads.size(), "][0]")),
                             Eigen::Vector3d(l.at(1).get<double>(), l.at(2).get<double>(), l.at(3).get<double>())});
-    for (const auto& s : j.value("sutures", nlohmann::json::array()))
-      mesh.sutures.push_back({s.at(0).get<int>(), s.at(1).get<int>()});
-    for (const auto& s : j.value("sliding_nodes", nlohmann::json::array()))
-      mesh.sliding.push_back({s.at(0).get<int>(),
+      const Eigen::Vector3d& f = mesh.loads.back().force_n;
+      if (!(f.array().abs() <= kMaxNodalLoadN).all())
+        throw InvalidInput(cat(jw, ": loads_n[", mesh.loads.size() - 1, "] = (", f.transpose(),
+                               ") N: a nodal load must be finite and at most ", kMaxNodalLoadN,
+                               " N in each component; check the units (N) of the load"));
+    }
+    for (const auto& s : entries("sutures"))
+      mesh.sutures.push_back({integer(s.at(0), cat("sutures[", mesh.sutures.size(), "][0]")),
+                              integer(s.at(1), cat("sutures[", mesh.sutures.size(), "][1]"))});
+    for (const auto& s : entries("sliding_nodes"))
+      mesh.sliding.push_back({integer(s.at(0), cat("sliding_nodes[", mesh.sliding.size(), "][0]")),
                               Eigen::Vector3d(s.at(1).get<double>(), s.at(2).get<double>(), s.at(3).get<double>()),
                               s.at(4).get<double>()});
     mesh.model = j.value("model", "");
@@ -236,21 +266,29 @@ Mesh read_mesh_dir(const fs::path& dir) {
   if (static_cast<long>(offs.size()) != v.n_cells || static_cast<long>(types.size()) != v.n_cells ||
       static_cast<long>(layer.size()) != v.n_cells)
     throw InvalidInput(cat(vw, ": offsets/types/layer must have one entry per cell (", v.n_cells, ")"));
+  // The integer arrays must hold whole numbers in range (a cast of any other double is undefined).
+  const auto whole = [&](const char* array, long c, double x, double lo, double hi) {
+    if (!is_whole_in(x, lo, hi))
+      throw InvalidInput(cat(vw, ": ", array, "[", c, "] = ", x, " is not a whole number in [", lo,
+                             ", ", hi, "]; the mesh file is damaged, write it again"));
+    return static_cast<long>(x);
+  };
   long begin = 0;
   for (long c = 0; c < v.n_cells; ++c) {
     Element el;
-    const int t = static_cast<int>(types[c]);
+    const int t = static_cast<int>(whole("types", c, types[c], 0, 255));
     if (t != 25 && t != 26)
       throw InvalidInput(cat(vw, ": cell ", c, " has VTK type ", t, "; only 25 (quadratic hexahedron) "
                              "and 26 (quadratic wedge) are supported"));
     el.type = t == 25 ? ElementType::Hex20 : ElementType::Wedge15;
-    el.layer = static_cast<int>(layer[c]);
-    const long end = static_cast<long>(offs[c]);
-    if (end - begin != el.n_nodes() || end > static_cast<long>(conn.size()))
+    el.layer = static_cast<int>(whole("layer", c, layer[c], -1e9, 1e9));
+    const long end = whole("offsets", c, offs[c], 0, static_cast<double>(conn.size()));
+    if (end - begin != el.n_nodes())
       throw InvalidInput(cat(vw, ": cell ", c, " has ", end - begin, " nodes, expected ", el.n_nodes()));
     for (int k = 0; k < el.n_nodes(); ++k) {
       const int src = el.type == ElementType::Wedge15 ? kWedge15ToVtk[k] : k;
-      el.nodes[k] = static_cast<int>(conn[begin + src]);
+      el.nodes[k] = static_cast<int>(whole("connectivity", begin + src, conn[begin + src], 0,
+                                           static_cast<double>(v.n_points) - 1));
     }
     mesh.elements.push_back(el);
     begin = end;

@@ -157,6 +157,36 @@ PlanReport check_plan_structure(const Plan& plan) {
                            "tissue on its left, running clockwise with superior up); check loop "
                            "node ", worst, " and its twin: nodes 0..n-1 of a path lie on its left"));
   }
+  // A flap's outline is a simple polygon: a bow-tie (two of its sides crossing or touching, or a
+  // side folding back over the one before) frees no well-defined area.
+  for (std::size_t f = 0; f < plan.flaps.size(); ++f) {
+    const auto& flap = plan.flaps[f];
+    const std::size_t m = flap.size();
+    if (m < 3)
+      throw InvalidInput(cat("flap ", f, " has ", m, " point(s); a flap's outline needs at least 3"));
+    for (int i : flap)
+      if (i < 0 || i >= static_cast<int>(xy.size()))
+        throw InvalidInput(cat("flap ", f, " names point ", i, ", but the plan has ", xy.size(),
+                               " points"));
+    const auto corner = [&](std::size_t k) { return xy[static_cast<std::size_t>(flap[k % m])]; };
+    for (std::size_t i = 0; i < m; ++i) {
+      const Eigen::Vector2d u = corner(i + 1) - corner(i), v = corner(i + 2) - corner(i + 1);
+      if (m > 2 && u.norm() > 0 && v.norm() > 0 && std::abs(cross2(u, v)) < 1e-3 * u.norm() * v.norm() &&
+          u.dot(v) < 0)
+        throw InvalidInput(cat("flap ", f, ": its outline folds back at point ", flap[(i + 1) % m],
+                               " (sides (", flap[i], ",", flap[(i + 1) % m], ") and (",
+                               flap[(i + 1) % m], ",", flap[(i + 2) % m], ") overlap); list the "
+                               "flap's points in order around it"));
+      for (std::size_t j = i + 2; j < m; ++j) {
+        if ((j + 1) % m == i) continue;
+        if (segments_meet(corner(i), corner(i + 1), corner(j), corner(j + 1), kTouchMm))
+          throw InvalidInput(cat("flap ", f, ": its outline crosses itself (a bow-tie): sides (",
+                                 flap[i], ",", flap[(i + 1) % m], ") and (", flap[j], ",",
+                                 flap[(j + 1) % m], ") meet near ", at(plan, corner(i)),
+                                 "; list the flap's points in order around it"));
+      }
+    }
+  }
   // Sutures: border edges (or runs of them), each edge sewn once, never to itself.
   std::map<std::pair<int, int>, int> used;
   for (std::size_t k = 0; k < plan.sutures.size(); ++k) {

@@ -6,6 +6,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/file_access.hpp"
 #include "caps/core/json_limits.hpp"
 #include "suture_json.hpp"
 
@@ -63,7 +64,7 @@ std::string plan_to_json(const Plan& plan, const PlanReport* report) {
     j["check"] = r;
   }
   j["notes"] = plan.notes;
-  return j.dump(2) + "\n";
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 Plan parse_plan_json(const std::string& text, const std::string& source) {
@@ -79,7 +80,7 @@ Plan parse_plan_json(const std::string& text, const std::string& source) {
     throw InvalidInput(cat(source, ": not a caps plan (\"format\" must be \"caps-plan\")"));
   const json version = j.contains("format_version") ? j["format_version"] : json(0);
   if (!version.is_number_integer() || version.get<long long>() != kPlanFormatVersion)
-    throw InvalidInput(cat(source, ": plan format_version ", version.dump(),
+    throw InvalidInput(cat(source, ": plan format_version ", version.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace),
                            " is not supported (this caps reads version ", kPlanFormatVersion, ")"));
   Plan plan;
   std::string field;
@@ -111,16 +112,16 @@ Plan parse_plan_json(const std::string& text, const std::string& source) {
       plan.points.push_back(s);
     }
     field = "paths";
-    plan.paths = j.at("paths").get<std::vector<std::vector<int>>>();
+    plan.paths = detail::index_lists(j.at("paths"), cat(source, ": paths"));
     field = "excisions";
     if (j.contains("excisions"))
       for (const auto& e : j["excisions"])
-        plan.excisions.push_back({e.at("loop_index").get<int>(),
+        plan.excisions.push_back({to_int(e.at("loop_index").get<double>(), cat(source, ": excisions: loop_index")),
                                   {e.at("offset_mm").at(0).get<double>(), e.at("offset_mm").at(1).get<double>()}});
     field = "sutures";
     for (const auto& s : j.at("sutures")) plan.sutures.push_back(detail::suture_from_json(s, source));
     field = "flaps";
-    if (j.contains("flaps")) plan.flaps = j["flaps"].get<std::vector<std::vector<int>>>();
+    if (j.contains("flaps")) plan.flaps = detail::index_lists(j["flaps"], cat(source, ": flaps"));
     field = "notes";
     plan.notes = j.value("notes", "");
   } catch (const json::exception& e) {
@@ -131,6 +132,7 @@ Plan parse_plan_json(const std::string& text, const std::string& source) {
 }
 
 Plan read_plan(const std::filesystem::path& path) {
+  require_readable(path, false, "check the plan file's path and permissions");
   std::ifstream in(path);
   if (!in) throw IoError(cat(path.string(), ": cannot read the plan file"));
   std::stringstream ss;
@@ -156,7 +158,7 @@ void write_plan(const std::filesystem::path& path, const Plan& plan, const PlanR
     const auto relative = model.lexically_relative(folder);
     if (!ec && !relative.empty()) j["model_relative"] = relative.generic_string();
   }
-  write_text_atomic(path, j.dump(2) + "\n");
+  write_text_atomic(path, j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
 }
 
 WoundBorder read_wound_border(const std::filesystem::path& path) {
@@ -176,9 +178,11 @@ WoundBorder read_wound_border(const std::filesystem::path& path) {
     for (const auto& p : j.at("loop_theta_z"))
       b.loop_theta_z.emplace_back(p.at(0).get<double>(), p.at(1).get<double>());
     if (j.contains("sutures"))
-      for (const auto& s : j.at("sutures"))
-        b.sutures.push_back({s.at(0).get<int>(), s.at(1).get<int>(), s.at(2).get<int>(),
-                             s.at(3).get<int>()});
+      for (const auto& s : j.at("sutures")) {
+        const std::vector<int> q = detail::index_list(s, cat(path.string(), ": sutures"));
+        if (q.size() != 4) throw InvalidInput(cat(path.string(), ": a suture is [a, b, c, d]"));
+        b.sutures.push_back({q[0], q[1], q[2], q[3]});
+      }
   } catch (const json::exception& e) {
     throw InvalidInput(cat(path.string(), ": expected {\"loop_theta_z\": [[theta_deg, z_mm], ...], "
                            "\"sutures\": [[a, b, c, d], ...]} (", e.what(), ")"));

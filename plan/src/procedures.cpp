@@ -447,7 +447,7 @@ std::string procedure_to_json(const LocalProcedure& p) {
   j["sutures"] = sutures_json(p.sutures);
   if (!p.flaps.empty()) j["flaps"] = p.flaps;
   j["notes"] = p.notes;
-  return j.dump(2);
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 LocalProcedure parse_procedure_json(const std::string& text, const std::string& source) {
@@ -461,19 +461,19 @@ LocalProcedure parse_procedure_json(const std::string& text, const std::string& 
   try {
     if (j.value("format", "") != "caps-procedure")
       throw InvalidInput(cat(source, ": \"format\" must be \"caps-procedure\""));
-    if (j.value("format_version", 0) != 1)
-      throw InvalidInput(cat(source, ": format_version ", j.value("format_version", 0),
+    if (j.value("format_version", 0.0) != 1.0)
+      throw InvalidInput(cat(source, ": format_version ", j.value("format_version", 0.0),
                              " is not supported (this caps reads version 1)"));
     LocalProcedure p;
     p.name = j.value("name", "custom");
     for (const auto& x : j.at("points_mm")) p.points_mm.push_back(V2(x.at(0).get<double>(), x.at(1).get<double>()));
-    p.paths = j.at("paths").get<std::vector<std::vector<int>>>();
+    p.paths = detail::index_lists(j.at("paths"), cat(source, ": paths"));
     if (j.contains("excisions"))
       for (const auto& e : j["excisions"])
-        p.excisions.push_back({e.at("loop_index").get<int>(),
+        p.excisions.push_back({to_int(e.at("loop_index").get<double>(), cat(source, ": excisions: loop_index")),
                                V2(e.at("offset_mm").at(0).get<double>(), e.at("offset_mm").at(1).get<double>())});
     for (const auto& s : j.at("sutures")) p.sutures.push_back(detail::suture_from_json(s, source));
-    if (j.contains("flaps")) p.flaps = j["flaps"].get<std::vector<std::vector<int>>>();
+    if (j.contains("flaps")) p.flaps = detail::index_lists(j["flaps"], cat(source, ": flaps"));
     p.notes = j.value("notes", "");
     return p;
   } catch (const json::exception& e) {

@@ -180,7 +180,7 @@ fs::path write_cylindrical_scan(const PatientModel& model, const fs::path& dir, 
     write_png(dir / "color.png", color);
     j["color"] = "color.png";
   }
-  write_text_atomic(dir / "range.json", j.dump(2) + "\n");
+  write_text_atomic(dir / "range.json", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
   return dir / "range.json";
 }
 

@@ -12,7 +12,9 @@
 #include <new>
 #include <sstream>
 
+#include "caps/core/checked_numbers.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/file_access.hpp"
 #include "caps/core/json_limits.hpp"
 #include "caps/volume/mesh_io.hpp"
 
@@ -29,6 +31,7 @@ std::string lower(std::string s) {
 // Opens a scan file and starts its ScanMesh (source and format).
 std::ifstream open_scan(const fs::path& path, const char* format, ScanMesh& s,
                         std::ios::openmode mode = std::ios::in) {
+  require_readable(path, false, "check the path and its permissions");
   std::ifstream in(path, mode);
   if (!in) throw IoError(cat(path.string(), ": cannot open (missing or unreadable)"));
   s.source = path.string();
@@ -65,6 +68,9 @@ void finish(ScanMesh& s, const ScanReadOptions& o) {
 }
 
 // ---- glTF 2.0
+
+// The most vertices a glTF scene may add up to over all its mesh instances (24 bytes each).
+constexpr std::size_t kMaxGltfVertices = 10'000'000;
 Eigen::Matrix4d node_matrix(const tinygltf::Node& n) {
   Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
   if (n.matrix.size() == 16) {
@@ -86,7 +92,10 @@ struct AccessorView {
   std::size_t stride = 0, count = 0;
   int components = 0, type = 0;
   bool normalized = false;
+  /// NaN for a component the accessor does not have (a VEC2 read as a position; the callers
+  /// refuse non-finite values): reading it would run past the element (found by fuzz_gltf).
   double get(std::size_t i, int c) const {
+    if (c < 0 || c >= components || i >= count) return std::nan("");
     const unsigned char* p = base + i * stride;
     switch (type) {
       case TINYGLTF_COMPONENT_TYPE_FLOAT: { float v; std::memcpy(&v, p + 4 * c, 4); return v; }
@@ -185,6 +194,13 @@ ScanMesh read_gltf(const fs::path& path, const ScanReadOptions& o) {
       const auto pos = prim.attributes.find("POSITION");
       if (pos == prim.attributes.end()) continue;
       const AccessorView P = view_of(model, pos->second, s.source);
+      if (P.components < 3)
+        throw InvalidInput(cat(s.source, ": the POSITION accessor ", pos->second, " has ",
+                               P.components, " component(s) a vertex; a position needs 3 (VEC3)"));
+      // Nodes may share a mesh (a scene graph is a DAG): bound what the instances add up to.
+      if (V.size() + P.count > kMaxGltfVertices)
+        throw InvalidInput(cat(s.source, ": the scene's mesh instances hold more than ",
+                               kMaxGltfVertices, " vertices; export the scan as one mesh"));
       const int base = static_cast<int>(V.size());
       for (std::size_t i = 0; i < P.count; ++i)
         V.push_back((M * Eigen::Vector4d(P.get(i, 0), P.get(i, 1), P.get(i, 2), 1.0)).head<3>());
@@ -203,7 +219,7 @@ ScanMesh read_gltf(const fs::path& path, const ScanReadOptions& o) {
         for (std::size_t i = 0; i < P.count; ++i) {
           std::array<std::uint8_t, 3> c{};
           for (int k = 0; k < 3; ++k)
-            c[k] = static_cast<std::uint8_t>(std::clamp(C.get(i, k) * (unit ? 255.0 : 1.0), 0.0, 255.0));
+            c[k] = channel_byte(C.get(i, k) * (unit ? 255.0 : 1.0));
           colors.push_back(c);
         }
       } else {
@@ -404,9 +420,7 @@ ScanMesh read_obj(const fs::path& path, const ScanReadOptions& o) {
       V.push_back(p);
       double r, g, b;
       if (ls >> r >> g >> b)
-        colors.push_back({static_cast<std::uint8_t>(std::clamp(r * 255, 0.0, 255.0)),
-                          static_cast<std::uint8_t>(std::clamp(g * 255, 0.0, 255.0)),
-                          static_cast<std::uint8_t>(std::clamp(b * 255, 0.0, 255.0))});
+        colors.push_back({channel_byte(r * 255), channel_byte(g * 255), channel_byte(b * 255)});
     } else if (tag == "vt") {
       double u = 0, v = 0;
       ls >> u >> v;
@@ -494,7 +508,7 @@ ScanMesh read_ply_scan(const fs::path& path, const ScanReadOptions& o) {
 }  // namespace
 
 ScanMesh read_scan_mesh(const fs::path& path, const ScanReadOptions& options) {
-  if (!fs::exists(path)) throw IoError(cat(path.string(), ": no such file"));
+  require_readable(path, false, "check the path and its permissions");
   const std::string ext = lower(path.extension().string());
   // Errors of the libraries underneath (tinygltf's containers, allocation) are the file's fault.
   try {

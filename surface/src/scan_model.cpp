@@ -364,13 +364,13 @@ void write_scan_model(const ScanModel& m, const fs::path& dir, bool force, Repor
                        {"to_lps", R},
                        {"credit", o.credit},
                        {"notes", m.scan.notes}}
-                      .dump();
+                      .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   c.segmentation_json = json{{"skin_method", "surface scan: outermost hit of the ray from the axis"},
                              {"bone_method", cat("skin moved inward by a constant ", o.thickness_mm,
                                                  " mm")},
                              {"bone_is_approximate", true},
                              {"inside_out_cells", m.inside_out_cells}}
-                            .dump();
+                            .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   c.thickness_json = json{{"kind", "constant"},
                           {"thickness_mm", o.thickness_mm},
                           {"assumption", "a constant soft-tissue thickness, as the 1992 CAPS "
@@ -381,7 +381,7 @@ void write_scan_model(const ScanModel& m, const fs::path& dir, bool force, Repor
                                      "thickness_mm x cos(angle between the ray and the skin normal)"},
                           {"fill", "cells without skin: r_skin filled by harmonic interpolation; "
                                    "see validity.nrrd"}}
-                         .dump();
+                         .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   write_model_directory(m, c, dir, force, reporter);
 }
 

@@ -1,6 +1,7 @@
 #include "caps/volume/mesh_io.hpp"
 
 #include "caps/core/atomic_output.hpp"
+#include "caps/core/checked_numbers.hpp"
 #include "caps/core/error.hpp"
 
 #include <algorithm>
@@ -329,7 +330,7 @@ PlyMesh read_ply_with_attributes(const std::filesystem::path& path) {
           } else if (role[q] <= 5 && have_colors) {
             const bool unit = p.type == Scalar::Float32 || p.type == Scalar::Float64;
             out.colors(n, role[q] - 3) =
-                static_cast<std::uint8_t>(std::clamp(v * (unit ? 255.0 : 1.0), 0.0, 255.0));
+                channel_byte(v * (unit ? 255.0 : 1.0));
           } else if (role[q] >= 6 && have_uv) {
             out.uv(n, role[q] - 6) = v;
           }

@@ -257,7 +257,7 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter
                        {"dims", vec(m.source_dims)},
                        {"spacing_mm", vec(m.source_spacing_mm)},
                        {"notes", m.notes}}
-                      .dump();
+                      .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   c.segmentation_json = json{{"skin_method", seg.skin_method},
                              {"skin_threshold", seg.skin_threshold},
                              {"bone_method", seg.bone_method},
@@ -269,14 +269,14 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter
                              {"bone_volume_ml", seg.bone_volume_ml},
                              {"detached_pieces", seg.detached_pieces},
                              {"detached_volume_ml", seg.detached_volume_ml}}
-                            .dump();
+                            .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   c.thickness_json = json{{"kind", seg.bone_is_approximate ? "approximate" : "measured"},
                           {"radial", "r_skin - r_bone along the ray from the axis"},
                           {"normal", "distance from the skin point to the nearest bone"},
                           {"fill", "invalid cells: r_skin and thickness filled by harmonic "
                                    "interpolation from valid cells; see validity.nrrd"},
                           {"layers", layers_json(m)}}
-                         .dump();
+                         .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   write_model_directory(m, c, dir, force, reporter);
 }
 

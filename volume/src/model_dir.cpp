@@ -9,7 +9,9 @@
 #include <tuple>
 
 #include "caps/core/atomic_output.hpp"
+#include "caps/core/checked_numbers.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/file_access.hpp"
 #include "caps/core/json_limits.hpp"
 #include "caps/core/reporter.hpp"
 #include "caps/image/image_io.hpp"
@@ -83,11 +85,22 @@ json statistics_json(const ModelStatistics& s) {
                                      {"deep", s.deep_median_mm}}}}}};
 }
 
+// A count in model.json: a whole number from 0 to 2^53 (a cast of 1e300 or -1 would be wrong or
+// undefined); `where` names the file and the object.
+std::int64_t count_field(const json& o, const char* key, const std::string& where) {
+  const double x = o.value(key, 0.0);
+  if (!is_whole_in(x, 0, 9007199254740992.0))
+    throw InvalidInput(cat(where, ".", key, " = ", x, " is not a count; rebuild the model"));
+  return static_cast<std::int64_t>(x);
+}
+
 // Missing statistics read as 0: they describe the model, nothing downstream depends on them.
-ModelStatistics statistics_of(const json& j) {
+ModelStatistics statistics_of(const json& j, const std::string& where) {
   ModelStatistics s;
   if (!j.is_object()) return s;
-  auto count = [](const json& o, const char* key) { return o.value(key, std::size_t(0)); };
+  auto count = [&](const json& o, const char* key) {
+    return static_cast<std::size_t>(count_field(o, key, where));
+  };
   auto num = [](const json& o, const char* key) { return o.value(key, 0.0); };
   const json none = json::object();
   auto child = [&none](const json& o, const char* key) -> const json& {
@@ -127,11 +140,11 @@ json mesh_json(const MeshSummary& m) {
   return {{"vertices", m.vertices}, {"faces", m.faces}, {"area_mm2", m.area_mm2}, {"closed", m.closed}};
 }
 
-MeshSummary mesh_summary_of(const json& j) {
+MeshSummary mesh_summary_of(const json& j, const std::string& where) {
   MeshSummary m;
   if (!j.is_object()) return m;
-  m.vertices = j.value("vertices", std::int64_t(0));
-  m.faces = j.value("faces", std::int64_t(0));
+  m.vertices = count_field(j, "vertices", where);
+  m.faces = count_field(j, "faces", where);
   m.area_mm2 = j.value("area_mm2", 0.0);
   m.closed = j.value("closed", false);
   return m;
@@ -173,11 +186,13 @@ json to_json(const ModelInfo& info) {
 // model.json of `dir`, with the format, the version and the files it names checked.
 json load_model_json(const fs::path& dir) {
   const fs::path file = dir / model_file::kJson;
-  if (!fs::is_directory(dir))
-    throw IoError(cat(dir.string(), ": not a model directory (no such folder); build one with "
+  const std::string why = unreadable_reason(dir, true);
+  if (!why.empty())
+    throw IoError(cat(dir.string(), ": not a model directory (", why, "); build one with "
                       "`caps model from-volume`"));
+  require_readable(file, false, cat("is ", dir.string(), " a caps model?"));
   std::ifstream in(file);
-  if (!in) throw IoError(cat(file.string(), ": missing; is ", dir.string(), " a caps model?"));
+  if (!in) throw IoError(cat(file.string(), ": cannot be read; is ", dir.string(), " a caps model?"));
   std::stringstream text;
   text << in.rdbuf();
   check_json_depth(text.str(), file.string());
@@ -192,18 +207,20 @@ json load_model_json(const fs::path& dir) {
     throw InvalidInput(cat(file.string(), ": 'format' is not \"caps-model\""));
   const json version = j.contains("format_version") ? j["format_version"] : json(-1);
   if (!version.is_number_integer() || version.get<long long>() != kModelFormatVersion)
-    throw InvalidInput(cat(file.string(), ": format_version ", version.dump(), " is not supported "
+    throw InvalidInput(cat(file.string(), ": format_version ", version.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace), " is not supported "
                            "(this caps reads version ", kModelFormatVersion, "); rebuild the model"));
   if (j.contains("files")) {
     if (!j["files"].is_object())
       throw InvalidInput(cat(file.string(), ": \"files\" must be an object of file names"));
     for (const auto& [key, name] : j["files"].items()) {
       if (!name.is_string())
-        throw InvalidInput(cat(file.string(), ": files.", key, " = ", name.dump(),
+        throw InvalidInput(cat(file.string(), ": files.", key, " = ", name.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace),
                                " is not a file name"));
-      if (!fs::exists(dir / name.get<std::string>()))
+      const std::string why = unreadable_reason(dir / name.get<std::string>());
+      if (!why.empty())
         throw InvalidInput(cat(dir.string(), ": model.json names ", key, " = ",
-                               name.get<std::string>(), " but the file is missing"));
+                               name.get<std::string>(), " but that file cannot be read (", why,
+                               ")"));
     }
   }
   return j;
@@ -219,7 +236,7 @@ std::string ModelInfo::thickness_kind() const {
   return parse_object(thickness_json, "thickness").value("kind", std::string());
 }
 
-std::string model_json_text(const ModelInfo& info) { return to_json(info).dump(2) + "\n"; }
+std::string model_json_text(const ModelInfo& info) { return to_json(info).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n"; }
 
 namespace {
 
@@ -250,8 +267,8 @@ ModelInfo read_model_info_fields(const fs::path& dir) {
     info.axis.direction = vec3(a.at("direction")).normalized();
     info.axis.front = vec3(a.at("front")).normalized();
     const auto& g = j.at("grid");
-    info.grid.n_theta = g.at("n_theta").get<int>();
-    info.grid.n_z = g.at("n_z").get<int>();
+    info.grid.n_theta = to_int(g.at("n_theta").get<double>(), file.string() + ": grid.n_theta");
+    info.grid.n_z = to_int(g.at("n_z").get<double>(), file.string() + ": grid.n_z");
     info.grid.theta0_deg = g.at("theta0_deg").get<double>();
     info.grid.z0_mm = g.at("z0_mm").get<double>();
     info.grid.dz_mm = g.at("dz_mm").get<double>();
@@ -263,16 +280,16 @@ ModelInfo read_model_info_fields(const fs::path& dir) {
   if (g.n_theta < 4 || g.n_z < 2 || !(g.dz_mm > 0))
     throw InvalidInput(cat(file.string(), ": grid ", g.n_theta, " x ", g.n_z, " with dz ",
                            g.dz_mm, " mm is not usable; rebuild the model"));
-  auto text = [&](const char* key) { return j.contains(key) ? j[key].dump() : std::string("{}"); };
+  auto text = [&](const char* key) { return j.contains(key) ? j[key].dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) : std::string("{}"); };
   info.source_json = text("source");
   info.segmentation_json = text("segmentation");
   info.thickness_json = text("thickness");
-  info.stats = statistics_of(j.value("statistics", json::object()));
+  info.stats = statistics_of(j.value("statistics", json::object()), file.string() + ": statistics");
   info.has_color = j.contains("files") && j["files"].contains("color");
   info.has_layers = j.contains("files") && j["files"].contains("thickness_skin");
   const json meshes = j.value("meshes", json::object());
-  info.skin = mesh_summary_of(meshes.value("skin", json::object()));
-  info.bone = mesh_summary_of(meshes.value("bone", json::object()));
+  info.skin = mesh_summary_of(meshes.value("skin", json::object()), file.string() + ": meshes.skin");
+  info.bone = mesh_summary_of(meshes.value("bone", json::object()), file.string() + ": meshes.bone");
   if (j.contains("content_hash") && j["content_hash"].is_string())
     info.content_hash = j["content_hash"].get<std::string>();
   if (j.contains("warnings") && j["warnings"].is_array())
@@ -285,7 +302,7 @@ ModelInfo read_model_info_fields(const fs::path& dir) {
 
 std::string read_model_json(const fs::path& dir) {
   read_model_info(dir);
-  return load_model_json(dir).dump(2);
+  return load_model_json(dir).dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 CylindricalMaps read_model_maps(const fs::path& dir, const ModelInfo& info) {

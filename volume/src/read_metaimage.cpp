@@ -97,11 +97,10 @@ std::vector<char> inflate_all(const fs::path& file, const char* src, std::size_t
   return out;
 }
 
-// The file name for slice `i` of an ElementDataFile pattern such as "slice%03d.raw". The pattern
-// is user text, so it never reaches a printf-style formatter: exactly one %d conversion with an
-// optional 0 flag and width (ITK's form) is expanded here, "%%" is a literal %, and anything else
-// is refused.
-std::string slice_file_name(const fs::path& file, const std::string& pattern, long long i) {
+}  // namespace
+
+std::string slice_file_name(const fs::path& file, const std::string& field,
+                            const std::string& pattern, long long i) {
   std::string out;
   int n_conversions = 0;
   for (std::size_t k = 0; k < pattern.size(); ++k) {
@@ -121,7 +120,7 @@ std::string slice_file_name(const fs::path& file, const std::string& pattern, lo
     while (j < pattern.size() && std::isdigit(static_cast<unsigned char>(pattern[j])) && width < 100)
       width = width * 10 + (pattern[j++] - '0');
     if (j >= pattern.size() || pattern[j] != 'd' || width > 32 || ++n_conversions > 1)
-      throw InvalidInput(cat(file.string(), ": ElementDataFile pattern '", pattern,
+      throw InvalidInput(cat(file.string(), ": ", field, " pattern '", pattern,
                              "' is not a file name with one %d (or %0Nd) slice number"));
     std::string number = std::to_string(i < 0 ? -i : i);
     const std::size_t w = static_cast<std::size_t>(width) - (i < 0 ? 1 : 0);
@@ -130,12 +129,10 @@ std::string slice_file_name(const fs::path& file, const std::string& pattern, lo
     k = j;
   }
   if (n_conversions != 1)
-    throw InvalidInput(cat(file.string(), ": ElementDataFile pattern '", pattern,
+    throw InvalidInput(cat(file.string(), ": ", field, " pattern '", pattern,
                            "' is not a file name with one %d (or %0Nd) slice number"));
   return out;
 }
-
-}  // namespace
 
 Volume read_metaimage(const fs::path& file, const ReadOptions& options) {
   const auto total_bytes = file_size_or_throw(file);
@@ -274,7 +271,7 @@ Volume read_metaimage(const fs::path& file, const ReadOptions& options) {
           throw InvalidInput(cat(name, ": ElementDataFile pattern '", data_file,
                                  "' has an invalid range"));
         for (long long i = first; step > 0 ? i <= last : i >= last; i += step) {
-          files.push_back(dir / slice_file_name(file, pattern, i));
+          files.push_back(dir / slice_file_name(file, "ElementDataFile", pattern, i));
         }
       } else {
         files.push_back(dir / data_file);

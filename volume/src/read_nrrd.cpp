@@ -3,8 +3,10 @@
 // without data so that damaged or absurd headers are rejected before any large allocation, and so
 // that a failure in the second (data) pass can be reported as a truncated/missing data file.
 
+#include <cctype>
 #include <cmath>
 #include <cstdlib>
+#include <fstream>
 #include <memory>
 #include <string>
 
@@ -54,12 +56,88 @@ std::string nrrd_element_type(int type) {
   }
 }
 
+// The header's lines (up to the blank line that ends it, at most 1 MiB), for the fields whose
+// meaning teem loses: teem stores both a missing spacing and "nan" as NaN.
+std::vector<std::string> header_lines(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  std::vector<std::string> lines;
+  std::string line;
+  std::size_t total = 0;
+  while (std::getline(in, line) && total < (1u << 20)) {
+    total += line.size() + 1;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty() && !lines.empty()) break;
+    lines.push_back(line);
+  }
+  return lines;
+}
+
+// teem copies a header field's text into fixed buffers when it has more than the values it
+// expects, and overflows its stack on a field line longer than about 1000 characters (found by
+// fuzz/fuzz_nrrd.cpp): such lines are refused before teem reads the header. Comments and
+// key:=value lines are exempt (teem keeps them whole).
+constexpr std::size_t kMaxNrrdFieldChars = 512;
+
+void check_field_lengths(const fs::path& file) {
+  const std::vector<std::string> lines = header_lines(file);
+  for (std::size_t i = 0; i < lines.size(); ++i) {
+    const std::string& line = lines[i];
+    if (line.size() <= kMaxNrrdFieldChars || line[0] == '#' ||
+        line.find(":=") != std::string::npos)
+      continue;
+    throw InvalidInput(cat(file.string(), ": header line ", i + 1, " ('", line.substr(0, 40),
+                           "...') is ", line.size(), " characters long; a NRRD field holds at "
+                           "most ", kMaxNrrdFieldChars, ": the header is damaged"));
+  }
+}
+
+// Refuses a spacing or space direction written as NaN (teem reads "nan" as "unknown" and caps
+// would take 1 mm): the voxel size must be known to measure a patient.
+void check_no_nan_spacing(const fs::path& file) {
+  for (const std::string& line : header_lines(file)) {
+    const auto colon = line.find(':');
+    if (colon == std::string::npos) continue;
+    const std::string field = to_lower(line.substr(0, colon));
+    if (field != "spacings" && field != "space directions" && field != "thicknesses" &&
+        field != "space origin")
+      continue;
+    const std::string value = to_lower(line.substr(colon + 1));
+    if (value.find("nan") != std::string::npos || value.find("inf") != std::string::npos)
+      throw InvalidInput(cat(file.string(), ": '", line, "': the voxel size or position is not a "
+                             "finite number; write the scanner's spacing into the header (a NaN "
+                             "spacing would be read as 1 mm)"));
+  }
+}
+
+// A detached raw data file must hold exactly the bytes the header describes: a larger one means
+// that the header's sizes or type do not describe the file (teem would read its first bytes).
+void check_detached_size(const fs::path& file, const NrrdIoState& nio, double n_bytes) {
+  if (!nio.encoding || std::string(nio.encoding->name) != "raw" || nio.dataFNFormat ||
+      !nio.dataFNArr || nio.dataFNArr->len != 1 || nio.byteSkip != 0 || nio.lineSkip != 0 ||
+      nio.dataFSkip)
+    return;
+  const std::string data_name = nio.dataFN[0];
+  if (data_name == "LIST") return;
+  fs::path data = data_name;
+  if (data.is_relative()) data = file.parent_path() / data;
+  std::error_code ec;
+  const auto size = fs::file_size(data, ec);
+  if (ec) return;  // missing: the data pass reports it
+  if (static_cast<double>(size) > n_bytes)
+    throw InvalidInput(cat(file.string(), ": the data file ", data.string(), " holds ", size,
+                           " bytes but the header's sizes and type describe ",
+                           static_cast<std::uintmax_t>(n_bytes),
+                           "; the header does not match the data (check sizes, type and data "
+                           "file)"));
+}
+
 }  // namespace
 
 Volume read_nrrd(const fs::path& file, const ReadOptions& options) {
   file_size_or_throw(file);
   const std::string name = file.string();
 
+  check_field_lengths(file);
   std::unique_ptr<Nrrd, NrrdFree> header(nrrdNew());
   std::unique_ptr<NrrdIoState, IoStateFree> nio(nrrdIoStateNew());
   nio->skipData = AIR_TRUE;
@@ -80,6 +158,11 @@ Volume read_nrrd(const fs::path& file, const ReadOptions& options) {
   double n_vox = 1;
   for (long long s : sizes) n_vox *= static_cast<double>(s);
   check_dims(file, "sizes", sizes, options, n_vox * static_cast<double>(type_size(type)));
+  check_no_nan_spacing(file);
+  // teem expands a "data file" pattern with sprintf: only a plain %d pattern may reach it.
+  if (nio->dataFNFormat)
+    (void)slice_file_name(file, "data file", nio->dataFNFormat, nio->dataFNMin);
+  check_detached_size(file, *nio, n_vox * static_cast<double>(type_size(type)));
 
   std::unique_ptr<Nrrd, NrrdFree> nrrd(nrrdNew());
   if (nrrdLoad(nrrd.get(), name.c_str(), nullptr) != 0 || nrrd->data == nullptr)

@@ -9,6 +9,7 @@
 #include <fstream>
 
 #include "caps/core/error.hpp"
+#include "caps/core/file_access.hpp"
 #include "volume_io_detail.hpp"
 
 namespace fs = std::filesystem;
@@ -23,12 +24,9 @@ std::string to_lower(std::string s) {
 }
 
 std::uintmax_t file_size_or_throw(const fs::path& file) {
+  require_readable(file, false, "check the path and its permissions");
   std::error_code ec;
-  const auto status = fs::status(file, ec);
-  if (ec || !fs::exists(status))
-    throw IoError(cat(file.string(), ": no such file; check the path"));
-  if (!fs::is_regular_file(status))
-    throw IoError(cat(file.string(), ": is not a regular file"));
+  if (!fs::is_regular_file(file, ec)) throw IoError(cat(file.string(), ": is not a regular file"));
   const auto size = fs::file_size(file, ec);
   if (ec) throw IoError(cat(file.string(), ": cannot get the file size: ", ec.message()));
   return size;
@@ -180,12 +178,11 @@ Volume read_volume(const fs::path& input, const ReadOptions& options) {
     throw InvalidInput(cat("max_voxels (", options.max_voxels, ") and max_bytes (",
                            options.max_bytes, ") must be positive numbers"));
   std::error_code ec;
-  const auto status = fs::status(input, ec);
-  if (ec || !fs::exists(status))
-    throw IoError(cat(input.string(), ": no such file or folder; check the path"));
+  const bool is_directory = fs::is_directory(input, ec);
+  require_readable(input, is_directory, "check the path and its permissions");
   // Errors of the libraries underneath (allocation, containers) are the file's fault.
   try {
-    return read_by_kind(input, options, fs::is_directory(status));
+    return read_by_kind(input, options, is_directory);
   } catch (const std::bad_alloc&) {
     throw IoError(cat(input.string(), ": not enough memory to read it within max_bytes (",
                       options.max_bytes, "); lower --max-bytes or free memory"));

@@ -51,4 +51,12 @@ std::size_t type_size(const std::string& type);
 /// Lower-case copy.
 std::string to_lower(std::string s);
 
+/// The file name for slice `i` of a data-file pattern such as "slice%03d.raw" (MetaImage
+/// ElementDataFile, NRRD "data file"). The pattern is file text, so it never reaches a
+/// printf-style formatter: exactly one %d conversion with an optional 0 flag and width is
+/// expanded here, "%%" is a literal %, and anything else is refused (InvalidInput naming `file`
+/// and `field`).
+std::string slice_file_name(const std::filesystem::path& file, const std::string& field,
+                            const std::string& pattern, long long i);
+
 }  // namespace caps::detail

@@ -1,7 +1,9 @@
 #pragma once
 /// @brief Atomic outputs: write under a temporary name, then rename into place.
 ///
-/// A failed run leaves neither a partial file nor a clobbered old one.
+/// A failed run leaves neither a partial file nor a clobbered old one. A run that was killed
+/// leaves its temporary (`<name>.tmp-<pid>-<hex>`); the next run writing `<name>` removes those
+/// whose process no longer exists.
 
 #include <filesystem>
 #include <functional>

@@ -1,0 +1,10 @@
+// The .ply scan reader (read_scan_mesh).
+#include "caps/surface/scan_io.hpp"
+#include "fuzz_input.hpp"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  using namespace caps_fuzz;
+  fresh_dir();
+  const fs::path p = put("in.ply", {reinterpret_cast<const char*>(data), size});
+  return answer([&] { (void)caps::read_scan_mesh(p); });
+}

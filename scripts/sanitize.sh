@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Hostile-input checks (docs/reliability.md), run by scripts/test.sh after the test suite:
+#  1. the reader, plan and fem test programs built with clang, AddressSanitizer and
+#     UndefinedBehaviorSanitizer, run to the end: any sanitizer report fails;
+#  2. every fuzz target of fuzz/ for a bounded time from its seed corpus (scripts/fuzz.sh): any
+#     finding fails.
+# Both use one build directory, build-fuzz (CC=clang CXX=clang++ -DCAPS_FUZZ=ON).
+#
+#   scripts/sanitize.sh [--seconds N]   (N: fuzzing time per target, default 20)
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+seconds=20
+[ "${1:-}" = "--seconds" ] && seconds="$2"
+build="$here/build-fuzz"
+launcher=()
+command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
+data=()
+[ -n "${CAPS_SHARED_DATA:-}" ] && data=(-DCAPS_SHARED_DATA="$CAPS_SHARED_DATA")
+CC=clang CXX=clang++ cmake -S "$here" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCAPS_FUZZ=ON -DCAPS_BUILD_TESTS=ON \
+  "${launcher[@]}" "${data[@]}" >/dev/null
+programs=(test_volume_io test_surface test_plan test_fem)
+t0=$(date +%s)
+cmake --build "$build" -j"$(nproc)" --target fuzzers "${programs[@]}"
+t1=$(date +%s)
+echo "sanitize: sanitized build $((t1 - t0)) s"
+
+export TMPDIR="${TMPDIR:-/tmp}/caps-sanitize-$$"
+mkdir -p "$TMPDIR"
+trap 'rm -rf "$TMPDIR"' EXIT
+export ASAN_OPTIONS="abort_on_error=1:detect_leaks=1:symbolize=1"
+export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1"
+# cairo's fontconfig keeps a 652-byte cache until exit: not ours (scripts/lsan.supp).
+export LSAN_OPTIONS="suppressions=$here/scripts/lsan.supp:print_suppressions=0"
+failed=0
+for p in "${programs[@]}"; do
+  s=$(date +%s)
+  if "$build/tests/$p" --gtest_brief=1 >"$TMPDIR/$p.log" 2>&1; then
+    echo "sanitize: $p clean ($(( $(date +%s) - s )) s)"
+  else
+    echo "sanitize: $p FAILED under ASan/UBSan:"
+    grep -E 'ERROR|runtime error|SUMMARY|FAILED|Failure' "$TMPDIR/$p.log" | head -20 | sed 's/^/    /'
+    failed=1
+  fi
+done
+t2=$(date +%s)
+bash "$here/scripts/fuzz.sh" --build "$build" --seconds "$seconds" || failed=1
+echo "sanitize: tests $((t2 - t1)) s, fuzzing $(( $(date +%s) - t2 )) s"
+exit $failed
