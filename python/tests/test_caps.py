@@ -43,8 +43,8 @@ def test_a_simulation_through_python_equals_the_cli(model, work, cli):
     plan = work / "vy.json"
     planned = caps.plan_new("v-y-advancement", model=model, output=plan, at="0,60",
                             orientation=90, parameters={"length": 12, "advance": 3})
-    assert planned["suture_pairs"] > 0
-    assert caps.plan_check(plan)["suture_pairs"] == planned["suture_pairs"]
+    assert planned["ok"] and planned["suture_quadruples"]  # the plan file with its check
+    assert caps.plan_check(plan)["suture_quadruples"] == planned["suture_quadruples"]
 
     steps = []
     sim = caps.simulate(model, plan, work / "sim_py", mesh_size=2.5, undermine=4,
@@ -75,18 +75,24 @@ def test_the_generic_run_takes_the_request_json(model, work):
     body = {"procedure": "ellipse", "model": str(model), "at": "0,60", "orientation": 90,
             "parameters": {"length": 15, "width": 4}, "output": str(work / "ellipse.json")}
     r = caps.run("plan new", body)
-    assert r["procedure"] == "ellipse" and r["cut_length_mm"] > 0
+    assert r["procedure"]["name"] == "ellipse" and r["check"]["cut_length_mm"] > 0
     assert caps.run("plan_new", body, force=True) == r  # keyword fields join the dict
 
 
 def test_warnings_reach_python_and_the_result(model, work):
+    # docs/plan-format.md's hand-written Z, with its central limb left unsutured
+    procedure = {"format": "caps-procedure", "format_version": 1, "name": "open-z",
+                 "points_mm": [[-2.5, 17.3], [-10, 0], [10, 0], [2.5, -17.3]],
+                 "paths": [[0, 1, 2, 3]], "excisions": [],
+                 "sutures": [[[5, 0], [5, 4]], [[2, 1], [2, 3]]], "notes": ""}
+    (work / "open_z.json").write_text(json.dumps(procedure))
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
-        r = caps.plan_new("ellipse", model=model, output=work / "nose.json", at="0,-20",
-                          parameters={"length": 30, "width": 8})
+        r = caps.plan_new(work / "open_z.json", model=model, output=work / "open_z_plan.json",
+                          at="0,60", orientation=90)
     got = [str(w.message) for w in seen if issubclass(w.category, caps.CapsWarning)]
-    assert r["warnings"], "this plan over the nose is expected to warn"
-    assert got == r["warnings"]
+    assert any("not sutured" in w for w in r["check"]["warnings"]), r["check"]
+    assert got == r["check"]["warnings"]
 
 
 def test_errors_are_python_exceptions_with_the_cli_message(model, work, cli):
