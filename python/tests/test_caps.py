@@ -134,3 +134,27 @@ def test_a_progress_callback_that_raises_stops_the_run(model, work):
     with pytest.raises(Stop):
         caps.simulate(model, work / "stop.json", work / "stopped", mesh_size=2.5, progress=stop)
     assert not (work / "stopped").exists()
+
+
+def test_a_solver_error_carries_where_it_failed(work, cli):
+    # the box of caps fem box, mirrored in x: every element is inverted
+    box = work / "inverted_box"
+    caps.run("fem_box", output=box, cells="2,1,1")
+    vtu = (box / "mesh.vtu").read_text()
+    head, rest = vtu.split("<Points>", 1)
+    points, tail = rest.split("</Points>", 1)
+    opening, values = points.split(">", 1)
+    values, closing = values.split("</DataArray>", 1)
+    xyz = np.array(values.split(), dtype=float).reshape(-1, 3)
+    xyz[:, 0] *= -1
+    values = "\n" + "\n".join(" ".join(repr(v) for v in row) for row in xyz) + "\n"
+    (box / "mesh.vtu").write_text(
+        head + "<Points>" + opening + ">" + values + "</DataArray>" + closing + "</Points>" + tail)
+
+    with pytest.raises(caps.SolverError) as e:
+        caps.run("solve", mesh=box, output=work / "inverted_out")
+    assert isinstance(e.value, RuntimeError)
+    assert (e.value.element, e.value.gauss_point) == (0, 0)
+    assert "Jacobian determinant" in str(e.value)
+    c = cli("solve", box, "-o", work / "inverted_cli")
+    assert c.returncode == 1 and str(e.value) in c.stdout + c.stderr
