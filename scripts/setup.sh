@@ -13,7 +13,7 @@ packages=(
   libcpp-httplib-dev
   invesalius-examples mricron-data
   calculix-ccx
-  python3-pybind11 python3-numpy python3-pytest snakemake
+  python3-dev python3-pybind11 python3-numpy python3-pytest snakemake
 )
 
 missing=()
