@@ -1,7 +1,7 @@
 // caps serve: bound to server/ (caps/server/serve.hpp); docs/planner.md describes the API.
 //   caps serve /tmp/cranium
 //   caps serve /tmp/cranium --port 0
-//   caps serve /tmp/cranium --port 8080 --web-root web/dist
+//   caps serve /tmp/cranium --port 8080 --web-root my-page/  (default: the page built into build/web/dist)
 #include "caps/server/serve.hpp"
 #include "commands.hpp"
 
