@@ -296,6 +296,9 @@ Volume read_metaimage(const fs::path& file, const ReadOptions& options) {
     } else {
       if (compressed)
         throw InvalidInput(cat(name, ": compressed multi-file MetaImage data are not supported"));
+      if (files.empty())
+        throw InvalidInput(cat(name, ": ElementDataFile lists no data file; name the file(s) that "
+                               "hold the voxels"));
       const std::size_t per_file = n_bytes / files.size();
       if (per_file * files.size() != n_bytes)
         throw InvalidInput(cat(name, ": ", files.size(), " data files do not divide ", n_bytes,
