@@ -250,6 +250,7 @@ SolveResult run_solve(const SolveRequest& r, Reporter* reporter) {
     for (auto& [layer, m] : mesh.materials)
       m = fem::LinearElastic(r.E ? *r.E * 1e-3 : m.E_mpa(), r.nu ? *r.nu : m.nu(), "--E/--nu");
   Progress progress(reporter, "solving", 1);
+  o.reporter = reporter;
   const fem::SolveResult res = fem::solve(mesh, o);
   progress.done();
   fem::write_result_dir(mesh, res, out.path());

@@ -188,9 +188,16 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   // Elements: polygons run counter-clockwise in (theta, z), i.e. seen from outside the skin;
   // reversed, their right-hand normal points into the tissue as the element numbering needs.
   for (int k = 0; k < NL; ++k) mesh.materials.emplace(k, o.material);
+  mesh.flaps.assign(surface.flaps_theta_z.size(), {});
   for (std::size_t p = 0; p < surface.polygons.size(); ++p) {
     std::vector<int> v(surface.polygons[p].rbegin(), surface.polygons[p].rend());
     const int n = static_cast<int>(v.size());
+    // The flap a polygon lies in: its centroid inside the flap's outline.
+    Eigen::Vector2d centroid = Eigen::Vector2d::Zero();
+    for (int i : v) centroid += surface.theta_z.row(i).transpose() / n;
+    int flap = -1;
+    for (std::size_t f = 0; f < surface.flaps_theta_z.size() && flap < 0; ++f)
+      if (inside_or_on(surface.flaps_theta_z[f], centroid)) flap = static_cast<int>(f);
     for (int k = 0; k < NL; ++k) {
       Element el;
       el.layer = k;
@@ -205,6 +212,7 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
         el.nodes[bot_mid_off + i] = enode(e, k + 1);
         el.nodes[centre + i] = vnode(v[i], 2 * k + 1);
       }
+      if (flap >= 0) mesh.flaps[static_cast<std::size_t>(flap)].push_back(static_cast<int>(mesh.elements.size()));
       mesh.elements.push_back(el);
       out.element_polygon.push_back(static_cast<int>(p));
     }

@@ -50,6 +50,12 @@ void validate(const Mesh& mesh, const std::string& where) {
       throw InvalidInput(cat(where, ": fixed dof entry ", i, " (node ", f.node,
                              ") has a non-finite value"));
   }
+  const auto n_elements = static_cast<long>(mesh.elements.size());
+  for (std::size_t f = 0; f < mesh.flaps.size(); ++f)
+    for (const int e : mesh.flaps[f])
+      if (e < 0 || e >= n_elements)
+        throw InvalidInput(cat(where, ": flap ", f, " refers to element ", e,
+                               ", but element ids run 0..", n_elements - 1));
   for (std::size_t i = 0; i < mesh.sliding.size(); ++i) {
     const SlidingNode& s = mesh.sliding[i];
     check_node(s.node, [&] { return cat("sliding node entry ", i); });

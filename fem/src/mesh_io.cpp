@@ -178,6 +178,7 @@ void write_mesh_dir(const Mesh& mesh, const fs::path& dir) {
     for (const SlidingNode& s : mesh.sliding)
       j["sliding_nodes"].push_back({s.node, s.normal.x(), s.normal.y(), s.normal.z(), s.stiffness_n_per_mm});
   }
+  if (!mesh.flaps.empty()) j["flaps"] = mesh.flaps;  // the elements of each raised flap
   j["model"] = mesh.model;
   j["plan"] = mesh.plan;
   j["warnings"] = mesh.warnings;
@@ -242,6 +243,11 @@ Mesh read_mesh_dir(const fs::path& dir) {
       mesh.sliding.push_back({integer(s.at(0), cat("sliding_nodes[", mesh.sliding.size(), "][0]")),
                               Eigen::Vector3d(s.at(1).get<double>(), s.at(2).get<double>(), s.at(3).get<double>()),
                               s.at(4).get<double>()});
+    for (const auto& f : entries("flaps")) {
+      if (!f.is_array()) throw InvalidInput(cat(jw, ": flaps[", mesh.flaps.size(), "] must be an array of element ids"));
+      mesh.flaps.emplace_back();
+      for (const auto& e : f) mesh.flaps.back().push_back(integer(e, cat("flaps[", mesh.flaps.size() - 1, "]")));
+    }
     mesh.model = j.value("model", "");
     mesh.plan = j.value("plan", "");
     if (j.contains("warnings")) mesh.warnings = j.at("warnings").get<std::vector<std::string>>();

@@ -58,7 +58,7 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
                        {"cutbacks", s.cutbacks}, {"relative_residuals", s.residual_norms},
                        {"line_search", s.line_search}, {"shifts", s.shifts}});
     j["newton"] = {{"iterations", r.newton_iterations}, {"factorizations", r.factorizations},
-                   {"steps", steps}};
+                   {"steps", steps}, {"flap_rotations_deg", r.flap_rotations_deg}};
   }
   j["peak_memory_mb"] = r.peak_memory_mb;
   j["relative_residual"] = r.relative_residual;

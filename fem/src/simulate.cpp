@@ -20,7 +20,9 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
   sim.wound =
       mesh_wound(plan::wound_border(plan), model, options.surface, options.continuum, reporter);
   progress.update(1);
-  sim.result = solve(sim.wound.continuum.mesh, options.solve);
+  SolveOptions solve_options = options.solve;
+  if (!solve_options.reporter) solve_options.reporter = reporter;
+  sim.result = solve(sim.wound.continuum.mesh, solve_options);
   progress.done();
   // The sutures must close: measured on the deformed positions, not assumed.
   const Mesh& mesh = sim.wound.continuum.mesh;

@@ -10,6 +10,7 @@
 #include "caps/core/error.hpp"
 #include "caps/fem/elements.hpp"
 #include "assemble.hpp"
+#include "closing_path.hpp"
 #include "direct_solver.hpp"
 #include "elements_impl.hpp"
 #include "solve_impl.hpp"
@@ -42,7 +43,7 @@ struct Failure {
 
 class FiniteProblem {
  public:
-  FiniteProblem(const Mesh& mesh, const DofMap& map) : mesh_(mesh), map_(map) {
+  FiniteProblem(const Mesh& mesh, const DofMap& map) : mesh_(mesh), map_(map), path_(mesh, map) {
     for (const auto& [layer, linear] : mesh.materials) {
       const auto it = mesh.finite_materials.find(layer);
       if (it != mesh.finite_materials.end() && it->second) {
@@ -60,10 +61,11 @@ class FiniteProblem {
   }
 
   const FiniteMaterials& materials() const { return materials_; }
+  const ClosingPath& path() const { return path_; }
 
-  // Full displacement u = T q + lambda g (3N, mm).
+  // Full displacement u = T q + u_p(lambda) (3N, mm): u_p = lambda g on a straight path.
   Eigen::VectorXd expand(const Eigen::VectorXd& q, double lambda) const {
-    Eigen::VectorXd u = lambda * map_.g;
+    Eigen::VectorXd u = path_.at(lambda);
     for (std::size_t d = 0; d < map_.eq.size(); ++d)
       if (map_.eq[d] >= 0) u[static_cast<Eigen::Index>(d)] += q[map_.eq[d]];
     return u;
@@ -94,6 +96,7 @@ class FiniteProblem {
  private:
   const Mesh& mesh_;   // not owned; outlives the problem
   const DofMap& map_;  // not owned; outlives the problem
+  ClosingPath path_;
   FiniteMaterials materials_;
   std::vector<std::unique_ptr<Material>> owned_;
 };
@@ -117,6 +120,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
   const NewtonOptions& no = options.newton;
   check_options(no);
   const FiniteProblem problem(mesh, map);
+  res.flap_rotations_deg = problem.path().rotations_deg();
   auto t = Clock::now();
   Assembly sys = assemble_structure(mesh, map);
   res.n_nonzeros = sys.K.nonZeros();
@@ -208,11 +212,12 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
 
     // Predictor: the tangent at the converged state with the increment of the prescribed values
     // lifted, K dq = lambda_new f_ext - f_int - K (dl g).
-    if (at_converged_state) {
+    if (at_converged_state && problem.path().straight()) {
       sys.f += dl * (f_ext + unit_lift);
     } else {
       t = Clock::now();
-      failure = problem.evaluate(q, lambda, lambda_new, dl * map.g, sys);
+      failure = problem.evaluate(q, lambda, lambda_new,
+                                 problem.path().at(lambda_new) - problem.path().at(lambda), sys);
       res.timings.assembly_s += seconds_since(t);
     }
     at_converged_state = false;
@@ -314,6 +319,10 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
       cutbacks = 0;
       inverted_in_step.reset();
       at_converged_state = record.iterations > 0 && r0 > 0;
+      if (options.reporter) {
+        options.reporter->progress("closing the wound", lambda);
+        options.reporter->check_cancelled();
+      }
       // Grow back towards the nominal step after an easy step.
       if (record.iterations <= 4) dlambda = std::min(2 * dlambda, nominal);
       continue;

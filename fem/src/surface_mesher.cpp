@@ -314,9 +314,12 @@ std::vector<Vec2> local_plane(Builder& B, const std::vector<Eigen::Vector2d>& lo
                              "must differ (twins are points of the other lip, not neighbours)"));
     for (int j = 0; j < n; ++j) out.wound_size_mm = std::max(out.wound_size_mm, (L[j] - a).norm());
   }
-  // A loop running clockwise (hole on its right) is mirrored so that the hole is on the left; a
-  // zero-area incision may run either way: which lip is which is then a free choice.
-  B.mirrored = area < -1e-9 * perimeter * perimeter;
+  // The plan keeps the tissue on the loop's left (a clockwise loop, docs/plan-format.md); the
+  // mesher wants the hole on the left, so the loop is mirrored unless it clearly runs
+  // counterclockwise. A zero-area incision (a Z-plasty's cut) is mirrored too: its area says
+  // nothing, yet which lip is which matters, since the sutures name the lips by their loop
+  // points (the Z-plasty's flap tips are loop points 1 and 4, not their twins 5 and 2).
+  B.mirrored = !(area > 1e-9 * perimeter * perimeter);
   if (B.mirrored)
     for (auto& p : L) p.x() = -p.x();
   return L;

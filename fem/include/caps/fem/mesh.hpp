@@ -95,6 +95,9 @@ struct Mesh {
   std::vector<NodalLoad> loads;           ///< nodal forces
   std::vector<SuturePair> sutures;        ///< suture constraints
   std::vector<SlidingNode> sliding;       ///< nodes held only along a normal (undermined base)
+  /// The elements of each flap the plan raises (transposed, rotated or advanced tissue): the
+  /// finite-strain solve swings each flap into place along an arc (docs/fem.md, "Closing path").
+  std::vector<std::vector<int>> flaps;
   std::string model;                      ///< reference to the patient model, if known
   std::string plan;                       ///< reference to the surgical plan, if known
   std::vector<std::string> warnings;      ///< what the mesher had to give up (e.g. a limited extent)

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "caps/core/reporter.hpp"
 #include "caps/fem/mesh.hpp"
 
 namespace caps::fem {
@@ -68,6 +69,9 @@ struct SolveOptions {
   bool mixed_precision = true;
   /// Threads for assembly and stress recovery (0 = all).
   int threads = 0;
+  /// Not owned, may be null: a finite-strain solve reports the load factor reached after every
+  /// load step as progress of "closing the wound", and stops there (Cancelled) when asked to.
+  Reporter* reporter = nullptr;
 };
 
 /// Wall-clock seconds of each phase. The analysis runs on its own thread while the values are
@@ -129,6 +133,9 @@ struct SolveResult {
   std::vector<NewtonStep> newton_steps;      ///< finite strain: the converged load steps
   int newton_iterations = 0;                 ///< finite strain: total, including cut-back attempts
   int factorizations = 0;                    ///< numerical factorizations (1 for a linear solve)
+  /// finite strain: each flap's rotation along its closing path (deg, Mesh::flaps order; a flap
+  /// turned by less than 3 deg closes straight)
+  std::vector<double> flap_rotations_deg;
 };
 
 /// Solves the static problem (options.kinematics). Throws InvalidInput for bad input and for
