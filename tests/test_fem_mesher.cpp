@@ -625,3 +625,81 @@ TEST(SutureSpacing, ForcePerSutureAndPerMmOfWound) {
   EXPECT_NEAR(one.max_suture_force_n, total, 1e-9 * std::abs(total));
   EXPECT_THROW(suture_spacing(sim.wound.continuum, sim.result, 0.0), InvalidInput);
 }
+
+// The Z-plasty transposes its flaps (paper Figure 2): flap 0's tip (loop point 1) meets the end
+// of the other limb (3), flap 1's tip (4) meets 0, and the edges between are sewn flap to skin
+// and flap to flap. A zero-area cut says nothing by its area about which lip is which; the
+// mesher once took the wrong ones, so that each flap's tip was folded onto itself and the
+// closure turned elements inside out and shortened the skin beyond the limbs. Checked here:
+// every suture joins a flap to the surrounding skin or to the other flap; after closure (linear
+// and finite strain) no element is inverted, the closed corners 2 and 5 move apart (the
+// lengthening: geometric sqrt(5 - 4 cos 60) - 1 = 73 % of the central limb with rigid flaps and
+// free surroundings) and the skin beyond the limb ends is stretched, not pulled in.
+TEST(Simulate, ZPlastyTransposesItsFlapsAndLengthensTheCentralLimb) {
+  const PatientModel model = constant_cylinder();
+  const double L = 20;
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("z-plasty", {{"length", L}}), model, 0.0, 40.0, 0.0);
+  SimulateOptions o;
+  o.surface.size_mm = 3.0;
+  o.surface.extent_mm = 40;
+  const WoundMesh w = mesh_wound(plan::wound_border(p), model, o.surface, o.continuum);
+  const Mesh& m = w.continuum.mesh;
+  ASSERT_EQ(m.flaps.size(), 2u);
+  // A node's side: the flap all its elements lie in, or -1 (skin, or a flap's base).
+  std::vector<int> element_flap(m.n_elements(), -1), node_flap(static_cast<std::size_t>(m.n_nodes()), -2);
+  for (int f = 0; f < 2; ++f)
+    for (int e : m.flaps[f]) element_flap[e] = f;
+  for (std::size_t e = 0; e < m.n_elements(); ++e)
+    for (int a = 0; a < m.elements[e].n_nodes(); ++a) {
+      int& s = node_flap[m.elements[e].nodes[a]];
+      s = s == -2 ? element_flap[e] : (s == element_flap[e] ? s : -1);
+    }
+  std::map<std::pair<int, int>, int> kinds;
+  for (const SuturePair& s : m.sutures) ++kinds[std::minmax(node_flap[s.a], node_flap[s.b])];
+  for (const auto& [k, n] : kinds) std::cout << "sutures joining sides (" << k.first << ", " << k.second << "): " << n << "\n";
+  EXPECT_EQ(kinds.count(std::make_pair(-1, -1)), 0u);
+  EXPECT_EQ(kinds.count(std::make_pair(0, 0)), 0u);
+  EXPECT_EQ(kinds.count(std::make_pair(1, 1)), 0u);
+  EXPECT_GT(kinds[std::make_pair(-1, 0)], 0);
+  EXPECT_GT(kinds[std::make_pair(-1, 1)], 0);
+  EXPECT_GT(kinds[std::make_pair(0, 1)], 0);
+  const auto skin = [&](int loop_point) { return w.continuum.skin_node[w.surface.loop_vertex[loop_point]]; };
+  auto sewn = [&](int a, int b) {
+    for (const SuturePair& s : m.sutures)
+      if ((s.a == a && s.b == b) || (s.a == b && s.b == a)) return true;
+    return false;
+  };
+  EXPECT_TRUE(sewn(skin(1), skin(3)));
+  EXPECT_TRUE(sewn(skin(4), skin(0)));
+
+  const Eigen::Vector3d P1 = m.nodes.row(skin(1)).transpose(), P2 = m.nodes.row(skin(2)).transpose();
+  const Eigen::Vector3d e = (P2 - P1).normalized();
+  auto nearest_skin = [&](const Eigen::Vector3d& q) {
+    int best = -1;
+    for (Eigen::Index n = 0; n < m.n_nodes(); ++n)
+      if (w.continuum.node_level[n] == 0 && (best < 0 || (m.nodes.row(n).transpose() - q).norm() <
+                                                            (m.nodes.row(best).transpose() - q).norm()))
+        best = static_cast<int>(n);
+    return best;
+  };
+  const int before = nearest_skin(P1 - 0.5 * L * e), beyond = nearest_skin(P2 + 0.5 * L * e);
+  for (const Kinematics k : {Kinematics::Linear, Kinematics::Finite}) {
+    SolveOptions so;
+    so.kinematics = k;
+    const SolveResult r = solve(m, so);
+    Mesh deformed = m;
+    deformed.nodes += r.displacement_mm;
+    const double min_jacobian = min_element_jacobians(deformed).minCoeff();
+    auto x = [&](int n) { return Eigen::Vector3d(deformed.nodes.row(n).transpose()); };
+    const double gain = (x(skin(2)) - x(skin(5))).norm() / L - 1;
+    const double beyond_gain = ((x(beyond) - x(before)).dot(e) - (m.nodes.row(beyond) - m.nodes.row(before)).dot(e.transpose())) / L;
+    std::cout << kinematics_name(k) << ": min det J " << min_jacobian << ", central limb +" << 100 * gain
+              << " %, skin beyond the limb ends +" << 100 * beyond_gain << " % of the limb, closing force "
+              << r.total_suture_force_n << " N\n";
+    EXPECT_GT(min_jacobian, 0);
+    EXPECT_GT(gain, 0.15);
+    EXPECT_LT(gain, std::sqrt(5 - 4 * std::cos(kPi / 3)) - 1);
+    EXPECT_GT(beyond_gain, 0.02);
+  }
+}
