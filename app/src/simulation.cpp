@@ -194,6 +194,7 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   s.material = res.kinematics;
   s.load_steps = static_cast<int>(res.newton_steps.size());
   s.newton_iterations = res.newton_iterations;
+  s.inverted_elements = sim.inverted_elements;
   s.suture_spacing_mm = sim.sutures.spacing_mm;
   s.sutures = static_cast<int>(sim.sutures.sutures.size());
   s.max_force_per_suture_n = sim.sutures.max_suture_force_n;
@@ -221,6 +222,7 @@ std::string to_json(const SimulateResult& s) {
          {"material", s.material},
          {"load_steps", s.load_steps},
          {"newton_iterations", s.newton_iterations},
+         {"inverted_elements", s.inverted_elements},
          {"images", s.images},
          {"warnings", s.warnings},
          {"timings_s", {{"solve", s.solve_s}}}};

@@ -32,6 +32,16 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
     const Eigen::Vector3d b = mesh.nodes.row(s.b).transpose() + u.row(s.b).transpose();
     sim.max_suture_gap_mm = std::max(sim.max_suture_gap_mm, (a - b).norm());
   }
+  // Inverted elements: the deformed mesh's Jacobians (a finite-strain solve refuses them).
+  Mesh deformed = mesh;
+  deformed.nodes += u;
+  const Eigen::VectorXd det = min_element_jacobians(deformed);
+  sim.inverted_elements = static_cast<int>((det.array() <= 0).count());
+  if (sim.inverted_elements > 0)
+    sim.wound.continuum.mesh.warnings.push_back(
+        cat("the closure turns ", sim.inverted_elements, " of ", mesh.n_elements(),
+            " elements inside out: the small-strain (linear) model does not hold for a closure "
+            "this large; use --material neo-hookean"));
   sim.sutures = suture_spacing(sim.wound.continuum, sim.result, options.suture_spacing_mm);
   return sim;
 }

@@ -149,6 +149,7 @@ struct SimulateResult {
          max_suture_gap_mm = 0, strain_energy_mj = 0;
   std::string material;             ///< linear or neo-hookean
   int load_steps = 0, newton_iterations = 0;  ///< neo-hookean: converged steps, iterations
+  int inverted_elements = 0;        ///< elements the closure turned inside out (linear only)
   /// Surgeons' terms (fem::suture_spacing()): sutures every suture_spacing_mm along the wound,
   /// how many, the largest single-suture force, the force per mm of wound, the wound's length.
   double suture_spacing_mm = 0, max_force_per_suture_n = 0, force_per_mm_n = 0,

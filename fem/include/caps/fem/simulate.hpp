@@ -32,6 +32,9 @@ struct Simulation {
   SolveResult result;
   /// The largest distance (mm) between sutured nodes after the closure: 0 up to round-off.
   double max_suture_gap_mm = 0;
+  /// Elements turned inside out by the closure (det J <= 0 at a Gauss point of the deformed
+  /// mesh): possible only with the small-strain model, which then does not hold (a warning says so).
+  int inverted_elements = 0;
   /// The closing force per suture at SimulateOptions::suture_spacing_mm, the largest one and
   /// the force per mm of wound (suture_spacing()).
   SutureSpacing sutures;
