@@ -17,9 +17,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <mutex>
+#include <optional>
 
 #include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
 
 namespace caps {
 namespace {
@@ -85,20 +88,41 @@ double percentile(std::vector<double> v, double q) {
 
 void check_options(const RegistrationOptions& o) {
   if (o.mm_per_unit && !(*o.mm_per_unit > 0 && std::isfinite(*o.mm_per_unit)))
-    throw InvalidInput(cat("{scan_scale} ", *o.mm_per_unit, ": give millimetres per scan unit (> 0)"));
+    throw InvalidParameter(cat("{scan_scale} ", *o.mm_per_unit, ": give millimetres per scan unit (> 0)"));
   if (!(o.voxel_mm >= 0.5 && o.voxel_mm <= 20))
-    throw InvalidInput(cat("{voxel} ", o.voxel_mm, " mm must be in [0.5, 20]"));
+    throw InvalidParameter(cat("{voxel} ", o.voxel_mm, " mm must be in [0.5, 20]"));
   if (!(o.icp_final_mm > 0 && o.icp_final_mm <= 20))
-    throw InvalidInput(cat("{icp_distance} ", o.icp_final_mm, " mm must be in (0, 20]"));
+    throw InvalidParameter(cat("{icp_distance} ", o.icp_final_mm, " mm must be in (0, 20]"));
   if (!(o.overlap_mm > 0) || !(o.max_rms_mm > 0) || !(o.max_median_mm > 0))
-    throw InvalidInput(cat("registration limits: {overlap_distance} ", o.overlap_mm, " mm, {max_rms} ",
+    throw InvalidParameter(cat("registration limits: {overlap_distance} ", o.overlap_mm, " mm, {max_rms} ",
                            o.max_rms_mm, " mm and {max_median} ", o.max_median_mm,
                            " mm must be positive"));
   if (!(o.min_overlap >= 0 && o.min_overlap <= 1))
-    throw InvalidInput(cat("{min_overlap} ", o.min_overlap, " must be in [0, 1]"));
+    throw InvalidParameter(cat("{min_overlap} ", o.min_overlap, " must be in [0, 1]"));
+  if (o.orientation && !(std::abs(o.orientation->determinant() - 1) < 1e-6))
+    throw InvalidInput("registration: the orientation prior must be a rotation");
+  if (!(o.max_orientation_deg > 0 && o.max_orientation_deg <= 180))
+    throw InvalidParameter(cat("{max_orientation} ", o.max_orientation_deg, " deg must be in (0, 180]"));
   if (o.ransac_iterations < 1000 || o.ransac_iterations > 10000000)
     throw InvalidInput(cat("RANSAC iterations ", o.ransac_iterations, " must be in [1000, 1e7]"));
 }
+
+// Rejects RANSAC hypotheses whose rotation is further than a limit from a prior rotation.
+class OrientationChecker : public reg::CorrespondenceChecker {
+ public:
+  OrientationChecker(const Eigen::Matrix3d& prior, double max_deg)
+      : reg::CorrespondenceChecker(true), prior_(prior), min_cos_(std::cos(max_deg * kPi / 180.0)) {}
+  bool Check(const PointCloud&, const PointCloud&, const reg::CorrespondenceSet&,
+             const Eigen::Matrix4d& T) const override {
+    // The angle of R prior^T from its trace: cos(angle) = (tr - 1) / 2.
+    const Eigen::Matrix3d d = T.topLeftCorner<3, 3>() * prior_.transpose();
+    return (d.trace() - 1.0) / 2.0 >= min_cos_;
+  }
+
+ private:
+  Eigen::Matrix3d prior_;
+  double min_cos_;
+};
 
 }  // namespace
 
@@ -218,9 +242,15 @@ ScanRegistration register_scan(const TriMesh& scan, const TriMesh& skin,
   progress.update(0.2);
   const reg::CorrespondenceCheckerBasedOnEdgeLength edge_check(0.9);
   const reg::CorrespondenceCheckerBasedOnDistance distance_check(1.5 * v);
+  std::vector<std::reference_wrapper<const reg::CorrespondenceChecker>> checks{edge_check, distance_check};
+  std::optional<OrientationChecker> orientation_check;
+  if (o.orientation) {
+    orientation_check.emplace(*o.orientation, o.max_orientation_deg);
+    checks.emplace_back(*orientation_check);
+  }
   const auto coarse = reg::RegistrationRANSACBasedOnFeatureMatching(
       *scan_coarse, *skin_coarse, *scan_fpfh, *skin_fpfh, true, 1.5 * v,
-      reg::TransformationEstimationPointToPoint(false), 3, {edge_check, distance_check},
+      reg::TransformationEstimationPointToPoint(false), 3, checks,
       reg::RANSACConvergenceCriteria(o.ransac_iterations, 0.9999));
   if (coarse.correspondence_set_.empty())
     throw InvalidInput(cat("registration: no alignment of the scan brings any of its ", scan_coarse->points_.size(),

@@ -8,7 +8,8 @@
 ///    scan's size closest to the skin's.
 /// 2. Coarse alignment: both surfaces sampled on a voxel grid, FPFH features (Rusu et al. 2009)
 ///    matched, and RANSAC over three-point correspondences (Open3D), scored by the fraction of
-///    scan samples it brings within 1.5 voxels of the skin.
+///    scan samples it brings within 1.5 voxels of the skin; with an orientation prior (the
+///    file's up and front) only rotations near it are tried.
 /// 3. Fine alignment: point-to-plane ICP (Chen and Medioni 1992) from a coarse to a fine
 ///    correspondence distance with a Tukey loss, so that scan parts the skin lacks (hair, a
 ///    cap, the chin outside the CT) are trimmed; with estimate_scale, scaled point-to-point
@@ -30,6 +31,11 @@ struct RegistrationOptions {
   /// Millimetres per scan unit; unset: chosen among 1 (mm), 10 (cm) and 1000 (m) by size.
   std::optional<double> mm_per_unit;
   bool estimate_scale = false;  ///< refine a uniform scale (for scans in arbitrary units)
+  /// A prior on the scan's orientation: the rotation taking scan-file directions to LPS (e.g.
+  /// scan_to_lps_rotation() of the file's up and front). The coarse alignment then rejects
+  /// rotations more than max_orientation_deg away from it. Unset: any orientation.
+  std::optional<Eigen::Matrix3d> orientation;
+  double max_orientation_deg = 45.0;  ///< (0, 180]
   double voxel_mm = 4.0;        ///< sampling of the coarse alignment, mm, [0.5, 20]
   double icp_final_mm = 2.0;    ///< the last ICP correspondence distance (trimming), mm
   double overlap_mm = 3.0;      ///< a scan vertex this close to the skin overlaps it, mm
