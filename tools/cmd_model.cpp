@@ -7,7 +7,7 @@
 //   caps model pick /tmp/lps --ray 0,-400,0,0,1,0 --json
 //   caps model export-range /tmp/lps -o /tmp/lps_range
 //   caps model color-picture /tmp/lps -o /tmp/lps_color.png --force
-//   caps model register ../shared/data/scan/leeperrysmith/LeePerrySmith.glb --to /tmp/cranium --estimate-scale --accept-other-head --credit "Lee Perry-Smith head scan, CC BY 3.0" -o /tmp/lps_reg
+//   caps model register ../shared/data/scan/leeperrysmith/LeePerrySmith.glb --to /tmp/cranium --scan-scale 29 --up +y --front +z --accept-other-head --credit "Infinite, 3D Head Scan by Lee Perry-Smith, CC BY 3.0 (www.triplegangers.com)" -o /tmp/lps_reg
 //   caps model fuse ../shared/data/scan/leeperrysmith/LeePerrySmith.glb --to /tmp/cranium --registration /tmp/lps_reg/registration.json --texture ../shared/data/scan/leeperrysmith/Map-COL.jpg --flip-v -o /tmp/cranium_fused
 #include "caps/app/model.hpp"
 #include "caps/app/register.hpp"
