@@ -39,30 +39,10 @@ const Case& the_case() {
     const PatientModel model = PatientModel::load(model_dir());
     c.skin = read_ply(fs::path(model_dir()) / "skin.ply");
     // The face: vertices within 70 degrees of the front.
-    std::vector<int> index(c.skin.n_vertices(), -1);
-    std::vector<Eigen::Vector3d> V;
-    std::vector<Eigen::Vector3i> F;
-    auto inside = [&](int v) {
-      return std::abs(model.to_cylindrical(c.skin.V.row(v).transpose()).theta_deg) <= 70;
-    };
-    for (Eigen::Index f = 0; f < c.skin.n_faces(); ++f) {
-      if (!inside(c.skin.F(f, 0)) || !inside(c.skin.F(f, 1)) || !inside(c.skin.F(f, 2))) continue;
-      Eigen::Vector3i face;
-      for (int q = 0; q < 3; ++q) {
-        int& k = index[c.skin.F(f, q)];
-        if (k < 0) {
-          k = static_cast<int>(V.size());
-          V.push_back(c.skin.V.row(c.skin.F(f, q)).transpose());
-        }
-        face[q] = k;
-      }
-      F.push_back(face);
-    }
-    TriMesh face;
-    face.V.resize(static_cast<Eigen::Index>(V.size()), 3);
-    for (std::size_t i = 0; i < V.size(); ++i) face.V.row(static_cast<Eigen::Index>(i)) = V[i];
-    face.F.resize(static_cast<Eigen::Index>(F.size()), 3);
-    for (std::size_t i = 0; i < F.size(); ++i) face.F.row(static_cast<Eigen::Index>(i)) = F[i];
+    std::vector<char> keep(c.skin.n_vertices());
+    for (Eigen::Index v = 0; v < c.skin.n_vertices(); ++v)
+      keep[v] = std::abs(model.to_cylindrical(c.skin.V.row(v).transpose()).theta_deg) <= 70;
+    const TriMesh face = crop_mesh(c.skin, keep);
     c.face = decimate(face, std::min(1.0, 40000.0 / static_cast<double>(face.n_faces())));
     c.model_to_scan.topLeftCorner<3, 3>() =
         Eigen::AngleAxisd(deg_to_rad(12.0), Eigen::Vector3d(1, 2, 0.5).normalized()).toRotationMatrix();

@@ -17,6 +17,7 @@
 #include "caps/core/units.hpp"
 #include "caps/image/image_io.hpp"
 #include "caps/surface/patient_model.hpp"
+#include "caps/surface/register.hpp"
 #include "caps/volume/mesh_io.hpp"
 #include "cli_run.hpp"
 #include "phantom_model.hpp"
@@ -65,12 +66,6 @@ Eigen::Matrix4d model_to_scan() {
   return T;
 }
 
-Eigen::MatrixX3d moved(const Eigen::Matrix4d& T, const Eigen::MatrixX3d& V) {
-  Eigen::MatrixX3d out = V * T.topLeftCorner<3, 3>().transpose();
-  out.rowwise() += T.topRightCorner<3, 1>().transpose();
-  return out;
-}
-
 // The face of the model's skin.ply (the faces whose vertices lie within 60 degrees of the front
 // and 70 mm of the nose's height), with a red disc of radius 8 mm around `marker` (LPS) and grey
 // elsewhere, moved by model_to_scan() and with noise of 0.1 mm; `stretch` widens it left-right
@@ -79,31 +74,12 @@ TriMesh write_face_scan(const fs::path& path, const PatientModel& model, const E
                         double stretch = 1.0) {
   const TriMesh skin = read_ply(fs::path(model_dir()) / "skin.ply");
   const CylindricalPoint nose = model.to_cylindrical(model.skin_point(0.0, -20.0));
-  std::vector<int> index(skin.n_vertices(), -1);
-  std::vector<Eigen::Vector3d> V;
-  std::vector<Eigen::Vector3i> F;
-  auto inside = [&](int v) {
+  std::vector<char> keep(skin.n_vertices());
+  for (Eigen::Index v = 0; v < skin.n_vertices(); ++v) {
     const CylindricalPoint c = model.to_cylindrical(skin.V.row(v).transpose());
-    return std::abs(c.theta_deg) <= 60 && std::abs(c.z_mm - nose.z_mm) <= 70 && c.r_mm > 30;
-  };
-  for (Eigen::Index f = 0; f < skin.n_faces(); ++f) {
-    if (!inside(skin.F(f, 0)) || !inside(skin.F(f, 1)) || !inside(skin.F(f, 2))) continue;
-    Eigen::Vector3i face;
-    for (int q = 0; q < 3; ++q) {
-      int& k = index[skin.F(f, q)];
-      if (k < 0) {
-        k = static_cast<int>(V.size());
-        V.push_back(skin.V.row(skin.F(f, q)).transpose());
-      }
-      face[q] = k;
-    }
-    F.push_back(face);
+    keep[v] = std::abs(c.theta_deg) <= 60 && std::abs(c.z_mm - nose.z_mm) <= 70 && c.r_mm > 30;
   }
-  TriMesh face;
-  face.V.resize(static_cast<Eigen::Index>(V.size()), 3);
-  for (std::size_t i = 0; i < V.size(); ++i) face.V.row(static_cast<Eigen::Index>(i)) = V[i];
-  face.F.resize(static_cast<Eigen::Index>(F.size()), 3);
-  for (std::size_t i = 0; i < F.size(); ++i) face.F.row(static_cast<Eigen::Index>(i)) = F[i];
+  const TriMesh face = crop_mesh(skin, keep);
   Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 3> colours(face.n_vertices(), 3);
   for (Eigen::Index v = 0; v < face.n_vertices(); ++v) {
     const bool red = (face.V.row(v).transpose() - marker).norm() <= 8.0;
@@ -116,7 +92,7 @@ TriMesh write_face_scan(const fs::path& path, const PatientModel& model, const E
   std::normal_distribution<double> noise(0.0, 0.1);
   for (Eigen::Index v = 0; v < scan.n_vertices(); ++v)
     for (int d = 0; d < 3; ++d) scan.V(v, d) += noise(rng);
-  scan.V = moved(model_to_scan(), scan.V);
+  scan.V = transform_points(model_to_scan(), scan.V);
   write_ply(scan, path, &colours);
   return face;
 }
@@ -144,7 +120,7 @@ TEST(ModelRegister, FaceCutFromTheSkinIsRegisteredBackAndFusedWithItsColour) {
   for (int i = 0; i < 4; ++i)
     for (int k = 0; k < 4; ++k) T(i, k) = j.at("scan_to_model").at(i).at(k).get<double>();
   // The clean face moved to the scan's frame and back lands where it was.
-  const Eigen::MatrixX3d back = moved(T, moved(model_to_scan(), face.V));
+  const Eigen::MatrixX3d back = transform_points(T, transform_points(model_to_scan(), face.V));
   EXPECT_LT((back - face.V).rowwise().norm().maxCoeff(), 0.5);
   EXPECT_NEAR(j.at("scale_mm_per_unit").get<double>(), 1.0, 1e-12);
   // The distance map: the registered scan with a float "distance" per vertex, and its picture.

@@ -43,32 +43,12 @@ TriMesh head_mesh(int n_theta, int n_z, bool other_head = false) {
 // front, z in [-75, 55] mm), with their vertices renumbered.
 TriMesh face_patch(const TriMesh& m) {
   const CylinderAxis axis;
-  std::vector<int> keep_vertex(m.n_vertices(), -1);
-  auto inside = [&](Eigen::Index v) {
+  std::vector<char> keep(m.n_vertices());
+  for (Eigen::Index v = 0; v < m.n_vertices(); ++v) {
     const Eigen::Vector3d c = axis.to_cylindrical(m.V.row(v).transpose());
-    return std::abs(rad_to_deg(c[0])) <= 65 && c[1] >= -75 && c[1] <= 55;
-  };
-  std::vector<Eigen::Vector3i> faces;
-  std::vector<Eigen::Vector3d> verts;
-  for (Eigen::Index f = 0; f < m.n_faces(); ++f) {
-    if (!inside(m.F(f, 0)) || !inside(m.F(f, 1)) || !inside(m.F(f, 2))) continue;
-    Eigen::Vector3i face;
-    for (int q = 0; q < 3; ++q) {
-      int& k = keep_vertex[m.F(f, q)];
-      if (k < 0) {
-        k = static_cast<int>(verts.size());
-        verts.push_back(m.V.row(m.F(f, q)).transpose());
-      }
-      face[q] = k;
-    }
-    faces.push_back(face);
+    keep[v] = std::abs(rad_to_deg(c[0])) <= 65 && c[1] >= -75 && c[1] <= 55;
   }
-  TriMesh out;
-  out.V.resize(static_cast<Eigen::Index>(verts.size()), 3);
-  for (std::size_t i = 0; i < verts.size(); ++i) out.V.row(static_cast<Eigen::Index>(i)) = verts[i];
-  out.F.resize(static_cast<Eigen::Index>(faces.size()), 3);
-  for (std::size_t i = 0; i < faces.size(); ++i) out.F.row(static_cast<Eigen::Index>(i)) = faces[i];
-  return out;
+  return crop_mesh(m, keep);
 }
 
 // A known pose, model -> scan: a rotation of 12 degrees about a skew axis and 25, -40, 15 mm.

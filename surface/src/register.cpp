@@ -126,6 +126,28 @@ class OrientationChecker : public reg::CorrespondenceChecker {
 
 }  // namespace
 
+TriMesh crop_mesh(const TriMesh& mesh, const std::vector<char>& keep) {
+  if (keep.size() != static_cast<std::size_t>(mesh.n_vertices()))
+    throw InvalidInput(cat("crop_mesh: ", keep.size(), " flags for ", mesh.n_vertices(), " vertices"));
+  std::vector<int> index(keep.size(), -1);
+  std::vector<Eigen::Index> faces;
+  int n = 0;
+  for (Eigen::Index f = 0; f < mesh.n_faces(); ++f) {
+    if (!keep[mesh.F(f, 0)] || !keep[mesh.F(f, 1)] || !keep[mesh.F(f, 2)]) continue;
+    faces.push_back(f);
+    for (int q = 0; q < 3; ++q)
+      if (index[mesh.F(f, q)] < 0) index[mesh.F(f, q)] = n++;
+  }
+  TriMesh out;
+  out.V.resize(n, 3);
+  for (std::size_t v = 0; v < index.size(); ++v)
+    if (index[v] >= 0) out.V.row(index[v]) = mesh.V.row(static_cast<Eigen::Index>(v));
+  out.F.resize(static_cast<Eigen::Index>(faces.size()), 3);
+  for (std::size_t i = 0; i < faces.size(); ++i)
+    for (int q = 0; q < 3; ++q) out.F(static_cast<Eigen::Index>(i), q) = index[mesh.F(faces[i], q)];
+  return out;
+}
+
 Eigen::MatrixX3d transform_points(const Eigen::Matrix4d& T, const Eigen::MatrixX3d& points) {
   Eigen::MatrixX3d out = points * T.topLeftCorner<3, 3>().transpose();
   out.rowwise() += T.topRightCorner<3, 1>().transpose();

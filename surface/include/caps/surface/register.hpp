@@ -89,6 +89,12 @@ ScanRegistration register_scan(const TriMesh& scan, const TriMesh& skin,
 /// @return        #P distances
 Eigen::VectorXd signed_distance_to_mesh(const Eigen::MatrixX3d& points, const TriMesh& mesh);
 
+/// The part of a mesh whose vertices are kept: the faces with all three corners kept, their
+/// vertices renumbered in their first use (e.g. the face region of a skin, as a scan would cover).
+/// @param keep_vertex  #V flags (non-zero: keep)
+/// Throws InvalidInput if keep_vertex is not #V long.
+TriMesh crop_mesh(const TriMesh& mesh, const std::vector<char>& keep_vertex);
+
 /// The points moved by a 4×4 transform: T [p; 1] for every row.
 Eigen::MatrixX3d transform_points(const Eigen::Matrix4d& T, const Eigen::MatrixX3d& points);
 
