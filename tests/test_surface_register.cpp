@@ -9,6 +9,7 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "caps/surface/fuse.hpp"
 #include "caps/surface/range_mesh.hpp"
 #include "caps/surface/register.hpp"
 #include "caps/volume/isosurface.hpp"
@@ -164,4 +165,54 @@ TEST(ScanRegistration, SignedDistanceIsPositiveOutside) {
   EXPECT_NEAR(s.median_mm, 3.0, 0.01);
   EXPECT_NEAR(s.max_mm, 10.0, 0.01);
   EXPECT_THROW(register_scan(TriMesh{}, cyl), InvalidInput);
+}
+
+TEST(ScanFusion, ScanSkinAndColourOverTheCtDepths) {
+  // The "CT": the phantom head on a 128 x 64 grid with a constant 5 mm thickness in three layers
+  // (1, 2, 2 mm). The "scan": the same head 1 mm larger over the face, red on the patient's left
+  // (x > 0), blue elsewhere, in the model's frame (identity transform).
+  const CylinderGrid g = caps_test::grid(128, 64, -100.0, 190.0 / 63);
+  ModelContent ct;
+  ct.maps = caps_test::synthetic_maps(g, [](double t, double z) { return head_radius(t, z, false); },
+                                      [](double, double) { return 5.0; });
+  ct.maps.allocate_layers();
+  for (std::size_t c = 0; c < g.size(); ++c) {
+    ct.maps.thickness_skin[c] = 1.0f;
+    ct.maps.thickness_fat[c] = 2.0f;
+    ct.maps.thickness_deep[c] = 2.0f;
+  }
+  ct.skin = range_mesh(ct.maps, RangeSurface::Skin, {true});
+  const CylindricalMaps bigger = caps_test::synthetic_maps(
+      caps_test::grid(256, 128, -100.0, 190.0 / 127),
+      [](double t, double z) { return head_radius(t, z, false) + 1.0; }, [](double, double) { return 5.0; });
+  ScanMesh scan;
+  scan.mesh = face_patch(range_mesh(bigger, RangeSurface::Skin, {false}));
+  scan.source = "bigger face";
+  scan.vertex_colors.resize(scan.mesh.n_vertices(), 3);
+  for (Eigen::Index v = 0; v < scan.mesh.n_vertices(); ++v)
+    scan.vertex_colors.row(v) << (scan.mesh.V(v, 0) > 0 ? 200 : 0), 0, (scan.mesh.V(v, 0) > 0 ? 0 : 200);
+  FuseOptions o;
+  o.scan_skin = true;
+  const FusedModel f = fuse_scan(ct, scan, Eigen::Matrix4d::Identity(), o);
+  EXPECT_GT(f.colored_cells, 500u);
+  EXPECT_EQ(f.skin_cells, f.colored_cells);
+  EXPECT_NEAR(f.median_gap_mm, 1.0, 0.05);
+  // A cell in the middle of the face, on the left (theta 30 deg): 1 mm more skin and thickness,
+  // the layers 6/5 as thick, the bone unchanged, red; on the right (theta -30 deg) blue.
+  const int jl = g.n_theta / 2 + g.n_theta / 12, jr = g.n_theta / 2 - g.n_theta / 12, k = 38;
+  const std::size_t cl = g.index(jl, k), cr = g.index(jr, k);
+  EXPECT_NEAR(f.maps.r_skin[cl] - ct.maps.r_skin[cl], 1.0, 0.05);
+  EXPECT_NEAR(f.maps.thickness[cl], 6.0, 0.05);
+  EXPECT_NEAR(f.maps.r_bone[cl], ct.maps.r_bone[cl], 1e-6);
+  EXPECT_NEAR(f.maps.thickness_fat[cl], 2.4, 0.02);
+  auto rgb = [&](std::size_t c, int q) {
+    const int j = static_cast<int>(c % g.n_theta), kk = static_cast<int>(c / g.n_theta);
+    return f.color.rgb[(std::size_t(g.n_z - 1 - kk) * g.n_theta + j) * 3 + q];
+  };
+  EXPECT_EQ(rgb(cl, 0), 200);
+  EXPECT_EQ(rgb(cr, 2), 200);
+  // The back of the head is not covered: the CT's radius and grey.
+  const std::size_t back = g.index(0, k);
+  EXPECT_EQ(f.maps.r_skin[back], ct.maps.r_skin[back]);
+  EXPECT_EQ(rgb(back, 0), 128);
 }

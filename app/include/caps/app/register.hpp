@@ -16,9 +16,7 @@
 namespace caps::app {
 
 /// The scan file's options and the registration's, shared by register and fuse.
-struct ScanRegistrationFields {
-  std::string texture;
-  bool flip_v = false;
+struct ScanRegistrationFields : ScanTextureFields {
   std::optional<double> scan_scale;
   std::string up, front;
   double max_orientation = RegistrationOptions{}.max_orientation_deg;
@@ -33,9 +31,7 @@ struct ScanRegistrationFields {
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
-    v(r.texture, {"texture", "colour texture (JPEG or PNG) for the scan's texture coordinates, "
-                             "overriding the file's own"});
-    v(r.flip_v, {"flip_v", "flip the texture's v coordinate (v' = 1 - v)", FieldKind::Flag});
+    ScanTextureFields::fields(r, v);
     v(r.scan_scale, {"scan_scale", "millimetres per scan unit (default: mm, cm or m, whichever "
                                    "fits the model's size)"});
     v(r.up, {"up", "the scan file's direction towards the top of the head (+x -x +y -y +z -z or "
