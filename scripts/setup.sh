@@ -10,7 +10,7 @@ packages=(
   nlohmann-json3-dev libcli11-dev libgtest-dev libbenchmark-dev
   libnifti2-dev libteem-dev libarchive-dev libpng-dev zlib1g-dev
   libcairo2-dev fonts-dejavu-core libtinygltf-dev libjpeg-dev libembree-dev libgif-dev
-  libcpp-httplib-dev
+  libcpp-httplib-dev libopen3d-dev
   invesalius-examples mricron-data
   calculix-ccx
   chromium

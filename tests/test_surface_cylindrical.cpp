@@ -196,3 +196,41 @@ TEST(CylindricalScan, BadInputsAreRefused) {
   EXPECT_EQ(read_cylindrical_sidecar(dir / "d.json").range, dir / "r.png");
   fs::remove_all(dir);
 }
+
+TEST(CylindricalScan, UniformCylinderHasSkinInEveryColumn) {
+  // A cylinder of radius 150 mm at 1024 columns x 64 lines: every ray from the axis meets it,
+  // also the rays that pass exactly through a vertical edge of the reconstruction (at 1024 grid
+  // columns every ray does; theta -25.66 deg used to find no face).
+  const int nt = 1024, nz = 64;
+  const fs::path dir = temp_dir("uniform");
+  write_grey16(dir / "r.png", nt, nz, std::vector<std::uint16_t>(std::size_t(nt) * nz, 1500));
+  CylindricalScanSpec s;
+  s.range = dir / "r.png";
+  s.r_scale_mm = 0.1;
+  s.z_scale_mm = 2;
+  const ScanMesh scan = cylindrical_scan_mesh(s);
+  for (const int n_theta : {512, 1024}) {
+    ScanModelOptions o;
+    o.thickness_mm = 6;
+    o.mm_per_unit = 1;
+    o.maps.n_theta = n_theta;
+    o.maps.n_z = 32;
+    const ScanModel sm = build_scan_model(scan, o);
+    const auto& g = sm.maps.grid;
+    int missing = 0;
+    double worst = 0;
+    for (int k = 1; k + 1 < g.n_z; ++k)
+      for (int j = 0; j < g.n_theta; ++j) {
+        const std::size_t c = g.index(j, k);
+        if (sm.maps.flags[c] & kNoSkin) {
+          if (missing++ == 0) ADD_FAILURE() << "no skin at theta " << g.theta_deg(j) << " deg, z " << g.z_mm(k);
+          continue;
+        }
+        worst = std::max(worst, std::abs(sm.maps.r_skin[c] - 150.0));
+      }
+    EXPECT_EQ(missing, 0) << n_theta << " columns";
+    // Chords of 1024 sides: 150 (1 - cos(pi / 1024)) = 0.0007 mm inside the circle at most.
+    EXPECT_LT(worst, 0.01) << n_theta << " columns";
+  }
+  fs::remove_all(dir);
+}

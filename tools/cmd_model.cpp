@@ -7,7 +7,10 @@
 //   caps model pick /tmp/lps --ray 0,-400,0,0,1,0 --json
 //   caps model export-range /tmp/lps -o /tmp/lps_range
 //   caps model color-picture /tmp/lps -o /tmp/lps_color.png --force
+//   caps model register ../shared/data/scan/leeperrysmith/LeePerrySmith.glb --to /tmp/cranium --scan-scale 29 --up +y --front +z --accept-other-head --credit "Infinite, 3D Head Scan by Lee Perry-Smith, CC BY 3.0 (www.triplegangers.com)" -o /tmp/lps_reg
+//   caps model fuse ../shared/data/scan/leeperrysmith/LeePerrySmith.glb --to /tmp/cranium --registration /tmp/lps_reg/registration.json --texture ../shared/data/scan/leeperrysmith/Map-COL.jpg --flip-v -o /tmp/cranium_fused
 #include "caps/app/model.hpp"
+#include "caps/app/register.hpp"
 #include "commands.hpp"
 
 namespace caps::cli {
@@ -58,6 +61,19 @@ void add_model(CLI::App& app, Common& common, Action& action) {
            "Pick the first point of a ray on a model's skin.\n"
            "Example: caps model pick head --ray 0,-400,0,0,1,0",
            &app::run_pick, common, action, Print::Stdout);
+  add_verb(model, "register",
+           "Register a surface scan (partial coverage allowed) to a model's skin: a rigid motion\n"
+           "(and optionally a uniform scale) found without landmarks, the scan-to-model matrix,\n"
+           "residual statistics and a distance map (distance.ply, distance.png). Refuses a scan\n"
+           "whose residual says it is of another head.\n"
+           "Example: caps model register face.ply --to cranium -o face_reg",
+           &app::run_register, common, action);
+  add_verb(model, "fuse",
+           "Build a model whose skin colour (and with --scan-skin, skin) comes from a registered\n"
+           "scan and whose bone, thickness and layers come from a CT model.\n"
+           "Example: caps model fuse face.ply --to cranium --registration face_reg/registration.json "
+           "-o cranium_fused",
+           &app::run_fuse, common, action);
   add_verb(model, "color-picture",
            "Draw a model's skin colour with axes and its credit line.\n"
            "Example: caps model color-picture head -o head_color.png",

@@ -13,6 +13,7 @@
 #include "caps/volume/read_volume.hpp"
 #include "json_fields.hpp"
 #include "numbers.hpp"
+#include "model_result.hpp"
 #include "output_check.hpp"
 
 CAPS_APP_REQUEST_JSON(caps::app::FromVolumeRequest)
@@ -36,7 +37,9 @@ Eigen::Vector3d triple(const std::string& s, const std::string& option, const st
   return {t[0], t[1], t[2]};
 }
 
-ModelResult model_result(const std::string& dir, const std::string& output) {
+}  // namespace
+
+ModelResult detail::model_result(const std::string& dir, const std::string& output) {
   ModelResult m;
   m.output = output;
   m.model_json = read_model_json(dir);
@@ -45,8 +48,6 @@ ModelResult model_result(const std::string& dir, const std::string& output) {
   if (j.contains("warnings")) m.warnings = j.at("warnings").get<std::vector<std::string>>();
   return m;
 }
-
-}  // namespace
 
 std::string to_json(const ModelResult& m) {
   json j = json::parse(m.model_json);
@@ -115,7 +116,7 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   }
   const VolumeModel m = build_volume_model(v, o, reporter);
   write_model(m, r.output, r.force, reporter);
-  return model_result(r.output, r.output);
+  return detail::model_result(r.output, r.output);
 }
 
 // ---- from-scan ----------------------------------------------------------------------------
@@ -171,13 +172,13 @@ ModelResult run_from_scan(const FromScanRequest& r, Reporter* reporter) {
   const ScanMesh scan = read_any_scan(r);
   const ScanModel m = build_scan_model(scan, o, reporter);
   write_scan_model(m, r.output, r.force, reporter);
-  return model_result(r.output, r.output);
+  return detail::model_result(r.output, r.output);
 }
 
 // ---- info, pick, export-range, color-picture ----------------------------------------------
 
 ModelResult run_model_info(const ModelInfoRequest& r, Reporter*) {
-  return model_result(r.model, "");
+  return detail::model_result(r.model, "");
 }
 
 PickResult run_pick(const PickRequest& r, Reporter*) {

@@ -25,6 +25,7 @@
 
 #include "caps/app/model.hpp"
 #include "caps/app/plan.hpp"
+#include "caps/app/register.hpp"
 #include "caps/app/render.hpp"
 #include "caps/app/simulation.hpp"
 #include "caps/core/error.hpp"
@@ -134,6 +135,8 @@ const std::map<std::string, VerbEntry>& verbs() {
       {"model_pick", entry(&app::run_pick)},
       {"model_export_range", entry(&app::run_export_range)},
       {"model_color_picture", entry(&app::run_color_picture)},
+      {"model_register", entry(&app::run_register)},
+      {"model_fuse", entry(&app::run_fuse)},
       {"plan_new", entry(&app::run_plan_new)},
       {"plan_check", entry(&app::run_plan_check)},
       {"plan_show", entry(&app::run_plan_show)},

@@ -3,7 +3,7 @@
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
 #include <CGAL/AABB_triangle_primitive.h>
-#include <CGAL/Simple_cartesian.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 
 #include <algorithm>
 #include <cmath>
@@ -14,7 +14,10 @@
 namespace caps {
 namespace {
 
-using Kernel = CGAL::Simple_cartesian<double>;
+// Exact predicates: a ray through an edge shared by two triangles meets at least one of them.
+// With inexact predicates (Simple_cartesian) both orientation tests can round the wrong way, and
+// a ray from the axis through a vertical edge of a cylindrical range image met no face at all.
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
 using Point = Kernel::Point_3;
 using Vector = Kernel::Vector_3;
 using Triangle = Kernel::Triangle_3;

@@ -152,6 +152,12 @@ class BodyReader {
 
 void write_ply(const TriMesh& mesh, const std::filesystem::path& path,
                const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 3>* colors) {
+  write_ply(mesh, path, colors, nullptr);
+}
+
+void write_ply(const TriMesh& mesh, const std::filesystem::path& path,
+               const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 3>* colors,
+               const PlyScalar* scalar) {
   const Eigen::Index nv = mesh.n_vertices(), nf = mesh.n_faces();
   const std::string name = path.string();
   if (nf > 0 && (mesh.F.minCoeff() < 0 || mesh.F.maxCoeff() >= nv))
@@ -162,17 +168,23 @@ void write_ply(const TriMesh& mesh, const std::filesystem::path& path,
   if (colors && colors->rows() != nv)
     throw InvalidInput(
         cat(name, ": cannot write PLY, ", colors->rows(), " colours for ", nv, " vertices"));
+  if (scalar && (scalar->values.size() != nv || scalar->name.empty() ||
+                 scalar->name.find_first_of(" \t\n") != std::string::npos))
+    throw InvalidInput(cat(name, ": cannot write PLY, the vertex property '", scalar ? scalar->name : "",
+                           "' needs a name without spaces and ", nv, " values"));
 
   std::string buf;
   buf.reserve(256 + std::size_t(nv) * (colors ? 15 : 12) + std::size_t(nf) * 13);
   buf += "ply\nformat binary_little_endian 1.0\ncomment caps: units mm, frame LPS\n";
   buf += cat("element vertex ", nv, "\nproperty float x\nproperty float y\nproperty float z\n");
   if (colors) buf += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+  if (scalar) buf += cat("property float ", scalar->name, "\n");
   buf += cat("element face ", nf, "\nproperty list uchar int vertex_indices\nend_header\n");
   for (Eigen::Index v = 0; v < nv; ++v) {
     for (int c = 0; c < 3; ++c) put_le(buf, static_cast<float>(mesh.V(v, c)));
     if (colors)
       for (int c = 0; c < 3; ++c) buf.push_back(static_cast<char>((*colors)(v, c)));
+    if (scalar) put_le(buf, static_cast<float>(scalar->values[v]));
   }
   for (Eigen::Index f = 0; f < nf; ++f) {
     buf.push_back(3);

@@ -77,10 +77,22 @@ ModelResult run_from_volume(const FromVolumeRequest& request, Reporter* reporter
 
 // ---- caps model from-scan -----------------------------------------------------------------
 
-struct FromScanRequest {
-  std::string input, output, texture, up = "+y", front = "+z", credit, axis_origin, color;
+/// A scan file's colour options (from-scan, register, fuse).
+struct ScanTextureFields {
+  std::string texture;
+  bool flip_v = false;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.texture, {"texture", "colour texture (JPEG or PNG) for the scan's texture coordinates, "
+                             "overriding the file's own"});
+    v(r.flip_v, {"flip_v", "flip the texture's v coordinate (v' = 1 - v)", FieldKind::Flag});
+  }
+};
+
+struct FromScanRequest : ScanTextureFields {
+  std::string input, output, up = "+y", front = "+z", credit, axis_origin, color;
   std::optional<double> thickness, scale, head_height_mm;
-  bool flip_v = false, flip_faces = false;
+  bool flip_faces = false;
   int n_theta = MapOptions{}.n_theta, n_z = MapOptions{}.n_z;
   // Cylindrical range images (Cyberware style): a sidecar .json, or a grey PNG with these.
   std::optional<double> r_scale, z_scale;
@@ -95,9 +107,7 @@ struct FromScanRequest {
                 FieldKind::Positional, "INPUT"});
     v(r.output, {"output", "the model directory to create", FieldKind::Required, "-o,--output"});
     v(r.thickness, {"thickness", "constant soft-tissue thickness, mm (required)"});
-    v(r.texture, {"texture", "colour texture (JPEG or PNG) for the scan's texture coordinates, "
-                             "overriding the file's own"});
-    v(r.flip_v, {"flip_v", "flip the texture's v coordinate (v' = 1 - v)", FieldKind::Flag});
+    ScanTextureFields::fields(r, v);
     v(r.scale, {"scale", "millimetres per file unit (glTF default 1000: metres; other formats "
                          "default 1: mm)"});
     v(r.head_height_mm, {"head_height_mm", "scale the scan so it is this tall along --up (for "

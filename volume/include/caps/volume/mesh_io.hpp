@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <filesystem>
+#include <string>
 
 #include "caps/core/mesh.hpp"
 
@@ -22,6 +23,18 @@ namespace caps {
 /// written.
 void write_ply(const TriMesh& mesh, const std::filesystem::path& path,
                const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 3>* colors);
+
+/// A named per-vertex value written as a PLY float property after x y z (and the colours).
+struct PlyScalar {
+  std::string name;        ///< the property's name, no spaces (e.g. "distance")
+  Eigen::VectorXd values;  ///< #V values
+};
+
+/// write_ply() with colours (or nullptr) and one scalar vertex property (or nullptr); throws
+/// InvalidInput also for a scalar whose size is not #V or whose name is empty or has spaces.
+void write_ply(const TriMesh& mesh, const std::filesystem::path& path,
+               const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 3>* colors,
+               const PlyScalar* scalar);
 
 /// Writes a mesh as binary little-endian PLY without colours; see the overload above.
 void write_ply(const TriMesh& mesh, const std::filesystem::path& path);
