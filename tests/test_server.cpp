@@ -343,6 +343,43 @@ TEST_F(ServerTest, BadRequestsGetTheirStatusAndTheCliMessage) {
   expect_still_serving();
 }
 
+TEST_F(ServerTest, APlanCheckRefusalIsTheCliMessageWithoutTheServersPaths) {
+  // The message `caps plan check plan.json` prints in the plan's folder, for a broken file and for
+  // a plan the model cannot take (a point below the model's z range).
+  const fs::path dir = kTmp / "cli-check";
+  fs::create_directories(dir);
+  json made = json::parse(post("/api/plan/new", plan_body().dump())->body);
+  json off_model = made;
+  for (auto& p : off_model["points"]) p["z_mm"] = -500.0;
+  for (const std::string& body :
+       {std::string(R"({"format": "caps-plan", "points": "none"})"), off_model.dump()}) {
+    for (const std::string& name : {std::string("plan.json"), std::string("my-z.json")}) {
+      std::ofstream(dir / name) << body;
+      app::PlanCheckRequest pc;
+      pc.plan = (dir / name).string();
+      pc.model = kModel;
+      std::string cli = message_of([&] { app::run_plan_check(pc); });
+      ASSERT_FALSE(cli.empty());
+      for (std::size_t at; (at = cli.find(dir.string() + "/")) != std::string::npos;)
+        cli.erase(at, dir.string().size() + 1);
+      const auto r = post(name == "plan.json" ? "/api/plan/check" : "/api/plan/check?name=" + name,
+                          body);
+      ASSERT_TRUE(r);
+      EXPECT_EQ(r->status, 400);
+      const std::string got = error_of(r);
+      EXPECT_EQ(got, cli);
+      EXPECT_EQ(got.find(server_->work_dir().string()), std::string::npos) << got;
+      EXPECT_EQ(got.find("caps-serve-"), std::string::npos) << got;
+    }
+  }
+  // A name that is not a plain file name is not used.
+  const auto r = post("/api/plan/check?name=../../etc/passwd", R"({"points": 1})");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 400);
+  EXPECT_EQ(error_of(r).rfind("plan.json", 0), 0u) << error_of(r);
+  expect_still_serving();
+}
+
 TEST_F(ServerTest, APlanMadeAndSimulatedThroughTheApiEqualsTheAppResult) {
   // plan new through the API and through app:: with the same inputs.
   const auto planned = post("/api/plan/new", plan_body().dump());

@@ -14,6 +14,7 @@
 
 #include <unistd.h>
 #include <algorithm>
+#include <cctype>
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -87,6 +88,18 @@ fs::path file_under(const fs::path& root, const std::string& relative) {
   if (b != base.end()) throw Refusal(403, cat("\"", relative, "\": leaves the served folder"));
   if (!fs::is_regular_file(full)) throw Refusal(404, cat("\"", relative, "\": no such file"));
   return full;
+}
+
+// The plan's name for messages: the request's `name` query parameter when it is a plain file
+// name ending in .json (the page sends the name of the file loaded), else "plan.json".
+std::string plan_name(const httplib::Request& req) {
+  const std::string name = req.get_param_value("name");
+  const bool plain = !name.empty() && name.size() <= 128 && name.front() != '.' &&
+                     std::all_of(name.begin(), name.end(), [](char c) {
+                       return std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' ||
+                              c == '-';
+                     });
+  return plain && fs::path(name).extension() == ".json" ? name : "plan.json";
 }
 
 void send_file(httplib::Response& res, const fs::path& path) {
@@ -265,9 +278,32 @@ struct PlannerServer::Impl {
       } catch (const std::exception& e) {
         const ErrorResponse error = error_response(e);
         res.status = error.status;
-        send_json(res, json{{"error", error.message}}.dump());
+        send_json(res, json{{"error", without_work_dir(error.message)}}.dump());
       }
     };
+  }
+
+  // A message as the command line gives it for the user's own file: the server's copies of request
+  // bodies (work/plans/<n>/<name>) are named by their name alone, as `caps plan check <name>` run
+  // in the file's folder names it, and no other path of the work folder is shown.
+  std::string without_work_dir(std::string message) const {
+    const std::string plans = (work / "plans").string() + "/", root = work.string() + "/";
+    for (std::size_t at; (at = message.find(plans)) != std::string::npos;) {
+      std::size_t end = at + plans.size();
+      while (end < message.size() && std::isdigit(static_cast<unsigned char>(message[end]))) ++end;
+      if (end < message.size() && message[end] == '/') ++end;
+      message.erase(at, end - at);
+    }
+    for (std::size_t at; (at = message.find(root)) != std::string::npos;)
+      message.erase(at, root.size());
+    return message;
+  }
+
+  // A fresh folder for one request's copy of its body: work/plans/<n>/.
+  fs::path request_folder() {
+    const fs::path dir = work / "plans" / std::to_string(++next_id);
+    fs::create_directories(dir);
+    return dir;
   }
 
   std::string plan_new(const std::string& body) {
@@ -283,15 +319,16 @@ struct PlannerServer::Impl {
                                "(GET /api/templates); the server opens no procedure files"));
     }
     j["model"] = options.model_dir;
-    j["output"] = (work / "plans" / cat("plan-", ++next_id, ".json")).string();
+    j["output"] = (request_folder() / "plan.json").string();
     j["force"] = true;
     const auto request = app::read_request<app::PlanNewRequest>(j.dump(), source);
     return app::to_json(app::run_plan_new(request));
   }
 
-  std::string plan_check(const std::string& body) {
+  // `name`: what the user calls the plan (the page sends its file's name), for the messages.
+  std::string plan_check(const std::string& body, const std::string& name) {
     parse_object(body, "plan check request");
-    const fs::path plan = work / "plans" / cat("check-", ++next_id, ".json");
+    const fs::path plan = request_folder() / name;
     write_text_atomic(plan, body);
     app::PlanCheckRequest request;
     request.plan = plan.string();
@@ -312,8 +349,8 @@ struct PlannerServer::Impl {
     if (!options_json.is_object())
       throw InvalidInput(cat(source, ": \"options\" must be an object of simulate options"));
     refuse_server_keys(options_json, {"model", "plan", "output", "force"}, source);
+    const fs::path plan = request_folder() / "plan.json";
     const int id = ++next_id;
-    const fs::path plan = work / "plans" / cat("simulate-", id, ".json");
     options_json["model"] = options.model_dir;
     options_json["plan"] = plan.string();
     options_json["output"] = (work / "results" / std::to_string(id)).string();
@@ -340,7 +377,7 @@ struct PlannerServer::Impl {
   // The plan in the body, read as `caps plan check` reads a plan file (from the work folder).
   plan::Plan plan_of(const std::string& body, const std::string& source) {
     parse_object(body, source);
-    const fs::path file = work / "plans" / cat("view-", ++next_id, ".json");
+    const fs::path file = request_folder() / "plan.json";
     write_text_atomic(file, body);
     return plan::read_plan(file);
   }
@@ -432,7 +469,7 @@ struct PlannerServer::Impl {
               }));
     http.Post("/api/plan/check",
               guarded([this](const httplib::Request& req, httplib::Response& res) {
-                send_json(res, plan_check(req.body));
+                send_json(res, plan_check(req.body, plan_name(req)));
               }));
     http.Post("/api/simulate", guarded([this](const httplib::Request& req, httplib::Response& res) {
                 send_json(res, simulate(req.body));
