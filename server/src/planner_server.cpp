@@ -2,6 +2,7 @@
 
 #include "caps/app/loaded_model.hpp"
 #include "caps/app/plan.hpp"
+#include "caps/app/render.hpp"
 #include "caps/app/simulation.hpp"
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
@@ -263,7 +264,8 @@ struct PlannerServer::Impl {
   std::mutex simulation_mutex;  // kMaxConcurrentSimulations = 1
   std::shared_ptr<const PatientModel> model;  // loaded once (app::loaded_model)
   std::unique_ptr<ProgressBoard> progress;
-  std::mutex views_mutex;  // writing the skin's .glb files (once each)
+  std::mutex views_mutex;   // writing the skin's .glb files (once each)
+  std::mutex export_mutex;  // rendering a result's export (once each)
 
   Impl(ServerOptions o, Reporter* r) : options(std::move(o)), reporter(r) {}
 
@@ -368,6 +370,8 @@ struct PlannerServer::Impl {
       ~Finish() { board.finish(); }
     } finish{*progress};
     const app::SimulateResult result = app::run_simulate(request, &cancellable);
+    // The plan beside its result, for exporting them together.
+    write_text_atomic(work / "results" / std::to_string(id) / "plan.json", j["plan"].dump(2) + "\n");
     json out = json::parse(app::to_json(result));
     out["result_id"] = id;
     out["result_url"] = cat("/api/results/", id, "/");
@@ -409,6 +413,37 @@ struct PlannerServer::Impl {
     for (const char* k : {"skin", "tension"})
       j[k] = cat("/api/results/", id, "/", j[k].get<std::string>());
     return j;
+  }
+
+  // A simulation's pictures and 3D skin as `caps render RESULT --gltf --tension-map --plan PLAN`
+  // writes them (into the result's export/ folder, once), for downloading from the page.
+  json result_export(const std::string& id) {
+    const fs::path dir = work / "results" / id;
+    if (!fs::is_regular_file(dir / "result.json"))
+      throw Refusal(404, cat("simulation ", id, ": no such result"));
+    const fs::path info = dir / "export.json";
+    std::lock_guard<std::mutex> lock(export_mutex);
+    if (!fs::is_regular_file(info)) {
+      app::RenderRequest r;
+      r.result = dir.string();
+      r.model = options.model_dir;
+      r.output = (dir / "export").string();
+      r.plan = (dir / "plan.json").string();
+      r.gltf = true;
+      r.tension_map = true;
+      r.force = true;
+      write_text_atomic(info, app::to_json(app::run_render(r, reporter)));
+    }
+    json rendered = json::parse(read_file(info));
+    json files = json::array();
+    const std::string base = cat("/api/results/", id, "/");
+    for (const char* f : {"plan.json", "result.json", "summary.json"})
+      if (fs::is_regular_file(dir / f)) files.push_back({{"name", f}, {"url", base + f}});
+    if (fs::is_regular_file(dir / "export" / "skin.glb"))
+      files.push_back({{"name", "skin.glb"}, {"url", base + "export/skin.glb"}});
+    for (const auto& image : rendered.value("images", json::array()))
+      files.push_back({{"name", image}, {"url", base + "export/" + image.get<std::string>()}});
+    return json{{"files", files}, {"render", rendered}};
   }
 
   void add_routes() {
@@ -461,6 +496,10 @@ struct PlannerServer::Impl {
              guarded([this](const httplib::Request& req, httplib::Response& res) {
                send_json(res, result_view(req.matches[1]).dump());
              }));
+    http.Post(R"(/api/results/([0-9]+)/export)",
+              guarded([this](const httplib::Request& req, httplib::Response& res) {
+                send_json(res, result_export(req.matches[1]).dump());
+              }));
     http.Get("/api/templates", guarded([](const httplib::Request&, httplib::Response& res) {
                send_json(res, app::to_json(app::run_templates({})));
              }));

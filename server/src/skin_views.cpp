@@ -209,9 +209,31 @@ std::string plan_lines_json(const plan::Plan& plan, const PatientModel& model) {
   json points = json::array();
   for (const plan::SkinPoint& p : plan.points)
     points.push_back(lps_json(model.skin_point(p.theta_deg, p.z_mm)));
+  // The border loop (the sides of the cut a suture sews): each node where it lies on the skin with
+  // the skin's outward normal there, and each edge i -> i + 1 sampled along the skin, as the
+  // mesher lays it (straight in (theta, z), excision offsets applied).
+  constexpr int kEdgeSamples = 8;
+  const plan::BorderLoop loop = plan::border_loop(plan);
+  json nodes = json::array(), edges = json::array();
+  const int n = loop.size();
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector2d& a = loop.theta_z[static_cast<std::size_t>(i)];
+    const Eigen::Vector2d& b = loop.theta_z[static_cast<std::size_t>((i + 1) % n)];
+    const double dtheta = std::remainder(b[0] - a[0], 360.0);
+    nodes.push_back({{"point", loop.point[static_cast<std::size_t>(i)]},
+                     {"lps", lps_json(model.skin_point(a[0], a[1]))},
+                     {"normal_lps", lps_json(model.skin_normal(a[0], a[1]))}});
+    json edge = json::array();
+    for (int k = 0; k <= kEdgeSamples; ++k) {
+      const double t = static_cast<double>(k) / kEdgeSamples;
+      edge.push_back(lps_json(model.skin_point(a[0] + t * dtheta, a[1] + t * (b[1] - a[1]))));
+    }
+    edges.push_back(std::move(edge));
+  }
   const plan::PlanFrame& f = plan.frame;
   return json{{"lines_lps", lines},
               {"points_lps", points},
+              {"loop", {{"nodes", nodes}, {"edges_lps", edges}}},
               {"centre",
                {{"theta_deg", f.theta_deg},
                 {"z_mm", f.z_mm},

@@ -41,8 +41,9 @@ std::string write_result_skin_glbs(const PatientModel& model,
                                    const std::filesystem::path& result_dir);
 
 /// The plan's cutting paths and points on the skin, LPS mm: {"lines_lps": [[[x, y, z], ...],
-/// ...], "points_lps": [[x, y, z], ...], "centre": {"theta_deg", "z_mm", "orientation_deg",
-/// "lps"}}.
+/// ...], "points_lps": [[x, y, z], ...], "loop": {"nodes": [{"point", "lps", "normal_lps"}],
+/// "edges_lps": [edge i -> i + 1 as 9 points along the skin]} (the border loop, excision offsets
+/// applied), "centre": {"theta_deg", "z_mm", "orientation_deg", "lps", "normal_lps"}}.
 std::string plan_lines_json(const plan::Plan& plan, const PatientModel& model);
 
 }  // namespace caps::server::detail

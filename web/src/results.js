@@ -12,11 +12,14 @@ const kPlaySeconds = 2;
 
 const fmt = (v, digits = 2) => (Number.isFinite(v) ? v.toFixed(digits) : '–');
 
-/** A short name for a plan: the procedure and its parameters. */
+/** A short name for a plan: the procedure and its parameters (a drawn cut: its points). */
 export function planLabel(plan) {
   const p = plan.procedure ?? {};
+  const pairs = plan.sutures?.length ?? 0;
+  if ((p.name ?? 'custom') === 'custom')
+    return `drawn cut (${plan.points?.length ?? 0} points, ${pairs} suture pair${pairs === 1 ? '' : 's'})`;
   const params = Object.entries(p.parameters ?? {}).map(([k, v]) => `${k} ${+v.toFixed(1)}`);
-  return `${p.name ?? 'custom'} (${params.join(', ')}; ${+plan.frame.orientation_deg.toFixed(0)}°)`;
+  return `${p.name} (${params.join(', ')}; ${+plan.frame.orientation_deg.toFixed(0)}°)`;
 }
 
 export class Results {
@@ -84,7 +87,10 @@ export class Results {
     this.shown[which] = row;
     document.getElementById(which ? 'label-b' : 'label-a').textContent =
       `${which ? 'B' : 'A'}: #${row.n} ${planLabel(row.plan)}`;
-    if (which === 0) this.showSummary(row);
+    if (which === 0) {
+      this.showSummary(row);
+      this.onShown?.(row);
+    }
     this.el.result.hidden = false;
     this.renderTable();
   }
@@ -96,7 +102,69 @@ export class Results {
     this.views[0].setSkin(this.modelSkin.mesh, { pickable: true });
     document.getElementById('label-a').textContent = '';
     this.el.result.hidden = true;
+    this.onShown?.(null);
     this.renderTable();
+  }
+
+  /** The files of `caps render` for a row's result (rendered once on the server), with the plan
+   * and result.json: [{name, url}]. */
+  async exportFiles(row) {
+    row.exported ??= api.resultExport(row.result.result_id);
+    try {
+      return (await row.exported).files;
+    } catch (e) {
+      row.exported = null;
+      throw e;
+    }
+  }
+
+  /** A self-contained HTML page on a row: the plan, the forces, the warnings and the pictures
+   * before and after (from exportFiles()). */
+  async report(row) {
+    const files = await this.exportFiles(row);
+    const pictures = {};
+    await Promise.all(files.filter((f) => f.name.endsWith('.png')).map(async (f) => {
+      const blob = await (await fetch(f.url)).blob();
+      pictures[f.name] = await new Promise((resolve) => {
+        const reader = new FileReader();
+        reader.onload = () => resolve(reader.result);
+        reader.readAsDataURL(blob);
+      });
+    }));
+    const r = row.result, s = r.sutures_at_spacing ?? {}, p = row.plan;
+    const figure = (name, caption) => (pictures[name]
+      ? `<figure><img src="${pictures[name]}" alt="${escapeHtml(caption)}"><figcaption>${escapeHtml(caption)}</figcaption></figure>` : '');
+    const rows = [
+      ['Closing force', `${fmt(r.closing_force_n)} N`],
+      ['Largest suture force', `${fmt(s.max_force_per_suture_n)} N (${s.sutures ?? 0} sutures every ${fmt(s.spacing_mm, 1)} mm)`],
+      ['Force per mm of wound', `${fmt(s.force_per_mm_n, 3)} N/mm over ${fmt(s.wound_length_mm, 1)} mm`],
+      ['Skin tension (99th percentile)', `${fmt(row.view.tension_scale_max_kpa, 1)} kPa`],
+      ['Largest displacement', `${fmt(r.max_displacement_mm)} mm`],
+      ['Excised area', `${fmt(row.view.wound_area_mm2?.pre, 1)} mm²`],
+      ['Model', `${r.elements} elements, ${escapeHtml(r.material)}`],
+    ].map(([k, v]) => `<tr><th>${k}</th><td>${v}</td></tr>`).join('');
+    const sutures = row.sutures.map((x, i) => `<tr><td>${i + 1}</td><td>${fmt(x.force_n, 3)} N</td></tr>`).join('');
+    const warnings = [...(p.check?.warnings ?? []), ...(r.warnings ?? [])]
+      .map((w) => `<li>${escapeHtml(w)}</li>`).join('');
+    return `<!doctype html><html lang="en"><head><meta charset="utf-8">
+<title>caps: ${escapeHtml(planLabel(p))}</title>
+<style>body{font-family:"DejaVu Sans",Arial,sans-serif;max-width:1000px;margin:2em auto;color:#222}
+table{border-collapse:collapse}th,td{border:1px solid #ccd;padding:3px 8px;text-align:left}
+.row{display:flex;gap:10px;flex-wrap:wrap}figure{margin:0;flex:1 1 30%}img{width:100%;border:1px solid #ddd}</style></head>
+<body><h1>${escapeHtml(planLabel(p))}</h1>
+<p>Planned on ${escapeHtml(p.model ?? '')}; centre at theta ${fmt(p.frame.theta_deg, 1)}°, z ${fmt(p.frame.z_mm, 1)} mm;
+cut ${fmt(p.check?.cut_length_mm, 1)} mm on the skin; ${p.sutures?.length ?? 0} suture pairs. Simulated with caps
+(${new Date().toISOString().slice(0, 10)}).</p>
+<table>${rows}</table>
+${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
+<h2>Before and after</h2>
+<div class="row">${figure('pre_plan.png', 'before, looking down on the plan')}${figure('post_plan.png', 'after the closure')}${figure('tension_plan.png', 'skin tension after the closure')}</div>
+<div class="row">${figure('pre_oblique.png', 'before, oblique')}${figure('post_oblique.png', 'after, oblique')}${figure('tension_oblique.png', 'skin tension, oblique')}</div>
+<h2>Forces per suture</h2><table><tr><th>suture</th><th>force</th></tr>${sutures}</table>
+<p>Files: the plan (${escapeHtml(`${p.procedure?.name ?? 'plan'}-plan.json`)}) is read by <code>caps plan check</code> and
+<code>caps simulate</code>; result.json is what <code>caps simulate</code> writes.</p>
+</body></html>
+`;
   }
 
   /** Pre (0) to post (1) on every result shown. */
