@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <fstream>
 #include <functional>
+#include <future>
 #include <map>
 #include <mutex>
 #include <sstream>
@@ -266,6 +267,7 @@ struct PlannerServer::Impl {
   std::unique_ptr<ProgressBoard> progress;
   std::mutex views_mutex;   // writing the skin's .glb files (once each)
   std::mutex export_mutex;  // rendering a result's export (once each)
+  std::map<std::string, std::shared_future<void>> tension_files;  // by result id (views_mutex)
 
   Impl(ServerOptions o, Reporter* r) : options(std::move(o)), reporter(r) {}
 
@@ -407,8 +409,12 @@ struct PlannerServer::Impl {
       throw Refusal(404, cat("simulation ", id, ": no such result"));
     const fs::path info = dir / "view.json";
     std::lock_guard<std::mutex> lock(views_mutex);
-    if (!fs::is_regular_file(info))
-      write_text_atomic(info, detail::write_result_skin_glbs(*model, dir));
+    if (!fs::is_regular_file(info)) {
+      detail::ResultView view = detail::write_result_skin_glbs(*model, dir);
+      write_text_atomic(info, view.json);
+      // tension.glb after the answer: the page draws the skin first (GET .../tension.glb waits).
+      tension_files[id] = std::async(std::launch::async, std::move(view.write_tension)).share();
+    }
     json j = json::parse(read_file(info));
     for (const char* k : {"skin", "tension"})
       j[k] = cat("/api/results/", id, "/", j[k].get<std::string>());
@@ -444,6 +450,18 @@ struct PlannerServer::Impl {
     for (const auto& image : rendered.value("images", json::array()))
       files.push_back({{"name", image}, {"url", base + "export/" + image.get<std::string>()}});
     return json{{"files", files}, {"render", rendered}};
+  }
+
+  // A result's tension.glb, once result_view() has started writing it.
+  fs::path tension_file(const std::string& id) {
+    std::shared_future<void> job;
+    {
+      std::lock_guard<std::mutex> lock(views_mutex);
+      const auto it = tension_files.find(id);
+      if (it != tension_files.end()) job = it->second;
+    }
+    if (job.valid()) job.get();  // rethrows the writer's error
+    return file_under(work / "results" / id, "tension.glb");
   }
 
   void add_routes() {
@@ -495,6 +513,10 @@ struct PlannerServer::Impl {
     http.Get(R"(/api/results/([0-9]+)/view)",
              guarded([this](const httplib::Request& req, httplib::Response& res) {
                send_json(res, result_view(req.matches[1]).dump());
+             }));
+    http.Get(R"(/api/results/([0-9]+)/tension\.glb)",
+             guarded([this](const httplib::Request& req, httplib::Response& res) {
+               send_file(res, tension_file(req.matches[1]));
              }));
     http.Post(R"(/api/results/([0-9]+)/export)",
               guarded([this](const httplib::Request& req, httplib::Response& res) {
@@ -558,6 +580,7 @@ PlannerServer::PlannerServer(ServerOptions options, Reporter* reporter)
 
 PlannerServer::~PlannerServer() {
   stop();
+  for (auto& [id, job] : impl_->tension_files) job.wait();
   std::error_code ec;
   fs::remove_all(impl_->work, ec);
 }

@@ -132,6 +132,7 @@ try {
   log(`simulated: closing force ${closing1} N, largest suture ${largest1} N, ${sutureRows - 1} sutures`);
   await page.screenshot({ path: join(out, '3-simulated.png') });
   await page.check('#show-tension');
+  await page.waitForSelector('body[data-tension="shown"]');
   await page.screenshot({ path: join(out, '4-tension.png') });
   await page.uncheck('#show-tension');
 
