@@ -63,7 +63,7 @@ try {
     }, i);
     rows.push(row);
     console.log(`#${i + 1}: ${row.seconds.toFixed(2)} s on screen (simulate ${row.simulate_s.toFixed(2)} s ` +
-      `[solve ${row.server.solve.toFixed(2)} s], view ${row.view_s.toFixed(2)} s [skin ` +
+      `[solve ${row.server.solve.toFixed(2)} s; ${JSON.stringify(row.server.steps)}], view ${row.view_s.toFixed(2)} s [skin ` +
       `${row.view.skin.toFixed(2)} s, ${row.subdivisions} subdivisions], load and draw ` +
       `${row.draw_s.toFixed(2)} s); closing force ${row.force.toFixed(2)} N`);
   }

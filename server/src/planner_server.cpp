@@ -161,8 +161,18 @@ class SimulationReporter : public Reporter {
 class ProgressBoard : public Reporter {
  public:
   explicit ProgressBoard(Reporter* outer) : outer_(outer) {}
-  void start() { set("starting", 0, true); }
+  void start() {
+    set("starting", 0, true);
+    std::lock_guard<std::mutex> lock(m_);
+    steps_s_ = json::object();
+    step_started_ = started_;
+  }
   void finish() { set("", 1, false); }
+  /// Seconds spent in each progress step of the last simulation ({"meshing and solving": ...}).
+  json steps_s() const {
+    std::lock_guard<std::mutex> lock(m_);
+    return steps_s_;
+  }
   json snapshot() const {
     std::lock_guard<std::mutex> lock(m_);
     return json{{"running", running_}, {"step", step_}, {"fraction", fraction_},
@@ -186,7 +196,12 @@ class ProgressBoard : public Reporter {
  private:
   void set(const std::string& step, double fraction, bool running) {
     std::lock_guard<std::mutex> lock(m_);
-    if (running && !running_) started_ = std::chrono::steady_clock::now();
+    const auto now = std::chrono::steady_clock::now();
+    if (running && !running_) started_ = now;
+    if (step != step_ && !step_.empty() && step_ != "starting")
+      steps_s_[step_] = steps_s_.value(step_, 0.0) +
+                        std::chrono::duration<double>(now - step_started_).count();
+    if (step != step_) step_started_ = now;
     step_ = step;
     fraction_ = fraction;
     running_ = running;
@@ -195,7 +210,8 @@ class ProgressBoard : public Reporter {
   std::string step_;
   double fraction_ = 0;
   bool running_ = false;
-  std::chrono::steady_clock::time_point started_;
+  std::chrono::steady_clock::time_point started_, step_started_;
+  json steps_s_ = json::object();
   Reporter* outer_;  // not owned; may be null
 };
 
@@ -371,10 +387,17 @@ struct PlannerServer::Impl {
       ProgressBoard& board;
       ~Finish() { board.finish(); }
     } finish{*progress};
+    const auto t0 = std::chrono::steady_clock::now();
     const app::SimulateResult result = app::run_simulate(request, &cancellable);
+    const double total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    progress->finish();
     // The plan beside its result, for exporting them together.
     write_text_atomic(work / "results" / std::to_string(id) / "plan.json", j["plan"].dump(2) + "\n");
     json out = json::parse(app::to_json(result));
+    // Where the time went (not reproducible, so under timings_s): each progress step, and the
+    // whole request's simulation, files included.
+    out["timings_s"]["steps"] = progress->steps_s();
+    out["timings_s"]["simulate"] = total_s;
     out["result_id"] = id;
     out["result_url"] = cat("/api/results/", id, "/");
     return out.dump(2);

@@ -77,7 +77,22 @@ export class Viewer {
     this.pending = requestAnimationFrame(() => {
       this.pending = 0;
       this.renderer.render(this.scene, this.camera);
-      for (const f of this.listeners) f();
+      for (const f of [...this.listeners]) f();
+    });
+  }
+
+  /** Resolves once the next frame is drawn (asking for one): reading a pixel back waits until
+   * the GL has finished drawing it, not only until it was asked to. */
+  nextFrame() {
+    return new Promise((resolve) => {
+      const once = () => {
+        this.listeners = this.listeners.filter((f) => f !== once);
+        const gl = this.renderer.getContext();
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+        resolve();
+      };
+      this.listeners.push(once);
+      this.requestRender();
     });
   }
 
