@@ -165,6 +165,8 @@ async function main() {
     onNotice: notice,
     onPick: (pick) => {
       clearTimeout(noticeTimer);
+      // The cut seen from straight above, close enough to click beside either side of it.
+      if (pick && pick.first < 0) lookAtPlan();
       if (!pick) status('');
       else status(pick.first < 0
         ? 'Suture pair: click on the skin just beside the cut, on the first side to sew (Esc cancels).'
@@ -208,15 +210,18 @@ async function main() {
   showTemplate('z-plasty');
 
   // Views and overlays.
+  function lookAtPlan() {
+    if (!planner.lines) return;
+    const c = planner.lines.centre;
+    const p = [c.lps[0] + c.normal_lps[0], c.lps[1] + c.normal_lps[1], c.lps[2] + c.normal_lps[2]];
+    const target = lpsToScene(c.lps), tip = lpsToScene(p);
+    viewA.lookFrom(target, tip.sub(target), 0.16);
+  }
   for (const b of document.querySelectorAll('[data-view]'))
     b.addEventListener('click', () => {
       const v = b.dataset.view;
-      if (v === 'plan' && planner.lines) {
-        const c = planner.lines.centre;
-        const p = [c.lps[0] + c.normal_lps[0], c.lps[1] + c.normal_lps[1], c.lps[2] + c.normal_lps[2]];
-        const target = lpsToScene(c.lps), tip = lpsToScene(p);
-        viewA.lookFrom(target, tip.sub(target), 0.16);
-      } else viewA.setView(v);
+      if (v === 'plan') lookAtPlan();
+      else viewA.setView(v);
     });
   $('show-thickness').addEventListener('change', (e) => {
     skin.show(e.target.checked ? 'thickness' : 'skin');

@@ -90,6 +90,8 @@ export class Results {
     skin.setMorph(this.morph);
     this.showColouring(skin, viewer);
     viewer.setSkin(skin.mesh);
+    // View B's first skin frames B alone; the views move together, so B takes A's camera.
+    if (which === 1) viewer.copyCamera(this.views[0]);
     viewer.setOverlay(sutureObjects(row.sutures));
     this.shown[which] = row;
     document.getElementById(which ? 'label-b' : 'label-a').textContent =
@@ -223,7 +225,8 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
     this.el.summary.innerHTML = `
       <p>Closing force <b id="closing-force">${fmt(r.closing_force_n)} N</b>; ${s.sutures ?? 0}
         sutures every ${fmt(s.spacing_mm, 1)} mm, the largest <b>${fmt(s.max_force_per_suture_n)} N</b>
-        (${fmt(s.force_per_mm_n, 3)} N per mm of wound).</p>
+        (${fmt(s.force_per_mm_n, 3)} N per mm of wound; the dots on the skin are the sutures,
+        blue the smallest force, red the largest).</p>
       <p>Skin tension ${fmt(row.view.tension_scale_max_kpa, 1)} kPa (99th percentile; peak
         ${fmt(row.view.max_skin_tension_kpa, 1)} kPa at a sutured corner); largest displacement
         ${fmt(r.max_displacement_mm)} mm; ${r.elements} elements, ${r.material}; ${fmt(row.seconds, 1)} s.</p>
