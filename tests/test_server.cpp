@@ -363,8 +363,8 @@ TEST_F(ServerTest, APlanCheckRefusalIsTheCliMessageWithoutTheServersPaths) {
       ASSERT_FALSE(cli.empty());
       for (std::size_t at; (at = cli.find(dir.string() + "/")) != std::string::npos;)
         cli.erase(at, dir.string().size() + 1);
-      const auto r = post(name == "plan.json" ? "/api/plan/check" : "/api/plan/check?name=" + name,
-                          body);
+      const auto r =
+          post(name == "plan.json" ? "/api/plan/check" : "/api/plan/check?name=" + name, body);
       ASSERT_TRUE(r);
       EXPECT_EQ(r->status, 400);
       const std::string got = error_of(r);

@@ -9,6 +9,7 @@
 #include <sstream>
 #include <vector>
 
+#include "caps/app/loaded_model.hpp"
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
@@ -16,7 +17,6 @@
 #include "caps/plan/plan_figure.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/plan/procedures.hpp"
-#include "caps/app/loaded_model.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "json_fields.hpp"
 #include "numbers.hpp"
@@ -88,11 +88,13 @@ std::vector<std::array<double, N>> parse_point_list(const std::string& text,
 // A free incision: one cutting path through the points (theta deg, z mm), no sutures.
 plan::Plan free_incision(const PlanNewRequest& r, const PatientModel& model) {
   if (!r.at.empty() || !r.at_xyz.empty() || !r.parameters.empty())
-    throw InvalidInput("incision: the cut is given by its points; drop --at/--at-xyz and the "
-                       "template parameters");
+    throw InvalidInput(
+        "incision: the cut is given by its points; drop --at/--at-xyz and the "
+        "template parameters");
   if (r.points.empty() == r.points_xyz.empty())
-    throw InvalidInput("incision: give the cut's points with --points THETA,Z;THETA,Z;... or "
-                       "--points-xyz X,Y,Z;X,Y,Z;...");
+    throw InvalidInput(
+        "incision: give the cut's points with --points THETA,Z;THETA,Z;... or "
+        "--points-xyz X,Y,Z;X,Y,Z;...");
   std::vector<Eigen::Vector2d> tz;
   if (!r.points.empty()) {
     for (const auto& p : parse_point_list<2>(r.points, "--points", "THETA,Z in degrees and mm"))
@@ -113,8 +115,8 @@ plan::Plan free_incision(const PlanNewRequest& r, const PatientModel& model) {
   // Orientation: the direction from the first point to the last in the skin's tangent plane at
   // the centre. At orientation 0, x is superior and +theta is along +-y (docs/plan.md, "Frame").
   const plan::PlanFrame up = plan::make_frame(model, mean[0], mean[1], 0.0);
-  const Eigen::Vector2d d = up.to_local(tz.back()[0], tz.back()[1]) -
-                            up.to_local(tz.front()[0], tz.front()[1]);
+  const Eigen::Vector2d d =
+      up.to_local(tz.back()[0], tz.back()[1]) - up.to_local(tz.front()[0], tz.front()[1]);
   const Eigen::Vector2d theta_dir = up.local_to_theta_z.inverse() * Eigen::Vector2d(1, 0);
   const double orientation =
       d.norm() > 0 ? rad_to_deg(std::atan2(theta_dir[1] > 0 ? d[1] : -d[1], d[0])) : 90.0;

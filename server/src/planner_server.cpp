@@ -15,8 +15,8 @@
 
 #include <unistd.h>
 #include <algorithm>
-#include <cctype>
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cstdint>
 #include <fstream>
@@ -96,11 +96,11 @@ fs::path file_under(const fs::path& root, const std::string& relative) {
 // name ending in .json (the page sends the name of the file loaded), else "plan.json".
 std::string plan_name(const httplib::Request& req) {
   const std::string name = req.get_param_value("name");
-  const bool plain = !name.empty() && name.size() <= 128 && name.front() != '.' &&
-                     std::all_of(name.begin(), name.end(), [](char c) {
-                       return std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' ||
-                              c == '-';
-                     });
+  const bool plain =
+      !name.empty() && name.size() <= 128 && name.front() != '.' &&
+      std::all_of(name.begin(), name.end(), [](char c) {
+        return std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-';
+      });
   return plain && fs::path(name).extension() == ".json" ? name : "plan.json";
 }
 
@@ -199,8 +199,8 @@ class ProgressBoard : public Reporter {
     const auto now = std::chrono::steady_clock::now();
     if (running && !running_) started_ = now;
     if (step != step_ && !step_.empty() && step_ != "starting")
-      steps_s_[step_] = steps_s_.value(step_, 0.0) +
-                        std::chrono::duration<double>(now - step_started_).count();
+      steps_s_[step_] =
+          steps_s_.value(step_, 0.0) + std::chrono::duration<double>(now - step_started_).count();
     if (step != step_) step_started_ = now;
     step_ = step;
     fraction_ = fraction;
@@ -389,10 +389,12 @@ struct PlannerServer::Impl {
     } finish{*progress};
     const auto t0 = std::chrono::steady_clock::now();
     const app::SimulateResult result = app::run_simulate(request, &cancellable);
-    const double total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double total_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     progress->finish();
     // The plan beside its result, for exporting them together.
-    write_text_atomic(work / "results" / std::to_string(id) / "plan.json", j["plan"].dump(2) + "\n");
+    write_text_atomic(work / "results" / std::to_string(id) / "plan.json",
+                      j["plan"].dump(2) + "\n");
     json out = json::parse(app::to_json(result));
     // Where the time went (not reproducible, so under timings_s): each progress step, and the
     // whole request's simulation, files included.

@@ -16,8 +16,8 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
-#include <cmath>
 #include <chrono>
+#include <cmath>
 #include <memory>
 #include <vector>
 
@@ -205,18 +205,18 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
   render::write_gltf(part, result_dir / "skin.glb");
   const auto t3 = Clock::now();
   ResultView view;
-  view.json = json{{"skin", "skin.glb"},
-                   {"tension", "tension.glb"},
-                   {"subdivisions", n},
-                   {"vertices", skin->pre.n_vertices()},
-                   {"replaced_cells", replaced_cells(model.grid(), *skin)},
-                   {"tension_scale_max_kpa", tension.max_value},
-                   {"max_skin_tension_kpa", peak},
-                   {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},
-                   {"timings_s",
-                    {{"skin", seconds(t0, t1)}, {"tension", seconds(t1, t2)},
-                     {"glb", seconds(t2, t3)}}}}
-                  .dump();
+  view.json =
+      json{{"skin", "skin.glb"},
+           {"tension", "tension.glb"},
+           {"subdivisions", n},
+           {"vertices", skin->pre.n_vertices()},
+           {"replaced_cells", replaced_cells(model.grid(), *skin)},
+           {"tension_scale_max_kpa", tension.max_value},
+           {"max_skin_tension_kpa", peak},
+           {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},
+           {"timings_s",
+            {{"skin", seconds(t0, t1)}, {"tension", seconds(t1, t2)}, {"glb", seconds(t2, t3)}}}}
+          .dump();
   // The mesh faces coloured by the tension: shown only when asked for, so written afterwards.
   view.write_tension = [skin, tension, path = result_dir / "tension.glb"] {
     render::SkinSurfaces by_tension = *skin;

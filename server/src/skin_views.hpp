@@ -39,7 +39,7 @@ int view_subdivisions(const PatientModel& model, const fem::Mesh& mesh);
 
 /// A simulation's skin as the page shows it (write_result_skin_glbs()).
 struct ResultView {
-  std::string json;                   ///< its description (see write_result_skin_glbs())
+  std::string json;                     ///< its description (see write_result_skin_glbs())
   std::function<void()> write_tension;  ///< writes tension.glb (the page asks for it later)
 };
 

@@ -38,8 +38,9 @@ struct PlanNewRequest {
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
-    v(r.procedure, {"procedure", "a template (caps plan templates), a procedure file .json, or "
-                                 "incision (a free cut through --points or --points-xyz)",
+    v(r.procedure, {"procedure",
+                    "a template (caps plan templates), a procedure file .json, or "
+                    "incision (a free cut through --points or --points-xyz)",
                     FieldKind::Positional, "TEMPLATE"});
     v(r.model, {"model", "the patient model directory", FieldKind::Required});
     v(r.at, {"at", "the centre on the skin: THETA,Z (deg, mm)"});
