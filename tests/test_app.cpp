@@ -302,15 +302,20 @@ TEST_F(AppWithModel, AWoundNearTheModelsTopIsMeshedSoThatItCanBeDrawn) {
 }
 
 TEST_F(AppWithModel, AFreeIncisionIsOnePathThroughItsPointsWithNoSutures) {
-  auto incision = [](const std::string& points, const std::string& points_xyz = "") {
+  auto request = [](const std::string& points, const std::string& points_xyz,
+                    const std::string& at) {
     app::PlanNewRequest r;
     r.procedure = app::kFreeIncision;
     r.model = kModel;
     r.points = points;
     r.points_xyz = points_xyz;
+    r.at = at;
     r.output = (kTmp / "incision.json").string();
     r.force = true;
-    return json::parse(app::to_json(app::run_plan_new(r)));
+    return r;
+  };
+  auto incision = [&](const std::string& points, const std::string& points_xyz = "") {
+    return json::parse(app::to_json(app::run_plan_new(request(points, points_xyz, ""))));
   };
   // Three points along z = 60, theta increasing (towards the patient's left): orientation 90.
   const json h = incision("-10,60; 0,60; 10,61");
@@ -359,14 +364,8 @@ TEST_F(AppWithModel, AFreeIncisionIsOnePathThroughItsPointsWithNoSutures) {
   EXPECT_EQ(json::parse(cli.out)["points"], h["points"]);
   // Refusals.
   auto message = [&](const std::string& points, const std::string& at) {
-    app::PlanNewRequest r;
-    r.procedure = app::kFreeIncision;
-    r.model = kModel;
-    r.points = points;
-    r.at = at;
-    r.output = (kTmp / "incision_refused.json").string();
     try {
-      app::run_plan_new(r);
+      app::run_plan_new(request(points, "", at));
     } catch (const InvalidInput& e) {
       return std::string(e.what());
     }

@@ -113,6 +113,11 @@ class ServerTest : public ::testing::Test {
     return client().Post(path.c_str(), body, "application/json");
   }
   static httplib::Result get(const std::string& path) { return client().Get(path.c_str()); }
+  // POST /api/simulate of a plan (its JSON text) with a 2.5 mm mesh.
+  static httplib::Result simulate_coarse(const std::string& plan) {
+    return post("/api/simulate",
+                json{{"plan", json::parse(plan)}, {"options", {{"mesh_size", 2.5}}}}.dump());
+  }
 
   // The server still answers a good request after a bad one.
   static void expect_still_serving() {
@@ -617,8 +622,7 @@ TEST_F(ServerTest, PlanLinesCarryTheBorderLoopASutureSews) {
 TEST_F(ServerTest, AResultIsExportedAsCapsRenderWritesIt) {
   const auto planned = post("/api/plan/new", plan_body().dump());
   ASSERT_TRUE(planned);
-  const json body = {{"plan", json::parse(planned->body)}, {"options", {{"mesh_size", 2.5}}}};
-  const auto simulated = post("/api/simulate", body.dump());
+  const auto simulated = simulate_coarse(planned->body);
   ASSERT_TRUE(simulated);
   ASSERT_EQ(simulated->status, 200) << simulated->body;
   const std::string base =
@@ -659,8 +663,7 @@ TEST_F(ServerTest, ASimulationsSkinAndTensionAreServedAsGlb) {
   EXPECT_EQ(json::parse(idle->body).at("running"), false);
   const auto planned = post("/api/plan/new", plan_body().dump());
   ASSERT_TRUE(planned);
-  const json body = {{"plan", json::parse(planned->body)}, {"options", {{"mesh_size", 2.5}}}};
-  const auto simulated = post("/api/simulate", body.dump());
+  const auto simulated = simulate_coarse(planned->body);
   ASSERT_TRUE(simulated);
   ASSERT_EQ(simulated->status, 200) << simulated->body;
   const int id = json::parse(simulated->body).at("result_id");
