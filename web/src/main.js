@@ -245,7 +245,7 @@ async function main() {
     $('simulate').disabled = true;
     try {
       status('Simulating…');
-      await results.simulate(planner.plan, options);
+      await results.simulate(planner.plan, options, { ownSutures: planner.state?.sutures != null });
       status('');
     } catch (e) {
       status(`The simulation failed: ${e.message}`);

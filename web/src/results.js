@@ -12,14 +12,16 @@ const kPlaySeconds = 2;
 
 const fmt = (v, digits = 2) => (Number.isFinite(v) ? v.toFixed(digits) : '–');
 
-/** A short name for a plan: the procedure and its parameters (a drawn cut: its points). */
-export function planLabel(plan) {
+/** A short name for a plan: the procedure and its parameters (a drawn cut: its points);
+ * `ownSutures`: a template sewn with the user's pairs rather than its own. */
+export function planLabel(plan, ownSutures = false) {
   const p = plan.procedure ?? {};
   const pairs = plan.sutures?.length ?? 0;
   if ((p.name ?? 'custom') === 'custom')
     return `drawn cut (${plan.points?.length ?? 0} points, ${pairs} suture pair${pairs === 1 ? '' : 's'})`;
   const params = Object.entries(p.parameters ?? {}).map(([k, v]) => `${k} ${+v.toFixed(1)}`);
-  return `${p.name} (${params.join(', ')}; ${+plan.frame.orientation_deg.toFixed(0)}°)`;
+  return `${p.name} (${params.join(', ')}; ${+plan.frame.orientation_deg.toFixed(0)}°` +
+    `${ownSutures ? `; your ${pairs} suture pair${pairs === 1 ? '' : 's'}` : ''})`;
 }
 
 export class Results {
@@ -34,7 +36,7 @@ export class Results {
   }
 
   /** Runs the simulation of `plan` with `options`; adds its row and shows it in view A. */
-  async simulate(plan, options) {
+  async simulate(plan, options, { ownSutures = false } = {}) {
     const e = this.el;
     e.progress.hidden = false;
     e.progressText.textContent = 'starting…';
@@ -57,7 +59,7 @@ export class Results {
         api.resultFile(result.result_id, 'result.json')]);
       const t2 = performance.now();
       const row = {
-        n: this.rows.length + 1, plan, result, view,
+        n: this.rows.length + 1, plan, result, view, ownSutures,
         sutures: file.sutures_at_spacing?.sutures ?? [],
         skins: [null, null],
       };
@@ -95,7 +97,7 @@ export class Results {
     viewer.setOverlay(sutureObjects(row.sutures));
     this.shown[which] = row;
     document.getElementById(which ? 'label-b' : 'label-a').textContent =
-      `${which ? 'B' : 'A'}: #${row.n} ${planLabel(row.plan)}`;
+      `${which ? 'B' : 'A'}: #${row.n} ${planLabel(row.plan, row.ownSutures)}`;
     if (which === 0) {
       this.showSummary(row);
       this.onShown?.(row);
@@ -156,11 +158,11 @@ export class Results {
     const warnings = [...(p.check?.warnings ?? []), ...(r.warnings ?? [])]
       .map((w) => `<li>${escapeHtml(w)}</li>`).join('');
     return `<!doctype html><html lang="en"><head><meta charset="utf-8">
-<title>caps: ${escapeHtml(planLabel(p))}</title>
+<title>caps: ${escapeHtml(planLabel(p, row.ownSutures))}</title>
 <style>body{font-family:"DejaVu Sans",Arial,sans-serif;max-width:1000px;margin:2em auto;color:#222}
 table{border-collapse:collapse}th,td{border:1px solid #ccd;padding:3px 8px;text-align:left}
 .row{display:flex;gap:10px;flex-wrap:wrap}figure{margin:0;flex:1 1 30%}img{width:100%;border:1px solid #ddd}</style></head>
-<body><h1>${escapeHtml(planLabel(p))}</h1>
+<body><h1>${escapeHtml(planLabel(p, row.ownSutures))}</h1>
 <p>Planned on ${escapeHtml(p.model ?? '')}; centre at theta ${fmt(p.frame.theta_deg, 1)}°, z ${fmt(p.frame.z_mm, 1)} mm;
 cut ${fmt(p.check?.cut_length_mm, 1)} mm on the skin; ${p.sutures?.length ?? 0} suture pairs. Simulated with caps
 (${new Date().toISOString().slice(0, 10)}).</p>
@@ -246,7 +248,7 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
       tr.dataset.row = row.n;
       if (this.shown[0] === row) tr.classList.add('shown-a');
       if (this.shown[1] === row) tr.classList.add('shown-b');
-      tr.innerHTML = `<td>${row.n}</td><td>${escapeHtml(planLabel(row.plan))}</td>
+      tr.innerHTML = `<td>${row.n}</td><td>${escapeHtml(planLabel(row.plan, row.ownSutures))}</td>
         <td class="closing">${fmt(r.closing_force_n)}</td>
         <td class="largest">${fmt(r.sutures_at_spacing?.max_force_per_suture_n)}</td>
         <td>${fmt(row.view.tension_scale_max_kpa, 1)}</td>
