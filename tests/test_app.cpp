@@ -300,3 +300,78 @@ TEST_F(AppWithModel, AWoundNearTheModelsTopIsMeshedSoThatItCanBeDrawn) {
   EXPECT_NE(r.warnings[0].find("the extent was limited"), std::string::npos);
   EXPECT_TRUE(fs::exists(kTmp / "near_top" / "post_plan.png"));
 }
+
+TEST_F(AppWithModel, AFreeIncisionIsOnePathThroughItsPointsWithNoSutures) {
+  auto request = [](const std::string& points, const std::string& points_xyz,
+                    const std::string& at) {
+    app::PlanNewRequest r;
+    r.procedure = app::kFreeIncision;
+    r.model = kModel;
+    r.points = points;
+    r.points_xyz = points_xyz;
+    r.at = at;
+    r.output = (kTmp / "incision.json").string();
+    r.force = true;
+    return r;
+  };
+  auto incision = [&](const std::string& points, const std::string& points_xyz = "") {
+    return json::parse(app::to_json(app::run_plan_new(request(points, points_xyz, ""))));
+  };
+  // Three points along z = 60, theta increasing (towards the patient's left): orientation 90.
+  const json h = incision("-10,60; 0,60; 10,61");
+  EXPECT_EQ(h["procedure"]["name"], "custom");
+  ASSERT_EQ(h["points"].size(), 3u);
+  const double theta[] = {-10, 0, 10}, z[] = {60, 60, 61};
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_DOUBLE_EQ(h["points"][i]["theta_deg"].get<double>(), theta[i]);
+    EXPECT_DOUBLE_EQ(h["points"][i]["z_mm"].get<double>(), z[i]);
+  }
+  EXPECT_EQ(h["paths"], json::parse("[[0, 1, 2]]"));
+  EXPECT_TRUE(h["sutures"].empty());
+  // The Figure 2 loop 0 1 2 1: four border edges, all left open (a warning).
+  EXPECT_EQ(h["border_loop"].size(), 4u);
+  ASSERT_FALSE(h["check"]["warnings"].empty());
+  EXPECT_NEAR(h["frame"]["theta_deg"].get<double>(), 0.0, 1e-9);
+  EXPECT_NEAR(h["frame"]["z_mm"].get<double>(), 181.0 / 3, 1e-9);
+  // From the first point to the last: along +theta, tilted up by 1 mm over about 2 x 10 deg.
+  const double o = h["frame"]["orientation_deg"].get<double>();
+  EXPECT_GT(o, 80.0);
+  EXPECT_LT(o, 90.0);
+  // Straight along +theta, along -theta, up and down: 90, -90, 0 and 180. Orientation 90 is
+  // along constant z exactly; 0 is perpendicular to it on the skin, which a line of constant theta
+  // is only where the skin's radius does not change with theta (0.009 deg off here).
+  EXPECT_NEAR(incision("-10,60;10,60")["frame"]["orientation_deg"].get<double>(), 90.0, 1e-6);
+  EXPECT_NEAR(incision("10,60;-10,60")["frame"]["orientation_deg"].get<double>(), -90.0, 1e-6);
+  EXPECT_NEAR(incision("0,50;0,70")["frame"]["orientation_deg"].get<double>(), 0.0, 0.05);
+  EXPECT_NEAR(std::abs(incision("0,70;0,50")["frame"]["orientation_deg"].get<double>()), 180.0,
+              0.05);
+  // The same cut given by LPS points on the skin: the same (theta, z).
+  std::string xyz;
+  for (const auto& p : h["points"])
+    xyz += std::to_string(p["lps"][0].get<double>()) + "," +
+           std::to_string(p["lps"][1].get<double>()) + "," +
+           std::to_string(p["lps"][2].get<double>()) + ";";
+  const json x = incision("", xyz);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(x["points"][i]["theta_deg"].get<double>(), theta[i], 1e-4);
+    EXPECT_NEAR(x["points"][i]["z_mm"].get<double>(), z[i], 1e-4);
+  }
+  // The command line takes the same request.
+  const auto cli = caps_test::caps("plan new incision --model " + kModel +
+                                   " --points '-10,60;0,60;10,61' -q --json --force -o " +
+                                   (kTmp / "incision_cli.json").string());
+  ASSERT_EQ(cli.code, 0) << cli.out;
+  EXPECT_EQ(json::parse(cli.out)["points"], h["points"]);
+  // Refusals.
+  auto message = [&](const std::string& points, const std::string& at) {
+    try {
+      app::run_plan_new(request(points, "", at));
+    } catch (const InvalidInput& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(message("0,60", ""), "incision: 1 point given; a cut needs at least 2");
+  EXPECT_NE(message("0,60;5,60", "0,60").find("drop --at"), std::string::npos);
+  EXPECT_NE(message("0,60;five,60", "").find("--points 'five,60'"), std::string::npos);
+}

@@ -25,6 +25,7 @@
 #include <condition_variable>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <sstream>
@@ -112,6 +113,11 @@ class ServerTest : public ::testing::Test {
     return client().Post(path.c_str(), body, "application/json");
   }
   static httplib::Result get(const std::string& path) { return client().Get(path.c_str()); }
+  // POST /api/simulate of a plan (its JSON text) with a 2.5 mm mesh.
+  static httplib::Result simulate_coarse(const std::string& plan) {
+    return post("/api/simulate",
+                json{{"plan", json::parse(plan)}, {"options", {{"mesh_size", 2.5}}}}.dump());
+  }
 
   // The server still answers a good request after a bad one.
   static void expect_still_serving() {
@@ -343,6 +349,43 @@ TEST_F(ServerTest, BadRequestsGetTheirStatusAndTheCliMessage) {
   expect_still_serving();
 }
 
+TEST_F(ServerTest, APlanCheckRefusalIsTheCliMessageWithoutTheServersPaths) {
+  // The message `caps plan check plan.json` prints in the plan's folder, for a broken file and for
+  // a plan the model cannot take (a point below the model's z range).
+  const fs::path dir = kTmp / "cli-check";
+  fs::create_directories(dir);
+  json made = json::parse(post("/api/plan/new", plan_body().dump())->body);
+  json off_model = made;
+  for (auto& p : off_model["points"]) p["z_mm"] = -500.0;
+  for (const std::string& body :
+       {std::string(R"({"format": "caps-plan", "points": "none"})"), off_model.dump()}) {
+    for (const std::string& name : {std::string("plan.json"), std::string("my-z.json")}) {
+      std::ofstream(dir / name) << body;
+      app::PlanCheckRequest pc;
+      pc.plan = (dir / name).string();
+      pc.model = kModel;
+      std::string cli = message_of([&] { app::run_plan_check(pc); });
+      ASSERT_FALSE(cli.empty());
+      for (std::size_t at; (at = cli.find(dir.string() + "/")) != std::string::npos;)
+        cli.erase(at, dir.string().size() + 1);
+      const auto r =
+          post(name == "plan.json" ? "/api/plan/check" : "/api/plan/check?name=" + name, body);
+      ASSERT_TRUE(r);
+      EXPECT_EQ(r->status, 400);
+      const std::string got = error_of(r);
+      EXPECT_EQ(got, cli);
+      EXPECT_EQ(got.find(server_->work_dir().string()), std::string::npos) << got;
+      EXPECT_EQ(got.find("caps-serve-"), std::string::npos) << got;
+    }
+  }
+  // A name that is not a plain file name is not used.
+  const auto r = post("/api/plan/check?name=../../etc/passwd", R"({"points": 1})");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 400);
+  EXPECT_EQ(error_of(r).rfind("plan.json", 0), 0u) << error_of(r);
+  expect_still_serving();
+}
+
 TEST_F(ServerTest, APlanMadeAndSimulatedThroughTheApiEqualsTheAppResult) {
   // plan new through the API and through app:: with the same inputs.
   const auto planned = post("/api/plan/new", plan_body().dump());
@@ -532,14 +575,95 @@ TEST_F(ServerTest, PlanLinesFollowThePlanOnTheSkin) {
   expect_still_serving();
 }
 
+TEST_F(ServerTest, PlanLinesCarryTheBorderLoopASutureSews) {
+  // A free incision of three points: the loop 0 1 2 1' (Figure 2), four edges, each from its
+  // node to the next along the skin; the twin 1' lies on point 1.
+  const auto planned =
+      post("/api/plan/new", R"({"procedure": "incision", "points": "-10,58;0,60;10,58"})");
+  ASSERT_TRUE(planned);
+  ASSERT_EQ(planned->status, 200) << planned->body;
+  const json plan = json::parse(planned->body);
+  EXPECT_EQ(plan["procedure"]["name"], "custom");
+  const auto lines = post("/api/plan/lines", planned->body);
+  ASSERT_TRUE(lines);
+  ASSERT_EQ(lines->status, 200) << lines->body;
+  const json loop = json::parse(lines->body).at("loop");
+  const json& nodes = loop.at("nodes");
+  const json& edges = loop.at("edges_lps");
+  ASSERT_EQ(nodes.size(), 4u);
+  ASSERT_EQ(edges.size(), 4u);
+  const int point_of[] = {0, 1, 2, 1};
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(nodes[i]["point"].get<int>(), point_of[i]);
+    EXPECT_NEAR(norm3(nodes[i]["normal_lps"]), 1.0, 1e-9);
+    for (int c = 0; c < 3; ++c) {
+      const double p = plan["points"][point_of[i]]["lps"][c].get<double>();
+      EXPECT_NEAR(nodes[i]["lps"][c].get<double>(), p, 1e-6);
+      EXPECT_NEAR(edges[i].front()[c].get<double>(), p, 1e-6);
+      EXPECT_NEAR(edges[(i + 3) % 4].back()[c].get<double>(), p, 1e-6);
+    }
+  }
+  // A suture pair added to the plan's JSON is checked with it: edge 0 (0 -> 1, the left side of
+  // the first segment) sewn to edge 3 (1' -> 0, its right side) closes the cut as it was.
+  json sewn = plan;
+  sewn["sutures"] = json::parse("[[[0, 1], [3, 0]]]");
+  const auto checked = post("/api/plan/check", sewn.dump());
+  ASSERT_TRUE(checked);
+  ASSERT_EQ(checked->status, 200) << checked->body;
+  EXPECT_EQ(json::parse(checked->body)["suture_quadruples"], json::parse("[[0, 1, 0, 3]]"));
+  // The same edge twice is refused with the check's message.
+  sewn["sutures"] = json::parse("[[[0, 1], [3, 0]], [[1, 0], [1, 2]]]");
+  const auto twice = post("/api/plan/check", sewn.dump());
+  ASSERT_TRUE(twice);
+  EXPECT_EQ(twice->status, 400);
+  expect_still_serving();
+}
+
+TEST_F(ServerTest, AResultIsExportedAsCapsRenderWritesIt) {
+  const auto planned = post("/api/plan/new", plan_body().dump());
+  ASSERT_TRUE(planned);
+  const auto simulated = simulate_coarse(planned->body);
+  ASSERT_TRUE(simulated);
+  ASSERT_EQ(simulated->status, 200) << simulated->body;
+  const std::string base =
+      "/api/results/" + std::to_string(json::parse(simulated->body).at("result_id").get<int>());
+  const auto exported = post(base + "/export", "{}");
+  ASSERT_TRUE(exported);
+  ASSERT_EQ(exported->status, 200) << exported->body;
+  const json e = json::parse(exported->body);
+  std::map<std::string, std::string> files;
+  for (const auto& f : e.at("files")) files[f.at("name")] = f.at("url");
+  // The plan simulated, its result, and what `caps render --gltf --tension-map` writes: pictures
+  // before, after and of the tension in its four views, and the skin with its morph.
+  for (const char* name : {"plan.json", "result.json", "skin.glb", "pre_front.png", "post_plan.png",
+                           "tension_oblique.png"})
+    ASSERT_TRUE(files.count(name)) << name << " in " << exported->body;
+  EXPECT_EQ(e.at("render").at("gltf"), "skin.glb");
+  EXPECT_EQ(json::parse(get(files["plan.json"])->body), json::parse(planned->body));
+  EXPECT_EQ(json::parse(get(files["result.json"])->body).at("total_suture_force_n"),
+            json::parse(simulated->body).at("closing_force_n"));
+  const auto glb = get(files["skin.glb"]);
+  ASSERT_TRUE(glb);
+  EXPECT_EQ(glb->body.substr(0, 4), "glTF");
+  const auto png = get(files["post_plan.png"]);
+  ASSERT_TRUE(png);
+  EXPECT_EQ(png->body.substr(1, 3), "PNG");
+  EXPECT_EQ(png->get_header_value("Content-Type"), "image/png");
+  // Asked again: the same files, not rendered again.
+  EXPECT_EQ(json::parse(post(base + "/export", "{}")->body), e);
+  const auto none = post("/api/results/99999/export", "{}");
+  ASSERT_TRUE(none);
+  EXPECT_EQ(none->status, 404);
+  expect_still_serving();
+}
+
 TEST_F(ServerTest, ASimulationsSkinAndTensionAreServedAsGlb) {
   const auto idle = get("/api/progress");
   ASSERT_TRUE(idle);
   EXPECT_EQ(json::parse(idle->body).at("running"), false);
   const auto planned = post("/api/plan/new", plan_body().dump());
   ASSERT_TRUE(planned);
-  const json body = {{"plan", json::parse(planned->body)}, {"options", {{"mesh_size", 2.5}}}};
-  const auto simulated = post("/api/simulate", body.dump());
+  const auto simulated = simulate_coarse(planned->body);
   ASSERT_TRUE(simulated);
   ASSERT_EQ(simulated->status, 200) << simulated->body;
   const int id = json::parse(simulated->body).at("result_id");

@@ -6,6 +6,7 @@
 //   caps plan show /tmp/z.json -o /tmp/z.png
 //   caps plan save-procedure /tmp/z.json -o /tmp/my_z.json
 //   caps plan new /tmp/my_z.json --model /tmp/cranium --at 20,90 -o /tmp/z2.json
+//   caps plan new incision --model /tmp/cranium --points '20,100;28,108;36,100' -o /tmp/cut.json
 #include "caps/app/plan.hpp"
 #include "commands.hpp"
 

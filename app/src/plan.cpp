@@ -1,19 +1,22 @@
 #include "caps/app/plan.hpp"
 
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
+#include <vector>
 
+#include "caps/app/loaded_model.hpp"
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
 #include "caps/plan/check.hpp"
 #include "caps/plan/plan_figure.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/plan/procedures.hpp"
-#include "caps/app/loaded_model.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "json_fields.hpp"
 #include "numbers.hpp"
@@ -69,6 +72,71 @@ std::string model_of(const std::string& given, const plan::Plan& p, const std::s
   return dir;
 }
 
+// "a,b;c,d;..." as points of N numbers each (`option`, `meaning` for the message).
+template <std::size_t N>
+std::vector<std::array<double, N>> parse_point_list(const std::string& text,
+                                                    const std::string& option,
+                                                    const std::string& meaning) {
+  std::vector<std::array<double, N>> out;
+  std::istringstream in(text);
+  for (std::string item; std::getline(in, item, ';');)
+    if (item.find_first_not_of(" \t") != std::string::npos)
+      out.push_back(parse_numbers<N>(item, option, meaning));
+  return out;
+}
+
+// A free incision: one cutting path through the points (theta deg, z mm), no sutures.
+plan::Plan free_incision(const PlanNewRequest& r, const PatientModel& model) {
+  if (!r.at.empty() || !r.at_xyz.empty() || !r.parameters.empty())
+    throw InvalidInput(
+        "incision: the cut is given by its points; drop --at/--at-xyz and the "
+        "template parameters");
+  if (r.points.empty() == r.points_xyz.empty())
+    throw InvalidInput(
+        "incision: give the cut's points with --points THETA,Z;THETA,Z;... or "
+        "--points-xyz X,Y,Z;X,Y,Z;...");
+  std::vector<Eigen::Vector2d> tz;
+  if (!r.points.empty()) {
+    for (const auto& p : parse_point_list<2>(r.points, "--points", "THETA,Z in degrees and mm"))
+      tz.emplace_back(p[0], p[1]);
+  } else {
+    for (const auto& p : parse_point_list<3>(r.points_xyz, "--points-xyz", "LPS X,Y,Z in mm")) {
+      const CylindricalPoint cp = model.to_cylindrical({p[0], p[1], p[2]});
+      tz.emplace_back(cp.theta_deg, cp.z_mm);
+    }
+  }
+  if (tz.size() < 2)
+    throw InvalidInput(cat("incision: ", tz.size(), " point given; a cut needs at least 2"));
+  // Theta unwrapped about the first point, so a cut across theta = +-180 has a mean on the cut.
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (const Eigen::Vector2d& p : tz)
+    mean += Eigen::Vector2d(tz[0][0] + std::remainder(p[0] - tz[0][0], 360.0), p[1]);
+  mean /= static_cast<double>(tz.size());
+  // Orientation: the direction from the first point to the last in the skin's tangent plane at
+  // the centre. At orientation 0, x is superior and +theta is along +-y (docs/plan.md, "Frame").
+  const plan::PlanFrame up = plan::make_frame(model, mean[0], mean[1], 0.0);
+  const Eigen::Vector2d d =
+      up.to_local(tz.back()[0], tz.back()[1]) - up.to_local(tz.front()[0], tz.front()[1]);
+  const Eigen::Vector2d theta_dir = up.local_to_theta_z.inverse() * Eigen::Vector2d(1, 0);
+  const double orientation =
+      d.norm() > 0 ? rad_to_deg(std::atan2(theta_dir[1] > 0 ? d[1] : -d[1], d[0])) : 90.0;
+  plan::Plan p;
+  p.procedure = "custom";
+  p.frame = plan::make_frame(model, mean[0], mean[1], orientation);
+  p.paths.emplace_back();
+  for (const Eigen::Vector2d& t : tz) {
+    plan::SkinPoint sp;
+    sp.theta_deg = std::remainder(t[0], 360.0);
+    if (sp.theta_deg >= 180.0) sp.theta_deg -= 360.0;
+    sp.z_mm = t[1];
+    sp.lps = model.skin_point(sp.theta_deg, sp.z_mm);
+    p.paths.back().push_back(static_cast<int>(p.points.size()));
+    p.points.push_back(sp);
+  }
+  p.notes = cat("a free incision through ", tz.size(), " points; add its sutures");
+  return p;
+}
+
 }  // namespace
 
 std::string to_json(const PlanResult& r) { return r.plan_json; }
@@ -83,6 +151,18 @@ std::string summary(const PlanResult& r) {
 PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   refuse_existing(r.output, r.force);
+  if (r.procedure == kFreeIncision) {
+    const auto loaded = loaded_model(r.model);
+    plan::Plan p = free_incision(r, *loaded);
+    p.model = r.model;
+    p.model_hash = loaded->content_hash();
+    const plan::PlanReport report = plan::check_plan(p, *loaded);
+    plan::write_plan(r.output, p, &report);
+    return plan_result(p, report, r.output, reporter);
+  }
+  if (!r.points.empty() || !r.points_xyz.empty())
+    throw InvalidInput(cat("--points and --points-xyz are for a free incision (caps plan new ",
+                           kFreeIncision, "); ", r.procedure, " is placed with --at"));
   if (r.at.empty() == r.at_xyz.empty())
     throw InvalidInput("give the centre with --at THETA,Z or --at-xyz X,Y,Z");
   const bool from_file = fs::path(r.procedure).extension() == ".json";

@@ -2,6 +2,7 @@
 
 #include "caps/app/loaded_model.hpp"
 #include "caps/app/plan.hpp"
+#include "caps/app/render.hpp"
 #include "caps/app/simulation.hpp"
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
@@ -15,10 +16,12 @@
 #include <unistd.h>
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cstdint>
 #include <fstream>
 #include <functional>
+#include <future>
 #include <map>
 #include <mutex>
 #include <sstream>
@@ -89,6 +92,18 @@ fs::path file_under(const fs::path& root, const std::string& relative) {
   return full;
 }
 
+// The plan's name for messages: the request's `name` query parameter when it is a plain file
+// name ending in .json (the page sends the name of the file loaded), else "plan.json".
+std::string plan_name(const httplib::Request& req) {
+  const std::string name = req.get_param_value("name");
+  const bool plain =
+      !name.empty() && name.size() <= 128 && name.front() != '.' &&
+      std::all_of(name.begin(), name.end(), [](char c) {
+        return std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-';
+      });
+  return plain && fs::path(name).extension() == ".json" ? name : "plan.json";
+}
+
 void send_file(httplib::Response& res, const fs::path& path) {
   res.set_content(read_file(path), content_type(path).c_str());
 }
@@ -146,8 +161,18 @@ class SimulationReporter : public Reporter {
 class ProgressBoard : public Reporter {
  public:
   explicit ProgressBoard(Reporter* outer) : outer_(outer) {}
-  void start() { set("starting", 0, true); }
+  void start() {
+    set("starting", 0, true);
+    std::lock_guard<std::mutex> lock(m_);
+    steps_s_ = json::object();
+    step_started_ = started_;
+  }
   void finish() { set("", 1, false); }
+  /// Seconds spent in each progress step of the last simulation ({"meshing and solving": ...}).
+  json steps_s() const {
+    std::lock_guard<std::mutex> lock(m_);
+    return steps_s_;
+  }
   json snapshot() const {
     std::lock_guard<std::mutex> lock(m_);
     return json{{"running", running_}, {"step", step_}, {"fraction", fraction_},
@@ -171,7 +196,12 @@ class ProgressBoard : public Reporter {
  private:
   void set(const std::string& step, double fraction, bool running) {
     std::lock_guard<std::mutex> lock(m_);
-    if (running && !running_) started_ = std::chrono::steady_clock::now();
+    const auto now = std::chrono::steady_clock::now();
+    if (running && !running_) started_ = now;
+    if (step != step_ && !step_.empty() && step_ != "starting")
+      steps_s_[step_] =
+          steps_s_.value(step_, 0.0) + std::chrono::duration<double>(now - step_started_).count();
+    if (step != step_) step_started_ = now;
     step_ = step;
     fraction_ = fraction;
     running_ = running;
@@ -180,7 +210,8 @@ class ProgressBoard : public Reporter {
   std::string step_;
   double fraction_ = 0;
   bool running_ = false;
-  std::chrono::steady_clock::time_point started_;
+  std::chrono::steady_clock::time_point started_, step_started_;
+  json steps_s_ = json::object();
   Reporter* outer_;  // not owned; may be null
 };
 
@@ -250,7 +281,9 @@ struct PlannerServer::Impl {
   std::mutex simulation_mutex;  // kMaxConcurrentSimulations = 1
   std::shared_ptr<const PatientModel> model;  // loaded once (app::loaded_model)
   std::unique_ptr<ProgressBoard> progress;
-  std::mutex views_mutex;  // writing the skin's .glb files (once each)
+  std::mutex views_mutex;   // writing the skin's .glb files (once each)
+  std::mutex export_mutex;  // rendering a result's export (once each)
+  std::map<std::string, std::shared_future<void>> tension_files;  // by result id (views_mutex)
 
   Impl(ServerOptions o, Reporter* r) : options(std::move(o)), reporter(r) {}
 
@@ -265,9 +298,32 @@ struct PlannerServer::Impl {
       } catch (const std::exception& e) {
         const ErrorResponse error = error_response(e);
         res.status = error.status;
-        send_json(res, json{{"error", error.message}}.dump());
+        send_json(res, json{{"error", without_work_dir(error.message)}}.dump());
       }
     };
+  }
+
+  // A message as the command line gives it for the user's own file: the server's copies of request
+  // bodies (work/plans/<n>/<name>) are named by their name alone, as `caps plan check <name>` run
+  // in the file's folder names it, and no other path of the work folder is shown.
+  std::string without_work_dir(std::string message) const {
+    const std::string plans = (work / "plans").string() + "/", root = work.string() + "/";
+    for (std::size_t at; (at = message.find(plans)) != std::string::npos;) {
+      std::size_t end = at + plans.size();
+      while (end < message.size() && std::isdigit(static_cast<unsigned char>(message[end]))) ++end;
+      if (end < message.size() && message[end] == '/') ++end;
+      message.erase(at, end - at);
+    }
+    for (std::size_t at; (at = message.find(root)) != std::string::npos;)
+      message.erase(at, root.size());
+    return message;
+  }
+
+  // A fresh folder for one request's copy of its body: work/plans/<n>/.
+  fs::path request_folder() {
+    const fs::path dir = work / "plans" / std::to_string(++next_id);
+    fs::create_directories(dir);
+    return dir;
   }
 
   std::string plan_new(const std::string& body) {
@@ -283,15 +339,16 @@ struct PlannerServer::Impl {
                                "(GET /api/templates); the server opens no procedure files"));
     }
     j["model"] = options.model_dir;
-    j["output"] = (work / "plans" / cat("plan-", ++next_id, ".json")).string();
+    j["output"] = (request_folder() / "plan.json").string();
     j["force"] = true;
     const auto request = app::read_request<app::PlanNewRequest>(j.dump(), source);
     return app::to_json(app::run_plan_new(request));
   }
 
-  std::string plan_check(const std::string& body) {
+  // `name`: what the user calls the plan (the page sends its file's name), for the messages.
+  std::string plan_check(const std::string& body, const std::string& name) {
     parse_object(body, "plan check request");
-    const fs::path plan = work / "plans" / cat("check-", ++next_id, ".json");
+    const fs::path plan = request_folder() / name;
     write_text_atomic(plan, body);
     app::PlanCheckRequest request;
     request.plan = plan.string();
@@ -312,8 +369,8 @@ struct PlannerServer::Impl {
     if (!options_json.is_object())
       throw InvalidInput(cat(source, ": \"options\" must be an object of simulate options"));
     refuse_server_keys(options_json, {"model", "plan", "output", "force"}, source);
+    const fs::path plan = request_folder() / "plan.json";
     const int id = ++next_id;
-    const fs::path plan = work / "plans" / cat("simulate-", id, ".json");
     options_json["model"] = options.model_dir;
     options_json["plan"] = plan.string();
     options_json["output"] = (work / "results" / std::to_string(id)).string();
@@ -330,8 +387,19 @@ struct PlannerServer::Impl {
       ProgressBoard& board;
       ~Finish() { board.finish(); }
     } finish{*progress};
+    const auto t0 = std::chrono::steady_clock::now();
     const app::SimulateResult result = app::run_simulate(request, &cancellable);
+    const double total_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    progress->finish();
+    // The plan beside its result, for exporting them together.
+    write_text_atomic(work / "results" / std::to_string(id) / "plan.json",
+                      j["plan"].dump(2) + "\n");
     json out = json::parse(app::to_json(result));
+    // Where the time went (not reproducible, so under timings_s): each progress step, and the
+    // whole request's simulation, files included.
+    out["timings_s"]["steps"] = progress->steps_s();
+    out["timings_s"]["simulate"] = total_s;
     out["result_id"] = id;
     out["result_url"] = cat("/api/results/", id, "/");
     return out.dump(2);
@@ -340,7 +408,7 @@ struct PlannerServer::Impl {
   // The plan in the body, read as `caps plan check` reads a plan file (from the work folder).
   plan::Plan plan_of(const std::string& body, const std::string& source) {
     parse_object(body, source);
-    const fs::path file = work / "plans" / cat("view-", ++next_id, ".json");
+    const fs::path file = request_folder() / "plan.json";
     write_text_atomic(file, body);
     return plan::read_plan(file);
   }
@@ -366,12 +434,59 @@ struct PlannerServer::Impl {
       throw Refusal(404, cat("simulation ", id, ": no such result"));
     const fs::path info = dir / "view.json";
     std::lock_guard<std::mutex> lock(views_mutex);
-    if (!fs::is_regular_file(info))
-      write_text_atomic(info, detail::write_result_skin_glbs(*model, dir));
+    if (!fs::is_regular_file(info)) {
+      detail::ResultView view = detail::write_result_skin_glbs(*model, dir);
+      write_text_atomic(info, view.json);
+      // tension.glb after the answer: the page draws the skin first (GET .../tension.glb waits).
+      tension_files[id] = std::async(std::launch::async, std::move(view.write_tension)).share();
+    }
     json j = json::parse(read_file(info));
     for (const char* k : {"skin", "tension"})
       j[k] = cat("/api/results/", id, "/", j[k].get<std::string>());
     return j;
+  }
+
+  // A simulation's pictures and 3D skin as `caps render RESULT --gltf --tension-map --plan PLAN`
+  // writes them (into the result's export/ folder, once), for downloading from the page.
+  json result_export(const std::string& id) {
+    const fs::path dir = work / "results" / id;
+    if (!fs::is_regular_file(dir / "result.json"))
+      throw Refusal(404, cat("simulation ", id, ": no such result"));
+    const fs::path info = dir / "export.json";
+    std::lock_guard<std::mutex> lock(export_mutex);
+    if (!fs::is_regular_file(info)) {
+      app::RenderRequest r;
+      r.result = dir.string();
+      r.model = options.model_dir;
+      r.output = (dir / "export").string();
+      r.plan = (dir / "plan.json").string();
+      r.gltf = true;
+      r.tension_map = true;
+      r.force = true;
+      write_text_atomic(info, app::to_json(app::run_render(r, reporter)));
+    }
+    json rendered = json::parse(read_file(info));
+    json files = json::array();
+    const std::string base = cat("/api/results/", id, "/");
+    for (const char* f : {"plan.json", "result.json", "summary.json"})
+      if (fs::is_regular_file(dir / f)) files.push_back({{"name", f}, {"url", base + f}});
+    if (fs::is_regular_file(dir / "export" / "skin.glb"))
+      files.push_back({{"name", "skin.glb"}, {"url", base + "export/skin.glb"}});
+    for (const auto& image : rendered.value("images", json::array()))
+      files.push_back({{"name", image}, {"url", base + "export/" + image.get<std::string>()}});
+    return json{{"files", files}, {"render", rendered}};
+  }
+
+  // A result's tension.glb, once result_view() has started writing it.
+  fs::path tension_file(const std::string& id) {
+    std::shared_future<void> job;
+    {
+      std::lock_guard<std::mutex> lock(views_mutex);
+      const auto it = tension_files.find(id);
+      if (it != tension_files.end()) job = it->second;
+    }
+    if (job.valid()) job.get();  // rethrows the writer's error
+    return file_under(work / "results" / id, "tension.glb");
   }
 
   void add_routes() {
@@ -424,6 +539,14 @@ struct PlannerServer::Impl {
              guarded([this](const httplib::Request& req, httplib::Response& res) {
                send_json(res, result_view(req.matches[1]).dump());
              }));
+    http.Get(R"(/api/results/([0-9]+)/tension\.glb)",
+             guarded([this](const httplib::Request& req, httplib::Response& res) {
+               send_file(res, tension_file(req.matches[1]));
+             }));
+    http.Post(R"(/api/results/([0-9]+)/export)",
+              guarded([this](const httplib::Request& req, httplib::Response& res) {
+                send_json(res, result_export(req.matches[1]).dump());
+              }));
     http.Get("/api/templates", guarded([](const httplib::Request&, httplib::Response& res) {
                send_json(res, app::to_json(app::run_templates({})));
              }));
@@ -432,7 +555,7 @@ struct PlannerServer::Impl {
               }));
     http.Post("/api/plan/check",
               guarded([this](const httplib::Request& req, httplib::Response& res) {
-                send_json(res, plan_check(req.body));
+                send_json(res, plan_check(req.body, plan_name(req)));
               }));
     http.Post("/api/simulate", guarded([this](const httplib::Request& req, httplib::Response& res) {
                 send_json(res, simulate(req.body));
@@ -482,6 +605,7 @@ PlannerServer::PlannerServer(ServerOptions options, Reporter* reporter)
 
 PlannerServer::~PlannerServer() {
   stop();
+  for (auto& [id, job] : impl_->tension_files) job.wait();
   std::error_code ec;
   fs::remove_all(impl_->work, ec);
 }

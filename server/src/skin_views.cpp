@@ -1,6 +1,8 @@
 #include "skin_views.hpp"
 
 #include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
+#include "caps/fem/mesh.hpp"
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/plan/plan.hpp"
@@ -14,9 +16,9 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
-#include <cmath>
 #include <chrono>
-#include <future>
+#include <cmath>
+#include <memory>
 #include <vector>
 
 namespace caps::server::detail {
@@ -30,8 +32,8 @@ namespace {
 const Eigen::Vector3d kPlainSkin(0.86, 0.72, 0.62);
 // Cells flagged invalid in the thickness overlay (no plan can be placed there).
 const Eigen::Vector3d kInvalidGrey(0.55, 0.55, 0.55);
-// The micropolygons per element edge of the post-operative skin: the model's full resolution,
-// at most this many (the page shows a few hundred thousand triangles comfortably).
+// The micropolygons per element edge of the post-operative skin shown on the page: at most this
+// many (view_subdivisions()).
 constexpr int kMaxResultSubdivisions = 8;
 
 json lps_json(const Eigen::Vector3d& p) { return json::array({p.x(), p.y(), p.z()}); }
@@ -156,7 +158,30 @@ std::string write_model_skin_glb(const PatientModel& model, SkinColouring colour
   return info.dump();
 }
 
-std::string write_result_skin_glbs(const PatientModel& model, const fs::path& result_dir) {
+int view_subdivisions(const PatientModel& model, const fem::Mesh& mesh) {
+  std::vector<double> edges;
+  double radius = 0;
+  for (int e : render::skin_elements(model, mesh)) {
+    const fem::Element& el = mesh.elements[static_cast<std::size_t>(e)];
+    const int nc = el.type == fem::ElementType::Hex20 ? 4 : 3;
+    for (int a = 0; a < nc; ++a) {
+      const Eigen::Vector3d p = mesh.nodes.row(el.nodes[static_cast<std::size_t>(a)]);
+      const Eigen::Vector3d q = mesh.nodes.row(el.nodes[static_cast<std::size_t>((a + 1) % nc)]);
+      edges.push_back((p - q).norm());
+      radius += model.to_cylindrical(p).r_mm;
+    }
+  }
+  if (edges.empty()) return 1;
+  radius /= static_cast<double>(edges.size());
+  std::nth_element(edges.begin(), edges.begin() + static_cast<std::ptrdiff_t>(edges.size() / 2),
+                   edges.end());
+  const double median = edges[edges.size() / 2];
+  const double spacing =
+      std::min(model.grid().dz_mm, model.grid().dtheta_deg() * kPi / 180.0 * radius);
+  return std::clamp(static_cast<int>(std::ceil(median / spacing)), 1, kMaxResultSubdivisions);
+}
+
+ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& result_dir) {
   using Clock = std::chrono::steady_clock;
   const auto seconds = [](Clock::time_point a, Clock::time_point b) {
     return std::chrono::duration<double>(b - a).count();
@@ -164,39 +189,42 @@ std::string write_result_skin_glbs(const PatientModel& model, const fs::path& re
   const auto t0 = Clock::now();
   const fem::Mesh mesh = fem::read_mesh_dir(result_dir);
   const Eigen::MatrixX3d u = fem::read_result_displacement(result_dir, mesh.n_nodes());
-  const int n = std::min(kMaxResultSubdivisions, render::full_resolution_subdivisions(model, mesh));
-  const render::SkinSurfaces skin = render::displaced_skin(model, mesh, &u, n);
+  const int n = view_subdivisions(model, mesh);
+  auto skin = std::make_shared<render::SkinSurfaces>(render::displaced_skin(model, mesh, &u, n));
   const auto t1 = Clock::now();
-  // The two files at once (two cores): the part of the skin the simulation moved, coloured as
-  // the model, and its mesh faces coloured by the tension. The rest is the model's own skin.
-  auto coloured = std::async(std::launch::async, [&] {
-    render::SkinSurfaces part = mesh_part(skin, true);
-    if (!model.has_color()) part.color.rowwise() = kPlainSkin.transpose();  // as the model's skin
-    render::write_gltf(part, result_dir / "skin.glb");
-  });
   const render::ScalarMap tension = render::tension_map(
-      skin, mesh, fem::read_result_max_principal(result_dir, mesh.n_nodes()), 0);
-  const auto [fill_pre_mm2, fill_post_mm2] = render::wound_fill_area_mm2(skin);
-  const Eigen::Index n_micro = skin.n_micropolygon_vertices;
+      *skin, mesh, fem::read_result_max_principal(result_dir, mesh.n_nodes()), 0);
+  const auto [fill_pre_mm2, fill_post_mm2] = render::wound_fill_area_mm2(*skin);
+  const Eigen::Index n_micro = skin->n_micropolygon_vertices;
   const double peak = n_micro ? tension.value.head(n_micro).maxCoeff() : 0.0;
   const auto t2 = Clock::now();
-  render::SkinSurfaces by_tension = skin;
-  by_tension.color = render::scalar_colors(tension.value, tension.max_value);
-  // Off the finite-element mesh the tension is 0 by definition: only the mesh's part is written.
-  render::write_gltf(mesh_part(by_tension, false), result_dir / "tension.glb");
-  coloured.get();  // rethrows an error of the first file
+  // The part of the skin the simulation moved, coloured as the model (the rest is the model's
+  // own skin): what the page draws first.
+  render::SkinSurfaces part = mesh_part(*skin, true);
+  if (!model.has_color()) part.color.rowwise() = kPlainSkin.transpose();  // as the model's skin
+  render::write_gltf(part, result_dir / "skin.glb");
   const auto t3 = Clock::now();
-  return json{{"skin", "skin.glb"},
-              {"tension", "tension.glb"},
-              {"subdivisions", n},
-              {"vertices", skin.pre.n_vertices()},
-              {"replaced_cells", replaced_cells(model.grid(), skin)},
-              {"tension_scale_max_kpa", tension.max_value},
-              {"max_skin_tension_kpa", peak},
-              {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},
-              {"timings_s",
-               {{"skin", seconds(t0, t1)}, {"tension", seconds(t1, t2)}, {"glb", seconds(t2, t3)}}}}
-      .dump();
+  ResultView view;
+  view.json =
+      json{{"skin", "skin.glb"},
+           {"tension", "tension.glb"},
+           {"subdivisions", n},
+           {"vertices", skin->pre.n_vertices()},
+           {"replaced_cells", replaced_cells(model.grid(), *skin)},
+           {"tension_scale_max_kpa", tension.max_value},
+           {"max_skin_tension_kpa", peak},
+           {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},
+           {"timings_s",
+            {{"skin", seconds(t0, t1)}, {"tension", seconds(t1, t2)}, {"glb", seconds(t2, t3)}}}}
+          .dump();
+  // The mesh faces coloured by the tension: shown only when asked for, so written afterwards.
+  view.write_tension = [skin, tension, path = result_dir / "tension.glb"] {
+    render::SkinSurfaces by_tension = *skin;
+    by_tension.color = render::scalar_colors(tension.value, tension.max_value);
+    // Off the finite-element mesh the tension is 0 by definition: only the mesh's part is written.
+    render::write_gltf(mesh_part(by_tension, false), path);
+  };
+  return view;
 }
 
 std::string plan_lines_json(const plan::Plan& plan, const PatientModel& model) {
@@ -209,9 +237,31 @@ std::string plan_lines_json(const plan::Plan& plan, const PatientModel& model) {
   json points = json::array();
   for (const plan::SkinPoint& p : plan.points)
     points.push_back(lps_json(model.skin_point(p.theta_deg, p.z_mm)));
+  // The border loop (the sides of the cut a suture sews): each node where it lies on the skin with
+  // the skin's outward normal there, and each edge i -> i + 1 sampled along the skin, as the
+  // mesher lays it (straight in (theta, z), excision offsets applied).
+  constexpr int kEdgeSamples = 8;
+  const plan::BorderLoop loop = plan::border_loop(plan);
+  json nodes = json::array(), edges = json::array();
+  const int n = loop.size();
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector2d& a = loop.theta_z[static_cast<std::size_t>(i)];
+    const Eigen::Vector2d& b = loop.theta_z[static_cast<std::size_t>((i + 1) % n)];
+    const double dtheta = std::remainder(b[0] - a[0], 360.0);
+    nodes.push_back({{"point", loop.point[static_cast<std::size_t>(i)]},
+                     {"lps", lps_json(model.skin_point(a[0], a[1]))},
+                     {"normal_lps", lps_json(model.skin_normal(a[0], a[1]))}});
+    json edge = json::array();
+    for (int k = 0; k <= kEdgeSamples; ++k) {
+      const double t = static_cast<double>(k) / kEdgeSamples;
+      edge.push_back(lps_json(model.skin_point(a[0] + t * dtheta, a[1] + t * (b[1] - a[1]))));
+    }
+    edges.push_back(std::move(edge));
+  }
   const plan::PlanFrame& f = plan.frame;
   return json{{"lines_lps", lines},
               {"points_lps", points},
+              {"loop", {{"nodes", nodes}, {"edges_lps", edges}}},
               {"centre",
                {{"theta_deg", f.theta_deg},
                 {"z_mm", f.z_mm},

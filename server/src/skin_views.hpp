@@ -4,10 +4,14 @@
 // lines on the skin. Internal to the server.
 
 #include <filesystem>
+#include <functional>
 #include <string>
 
 namespace caps {
 class PatientModel;
+}
+namespace caps::fem {
+struct Mesh;
 }
 namespace caps::plan {
 struct Plan;
@@ -26,23 +30,37 @@ enum class SkinColouring { Skin, Thickness };
 std::string write_model_skin_glb(const PatientModel& model, SkinColouring colouring,
                                  const std::filesystem::path& path);
 
+/// The micropolygons per element edge of a simulation's skin on the page: the model's finest
+/// sample spacing (dz, or dtheta as arc at the skin) on the median skin-face edge, at most 8. The
+/// pictures of `caps render` take the longest edge (render::full_resolution_subdivisions()), which
+/// on a graded mesh is a rim element that hardly moves; the median is the size of the elements
+/// where the skin moves, and 2-4 times fewer micropolygons (measured in docs/benchmarks.md).
+int view_subdivisions(const PatientModel& model, const fem::Mesh& mesh);
+
+/// A simulation's skin as the page shows it (write_result_skin_glbs()).
+struct ResultView {
+  std::string json;                     ///< its description (see write_result_skin_glbs())
+  std::function<void()> write_tension;  ///< writes tension.glb (the page asks for it later)
+};
+
 /// The pre- and post-operative skin of the simulation in `result_dir` (caps simulate's folder)
-/// on `model`, as two .glb files in `result_dir` with the post-operative skin as the morph target
-/// (render::write_gltf): skin.glb, the part of render::displaced_skin() the simulation moved (the
-/// micropolygons, the wound fill and the seam) coloured as the model, and tension.glb, its
-/// micropolygons and wound fill coloured by the skin tension (render::tension_map, viridis from 0
-/// to the 99th percentile). The rest is the model's own skin (write_model_skin_glb()) without the
-/// cells listed in "replaced_cells". @return the JSON {"skin", "tension", "replaced_cells" (cells
-/// q = k n_theta + j of range_mesh(), faces 2q and 2q + 1), "subdivisions", "vertices",
-/// "tension_scale_max_kpa", "max_skin_tension_kpa", "wound_area_mm2": {"pre", "post"},
-/// "timings_s": {"skin" (reading the result and building the skin), "tension", "glb" (writing
-/// the two files)}}.
-std::string write_result_skin_glbs(const PatientModel& model,
-                                   const std::filesystem::path& result_dir);
+/// on `model`, with the post-operative skin as the morph target (render::write_gltf): skin.glb,
+/// written now, the part of render::displaced_skin() the simulation moved (the micropolygons at
+/// view_subdivisions(), the wound fill and the seam) coloured as the model, and tension.glb,
+/// written by the returned write_tension, its micropolygons and wound fill coloured by the skin
+/// tension (render::tension_map, viridis from 0 to the 99th percentile). The rest is the model's
+/// own skin (write_model_skin_glb()) without the cells listed in "replaced_cells". The JSON:
+/// {"skin", "tension", "replaced_cells" (cells q = k n_theta + j of range_mesh(), faces 2q and
+/// 2q + 1), "subdivisions", "vertices", "tension_scale_max_kpa", "max_skin_tension_kpa",
+/// "wound_area_mm2": {"pre", "post"}, "timings_s": {"skin" (reading the result and building the
+/// skin), "tension" (its values), "glb" (writing skin.glb)}}.
+ResultView write_result_skin_glbs(const PatientModel& model,
+                                  const std::filesystem::path& result_dir);
 
 /// The plan's cutting paths and points on the skin, LPS mm: {"lines_lps": [[[x, y, z], ...],
-/// ...], "points_lps": [[x, y, z], ...], "centre": {"theta_deg", "z_mm", "orientation_deg",
-/// "lps"}}.
+/// ...], "points_lps": [[x, y, z], ...], "loop": {"nodes": [{"point", "lps", "normal_lps"}],
+/// "edges_lps": [edge i -> i + 1 as 9 points along the skin]} (the border loop, excision offsets
+/// applied), "centre": {"theta_deg", "z_mm", "orientation_deg", "lps", "normal_lps"}}.
 std::string plan_lines_json(const plan::Plan& plan, const PatientModel& model);
 
 }  // namespace caps::server::detail

@@ -2,8 +2,12 @@
 // (headless, software GL) through the page as a surgeon would — place a Z-plasty by clicking on
 // the skin, rotate it with a key and undo, drag its handle and undo, simulate, read the forces in
 // the table, change the angle and simulate again, show the two alternatives side by side, save
-// the plan and load it back — and checks the saved plan with `caps plan check`. Screenshots go
-// to OUT_DIR.
+// the plan and load it back — and checks the saved plan with `caps plan check`; then draws the
+// same Z by hand as a free incision (four clicks on the skin), sews it with three suture pairs
+// picked by clicking beside the cut (they must be the template's pairs), moves and removes a
+// pair, simulates it, exports the result (result.json, the report, caps render's pictures and
+// .glb) and checks that `caps simulate` on the saved plan gives the page's closing force.
+// Screenshots go to OUT_DIR.
 //
 // node planner_e2e.mjs CAPS_EXE MODEL_DIR WEB_ROOT OUT_DIR    (run by run_planner_e2e.sh)
 import assert from 'node:assert/strict';
@@ -128,6 +132,7 @@ try {
   log(`simulated: closing force ${closing1} N, largest suture ${largest1} N, ${sutureRows - 1} sutures`);
   await page.screenshot({ path: join(out, '3-simulated.png') });
   await page.check('#show-tension');
+  await page.waitForSelector('body[data-tension="shown"]');
   await page.screenshot({ path: join(out, '4-tension.png') });
   await page.uncheck('#show-tension');
 
@@ -168,6 +173,129 @@ try {
   await page.waitForFunction(() => window.caps.planner.state.parameters.angle === 45);
   assert.match(await page.locator('#check').innerText(), /Can be operated/);
   assert.equal(await page.locator('#param-angle').inputValue(), '45');
+
+  // A free incision: the first Z-plasty's four points clicked on the skin, one by one.
+  const template = await page.evaluate(() => window.caps.results.rows[0].plan);
+  await page.selectOption('#procedure', 'incision');
+  await page.waitForFunction(() => window.caps.planner.state?.procedure === 'incision');
+  assert.match(await page.locator('#check').innerText(), /Click on the skin to draw the cut/);
+  await page.click('[data-view="front"]');
+  // The screen position of an LPS point (mm) in view A.
+  const screenOf = (lps) => page.evaluate((p) => {
+    const { viewA } = window.caps;
+    const v = viewA.camera.position.clone().set(p[0] / 1000, p[2] / 1000, -p[1] / 1000).project(viewA.camera);
+    const r = viewA.renderer.domElement.getBoundingClientRect();
+    return { x: r.left + ((v.x + 1) / 2) * r.width, y: r.top + ((1 - v.y) / 2) * r.height };
+  }, lps);
+  for (const [i, p] of template.points.entries()) {
+    const at = await screenOf(p.lps);
+    await page.mouse.click(at.x, at.y);
+    await page.waitForFunction((n) => window.caps.planner.state.points.length === n, i + 1);
+  }
+  await page.waitForSelector('body[data-check="ok"]');
+  const drawn = await page.evaluate(() => window.caps.planner.plan);
+  assert.equal(drawn.points.length, 4);
+  for (const [i, p] of drawn.points.entries()) {
+    assert.ok(Math.abs(p.theta_deg - template.points[i].theta_deg) < 1 &&
+      Math.abs(p.z_mm - template.points[i].z_mm) < 1, `point ${i} where it was clicked`);
+  }
+  assert.match(await page.locator('#check').innerText(), /No sutures yet/);
+  log(`free incision drawn: ${drawn.check.cut_length_mm.toFixed(1)} mm (the template's ` +
+    `${template.check.cut_length_mm.toFixed(1)} mm)`);
+  // Sutures: click beside the cut on one side, then on the side it is sewn to. The template's
+  // pairs, as loop edges: 5 with 4, 1 with 2, 0 with 3.
+  const besideEdge = (i) => page.evaluate((edge) => {
+    const loop = window.caps.planner.lines.loop;
+    const e = loop.edges_lps[edge], n = loop.nodes.length;
+    const a = loop.nodes[edge].normal_lps, b = loop.nodes[(edge + 1) % n].normal_lps;
+    const nrm = [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
+    const t = [0, 1, 2].map((k) => e[e.length - 1][k] - e[0][k]);
+    const side = [nrm[1] * t[2] - nrm[2] * t[1], nrm[2] * t[0] - nrm[0] * t[2], nrm[0] * t[1] - nrm[1] * t[0]];
+    const len = Math.hypot(...side);
+    const m = e[Math.floor(e.length / 2)];
+    return m.map((v, k) => v + (2.5 * side[k]) / len);
+  }, i);
+  await page.click('[data-view="plan"]');
+  const sew = async (first, second) => {
+    for (const edge of [first, second]) {
+      const at = await screenOf(await besideEdge(edge));
+      await page.mouse.click(at.x, at.y);
+    }
+  };
+  for (const [k, [a, b]] of [[5, 4], [1, 2], [0, 3]].entries()) {
+    await page.click('#add-suture');
+    await sew(a, b);
+    await page.waitForFunction((n) => window.caps.planner.plan?.sutures.length === n, k + 1);
+  }
+  await page.waitForSelector('body[data-check="ok"]');
+  // A pair (a, b, c, d) is the same sewing as (d, c, b, a) (docs/plan-format.md): one spelling each.
+  const sorted = (qs) => qs.map(([a, b, c, d]) => [JSON.stringify([a, b, c, d]),
+    JSON.stringify([d, c, b, a])].sort()[0]).sort();
+  let sewn = await page.evaluate(() => window.caps.planner.plan);
+  assert.deepEqual(sorted(sewn.suture_quadruples), sorted(template.suture_quadruples),
+    'the pairs picked beside the cut are the template Z-plasty\'s');
+  assert.equal(await page.locator('#suture-pairs tr').count(), 3);
+  await page.screenshot({ path: join(out, '6-incision-sutures.png') });
+  // Move the first pair (its two sides clicked again, the other way round: the same pair), remove
+  // the last, undo that.
+  await page.locator('#suture-pairs button[data-move="0"]').click();
+  await sew(4, 5);
+  await page.waitForFunction(() => window.caps.planner.state.sutures[0][0][0] === 4);
+  await page.waitForSelector('body[data-check="ok"]');
+  sewn = await page.evaluate(() => window.caps.planner.plan);
+  assert.deepEqual(sorted(sewn.suture_quadruples), sorted(template.suture_quadruples));
+  await page.locator('#suture-pairs button[data-remove="2"]').click();
+  await page.waitForFunction(() => window.caps.planner.plan?.sutures.length === 2);
+  await page.keyboard.press('Control+z');
+  await page.waitForFunction(() => window.caps.planner.plan?.sutures.length === 3);
+  await page.waitForSelector('body[data-check="ok"]');
+  log('three suture pairs picked beside the cut: the template\'s pairs; moved, removed, undone');
+  await page.click('#simulate');
+  await page.waitForFunction(() => window.caps.results.rows.length === 3, null, { timeout: 45000 });
+  await page.waitForSelector('body[data-simulation="done"]');
+  const closing3 = await page.evaluate(() => window.caps.results.rows[2].result.closing_force_n);
+  assert.ok(closing3 > 0, `the drawn Z closes with ${closing3} N`);
+  log(`drawn Z simulated: ${closing3.toFixed(2)} N (the template's ${closing1} N, which also frees its flaps)`);
+  await page.screenshot({ path: join(out, '7-incision-simulated.png') });
+
+  // Export: result.json, the report, caps render's pictures and .glb.
+  assert.equal(await page.locator('#export').isVisible(), true);
+  const [resultDownload] = await Promise.all([page.waitForEvent('download'), page.click('#export-result')]);
+  const resultFile = join(out, 'exported-result.json');
+  await resultDownload.saveAs(resultFile);
+  const exported = JSON.parse(readFileSync(resultFile, 'utf8'));
+  assert.ok(Math.abs(exported.total_suture_force_n - closing3) < 1e-9 * Math.max(1, closing3));
+  await page.click('#export-render');
+  await page.waitForFunction(() => document.querySelectorAll('#export-files li').length > 0, null,
+    { timeout: 90000 });
+  const files = await page.locator('#export-files a').evaluateAll((as) => as.map((a) => a.href));
+  for (const name of ['skin.glb', 'post_plan.png', 'tension_plan.png', 'plan.json', 'result.json'])
+    assert.ok(files.some((f) => f.endsWith(`/${name}`)), `${name} offered: ${files.join(', ')}`);
+  const glb = await page.evaluate(async (u) => {
+    const b = new Uint8Array(await (await fetch(u)).arrayBuffer());
+    return String.fromCharCode(...b.slice(0, 4));
+  }, files.find((f) => f.endsWith('/skin.glb')));
+  assert.equal(glb, 'glTF');
+  const [reportDownload] = await Promise.all([page.waitForEvent('download'), page.click('#export-report')]);
+  const reportFile = join(out, 'exported-report.html');
+  await reportDownload.saveAs(reportFile);
+  const report = readFileSync(reportFile, 'utf8');
+  assert.match(report, /Closing force/);
+  assert.match(report, /data:image\/png;base64,/);
+  log(`exported: result.json, the report (${(report.length / 1e6).toFixed(1)} MB), ${files.length} files of caps render`);
+  await page.screenshot({ path: join(out, '8-export.png') });
+
+  // The drawn plan with its sutures, saved: caps simulate reads it and gives the page's force.
+  const [drawnDownload] = await Promise.all([page.waitForEvent('download'), page.click('#save')]);
+  const drawnFile = join(out, 'drawn-plan.json');
+  await drawnDownload.saveAs(drawnFile);
+  const sim = spawnSync(caps, ['simulate', '--model', model, '--plan', drawnFile, '--mesh-size', '2.5',
+    '-o', join(out, 'drawn-sim'), '--force', '--json', '-q'], { encoding: 'utf8' });
+  assert.equal(sim.status, 0, `caps simulate ${drawnFile}: ${sim.stdout}${sim.stderr}`);
+  const cliForce = JSON.parse(sim.stdout).closing_force_n;
+  assert.ok(Math.abs(cliForce - closing3) <= 1e-9 * Math.max(1, closing3),
+    `caps simulate on the saved plan: ${cliForce} N, the page: ${closing3} N`);
+  log(`caps simulate on the saved drawn plan: ${cliForce.toFixed(4)} N, as on the page`);
 
   assert.deepEqual(foreign, [], 'requests outside the server');
   assert.deepEqual(errors.filter((e) => !/WebGL|GPU|GL_/i.test(e)), [], 'errors on the page');

@@ -51,7 +51,8 @@ export const api = {
   /** caps plan new: {procedure, at | at_xyz, orientation, parameters} -> the plan with its check. */
   planNew: (request, signal) => postJson('/api/plan/new', request, signal),
   /** caps plan check: a plan file's JSON -> the plan with its check. */
-  planCheck: (plan, signal) => postJson('/api/plan/check', plan, signal),
+  planCheck: (plan, signal, name) =>
+    postJson(`/api/plan/check${name ? `?name=${encodeURIComponent(name)}` : ''}`, plan, signal),
   /** The plan's cutting lines and points on the skin (LPS mm). */
   planLines: (plan, signal) => postJson('/api/plan/lines', plan, signal),
   /** caps simulate: the result JSON with result_id and result_url. */
@@ -60,4 +61,6 @@ export const api = {
   resultView: (id) => getJson(`/api/results/${id}/view`),
   resultFile: (id, file) => getJson(`/api/results/${id}/${file}`),
   progress: () => getJson('/api/progress'),
+  /** caps render of a result (pictures, tension map, skin.glb): {files: [{name, url}], render}. */
+  resultExport: (id) => postJson(`/api/results/${id}/export`, {}),
 };

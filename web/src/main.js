@@ -2,8 +2,9 @@
 // menu, the parameter sliders, the plan check, Simulate, the alternatives and save/load.
 import { api } from './api.js';
 import { lpsToScene } from './frames.js';
-import { Planner } from './planner.js';
+import { kIncision, Planner } from './planner.js';
 import { Results, escapeHtml } from './results.js';
+import { pairColour, sideText } from './sutures.js';
 import { loadModelSkin } from './skin.js';
 import { Viewer } from './viewer.js';
 
@@ -47,8 +48,15 @@ function buildParameters(template, values, onInput) {
   }
 }
 
-function showCheck(plan, message) {
+function showCheck(plan, message, state) {
   const el = $('check');
+  if (!plan && !message) {
+    el.className = 'check muted';
+    el.textContent = state?.procedure === kIncision
+      ? `Click on the skin to draw the cut: ${state.points.length ? 'one more point' : 'at least two points'}.`
+      : 'No plan yet.';
+    return;
+  }
   if (!plan) {
     el.className = 'check refused';
     el.innerHTML = `<b>Cannot be operated here.</b> ${escapeHtml(message ?? '')}`;
@@ -59,14 +67,39 @@ function showCheck(plan, message) {
   const pairs = plan.suture_quadruples?.length ?? plan.sutures?.length ?? 0;
   el.className = warnings.length ? 'check warn' : 'check ok';
   el.innerHTML = `<b>Can be operated.</b> Cut ${(c.cut_length_mm ?? 0).toFixed(1)} mm on the skin,
-    ${pairs} suture pairs, centre at theta ${plan.frame.theta_deg.toFixed(1)}°,
+    ${pairs} suture pair${pairs === 1 ? '' : 's'}, centre at theta ${plan.frame.theta_deg.toFixed(1)}°,
     z ${plan.frame.z_mm.toFixed(1)} mm.` +
+    (pairs ? '' : ' <b>No sutures yet</b>: nothing closes this cut; add pairs below.') +
     (warnings.length ? `<ul>${warnings.map((w) => `<li>${escapeHtml(w)}</li>`).join('')}</ul>` : '');
 }
 
-function download(name, text) {
+// The plan's suture pairs, each with its colour on the skin, its two sides (loop nodes), their
+// lengths on the skin, and buttons to move (choose its two sides again) or remove it.
+function showSutures(planner) {
+  const plan = planner.plan;
+  const table = $('suture-pairs');
+  const lengths = plan?.check?.suture_lengths_mm ?? [];
+  const own = planner.state?.sutures == null;
+  $('sutures-origin').textContent = !plan ? '' : own
+    ? (planner.isIncision ? '' : '(the procedure\'s)') : '(yours)';
+  table.innerHTML = (plan?.sutures ?? []).map((pair, k) => {
+    const len = lengths[k] ? ` ${lengths[k].map((v) => v.toFixed(1)).join(' / ')} mm` : '';
+    return `<tr><td><span class="swatch" style="background:#${pairColour(k).getHexString()}"></span></td>
+      <td>${sideText(pair[0])} ↔ ${sideText(pair[1])}</td><td>${len}</td>
+      <td><button data-move="${k}" title="Click its two sides again">Move</button>
+      <button data-remove="${k}" title="Remove this pair">✕</button></td></tr>`;
+  }).join('');
+  table.querySelectorAll('[data-move]').forEach((b) =>
+    b.addEventListener('click', () => planner.startPick(Number(b.dataset.move))));
+  table.querySelectorAll('[data-remove]').forEach((b) =>
+    b.addEventListener('click', () => planner.removeSuture(Number(b.dataset.remove))));
+  $('add-suture').disabled = !plan || !planner.lines?.loop;
+  $('reset-sutures').disabled = !plan || own;
+}
+
+function download(name, text, type = 'application/json') {
   const a = document.createElement('a');
-  a.href = URL.createObjectURL(new Blob([text], { type: 'application/json' }));
+  a.href = URL.createObjectURL(new Blob([text], { type }));
   a.download = name;
   document.body.appendChild(a);
   a.click();
@@ -105,17 +138,39 @@ async function main() {
 
   const menu = $('procedure');
   for (const t of templates) menu.add(new Option(`${t.name} — ${t.summary}`, t.name));
+  menu.add(new Option('free incision — your own cut and sutures', kIncision));
 
+  let noticeTimer = 0;
+  const notice = (text) => {
+    status(text);
+    clearTimeout(noticeTimer);
+    noticeTimer = setTimeout(() => status(''), 4000);
+  };
   const planner = new Planner(viewA, templates, {
     onState: (s) => {
+      if (!s) return;
+      if (s.procedure === 'loaded') {
+        showTemplate(null);
+        return;
+      }
       menu.value = s.procedure;
-      buildParameters(planner.templates.get(s.procedure), { ...s.parameters,
-        orientation: s.orientation }, onParameter);
+      showTemplate(s.procedure, s);
     },
-    onCheck: (plan, message) => {
-      showCheck(plan, message);
+    onCheck: (plan, message, state) => {
+      showCheck(plan, message, state);
+      showSutures(planner);
       $('simulate').disabled = !plan;
       $('save').disabled = !plan;
+    },
+    onNotice: notice,
+    onPick: (pick) => {
+      clearTimeout(noticeTimer);
+      // The cut seen from straight above, close enough to click beside either side of it.
+      if (pick && pick.first < 0) lookAtPlan();
+      if (!pick) status('');
+      else status(pick.first < 0
+        ? 'Suture pair: click on the skin just beside the cut, on the first side to sew (Esc cancels).'
+        : 'Now click beside the side it is sewn to.');
     },
     onHistory: (u, r) => {
       $('undo').disabled = !u;
@@ -125,11 +180,26 @@ async function main() {
   });
   const onParameter = (name, value) =>
     name === 'orientation' ? planner.setOrientation(value) : planner.setParameter(name, value);
-  const showTemplate = (name) => {
+  // The panel for the procedure `name` (a template, the free incision, or null: a loaded plan).
+  const showTemplate = (name, state = planner.state) => {
+    const incision = name === kIncision;
+    $('template-hint').hidden = incision || !name;
+    $('incision-hint').hidden = !incision;
+    if (!name) {
+      $('procedure-summary').textContent = 'A loaded plan (its own cut): its sutures can be changed below.';
+      $('parameters').innerHTML = '';
+      return;
+    }
+    if (incision) {
+      $('procedure-summary').textContent = 'Your own cut, drawn on the skin, and your own sutures.';
+      $('parameters').innerHTML = '';
+      return;
+    }
     const t = planner.templates.get(name);
     $('procedure-summary').textContent = t.summary;
-    buildParameters(t, { ...planner.parameters, orientation: planner.state?.orientation ?? 90 },
-      onParameter);
+    const same = state?.procedure === name;
+    buildParameters(t, { ...(same ? state.parameters : planner.parameters),
+      orientation: same ? state.orientation : 90 }, onParameter);
   };
   menu.addEventListener('change', () => {
     planner.setProcedure(menu.value);
@@ -140,15 +210,18 @@ async function main() {
   showTemplate('z-plasty');
 
   // Views and overlays.
+  function lookAtPlan() {
+    if (!planner.lines) return;
+    const c = planner.lines.centre;
+    const p = [c.lps[0] + c.normal_lps[0], c.lps[1] + c.normal_lps[1], c.lps[2] + c.normal_lps[2]];
+    const target = lpsToScene(c.lps), tip = lpsToScene(p);
+    viewA.lookFrom(target, tip.sub(target), 0.16);
+  }
   for (const b of document.querySelectorAll('[data-view]'))
     b.addEventListener('click', () => {
       const v = b.dataset.view;
-      if (v === 'plan' && planner.lines) {
-        const c = planner.lines.centre;
-        const p = [c.lps[0] + c.normal_lps[0], c.lps[1] + c.normal_lps[1], c.lps[2] + c.normal_lps[2]];
-        const target = lpsToScene(c.lps), tip = lpsToScene(p);
-        viewA.lookFrom(target, tip.sub(target), 0.16);
-      } else viewA.setView(v);
+      if (v === 'plan') lookAtPlan();
+      else viewA.setView(v);
     });
   $('show-thickness').addEventListener('change', (e) => {
     skin.show(e.target.checked ? 'thickness' : 'skin');
@@ -156,6 +229,13 @@ async function main() {
     $('thickness-legend').innerHTML = `0<span class="bar"></span>${thicknessMax.toFixed(1)} mm; grey: not measured`;
     viewA.requestRender();
   });
+
+  // Free incisions and sutures.
+  $('remove-point').addEventListener('click', () => planner.removeLastPoint());
+  $('new-incision').addEventListener('click', () => planner.newIncision());
+  $('add-suture').addEventListener('click', () => planner.startPick(-1));
+  $('reset-sutures').addEventListener('click', () => planner.resetSutures());
+  $('show-sutures').addEventListener('change', (e) => planner.setShowSutures(e.target.checked));
 
   // Simulate.
   $('simulate').addEventListener('click', async () => {
@@ -165,7 +245,7 @@ async function main() {
     $('simulate').disabled = true;
     try {
       status('Simulating…');
-      await results.simulate(planner.plan, options);
+      await results.simulate(planner.plan, options, { ownSutures: planner.state?.sutures != null });
       status('');
     } catch (e) {
       status(`The simulation failed: ${e.message}`);
@@ -189,16 +269,55 @@ async function main() {
   // Undo, redo, save, load, keys.
   $('undo').addEventListener('click', () => planner.undo());
   $('redo').addEventListener('click', () => planner.redo());
+  const savePlan = (plan) => download(`${plan.procedure?.name ?? 'plan'}-plan.json`,
+    `${JSON.stringify(plan, null, 2)}\n`);
   $('save').addEventListener('click', () => {
-    if (planner.plan) download(`${planner.plan.procedure?.name ?? 'plan'}-plan.json`,
-      `${JSON.stringify(planner.plan, null, 2)}\n`);
+    if (planner.plan) savePlan(planner.plan);
+  });
+
+  // Export what view A shows.
+  results.onShown = (row) => {
+    $('export').hidden = !row;
+    $('export-files').innerHTML = '';
+    if (row) $('export-which').textContent = `(#${row.n}, view A)`;
+  };
+  $('export-plan').addEventListener('click', () => results.shown[0] && savePlan(results.shown[0].plan));
+  $('export-result').addEventListener('click', async () => {
+    const row = results.shown[0];
+    if (row) download(`result-${row.n}.json`, await (await fetch(`${row.result.result_url}result.json`)).text());
+  });
+  $('export-report').addEventListener('click', async () => {
+    const row = results.shown[0];
+    if (!row) return;
+    status('Rendering the pictures for the report…');
+    try {
+      download(`report-${row.n}.html`, await results.report(row), 'text/html');
+      status('');
+    } catch (e) {
+      status(`The report could not be made: ${e.message}`);
+    }
+  });
+  $('export-render').addEventListener('click', async () => {
+    const row = results.shown[0];
+    if (!row) return;
+    status('Rendering the pictures and the 3D skin…');
+    $('export-render').disabled = true;
+    try {
+      const files = await results.exportFiles(row);
+      $('export-files').innerHTML = files.map((f) =>
+        `<li><a href="${f.url}" download="${escapeHtml(`${row.n}-${f.name}`)}">${escapeHtml(f.name)}</a></li>`).join('');
+      status('');
+    } catch (e) {
+      status(`The export failed: ${e.message}`);
+    } finally {
+      $('export-render').disabled = false;
+    }
   });
   $('load').addEventListener('change', async (e) => {
     const file = e.target.files[0];
     if (!file) return;
     try {
-      await planner.load(JSON.parse(await file.text()));
-      showTemplate(planner.procedure);
+      await planner.load(JSON.parse(await file.text()), file.name);
     } catch (err) {
       showCheck(null, `${file.name}: ${err.message}`);
     }

@@ -43,6 +43,19 @@ export function handleObject(centreLps) {
   return m;
 }
 
+/** Handles on a free incision's points (LPS mm), dragged to move them; userData.index is the
+ * point's index. */
+export function pointHandles(points) {
+  const ball = new SphereGeometry(0.0014, 16, 12);
+  return points.map((p, i) => {
+    const m = new Mesh(ball, handleMaterial);
+    m.position.copy(lpsToScene(p));
+    m.name = 'point';
+    m.userData.index = i;
+    return m;
+  });
+}
+
 /** A colour from blue (0) to red (1) for a force relative to the largest. */
 export function forceColour(fraction) {
   return new Color().setHSL((1 - Math.min(1, Math.max(0, fraction))) * 0.66, 0.85, 0.5);

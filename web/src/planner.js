@@ -1,14 +1,22 @@
-// The plan being edited: its state (procedure, parameters, centre, orientation), laid on the
-// model by the server (POST /api/plan/new, the same as `caps plan new`) whenever it changes, its
-// check shown in plain words, its lines drawn on the skin; placed by clicking, moved by dragging
-// the handle or with the arrow keys, rotated with R; undo and redo.
+// The plan being edited, laid on the model by the server (POST /api/plan/new, the same as
+// `caps plan new`) whenever it changes, its check shown in plain words, its lines drawn on the
+// skin; undo and redo. Three kinds of state:
+//   a template: {procedure, parameters, orientation, at | at_xyz, sutures} placed by clicking,
+//     moved by dragging the handle or with the arrow keys, rotated with R;
+//   a free incision: {procedure: 'incision', points: [[x, y, z] LPS mm], sutures}, drawn by
+//     clicking along the skin (`caps plan new incision --points-xyz`), points dragged to move;
+//   a loaded plan the page cannot redraw: {procedure: 'loaded', plan, sutures}.
+// `sutures` (the plan file's pairs) replaces the procedure's own when not null; the plan is then
+// checked again with them (POST /api/plan/check).
 import { api } from './api.js';
 import { sceneToLps } from './frames.js';
 import { History } from './history.js';
-import { handleObject, planObjects } from './overlays.js';
+import { handleObject, planObjects, pointHandles } from './overlays.js';
+import { edgePair, pickEdge, remapIncisionSutures, sutureMarks } from './sutures.js';
 
 const kRotateStepDeg = 5;
 const kClickSlopPx = 4;
+export const kIncision = 'incision';
 
 export class Planner {
   /**
@@ -18,6 +26,8 @@ export class Planner {
    */
   constructor(viewer, templates, ui) {
     this.viewer = viewer;
+    this.showSutures = true;
+    this.picking = null;     // choosing a suture pair: {replace: index | -1, first: edge | -1}
     this.templates = new Map(templates.map((t) => [t.name, t]));
     this.ui = ui;
     this.state = null;       // null until placed
@@ -40,11 +50,120 @@ export class Planner {
       .map((p) => [p.name, p.default]));
   }
 
-  /** Chooses the procedure from the menu (keeps the centre and orientation if placed). */
+  /** Chooses the procedure from the menu: a template keeps the plan's centre and orientation
+   * if one is placed; a free incision starts with no point. The sutures go back to the
+   * procedure's own. */
   setProcedure(name) {
     this.procedure = name;
+    this.cancelPick();
+    if (name === kIncision) {
+      this.parameters = {};
+      this.change({ procedure: kIncision, points: [], sutures: null });
+      return;
+    }
     this.parameters = this.defaults(name);
-    if (this.state) this.change({ ...this.state, procedure: name, parameters: { ...this.parameters } });
+    if (!this.state) return;
+    if (this.state.procedure === kIncision || this.state.procedure === 'loaded') {
+      const centre = this.lines?.centre;
+      if (!centre) {
+        this.change(null);
+        return;
+      }
+      this.change({ procedure: name, parameters: { ...this.parameters },
+        orientation: centre.orientation_deg, at: `${centre.theta_deg},${centre.z_mm}`, at_xyz: '',
+        sutures: null });
+      return;
+    }
+    this.change({ ...this.state, procedure: name, parameters: { ...this.parameters }, sutures: null });
+  }
+
+  get isIncision() {
+    return this.state?.procedure === kIncision;
+  }
+
+  /** A free incision: a new one with no point. */
+  newIncision() {
+    this.change({ procedure: kIncision, points: [], sutures: null });
+  }
+
+  /** A free incision's points changed: its sutures follow their segments (remapIncisionSutures). */
+  withPoints(points) {
+    const from = this.state.points.length;
+    let sutures = this.state.sutures;
+    if (sutures) {
+      const r = remapIncisionSutures(sutures, from, points.length);
+      sutures = r.sutures;
+      if (r.dropped) this.ui.onNotice?.(`${r.dropped} suture pair(s) on the removed segment dropped.`);
+    }
+    return { ...this.state, points, sutures };
+  }
+
+  /** Removes the last point of a free incision. */
+  removeLastPoint() {
+    if (!this.isIncision || !this.state.points.length) return;
+    this.change(this.withPoints(this.state.points.slice(0, -1)));
+  }
+
+  // ---- sutures -------------------------------------------------------------------------------
+
+  /** The plan's suture pairs as the plan file writes them. */
+  get sutures() {
+    return this.state?.sutures ?? this.plan?.sutures ?? [];
+  }
+
+  setSutures(sutures) {
+    if (this.state) this.change({ ...this.state, sutures });
+  }
+
+  removeSuture(k) {
+    this.setSutures(this.sutures.filter((_, i) => i !== k));
+  }
+
+  /** Back to the procedure's own sutures (a free incision: none). */
+  resetSutures() {
+    this.setSutures(null);
+  }
+
+  /** Starts choosing a pair by clicking its two sides; `replace`: the pair it replaces, or -1. */
+  startPick(replace = -1) {
+    if (!this.lines?.loop) return;
+    this.picking = { replace, first: -1 };
+    this.ui.onPick?.(this.picking);
+    this.drawOverlay();
+  }
+
+  cancelPick() {
+    if (!this.picking) return;
+    this.picking = null;
+    this.ui.onPick?.(null);
+    this.drawOverlay();
+  }
+
+  // A click at `lps` while choosing a pair.
+  pickAt(lps) {
+    const loop = this.lines.loop;
+    const edge = pickEdge(loop, lps);
+    if (edge < 0) {
+      this.ui.onNotice?.('Click on the skin just beside the cut, on the side to sew.');
+      return;
+    }
+    if (this.picking.first < 0) {
+      this.picking.first = edge;
+      this.ui.onPick?.(this.picking);
+      this.drawOverlay();
+      return;
+    }
+    if (edge === this.picking.first) {
+      this.ui.onNotice?.('That is the same side; click the side it is sewn to.');
+      return;
+    }
+    const pair = edgePair(this.picking.first, edge, loop.nodes.length);
+    const sutures = [...this.sutures];
+    if (this.picking.replace >= 0) sutures[this.picking.replace] = pair;
+    else sutures.push(pair);
+    this.picking = null;
+    this.ui.onPick?.(null);
+    this.setSutures(sutures);
   }
 
   setParameter(name, value) {
@@ -61,24 +180,25 @@ export class Planner {
     if (this.state) this.change({ ...this.state, orientation: deg });
   }
 
-  /** Places the current procedure with its centre at the skin point `lps` (mm). */
+  /** A click on the skin at `lps` (mm): a free incision gains a point there; a template is
+   * placed with its centre there. */
   placeAt(lps) {
+    if (this.procedure === kIncision) {
+      this.change(this.isIncision ? this.withPoints([...this.state.points, lps])
+        : { procedure: kIncision, points: [lps], sutures: null });
+      return;
+    }
     const at_xyz = lps.map((v) => v.toFixed(2)).join(',');
-    const base = this.state ?? { orientation: 90 };
+    const base = this.state?.procedure === this.procedure ? this.state : { orientation: 90 };
     this.change({ procedure: this.procedure, parameters: { ...this.parameters },
-      orientation: base.orientation, at_xyz, at: '' });
+      orientation: base.orientation ?? 90, at_xyz, at: '', sutures: base.sutures ?? null });
   }
 
   /** A new state: recorded for undo (unless `transient`), then laid and checked. */
   change(state, { transient = false } = {}) {
     if (!transient && this.state) this.history.push(this.dragStart ?? this.state);
     if (!transient) this.dragStart = null;
-    this.state = state;
-    this.procedure = state.procedure;
-    this.parameters = { ...state.parameters };
-    this.ui.onState(state);
-    this.ui.onPlanChanged();
-    return this.update();
+    return this.restore(state);
   }
 
   undo() {
@@ -93,11 +213,11 @@ export class Planner {
 
   restore(s) {
     this.state = s;
-    this.procedure = s.procedure;
-    this.parameters = { ...s.parameters };
+    if (s && s.procedure !== 'loaded') this.procedure = s.procedure;
+    this.parameters = { ...(s?.parameters ?? {}) };
     this.ui.onState(s);
     this.ui.onPlanChanged();
-    this.update();
+    return this.update();
   }
 
   /** Lays the state on the model; only the latest state is sent when several come quickly. */
@@ -107,18 +227,34 @@ export class Planner {
       return this.settled;
     }
     const s = this.state;
-    const request = { procedure: s.procedure, orientation: s.orientation, parameters: s.parameters };
-    if (s.at) request.at = s.at;
-    else request.at_xyz = s.at_xyz;
+    if (!s || (s.procedure === kIncision && s.points.length < 2)) {
+      // Nothing to lay yet: a free incision's first point is drawn by the page alone.
+      this.show(null, null, null);
+      document.body.dataset.check = 'none';
+      return this.settled;
+    }
     document.body.dataset.check = 'pending';
     const t0 = performance.now();
     this.inFlight = (async () => {
       try {
-        const plan = await api.planNew(request);
+        let plan;
+        if (s.procedure === 'loaded') plan = s.plan;
+        else if (s.procedure === kIncision)
+          plan = await api.planNew({ procedure: kIncision,
+            points_xyz: s.points.map((p) => p.map((v) => v.toFixed(2)).join(',')).join(';') });
+        else {
+          const request = { procedure: s.procedure, orientation: s.orientation, parameters: s.parameters };
+          if (s.at) request.at = s.at;
+          else request.at_xyz = s.at_xyz;
+          plan = await api.planNew(request);
+        }
+        // The user's sutures (or a loaded plan's) are checked with the plan they belong to.
+        if (s.sutures || s.procedure === 'loaded')
+          plan = await api.planCheck({ ...plan, sutures: s.sutures ?? plan.sutures });
         const lines = await api.planLines(plan);
         this.lastLatencyMs = performance.now() - t0;
         // Later moves and keys start from the plan's own (theta, z).
-        if (this.state === s && !s.at)
+        if (this.state === s && s.at === '')
           s.at = `${plan.frame.theta_deg.toFixed(3)},${plan.frame.z_mm.toFixed(3)}`;
         this.show(plan, lines, null);
       } catch (e) {
@@ -140,27 +276,60 @@ export class Planner {
   show(plan, lines, message) {
     this.plan = plan;
     this.lines = lines;
-    const objects = lines ? planObjects(lines, { refused: !plan }) : [];
-    if (lines) objects.push(handleObject(lines.centre.lps));
+    this.drawOverlay();
+    this.ui.onCheck(plan, message, this.state);
+  }
+
+  // The plan's lines, its handles (the centre's, or a free incision's points) and its sutures.
+  drawOverlay() {
+    const lines = this.lines, s = this.state;
+    const objects = lines ? planObjects(lines, { refused: !this.plan }) : [];
+    if (s?.procedure === kIncision) {
+      objects.length = 0;
+      if (lines && s.points.length >= 2) objects.push(...planObjects({ ...lines, points_lps: [] },
+        { refused: !this.plan }));
+      objects.push(...pointHandles(s.points));
+    } else if (lines && s && s.procedure !== 'loaded') objects.push(handleObject(lines.centre.lps));
+    if (lines?.loop && this.plan && (this.showSutures || this.picking))
+      objects.push(...sutureMarks(lines.loop, this.plan.suture_quadruples ?? [],
+        { highlight: this.picking?.first ?? -1 }));
     this.handle = objects.find((o) => o.name === 'handle') ?? null;
+    this.pointHandles = objects.filter((o) => o.name === 'point');
     this.viewer.setOverlay(objects);
-    this.ui.onCheck(plan, message);
+  }
+
+  setShowSutures(on) {
+    this.showSutures = on;
+    this.drawOverlay();
   }
 
   /** A plan file loaded by the user: checked on the server, then edited from its centre. */
-  async load(planJson) {
-    const plan = await api.planCheck(planJson);
+  async load(planJson, fileName) {
+    const plan = await api.planCheck(planJson, undefined, fileName);
     const lines = await api.planLines(plan);
     const name = plan.procedure?.name ?? plan.procedure;
     if (this.state) this.history.push(this.state);
+    const path = plan.paths?.[0] ?? [];
+    const oneCut = plan.paths?.length === 1 && path.every((p, i) => p === i) &&
+      path.length === plan.points.length && !plan.excisions?.length && !plan.flaps?.length;
     if (this.templates.has(name)) {
+      // The template's own sutures are kept as the state's only when they were changed.
+      const own = await api.planNew({ procedure: name, parameters: { ...plan.procedure.parameters },
+        orientation: plan.frame.orientation_deg, at: `${plan.frame.theta_deg},${plan.frame.z_mm}` });
+      const changed = JSON.stringify(own.sutures) !== JSON.stringify(plan.sutures);
       this.state = { procedure: name, parameters: { ...plan.procedure.parameters },
         orientation: plan.frame.orientation_deg,
-        at: `${plan.frame.theta_deg},${plan.frame.z_mm}`, at_xyz: '' };
+        at: `${plan.frame.theta_deg},${plan.frame.z_mm}`, at_xyz: '',
+        sutures: changed ? plan.sutures : null };
       this.procedure = name;
-      this.parameters = { ...this.state.parameters };
-      this.ui.onState(this.state);
+    } else if (oneCut) {
+      this.state = { procedure: kIncision, points: lines.points_lps, sutures: plan.sutures ?? [] };
+      this.procedure = kIncision;
+    } else {
+      this.state = { procedure: 'loaded', plan, sutures: null };
     }
+    this.parameters = { ...(this.state.parameters ?? {}) };
+    this.ui.onState(this.state);
     this.ui.onPlanChanged();
     this.show(plan, lines, null);
     document.body.dataset.check = 'ok';
@@ -188,7 +357,12 @@ export class Planner {
     if (!this.state || e.target.closest?.('input, select, textarea')) return false;
     const step = e.shiftKey ? 5 : 1;
     const k = e.key;
-    if (k === 'ArrowUp') this.moveBy(0, step);
+    if (k === 'Escape' && this.picking) this.cancelPick();
+    else if (this.isIncision) {
+      if (k === 'Backspace' || k === 'Delete') this.removeLastPoint();
+      else return false;
+    } else if (this.state.procedure === 'loaded') return false;
+    else if (k === 'ArrowUp') this.moveBy(0, step);
     else if (k === 'ArrowDown') this.moveBy(0, -step);
     else if (k === 'ArrowRight') this.moveBy(step * this.thetaDegPerMm(), 0);
     else if (k === 'ArrowLeft') this.moveBy(-step * this.thetaDegPerMm(), 0);
@@ -198,14 +372,18 @@ export class Planner {
     return true;
   }
 
-  // Click on the skin: place; drag the handle: move (one undo step per drag); else orbit.
+  // Click on the skin: place (or add a point, or pick a suture's side); drag the handle or an
+  // incision's point: move it (one undo step per drag); else orbit.
   bindPointer() {
     const el = this.viewer.renderer.domElement;
     let down = null;
     el.addEventListener('pointerdown', (e) => {
       down = { x: e.clientX, y: e.clientY, drag: false };
-      if (this.handle && this.viewer.hits(e, [this.handle]).length) {
+      if (this.picking) return;
+      const point = this.pointHandles?.length ? this.viewer.hits(e, this.pointHandles)[0] : null;
+      if (point || (this.handle && this.viewer.hits(e, [this.handle]).length)) {
         down.drag = true;
+        down.point = point ? point.object.userData.index : -1;
         this.dragStart = structuredClone(this.state);
         this.viewer.controls.enabled = false;
         el.setPointerCapture(e.pointerId);
@@ -214,8 +392,13 @@ export class Planner {
     el.addEventListener('pointermove', (e) => {
       if (!down?.drag) return;
       const p = this.viewer.pickSkin(e);
-      if (p) {
-        const at_xyz = sceneToLps(p).map((v) => v.toFixed(2)).join(',');
+      if (!p) return;
+      const lps = sceneToLps(p);
+      if (down.point >= 0) {
+        const points = this.state.points.map((q, i) => (i === down.point ? lps : q));
+        this.change({ ...this.state, points }, { transient: true });
+      } else {
+        const at_xyz = lps.map((v) => v.toFixed(2)).join(',');
         this.change({ ...this.state, at_xyz, at: '' }, { transient: true });
       }
     });
@@ -228,7 +411,8 @@ export class Planner {
         this.dragStart = null;
       } else if (moved <= kClickSlopPx) {
         const p = this.viewer.pickSkin(e);
-        if (p) this.placeAt(sceneToLps(p));
+        if (p && this.picking) this.pickAt(sceneToLps(p));
+        else if (p) this.placeAt(sceneToLps(p));
       }
       down = null;
     });

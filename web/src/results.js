@@ -12,11 +12,16 @@ const kPlaySeconds = 2;
 
 const fmt = (v, digits = 2) => (Number.isFinite(v) ? v.toFixed(digits) : '–');
 
-/** A short name for a plan: the procedure and its parameters. */
-export function planLabel(plan) {
+/** A short name for a plan: the procedure and its parameters (a drawn cut: its points);
+ * `ownSutures`: a template sewn with the user's pairs rather than its own. */
+export function planLabel(plan, ownSutures = false) {
   const p = plan.procedure ?? {};
+  const pairs = plan.sutures?.length ?? 0;
+  if ((p.name ?? 'custom') === 'custom')
+    return `drawn cut (${plan.points?.length ?? 0} points, ${pairs} suture pair${pairs === 1 ? '' : 's'})`;
   const params = Object.entries(p.parameters ?? {}).map(([k, v]) => `${k} ${+v.toFixed(1)}`);
-  return `${p.name ?? 'custom'} (${params.join(', ')}; ${+plan.frame.orientation_deg.toFixed(0)}°)`;
+  return `${p.name} (${params.join(', ')}; ${+plan.frame.orientation_deg.toFixed(0)}°` +
+    `${ownSutures ? `; your ${pairs} suture pair${pairs === 1 ? '' : 's'}` : ''})`;
 }
 
 export class Results {
@@ -31,7 +36,7 @@ export class Results {
   }
 
   /** Runs the simulation of `plan` with `options`; adds its row and shows it in view A. */
-  async simulate(plan, options) {
+  async simulate(plan, options, { ownSutures = false } = {}) {
     const e = this.el;
     e.progress.hidden = false;
     e.progressText.textContent = 'starting…';
@@ -48,17 +53,24 @@ export class Results {
     const t0 = performance.now();
     try {
       const result = await api.simulate(plan, options);
+      const t1 = performance.now();
       e.progressText.textContent = 'loading the post-operative skin…';
-      const view = await api.resultView(result.result_id);
-      const file = await api.resultFile(result.result_id, 'result.json');
+      const [view, file] = await Promise.all([api.resultView(result.result_id),
+        api.resultFile(result.result_id, 'result.json')]);
+      const t2 = performance.now();
       const row = {
-        n: this.rows.length + 1, plan, result, view,
+        n: this.rows.length + 1, plan, result, view, ownSutures,
         sutures: file.sutures_at_spacing?.sutures ?? [],
         skins: [null, null],
-        seconds: (performance.now() - t0) / 1000,
       };
       this.rows.push(row);
       await this.showRow(row, 0);
+      await this.views[0].nextFrame();  // on screen once the frame with it is drawn
+      const t3 = performance.now();
+      row.seconds = (t3 - t0) / 1000;
+      // Where the time went, for the latency benchmark (docs/benchmarks.md).
+      row.timing = { simulate_s: (t1 - t0) / 1000, view_s: (t2 - t1) / 1000, draw_s: (t3 - t2) / 1000 };
+      this.showSummary(row);
       this.renderTable();
       document.body.dataset.simulation = 'done';
       return row;
@@ -77,14 +89,19 @@ export class Results {
     if (which === 1) this.onShowB?.();
     if (!row.skins[which]) row.skins[which] = await loadResultSkin(row.view, this.modelSkin);
     const skin = row.skins[which];
-    skin.show(this.colouring === 'tension' ? 'tension' : 'skin');
     skin.setMorph(this.morph);
+    this.showColouring(skin, viewer);
     viewer.setSkin(skin.mesh);
+    // View B's first skin frames B alone; the views move together, so B takes A's camera.
+    if (which === 1) viewer.copyCamera(this.views[0]);
     viewer.setOverlay(sutureObjects(row.sutures));
     this.shown[which] = row;
     document.getElementById(which ? 'label-b' : 'label-a').textContent =
-      `${which ? 'B' : 'A'}: #${row.n} ${planLabel(row.plan)}`;
-    if (which === 0) this.showSummary(row);
+      `${which ? 'B' : 'A'}: #${row.n} ${planLabel(row.plan, row.ownSutures)}`;
+    if (which === 0) {
+      this.showSummary(row);
+      this.onShown?.(row);
+    }
     this.el.result.hidden = false;
     this.renderTable();
   }
@@ -96,7 +113,69 @@ export class Results {
     this.views[0].setSkin(this.modelSkin.mesh, { pickable: true });
     document.getElementById('label-a').textContent = '';
     this.el.result.hidden = true;
+    this.onShown?.(null);
     this.renderTable();
+  }
+
+  /** The files of `caps render` for a row's result (rendered once on the server), with the plan
+   * and result.json: [{name, url}]. */
+  async exportFiles(row) {
+    row.exported ??= api.resultExport(row.result.result_id);
+    try {
+      return (await row.exported).files;
+    } catch (e) {
+      row.exported = null;
+      throw e;
+    }
+  }
+
+  /** A self-contained HTML page on a row: the plan, the forces, the warnings and the pictures
+   * before and after (from exportFiles()). */
+  async report(row) {
+    const files = await this.exportFiles(row);
+    const pictures = {};
+    await Promise.all(files.filter((f) => f.name.endsWith('.png')).map(async (f) => {
+      const blob = await (await fetch(f.url)).blob();
+      pictures[f.name] = await new Promise((resolve) => {
+        const reader = new FileReader();
+        reader.onload = () => resolve(reader.result);
+        reader.readAsDataURL(blob);
+      });
+    }));
+    const r = row.result, s = r.sutures_at_spacing ?? {}, p = row.plan;
+    const figure = (name, caption) => (pictures[name]
+      ? `<figure><img src="${pictures[name]}" alt="${escapeHtml(caption)}"><figcaption>${escapeHtml(caption)}</figcaption></figure>` : '');
+    const rows = [
+      ['Closing force', `${fmt(r.closing_force_n)} N`],
+      ['Largest suture force', `${fmt(s.max_force_per_suture_n)} N (${s.sutures ?? 0} sutures every ${fmt(s.spacing_mm, 1)} mm)`],
+      ['Force per mm of wound', `${fmt(s.force_per_mm_n, 3)} N/mm over ${fmt(s.wound_length_mm, 1)} mm`],
+      ['Skin tension (99th percentile)', `${fmt(row.view.tension_scale_max_kpa, 1)} kPa`],
+      ['Largest displacement', `${fmt(r.max_displacement_mm)} mm`],
+      ['Excised area', `${fmt(row.view.wound_area_mm2?.pre, 1)} mm²`],
+      ['Model', `${r.elements} elements, ${escapeHtml(r.material)}`],
+    ].map(([k, v]) => `<tr><th>${k}</th><td>${v}</td></tr>`).join('');
+    const sutures = row.sutures.map((x, i) => `<tr><td>${i + 1}</td><td>${fmt(x.force_n, 3)} N</td></tr>`).join('');
+    const warnings = [...(p.check?.warnings ?? []), ...(r.warnings ?? [])]
+      .map((w) => `<li>${escapeHtml(w)}</li>`).join('');
+    return `<!doctype html><html lang="en"><head><meta charset="utf-8">
+<title>caps: ${escapeHtml(planLabel(p, row.ownSutures))}</title>
+<style>body{font-family:"DejaVu Sans",Arial,sans-serif;max-width:1000px;margin:2em auto;color:#222}
+table{border-collapse:collapse}th,td{border:1px solid #ccd;padding:3px 8px;text-align:left}
+.row{display:flex;gap:10px;flex-wrap:wrap}figure{margin:0;flex:1 1 30%}img{width:100%;border:1px solid #ddd}</style></head>
+<body><h1>${escapeHtml(planLabel(p, row.ownSutures))}</h1>
+<p>Planned on ${escapeHtml(p.model ?? '')}; centre at theta ${fmt(p.frame.theta_deg, 1)}°, z ${fmt(p.frame.z_mm, 1)} mm;
+cut ${fmt(p.check?.cut_length_mm, 1)} mm on the skin; ${p.sutures?.length ?? 0} suture pairs. Simulated with caps
+(${new Date().toISOString().slice(0, 10)}).</p>
+<table>${rows}</table>
+${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
+<h2>Before and after</h2>
+<div class="row">${figure('pre_plan.png', 'before, looking down on the plan')}${figure('post_plan.png', 'after the closure')}${figure('tension_plan.png', 'skin tension after the closure')}</div>
+<div class="row">${figure('pre_oblique.png', 'before, oblique')}${figure('post_oblique.png', 'after, oblique')}${figure('tension_oblique.png', 'skin tension, oblique')}</div>
+<h2>Forces per suture</h2><table><tr><th>suture</th><th>force</th></tr>${sutures}</table>
+<p>Files: the plan (${escapeHtml(`${p.procedure?.name ?? 'plan'}-plan.json`)}) is read by <code>caps plan check</code> and
+<code>caps simulate</code>; result.json is what <code>caps simulate</code> writes.</p>
+</body></html>
+`;
   }
 
   /** Pre (0) to post (1) on every result shown. */
@@ -121,12 +200,19 @@ export class Results {
     requestAnimationFrame(step);
   }
 
+  // The skin's colours as chosen (the tension is read when first shown).
+  async showColouring(skin, viewer) {
+    const name = this.colouring;
+    if (name === 'tension') document.body.dataset.tension = 'loading';
+    await skin.show(name);
+    viewer.requestRender();
+    if (name === 'tension' && this.colouring === 'tension') document.body.dataset.tension = 'shown';
+  }
+
   setTension(on) {
     this.colouring = on ? 'tension' : 'skin';
     this.shown.forEach((row, i) => {
-      if (!row) return;
-      row.skins[i].show(on ? 'tension' : 'skin');
-      this.views[i].requestRender();
+      if (row) this.showColouring(row.skins[i], this.views[i]);
     });
     const row = this.shown[0];
     this.el.tensionLegend.hidden = !on || !row;
@@ -141,7 +227,8 @@ export class Results {
     this.el.summary.innerHTML = `
       <p>Closing force <b id="closing-force">${fmt(r.closing_force_n)} N</b>; ${s.sutures ?? 0}
         sutures every ${fmt(s.spacing_mm, 1)} mm, the largest <b>${fmt(s.max_force_per_suture_n)} N</b>
-        (${fmt(s.force_per_mm_n, 3)} N per mm of wound).</p>
+        (${fmt(s.force_per_mm_n, 3)} N per mm of wound; the dots on the skin are the sutures,
+        blue the smallest force, red the largest).</p>
       <p>Skin tension ${fmt(row.view.tension_scale_max_kpa, 1)} kPa (99th percentile; peak
         ${fmt(row.view.max_skin_tension_kpa, 1)} kPa at a sutured corner); largest displacement
         ${fmt(r.max_displacement_mm)} mm; ${r.elements} elements, ${r.material}; ${fmt(row.seconds, 1)} s.</p>
@@ -161,7 +248,7 @@ export class Results {
       tr.dataset.row = row.n;
       if (this.shown[0] === row) tr.classList.add('shown-a');
       if (this.shown[1] === row) tr.classList.add('shown-b');
-      tr.innerHTML = `<td>${row.n}</td><td>${escapeHtml(planLabel(row.plan))}</td>
+      tr.innerHTML = `<td>${row.n}</td><td>${escapeHtml(planLabel(row.plan, row.ownSutures))}</td>
         <td class="closing">${fmt(r.closing_force_n)}</td>
         <td class="largest">${fmt(r.sutures_at_spacing?.max_force_per_suture_n)}</td>
         <td>${fmt(row.view.tension_scale_max_kpa, 1)}</td>

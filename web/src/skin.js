@@ -60,19 +60,11 @@ export async function loadModelSkin(info) {
 }
 
 /** A simulation's skin (GET /api/results/ID/view) over the model's (`modelSkin`, a ColouredSkin):
- * the part the simulation moved (morph 0 = pre-operative, 1 = post-operative) with, over it, its
- * mesh faces coloured by the skin tension (hidden until shown), and the model's skin without the
- * cells that part replaces. */
+ * the part the simulation moved (morph 0 = pre-operative, 1 = post-operative) and the model's
+ * skin without the cells that part replaces. Its mesh faces coloured by the skin tension are
+ * read when first shown (show('tension'), which resolves once they are drawn). */
 export async function loadResultSkin(view, modelSkin) {
-  fetchOnce(view.tension);  // both files download at once
   const patch = await loadMesh(view.skin);
-  const tension = await loadMesh(view.tension);
-  // Drawn in front of the patch's faces at the same place (they coincide before and after).
-  tension.material.polygonOffset = true;
-  tension.material.polygonOffsetFactor = -2;
-  tension.material.polygonOffsetUnits = -2;
-  tension.visible = false;
-  patch.add(tension);
   const base = modelSkin.mesh.geometry;
   const index = modelSkin.fileIndex.slice();
   for (const q of view.replaced_cells) index.fill(0, 6 * q, 6 * q + 6);  // empty triangles
@@ -83,14 +75,32 @@ export async function loadResultSkin(view, modelSkin) {
   rest.setIndex(new BufferAttribute(index, 1));
   const mesh = new Group();
   mesh.add(new Mesh(rest, modelSkin.mesh.material), patch);
+  let tension = null, morph = 1, wanted = 'skin';
+  const loadTension = async () => {
+    const t = await loadMesh(view.tension);
+    // Drawn in front of the patch's faces at the same place (they coincide before and after).
+    t.material.polygonOffset = true;
+    t.material.polygonOffsetFactor = -2;
+    t.material.polygonOffsetUnits = -2;
+    t.morphTargetInfluences[0] = morph;
+    patch.add(t);
+    return t;
+  };
+  let loading = null;
   return {
     mesh,
-    show(name) {
-      tension.visible = name === 'tension';
+    async show(name) {
+      wanted = name;
+      if (name === 'tension' && !tension) {
+        loading ??= loadTension();
+        tension = await loading;
+      }
+      if (tension) tension.visible = wanted === 'tension';
     },
     setMorph(t) {
+      morph = t;
       patch.morphTargetInfluences[0] = t;
-      tension.morphTargetInfluences[0] = t;
+      if (tension) tension.morphTargetInfluences[0] = t;
     },
   };
 }

@@ -34,10 +34,28 @@ const kViews = {
   oblique: { dir: [0.7, 0.35, 0.7], up: [0, 1, 0] },
 };
 
+// Whether WebGL runs in software (SwiftShader, llvmpipe): there multisampling costs about as much
+// as the rest of the frame (bench/bench_planner_page.mjs: 1.0 s -> 0.4-0.6 s from the result's
+// arrival to its frame drawn, on this 2-core machine), so it is left off.
+function isSoftwareGl() {
+  try {
+    const gl = document.createElement('canvas').getContext('webgl2') ??
+      document.createElement('canvas').getContext('webgl');
+    if (!gl) return false;
+    const info = gl.getExtension('WEBGL_debug_renderer_info');
+    const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+    gl.getExtension('WEBGL_lose_context')?.loseContext();
+    return /swiftshader|llvmpipe|software/i.test(name);
+  } catch {
+    return false;
+  }
+}
+const kAntialias = !isSoftwareGl();
+
 export class Viewer {
   constructor(container) {
     this.container = container;
-    this.renderer = new WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    this.renderer = new WebGLRenderer({ antialias: kAntialias, preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
     this.renderer.setClearColor(new Color(0x1d2327));
     container.appendChild(this.renderer.domElement);
@@ -77,7 +95,22 @@ export class Viewer {
     this.pending = requestAnimationFrame(() => {
       this.pending = 0;
       this.renderer.render(this.scene, this.camera);
-      for (const f of this.listeners) f();
+      for (const f of [...this.listeners]) f();
+    });
+  }
+
+  /** Resolves once the next frame is drawn (asking for one): reading a pixel back waits until
+   * the GL has finished drawing it, not only until it was asked to. */
+  nextFrame() {
+    return new Promise((resolve) => {
+      const once = () => {
+        this.listeners = this.listeners.filter((f) => f !== once);
+        const gl = this.renderer.getContext();
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+        resolve();
+      };
+      this.listeners.push(once);
+      this.requestRender();
     });
   }
 

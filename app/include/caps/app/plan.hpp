@@ -23,20 +23,30 @@ struct PlanResult {
 std::string to_json(const PlanResult& result);
 std::string summary(const PlanResult& result);
 
+/// The procedure name of a free incision (PlanNewRequest): the cut drawn through given points.
+inline constexpr const char* kFreeIncision = "incision";
+
 struct PlanNewRequest {
-  std::string procedure;  ///< a template name or a procedure file (.json)
+  std::string procedure;  ///< a template name, a procedure file (.json) or kFreeIncision
   std::string model, at, at_xyz, output;
+  /// A free incision's points along the cut, in order: "THETA,Z;THETA,Z;..." (deg, mm) or, in
+  /// points_xyz, "X,Y,Z;X,Y,Z;..." (LPS mm, each taken to the skin point in its direction).
+  std::string points, points_xyz;
   double orientation = 0;
   std::map<std::string, double> parameters;  ///< the template's, by name (caps plan templates)
   bool force = false;
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
-    v(r.procedure, {"procedure", "a template (caps plan templates) or a procedure file .json",
+    v(r.procedure, {"procedure",
+                    "a template (caps plan templates), a procedure file .json, or "
+                    "incision (a free cut through --points or --points-xyz)",
                     FieldKind::Positional, "TEMPLATE"});
     v(r.model, {"model", "the patient model directory", FieldKind::Required});
     v(r.at, {"at", "the centre on the skin: THETA,Z (deg, mm)"});
     v(r.at_xyz, {"at_xyz", "the centre as an LPS point X,Y,Z (mm)"});
+    v(r.points, {"points", "incision: the cut's points THETA,Z;THETA,Z;... (deg, mm), in order"});
+    v(r.points_xyz, {"points_xyz", "incision: the cut's points as LPS X,Y,Z;X,Y,Z;... (mm)"});
     v(r.orientation, {"orientation", "deg from superior towards +theta (the patient's left)"});
     v(r.parameters, {"parameters", "template parameter (see caps plan templates)",
                      FieldKind::Parameters});
@@ -45,7 +55,11 @@ struct PlanNewRequest {
   }
 };
 
-/// Lays the procedure on the model, checks it and writes the plan file.
+/// Lays the procedure on the model, checks it and writes the plan file. A free incision
+/// (procedure kFreeIncision) is the "custom" plan of one cutting path through the points given,
+/// straight between them in (theta, z) as every plan's segments, with no sutures (the user adds
+/// them to the file: docs/plan-format.md); its frame is centred at the points' mean and oriented
+/// from the first point towards the last.
 PlanResult run_plan_new(const PlanNewRequest& request, Reporter* reporter = nullptr);
 
 struct PlanCheckRequest {

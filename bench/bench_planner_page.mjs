@@ -1,0 +1,77 @@
+// The planner's latency in the browser (docs/benchmarks.md, "Planner latency"): `caps serve` on a
+// model, the page in Debian's chromium headless (software GL), the demo's Z-plasty (at 30,105,
+// length 15, orientation 90) laid through the page, then Simulate clicked N times; for each, the
+// time from the click to the post-operative skin drawn on screen, split into the simulate request,
+// the result's view (its skin .glb written and result.json) and loading and drawing it.
+//   node bench/bench_planner_page.mjs build/tools/caps out/cranium build/web/dist [N] [OPTIONS_JSON]
+// OPTIONS_JSON: the simulate options, e.g. '{"material": "neo-hookean"}' (default: the page's).
+import { spawn } from 'node:child_process';
+import { mkdtempSync, rmSync } from 'node:fs';
+import { createRequire } from 'node:module';
+import { tmpdir } from 'node:os';
+import { dirname, join } from 'node:path';
+import { fileURLToPath } from 'node:url';
+
+const here = dirname(fileURLToPath(import.meta.url));
+const require = createRequire(join(here, '..', 'web', 'package.json'));
+const { chromium } = require('playwright-core');
+
+const [caps, model, webRoot, runs = '5', optionsJson = '{}'] = process.argv.slice(2);
+const server = spawn(caps, ['serve', model, '--port', '0', '--web-root', webRoot],
+  { stdio: ['ignore', 'pipe', 'pipe'] });
+const url = await new Promise((resolve, reject) => {
+  let text = '';
+  const read = (chunk) => {
+    text += chunk;
+    const m = text.match(/http:\/\/127\.0\.0\.1:\d+\//);
+    if (m) resolve(m[0]);
+  };
+  server.stdout.on('data', read);
+  server.stderr.on('data', read);
+  server.on('exit', (code) => reject(new Error(`caps serve exited (${code}):\n${text}`)));
+});
+const profile = mkdtempSync(join(tmpdir(), 'caps-chromium-'));
+const browser = await chromium.launchPersistentContext(profile, {
+  executablePath: process.env.CAPS_CHROMIUM ?? '/usr/bin/chromium',
+  headless: true,
+  args: ['--headless', '--no-sandbox', '--disable-gpu', '--use-angle=swiftshader',
+    '--enable-unsafe-swiftshader', '--no-first-run', '--disable-background-networking'],
+  viewport: { width: 1400, height: 850 },
+});
+const median = (v) => [...v].sort((a, b) => a - b)[Math.floor(v.length / 2)];
+try {
+  const page = browser.pages()[0] ?? (await browser.newPage());
+  const t0 = Date.now();
+  await page.goto(url);
+  await page.waitForSelector('body[data-ready="true"]', { timeout: 120000 });
+  console.log(`page open, skin shown: ${((Date.now() - t0) / 1000).toFixed(1)} s`);
+  await page.evaluate(() => window.caps.planner.change({ procedure: 'z-plasty',
+    parameters: { length: 15, angle: 60 }, orientation: 90, at: '30,105', at_xyz: '', sutures: null }));
+  await page.waitForSelector('body[data-check="ok"]');
+  const options = JSON.parse(optionsJson);
+  if (options.material) await page.selectOption('#material', options.material);
+  if (options.mesh_size) await page.selectOption('#mesh-size', String(options.mesh_size));
+  const rows = [];
+  for (let i = 0; i < Number(runs); ++i) {
+    await page.click('#simulate');
+    await page.waitForFunction((n) => window.caps.results.rows.length === n &&
+      document.body.dataset.simulation === 'done', i + 1, { timeout: 900000 });
+    const row = await page.evaluate((n) => {
+      const r = window.caps.results.rows[n];
+      return { seconds: r.seconds, ...r.timing, server: r.result.timings_s, view: r.view.timings_s,
+        subdivisions: r.view.subdivisions, force: r.result.closing_force_n };
+    }, i);
+    rows.push(row);
+    console.log(`#${i + 1}: ${row.seconds.toFixed(2)} s on screen (simulate ${row.simulate_s.toFixed(2)} s ` +
+      `[solve ${row.server.solve.toFixed(2)} s; ${JSON.stringify(row.server.steps)}], view ${row.view_s.toFixed(2)} s [skin ` +
+      `${row.view.skin.toFixed(2)} s, ${row.subdivisions} subdivisions], load and draw ` +
+      `${row.draw_s.toFixed(2)} s); closing force ${row.force.toFixed(2)} N`);
+  }
+  console.log(`median of ${rows.length}: ${median(rows.map((r) => r.seconds)).toFixed(2)} s on screen ` +
+    `(simulate ${median(rows.map((r) => r.simulate_s)).toFixed(2)} s, view ` +
+    `${median(rows.map((r) => r.view_s)).toFixed(2)} s, load and draw ${median(rows.map((r) => r.draw_s)).toFixed(2)} s)`);
+} finally {
+  await browser.close();
+  server.kill('SIGTERM');
+  rmSync(profile, { recursive: true, force: true });
+}
