@@ -418,8 +418,11 @@ TEST(Simulate, VYAdvancementPushesTheFlapAlongItsAxis) {
   const double tip = u(2).dot(axis), junction = u(7).dot(axis);
   std::printf("V-Y: flap tip advances %.2f mm, the stem's end comes back %.2f mm; tip sideways %.3f mm\n",
               tip, -junction, u(2).dot(lateral));
-  EXPECT_GT(tip, 1.0);
-  EXPECT_LT(junction, -1.0);
+  // Measured: the tip 3.55 mm forward, the stem's end 0.98 mm back (the flap, freed whole, is
+  // the mobile part; before the lips of zero-area cuts were fixed the mesher sewed the other lips).
+  EXPECT_GT(tip, 2.0);
+  EXPECT_LT(junction, -0.5);
+  EXPECT_GT(tip, -junction);
   EXPECT_LT(std::abs(u(2).dot(lateral)), 0.05 * u(2).norm());
   EXPECT_GT(sim.result.total_suture_force_n, 0.0);
 }
@@ -428,8 +431,8 @@ TEST(SurfaceMesher, VYFlapIsMeshedWithoutALadder) {
   // The V-Y template's defaults (arms 20 mm at 50 deg, advance 6 mm) on the cylinder, border
   // nodes every 2 mm. Stage 1 alone (stage1_min_angle_deg = 0, the paper) zips the flap, the wedge
   // between the arms, into a ladder of thin triangles across it; the default rebuilds that region
-  // with interior points. Measured inside the flap: stage 1 alone corners 3.9-115 deg, edge ratio
-  // max 13.8; rebuilt 26.3-113.7 deg, max 2.18 (whole mesh 3.9 -> 26.3 deg); docs/mesher.md.
+  // with interior points. Measured inside the flap: stage 1 alone corners 6.4-115 deg, edge ratio
+  // max 8.45; rebuilt 31.0-107.6 deg, max 1.90 (whole mesh 6.4 -> 31.0 deg); docs/mesher.md.
   const PatientModel model = constant_cylinder();
   const plan::Plan p =
       plan::place_procedure(plan::layout_procedure("v-y-advancement", {}), model, 0.0, 40.0, 0.0);
@@ -459,8 +462,8 @@ TEST(SurfaceMesher, VYFlapIsMeshedWithoutALadder) {
               q0.n_triangles, q0.min_angle_deg, q0.max_angle_deg, q0.max_aspect_ratio);
   std::printf("V-Y flap, rebuilt:       %d triangles, corners %.1f-%.1f deg, edge ratio max %.2f\n",
               q.n_triangles, q.min_angle_deg, q.max_angle_deg, q.max_aspect_ratio);
-  EXPECT_LT(q0.min_angle_deg, 6.0);
-  EXPECT_GT(q0.max_aspect_ratio, 10.0);
+  EXPECT_LT(q0.min_angle_deg, 8.0);
+  EXPECT_GT(q0.max_aspect_ratio, 6.0);
   EXPECT_GT(q.min_angle_deg, 20.0);
   EXPECT_LT(q.max_aspect_ratio, 3.0);
   EXPECT_NEAR(area, area0, 1e-9 * area0);      // the same region
