@@ -555,6 +555,15 @@ class RayCaster {
     base.min_peak = bone_level_default_;
     if (edge_method_) {
       base = march_inward(ray, r_s, samples, true);
+      // Bone that reaches the threshold starts from the threshold's crossing, as with the
+      // threshold method, so the soft-tissue plateau (and the skin's edge) are sampled alike.
+      if (std::isfinite(base.r_bone)) {
+        const auto I = [&](double r) { return static_cast<double>(intensity_(ray.at(r))); };
+        const double rb = crossing_inward(I, std::min(r_s, base.r_bone + 2 * w_),
+                                          std::max(0.0, base.r_bone - 2 * w_), fine_,
+                                          bone_level_default_);
+        if (std::isfinite(rb)) base.r_bone = rb;
+      }
     } else {
       base.r_bone = bone_crossing(ray, r_s);
       if (!std::isfinite(base.r_bone) && cavity_base_) base = march_inward(ray, r_s, samples, false);
