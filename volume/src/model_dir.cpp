@@ -471,6 +471,20 @@ void write_model_directory(const ModelContent& m, const ModelProvenance& c, cons
   out.commit();
 }
 
+namespace {
+
+// ", found along the rays by its edge (floor 150 HU)" when model.json's thickness.base says so.
+std::string bone_along_rays(const ModelInfo& info) {
+  const json t = parse_object(info.thickness_json, "thickness");
+  if (!t.contains("base") || !t["base"].is_object()) return {};
+  const json& b = t["base"];
+  if (b.value("bone_method", "") != "edge") return {};
+  return cat("; along the rays by its edge (a peak ", b.value("floor_hu", 0.0),
+             " HU above the soft tissue)");
+}
+
+}  // namespace
+
 std::string model_summary(const fs::path& dir) {
   const ModelInfo info = read_model_info(dir);
   const json source = parse_object(info.source_json, "source");
@@ -486,9 +500,11 @@ std::string model_summary(const fs::path& dir) {
      << "grid       " << g.n_theta << " x " << g.n_z << " (theta x z), dz " << g.dz_mm
      << " mm, z " << g.z0_mm << " .. " << g.z_mm(g.n_z - 1) << " mm\n"
      << "skin       " << seg.at("skin_method").get<std::string>() << "\n"
-     << "bone       " << seg.at("bone_method").get<std::string>() << "\n"
+     << "bone       " << seg.at("bone_method").get<std::string>() << bone_along_rays(info)
+     << "\n"
      << "valid      " << 100.0 * (s.cells ? double(s.valid_cells) / s.cells : 0.0)
-     << " % of cells\n"
+     << " % of cells" << (s.base_cavity ? cat(" (", s.base_cavity, " based on an air cavity)") : "")
+     << "\n"
      << "thickness  median " << s.thickness_median_mm << " mm (5-95%: " << s.thickness_p5_mm
      << " - " << s.thickness_p95_mm << " mm), forehead " << s.forehead_thickness_mm << " mm\n"
      << "face       theta " << s.face_theta_deg << " deg, z " << s.face_z_mm << " mm\n";
