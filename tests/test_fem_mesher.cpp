@@ -705,4 +705,48 @@ TEST(Simulate, ZPlastyTransposesItsFlapsAndLengthensTheCentralLimb) {
     EXPECT_LT(gain, std::sqrt(5 - 4 * std::cos(kPi / 3)) - 1);
     EXPECT_GT(beyond_gain, 0.02);
   }
+
+TEST(Simulate, BaseOverAnAirCavityIsFreeAndTheSurroundingTissueHoldsTheSolve) {
+  // The band z 60..70 has its base on an air cavity (kBaseCavity: valid, no support). An ellipse
+  // on it meshes and closes with a free rim: the bottom nodes over the band are neither fixed nor
+  // sliding, and the base on bone around the band (fixed outside the undermined zone) alone holds
+  // the solve.
+  const PatientModel model = cylinder([](double, double) { return 5.0; }, kBaseCavity);
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0.0, 65.0, 90.0);
+  SimulateOptions o;
+  o.surface.size_mm = 2.0;
+  o.surface.extent_mm = 20.0;
+  o.continuum.rim = RimCondition::Free;
+  const Simulation sim = simulate(model, p, o);
+  const auto& c = sim.wound.continuum;
+  std::set<int> fixed(c.mesh.fixed_nodes.begin(), c.mesh.fixed_nodes.end()), sliding;
+  for (const auto& s : c.mesh.sliding) sliding.insert(s.node);
+  int band = 0, outside_fixed = 0;
+  for (Eigen::Index i = 0; i < c.mesh.n_nodes(); ++i) {
+    if (c.node_level[i] != c.n_layers) continue;
+    const double z = c.node_theta_z(i, 1);
+    if (z > 60.5 && z < 69.5) {
+      ++band;
+      EXPECT_FALSE(fixed.count(static_cast<int>(i))) << "z " << z;
+      EXPECT_FALSE(sliding.count(static_cast<int>(i))) << "z " << z;
+    } else if (z < 55 || z > 75) {
+      outside_fixed += fixed.count(static_cast<int>(i)) > 0;
+    }
+  }
+  EXPECT_GT(band, 10);
+  EXPECT_GT(outside_fixed, 10);
+  EXPECT_LT(sim.max_suture_gap_mm, 1e-6);
+  EXPECT_GT(sim.result.total_suture_force_n, 0.0);
+  // With no support anywhere (the free rim and the whole base over the cavity) the solve refuses.
+  const PatientModel all_cavity = [] {
+    CylindricalMaps m = caps_test::synthetic_maps(caps_test::grid(360, 401, -200, 1),
+                                                  [](double, double) { return kR; },
+                                                  [](double, double) { return 5.0; });
+    for (auto& f : m.flags) f = kBaseCavity;
+    return PatientModel(std::move(m));
+  }();
+  EXPECT_THROW(simulate(all_cavity, plan::place_procedure(
+                   plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}),
+                   all_cavity, 0.0, 0.0, 90.0), o), InvalidInput);
 }

@@ -78,6 +78,9 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   o.maps.n_theta = r.n_theta;
   o.maps.n_z = r.n_z;
   o.maps.bone_cap_mm = r.bone_cap;
+  o.maps.bone.method = parse_bone_method(r.bone_method);
+  o.maps.bone.floor_hu = r.bone_floor;
+  o.maps.bone.cavity_base = !r.no_cavity_base;
   o.maps.layers.measure = !r.no_layers;
   o.maps.layers.fat_level_hu = r.fat_level;
   o.maps.layers.merge_gap_mm = r.fat_merge_gap;
@@ -305,9 +308,10 @@ PhantomResult run_phantom(const PhantomRequest& r, Reporter*) {
   }
   o.head_holder = !r.no_holder;
   o.layered = r.layered;
+  o.thin_bone = r.thin_bone;
   const Volume v = make_phantom(o);
   write_nifti(v, path);
-  return {r.output, o.dims, o.spacing_mm, o.head_holder, o.layered};
+  return {r.output, o.dims, o.spacing_mm, o.head_holder, o.layered, o.thin_bone};
 }
 
 std::string to_json(const PhantomResult& p) {
@@ -315,7 +319,8 @@ std::string to_json(const PhantomResult& p) {
               {"dims", {p.dims[0], p.dims[1], p.dims[2]}},
               {"spacing_mm", {p.spacing_mm[0], p.spacing_mm[1], p.spacing_mm[2]}},
               {"head_holder", p.head_holder},
-              {"layered", p.layered}}
+              {"layered", p.layered},
+              {"thin_bone", p.thin_bone}}
       .dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 

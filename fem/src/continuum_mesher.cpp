@@ -147,7 +147,7 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
                  std::round(z * 10) / 10, " mm lies within ", kEndRowsKeptFree,
                  " rows of the model's top or bottom, too close to draw the skin around it; use "
                  "a smaller {extent} or a wound further from the model's ends");
-    if (const auto f = model.flags_at(theta, z); f != 0)
+    if (const auto f = model.flags_at(theta, z); !flags_valid(f))
       return cat("mesh: the site at theta ", std::round(theta * 10) / 10, " deg, z ",
                  std::round(z * 10) / 10, " mm lies on cells of the model that are not valid (",
                  describe_flags(f), "); move the wound or use a smaller {extent}");
@@ -284,11 +284,21 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
     const Eigen::Vector2d tz = 0.5 * (surface.theta_z.row(v0) + surface.theta_z.row(v1)).transpose();
     return near_border(xy) || in_flap(tz);
   };
-  std::set<int> fixed;
-  for (int v = 0; v < NV; ++v)
-    if (!undermined(v, v)) fixed.insert(vnode(v, 2 * NL));
-  for (int e = 0; e < NE; ++e)
-    if (!undermined(edges[e].first, edges[e].second)) fixed.insert(enode(e, NL));
+  // Over an air cavity (kBaseCavity: nasal cavity, mouth) the base has no support at all: it is
+  // neither fixed nor sliding (docs/fem.md); the tissue around it holds the column.
+  auto over_cavity = [&](int v0, int v1) {
+    const Eigen::Vector2d tz = 0.5 * (surface.theta_z.row(v0) + surface.theta_z.row(v1)).transpose();
+    return (model.flags_at(tz.x(), tz.y()) & kBaseCavity) != 0;
+  };
+  std::set<int> fixed, free_base;
+  for (int v = 0; v < NV; ++v) {
+    if (over_cavity(v, v)) free_base.insert(vnode(v, 2 * NL));
+    else if (!undermined(v, v)) fixed.insert(vnode(v, 2 * NL));
+  }
+  for (int e = 0; e < NE; ++e) {
+    if (over_cavity(edges[e].first, edges[e].second)) free_base.insert(enode(e, NL));
+    else if (!undermined(edges[e].first, edges[e].second)) fixed.insert(enode(e, NL));
+  }
   if (o.rim == RimCondition::Fixed) {
     const auto& rim = surface.outer_border;
     for (std::size_t i = 0; i < rim.size(); ++i) {
@@ -306,7 +316,7 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   if (o.base == BaseCondition::Slide) {
     constexpr double kSlidingStiffness = 1e5;
     auto slide = [&](int bottom, int top) {
-      if (fixed.count(bottom) || sutured.count(bottom)) return;
+      if (fixed.count(bottom) || sutured.count(bottom) || free_base.count(bottom)) return;
       const Eigen::Vector3d up = (mesh.nodes.row(top) - mesh.nodes.row(bottom)).transpose();
       const double height = up.norm();
       if (!(height > 0)) return;

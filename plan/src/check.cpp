@@ -235,10 +235,9 @@ PlanReport check_plan(const Plan& plan, const PatientModel& model) {
       throw InvalidInput(cat(what, " at (theta ", tz[0], " deg, z ", tz[1],
                              " mm) is outside the model (z from ", z_lo, " to ", z_hi, " mm)"));
     const auto f = model.flags_at(tz[0], tz[1]);
-    if (f != 0)
-      throw InvalidInput(cat(what, " at (theta ", tz[0], " deg, z ", tz[1],
-                             " mm) lies on cells without a valid skin and thickness (",
-                             describe_flags(f), "); move the plan where the model is valid"));
+    if (!flags_valid(f))
+      throw InvalidInput(cat(what, " at (theta ", tz[0], " deg, z ", tz[1], " mm) ",
+                             invalid_flags_advice(f)));
   };
   for (int i = 0; i < n; ++i)
     check_at(loop.theta_z[i], cat("loop node ", i, " (point ", loop.point[i], ")"));

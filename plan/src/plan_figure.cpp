@@ -58,7 +58,7 @@ void write_plan_png(const fs::path& path, const Plan& plan, const PatientModel& 
     for (int x = 0; x < W; ++x) {
       const V2 tz = plan.frame.to_theta_z(local(V2(lo.x() + (x + 0.5) / ppm, hi.y() - (y + 0.5) / ppm)));
       Eigen::Vector3d c = colour ? model.color_at(tz[0], tz[1]) : viridis(model.thickness(tz[0], tz[1]) / vmax);
-      if (!model.has_z(tz[1]) || model.flags_at(tz[0], tz[1]) != 0)
+      if (!model.has_z(tz[1]) || !flags_valid(model.flags_at(tz[0], tz[1])))
         c = ((x + y) / 4) % 2 ? Eigen::Vector3d(0.75, 0.75, 0.75) : Eigen::Vector3d(0.9, 0.9, 0.9);
       map.set(x, y, c);
     }

@@ -254,7 +254,7 @@ py::dict load_model(const std::string& dir) {
   for (int j = 0; j < g.n_theta; ++j) theta[j] = g.theta_deg(j);
   for (int k = 0; k < g.n_z; ++k) z[k] = g.z_mm(k);
   std::vector<std::uint8_t> valid(maps.flags.size());
-  for (std::size_t i = 0; i < valid.size(); ++i) valid[i] = maps.flags[i] == 0;
+  for (std::size_t i = 0; i < valid.size(); ++i) valid[i] = flags_valid(maps.flags[i]);
 
   py::dict axis;
   axis["origin_lps"] = Eigen::Vector3d(maps.axis.origin_lps);

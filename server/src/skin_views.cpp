@@ -145,7 +145,7 @@ std::string write_model_skin_glb(const PatientModel& model, SkinColouring colour
     for (Eigen::Index v = 0; v < n; ++v) {
       const Eigen::Vector2d tz = theta_z(v);
       t[v] = model.thickness(tz[0], tz[1]);
-      ok[static_cast<std::size_t>(v)] = model.flags_at(tz[0], tz[1]) == 0;
+      ok[static_cast<std::size_t>(v)] = flags_valid(model.flags_at(tz[0], tz[1]));
       if (ok[static_cast<std::size_t>(v)]) valid.push_back(t[v]);
     }
     const double top = render::scale_top(Eigen::VectorXd::Constant(1, percentile99(valid)), 0);

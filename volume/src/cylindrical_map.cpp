@@ -116,11 +116,39 @@ std::string describe_flags(std::uint8_t flags) {
   if (flags == 0) return "valid";
   static const std::pair<std::uint8_t, const char*> kNames[] = {
       {kNoSkin, "no_skin"}, {kNoBone, "no_bone"}, {kUndercut, "undercut"},
-      {kGrazing, "grazing"}, {kTruncated, "truncated"}};
+      {kGrazing, "grazing"}, {kTruncated, "truncated"}, {kBaseCavity, "base_cavity"}};
   std::string s;
   for (const auto& [bit, name] : kNames)
     if (flags & bit) s += (s.empty() ? "" : "|") + std::string(name);
   return s;
+}
+
+std::string invalid_flags_advice(std::uint8_t flags) {
+  if (flags_valid(flags)) return {};
+  const std::string names = describe_flags(flags & kInvalidFlags);
+  if (flags & (kNoSkin | kTruncated))
+    return cat("is not operable here: the scan does not cover the skin there (", names,
+               "; the scan's field of view ends or cuts the head); move the plan onto scanned "
+               "skin, or build the model from a scan that covers this region");
+  if (flags & (kUndercut | kGrazing))
+    return cat("lies where the model cannot represent the skin yet (", names, "): the ray from "
+               "the head's axis crosses the skin twice (undercut: nostrils, under the nose and "
+               "the chin, ears) or meets it edge-on (grazing), so its cylindrical image does not "
+               "hold this skin; move the plan onto skin that faces the axis, or rebuild the "
+               "model with an axis that sees this region face-on (--axis-origin, --axis-dir)");
+  return cat("has no base under the skin (", names, "): neither bone nor an air cavity was found "
+             "within the bone cap; move the plan, or rebuild the model with a deeper --bone-cap "
+             "or --bone-method edge (finds thin bone)");
+}
+
+const char* bone_method_name(BoneMethod method) {
+  return method == BoneMethod::Threshold ? "threshold" : "edge";
+}
+
+BoneMethod parse_bone_method(const std::string& name) {
+  if (name == "threshold") return BoneMethod::Threshold;
+  if (name == "edge") return BoneMethod::Edge;
+  throw InvalidInput(cat("bone method '", name, "': expected edge or threshold"));
 }
 
 CylinderAxis fit_axis(const Segmentation& seg) {
@@ -392,6 +420,9 @@ void check_map_options(const MapOptions& o) {
                            " is out of range (theta 8..8192, z 4..8192)"));
   if (!(o.bone_cap_mm > 0 && o.bone_cap_mm <= 200))
     throw InvalidInput(cat("bone cap ", o.bone_cap_mm, " mm must be in (0, 200]"));
+  if (!(o.bone.floor_hu >= 50 && o.bone.floor_hu <= 1000))
+    throw InvalidInput(cat("bone floor ", o.bone.floor_hu, " HU must be in [50, 1000] (a peak this "
+                           "far above the soft tissue is bone; 150 by default)"));
   const LayerOptions& l = o.layers;
   if (!(l.fat_level_hu >= -500 && l.fat_level_hu <= 200))
     throw InvalidInput(cat("fat level ", l.fat_level_hu, " HU must be in [-500, 200] (halfway "
@@ -465,6 +496,9 @@ struct Ray {
 // skin's outermost crossing, the first bone under it and the thickness along the normal, with
 // the cell's flags. Cells are independent; cast() may run in parallel for different cells.
 class RayCaster {
+  // Soft tissue's CT number where a ray has too few samples of its own (HU; muscle +20..+80).
+  static constexpr double kNominalSoftHu = 40.0;
+
  public:
   RayCaster(const Volume& v, const Segmentation& seg, const MapOptions& o,
             const std::vector<double>& row_r_max, CylindricalMaps& maps)
@@ -489,8 +523,11 @@ class RayCaster {
         is_ct_(v.modality == Modality::CT),
         skin_thr_(static_cast<float>(seg.skin_threshold)),
         measure_layers_(maps.has_layers()),
-        layer_step_(0.5 * v.geom.spacing_mm.maxCoeff()) {
-    squared_distance_mm2(seg.bone, &nearest_bone_);
+        layer_step_(0.5 * v.geom.spacing_mm.maxCoeff()),
+        edge_method_(is_ct_ && bone_by_threshold_ && o.bone.method == BoneMethod::Edge),
+        cavity_base_(is_ct_ && o.bone.cavity_base),
+        lateral_mm_(v.geom.spacing_mm.maxCoeff()) {
+    squared_distance_mm2(edge_method_ ? thin_bone_mask() : seg.bone, &nearest_bone_);
   }
   RayCaster(const RayCaster&) = delete;
   RayCaster& operator=(const RayCaster&) = delete;
@@ -514,22 +551,46 @@ class RayCaster {
       return;
     }
     double r_s = skin_crossing(ray, r_entry);
-    double r_b = bone_crossing(ray, r_s);
-    const double bone_level = half_maximum_edges(ray, samples, r_s, r_b);
+    Base base;
+    base.min_peak = bone_level_default_;
+    if (edge_method_) {
+      base = march_inward(ray, r_s, samples, true);
+      // Bone that reaches the threshold starts from the threshold's crossing, as with the
+      // threshold method, so the soft-tissue plateau (and the skin's edge) are sampled alike.
+      if (std::isfinite(base.r_bone)) {
+        const auto I = [&](double r) { return static_cast<double>(intensity_(ray.at(r))); };
+        const double rb = crossing_inward(I, std::min(r_s, base.r_bone + 2 * w_),
+                                          std::max(0.0, base.r_bone - 2 * w_), fine_,
+                                          bone_level_default_);
+        if (std::isfinite(rb)) base.r_bone = rb;
+      }
+    } else {
+      base.r_bone = bone_crossing(ray, r_s);
+      if (!std::isfinite(base.r_bone) && cavity_base_) base = march_inward(ray, r_s, samples, false);
+    }
+    double r_b = base.r_bone;
+    const double bone_level = half_maximum_edges(ray, samples, r_s, r_b, base.min_peak);
     maps_.r_skin[c] = static_cast<float>(r_s);
     maps_.measured_skin[c] = 1;
     const Eigen::Vector3d p = ray.at(r_s);
     // The skin point sits on the edge of the acquired data: a cut face, not skin.
     if (near_data_edge(v_, p, 1.5)) maps_.flags[c] |= kTruncated;
-    if (!std::isfinite(r_b)) {
+    const bool on_cavity = !std::isfinite(r_b) && std::isfinite(base.r_cavity);
+    if (!std::isfinite(r_b) && !on_cavity) {
       maps_.flags[c] |= kNoBone;
       return;
+    }
+    if (on_cavity) {
+      r_b = base.r_cavity;
+      maps_.flags[c] |= kBaseCavity;
     }
     maps_.r_bone[c] = static_cast<float>(r_b);
     maps_.thickness[c] = static_cast<float>(r_s - r_b);
     maps_.measured_bone[c] = 1;
     Eigen::Vector3d inward = -ray.d;
-    const double tn = thickness_along_normal(p, r_s - r_b, bone_level, inward);
+    // Over a cavity the nearest bone lies beyond the air: the base is measured along the ray only.
+    const double tn =
+        on_cavity ? r_s - r_b : thickness_along_normal(p, r_s - r_b, bone_level, inward);
     maps_.thickness_normal[c] = static_cast<float>(tn);
     if (measure_layers_) {
       // One pointer captured: std::function keeps it without allocating.
@@ -612,11 +673,90 @@ class RayCaster {
     return r_b;
   }
 
-  // 4. Half-maximum edges: the threshold finds an edge, the level halfway between the
-  // plateaus on either side locates it, independent of the threshold's value. Moves r_s and
-  // r_b onto them; returns the bone's level.
+  // 3b. The edge method (bone_edge) and the cavity base: marches the full-resolution profile
+  // inward from the skin, past its ramp, to the bone cap. With `find_bone`, the first sample at
+  // least floor_hu above the ray's soft-tissue level (the median of the soft-tissue samples met so
+  // far), confirmed laterally, is bone. A sample below the skin's tissue/air threshold past the
+  // skin's ramp is a cavity's air (with cavity_base); its edge is placed at half maximum between
+  // the soft tissue and the cavity's air. Whichever comes first ends the march.
+  struct Base {
+    double r_bone = std::numeric_limits<double>::quiet_NaN();
+    double r_cavity = std::numeric_limits<double>::quiet_NaN();
+    double min_peak = 0;  // the level that found r_bone
+  };
+  Base march_inward(const Ray& ray, double r_s, std::vector<double>& samples,
+                    bool find_bone) const {
+    // Physical bounds of the soft-tissue level (HU): from just above fat to muscle.
+    constexpr double kSoftHu[2] = {0.0, 100.0};
+    constexpr double kFatBelowHu = -30.0;  // samples below this are fat, not the reference
+    constexpr double kTissueAboveHu = -200.0;  // fat and denser: tissue, not the skin's ramp
+    double tissue_mm = 0;
+    const auto I = [&](double r) { return static_cast<double>(intensity_(ray.at(r))); };
+    Base out;
+    out.min_peak = bone_level_default_;
+    samples.clear();
+    auto soft_level = [&] {
+      if (samples.size() < 3) return kNominalSoftHu;
+      std::vector<double> xs = samples;
+      return std::clamp(median(xs), kSoftHu[0], kSoftHu[1]);
+    };
+    const double r_end = std::max(0.0, r_s - o_.bone_cap_mm);
+    for (double s = 0.5 * ramp_; r_s - s >= r_end; s += fine_) {
+      const double r = r_s - s;
+      const double x = I(r);
+      if (find_bone && x >= kSoftHu[0] + o_.bone.floor_hu) {
+        const double soft = soft_level();
+        if (x >= soft + o_.bone.floor_hu && confirmed_laterally(ray, r, soft)) {
+          out.r_bone = r;
+          out.min_peak = soft + o_.bone.floor_hu;
+          return out;
+        }
+      }
+      // Air counts as a cavity only past the skin's ramp and after half a millimetre of tissue
+      // (a ray oblique to the skin stretches the ramp beyond one voxel).
+      if (cavity_base_ && s >= ramp_ && tissue_mm >= 0.5 && x < skin_thr_) {
+        const double soft = soft_level();
+        double air = x;
+        for (double t = 0; t <= 2.0 && r - t >= 0; t += fine_) air = std::min(air, I(r - t));
+        const double level = 0.5 * (soft + std::max(air, -1024.0));
+        const auto minus_I = [&](double q) { return -I(q); };
+        const double rc = crossing_inward(minus_I, r + fine_, std::max(0.0, r - edge_span_), 0.25 * fine_,
+                                          -level);
+        out.r_cavity = std::isfinite(rc) ? rc : r;
+        return out;
+      }
+      if (x >= kFatBelowHu && x < kSoftHu[1] + 50.0) samples.push_back(x);
+      if (x >= kTissueAboveHu) tissue_mm += fine_;
+    }
+    return out;
+  }
+
+  // A bone candidate at r (the ray's soft-tissue level `soft`) is confirmed when, one voxel to
+  // either side across the ray (along the axis and around it), the profile's peak within a
+  // millimetre of the same depth averages at least half the floor above the soft tissue: a
+  // plate or a cortex extends sideways, a noise voxel does not.
+  bool confirmed_laterally(const Ray& ray, double r, double soft) const {
+    const Eigen::Vector3d e1 = maps_.axis.direction;
+    const Eigen::Vector3d e2 = ray.d.cross(e1).normalized();
+    const Eigen::Vector3d p = ray.at(r);
+    double sum = 0;
+    for (const Eigen::Vector3d& e : {e1, e2})
+      for (double sign : {-1.0, 1.0}) {
+        const Eigen::Vector3d q = p + sign * lateral_mm_ * e;
+        double peak = -std::numeric_limits<double>::max();
+        for (double t = -1.0; t <= 1.0 + 1e-9; t += fine_)
+          peak = std::max<double>(peak, intensity_(Eigen::Vector3d(q - t * ray.d)));
+        sum += peak;
+      }
+    return 0.25 * sum >= soft + 0.5 * o_.bone.floor_hu;
+  }
+
+  // 4. Half-maximum edges: the threshold (or the edge method's peak) finds an edge, the level
+  // halfway between the plateaus on either side locates it, independent of the threshold's
+  // value. Moves r_s and r_b onto them (r_b when its peak reaches `min_peak`); returns the
+  // bone's level.
   double half_maximum_edges(const Ray& ray, std::vector<double>& samples, double& r_s,
-                            double& r_b) const {
+                            double& r_b, double min_peak) const {
     const auto I = [&](double r) { return intensity_(ray.at(r)); };
     const auto I_gated = [&](double r) { return gated_intensity(ray, r); };
     double air = I_gated(r_s + edge_span_);
@@ -631,7 +771,7 @@ class RayCaster {
       double peak = -std::numeric_limits<double>::max();
       for (double r = r_b; r >= std::max(0.0, r_b - 4.0); r -= fine_)
         peak = std::max<double>(peak, I(r));
-      if (tissue < bone_level_default_ && peak > bone_level_default_) {
+      if (tissue < min_peak && peak >= min_peak) {
         const double rb =
             crossing_inward(I, std::min(r_s, r_b + edge_span_), std::max(0.0, r_b - edge_span_),
                             fine_, 0.5 * (tissue + peak));
@@ -682,6 +822,25 @@ class RayCaster {
     (normal ? maps_.layer_flags_normal : maps_.layer_flags)[c] = l.flags;
   }
 
+  // The bone the normal thickness looks for with the edge method: the working grid at or above
+  // the nominal soft tissue plus the floor, inside the head, in the components that hold bone
+  // of the threshold's mask (thin facial bone is attached to the skull; noise specks are not).
+  Mask thin_bone_mask() const {
+    const float level = static_cast<float>(kNominalSoftHu + o_.bone.floor_hu);
+    Mask m;
+    m.geom = seg_.working.geom;
+    m.data.resize(seg_.working.data.size());
+    for (std::size_t i = 0; i < m.data.size(); ++i)
+      m.data[i] = (seg_.working.data[i] >= level && seg_.skin.data[i]) || seg_.bone.data[i];
+    std::vector<std::int64_t> sizes;
+    const auto labels = label_components(m, sizes);
+    std::vector<char> holds_bone(sizes.size(), 0);
+    for (std::size_t i = 0; i < labels.size(); ++i)
+      if (seg_.bone.data[i]) holds_bone[labels[i]] = 1;
+    for (std::size_t i = 0; i < labels.size(); ++i) m.data[i] = labels[i] > 0 && holds_bone[labels[i]];
+    return m;
+  }
+
   // 5. Thickness along the normal: distance from the skin point p to the nearest bone, found
   // through the exact feature transform on the working grid and refined on the bone's edge;
   // at most the radial thickness. `inward` receives the unit direction from p to that bone
@@ -701,9 +860,17 @@ class RayCaster {
       if (len > 1e-6) {
         const Eigen::Vector3d u = (q - p) / len;
         const auto Bs = [&](double s) { return bone_value(Eigen::Vector3d(p + (len - s) * u)); };
+        // With the edge method the nearest bone may be thin: its edge is at half maximum between
+        // the soft tissue and its own peak near q, not the ray's bone's level.
+        double level = bone_level;
+        if (edge_method_) {
+          double peak = -std::numeric_limits<double>::max();
+          for (double s = -w_; s <= 2 * w_; s += fine_) peak = std::max(peak, Bs(s));
+          if (peak >= kNominalSoftHu + o_.bone.floor_hu) level = 0.5 * (kNominalSoftHu + peak);
+        }
         // Parameterised so "inward" runs from the skin (s = len) to past the bone site. q is
         // the nearest bone voxel, so the edge lies within two working voxels of it.
-        const double s = crossing_inward(Bs, std::min(len, 2 * w_), -w_, fine_, bone_level);
+        const double s = crossing_inward(Bs, std::min(len, 2 * w_), -w_, fine_, level);
         if (std::isfinite(s) && len - s < tn) {
           tn = len - s;
           inward = u;
@@ -734,6 +901,9 @@ class RayCaster {
   float skin_thr_;
   bool measure_layers_;
   double layer_step_;  // profile sampling step of the layers: half the largest voxel spacing
+  bool edge_method_;   // bone found by its edge on the profile (BoneMethod::Edge, CT)
+  bool cavity_base_;   // a cavity's air under the skin is the base where no bone is found (CT)
+  double lateral_mm_;  // lateral offset of the bone candidate's confirmation: one voxel
   std::vector<std::int64_t> nearest_bone_;
 };
 
@@ -778,7 +948,7 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
   if (maps.has_layers()) {
     // Layers of cells whose thickness is not valid are filled like the thickness itself.
     for (std::size_t i = 0; i < n; ++i)
-      if (maps.flags[i] != 0) {
+      if (!flags_valid(maps.flags[i])) {
         maps.layer_flags[i] |= kLayerNoThickness;
         maps.layer_flags_normal[i] |= kLayerNoThickness;
       }

@@ -84,6 +84,30 @@ json layers_json(const VolumeModel& m) {
   return {{"measured", false}, {"reason", reason}};
 }
 
+// model.json's thickness.base: how the base of the soft tissue (bone, or a cavity) was found.
+json base_json(const VolumeModel& m) {
+  const BoneOptions& o = m.bone_options;
+  const auto& seg = m.segmentation;
+  const bool ct = m.modality == Modality::CT;
+  const bool edge = ct && std::isfinite(seg.bone_threshold) && o.method == BoneMethod::Edge;
+  json j = {{"bone_method", edge ? "edge" : "threshold"},
+            {"mask", seg.bone_method},
+            {"cavity_base", ct && o.cavity_base}};
+  if (edge) {
+    j["floor_hu"] = o.floor_hu;
+    j["method"] = "bone: the first peak of the CT profile inward from the skin at least floor_hu "
+                  "above the ray's soft-tissue level, confirmed laterally, its edge at half "
+                  "maximum; the mask (bone.ply, the normal thickness) stays the threshold's; see "
+                  "docs/volume.md";
+  } else {
+    j["method"] = "bone: the first voxel of the mask inward from the skin, its edge at half maximum";
+  }
+  if (ct && o.cavity_base)
+    j["cavity"] = "no bone within the cap but an air cavity under the tissue: the base is the "
+                  "cavity's edge (half maximum), free (no support); validity flag 32 base_cavity";
+  return j;
+}
+
 }  // namespace
 
 ModelStatistics model_statistics(const CylindricalMaps& maps) {
@@ -99,7 +123,8 @@ ModelStatistics model_statistics(const CylindricalMaps& maps) {
     s.grazing += (f & kGrazing) != 0;
     s.truncated += (f & kTruncated) != 0;
     if (maps.measured_skin[i]) rs.push_back(maps.r_skin[i]);
-    if (f != 0) continue;
+    if (!flags_valid(f)) continue;
+    s.base_cavity += (f & kBaseCavity) != 0;
     ++s.valid_cells;
     t.push_back(maps.thickness[i]);
     tn.push_back(maps.thickness_normal[i]);
@@ -175,7 +200,7 @@ ModelStatistics model_statistics(const CylindricalMaps& maps) {
     if (dz < 30 || dz > 60) continue;
     for (int j = 0; j < g.n_theta; ++j) {
       const double th = g.theta_deg(j) - s.face_theta_deg;
-      if (std::abs(th) <= 15 && maps.flags[g.index(j, k)] == 0)
+      if (std::abs(th) <= 15 && flags_valid(maps.flags[g.index(j, k)]))
         forehead.push_back(maps.thickness[g.index(j, k)]);
     }
   }
@@ -229,6 +254,7 @@ VolumeModel build_volume_model(const Volume& input, const ModelOptions& o, Repor
   const CylinderAxis axis = o.axis ? *o.axis : fit_axis(m.segmentation);
   m.maps = cylindrical_maps(v, m.segmentation, axis, o.maps, reporter);
   m.layer_options = o.maps.layers;
+  m.bone_options = o.maps.bone;
   m.stats = model_statistics(m.maps);
   {
     Progress progress(reporter, "extracting skin and bone surfaces", 2);
@@ -275,6 +301,7 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter
                           {"normal", "distance from the skin point to the nearest bone"},
                           {"fill", "invalid cells: r_skin and thickness filled by harmonic "
                                    "interpolation from valid cells; see validity.nrrd"},
+                          {"base", base_json(m)},
                           {"layers", layers_json(m)}}
                          .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   write_model_directory(m, c, dir, force, reporter);

@@ -72,7 +72,8 @@ json statistics_json(const ModelStatistics& s) {
           {"valid_cells", s.valid_cells},
           {"valid_fraction", s.cells ? double(s.valid_cells) / s.cells : 0.0},
           {"flagged_cells", {{"no_skin", s.no_skin}, {"no_bone", s.no_bone}, {"undercut", s.undercut},
-                             {"grazing", s.grazing}, {"truncated", s.truncated}}},
+                             {"grazing", s.grazing}, {"truncated", s.truncated},
+                             {"base_cavity", s.base_cavity}}},
           {"thickness_mm", {{"mean", s.thickness_mean_mm}, {"median", s.thickness_median_mm},
                             {"p5", s.thickness_p5_mm}, {"p95", s.thickness_p95_mm}}},
           {"thickness_normal_median_mm", s.thickness_normal_median_mm},
@@ -116,6 +117,7 @@ ModelStatistics statistics_of(const json& j, const std::string& where) {
   s.undercut = count(flagged, "undercut");
   s.grazing = count(flagged, "grazing");
   s.truncated = count(flagged, "truncated");
+  s.base_cavity = count(flagged, "base_cavity");
   s.thickness_mean_mm = num(t, "mean");
   s.thickness_median_mm = num(t, "median");
   s.thickness_p5_mm = num(t, "p5");
@@ -446,7 +448,7 @@ void write_model_directory(const ModelContent& m, const ModelProvenance& c, cons
   std::vector<float> flags(maps.flags.begin(), maps.flags.end());
   write_map_nrrd(p / f::kValidity, flags, g,
                  "validity: 0 valid; bit flags 1 no_skin, 2 no_bone, 4 undercut, 8 grazing, "
-                 "16 truncated", "flags");
+                 "16 truncated; 32 base_cavity (valid, its base an air cavity's edge)", "flags");
   progress.update(3);
   // Clinicians and the soft-tissue-depth literature read the thickness along the normal.
   const bool assumed_bone = parse_object(c.thickness_json, "thickness").value("kind", "") ==
@@ -469,6 +471,20 @@ void write_model_directory(const ModelContent& m, const ModelProvenance& c, cons
   out.commit();
 }
 
+namespace {
+
+// ", found along the rays by its edge (floor 150 HU)" when model.json's thickness.base says so.
+std::string bone_along_rays(const ModelInfo& info) {
+  const json t = parse_object(info.thickness_json, "thickness");
+  if (!t.contains("base") || !t["base"].is_object()) return {};
+  const json& b = t["base"];
+  if (b.value("bone_method", "") != "edge") return {};
+  return cat("; along the rays by its edge (a peak ", b.value("floor_hu", 0.0),
+             " HU above the soft tissue)");
+}
+
+}  // namespace
+
 std::string model_summary(const fs::path& dir) {
   const ModelInfo info = read_model_info(dir);
   const json source = parse_object(info.source_json, "source");
@@ -484,9 +500,11 @@ std::string model_summary(const fs::path& dir) {
      << "grid       " << g.n_theta << " x " << g.n_z << " (theta x z), dz " << g.dz_mm
      << " mm, z " << g.z0_mm << " .. " << g.z_mm(g.n_z - 1) << " mm\n"
      << "skin       " << seg.at("skin_method").get<std::string>() << "\n"
-     << "bone       " << seg.at("bone_method").get<std::string>() << "\n"
+     << "bone       " << seg.at("bone_method").get<std::string>() << bone_along_rays(info)
+     << "\n"
      << "valid      " << 100.0 * (s.cells ? double(s.valid_cells) / s.cells : 0.0)
-     << " % of cells\n"
+     << " % of cells" << (s.base_cavity ? cat(" (", s.base_cavity, " based on an air cavity)") : "")
+     << "\n"
      << "thickness  median " << s.thickness_median_mm << " mm (5-95%: " << s.thickness_p5_mm
      << " - " << s.thickness_p95_mm << " mm), forehead " << s.forehead_thickness_mm << " mm\n"
      << "face       theta " << s.face_theta_deg << " deg, z " << s.face_z_mm << " mm\n";

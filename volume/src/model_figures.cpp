@@ -122,9 +122,12 @@ void write_mm_map_png(const fs::path& path, const CylindricalMaps& maps,
 void write_thickness_png(const fs::path& path, const CylindricalMaps& maps,
                          const std::vector<float>& values, const std::string& title,
                          const std::string& credit) {
-  write_mm_map_png(path, maps, values, maps.flags, "soft-tissue thickness (mm)",
-                   "no valid measurement (no bone within the cap, undercut, grazing ray; filled "
-                   "by interpolation)", title, credit);
+  // Cells over an air cavity (kBaseCavity) are measured: only the invalid ones are hatched.
+  std::vector<std::uint8_t> invalid(maps.flags.size());
+  for (std::size_t c = 0; c < invalid.size(); ++c) invalid[c] = maps.flags[c] & kInvalidFlags;
+  write_mm_map_png(path, maps, values, invalid, "soft-tissue thickness (mm)",
+                   "no valid measurement (no bone or cavity within the cap, undercut, grazing "
+                   "ray; filled by interpolation)", title, credit);
 }
 
 void write_layer_png(const fs::path& path, const CylindricalMaps& maps,

@@ -78,6 +78,14 @@ double HeadPhantom::fat_bottom_radius(double theta, double z) const {
   return fat_top_radius(theta, z) - fat_depth(theta, z);
 }
 
+double HeadPhantom::thin_bone_mm(double theta, double z) const {
+  if (!thin_bone_) return 0.0;
+  const double th = dtheta(theta, 0.0);
+  if (th < kThinThetaMin || th > kThinThetaMax || z < kThinZMin || z > kThinZMax) return 0.0;
+  const double u = (z - kThinZMin) / (kThinZMax - kThinZMin);
+  return 0.5 + u * u * u;
+}
+
 double HeadPhantom::bone_radius(double theta, double z) const {
   return head_radius(theta, z) - thickness(theta, z);
 }
@@ -92,7 +100,7 @@ double HeadPhantom::hu_at(const Eigen::Vector3d& p, const Eigen::Vector3d& voxel
   // Fraction of a voxel inside the surface r = R(theta, z): a linear ramp across the interface,
   // as wide as the voxel is along the surface normal. Distances come from the level set
   // g = R - r divided by |grad g|, evaluated by central differences.
-  auto fraction = [&](auto&& R) {
+  auto fraction = [&](auto&& R, double min_width = 0.0) {
     const double g = R(theta, z) - r;
     const double h = 1e-3;
     const double rr = std::max(r, 1e-6);
@@ -103,8 +111,9 @@ double HeadPhantom::hu_at(const Eigen::Vector3d& p, const Eigen::Vector3d& voxel
     const Eigen::Vector3d radial(x / rr, y / rr, 0.0);
     const Eigen::Vector3d tangential(-y / rr, x / rr, 0.0);  // direction of increasing theta
     const Eigen::Vector3d n = (radial - tangential * gt - Eigen::Vector3d(0, 0, gz)) / norm;
-    const double width = std::abs(n[0]) * voxel_mm[0] + std::abs(n[1]) * voxel_mm[1] +
-                         std::abs(n[2]) * voxel_mm[2];
+    const double width = std::max(min_width, std::abs(n[0]) * voxel_mm[0] +
+                                                 std::abs(n[1]) * voxel_mm[1] +
+                                                 std::abs(n[2]) * voxel_mm[2]);
     return clamp01(0.5 + (g / norm) / width);
   };
 
@@ -121,10 +130,20 @@ double HeadPhantom::hu_at(const Eigen::Vector3d& p, const Eigen::Vector3d& voxel
       hu += fraction([&](double t, double zz) { return fat_bottom_radius(t, zz); }) *
             (kMuscleHu - kFatHu);
     }
-    const double f_bone = fraction([&](double t, double zz) { return bone_radius(t, zz); });
     const double f_inner =
         fraction([&](double t, double zz) { return bone_radius(t, zz) - kSkullMm; });
-    hu += f_bone * (kBoneHu - deep_hu) + f_inner * (kBrainHu - kBoneHu);
+    if (const double plate = thin_bone_mm(theta, z); plate > 0) {
+      // The thin plate over soft tissue, both its faces blurred by the scanner (partial volume).
+      const double f_out = fraction([&](double t, double zz) { return bone_radius(t, zz); },
+                                    kThinBoneBlurMm);
+      const double f_in = fraction(
+          [&](double t, double zz) { return bone_radius(t, zz) - thin_bone_mm(t, zz); },
+          kThinBoneBlurMm);
+      hu += (f_out - f_in) * (kThinBoneHu - deep_hu) + f_inner * (kBrainHu - deep_hu);
+    } else {
+      const double f_bone = fraction([&](double t, double zz) { return bone_radius(t, zz); });
+      hu += f_bone * (kBoneHu - deep_hu) + f_inner * (kBrainHu - kBoneHu);
+    }
     // An enclosed air cavity (a "sinus") behind the forehead, inside the skull.
     const Eigen::Vector3d c = a + Eigen::Vector3d(0.0, -45.0, 35.0);
     const double d = (p - c).norm() - 9.0;
@@ -173,7 +192,7 @@ Volume make_phantom(const PhantomOptions& options) {
   v.source = "phantom";
   v.format = "phantom";
   v.data.resize(v.geom.n_voxels());
-  const HeadPhantom head(options.layered);
+  const HeadPhantom head(options.layered, options.thin_bone);
   const auto& d = v.geom.dims;
   tbb::parallel_for(0, d[2], [&](int k) {
     for (int j = 0; j < d[1]; ++j)
@@ -187,6 +206,8 @@ Volume make_phantom(const PhantomOptions& options) {
   });
   v.notes.push_back(options.layered ? "analytic layered head phantom (caps phantom --layered)"
                                      : "analytic head phantom (caps phantom)");
+  if (options.thin_bone)
+    v.notes.push_back("with a thin bone plate (0.5 .. 1.5 mm) under the right cheek");
   return v;
 }
 

@@ -33,13 +33,15 @@ struct FromVolumeRequest {
   std::optional<double> skin_threshold, bone_threshold;
   int n_theta = MapOptions{}.n_theta, n_z = MapOptions{}.n_z;
   double bone_cap = MapOptions{}.bone_cap_mm;
+  std::string bone_method = bone_method_name(BoneOptions{}.method);
+  double bone_floor = BoneOptions{}.floor_hu;
   double decimate = ModelOptions{}.decimate_fraction;
   double mr_scalp = SegmentOptions{}.mr_scalp_mm;
   double fat_level = LayerOptions{}.fat_level_hu;
   double fat_merge_gap = LayerOptions{}.merge_gap_mm;
   double fat_min_band = LayerOptions{}.min_band_mm;
   double max_voxels = kDefaultMaxVoxels, max_bytes = kDefaultMaxBytes;
-  bool allow_missing_slices = false, no_layers = false, force = false;
+  bool allow_missing_slices = false, no_layers = false, no_cavity_base = false, force = false;
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
@@ -60,6 +62,14 @@ struct FromVolumeRequest {
     v(r.n_theta, {"n_theta", "cylindrical grid: samples around"});
     v(r.n_z, {"n_z", "cylindrical grid: samples along the axis"});
     v(r.bone_cap, {"bone_cap", "no bone within this depth (mm) marks a cell invalid"});
+    v(r.bone_method, {"bone_method", "CT: how bone is found along each ray: edge (a peak "
+                                     "--bone-floor above the soft tissue; finds thin facial "
+                                     "bone) or threshold (the --bone-threshold mask)"});
+    v(r.bone_floor, {"bone_floor", "CT, --bone-method edge: a peak this far (HU) above the "
+                                   "soft tissue is bone"});
+    v(r.no_cavity_base, {"no_cavity_base", "CT: where no bone lies under the skin, leave the "
+                                           "cell no_bone instead of basing it on the air cavity "
+                                           "under the tissue", FieldKind::Flag});
     v(r.decimate, {"decimate", "fraction of mesh faces to keep (0..1]"});
     v(r.fat_level, {"fat_level", "tissue layers (CT): HU level halfway between fat and soft "
                                  "tissue; fat lies below it"});
@@ -235,7 +245,7 @@ std::string summary(const VolumeInfoResult& result);
 
 struct PhantomRequest {
   std::string output, voxels = "256,256,240", spacing = "1,1,1";
-  bool no_holder = false, layered = false, force = false;
+  bool no_holder = false, layered = false, thin_bone = false, force = false;
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
     v(r.output, {"output", "output .nii or .nii.gz", FieldKind::Required, "-o,--output"});
@@ -244,6 +254,8 @@ struct PhantomRequest {
     v(r.no_holder, {"no_holder", "leave out the head-holder arc", FieldKind::Flag});
     v(r.layered, {"layered", "soft tissue in three layers of known depth: dermis, fat, muscle",
                   FieldKind::Flag});
+    v(r.thin_bone, {"thin_bone", "a thin bone plate (0.5-1.5 mm, partial volume) under the right "
+                                 "cheek", FieldKind::Flag});
     v(r.force, {"force", "replace an existing output", FieldKind::Flag});
   }
 };
@@ -254,6 +266,7 @@ struct PhantomResult {
   Eigen::Vector3d spacing_mm{0, 0, 0};
   bool head_holder = true;
   bool layered = false;
+  bool thin_bone = false;
 };
 PhantomResult run_phantom(const PhantomRequest& request, Reporter* reporter = nullptr);
 std::string to_json(const PhantomResult& result);

@@ -51,17 +51,34 @@ struct CylinderGrid {
   std::size_t index(int j, int k) const { return static_cast<std::size_t>(k) * n_theta + j; }
 };
 
-/// Why a cell is not valid; a cell's flags are OR-ed, 0 means valid.
+/// Why a cell is not valid, and which base a valid cell has; a cell's flags are OR-ed. A cell is
+/// valid when none of kInvalidFlags is set (0: valid, over bone).
 enum CellFlag : std::uint8_t {
   kNoSkin = 1,     ///< the ray never meets skin (above the vertex, below the neck cut)
   kNoBone = 2,     ///< no bone within MapOptions::bone_cap_mm under the skin (nose, lips, neck)
   kUndercut = 4,   ///< the ray crosses the skin more than once (ears, under the nose or chin)
   kGrazing = 8,    ///< the ray meets the skin at a grazing angle (near the vertex)
   kTruncated = 16, ///< the head touches the edge of the scanned volume along this ray
+  /// Valid, with no bone under the skin: the base is the soft tissue's deep boundary on an air
+  /// cavity (nasal cavity, mouth, sinus) and carries no support (free; docs/volume.md).
+  kBaseCavity = 32,
 };
 
-/// Short names of the flags, e.g. "no_bone|undercut".
+/// The flags that make a cell invalid (every flag but kBaseCavity, which names a valid base).
+inline constexpr std::uint8_t kInvalidFlags = kNoSkin | kNoBone | kUndercut | kGrazing | kTruncated;
+
+/// True when `flags` (CellFlag, OR-ed) leave the cell valid: measured skin and thickness, over
+/// bone or (kBaseCavity) over an air cavity.
+constexpr bool flags_valid(std::uint8_t flags) { return (flags & kInvalidFlags) == 0; }
+
+/// Short names of the flags, e.g. "no_bone|undercut", "base_cavity"; "valid" for 0.
 std::string describe_flags(std::uint8_t flags);
+
+/// For a plan on an invalid cell: whether the place is not operable (outside the scan: no_skin,
+/// truncated), the model cannot represent it yet (undercut, grazing) or no base was found
+/// (no_bone), with the flags' names and what to do; a sentence that follows "the point at ...".
+/// "" for valid flags.
+std::string invalid_flags_advice(std::uint8_t flags);
 
 /// Why a cell's tissue layers (skin, fat, deep) are not measured; OR-ed, 0 means measured.
 enum LayerFlag : std::uint8_t {
@@ -89,6 +106,35 @@ struct LayerOptions {
   double min_band_mm = 0.5;   ///< narrower dips below the level are noise, not fat
 };
 
+/// How bone is found along each ray (CT). docs/volume.md says how the floor was chosen.
+enum class BoneMethod {
+  /// The first bone of the segmentation's mask (SegmentOptions::bone_threshold, 250 HU for CT)
+  /// inward from the skin: misses thin facial bone whose partial-volume peak is below it.
+  Threshold,
+  /// The first peak of the full-resolution profile at least BoneOptions::floor_hu above the
+  /// ray's own soft-tissue level, confirmed by its lateral neighbours (not a noise voxel); the
+  /// edge is then placed at half maximum between the soft tissue and that peak.
+  Edge,
+};
+
+/// "threshold" / "edge".
+const char* bone_method_name(BoneMethod method);
+/// Parses "threshold" / "edge"; throws InvalidInput otherwise.
+BoneMethod parse_bone_method(const std::string& name);
+
+/// Where the soft tissue's base is found along each ray.
+struct BoneOptions {
+  BoneMethod method = BoneMethod::Edge;
+  /// Edge: a peak this far above the ray's soft-tissue level (HU) is bone. 150 HU: ten times
+  /// the soft-tissue noise of a head CT (about 15 HU), above cartilage (about +100 HU over soft
+  /// tissue) and below the partial-volume peaks of the thin facial bones (about +230 HU).
+  double floor_hu = 150.0;
+  /// Where no bone lies within MapOptions::bone_cap_mm but the soft tissue ends on an air cavity
+  /// (nasal cavity, mouth, a sinus without a visible wall), the base is that boundary
+  /// (kBaseCavity); otherwise such cells are kNoBone.
+  bool cavity_base = true;
+};
+
 /// A ray that re-enters the skin after an air gap of at least this length (mm) is kUndercut.
 inline constexpr double kUndercutMinGapMm = 2.0;
 
@@ -97,6 +143,7 @@ struct MapOptions {
   int n_z = 256;
   double bone_cap_mm = 40.0;     ///< no bone deeper than this under the skin -> kNoBone
   double grazing_deg = 70.0;     ///< ray-to-normal angle beyond which a cell is kGrazing
+  BoneOptions bone;
   LayerOptions layers;
   /// The z range of the grid (mm along the axis); by default the head's extent.
   std::optional<double> z_min_mm, z_max_mm;
@@ -104,7 +151,8 @@ struct MapOptions {
 
 /// The maps. Images hold grid.size() values, theta fastest. Lengths in mm.
 /// r_skin: outermost skin crossing (sub-voxel, half-maximum edge); r_bone: first bone crossing
-/// inward from the skin; thickness = r_skin - r_bone (radial, what the extruder uses);
+/// inward from the skin (kBaseCavity cells: the tissue/air edge of the cavity under it);
+/// thickness = r_skin - r_bone (radial, what the extruder uses);
 /// thickness_normal: distance from the skin point to the nearest bone (how clinicians measure).
 /// Invalid cells are filled (see docs/model-format.md): r_skin and thickness by harmonic
 /// interpolation from valid neighbours, so every value is finite; `flags` says which are measured.
@@ -124,7 +172,7 @@ struct CylindricalMaps {
   std::vector<float> thickness_skin_normal, thickness_fat_normal, thickness_deep_normal;
   std::vector<std::uint8_t> layer_flags, layer_flags_normal;
 
-  bool is_valid(int j, int k) const { return flags[grid.index(j, k)] == 0; }
+  bool is_valid(int j, int k) const { return flags_valid(flags[grid.index(j, k)]); }
   bool has_layers() const { return !thickness_skin.empty(); }
   /// Sizes the layer images to grid.size(), all zero, flagged kLayerNoThickness.
   void allocate_layers();

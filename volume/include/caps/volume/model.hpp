@@ -33,6 +33,7 @@ struct VolumeModel : ModelContent {
   Eigen::Vector3d source_spacing_mm{0, 0, 0};
   std::vector<std::string> notes;
   LayerOptions layer_options;  ///< how the tissue layers were measured (model.json)
+  BoneOptions bone_options;    ///< how the base (bone, cavity) was found (model.json)
 };
 
 /// Segments the volume, fits the axis, measures the maps, extracts the surfaces.

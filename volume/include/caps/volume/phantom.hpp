@@ -15,6 +15,12 @@
 /// (kDermisHu) from the skin to R_fat_top = R_head - dermis(theta, z), subcutaneous fat (kFatHu)
 /// down to R_fat_bottom = R_fat_top - fat(theta, z), then deep tissue (muscle, kMuscleHu) down to
 /// the bone; its soft-tissue thickness is dermis + fat + deep (4.2 .. 12.2 mm).
+/// The thin-bone variant (`thin_bone`) replaces the skull under the patient's right cheek
+/// (thin_bone_mm() > 0) by a plate 0.5 .. 1.5 mm thick (kThinBoneHu) over soft tissue, imaged with
+/// a blur of kThinBoneBlurMm: its partial-volume peak (kTissueHu + (kThinBoneHu - kTissueHu)
+/// t / kThinBoneBlurMm, 227 .. 600 HU) is below the 250 HU bone threshold where the plate is
+/// thinner than 0.56 mm, and sampled along oblique rays below it to about 0.65 mm, as the
+/// anterior maxilla and the nasal bones are in a head CT.
 /// Voxels carry partial-volume values (a linear ramp one voxel wide across each interface), so
 /// sub-voxel measurements can be checked against the analytic surfaces.
 
@@ -29,13 +35,15 @@ struct PhantomOptions {
   Eigen::Vector3d spacing_mm{1.0, 1.0, 1.0};
   bool head_holder = true;                 ///< include the plastic head-holder arc
   bool layered = false;  ///< dermis, fat and muscle instead of one soft tissue (HeadPhantom)
+  bool thin_bone = false;  ///< a thin bone plate under the right cheek (HeadPhantom)
 };
 
 /// Analytic description of the phantom head (all lengths in mm, angles in radians).
 class HeadPhantom {
  public:
   /// The single-tissue phantom, or with `layered` the three-layer one (dermis, fat, muscle).
-  explicit HeadPhantom(bool layered = false) : layered_(layered) {}
+  explicit HeadPhantom(bool layered = false, bool thin_bone = false)
+      : layered_(layered), thin_bone_(thin_bone) {}
 
   static constexpr double kAirHu = -1000.0;
   static constexpr double kTissueHu = 40.0;
@@ -46,6 +54,12 @@ class HeadPhantom {
   static constexpr double kBrainHu = 35.0;
   static constexpr double kHolderHu = 100.0;
   static constexpr double kSkullMm = 6.0;
+  static constexpr double kThinBoneHu = 600.0;    ///< thin_bone: the plate's CT number
+  static constexpr double kThinBoneBlurMm = 1.5;  ///< thin_bone: the plate's edge ramp width (mm)
+  /// thin_bone: the plate's region, theta in radians (patient's right cheek), z in mm.
+  static constexpr double kThinThetaMin = -70.0 * 3.14159265358979323846 / 180.0;
+  static constexpr double kThinThetaMax = -30.0 * 3.14159265358979323846 / 180.0;
+  static constexpr double kThinZMin = -50.0, kThinZMax = -10.0;
 
   /// A point on the head's axis at z = 0 (LPS mm). The axis is parallel to LPS +z.
   Eigen::Vector3d axis_point() const { return {2.0, 6.0, 0.0}; }
@@ -57,6 +71,11 @@ class HeadPhantom {
   /// Skin radius (outer envelope) including the nose and the marker.
   double skin_radius(double theta, double z) const;
   bool is_layered() const { return layered_; }
+  bool has_thin_bone() const { return thin_bone_; }
+  /// thin_bone: the plate's thickness (mm) under (theta, z), 0.5 mm at kThinZMin rising as the
+  /// cube of the height to 1.5 mm at kThinZMax (most of the plate is under 1 mm); 0 outside the
+  /// region (the 6 mm skull) or without thin_bone. Its outer face is bone_radius(theta, z).
+  double thin_bone_mm(double theta, double z) const;
   /// Soft-tissue thickness of the head without bumps, radially: 2.5 .. 8.5 mm (layered:
   /// dermis + fat + deep, 4.2 .. 12.2 mm).
   double thickness(double theta, double z) const;
@@ -82,10 +101,11 @@ class HeadPhantom {
 
  private:
   bool layered_ = false;
+  bool thin_bone_ = false;
 };
 
 /// Samples the phantom on a grid centred on the head, identity direction, as a CT in HU
-/// (options.layered: the layered HeadPhantom).
+/// (options.layered: the layered HeadPhantom; options.thin_bone: with the thin plate).
 Volume make_phantom(const PhantomOptions& options = {});
 
 }  // namespace caps

@@ -1,0 +1,221 @@
+// The base of the soft tissue: thin bone found by its edge (the thin-bone phantom, against the
+// fixed threshold) and the air-cavity base where no bone lies under the skin (a hand-made CT).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "caps/core/units.hpp"
+#include "caps/volume/model.hpp"
+#include "caps/volume/phantom.hpp"
+#include "phantom_crossing.hpp"
+
+using namespace caps;
+
+namespace {
+
+// The thin-bone phantom at 1 mm voxels, from the vertex down to 60 mm below the centre, measured
+// with the edge method (the default) and with the fixed 250 HU threshold.
+struct ThinBoneModels {
+  HeadPhantom ph{false, true};
+  Volume ct;
+  VolumeModel edge, threshold;
+  ThinBoneModels() {
+    PhantomOptions po;
+    po.dims = {170, 230, 176};
+    po.head_holder = false;
+    po.thin_bone = true;
+    ct = make_phantom(po);
+    ModelOptions o;
+    o.maps.n_theta = 256;
+    o.maps.n_z = 128;
+    o.maps.layers.measure = false;
+    edge = build_volume_model(ct, o);
+    o.maps.bone.method = BoneMethod::Threshold;
+    threshold = build_volume_model(ct, o);
+  }
+};
+
+const ThinBoneModels& thin_bone_models() {
+  static const ThinBoneModels m;
+  return m;
+}
+
+// The plate's peak in the phantom's closed form: tissue + contrast x t / blur (t < blur).
+double plate_peak_hu(double t_mm) {
+  return HeadPhantom::kTissueHu + (HeadPhantom::kThinBoneHu - HeadPhantom::kTissueHu) *
+                                      std::min(1.0, t_mm / HeadPhantom::kThinBoneBlurMm);
+}
+
+}  // namespace
+
+TEST(ThinBone, PhantomPlateIsBelowTheThresholdWhereThinnerThanAboutHalfAMillimetre) {
+  EXPECT_NEAR(plate_peak_hu(0.5), 226.6667, 1e-4);
+  EXPECT_NEAR(plate_peak_hu(1.5), 600.0, 1e-9);
+  const HeadPhantom ph(false, true);
+  EXPECT_NEAR(ph.thin_bone_mm(deg_to_rad(-50.0), -50.0), 0.5, 1e-12);
+  EXPECT_NEAR(ph.thin_bone_mm(deg_to_rad(-50.0), -10.0), 1.5, 1e-12);
+  EXPECT_EQ(ph.thin_bone_mm(deg_to_rad(50.0), -30.0), 0.0);
+  // Sampled on the voxels: the profile's largest value across the plate where it is 0.5 mm.
+  const Volume& v = thin_bone_models().ct;
+  const double th = deg_to_rad(-50.0), z = -48.0;
+  const double rb = ph.bone_radius(th, z);
+  double peak = -1e9;
+  for (double r = rb - 3; r <= rb + 3; r += 0.05) {
+    const Eigen::Vector3d p = ph.axis_point() + Eigen::Vector3d(0, 0, z) + r * HeadPhantom::ray_direction(th);
+    peak = std::max<double>(peak, sample_trilinear(v, v.lps_to_index(p), -1000.0f));
+  }
+  EXPECT_LT(peak, 250.0);
+  EXPECT_GT(peak, 190.0);
+}
+
+// Over the plate (away from its edges), the fixed threshold misses the plate wherever it is
+// thinner than 0.55 mm (its peak under 250 HU); the edge method finds it in 99 % of the cells,
+// its half-maximum edge within 0.35 mm of (blur - t) / 2 outside the plate's outer face (where a
+// half-maximum edge of a plate thinner than the blur lies: docs/volume.md).
+TEST(ThinBone, EdgeMethodFindsThePlateThatTheThresholdMisses) {
+  const auto& m = thin_bone_models();
+  const auto& ge = m.edge.maps;
+  const auto& gt = m.threshold.maps;
+  const auto& g = ge.grid;
+  int cells = 0, thin = 0, thin_missed = 0, found = 0;
+  double se = 0, worst = 0;
+  for (int k = 0; k < g.n_z; ++k)
+    for (int j = 0; j < g.n_theta; ++j) {
+      const double th_deg = g.theta_deg(j), z = g.z_mm(k);
+      if (th_deg < -65 || th_deg > -35 || z < -45 || z > -15) continue;
+      const double th = deg_to_rad(th_deg);
+      const double t = m.ph.thin_bone_mm(th, z);
+      ASSERT_GT(t, 0.0);
+      const std::size_t c = g.index(j, k);
+      ++cells;
+      if (t < 0.55) {
+        ++thin;
+        thin_missed += (gt.flags[c] & kNoBone) != 0;
+      }
+      if (ge.flags[c] != 0) continue;
+      ++found;
+      const double rb = caps_test::analytic_crossing(
+          m.ph, ge.axis, th, z, [&](double a, double b) { return m.ph.bone_radius(a, b); },
+          ge.r_skin[c] + 1.0);
+      const double err = ge.r_bone[c] - rb;
+      const double bias = 0.5 * std::max(0.0, HeadPhantom::kThinBoneBlurMm - t);
+      EXPECT_NEAR(err, bias, 0.35) << "theta " << th_deg << " z " << z << " t " << t;
+      se += err * err;
+      worst = std::max(worst, std::abs(err - bias));
+    }
+  ASSERT_GT(cells, 300);
+  ASSERT_GT(thin, cells / 5);
+  const double rms = std::sqrt(se / std::max(1, found));
+  std::printf("thin plate: %d cells, %d thinner than 0.55 mm of which the threshold misses %d; "
+              "the edge method finds %d, depth error RMS %.3f mm, largest beyond the bias %.3f "
+              "mm\n", cells, thin, thin_missed, found, rms, worst);
+  EXPECT_GE(thin_missed, thin * 95 / 100);
+  EXPECT_GE(found, cells * 99 / 100);
+  EXPECT_LT(rms, 0.55);
+}
+
+TEST(ThinBone, EdgeMethodMatchesTheThresholdOnThickBone) {
+  const auto& m = thin_bone_models();
+  const auto& g = m.edge.maps.grid;
+  double se = 0;
+  int n = 0;
+  for (int k = 0; k < g.n_z; ++k)
+    for (int j = 0; j < g.n_theta; ++j) {
+      const std::size_t c = g.index(j, k);
+      if (m.edge.maps.flags[c] != 0 || m.threshold.maps.flags[c] != 0) continue;
+      if (m.ph.thin_bone_mm(deg_to_rad(g.theta_deg(j)), g.z_mm(k)) > 0) continue;
+      se += std::pow(m.edge.maps.r_bone[c] - m.threshold.maps.r_bone[c], 2);
+      ++n;
+    }
+  ASSERT_GT(n, static_cast<int>(g.size() / 2));
+  EXPECT_LT(std::sqrt(se / n), 0.05);
+}
+
+namespace {
+
+// A hand-made CT: a soft-tissue cylinder (radius 80 mm, +40 HU) about the LPS z axis with a
+// 4 mm skull (r 66..70, +1200 HU) and brain inside, except in front (|theta| < 25 deg,
+// |z| < 15 mm) where there is no bone and the tissue ends on air at r = 68 mm (a "nasal
+// cavity"). Edges are linear ramps one voxel wide, as in the phantom.
+Volume cavity_ct() {
+  Volume v;
+  v.geom.dims = {200, 200, 70};
+  v.geom.spacing_mm = {1.0, 1.0, 1.0};
+  v.geom.direction.setIdentity();
+  v.geom.origin_lps = {-99.5, -99.5, -34.5};
+  v.modality = Modality::CT;
+  v.source = "cavity";
+  v.format = "test";
+  v.data.resize(v.geom.n_voxels());
+  for (int k = 0; k < v.geom.dims[2]; ++k)
+    for (int j = 0; j < v.geom.dims[1]; ++j)
+      for (int i = 0; i < v.geom.dims[0]; ++i) {
+        const Eigen::Vector3d p = v.index_to_lps(Eigen::Vector3d(i, j, k));
+        const double r = std::hypot(p.x(), p.y());
+        const double th = std::atan2(p.x(), -p.y());
+        auto in = [&](double R) { return std::clamp(0.5 + (R - r), 0.0, 1.0); };
+        double hu = -1000.0 + in(80.0) * 1040.0;
+        if (std::abs(th) < deg_to_rad(25.0) && std::abs(p.z()) < 15.0)
+          hu += in(68.0) * (-1000.0 - 40.0);
+        else
+          hu += in(70.0) * (1200.0 - 40.0) + in(66.0) * (35.0 - 1200.0);
+        v.data[v.geom.linear(i, j, k)] = static_cast<float>(hu);
+      }
+  return v;
+}
+
+}  // namespace
+
+TEST(CavityBase, NoBoneOverAnAirCavityIsBasedOnItsEdge) {
+  const Volume v = cavity_ct();
+  ModelOptions o;
+  o.maps.n_theta = 360;
+  o.maps.n_z = 64;
+  o.maps.layers.measure = false;
+  o.axis = CylinderAxis{};
+  o.axis->origin_lps = {0, 0, 0};
+  const VolumeModel m = build_volume_model(v, o);
+  const auto& g = m.maps.grid;
+  int cavity = 0, inner = 0;
+  for (int k = 0; k < g.n_z; ++k)
+    for (int j = 0; j < g.n_theta; ++j) {
+      const double th = g.theta_deg(j), z = g.z_mm(k);
+      const std::size_t c = g.index(j, k);
+      if (std::abs(th) < 20 && std::abs(z) < 10) {
+        ++inner;
+        EXPECT_EQ(m.maps.flags[c], kBaseCavity) << "theta " << th << " z " << z;
+        EXPECT_TRUE(m.maps.is_valid(j, k));
+        EXPECT_NEAR(m.maps.r_bone[c], 68.0, 0.1) << "theta " << th << " z " << z;
+        EXPECT_NEAR(m.maps.thickness[c], 12.0, 0.2);
+      } else if (std::abs(th) > 30 && std::abs(th) < 150 && std::abs(z) > 20 && std::abs(z) < 28) {
+        EXPECT_EQ(m.maps.flags[c], 0) << "theta " << th << " z " << z;
+        EXPECT_NEAR(m.maps.r_bone[c], 70.0, 0.1);
+      }
+      cavity += (m.maps.flags[c] & kBaseCavity) != 0;
+    }
+  ASSERT_GT(inner, 300);
+  EXPECT_EQ(m.stats.base_cavity, static_cast<std::size_t>(cavity));
+  EXPECT_EQ(describe_flags(kBaseCavity), "base_cavity");
+  EXPECT_TRUE(flags_valid(kBaseCavity));
+  EXPECT_FALSE(flags_valid(kBaseCavity | kNoBone));
+  // Without the cavity base the same cells have no bone.
+  o.maps.bone.cavity_base = false;
+  const VolumeModel without = build_volume_model(v, o);
+  EXPECT_EQ(without.stats.base_cavity, 0u);
+  EXPECT_EQ(without.maps.flags[g.index(g.n_theta / 2, g.n_z / 2)], kNoBone);
+}
+
+TEST(CavityBase, AdviceSaysWhetherThePlaceIsNotOperableOrNotRepresented) {
+  EXPECT_EQ(invalid_flags_advice(0), "");
+  EXPECT_EQ(invalid_flags_advice(kBaseCavity), "");
+  EXPECT_NE(invalid_flags_advice(kTruncated | kGrazing).find("not operable"), std::string::npos);
+  EXPECT_NE(invalid_flags_advice(kNoSkin).find("not operable"), std::string::npos);
+  EXPECT_NE(invalid_flags_advice(kUndercut).find("cannot represent"), std::string::npos);
+  EXPECT_NE(invalid_flags_advice(kGrazing | kNoBone).find("cannot represent"), std::string::npos);
+  EXPECT_NE(invalid_flags_advice(kNoBone).find("--bone-cap"), std::string::npos);
+  EXPECT_EQ(parse_bone_method("edge"), BoneMethod::Edge);
+  EXPECT_EQ(std::string(bone_method_name(BoneMethod::Threshold)), "threshold");
+  EXPECT_THROW(parse_bone_method("otsu"), InvalidInput);
+}
