@@ -59,4 +59,13 @@ std::string to_lower(std::string s);
 std::string slice_file_name(const std::filesystem::path& file, const std::string& field,
                             const std::string& pattern, long long i);
 
+/// Throws IoError naming `file` unless the gzip (or zlib) stream in `data` from byte `offset`
+/// is whole: it decompresses without error, and ends (end marker, CRC-32 and length checked by
+/// zlib) within 1 MiB after the first `needed_bytes` decompressed bytes, the part its reader
+/// uses. The readers stop inflating once they hold what the header declares, so a stream cut
+/// short after that point was accepted. Concatenated gzip members are followed. Streams the
+/// file through a 64 KiB buffer: no allocation sized by the file.
+void require_whole_gzip(const std::filesystem::path& file, const std::filesystem::path& data,
+                        std::uint64_t offset, std::uint64_t needed_bytes);
+
 }  // namespace caps::detail
