@@ -9,6 +9,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 #include "caps/plan/check.hpp"
 #include "caps/plan/plan_figure.hpp"
 #include "caps/plan/plan_io.hpp"
@@ -85,6 +86,8 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
   refuse_existing(r.output, r.force);
   if (r.at.empty() == r.at_xyz.empty())
     throw InvalidInput("give the centre with --at THETA,Z or --at-xyz X,Y,Z");
+  // The plan records its model's folder to find it again: with its bytes replaced it could not.
+  require_utf8(r.model, "the model folder");
   const bool from_file = fs::path(r.procedure).extension() == ".json";
   if (from_file && !r.parameters.empty())
     throw InvalidInput("a procedure file has no parameters; drop --length/--width/--angle/...");
