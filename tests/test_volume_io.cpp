@@ -585,6 +585,19 @@ TEST(VolumeIo, DicomPicksLargestSeriesAndRejectsUnknownUid) {
                                    "1.2.3.4.5.2");
 }
 
+// The 128-byte preamble, "DICM" and a meta group naming `syntax` and nothing else.
+std::string part10_preamble(const std::string& syntax) {
+  std::string meta;
+  element(meta, 0x0002, 0x0001, "OB", std::string("\0\1", 2));
+  element(meta, 0x0002, 0x0010, "UI", syntax);
+  std::string out(128, '\0');
+  out += "DICM";
+  std::string len;
+  put_le32(len, static_cast<std::uint32_t>(meta.size()));
+  element(out, 0x0002, 0x0000, "UL", len);
+  return out + meta;
+}
+
 // A file written by write_dicom_slice with `insert` placed just before (0020,000D), so that the
 // elements stay in tag order.
 std::string dicom_variant(const fs::path& p, const std::string& insert) {
@@ -636,15 +649,7 @@ TEST(VolumeIo, DicomStructureIsCheckedBeforeGdcmReadsIt) {
 
   // Implicit VR little endian with pixel data of undefined length (found by fuzz_dicom: GDCM
   // asserts, aborting the process): refused before GDCM reads it.
-  std::string meta;
-  element(meta, 0x0002, 0x0001, "OB", std::string("\0\1", 2));
-  element(meta, 0x0002, 0x0010, "UI", "1.2.840.10008.1.2");
-  std::string implicit(128, '\0');
-  implicit += "DICM";
-  std::string len;
-  put_le32(len, static_cast<std::uint32_t>(meta.size()));
-  element(implicit, 0x0002, 0x0000, "UL", len);
-  implicit += meta;
+  std::string implicit = part10_preamble("1.2.840.10008.1.2");
   implicit += tag_len(0x0008, 0x0060, 2) + "CT";
   implicit += tag_len(0x0020, 0x000e, 6) + "1.2.3" + std::string(1, '\0');
   implicit += tag_len(0x0028, 0x0010, 2) + us(2) + tag_len(0x0028, 0x0011, 2) + us(2);
@@ -656,15 +661,8 @@ TEST(VolumeIo, DicomStructureIsCheckedBeforeGdcmReadsIt) {
 
   // Deflated Explicit VR Little Endian: refused with what to do (GDCM would inflate it without
   // a bound).
-  std::string dmeta;
-  element(dmeta, 0x0002, 0x0001, "OB", std::string("\0\1", 2));
-  element(dmeta, 0x0002, 0x0010, "UI", "1.2.840.10008.1.2.1.99");
-  std::string deflated(128, '\0');
-  deflated += "DICM";
-  std::string dlen;
-  put_le32(dlen, static_cast<std::uint32_t>(dmeta.size()));
-  element(deflated, 0x0002, 0x0000, "UL", dlen);
-  deflated += dmeta + deflate_stored(std::string(64, '\0'));
+  std::string deflated = part10_preamble("1.2.840.10008.1.2.1.99");
+  deflated += deflate_stored(std::string(64, '\0'));
   write_bytes(tmp / "deflated.dcm", deflated);
   expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "deflated.dcm"); },
                                    "deflated.dcm", "gdcmconv --raw");

@@ -2,6 +2,7 @@
 
 #include <zlib.h>
 
+#include <algorithm>
 #include <cstring>
 #include <fstream>
 #include <vector>
@@ -14,7 +15,7 @@ namespace fs = std::filesystem;
 namespace caps::detail {
 
 void require_whole_gzip(const fs::path& file, const fs::path& data, std::uint64_t offset,
-                        std::uint64_t needed_bytes) {
+                        std::uint64_t needed_bytes, std::uint64_t search_bytes) {
   std::ifstream in(data, std::ios::binary);
   if (!in) throw IoError(cat(data.string(), ": cannot open the compressed data for reading"));
   in.seekg(static_cast<std::streamoff>(offset));
@@ -26,9 +27,10 @@ void require_whole_gzip(const fs::path& file, const fs::path& data, std::uint64_
     z_stream* zs;
     ~End() { inflateEnd(zs); }
   } end{&zs};
-  // Past what the reader uses, the end of the stream is looked for this much further: the
-  // rest of a 4-D image is not read, and a decompression bomb must not cost more than that.
-  constexpr std::uint64_t kSlack = std::uint64_t(1) << 20;
+  // Past what the reader uses, the end of the stream is looked for only so far: the rest of a
+  // 4-D image is not read, and a decompression bomb must not cost more than that.
+  const std::uint64_t search = search_bytes > 0 ? std::max(search_bytes, needed_bytes)
+                                                : needed_bytes + (std::uint64_t(1) << 20);
   std::vector<char> input(1 << 16), scratch(1 << 16);
   std::uint64_t total = 0;  // decompressed bytes over every member
   bool at_eof = false;
@@ -45,8 +47,9 @@ void require_whole_gzip(const fs::path& file, const fs::path& data, std::uint64_
     const int rc = inflate(&zs, Z_NO_FLUSH);
     total += zs.total_out - before;
     if (rc == Z_STREAM_END) {
+      // What follows a member that ends the data is ignored, as zlib's gzread does.
       if (total >= needed_bytes) return;
-      // Concatenated members (pigz, bgzip) are read on as one stream by zlib's gzread.
+      // Concatenated members (pigz, bgzip) are read on as one stream by gzread.
       if (zs.avail_in == 0 && at_eof) break;
       inflateReset(&zs);
       continue;
@@ -55,7 +58,7 @@ void require_whole_gzip(const fs::path& file, const fs::path& data, std::uint64_
       throw IoError(cat(file.string(), ": the compressed data are corrupt (zlib: ",
                         zs.msg ? zs.msg : "error", " after ", total,
                         " decompressed bytes); copy or export the file again"));
-    if (total > needed_bytes + kSlack) return;
+    if (total > search) return;
     if (zs.avail_in == 0 && at_eof) break;
   }
   throw IoError(cat(file.string(), ": the gzip stream is cut short: it ends after ", total,

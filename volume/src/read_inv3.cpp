@@ -344,7 +344,7 @@ Volume read_inv3(const fs::path& file, const ReadOptions& options) {
                               ? std::min(options.max_bytes, 1e18)
                               : 1e18;
     if (magic[0] == 0x1f && magic[1] == 0x8b)
-      require_whole_gzip(file, file, 0, static_cast<std::uint64_t>(budget));
+      require_whole_gzip(file, file, 0, 0, static_cast<std::uint64_t>(budget));
   }
   if (raw.size() != n_bytes)
     throw InvalidInput(cat(name, ": ", fname->text, " holds ", raw.size(), " bytes but matrix.shape ",
