@@ -240,14 +240,17 @@ bool extract_entry(const fs::path& file, const std::string& wanted, std::string&
                         " bytes; the project file is truncated"));
     if (to_end) {
       // The archive must go on to its end: a gzip stream cut short after the member read
-      // would pass unseen (libarchive reports it when the rest is walked).
+      // would pass unseen (libarchive reports it when the rest is walked). The member's name
+      // is copied first: libarchive frees it with the next header (a use after free that
+      // fuzz_inv3 found).
+      const std::string member = path;
       for (;;) {
         const int next = archive_read_next_header(a.get(), &entry);
         if (next == ARCHIVE_EOF) break;
         if ((next != ARCHIVE_OK && next != ARCHIVE_WARN) ||
             archive_read_data_skip(a.get()) != ARCHIVE_OK) {
           const char* err = archive_error_string(a.get());
-          throw IoError(cat(name, ": the archive is truncated or damaged after member ", path,
+          throw IoError(cat(name, ": the archive is truncated or damaged after member ", member,
                             " (", err ? err : "?", "); re-save the project"));
         }
       }
