@@ -2,8 +2,9 @@
 # Hostile-input checks (docs/reliability.md), run by scripts/test.sh after the test suite:
 #  1. the reader, plan and fem test programs built with clang, AddressSanitizer and
 #     UndefinedBehaviorSanitizer, run to the end: any sanitizer report fails;
-#  2. every fuzz target of fuzz/ for a bounded time from its seed corpus (scripts/fuzz.sh): any
-#     finding fails.
+#  2. every fuzz target of fuzz/ for a bounded time from its seed corpus and past findings
+#     (scripts/fuzz.sh): any finding fails.
+# Test programs and fuzz targets run as many at a time as there are cores.
 # Both use one build directory, build-fuzz (CC=clang CXX=clang++ -DCAPS_FUZZ=ON).
 #
 #   scripts/sanitize.sh [--seconds N]   (N: fuzzing time per target, default 20)
@@ -31,27 +32,32 @@ export ASAN_OPTIONS="abort_on_error=1:detect_leaks=1:symbolize=1"
 export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1"
 # cairo's fontconfig keeps a 652-byte cache until exit: not ours (scripts/lsan.supp).
 export LSAN_OPTIONS="suppressions=$here/scripts/lsan.supp:print_suppressions=0"
-failed=0
-for p in "${programs[@]}"; do
+# The test programs run side by side, as many at a time as there are cores (each is one process
+# and its tests use folders of their own under TMPDIR).
+jobs="$(nproc)"
+run_test() {
+  local p="$1" s
   s=$(date +%s)
   if "$build/tests/$p" --gtest_brief=1 >"$TMPDIR/$p.log" 2>&1; then
     echo "sanitize: $p clean ($(( $(date +%s) - s )) s)"
   else
     echo "sanitize: $p FAILED under ASan/UBSan:"
     grep -E 'ERROR|runtime error|SUMMARY|FAILED|Failure' "$TMPDIR/$p.log" | head -20 | sed 's/^/    /'
-    failed=1
+    touch "$TMPDIR/$p.failed"
   fi
+}
+running=0
+for p in "${programs[@]}"; do
+  run_test "$p" &
+  running=$((running + 1))
+  if [ $running -ge "$jobs" ]; then wait -n || true; running=$((running - 1)); fi
 done
+wait
+failed=0
+for p in "${programs[@]}"; do if [ -e "$TMPDIR/$p.failed" ]; then failed=1; fi; done
 t2=$(date +%s)
-# GDCM as Debian builds it aborts on internal assertions that random DICOM mutations keep finding
-# (docs/reliability.md): here fuzz_dicom replays its seeds and past findings only; the other
-# targets fuzz for the time given.
-targets=()
-for f in "$build"/fuzz/fuzz_*; do
-  name="$(basename "$f")"
-  [ -f "$f" ] && [ -x "$f" ] && [ "$name" != fuzz_seeds ] && [ "$name" != fuzz_dicom ] && targets+=("$name")
-done
-bash "$here/scripts/fuzz.sh" --build "$build" --seconds "$seconds" "${targets[@]}" || failed=1
-bash "$here/scripts/fuzz.sh" --build "$build" --runs 0 fuzz_dicom || failed=1
+# Every target fuzzes for the time given after replaying its seeds and past findings
+# (fuzz/regressions/), as many at a time as there are cores.
+bash "$here/scripts/fuzz.sh" --build "$build" --seconds "$seconds" --jobs "$jobs" || failed=1
 echo "sanitize: tests $((t2 - t1)) s, fuzzing $(( $(date +%s) - t2 )) s"
 exit $failed

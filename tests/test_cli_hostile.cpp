@@ -573,6 +573,49 @@ TEST_F(HostileModel, AnOutputThatIsOrHoldsAnInputIsRefusedEvenWithForce) {
                  {"is the input"}, mesh, mesh);
 }
 
+TEST_F(HostileModel, PlanErrorsNameTheFileAndTheEntry) {
+  // A plan whose path names a point it does not have, and one whose suture sews two points that
+  // are not a border edge: every command reading the plan names the file and the entry.
+  const nlohmann::json good = nlohmann::json::parse(slurp(plan()));
+  nlohmann::json j = good;
+  j["paths"][0][1] = 99;
+  const fs::path p = dir / "entry_plan.json";
+  write_file(p, j.dump(1));
+  expect_refused_new("plan check " + p.string(), {p.string() + ": ", "/paths/0/1", "names point 99"},
+                     dir / "none", p);
+  const fs::path out = dir / "entry_sim";
+  expect_refused_new("simulate --model " + model().string() + " --plan " + p.string() + " -o " +
+                         out.string(),
+                     {p.string() + ": ", "/paths/0/1"}, out, p);
+  j = good;
+  j["sutures"][0][0] = {0, 2};
+  write_file(p, j.dump(1));
+  expect_refused_new("plan check " + p.string(), {p.string() + ": ", "/sutures/0", "(0,2)"},
+                     dir / "none", p);
+  expect_refused_new("mesh --model " + model().string() + " --plan " + p.string() + " -o " +
+                         out.string(),
+                     {p.string() + ": ", "/sutures/0", "(0,2)"}, out, p);
+}
+
+TEST_F(HostileModel, NamesThatAreNotUtf8AreRefusedWhereAJsonFileWouldRecordThem) {
+  // result.json records the plan's and the model's names, a plan its model's folder: JSON is
+  // UTF-8, so a Latin-1 name is refused before any work (the JSON writer threw at the end of the
+  // solve before, an internal error; a plan recorded with U+FFFD could not find its model).
+  const fs::path latin_plan = dir / "pl\xe4n.json";
+  fs::copy_file(plan(), latin_plan, fs::copy_options::overwrite_existing);
+  const fs::path out = dir / "latin_sim";
+  expect_refused_new("simulate --model " + model().string() + " --plan " + latin_plan.string() +
+                         " -o " + out.string(),
+                     {"plan file", "pl\\xe4n.json", "not valid UTF-8", "rename"}, out, latin_plan);
+  const fs::path latin_model = dir / "mod\xe8le_plan";
+  fs::remove_all(latin_model);
+  fs::copy(model(), latin_model, fs::copy_options::recursive);
+  const fs::path new_plan = dir / "latin_model_plan.json";
+  expect_refused_new("plan new z-plasty -q --model " + latin_model.string() + " --at 0,60 -o " +
+                         new_plan.string(),
+                     {"model folder", "mod\\xe8le_plan", "not valid UTF-8"}, new_plan, latin_model);
+}
+
 TEST_F(HostileModel, JsonFieldsOfTheWrongTypeAreInputErrors) {
   // A plan whose "format" is a number, or whose format_version is a string.
   const std::string text = slurp(plan());

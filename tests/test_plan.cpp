@@ -5,10 +5,14 @@
 
 #include "synthetic_model.hpp"
 
+#include <unistd.h>
+
 #include <cmath>
+#include <filesystem>
 #include <numeric>
 
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 #include "caps/core/units.hpp"
 #include "caps/plan/check.hpp"
 #include "caps/plan/plan.hpp"
@@ -322,6 +326,59 @@ TEST(PlanCatalogue, BadPlansAreRefusedByName) {
                  {"p.json", "frame"});                                                     // 30
   expect_refused([] { layout_procedure("multiple-z-plasty", {{"segments", 12}}); },
                  {"segments = 12"});                                                       // 31
+}
+
+TEST(PlanFiles, ErrorsNameThePlanFileAndTheEntry) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("caps_test_plan_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  // A path naming a point the plan does not have: the check's message starts with the file and
+  // points at the entry.
+  Plan plan = placed("z-plasty");
+  const std::size_t last = plan.paths[0].size() - 1;
+  plan.paths[0][last] = 99;
+  const fs::path bad = dir / "bad_path.json";
+  write_plan(bad, plan);
+  const Plan back = read_plan(bad);
+  EXPECT_EQ(back.source, bad.string());
+  const std::string pointer = "/paths/0/" + std::to_string(last);
+  expect_refused([&] { check_plan_structure(back); }, {bad.string() + ": ", pointer, "names point 99"});
+  expect_refused([&] { check_plan(back, cylinder()); }, {bad.string() + ": ", pointer});
+  expect_refused([&] { wound_border(back); }, {bad.string() + ": ", pointer});
+  // A suture side that is not a border edge, through wound_border() (what the mesher reads).
+  Plan sewn = placed("z-plasty");
+  sewn.sutures[0].first = {0, 2};
+  const fs::path bad_suture = dir / "bad_suture.json";
+  write_plan(bad_suture, sewn);
+  expect_refused([&] { wound_border(read_plan(bad_suture)); },
+                 {bad_suture.string() + ": /sutures/0: ", "(0,2) is not a border edge"});
+  // A plan made in memory has no file to name: the message is as before.
+  try {
+    check_plan_structure(plan);
+    ADD_FAILURE() << "not refused";
+  } catch (const InvalidInput& e) {
+    EXPECT_EQ(std::string(e.what()).rfind("path 0 ", 0), 0u) << e.what();
+  }
+  // A model folder whose name is not UTF-8 cannot be recorded: refused, nothing written.
+  Plan latin = placed("z-plasty");
+  latin.model = "/data/mod\xe8le";
+  const fs::path out = dir / "latin.json";
+  expect_refused([&] { write_plan(out, latin); }, {"mod\\xe8le", "not valid UTF-8"});
+  EXPECT_FALSE(fs::exists(out));
+  fs::remove_all(dir);
+}
+
+TEST(PlanFiles, Utf8IsValidatedByTheStandardsRules) {
+  constexpr auto npos = std::string_view::npos;
+  EXPECT_EQ(first_invalid_utf8("plan"), npos);
+  EXPECT_EQ(first_invalid_utf8("caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x98\x80"), npos);  // e-acute, euro, emoji
+  EXPECT_EQ(first_invalid_utf8("caf\xe9"), 3u);                    // Latin-1 e-acute
+  EXPECT_EQ(first_invalid_utf8("a\xc0\xaf"), 1u);                  // overlong '/'
+  EXPECT_EQ(first_invalid_utf8("\xed\xa0\x80"), 0u);               // a UTF-16 surrogate
+  EXPECT_EQ(first_invalid_utf8("\xf4\x90\x80\x80"), 0u);           // above U+10FFFF
+  EXPECT_EQ(first_invalid_utf8("ab\xe2\x82"), 2u);                 // cut inside a character
+  EXPECT_EQ(first_invalid_utf8("\x80"), 0u);                       // a lone continuation byte
+  EXPECT_NO_THROW(require_utf8("caf\xc3\xa9", "x"));
 }
 
 TEST(PlanLibrary, RotationFlapTurnsIntoTheDefect) {

@@ -585,6 +585,89 @@ TEST(VolumeIo, DicomPicksLargestSeriesAndRejectsUnknownUid) {
                                    "1.2.3.4.5.2");
 }
 
+// The 128-byte preamble, "DICM" and a meta group naming `syntax` and nothing else.
+std::string part10_preamble(const std::string& syntax) {
+  std::string meta;
+  element(meta, 0x0002, 0x0001, "OB", std::string("\0\1", 2));
+  element(meta, 0x0002, 0x0010, "UI", syntax);
+  std::string out(128, '\0');
+  out += "DICM";
+  std::string len;
+  put_le32(len, static_cast<std::uint32_t>(meta.size()));
+  element(out, 0x0002, 0x0000, "UL", len);
+  return out + meta;
+}
+
+// A file written by write_dicom_slice with `insert` placed just before (0020,000D), so that the
+// elements stay in tag order.
+std::string dicom_variant(const fs::path& p, const std::string& insert) {
+  std::string d = read_bytes(p);
+  const auto at = d.find(std::string("\x20\x00\x0d\x00UI", 6));
+  EXPECT_NE(at, std::string::npos);
+  d.insert(at, insert);
+  return d;
+}
+
+std::string tag_len(std::uint16_t g, std::uint16_t e, std::uint32_t length) {
+  std::string s;
+  put_u16(s, g);
+  put_u16(s, e);
+  put_le32(s, length);
+  return s;
+}
+
+TEST(VolumeIo, DicomStructureIsCheckedBeforeGdcmReadsIt) {
+  TempDir tmp;
+  write_uniform_series(tmp / "seq", 3);
+  // A well-formed Referenced Image Sequence (0008,1140), SQ of undefined length holding one item
+  // of undefined length: read as before.
+  std::string sq("\x08\x00\x40\x11SQ\0\0", 8);
+  put_le32(sq, 0xffffffffu);
+  std::string item_body;
+  element(item_body, 0x0008, 0x1150, "UI", "1.2.840.10008.5.1.4.1.1.2");
+  const std::string good_sq = sq + tag_len(0xfffe, 0xe000, 0xffffffffu) + item_body +
+                              tag_len(0xfffe, 0xe00d, 0) + tag_len(0xfffe, 0xe0dd, 0);
+  for (const auto& e : fs::directory_iterator(tmp / "seq"))
+    write_bytes(e.path(), dicom_variant(e.path(), good_sq));
+  const Volume v = caps::read_volume(tmp / "seq");
+  EXPECT_EQ(v.geom.dims, Eigen::Vector3i(8, 6, 3));
+  EXPECT_FLOAT_EQ(v.at(7, 5, 2), 200 + 50 + 7 - 1024.0f);
+
+  // The same item without its delimiter: GDCM's parse would go astray; refused as damaged.
+  write_uniform_series(tmp / "bad_item", 3);
+  const fs::path bad = tmp / "bad_item/IM001.dcm";
+  write_bytes(bad, dicom_variant(bad, sq + tag_len(0xfffe, 0xe000, 0xffffffffu) + item_body +
+                                          tag_len(0xfffe, 0xe0dd, 0)));
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "bad_item"); }, "IM001.dcm",
+                              "damaged");
+  // An item outside any sequence.
+  write_uniform_series(tmp / "stray_item", 2);
+  const fs::path stray = tmp / "stray_item/IM000.dcm";
+  write_bytes(stray, dicom_variant(stray, tag_len(0xfffe, 0xe000, 4) + "abcd"));
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "stray_item"); }, "IM000.dcm",
+                              "outside a sequence");
+
+  // Implicit VR little endian with pixel data of undefined length (found by fuzz_dicom: GDCM
+  // asserts, aborting the process): refused before GDCM reads it.
+  std::string implicit = part10_preamble("1.2.840.10008.1.2");
+  implicit += tag_len(0x0008, 0x0060, 2) + "CT";
+  implicit += tag_len(0x0020, 0x000e, 6) + "1.2.3" + std::string(1, '\0');
+  implicit += tag_len(0x0028, 0x0010, 2) + us(2) + tag_len(0x0028, 0x0011, 2) + us(2);
+  implicit += tag_len(0x7fe0, 0x0010, 0xffffffffu) + tag_len(0xfffe, 0xe000, 8) +
+              std::string(8, '\0') + tag_len(0xfffe, 0xe0dd, 0);
+  write_bytes(tmp / "implicit.dcm", implicit);
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "implicit.dcm"); }, "implicit.dcm",
+                              "pixel data of undefined length");
+
+  // Deflated Explicit VR Little Endian: refused with what to do (GDCM would inflate it without
+  // a bound).
+  std::string deflated = part10_preamble("1.2.840.10008.1.2.1.99");
+  deflated += deflate_stored(std::string(64, '\0'));
+  write_bytes(tmp / "deflated.dcm", deflated);
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "deflated.dcm"); },
+                                   "deflated.dcm", "gdcmconv --raw");
+}
+
 TEST(VolumeIo, GeHeadTiltIsResampledToHu) {
   const fs::path p = kData / "ct/ge-head-tilt";
   if (!fs::exists(p)) GTEST_SKIP() << p;
@@ -701,6 +784,61 @@ TEST(VolumeIo, BadInputsGiveTheRightErrorNamingTheFile) {
   } catch (const caps::Error& e) {
     EXPECT_NE(std::string(e.what()).find("trunc"), std::string::npos) << e.what();
   }
+}
+
+// A gzip (or zlib) stream cut short after the bytes its reader needs (the end marker, CRC and
+// length lost) was accepted by every reader: each now requires the stream's end.
+TEST(VolumeIo, CompressedStreamsCutShortAreRefusedByEveryReader) {
+  TempDir tmp;
+  Volume v;
+  v.geom.dims = Eigen::Vector3i(12, 10, 8);
+  v.data.resize(v.geom.n_voxels());
+  for (std::size_t n = 0; n < v.data.size(); ++n) v.data[n] = static_cast<float>(n % 301);
+  // NIfTI .nii.gz written by caps, its 8-byte gzip trailer cut off.
+  caps::write_nifti(v, tmp / "whole.nii.gz");
+  const std::string nii = read_bytes(tmp / "whole.nii.gz");
+  EXPECT_NO_THROW(caps::read_volume(tmp / "whole.nii.gz"));
+  write_bytes(tmp / "cut.nii.gz", nii.substr(0, nii.size() - 8));
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "cut.nii.gz"); }, "cut.nii.gz",
+                              "truncated");
+
+  std::vector<std::uint16_t> vals(6 * 5 * 4);
+  for (std::size_t n = 0; n < vals.size(); ++n) vals[n] = static_cast<std::uint16_t>(n * 7);
+  const std::string head = "NRRD0004\ntype: ushort\ndimension: 3\nsizes: 6 5 4\n"
+                           "spacings: 0.5 0.6 0.7\nendian: little\nencoding: gzip\n";
+  const std::string gz = gzip_stored(raw_bytes(vals));
+  // NRRD, gzip data attached: whole, then without its trailer.
+  write_bytes(tmp / "whole.nrrd", head + "\n" + gz);
+  EXPECT_NO_THROW(caps::read_volume(tmp / "whole.nrrd"));
+  // teem notices a missing CRC itself; with the CRC there and the length gone it read on.
+  write_bytes(tmp / "cut.nrrd", head + "\n" + gz.substr(0, gz.size() - 4));
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "cut.nrrd"); }, "cut.nrrd",
+                              "cut short");
+  // NRRD, gzip data in a detached file.
+  write_bytes(tmp / "d.raw.gz", gz.substr(0, gz.size() - 4));
+  write_bytes(tmp / "d.nhdr", head + "data file: d.raw.gz\n");
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "d.nhdr"); }, "d.nhdr", "cut short");
+  write_bytes(tmp / "d.raw.gz", gz);
+  EXPECT_NO_THROW(caps::read_volume(tmp / "d.nhdr"));
+
+  // MetaImage, zlib data without its Adler-32.
+  const std::string z = zlib_stored(raw_bytes(vals));
+  auto mha = [&](const std::string& data) {
+    return "ObjectType = Image\nNDims = 3\nBinaryData = True\nCompressedData = True\n"
+           "CompressedDataSize = " + std::to_string(data.size()) +
+           "\nDimSize = 6 5 4\nElementType = MET_USHORT\nElementDataFile = LOCAL\n" + data;
+  };
+  write_bytes(tmp / "whole.mha", mha(z));
+  EXPECT_NO_THROW(caps::read_volume(tmp / "whole.mha"));
+  write_bytes(tmp / "cut.mha", mha(z.substr(0, z.size() - 4)));
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "cut.mha"); }, "cut.mha", "cut short");
+
+  // InVesalius: the project's gzipped tar cut short after the image member.
+  if (!fs::exists(kCranium)) GTEST_SKIP() << "invesalius-examples not installed";
+  const std::string inv = read_bytes(kCranium);
+  write_bytes(tmp / "cut.inv3", inv.substr(0, inv.size() - 8));
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "cut.inv3"); }, "cut.inv3",
+                              "truncated");
 }
 
 namespace caps {

@@ -12,6 +12,7 @@
 #include "caps/app/loaded_model.hpp"
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 #include "caps/core/units.hpp"
 #include "caps/plan/check.hpp"
 #include "caps/plan/plan_figure.hpp"
@@ -165,6 +166,8 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
                            kFreeIncision, "); ", r.procedure, " is placed with --at"));
   if (r.at.empty() == r.at_xyz.empty())
     throw InvalidInput("give the centre with --at THETA,Z or --at-xyz X,Y,Z");
+  // The plan records its model's folder to find it again: with its bytes replaced it could not.
+  require_utf8(r.model, "the model folder");
   const bool from_file = fs::path(r.procedure).extension() == ".json";
   if (from_file && !r.parameters.empty())
     throw InvalidInput("a procedure file has no parameters; drop --length/--width/--angle/...");

@@ -8,6 +8,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/json_limits.hpp"
 #include "caps/fem/box.hpp"
 #include "caps/fem/compare.hpp"
 #include "caps/fem/inp_io.hpp"
@@ -74,6 +75,8 @@ double max_norm(const Eigen::MatrixX3d& u) { return u.rows() ? u.rowwise().norm(
 // ---- mesh ---------------------------------------------------------------------------------
 
 MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
+  require_utf8(r.model, "the model folder");
+  require_utf8(r.plan.empty() ? r.border : r.plan, "the wound's file");
   detail::refuse_output_over_inputs(r);
   const fem::SimulateOptions o = simulate_options(r.meshing, {});
   const fem::WoundBorder border = border_of(r);
@@ -158,6 +161,9 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   o.suture_spacing_mm = r.suture_spacing;
   if (r.tension_map && !r.render)
     throw InvalidInput("--tension-map draws on the rendered images; add --render");
+  // Both names are recorded in result.json (JSON is UTF-8).
+  require_utf8(r.model, "the model folder");
+  require_utf8(r.plan, "the plan file");
   const plan::Plan plan = plan::read_plan(r.plan);
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(r.model);
@@ -330,6 +336,8 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
     throw InvalidInput("compare meshes the measured and a constant thickness itself; give the "
                        "constant one with --thickness, not --constant-thickness");
   const fem::SimulateOptions o = simulate_options(r.meshing, r.solver);
+  require_utf8(r.model, "the model folder");
+  require_utf8(r.plan, "the plan file");
   const plan::Plan plan = plan::read_plan(r.plan);
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(r.model);

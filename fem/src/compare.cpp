@@ -118,7 +118,7 @@ std::string comparison_json(const Comparison& c, const std::string& plan_name) {
                         {"measured", side(c.measured_summary)},
                         {"constant", side(c.constant_summary)},
                         {"warnings", c.warnings}}
-             .dump(2);
+      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 }  // namespace caps::fem

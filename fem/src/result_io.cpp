@@ -85,7 +85,9 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
   for (const SutureForce& s : r.suture_forces)
     j["suture_forces"].push_back({{"a", s.a}, {"b", s.b}, {"magnitude_n", s.magnitude_n},
                                   {"force_on_a_n", {s.force_on_a_n.x(), s.force_on_a_n.y(), s.force_on_a_n.z()}}});
-  write_text_atomic(dir / "result.json", j.dump(1) + "\n");
+  // Names are checked for UTF-8 where they enter (app); a replaced byte is better than a throw.
+  write_text_atomic(dir / "result.json",
+                    j.dump(1, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
 }
 
 namespace {

@@ -8,6 +8,7 @@
 #include "caps/core/error.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/volume/cylindrical_map.hpp"
+#include "plan_source.hpp"
 
 namespace caps::plan {
 
@@ -65,19 +66,22 @@ double SutureLength::ratio() const {
   return lo > 0 ? hi / lo : INFINITY;
 }
 
-PlanReport check_plan_structure(const Plan& plan) {
+namespace {
+
+/// check_plan_structure() without the plan's file in front of its errors.
+PlanReport structure(const Plan& plan) {
   if (plan.points.empty()) throw InvalidInput("the plan has no points");
   for (std::size_t i = 0; i < plan.points.size(); ++i)
     if (!std::isfinite(plan.points[i].theta_deg) || !std::isfinite(plan.points[i].z_mm))
-      throw InvalidInput(cat("point ", i, ": theta and z must be finite numbers"));
+      throw InvalidInput(cat("point ", i, " (/points/", i, "): theta and z must be finite numbers"));
     else if (std::abs(plan.points[i].theta_deg) > kMaxAbsThetaDeg ||
              std::abs(plan.points[i].z_mm) > kMaxAbsZMm)
-      throw InvalidInput(cat("point ", i, ": theta ", plan.points[i].theta_deg, " deg, z ",
+      throw InvalidInput(cat("point ", i, " (/points/", i, "): theta ", plan.points[i].theta_deg, " deg, z ",
                              plan.points[i].z_mm, " mm is outside any head (|theta| <= ",
                              kMaxAbsThetaDeg, " deg, |z| <= ", kMaxAbsZMm, " mm)"));
   if (!plan.frame.local_to_theta_z.allFinite() ||
       std::abs(plan.frame.local_to_theta_z.determinant()) < 1e-12)
-    throw InvalidInput("the plan's frame (local_to_theta_z) is singular or not finite");
+    throw InvalidInput("the plan's frame (/frame/local_to_theta_z) is singular or not finite");
   // Parameters of a library procedure stay in their clinical range.
   for (const auto& info : procedure_library()) {
     if (info.name != plan.procedure) continue;
@@ -88,7 +92,8 @@ PlanReport check_plan_structure(const Plan& plan) {
       if (it == info.parameters.end()) continue;
       if (!(v >= it->min && v <= it->max))
         throw InvalidInput(cat(plan.procedure, ": parameter ", k, " = ", v, " ", it->unit,
-                               " is outside its clinical range [", it->min, ", ", it->max, "]"));
+                               " is outside its clinical range [", it->min, ", ", it->max,
+                               "] (/procedure/parameters/", k, ")"));
     }
   }
   const BorderLoop loop = border_loop(plan);
@@ -109,7 +114,7 @@ PlanReport check_plan_structure(const Plan& plan) {
     xy[i] = plan.frame.to_local(plan.points[i].theta_deg, plan.points[i].z_mm);
   for (const auto& s : segs)
     if ((xy[s.a] - xy[s.b]).norm() < kMinSegmentMm)
-      throw InvalidInput(cat("path ", s.path, ": segment (", s.a, ",", s.b, ") is ",
+      throw InvalidInput(cat("path ", s.path, " (/paths/", s.path, "): segment (", s.a, ",", s.b, ") is ",
                              (xy[s.a] - xy[s.b]).norm(), " mm long at ", at(plan, xy[s.a]),
                              "; points of a cut must be at least ", kMinSegmentMm, " mm apart"));
   for (std::size_t i = 0; i < segs.size(); ++i)
@@ -163,24 +168,24 @@ PlanReport check_plan_structure(const Plan& plan) {
     const auto& flap = plan.flaps[f];
     const std::size_t m = flap.size();
     if (m < 3)
-      throw InvalidInput(cat("flap ", f, " has ", m, " point(s); a flap's outline needs at least 3"));
+      throw InvalidInput(cat("flap ", f, " (/flaps/", f, ") has ", m, " point(s); a flap's outline needs at least 3"));
     for (int i : flap)
       if (i < 0 || i >= static_cast<int>(xy.size()))
-        throw InvalidInput(cat("flap ", f, " names point ", i, ", but the plan has ", xy.size(),
+        throw InvalidInput(cat("flap ", f, " (/flaps/", f, ") names point ", i, ", but the plan has ", xy.size(),
                                " points"));
     const auto corner = [&](std::size_t k) { return xy[static_cast<std::size_t>(flap[k % m])]; };
     for (std::size_t i = 0; i < m; ++i) {
       const Eigen::Vector2d u = corner(i + 1) - corner(i), v = corner(i + 2) - corner(i + 1);
       if (m > 2 && u.norm() > 0 && v.norm() > 0 && std::abs(cross2(u, v)) < 1e-3 * u.norm() * v.norm() &&
           u.dot(v) < 0)
-        throw InvalidInput(cat("flap ", f, ": its outline folds back at point ", flap[(i + 1) % m],
+        throw InvalidInput(cat("flap ", f, " (/flaps/", f, "): its outline folds back at point ", flap[(i + 1) % m],
                                " (sides (", flap[i], ",", flap[(i + 1) % m], ") and (",
                                flap[(i + 1) % m], ",", flap[(i + 2) % m], ") overlap); list the "
                                "flap's points in order around it"));
       for (std::size_t j = i + 2; j < m; ++j) {
         if ((j + 1) % m == i) continue;
         if (segments_meet(corner(i), corner(i + 1), corner(j), corner(j + 1), kTouchMm))
-          throw InvalidInput(cat("flap ", f, ": its outline crosses itself (a bow-tie): sides (",
+          throw InvalidInput(cat("flap ", f, " (/flaps/", f, "): its outline crosses itself (a bow-tie): sides (",
                                  flap[i], ",", flap[(i + 1) % m], ") and (", flap[j], ",",
                                  flap[(j + 1) % m], ") meet near ", at(plan, corner(i)),
                                  "; list the flap's points in order around it"));
@@ -194,21 +199,26 @@ PlanReport check_plan_structure(const Plan& plan) {
     for (const BorderRun* r : {&s.first, &s.second})
       for (std::size_t i = 0; i + 1 < r->size(); ++i)
         if (!is_border_edge({(*r)[i], (*r)[i + 1]}, n))
-          throw InvalidInput(cat("suture ", k, " ", suture_text(s), ": edge (", (*r)[i], ",",
+          throw InvalidInput(cat("suture ", k, " (/sutures/", k, ") ", suture_text(s), ": edge (", (*r)[i], ",",
                                  (*r)[i + 1], ") is not on the border; border edges join "
                                  "consecutive nodes of the loop 0..", n - 1));
-    const auto q = oriented_suture(s, n);
+    std::array<int, 4> q;
+    try {
+      q = oriented_suture(s, n);
+    } catch (const InvalidInput& e) {
+      throw InvalidInput(cat("/sutures/", k, ": ", e.what()));
+    }
     const auto edges = suture_edges(q, n);
     for (int e : edges[0])
       if (std::find(edges[1].begin(), edges[1].end(), e) != edges[1].end())
-        throw InvalidInput(cat("suture ", k, " ", suture_text(s), ": edge (", e, ",", (e + 1) % n,
+        throw InvalidInput(cat("suture ", k, " (/sutures/", k, ") ", suture_text(s), ": edge (", e, ",", (e + 1) % n,
                                ") is sewn to itself"));
     for (const auto& side : edges)
       for (int e : side) {
         auto [it, fresh] = used.insert({{e, (e + 1) % n}, static_cast<int>(k)});
         if (!fresh)
           throw InvalidInput(cat("border edge (", e, ",", (e + 1) % n, ") is used by sutures ",
-                                 it->second, " and ", k, "; each edge can be sewn once"));
+                                 it->second, " and ", k, " (/sutures/", it->second, ", /sutures/", k, ")", "; each edge can be sewn once"));
       }
   }
   std::string open;
@@ -219,8 +229,9 @@ PlanReport check_plan_structure(const Plan& plan) {
   return report;
 }
 
-PlanReport check_plan(const Plan& plan, const PatientModel& model) {
-  PlanReport report = check_plan_structure(plan);
+/// check_plan() without the plan's file in front of its errors.
+PlanReport on_model(const Plan& plan, const PatientModel& model) {
+  PlanReport report = structure(plan);
   if (!plan.model_hash.empty() && plan.model_hash != model.content_hash())
     throw InvalidInput(cat("the plan was made on another model (", plan.model.empty() ? "" : plan.model + ", ",
                            "content ", plan.model_hash, ") than the one given (content ",
@@ -240,7 +251,7 @@ PlanReport check_plan(const Plan& plan, const PatientModel& model) {
                              invalid_flags_advice(f)));
   };
   for (int i = 0; i < n; ++i)
-    check_at(loop.theta_z[i], cat("loop node ", i, " (point ", loop.point[i], ")"));
+    check_at(loop.theta_z[i], cat("loop node ", i, " (point ", loop.point[i], "), /points/", loop.point[i]));
   // Edge lengths on the skin, sampled densely in the local frame.
   std::vector<double> len(n, 0.0);
   for (int i = 0; i < n; ++i) {
@@ -272,6 +283,16 @@ PlanReport check_plan(const Plan& plan, const PatientModel& model) {
     }
   }
   return report;
+}
+
+}  // namespace
+
+PlanReport check_plan_structure(const Plan& plan) {
+  return detail::naming_plan_file(plan, [&] { return structure(plan); });
+}
+
+PlanReport check_plan(const Plan& plan, const PatientModel& model) {
+  return detail::naming_plan_file(plan, [&] { return on_model(plan, model); });
 }
 
 }  // namespace caps::plan

@@ -8,6 +8,7 @@
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
 #include "caps/plan/skin_walk.hpp"
+#include "plan_source.hpp"
 
 namespace caps::plan {
 
@@ -67,28 +68,29 @@ std::vector<int> walk_around_cut(const std::vector<Eigen::Vector2d>& xy,
   for (std::size_t p = 0; p < paths.size(); ++p) {
     const auto& path = paths[p];
     if (path.size() < 2)
-      throw InvalidInput(cat("path ", p, " has ", path.size(), " point(s); a cut needs at least 2"));
+      throw InvalidInput(cat("path ", p, " (/paths/", p, ") has ", path.size(), " point(s); a cut needs at least 2"));
     for (std::size_t i = 0; i < path.size(); ++i) {
       if (path[i] < 0 || path[i] >= np)
-        throw InvalidInput(cat("path ", p, " names point ", path[i], ", but the plan has ", np,
+        throw InvalidInput(cat("path ", p, " (/paths/", p, "/", i, ") names point ", path[i], ", but the plan has ", np,
                                " points (0..", np - 1, ")"));
       if (i == 0) continue;
       const int a = path[i - 1], b = path[i];
       if (a == b)
-        throw InvalidInput(cat("path ", p, " repeats point ", a, " (segment ", i - 1, "-", i, ")"));
+        throw InvalidInput(cat("path ", p, " (/paths/", p, "/", i, ") repeats point ", a, " (segment ", i - 1, "-", i, ")"));
       const auto key = std::minmax(a, b);
       if (!edges.insert({key.first, key.second}).second)
-        throw InvalidInput(cat("path ", p, ": segment (", a, ",", b,
+        throw InvalidInput(cat("path ", p, " (/paths/", p, "/", i, "): segment (", a, ",", b,
                                ") is cut twice (the paths overlap there)"));
       nb[a].push_back(b);
       nb[b].push_back(a);
     }
   }
   for (int i = 0; i < np; ++i)
-    if (nb[i].empty()) throw InvalidInput(cat("point ", i, " is on no cutting path"));
+    if (nb[i].empty())
+      throw InvalidInput(cat("point ", i, " is on no cutting path (/points/", i, " is in no entry of /paths)"));
   const int start = paths[0][0];
   if (nb[start].size() != 1)
-    throw InvalidInput(cat("the first path must start at an end of the cut, but point ", start,
+    throw InvalidInput(cat("the first path (/paths/0/0) must start at an end of the cut, but point ", start,
                            " joins ", nb[start].size(), " segments"));
   // A tree has one segment fewer than points; more closes a loop, fewer leaves it in pieces
   // (found by the walk below).
@@ -123,12 +125,13 @@ std::vector<int> walk_around_cut(const std::vector<Eigen::Vector2d>& xy,
   for (int p : loop) seen[p] = 1;
   for (int i = 0; i < np; ++i)
     if (!seen[i])
-      throw InvalidInput(cat("point ", i, " is on a cut not connected to the first path; a plan "
+      throw InvalidInput(cat("point ", i, " (/points/", i, ") is on a cut not connected to the first path; a plan "
                              "describes one wound (make a plan per wound)"));
   return loop;
 }
 
 BorderLoop border_loop(const Plan& plan) {
+  return detail::naming_plan_file(plan, [&] {
   const int np = static_cast<int>(plan.points.size());
   std::vector<Eigen::Vector2d> xy(np);
   for (int i = 0; i < np; ++i) xy[i] = plan.frame.to_local(plan.points[i].theta_deg, plan.points[i].z_mm);
@@ -141,18 +144,19 @@ BorderLoop border_loop(const Plan& plan) {
   for (std::size_t e = 0; e < plan.excisions.size(); ++e) {
     const auto& x = plan.excisions[e];
     if (x.loop_index < 0 || x.loop_index >= n)
-      throw InvalidInput(cat("excision ", e, " moves loop node ", x.loop_index,
+      throw InvalidInput(cat("excision ", e, " (/excisions/", e, "/loop_index) moves loop node ", x.loop_index,
                              ", but the border loop has nodes 0..", n - 1));
     if (!x.offset_mm.allFinite())
-      throw InvalidInput(cat("excision ", e, " (loop node ", x.loop_index,
-                             "): the offset must be finite"));
+      throw InvalidInput(cat("excision ", e, " (/excisions/", e, "/offset_mm, loop node ",
+                             x.loop_index, "): the offset must be finite"));
     if (moved[x.loop_index]++)
-      throw InvalidInput(cat("excision ", e, ": loop node ", x.loop_index, " is moved twice"));
+      throw InvalidInput(cat("excision ", e, " (/excisions/", e, "/loop_index): loop node ", x.loop_index, " is moved twice"));
     loop.local_mm[x.loop_index] += x.offset_mm;
   }
   loop.theta_z.resize(n);
   for (int i = 0; i < n; ++i) loop.theta_z[i] = plan.frame.to_theta_z(loop.local_mm[i]);
   return loop;
+  });
 }
 
 bool is_border_edge(const BorderEdge& e, int n) {
@@ -215,20 +219,27 @@ std::array<std::vector<int>, 2> suture_edges(const std::array<int, 4>& q, int n)
 }
 
 WoundBorder wound_border(const Plan& plan) {
+  return detail::naming_plan_file(plan, [&] {
   const BorderLoop loop = border_loop(plan);
   WoundBorder w;
   w.loop_theta_z = loop.theta_z;
-  for (const auto& s : plan.sutures) w.sutures.push_back(oriented_suture(s, loop.size()));
+  for (std::size_t k = 0; k < plan.sutures.size(); ++k) {
+    try {
+      w.sutures.push_back(oriented_suture(plan.sutures[k], loop.size()));
+    } catch (const InvalidInput& e) {
+      throw InvalidInput(cat("/sutures/", k, ": ", e.what()));
+    }
+  }
   const double t0 = loop.theta_z.empty() ? 0.0 : loop.theta_z[0][0];
   for (std::size_t f = 0; f < plan.flaps.size(); ++f) {
     const auto& flap = plan.flaps[f];
     if (flap.size() < 3)
-      throw InvalidInput(cat("flap ", f, " has ", flap.size(), " point(s); a flap's outline needs "
+      throw InvalidInput(cat("flap ", f, " (/flaps/", f, ") has ", flap.size(), " point(s); a flap's outline needs "
                              "at least 3"));
     std::vector<Eigen::Vector2d> poly;
     for (int i : flap) {
       if (i < 0 || i >= static_cast<int>(plan.points.size()))
-        throw InvalidInput(cat("flap ", f, " names point ", i, ", but the plan has ",
+        throw InvalidInput(cat("flap ", f, " (/flaps/", f, ") names point ", i, ", but the plan has ",
                                plan.points.size(), " points"));
       const auto& p = plan.points[i];
       poly.push_back({t0 + std::remainder(p.theta_deg - t0, 360.0), p.z_mm});
@@ -236,6 +247,7 @@ WoundBorder wound_border(const Plan& plan) {
     w.flaps_theta_z.push_back(std::move(poly));
   }
   return w;
+  });
 }
 
 }  // namespace caps::plan

@@ -83,6 +83,7 @@ Plan parse_plan_json(const std::string& text, const std::string& source) {
     throw InvalidInput(cat(source, ": plan format_version ", version.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace),
                            " is not supported (this caps reads version ", kPlanFormatVersion, ")"));
   Plan plan;
+  plan.source = source;
   std::string field;
   try {
     field = "model";
@@ -125,6 +126,7 @@ Plan parse_plan_json(const std::string& text, const std::string& source) {
     field = "notes";
     plan.notes = j.value("notes", "");
   } catch (const json::exception& e) {
+    // With JSON_DIAGNOSTICS the message holds the JSON pointer of the offending value.
     throw InvalidInput(cat(source, ": field \"", field, "\": ", e.what(),
                            "; see docs/plan-format.md"));
   }
@@ -150,6 +152,8 @@ Plan read_plan(const std::filesystem::path& path) {
 }
 
 void write_plan(const std::filesystem::path& path, const Plan& plan, const PlanReport* report) {
+  // The plan finds its model again by this name: one with replaced bytes would not be found.
+  require_utf8(plan.model, "the plan's model folder");
   json j = json::parse(plan_to_json(plan, report));
   if (!plan.model.empty()) {
     std::error_code ec;

@@ -29,6 +29,7 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "dicom_structure.hpp"
 #include "volume_io_detail.hpp"
 
 #include <Eigen/Geometry>
@@ -101,102 +102,10 @@ bool looks_like_dicom(const fs::path& file) {
   return (group == 0x0002 || group == 0x0008) && element < 0x0100;
 }
 
-/// Whether every data element of `in` from `start` on declares a length that fits in the file
-/// (`size` bytes): GDCM allocates an element's declared length before reading it, so a 2 KB file
-/// declaring a 3 GB element would take 3 GB (found by fuzz/fuzz_dicom.cpp). `explicit_vr`,
-/// `big_endian`: the encoding. Elements of undefined length (sequences, items, encapsulated pixel
-/// data) are walked into; the meta group (0002) is read in explicit VR little endian and its
-/// transfer syntax UID is returned in `syntax`. Linear in the number of elements.
-bool lengths_fit(std::ifstream& in, std::uint64_t start, std::uint64_t size, bool explicit_vr,
-                 bool big_endian, std::string* syntax) {
-  std::uint64_t at = start;
-  in.clear();
-  in.seekg(static_cast<std::streamoff>(at));
-  unsigned char b[12];
-  const auto u16 = [](const unsigned char* p, bool be) {
-    return be ? unsigned(p[0]) << 8 | p[1] : unsigned(p[1]) << 8 | p[0];
-  };
-  const auto u32 = [](const unsigned char* p, bool be) {
-    return be ? std::uint32_t(p[0]) << 24 | std::uint32_t(p[1]) << 16 | std::uint32_t(p[2]) << 8 | p[3]
-              : std::uint32_t(p[3]) << 24 | std::uint32_t(p[2]) << 16 | std::uint32_t(p[1]) << 8 | p[0];
-  };
-  while (at + 8 <= size) {
-    if (!in.read(reinterpret_cast<char*>(b), 8)) return false;
-    const bool meta = u16(b, false) == 0x0002;
-    if (syntax && !meta) return true;  // the meta group ended (or there is none)
-    const bool be = big_endian && !meta;
-    const unsigned group = u16(b, be), element = u16(b + 2, be);
-    std::uint64_t header = 8, length = 0;
-    if (group == 0xfffe) {  // item, item and sequence delimiters: no VR
-      length = u32(b + 4, be);
-    } else if (explicit_vr || meta) {
-      const std::string vr(reinterpret_cast<const char*>(b + 4), 2);
-      static const std::set<std::string> long_vrs = {"OB", "OD", "OF", "OL", "OV", "OW", "SQ",
-                                                     "SV", "UC", "UN", "UR", "UT", "UV"};
-      static const std::set<std::string> short_vrs = {"AE", "AS", "AT", "CS", "DA", "DS", "DT",
-                                                      "FL", "FD", "IS", "LO", "LT", "PN", "SH",
-                                                      "SL", "SS", "ST", "TM", "UI", "UL", "US"};
-      // GDCM reads an unknown VR with a 4-byte length, which this walk cannot follow: damaged.
-      if (!long_vrs.count(vr) && !short_vrs.count(vr)) return false;
-      if (long_vrs.count(vr)) {
-        if (at + 12 > size || !in.read(reinterpret_cast<char*>(b + 8), 4)) return false;
-        header = 12;
-        length = u32(b + 8, be);
-      } else {
-        length = u16(b + 6, be);
-      }
-    } else {
-      length = u32(b + 4, be);
-    }
-    at += header;
-    if (length == 0xffffffffu) continue;  // undefined length: its contents follow
-    if (length > size - at) return false;
-    if (syntax && group == 0x0002 && element == 0x0010 && length < 256) {
-      std::string uid(static_cast<std::size_t>(length), '\0');
-      if (!in.read(uid.data(), static_cast<std::streamsize>(length))) return false;
-      while (!uid.empty() && (uid.back() == '\0' || uid.back() == ' ')) uid.pop_back();
-      *syntax = uid;
-    }
-    at += length;
-    in.seekg(static_cast<std::streamoff>(at));
-  }
-  // A file that ends inside its meta group (GDCM asserts on a partial element there, found by
-  // fuzz_dicom) holds no image.
-  return syntax == nullptr;
-}
-
-/// Whether the declared lengths of `file`'s elements fit in it (see lengths_fit): the meta group,
-/// then the data set in its transfer syntax; without a meta group, implicit or explicit VR
-/// little endian (whichever fits). A deflated data set cannot be checked this way.
-bool declared_lengths_fit(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  std::error_code ec;
-  const std::uint64_t size = fs::file_size(file, ec);
-  if (!in || ec) return false;
-  char magic[4] = {};
-  in.seekg(128);
-  in.read(magic, 4);
-  const std::uint64_t start = in && std::memcmp(magic, "DICM", 4) == 0 ? 132 : 0;
-  std::string syntax;
-  if (!lengths_fit(in, start, size, true, false, &syntax)) return false;
-  // A Part 10 file (DICM) must start with its meta group and name its transfer syntax; GDCM
-  // asserts on one that does not (found by fuzz_dicom).
-  if (start == 132 && syntax.empty()) return false;
-  if (syntax.empty())
-    return lengths_fit(in, start, size, false, false, nullptr) ||
-           lengths_fit(in, start, size, true, false, nullptr);
-  if (syntax == "1.2.840.10008.1.2.1.99") return true;  // deflated: not walkable
-  return lengths_fit(in, start, size, syntax != "1.2.840.10008.1.2",
-                     syntax == "1.2.840.10008.1.2.2", nullptr);
-}
-
 /// Reads the header of one file; returns false if it is not a DICOM image with a series UID.
 bool read_header(const fs::path& file, SliceHeader& h) {
   if (!looks_like_dicom(file)) return false;
-  if (!declared_lengths_fit(file))
-    throw IoError(cat(file.string(), ": the DICOM file is truncated or damaged (an element "
-                      "declares more bytes than the file holds, or an unknown value "
-                      "representation); export the series again"));
+  check_dicom_structure(file);
   gdcm::Reader reader;
   reader.SetFileName(file.c_str());
   const gdcm::Tag pixel_data(0x7fe0, 0x0010);

@@ -19,6 +19,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <string>
@@ -185,8 +186,10 @@ std::string base_name(const std::string& entry) {
 
 /// Reads the first archive member whose base name is `wanted` into `out`; returns false if there
 /// is none. Throws InvalidInput if the file is not a tar archive, IoError if it is damaged.
+/// `to_end`: then walk the rest of the archive, so that one cut short after the member is an
+/// IoError too.
 bool extract_entry(const fs::path& file, const std::string& wanted, std::string& out,
-                   std::uintmax_t max_bytes) {
+                   std::uintmax_t max_bytes, bool to_end = false) {
   const std::string name = file.string();
   std::unique_ptr<archive, ArchiveFree> a(archive_read_new());
   archive_read_support_filter_all(a.get());
@@ -235,6 +238,23 @@ bool extract_entry(const fs::path& file, const std::string& wanted, std::string&
     if (got != declared)
       throw IoError(cat(name, ": archive member ", path, " holds ", got, " of its ", declared,
                         " bytes; the project file is truncated"));
+    if (to_end) {
+      // The archive must go on to its end: a gzip stream cut short after the member read
+      // would pass unseen (libarchive reports it when the rest is walked). The member's name
+      // is copied first: libarchive frees it with the next header (a use after free that
+      // fuzz_inv3 found).
+      const std::string member = path;
+      for (;;) {
+        const int next = archive_read_next_header(a.get(), &entry);
+        if (next == ARCHIVE_EOF) break;
+        if ((next != ARCHIVE_OK && next != ARCHIVE_WARN) ||
+            archive_read_data_skip(a.get()) != ARCHIVE_OK) {
+          const char* err = archive_error_string(a.get());
+          throw IoError(cat(name, ": the archive is truncated or damaged after member ", member,
+                            " (", err ? err : "?", "); re-save the project"));
+        }
+      }
+    }
     return true;
   }
   return false;
@@ -314,9 +334,21 @@ Volume read_inv3(const fs::path& file, const ReadOptions& options) {
 
   std::string raw;
   const std::size_t n_bytes = g.n_voxels() * type_size(type);
-  if (!extract_entry(file, base_name(fname->text), raw, n_bytes + (1u << 20)))
+  if (!extract_entry(file, base_name(fname->text), raw, n_bytes + (1u << 20), true))
     throw InvalidInput(cat(name, ": the archive has no member '", fname->text,
                            "' named by main.plist matrix.filename"));
+  // libarchive stops at the tar's end-of-archive blocks without reading on: a gzip stream cut
+  // short after them (its CRC and length) would pass. Looked for up to the byte budget.
+  {
+    std::ifstream in(file, std::ios::binary);
+    unsigned char magic[2] = {};
+    in.read(reinterpret_cast<char*>(magic), 2);
+    const double budget = std::isfinite(options.max_bytes) && options.max_bytes > 0
+                              ? std::min(options.max_bytes, 1e18)
+                              : 1e18;
+    if (magic[0] == 0x1f && magic[1] == 0x8b)
+      require_whole_gzip(file, file, 0, 0, static_cast<std::uint64_t>(budget));
+  }
   if (raw.size() != n_bytes)
     throw InvalidInput(cat(name, ": ", fname->text, " holds ", raw.size(), " bytes but matrix.shape ",
                            zyx[0], "x", zyx[1], "x", zyx[2], " of ", dtype->text, " needs ",

@@ -85,7 +85,28 @@ std::vector<char> inflate_all(const fs::path& file, const char* src, std::size_t
     rc = inflate(&zs, Z_NO_FLUSH);
     if (rc != Z_OK || zs.total_out >= expected) break;
   }
-  const std::size_t out_off = zs.total_out;
+  // Inflating stops once the header's bytes are out: the stream must still end right after
+  // them (its end marker and checksum), or it was cut short; 1 MiB more is looked through.
+  if (rc == Z_OK && zs.total_out >= expected) {
+    char scratch[1 << 12];
+    std::size_t extra = 0;
+    while (rc == Z_OK && extra < (std::size_t(1) << 20)) {
+      zs.avail_in = static_cast<uInt>(std::min<std::size_t>(n - zs.total_in, 1u << 30));
+      zs.next_out = reinterpret_cast<Bytef*>(scratch);
+      zs.avail_out = sizeof scratch;
+      const uLong before = zs.total_out;
+      rc = inflate(&zs, Z_NO_FLUSH);
+      extra += zs.total_out - before;
+    }
+    if (rc == Z_BUF_ERROR) {
+      inflateEnd(&zs);
+      throw IoError(cat(file.string(), ": the compressed data are cut short (the stream ends "
+                        "without its end marker and checksum); the file is truncated: export "
+                        "it again"));
+    }
+    if (rc == Z_OK) rc = Z_STREAM_END;  // more data than the header describes: not read
+  }
+  const std::size_t out_off = std::min<std::size_t>(zs.total_out, expected);
   inflateEnd(&zs);
   if (rc == Z_DATA_ERROR || rc == Z_MEM_ERROR || rc == Z_STREAM_ERROR || rc == Z_NEED_DICT)
     throw IoError(cat(file.string(), ": the compressed data are corrupt (zlib error ", rc,

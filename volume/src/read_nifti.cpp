@@ -109,6 +109,11 @@ std::vector<char> read_first_volume(const std::string& name, const nifti_image& 
   if (!ok)
     throw IoError(cat(name, ": the voxel data could not be read (truncated or corrupt ",
                       is_gz(fs::path(name)) ? "gzip stream" : "file", "); re-export or re-download it"));
+  // zlib's gzread stops once it has the bytes asked for: a stream cut short after them (its end
+  // and checksum) would pass unseen.
+  if (nifti_is_gzfile(data_file.c_str()))
+    require_whole_gzip(fs::path(name), fs::path(data_file), 0,
+                       static_cast<std::uint64_t>(nim.iname_offset) + n_bytes);
   return raw;
 }
 

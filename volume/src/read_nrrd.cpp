@@ -131,6 +131,41 @@ void check_detached_size(const fs::path& file, const NrrdIoState& nio, double n_
                            "file)"));
 }
 
+// The byte offset of an attached header's data: just after the blank line that ends the header
+// (lines end in \n or \r\n); 0 if there is none in the first MiB.
+std::uint64_t attached_data_offset(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  std::string head(1u << 20, '\0');
+  in.read(head.data(), static_cast<std::streamsize>(head.size()));
+  head.resize(static_cast<std::size_t>(in.gcount()));
+  for (std::size_t i = head.find('\n'); i != std::string::npos; i = head.find('\n', i + 1)) {
+    if (i + 1 < head.size() && head[i + 1] == '\n') return i + 2;
+    if (i + 2 < head.size() && head[i + 1] == '\r' && head[i + 2] == '\n') return i + 3;
+  }
+  return 0;
+}
+
+// teem's gzip decoding stops once it has the header's bytes: a stream cut short after them
+// would pass. Checked for attached data and a single detached file without skips (a list or
+// pattern of files, or byte/line skips, are read by teem alone).
+void check_gzip_whole(const fs::path& file, const NrrdIoState& nio, double n_bytes) {
+  if (!nio.encoding || std::string(nio.encoding->name) != "gzip" || nio.byteSkip != 0 ||
+      nio.lineSkip != 0 || nio.dataFNFormat || !nio.dataFNArr)
+    return;
+  const auto needed = static_cast<std::uint64_t>(n_bytes);
+  if (nio.dataFNArr->len == 0) {
+    const std::uint64_t offset = attached_data_offset(file);
+    if (offset > 0) require_whole_gzip(file, file, offset, needed);
+    return;
+  }
+  if (nio.dataFNArr->len != 1 || nio.dataFSkip) return;
+  const std::string data_name = nio.dataFN[0];
+  if (data_name == "LIST") return;
+  fs::path data = data_name;
+  if (data.is_relative()) data = file.parent_path() / data;
+  require_whole_gzip(file, data, 0, needed);
+}
+
 }  // namespace
 
 Volume read_nrrd(const fs::path& file, const ReadOptions& options) {
@@ -169,6 +204,7 @@ Volume read_nrrd(const fs::path& file, const ReadOptions& options) {
     throw IoError(cat(name, ": the voxel data could not be read (", teem_error(),
                       "); a detached data file is missing or truncated, or the compressed data "
                       "are corrupt"));
+  check_gzip_whole(file, *nio, n_vox * static_cast<double>(type_size(type)));
 
   Volume v;
   v.source = name;

@@ -59,4 +59,16 @@ std::string to_lower(std::string s);
 std::string slice_file_name(const std::filesystem::path& file, const std::string& field,
                             const std::string& pattern, long long i);
 
+/// Throws IoError naming `file` unless the gzip (or zlib) stream in `data` from byte `offset`
+/// is whole: it decompresses without error and ends (end marker, CRC-32 and length checked by
+/// zlib) after at least `needed_bytes` decompressed bytes, the part its reader uses. The end is
+/// looked for up to `search_bytes` decompressed bytes (default: 1 MiB past `needed_bytes`); a
+/// longer stream passes unexamined beyond that. The readers stop inflating once they hold what
+/// the header declares, so a stream cut short after that point was accepted. Concatenated gzip
+/// members are followed; bytes after the member that completes the data are ignored (as zlib's
+/// gzread does). Streams the file through 64 KiB buffers: no allocation sized by the file.
+void require_whole_gzip(const std::filesystem::path& file, const std::filesystem::path& data,
+                        std::uint64_t offset, std::uint64_t needed_bytes,
+                        std::uint64_t search_bytes = 0);
+
 }  // namespace caps::detail

@@ -5,6 +5,7 @@
 /// a file nested 200,000 deep overflows the stack or takes gigabytes. Every reader of JSON from a
 /// file or a request calls check_json_depth() on the text before parsing it.
 
+#include <cstddef>
 #include <string>
 #include <string_view>
 
@@ -19,5 +20,19 @@ constexpr int kMaxJsonDepth = 100;
 /// (the parser does that). Linear time, no allocation.
 void check_json_depth(std::string_view text, const std::string& source,
                       int max_depth = kMaxJsonDepth);
+
+}  // namespace caps
+
+namespace caps {
+
+/// The offset of the first byte of `text` that is not part of valid UTF-8 (overlong forms,
+/// surrogates and code points above U+10FFFF included), or npos when it is all valid.
+std::size_t first_invalid_utf8(std::string_view text);
+
+/// Throws InvalidInput when `text` (a file or folder name that caps will record in a JSON file,
+/// which must be UTF-8) is not valid UTF-8: the message names `what`, shows the text with the
+/// invalid bytes as \xNN, and says to rename it. A name recorded with its bytes replaced could
+/// not be found again (a plan's model folder), and JSON writers throw on such bytes.
+void require_utf8(std::string_view text, const std::string& what);
 
 }  // namespace caps

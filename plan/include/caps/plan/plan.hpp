@@ -117,6 +117,10 @@ struct Plan {
   /// mesher frees the deep tissue under their whole area (docs/fem.md).
   std::vector<std::vector<int>> flaps;
   std::string notes;
+  /// The file the plan was read from (read_plan(), parse_plan_json()'s `source`); empty for a
+  /// plan made in memory. Not written to plan files. The checks' errors start with it, and name
+  /// the offending entry by its JSON pointer in the file (`/paths/0/3`).
+  std::string source;
 };
 
 /// The paper's Figure 2 rule for one path of n >= 2 points: 0..n-1 then n-2..1.
