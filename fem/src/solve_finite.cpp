@@ -395,8 +395,21 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
     out.von_mises_mean = vm / w_sum;
     const Eigen::MatrixX3d P = natural_nodes(el.type);
     out.nodal_stress.resize(nn, 6);
-    for (int a = 0; a < nn; ++a)
-      out.nodal_stress.row(a) = element_cauchy_stress(el.type, X, mat, ue, P.row(a).transpose(), e).transpose();
+    // At a node the quadratic element's deformation gradient may fold (det F <= 0 at a corner
+    // squeezed by the closure) while every Gauss point, where equilibrium is solved and checked,
+    // is sound: such a node takes the stress of its nearest Gauss point.
+    const auto& rule = quadrature(el.type);
+    for (int a = 0; a < nn; ++a) {
+      const Eigen::Vector3d xi = P.row(a).transpose();
+      try {
+        out.nodal_stress.row(a) = element_cauchy_stress(el.type, X, mat, ue, xi, e).transpose();
+      } catch (const SolverError&) {
+        std::size_t nearest = 0;
+        for (std::size_t g = 1; g < rule.size(); ++g)
+          if ((rule[g].xi - xi).squaredNorm() < (rule[nearest].xi - xi).squaredNorm()) nearest = g;
+        out.nodal_stress.row(a) = out.gauss_stress.row(static_cast<Eigen::Index>(nearest));
+      }
+    }
   }, res);
   res.timings.recovery_s = seconds_since(t);
 }
