@@ -705,6 +705,7 @@ TEST(Simulate, ZPlastyTransposesItsFlapsAndLengthensTheCentralLimb) {
     EXPECT_LT(gain, std::sqrt(5 - 4 * std::cos(kPi / 3)) - 1);
     EXPECT_GT(beyond_gain, 0.02);
   }
+}
 
 TEST(Simulate, BaseOverAnAirCavityIsFreeAndTheSurroundingTissueHoldsTheSolve) {
   // The band z 60..70 has its base on an air cavity (kBaseCavity: valid, no support). An ellipse
