@@ -51,6 +51,7 @@ fem::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields
   o.solve.solver = fem::parse_solver(s.solver);
   o.solve.mixed_precision = fem::parse_precision(s.precision);
   o.solve.kinematics = fem::parse_kinematics(s.material);
+  o.solve.prestretch = s.prestretch;
   if (s.steps < 1 || s.steps > 1000)
     throw InvalidParameter(cat("{steps} ", s.steps, ": give 1..1000 load steps"));
   o.solve.newton.n_steps = s.steps;
@@ -198,6 +199,8 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   s.strain_energy_mj = res.strain_energy_mj;
   s.warnings = sim.wound.continuum.mesh.warnings;
   s.material = res.kinematics;
+  s.prestretch = res.prestretch;
+  s.gape_mm = sim.gape_mm;
   s.load_steps = static_cast<int>(res.newton_steps.size());
   s.newton_iterations = res.newton_iterations;
   s.inverted_elements = sim.inverted_elements;
@@ -226,6 +229,8 @@ std::string to_json(const SimulateResult& s) {
                                  {"wound_length_mm", s.wound_length_mm}}},
          {"strain_energy_mj", s.strain_energy_mj},
          {"material", s.material},
+         {"prestretch", s.prestretch},
+         {"gape_mm", s.gape_mm},
          {"load_steps", s.load_steps},
          {"newton_iterations", s.newton_iterations},
          {"inverted_elements", s.inverted_elements},
@@ -242,7 +247,11 @@ std::string summary(const SimulateResult& s) {
              " N each; ", round_to(s.force_per_mm_n, 3), " N per mm of wound), max displacement ",
              round_to(s.max_displacement_mm, 2), " mm, suture gap after closure ",
              s.max_suture_gap_mm < 1e-6 ? std::string("0") : cat(round_sig(s.max_suture_gap_mm, 2)),
-             " mm -> ", s.output);
+             " mm",
+             s.prestretch != 1 ? cat("; skin prestretched ", s.prestretch, ": the open wound gapes ",
+                                     round_to(s.gape_mm, 2), " mm")
+                               : std::string(),
+             " -> ", s.output);
 }
 
 // ---- solve --------------------------------------------------------------------------------

@@ -273,7 +273,8 @@ void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys) {
 FiniteAssembly assemble_finite(const Mesh& mesh, const DofMap& map,
                                const FiniteMaterials& materials, const Eigen::VectorXd& u,
                                double load_factor, const Eigen::VectorXd& lift, bool with_tangent,
-                               Assembly& sys, Eigen::VectorXd* unit_lift) {
+                               Assembly& sys, Eigen::VectorXd* unit_lift,
+                               const LayerPrestretch& prestretch) {
   if (with_tangent) std::fill(sys.K.valuePtr(), sys.K.valuePtr() + sys.K.nonZeros(), 0.0);
   sys.f.setZero(map.n_eq);
   if (unit_lift) unit_lift->setZero(map.n_eq);
@@ -288,7 +289,8 @@ FiniteAssembly assemble_finite(const Mesh& mesh, const DofMap& map,
     for (int a = 0; a < nn; ++a)
       w.ue.segment<3>(3 * a) = u.segment<3>(3 * static_cast<Eigen::Index>(el.nodes[a]));
     per_element[e] = finite_kernel(el.type, w.X, *materials.at(el.layer), w.ue, e, w.fe,
-                                   with_tangent ? &w.Ke : nullptr);
+                                   with_tangent ? &w.Ke : nullptr,
+                                   el.layer == prestretch.layer ? prestretch.stretch : 1.0);
     if (per_element[e].inverted_at >= 0) return;
     const bool has_lift = gather_element(el, map, lift.size() ? lift.data() : nullptr, w.blk, w.eq, w.ge);
     for (int p = 0; p < m; ++p)

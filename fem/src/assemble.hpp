@@ -44,6 +44,12 @@ void add_loads(const Mesh& mesh, const DofMap& map, double scale, Eigen::VectorX
 /// Layer id -> the material of the finite-strain solve (not owned; must outlive the assembly).
 using FiniteMaterials = std::map<int, const Material*>;
 
+/// The in-plane prestretch of one element layer (detail::prestretch_tensor); stretch 1: none.
+struct LayerPrestretch {
+  int layer = 0;
+  double stretch = 1.0;
+};
+
 /// What assemble_finite() found: the strain energy, or the first inverted element.
 struct FiniteAssembly {
   double energy_mj = 0;
@@ -57,11 +63,13 @@ struct FiniteAssembly {
 ///   f = T^T (load_factor f_ext - f_int(u)) - T^T K_T lift     (lift: 3N mm, or empty)
 /// (the lifting term gives the predictor of a load step whose prescribed values grow by lift).
 /// With `unit_lift` (and the tangent), also -T^T K_T g for the full offsets g = map.g, so that
-/// the next load step's predictor needs no assembly of its own. Same colours and scatter as
+/// the next load step's predictor needs no assembly of its own. The elements of
+/// `prestretch.layer` are prestretched by `prestretch.stretch`. Same colours and scatter as
 /// assemble_values(). An inverted element is reported, not thrown (K and f are then incomplete).
 FiniteAssembly assemble_finite(const Mesh& mesh, const DofMap& map,
                                const FiniteMaterials& materials, const Eigen::VectorXd& u,
                                double load_factor, const Eigen::VectorXd& lift, bool with_tangent,
-                               Assembly& sys, Eigen::VectorXd* unit_lift = nullptr);
+                               Assembly& sys, Eigen::VectorXd* unit_lift = nullptr,
+                               const LayerPrestretch& prestretch = {});
 
 }  // namespace caps::fem::detail

@@ -213,9 +213,64 @@ Vector6d cauchy_from_pk2(const Eigen::Matrix3d& F, const Vector6d& S) {
   return s;
 }
 
+Eigen::Matrix3d prestretch_tensor(const Eigen::Matrix3d& J, double stretch) {
+  const Eigen::Vector3d n = J.row(0).transpose().cross(J.row(1).transpose()).normalized();
+  const Eigen::Matrix3d nn = n * n.transpose();
+  return stretch * (Eigen::Matrix3d::Identity() - nn) + nn / (stretch * stretch);
+}
+
+double material_response(const Material& material, const Eigen::Matrix3d& H,
+                         const Eigen::Matrix3d* F_p, Vector6d& S, Matrix6d& C) {
+  if (!F_p) {
+    material.stress_and_tangent(H, S, C);
+    return material.strain_energy_density(H);
+  }
+  const Eigen::Matrix3d& A = *F_p;
+  // H0 = F F_p - I = H F_p + (F_p - I): small prestretches keep their digits.
+  const Eigen::Matrix3d H0 = H * A + (A - Eigen::Matrix3d::Identity());
+  Vector6d S0;
+  Matrix6d C0;
+  material.stress_and_tangent(H0, S0, C0);
+  // Q: Voigt strain (engineering shears) of A^T E A for each unit Voigt strain E.
+  static constexpr int kI[6] = {0, 1, 2, 0, 1, 0}, kJ[6] = {0, 1, 2, 1, 2, 2};
+  Matrix6d Q;
+  for (int k = 0; k < 6; ++k) {
+    Eigen::Matrix3d E = Eigen::Matrix3d::Zero();
+    const double v = k < 3 ? 1.0 : 0.5;
+    E(kI[k], kJ[k]) = v;
+    E(kJ[k], kI[k]) = v;
+    const Eigen::Matrix3d E0 = A.transpose() * E * A;
+    for (int r = 0; r < 6; ++r) Q(r, k) = r < 3 ? E0(kI[r], kJ[r]) : 2 * E0(kI[r], kJ[r]);
+  }
+  S.noalias() = Q.transpose() * S0;
+  C.noalias() = Q.transpose() * C0 * Q;
+  return material.strain_energy_density(H0);
+}
+
+Vector6d finite_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X, const Material& material,
+                              const Eigen::VectorXd& u_e, const Eigen::Vector3d& xi, int element,
+                              double prestretch) {
+  Eigen::VectorXd N;
+  Eigen::MatrixX3d dN, G(X.rows(), 3);
+  shape_functions(type, xi, N, dN);
+  gradients(dN, X, G, element, -1);
+  const Eigen::Matrix3d H = displacement_gradient(G, u_e);
+  checked_det_F(H, element, -1);
+  Vector6d S;
+  Matrix6d C;
+  if (prestretch != 1.0) {
+    const Eigen::Matrix3d F_p = prestretch_tensor(dN.transpose() * X, prestretch);
+    material_response(material, H, &F_p, S, C);
+  } else {
+    material_response(material, H, nullptr, S, C);
+  }
+  return cauchy_from_pk2(H + Eigen::Matrix3d::Identity(), S);
+}
+
 FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
                                  const Material& material, const Eigen::VectorXd& u_e,
-                                 int element, Eigen::VectorXd& f, Eigen::MatrixXd* K) {
+                                 int element, Eigen::VectorXd& f, Eigen::MatrixXd* K,
+                                 double prestretch) {
   using Gradients = Eigen::Matrix<double, Eigen::Dynamic, 3, 0, 20, 3>;
   using Block = Eigen::Matrix<double, 6, 3>;
   const ShapeTable& t = shape_table(type);
@@ -239,8 +294,12 @@ FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
       out.det_F = J;
       return out;
     }
-    material.stress_and_tangent(H, S, C);
-    out.energy_mj += w * material.strain_energy_density(H);
+    if (prestretch != 1.0) {
+      const Eigen::Matrix3d F_p = prestretch_tensor(t.dN[q].transpose() * X, prestretch);
+      out.energy_mj += w * material_response(material, H, &F_p, S, C);
+    } else {
+      out.energy_mj += w * material_response(material, H, nullptr, S, C);
+    }
     Sm << S[0], S[3], S[5], S[3], S[1], S[4], S[5], S[4], S[2];
     FSG.noalias() = G * (Sm * F.transpose());  // row a: (F S G_a)^T
     for (int a = 0; a < n; ++a) f.segment<3>(3 * a) += w * FSG.row(a).transpose();
@@ -291,13 +350,7 @@ FiniteElementResponse element_finite_response(ElementType type, const Eigen::Mat
 Vector6d element_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X,
                                const Material& material, const Eigen::VectorXd& u_e,
                                const Eigen::Vector3d& xi, int element) {
-  const Eigen::MatrixX3d G = gradients_at(type, X, xi, element);
-  const Eigen::Matrix3d H = detail::displacement_gradient(G, u_e);
-  detail::checked_det_F(H, element, -1);
-  Vector6d S;
-  Matrix6d C;
-  material.stress_and_tangent(H, S, C);
-  return detail::cauchy_from_pk2(H + Eigen::Matrix3d::Identity(), S);
+  return detail::finite_cauchy_stress(type, X, material, u_e, xi, element, 1.0);
 }
 
 int n_element_nodes(ElementType type) { return type == ElementType::Hex20 ? 20 : 15; }

@@ -35,6 +35,20 @@ double checked_det_F(const Eigen::Matrix3d& H, int element, int gauss_point);
 /// Cauchy stress F S F^T / J (Voigt) from S (Voigt).
 Vector6d cauchy_from_pk2(const Eigen::Matrix3d& F, const Vector6d& S);
 
+/// The pre-deformation F_p of a prestretched layer (FEBio's prestrain: the stress-free tissue
+/// is mapped onto the reference by F_p, so that F_total = F F_p): `stretch` in the plane of the
+/// element's layer and 1/stretch^2 along its normal (isochoric, J_p = 1). The layer's plane is
+/// the natural xi-eta plane (the mesher stacks elements along zeta): its normal is
+/// dX/dxi x dX/deta, the rows of the reference Jacobian J = dN^T X.
+Eigen::Matrix3d prestretch_tensor(const Eigen::Matrix3d& J, double stretch);
+
+/// Second Piola-Kirchhoff stress S and tangent C (Voigt, MPa) and the strain energy density
+/// (MPa) of `material` at F = I + H of a point whose tissue is prestretched by F_p:
+///   W(F) = W0(F F_p),  E0 = F_p^T E F_p + E(F_p) = Q E + E(F_p),  S = Q^T S0,  C = Q^T C0 Q
+/// (Q the Voigt form of E -> F_p^T E F_p; energy conjugacy gives S and C). F_p = null: none.
+double material_response(const Material& material, const Eigen::Matrix3d& H,
+                         const Eigen::Matrix3d* F_p, Vector6d& S, Matrix6d& C);
+
 /// What finite_kernel() found: the strain energy (mJ), or the first Gauss point where the
 /// element inverts (det F <= 0; f and K are then incomplete).
 struct FiniteKernelResult {
@@ -46,9 +60,17 @@ struct FiniteKernelResult {
 /// The total-Lagrangian kernel of element_finite_response() into caller buffers (hot loop):
 /// f (3n) and, when K is not null, K (3n×3n) are overwritten. An inverted Gauss point is
 /// reported in the result, not thrown (the Newton solver cuts the step back).
+/// `prestretch`: the in-plane stretch of prestretch_tensor() (1: none).
 FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
                                  const Material& material, const Eigen::VectorXd& u_e,
-                                 int element, Eigen::VectorXd& f, Eigen::MatrixXd* K);
+                                 int element, Eigen::VectorXd& f, Eigen::MatrixXd* K,
+                                 double prestretch = 1.0);
+
+/// Cauchy stress (Voigt, MPa) at natural point xi of an element whose tissue is prestretched
+/// (`prestretch` as finite_kernel()); throws SolverError if det F <= 0 there.
+Vector6d finite_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X, const Material& material,
+                              const Eigen::VectorXd& u_e, const Eigen::Vector3d& xi, int element,
+                              double prestretch);
 
 /// The message of an inverted element: "element 3, Gauss point 9: det F = -0.01 (...)".
 std::string inverted_message(int element, int gauss_point, double det_F);

@@ -51,6 +51,7 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
                     {"solve", r.timings.solve_s}, {"recovery", r.timings.recovery_s},
                     {"total", r.timings.total_s}};
   j["kinematics"] = r.kinematics;
+  j["prestretch"] = r.prestretch;
   if (!r.newton_steps.empty()) {
     nlohmann::json steps = nlohmann::json::array();
     for (const NewtonStep& s : r.newton_steps)

@@ -11,6 +11,24 @@
 #include "caps/surface/patient_model.hpp"
 
 namespace caps::fem {
+namespace {
+
+// The prestressed skin cut and left open: the largest widening (mm) between sutured nodes.
+double gape(const Mesh& mesh, SolveOptions options) {
+  Mesh open = mesh;
+  open.sutures.clear();
+  options.reporter = nullptr;
+  const SolveResult r = solve(open, options);
+  double widest = 0;
+  for (const auto& s : mesh.sutures) {
+    const Eigen::Vector3d d0 = (mesh.nodes.row(s.b) - mesh.nodes.row(s.a)).transpose();
+    const Eigen::Vector3d d = d0 + (r.displacement_mm.row(s.b) - r.displacement_mm.row(s.a)).transpose();
+    widest = std::max(widest, d.norm() - d0.norm());
+  }
+  return widest;
+}
+
+}  // namespace
 
 Simulation simulate(const PatientModel& model, const plan::Plan& plan,
                     const SimulateOptions& options, Reporter* reporter) {
@@ -43,6 +61,7 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
             " elements inside out: the small-strain (linear) model does not hold for a closure "
             "this large; use --material neo-hookean"));
   sim.sutures = suture_spacing(sim.wound.continuum, sim.result, options.suture_spacing_mm);
+  if (solve_options.prestretch != 1.0) sim.gape_mm = gape(mesh, solve_options);
   return sim;
 }
 

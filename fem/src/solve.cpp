@@ -98,6 +98,12 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   if (options.threads > 0)
     threads.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
   validate(mesh);
+  if (!(options.prestretch >= 1.0 && options.prestretch <= 1.5))
+    throw InvalidInput(cat("prestretch ", options.prestretch, " must be in 1..1.5 (skin in vivo: "
+                           "about 1.1-1.2; 1 = none)"));
+  if (options.prestretch != 1.0 && options.kinematics != Kinematics::Finite)
+    throw InvalidInput(cat("prestretch ", options.prestretch, " needs the large-deformation model: "
+                           "use the neo-hookean material (the linear model has no prestress)"));
   SolveResult res;
   res.solver = solver_name(options.solver);
   auto t = Clock::now();
@@ -108,6 +114,7 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   res.n_equations = map.n_eq;
   if (map.n_eq == 0) throw InvalidInput("every degree of freedom is fixed; nothing to solve");
   res.kinematics = kinematics_name(options.kinematics);
+  res.prestretch = options.prestretch;
   if (options.kinematics == Kinematics::Finite) {
     detail::solve_finite(mesh, options, map, res);
     res.timings.total_s = seconds_since(t_start);

@@ -32,6 +32,8 @@ constexpr int kMaxLineSearch = 12;
 constexpr double kShiftedStepMm = 1.0;
 // A residual this many times the step's load means the iteration diverges: cut back.
 constexpr double kDivergence = 1e8;
+// The layer SolveOptions::prestretch acts on: the one under the skin surface.
+constexpr int kSkinLayer = 0;
 
 // Why an attempt at a load step failed: an inverted element, a singular tangent or no
 // convergence.
@@ -43,7 +45,8 @@ struct Failure {
 
 class FiniteProblem {
  public:
-  FiniteProblem(const Mesh& mesh, const DofMap& map) : mesh_(mesh), map_(map), path_(mesh, map) {
+  FiniteProblem(const Mesh& mesh, const DofMap& map, double prestretch)
+      : mesh_(mesh), map_(map), path_(mesh, map), prestretch_(prestretch) {
     for (const auto& [layer, linear] : mesh.materials) {
       const auto it = mesh.finite_materials.find(layer);
       if (it != mesh.finite_materials.end() && it->second) {
@@ -62,6 +65,11 @@ class FiniteProblem {
 
   const FiniteMaterials& materials() const { return materials_; }
   const ClosingPath& path() const { return path_; }
+  bool prestretched() const { return prestretch_ != 1.0; }
+  /// The skin layer's prestretch at load factor lambda: it grows linearly from none.
+  LayerPrestretch prestretch_at(double lambda) const {
+    return {kSkinLayer, 1.0 + lambda * (prestretch_ - 1.0)};
+  }
 
   // Full displacement u = T q + u_p(lambda) (3N, mm): u_p = lambda g on a straight path.
   Eigen::VectorXd expand(const Eigen::VectorXd& q, double lambda) const {
@@ -80,7 +88,7 @@ class FiniteProblem {
                                   double* energy = nullptr) const {
     const Eigen::VectorXd u = expand(q, lambda);
     const FiniteAssembly a = assemble_finite(mesh_, map_, materials_, u, load_lambda, lift, true,
-                                             sys, unit_lift);
+                                             sys, unit_lift, prestretch_at(load_lambda));
     if (a.inverted_element < 0) {
       const double sliding = add_sliding_supports(mesh_, map_, lift.size() ? Eigen::VectorXd(u + lift) : u,
                                                   true, sys, unit_lift);
@@ -97,6 +105,7 @@ class FiniteProblem {
   const Mesh& mesh_;   // not owned; outlives the problem
   const DofMap& map_;  // not owned; outlives the problem
   ClosingPath path_;
+  double prestretch_;
   FiniteMaterials materials_;
   std::vector<std::unique_ptr<Material>> owned_;
 };
@@ -119,7 +128,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
                   SolveResult& res) {
   const NewtonOptions& no = options.newton;
   check_options(no);
-  const FiniteProblem problem(mesh, map);
+  const FiniteProblem problem(mesh, map, options.prestretch);
   res.flap_rotations_deg = problem.path().rotations_deg();
   auto t = Clock::now();
   Assembly sys = assemble_structure(mesh, map);
@@ -212,7 +221,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
 
     // Predictor: the tangent at the converged state with the increment of the prescribed values
     // lifted, K dq = lambda_new f_ext - f_int - K (dl g).
-    if (at_converged_state && problem.path().straight()) {
+    if (at_converged_state && problem.path().straight() && !problem.prestretched()) {
       sys.f += dl * (f_ext + unit_lift);
     } else {
       t = Clock::now();
@@ -371,7 +380,8 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
     Eigen::VectorXd ue(3 * nn);
     for (int a = 0; a < nn; ++a) ue.segment<3>(3 * a) = u.segment<3>(3 * static_cast<Eigen::Index>(el.nodes[a]));
     Eigen::VectorXd fe;
-    const FiniteKernelResult k = finite_kernel(el.type, X, mat, ue, e, fe, nullptr);
+    const double stretch = el.layer == kSkinLayer ? options.prestretch : 1.0;
+    const FiniteKernelResult k = finite_kernel(el.type, X, mat, ue, e, fe, nullptr, stretch);
     if (k.inverted_at >= 0)  // not after a converged step, which evaluated this very state
       throw SolverError(inverted_message(e, k.inverted_at, k.det_F), e, k.inverted_at);
     out.energy_mj = k.energy_mj;
@@ -386,7 +396,12 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
     for (std::size_t g = 0; g < tab.w.size(); ++g) {
       const double w = tab.w[g] * gradients(tab.dN[g], X, G, e, static_cast<int>(g));
       const Eigen::Matrix3d H = displacement_gradient(G, ue);
-      mat.stress_and_tangent(H, S, C);
+      if (stretch != 1.0) {
+        const Eigen::Matrix3d F_p = prestretch_tensor(tab.dN[g].transpose() * X, stretch);
+        material_response(mat, H, &F_p, S, C);
+      } else {
+        material_response(mat, H, nullptr, S, C);
+      }
       const Vector6d sigma = cauchy_from_pk2(H + Eigen::Matrix3d::Identity(), S);
       out.gauss_stress.row(static_cast<Eigen::Index>(g)) = sigma.transpose();
       vm += w * von_mises(sigma);
@@ -402,7 +417,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
     for (int a = 0; a < nn; ++a) {
       const Eigen::Vector3d xi = P.row(a).transpose();
       try {
-        out.nodal_stress.row(a) = element_cauchy_stress(el.type, X, mat, ue, xi, e).transpose();
+        out.nodal_stress.row(a) = finite_cauchy_stress(el.type, X, mat, ue, xi, e, stretch).transpose();
       } catch (const SolverError&) {
         std::size_t nearest = 0;
         for (std::size_t g = 1; g < rule.size(); ++g)

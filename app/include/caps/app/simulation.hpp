@@ -57,6 +57,7 @@ struct SolverFields {
   std::string precision = fem::SolveOptions{}.mixed_precision ? "mixed" : "double";
   std::string material = fem::kinematics_name(fem::SolveOptions{}.kinematics);
   int steps = fem::NewtonOptions{}.n_steps;
+  double prestretch = fem::SolveOptions{}.prestretch;
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
@@ -64,6 +65,9 @@ struct SolverFields {
                                "strain, sutures closed in load steps by Newton-Raphson)"});
     v(r.steps, {"steps", "neo-hookean: load steps that close the sutures (cut back by itself "
                          "when a step does not converge)"});
+    v(r.prestretch, {"prestretch", "neo-hookean: the skin's in-vivo prestretch in its plane (1 = "
+                                   "none; about 1.1-1.2 in vivo): the wound gapes, and the "
+                                   "closure and its forces carry the skin's tension"});
     v(r.solver, {"solver", "mumps or cholmod"});
     v(r.precision, {"precision", "mixed (a single-precision factorization refined to double "
                                  "accuracy; falls back to double by itself when that is not "
@@ -148,6 +152,8 @@ struct SimulateResult {
   double max_displacement_mm = 0, closing_force_n = 0, max_suture_force_n = 0,
          max_suture_gap_mm = 0, strain_energy_mj = 0;
   std::string material;             ///< linear or neo-hookean
+  double prestretch = 1;            ///< the skin's in-plane prestretch (1 = none)
+  double gape_mm = 0;               ///< with prestretch: the open wound's largest widening
   int load_steps = 0, newton_iterations = 0;  ///< neo-hookean: converged steps, iterations
   int inverted_elements = 0;        ///< elements the closure turned inside out (linear only)
   /// Surgeons' terms (fem::suture_spacing()): sutures every suture_spacing_mm along the wound,

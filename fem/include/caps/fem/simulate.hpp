@@ -35,6 +35,10 @@ struct Simulation {
   /// Elements turned inside out by the closure (det J <= 0 at a Gauss point of the deformed
   /// mesh): possible only with the small-strain model, which then does not hold (a warning says so).
   int inverted_elements = 0;
+  /// With a prestretch (SolveOptions::prestretch > 1): how far the wound gapes before it is
+  /// sutured, the largest widening (mm) between the nodes of a suture pair when the prestressed
+  /// skin is cut and left open (a solve of its own, without the sutures); 0 without prestretch.
+  double gape_mm = 0;
   /// The closing force per suture at SimulateOptions::suture_spacing_mm, the largest one and
   /// the force per mm of wound (suture_spacing()).
   SutureSpacing sutures;

@@ -69,6 +69,12 @@ struct SolveOptions {
   bool mixed_precision = true;
   /// Threads for assembly and stress recovery (0 = all).
   int threads = 0;
+  /// In-vivo prestretch of the skin (layer 0, the element layer under the surface), in its
+  /// plane, 1 = none, valid 1..1.5 (skin in vivo: about 1.1-1.2; docs/fem.md). The stress-free
+  /// skin is its reference shrunk by this factor in the plane and thickened along the normal
+  /// (isochoric; FEBio's prestrain). Finite strain only; it grows with the load factor together
+  /// with the closure, so the closed state and its forces include it.
+  double prestretch = 1.0;
   /// Not owned, may be null: a finite-strain solve reports the load factor reached after every
   /// load step as progress of "closing the wound", and stops there (Cancelled) when asked to.
   Reporter* reporter = nullptr;
@@ -130,6 +136,7 @@ struct SolveResult {
   bool fell_back_to_double = false;          ///< mixed precision was tried and not enough
   SolveTimings timings;
   std::string kinematics = "linear";         ///< kinematics_name() of the solve
+  double prestretch = 1.0;                   ///< SolveOptions::prestretch of the solve
   std::vector<NewtonStep> newton_steps;      ///< finite strain: the converged load steps
   int newton_iterations = 0;                 ///< finite strain: total, including cut-back attempts
   int factorizations = 0;                    ///< numerical factorizations (1 for a linear solve)
