@@ -707,6 +707,33 @@ TEST(Simulate, ZPlastyTransposesItsFlapsAndLengthensTheCentralLimb) {
   }
 }
 
+TEST(Simulate, PrestretchedSkinGapesWhenCutAndPullsHarderOnTheSutures) {
+  // In-vivo skin is under tension (prestretch about 1.1-1.2, docs/fem.md): cut, the wound
+  // gapes; sutured, the closure carries that tension as well as the excision's own gap. The
+  // unstressed skin (prestretch 1) does not gape.
+  const PatientModel model = constant_cylinder();
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0.0, 40.0, 90.0);
+  SimulateOptions o;
+  o.surface.size_mm = 3.5;
+  o.surface.extent_mm = 20.0;
+  o.solve.kinematics = Kinematics::Finite;
+  o.solve.newton.n_steps = 4;
+  const Simulation plain = simulate(model, p, o);
+  o.solve.prestretch = 1.15;
+  const Simulation tense = simulate(model, p, o);
+  std::cout << "closing force " << plain.result.total_suture_force_n << " N, prestretched 1.15: "
+            << tense.result.total_suture_force_n << " N, the open wound gapes " << tense.gape_mm
+            << " mm\n";
+  EXPECT_EQ(plain.gape_mm, 0.0);
+  EXPECT_GT(tense.gape_mm, 0.3);  // the skin pulls the 6 mm wide wound open
+  EXPECT_LT(tense.gape_mm, 6.0);  // without tearing the rest of the patch along
+  EXPECT_GT(tense.result.total_suture_force_n, 1.3 * plain.result.total_suture_force_n);
+  EXPECT_LT(tense.max_suture_gap_mm, 1e-6);
+  EXPECT_EQ(tense.inverted_elements, 0);
+  EXPECT_EQ(tense.result.prestretch, 1.15);
+}
+
 TEST(Simulate, BaseOverAnAirCavityIsFreeAndTheSurroundingTissueHoldsTheSolve) {
   // The band z 60..70 has its base on an air cavity (kBaseCavity: valid, no support). An ellipse
   // on it meshes and closes with a free rim: the bottom nodes over the band are neither fixed nor
