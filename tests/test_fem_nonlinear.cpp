@@ -121,6 +121,98 @@ TEST(NeoHookean, StressAndTangentAreDerivativesOfTheEnergy) {
   EXPECT_LT((C - Cl).cwiseAbs().maxCoeff(), 1e-12);
 }
 
+TEST(GasserOgdenHolzapfel, StressAndTangentAreDerivativesOfTheEnergy) {
+  // Two fibre families at +-30 deg from (1, 0.3, 0) in the plane of normal n, at a general F that
+  // stretches them: S = dW/dE and C = dS/dE against central differences in E (through U).
+  const GasserOgdenHolzapfel m(0.05, 0.24, 4.97, 2.88, 0.0498, 30.0, Eigen::Vector3d(1, 0.3, 0));
+  const Eigen::Vector3d n = Eigen::Vector3d(0.1, -0.2, 1).normalized();
+  Eigen::Matrix3d F;
+  F << 1.25, 0.1, -0.05, 0.05, 1.1, 0.08, -0.06, 0.04, 0.8;
+  auto U_of = [](const Eigen::Matrix3d& Cg) {
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(Cg);
+    return Eigen::Matrix3d(es.eigenvectors() * es.eigenvalues().cwiseSqrt().asDiagonal() *
+                           es.eigenvectors().transpose());
+  };
+  const Eigen::Matrix3d Cg = F.transpose() * F;
+  Vector6d S;
+  Matrix6d C;
+  m.stress_and_tangent_in_layer(F - Eigen::Matrix3d::Identity(), n, S, C);
+  int taut = 0;
+  for (const Eigen::Vector3d& a : m.fibres(n)) {
+    EXPECT_NEAR(a.dot(n), 0.0, 1e-12);
+    taut += (F * a).norm() > 1.02;
+  }
+  EXPECT_EQ(taut, 2);
+  const int idx[6][2] = {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {1, 2}, {0, 2}};
+  const double h = 1e-6;
+  for (int J = 0; J < 6; ++J) {
+    Eigen::Matrix3d dC = Eigen::Matrix3d::Zero();
+    if (J < 3) dC(idx[J][0], idx[J][1]) = 2 * h;
+    else dC(idx[J][0], idx[J][1]) = dC(idx[J][1], idx[J][0]) = h;
+    const Eigen::Matrix3d Up = U_of(Cg + dC), Um = U_of(Cg - dC);
+    const double dW = (m.strain_energy_density_in_layer(Up - Eigen::Matrix3d::Identity(), n) -
+                       m.strain_energy_density_in_layer(Um - Eigen::Matrix3d::Identity(), n)) / (2 * h);
+    EXPECT_NEAR(dW, S[J], 1e-7 * S.cwiseAbs().maxCoeff()) << "S component " << J;
+    Vector6d sp, sm;
+    Matrix6d c;
+    m.stress_and_tangent_in_layer(Up - Eigen::Matrix3d::Identity(), n, sp, c);
+    m.stress_and_tangent_in_layer(Um - Eigen::Matrix3d::Identity(), n, sm, c);
+    EXPECT_LT(((sp - sm) / (2 * h) - C.col(J)).cwiseAbs().maxCoeff(), 1e-6 * C.cwiseAbs().maxCoeff())
+        << "C column " << J;
+  }
+  // Fibres carry no compression: squeezed along them (and stretched across), the skin is its
+  // neo-Hookean ground matrix.
+  const Eigen::Vector3d a = m.fibres(Eigen::Vector3d::UnitZ())[0];
+  const Eigen::Matrix3d squeeze = Eigen::Matrix3d::Identity() - 0.2 * a * a.transpose() +
+                                  0.1 * Eigen::Vector3d::UnitZ() * Eigen::Vector3d::UnitZ().transpose();
+  Vector6d Sm;
+  Matrix6d Cm;
+  m.stress_and_tangent(squeeze - Eigen::Matrix3d::Identity(), S, C);
+  m.matrix().stress_and_tangent(squeeze - Eigen::Matrix3d::Identity(), Sm, Cm);
+  EXPECT_LT((S - Sm).cwiseAbs().maxCoeff(), 1e-15);
+  // kappa = 1/3 spreads the fibres evenly: the response does not depend on the plane.
+  const GasserOgdenHolzapfel iso(0.05, 0.24, 4.97, 2.88, 1.0 / 3.0, 0.0, Eigen::Vector3d::UnitX());
+  Vector6d S1, S2;
+  iso.stress_and_tangent_in_layer(F - Eigen::Matrix3d::Identity(), Eigen::Vector3d::UnitZ(), S1, C);
+  iso.stress_and_tangent_in_layer(F - Eigen::Matrix3d::Identity(), Eigen::Vector3d::UnitX(), S2, C);
+  EXPECT_LT((S1 - S2).cwiseAbs().maxCoeff(), 1e-12 * S1.cwiseAbs().maxCoeff());
+  // Declared and checked parameters.
+  EXPECT_EQ(m.parameters().size(), 6u);
+  EXPECT_THROW(GasserOgdenHolzapfel(0.05, 0.24, 4.97, 2.88, 0.4, 0.0, Eigen::Vector3d::UnitX()), InvalidInput);
+  EXPECT_THROW(GasserOgdenHolzapfel(0.05, 0.01, 4.97, 2.88, 0.1, 0.0, Eigen::Vector3d::UnitX()), InvalidInput);
+  EXPECT_THROW(GasserOgdenHolzapfel(0.05, 0.24, 4.97, 2.88, 0.1, 0.0, Eigen::Vector3d::Zero()), InvalidInput);
+}
+
+TEST(FiniteStrain, SkinPulledAcrossItsFibresIsItsGroundMatrixAndAlongThemStiffens) {
+  // Uniaxial stretch 1.3 of a skin cube whose fibres run along y in its x-y plane: pulled along
+  // x the fibres shorten (slack) and the answer is the neo-Hookean closed form of the matrix
+  // (mu 0.05, K 0.24 MPa); pulled along y the fibres carry the load and the stress is higher.
+  const double L = 10, l1 = 1.3;
+  const auto skin = std::make_shared<GasserOgdenHolzapfel>(0.05, 0.24, 4.97, 2.88, 0.0498, 0.0,
+                                                           Eigen::Vector3d::UnitY());
+  double across = 0, along = 0;
+  for (int axis : {0, 1}) {
+    Mesh m = unit_box({L, L, L}, {1, 1, 1});
+    for (int i = 0; i < m.n_nodes(); ++i)
+      for (int c = 0; c < 3; ++c)
+        if (std::abs(m.nodes(i, c)) < 1e-9) m.fixed_dofs.push_back({i, c, 0.0});
+    for (int i = 0; i < m.n_nodes(); ++i)
+      if (std::abs(m.nodes(i, axis) - L) < 1e-9) m.fixed_dofs.push_back({i, axis, (l1 - 1) * L});
+    m.finite_materials[0] = skin;
+    SolveOptions o = finite(4);
+    o.solver = SolverKind::Cholmod;
+    const SolveResult r = solve(m, o);
+    (axis == 0 ? across : along) = r.gauss_stress_mpa(0, axis);
+  }
+  const double mu = 0.05, K = 0.24;
+  const double l2 = lateral_stretch(l1, mu, K);
+  const double s11 = principal_cauchy(l1, l2, mu, K)[0];
+  std::cout << "skin pulled 30 %: across its fibres " << 1e3 * across << " kPa (matrix closed form "
+            << 1e3 * s11 << "), along them " << 1e3 * along << " kPa\n";
+  EXPECT_NEAR(across, s11, 1e-6 * s11);
+  EXPECT_GT(along, 3 * across);
+}
+
 TEST(NeoHookean, ParametersAreDeclaredAndValidated) {
   const NeoHookean m(kE, kNu);
   ASSERT_EQ(m.parameters().size(), 2u);
@@ -149,13 +241,20 @@ TEST(FiniteElements, TangentIsTheDerivativeOfTheInternalForce) {
   // Distorted Hex20 and Wedge15 at a finite displacement (strains of 10-20 %).
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> d(-1, 1);
-  const NeoHookean mat(kE, kNu);
-  for (bool wedges : {false, true}) {
+  // The neo-Hookean solid, and skin with two fibre families in the element's layer (stretched
+  // 25 % along x so that the fibres are taut).
+  const NeoHookean neo(kE, kNu);
+  const GasserOgdenHolzapfel goh(0.05, 0.24, 4.97, 2.88, 0.0498, 30.0, Eigen::Vector3d(1, 0.3, 0));
+  for (auto [wedges, fibres] : {std::pair{false, false}, std::pair{true, false}, std::pair{false, true},
+                                std::pair{true, true}}) {
+    const Material& mat = fibres ? static_cast<const Material&>(goh) : neo;
     Mesh m = unit_box({2, 2, 2}, {1, 1, 1}, wedges);
     const Element& el = m.elements[0];
     Eigen::MatrixX3d X = element_coordinates(m, 0);
     X += 0.05 * Eigen::MatrixX3d::NullaryExpr(X.rows(), 3, [&] { return d(rng); });
     Eigen::VectorXd u = 0.15 * Eigen::VectorXd::NullaryExpr(3 * X.rows(), [&] { return d(rng); });
+    if (fibres)
+      for (Eigen::Index a = 0; a < X.rows(); ++a) u[3 * a] += 0.25 * X(a, 0);
     const FiniteElementResponse r = element_finite_response(el.type, X, mat, u);
     const double h = 1e-6;
     Eigen::MatrixXd K_fd(u.size(), u.size());

@@ -50,7 +50,14 @@ fem::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields
   o.continuum.base = fem::parse_base_condition(m.base);
   o.solve.solver = fem::parse_solver(s.solver);
   o.solve.mixed_precision = fem::parse_precision(s.precision);
-  o.solve.kinematics = fem::parse_kinematics(s.material);
+  if (s.material == "goh") {
+    // Skin with collagen fibres along the forehead's Langer lines (the patient's left-right).
+    o.solve.kinematics = fem::Kinematics::Finite;
+    o.skin_finite_material = std::make_shared<fem::GasserOgdenHolzapfel>(
+        fem::default_goh_skin(Eigen::Vector3d::UnitX()));
+  } else {
+    o.solve.kinematics = fem::parse_kinematics(s.material);
+  }
   o.solve.prestretch = s.prestretch;
   if (s.steps < 1 || s.steps > 1000)
     throw InvalidParameter(cat("{steps} ", s.steps, ": give 1..1000 load steps"));
@@ -198,7 +205,7 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   s.max_suture_gap_mm = sim.max_suture_gap_mm;
   s.strain_energy_mj = res.strain_energy_mj;
   s.warnings = sim.wound.continuum.mesh.warnings;
-  s.material = res.kinematics;
+  s.material = o.skin_finite_material ? o.skin_finite_material->name() : res.kinematics;
   s.prestretch = res.prestretch;
   s.gape_mm = sim.gape_mm;
   s.load_steps = static_cast<int>(res.newton_steps.size());
@@ -258,7 +265,8 @@ std::string summary(const SimulateResult& s) {
 
 SolveResult run_solve(const SolveRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
-  fem::SolveOptions o = simulate_options({}, r.solver).solve;
+  const fem::SimulateOptions so = simulate_options({}, r.solver);
+  fem::SolveOptions o = so.solve;
   if (r.E && !(*r.E > 0 && std::isfinite(*r.E)))
     throw InvalidInput(cat("--E ", *r.E, ": give Young's modulus in kPa, > 0"));
   OutputDirectory out(r.output, r.force);
@@ -266,6 +274,7 @@ SolveResult run_solve(const SolveRequest& r, Reporter* reporter) {
   if (r.E || r.nu)
     for (auto& [layer, m] : mesh.materials)
       m = fem::LinearElastic(r.E ? *r.E * 1e-3 : m.E_mpa(), r.nu ? *r.nu : m.nu(), "--E/--nu");
+  if (so.skin_finite_material) mesh.finite_materials[0] = so.skin_finite_material;
   Progress progress(reporter, "solving", 1);
   o.reporter = reporter;
   const fem::SolveResult res = fem::solve(mesh, o);

@@ -213,24 +213,39 @@ Vector6d cauchy_from_pk2(const Eigen::Matrix3d& F, const Vector6d& S) {
   return s;
 }
 
-Eigen::Matrix3d prestretch_tensor(const Eigen::Matrix3d& J, double stretch) {
-  const Eigen::Vector3d n = J.row(0).transpose().cross(J.row(1).transpose()).normalized();
+Eigen::Vector3d layer_normal(const Eigen::MatrixX3d& dN_dxi, const Eigen::MatrixX3d& X) {
+  const Eigen::Matrix3d J = dN_dxi.transpose() * X;
+  return J.row(0).transpose().cross(J.row(1).transpose()).normalized();
+}
+
+Eigen::Matrix3d prestretch_tensor(const Eigen::Vector3d& n, double stretch) {
   const Eigen::Matrix3d nn = n * n.transpose();
   return stretch * (Eigen::Matrix3d::Identity() - nn) + nn / (stretch * stretch);
 }
 
-double material_response(const Material& material, const Eigen::Matrix3d& H,
-                         const Eigen::Matrix3d* F_p, Vector6d& S, Matrix6d& C) {
-  if (!F_p) {
-    material.stress_and_tangent(H, S, C);
-    return material.strain_energy_density(H);
+namespace {
+
+double response_at(const Material& material, const Eigen::Matrix3d& H, const Eigen::Vector3d* n,
+                   Vector6d& S, Matrix6d& C) {
+  if (n && material.uses_layer_normal()) {
+    material.stress_and_tangent_in_layer(H, *n, S, C);
+    return material.strain_energy_density_in_layer(H, *n);
   }
-  const Eigen::Matrix3d& A = *F_p;
+  material.stress_and_tangent(H, S, C);
+  return material.strain_energy_density(H);
+}
+
+}  // namespace
+
+double material_response(const Material& material, const Eigen::Matrix3d& H,
+                         const Eigen::Vector3d* n, double stretch, Vector6d& S, Matrix6d& C) {
+  if (stretch == 1.0 || !n) return response_at(material, H, n, S, C);
+  const Eigen::Matrix3d A = prestretch_tensor(*n, stretch);
   // H0 = F F_p - I = H F_p + (F_p - I): small prestretches keep their digits.
   const Eigen::Matrix3d H0 = H * A + (A - Eigen::Matrix3d::Identity());
   Vector6d S0;
   Matrix6d C0;
-  material.stress_and_tangent(H0, S0, C0);
+  const double W = response_at(material, H0, n, S0, C0);
   // Q: Voigt strain (engineering shears) of A^T E A for each unit Voigt strain E.
   static constexpr int kI[6] = {0, 1, 2, 0, 1, 0}, kJ[6] = {0, 1, 2, 1, 2, 2};
   Matrix6d Q;
@@ -244,7 +259,7 @@ double material_response(const Material& material, const Eigen::Matrix3d& H,
   }
   S.noalias() = Q.transpose() * S0;
   C.noalias() = Q.transpose() * C0 * Q;
-  return material.strain_energy_density(H0);
+  return W;
 }
 
 Vector6d finite_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X, const Material& material,
@@ -258,12 +273,8 @@ Vector6d finite_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X, const
   checked_det_F(H, element, -1);
   Vector6d S;
   Matrix6d C;
-  if (prestretch != 1.0) {
-    const Eigen::Matrix3d F_p = prestretch_tensor(dN.transpose() * X, prestretch);
-    material_response(material, H, &F_p, S, C);
-  } else {
-    material_response(material, H, nullptr, S, C);
-  }
+  const Eigen::Vector3d n = layer_normal(dN, X);
+  material_response(material, H, &n, prestretch, S, C);
   return cauchy_from_pk2(H + Eigen::Matrix3d::Identity(), S);
 }
 
@@ -284,6 +295,8 @@ FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
   f.setZero(m);
   if (K) K->setZero(m, m);
   FiniteKernelResult out;
+  // The layer's plane matters to a prestretch and to fibres in it.
+  const bool layered = prestretch != 1.0 || material.uses_layer_normal();
   for (std::size_t q = 0; q < t.w.size(); ++q) {
     const int gp = static_cast<int>(q);
     const double w = t.w[q] * gradients(t.dN[q], X, G, element, gp);
@@ -294,11 +307,11 @@ FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
       out.det_F = J;
       return out;
     }
-    if (prestretch != 1.0) {
-      const Eigen::Matrix3d F_p = prestretch_tensor(t.dN[q].transpose() * X, prestretch);
-      out.energy_mj += w * material_response(material, H, &F_p, S, C);
+    if (layered) {
+      const Eigen::Vector3d nq = layer_normal(t.dN[q], X);
+      out.energy_mj += w * material_response(material, H, &nq, prestretch, S, C);
     } else {
-      out.energy_mj += w * material_response(material, H, nullptr, S, C);
+      out.energy_mj += w * material_response(material, H, nullptr, 1.0, S, C);
     }
     Sm << S[0], S[3], S[5], S[3], S[1], S[4], S[5], S[4], S[2];
     FSG.noalias() = G * (Sm * F.transpose());  // row a: (F S G_a)^T

@@ -35,19 +35,24 @@ double checked_det_F(const Eigen::Matrix3d& H, int element, int gauss_point);
 /// Cauchy stress F S F^T / J (Voigt) from S (Voigt).
 Vector6d cauchy_from_pk2(const Eigen::Matrix3d& F, const Vector6d& S);
 
-/// The pre-deformation F_p of a prestretched layer (FEBio's prestrain: the stress-free tissue
-/// is mapped onto the reference by F_p, so that F_total = F F_p): `stretch` in the plane of the
-/// element's layer and 1/stretch^2 along its normal (isochoric, J_p = 1). The layer's plane is
-/// the natural xi-eta plane (the mesher stacks elements along zeta): its normal is
-/// dX/dxi x dX/deta, the rows of the reference Jacobian J = dN^T X.
-Eigen::Matrix3d prestretch_tensor(const Eigen::Matrix3d& J, double stretch);
+/// The unit normal of the element's layer at a point: the layer's plane is the natural xi-eta
+/// plane (the mesher stacks elements along zeta), its normal dX/dxi x dX/deta, from the rows of
+/// the reference Jacobian dN^T X (dN_dxi #n×3, X #n×3).
+Eigen::Vector3d layer_normal(const Eigen::MatrixX3d& dN_dxi, const Eigen::MatrixX3d& X);
+
+/// The pre-deformation F_p of a prestretched layer with unit normal n (FEBio's prestrain: the
+/// stress-free tissue is mapped onto the reference by F_p, F_total = F F_p): `stretch` in the
+/// layer's plane and 1/stretch^2 along n (isochoric, J_p = 1).
+Eigen::Matrix3d prestretch_tensor(const Eigen::Vector3d& n, double stretch);
 
 /// Second Piola-Kirchhoff stress S and tangent C (Voigt, MPa) and the strain energy density
-/// (MPa) of `material` at F = I + H of a point whose tissue is prestretched by F_p:
+/// (MPa) of `material` at F = I + H of a point with layer normal n (needed when the material
+/// uses_layer_normal() or stretch != 1; may be null otherwise) whose tissue is prestretched by
+/// F_p = prestretch_tensor(n, stretch):
 ///   W(F) = W0(F F_p),  E0 = F_p^T E F_p + E(F_p) = Q E + E(F_p),  S = Q^T S0,  C = Q^T C0 Q
-/// (Q the Voigt form of E -> F_p^T E F_p; energy conjugacy gives S and C). F_p = null: none.
+/// (Q the Voigt form of E -> F_p^T E F_p; energy conjugacy gives S and C).
 double material_response(const Material& material, const Eigen::Matrix3d& H,
-                         const Eigen::Matrix3d* F_p, Vector6d& S, Matrix6d& C);
+                         const Eigen::Vector3d* n, double stretch, Vector6d& S, Matrix6d& C);
 
 /// What finite_kernel() found: the strain energy (mJ), or the first Gauss point where the
 /// element inverts (det F <= 0; f and K are then incomplete).

@@ -132,6 +132,108 @@ double NeoHookean::strain_energy_density(const Eigen::Matrix3d& H) const {
   return 0.5 * mu_mpa() * ((1 + Jm23m1) * I1m3 + 3 * Jm23m1) + 0.5 * bulk_mpa() * Jm1 * Jm1;
 }
 
+namespace {
+
+// E and nu of the neo-Hookean with shear modulus mu and bulk modulus K (MPa).
+double young_of(double mu, double K) { return 9 * K * mu / (3 * K + mu); }
+double poisson_of(double mu, double K) { return (3 * K - 2 * mu) / (2 * (3 * K + mu)); }
+
+}  // namespace
+
+GasserOgdenHolzapfel::GasserOgdenHolzapfel(double mu_mpa, double K_mpa, double k1_mpa, double k2,
+                                           double kappa, double gamma_deg,
+                                           const Eigen::Vector3d& langer, const std::string& where)
+    : mu_(mu_mpa), K_(K_mpa), k1_(k1_mpa), k2_(k2), kappa_(kappa), gamma_deg_(gamma_deg),
+      langer_(langer),
+      matrix_([&] {
+        validate_parameters(where);
+        if (!(K_mpa > 2 * mu_mpa / 3))
+          throw InvalidInput(cat(where, ": goh bulk modulus K = ", K_mpa, " MPa must exceed 2/3 of mu = ",
+                                 mu_mpa, " MPa (a negative Poisson's ratio otherwise)"));
+        if (!(langer.allFinite() && langer.norm() > 0))
+          throw InvalidInput(cat(where, ": goh fibre direction must be a non-zero vector"));
+        if (poisson_of(mu_mpa, K_mpa) > IsotropicElastic::kMaxNu)
+          throw InvalidInput(cat(where, ": goh bulk modulus K = ", K_mpa, " MPa is more than 500 times mu = ",
+                                 mu_mpa, " MPa (Poisson's ratio above ", IsotropicElastic::kMaxNu,
+                                 "): the displacement elements lock; lower K"));
+        return NeoHookean(young_of(mu_mpa, K_mpa), poisson_of(mu_mpa, K_mpa), where);
+      }()) {
+  langer_.normalize();
+}
+
+std::vector<ParameterSpec> GasserOgdenHolzapfel::parameters() const {
+  return {{"mu", "MPa", 0.0, 1e3, true, false, "skin's ground matrix is about 0.01-0.1 MPa"},
+          {"K", "MPa", 0.0, 1e4, true, false, "a few times mu or more (nearly incompressible)"},
+          {"k1", "MPa", 0.0, 1e3, false, false, "fibre stiffness; skin fits give 1-100 MPa"},
+          {"k2", "1", 0.0, 1e3, true, false, "exponential stiffening; skin fits give 0.1-10"},
+          {"kappa", "1", 0.0, 1.0 / 3.0, false, false, "0 = aligned fibres, 1/3 = isotropic"},
+          {"gamma", "deg", 0.0, 90.0, false, false, "fibre angle from the reference direction"}};
+}
+
+std::vector<Eigen::Vector3d> GasserOgdenHolzapfel::fibres(const Eigen::Vector3d& n) const {
+  Eigen::Vector3d a = langer_ - langer_.dot(n) * n;
+  if (a.norm() < 1e-6) {  // the reference direction is normal to the layer: any in-plane one
+    a = n.unitOrthogonal();
+  }
+  a.normalize();
+  if (gamma_deg_ == 0) return {a};
+  const double g = gamma_deg_ * 3.14159265358979323846 / 180;
+  const Eigen::Vector3d b = n.cross(a).normalized();
+  return {std::cos(g) * a + std::sin(g) * b, std::cos(g) * a - std::sin(g) * b};
+}
+
+void GasserOgdenHolzapfel::stress_and_tangent_in_layer(const Eigen::Matrix3d& H,
+                                                       const Eigen::Vector3d& n, Vector6d& S,
+                                                       Matrix6d& C) const {
+  matrix_.stress_and_tangent(H, S, C);
+  const Eigen::Matrix3d Cg = Eigen::Matrix3d::Identity() + H + H.transpose() + H.transpose() * H;
+  const Eigen::Matrix3d Ci = Cg.inverse();
+  const double J = 1 + volume_change(H), Jm23 = std::pow(J, -2.0 / 3.0);
+  const Vector6d ci = to_voigt(Ci);
+  const Matrix6d cc = odot(Ci);
+  for (const Eigen::Vector3d& a : fibres(n)) {
+    const Eigen::Matrix3d Hs = kappa_ * Eigen::Matrix3d::Identity() + (1 - 3 * kappa_) * a * a.transpose();
+    const double Ih = (Hs.array() * Cg.array()).sum();  // Hs : C
+    const double Eb = Jm23 * Ih - 1;
+    if (!(Eb > 0)) continue;  // the fibres are slack
+    const double ex = std::exp(k2_ * Eb * Eb);
+    const double d1 = k1_ * Eb * ex, d2 = k1_ * (1 + 2 * k2_ * Eb * Eb) * ex;  // psi', psi''
+    // dIbar/dC = J^(-2/3) A, A = Hs - Ih/3 C^-1; S = 2 psi' dIbar/dC;
+    // C = 4 psi'' (dIbar/dC) (x) (dIbar/dC) + 4 psi' d2Ibar/dC2,
+    // d2Ibar/dC2 = J^(-2/3) [-(Hs (x) C^-1 + C^-1 (x) Hs)/3 + Ih/9 C^-1 (x) C^-1 + Ih/3 C^-1 (.) C^-1].
+    const Vector6d hs = to_voigt(Hs), A = hs - Ih / 3 * ci;
+    S += 2 * d1 * Jm23 * A;
+    C += 4 * d2 * Jm23 * Jm23 * A * A.transpose() +
+         4 * d1 * Jm23 *
+             (-(hs * ci.transpose() + ci * hs.transpose()) / 3 + Ih / 9 * ci * ci.transpose() + Ih / 3 * cc);
+  }
+}
+
+double GasserOgdenHolzapfel::strain_energy_density_in_layer(const Eigen::Matrix3d& H,
+                                                            const Eigen::Vector3d& n) const {
+  double W = matrix_.strain_energy_density(H);
+  const Eigen::Matrix3d Cg = Eigen::Matrix3d::Identity() + H + H.transpose() + H.transpose() * H;
+  const double Jm23 = std::pow(1 + volume_change(H), -2.0 / 3.0);
+  for (const Eigen::Vector3d& a : fibres(n)) {
+    const Eigen::Matrix3d Hs = kappa_ * Eigen::Matrix3d::Identity() + (1 - 3 * kappa_) * a * a.transpose();
+    const double Eb = Jm23 * (Hs.array() * Cg.array()).sum() - 1;
+    if (Eb > 0) W += k1_ / (2 * k2_) * std::expm1(k2_ * Eb * Eb);
+  }
+  return W;
+}
+
+void GasserOgdenHolzapfel::stress_and_tangent(const Eigen::Matrix3d& H, Vector6d& S, Matrix6d& C) const {
+  stress_and_tangent_in_layer(H, Eigen::Vector3d::UnitZ(), S, C);
+}
+
+double GasserOgdenHolzapfel::strain_energy_density(const Eigen::Matrix3d& H) const {
+  return strain_energy_density_in_layer(H, Eigen::Vector3d::UnitZ());
+}
+
+GasserOgdenHolzapfel default_goh_skin(const Eigen::Vector3d& langer) {
+  return GasserOgdenHolzapfel(0.05, 0.24, 4.97, 2.88, 0.0498, 0.0, langer, "default goh skin");
+}
+
 double volume_change(const Eigen::Matrix3d& H) {
   const double tr = H.trace();
   return tr + 0.5 * (tr * tr - (H * H).trace()) + H.determinant();

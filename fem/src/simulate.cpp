@@ -28,6 +28,12 @@ double gape(const Mesh& mesh, SolveOptions options) {
   return widest;
 }
 
+// CalculiX has the neo-Hookean form of a finite-strain skin, not the others (mesh.inp).
+bool exports_to_calculix(const SimulateOptions& options) {
+  return options.solve.kinematics != Kinematics::Finite || !options.skin_finite_material ||
+         dynamic_cast<const NeoHookean*>(options.skin_finite_material.get());
+}
+
 }  // namespace
 
 Simulation simulate(const PatientModel& model, const plan::Plan& plan,
@@ -38,6 +44,15 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
   sim.wound =
       mesh_wound(plan::wound_border(plan), model, options.surface, options.continuum, reporter);
   progress.update(1);
+  if (options.skin_finite_material)
+    sim.wound.continuum.mesh.finite_materials[0] = options.skin_finite_material;
+  if (!exports_to_calculix(options))
+    sim.wound.continuum.mesh.warnings.push_back(
+        cat("mesh.inp is not written: CalculiX has no form of the '", options.skin_finite_material->name(),
+            "' skin here (use neo-hookean to cross-check with CalculiX)"));
+  if (options.solve.prestretch != 1.0)
+    sim.wound.continuum.mesh.warnings.push_back(
+        "mesh.inp has no prestretch (CalculiX has no prestrain): it is the closure of unstressed skin");
   SolveOptions solve_options = options.solve;
   if (!solve_options.reporter) solve_options.reporter = reporter;
   sim.result = solve(sim.wound.continuum.mesh, solve_options);
@@ -73,7 +88,7 @@ void write_simulation(const Simulation& sim, const PatientModel& model,
   InpOptions inp;
   inp.finite_strain = options.solve.kinematics == Kinematics::Finite;
   inp.increments = options.solve.newton.n_steps;
-  write_inp(mesh, dir / "mesh.inp", inp);
+  if (exports_to_calculix(options)) write_inp(mesh, dir / "mesh.inp", inp);
   write_result_dir(mesh, sim.result, dir, &sim.sutures);
   write_surface_mesh_png(dir / "surface.png", sim.wound.surface, cat("surface mesh of ", name));
   write_cross_section_png(dir / "section.png", sim.wound.surface, model, options.continuum,

@@ -396,12 +396,8 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
     for (std::size_t g = 0; g < tab.w.size(); ++g) {
       const double w = tab.w[g] * gradients(tab.dN[g], X, G, e, static_cast<int>(g));
       const Eigen::Matrix3d H = displacement_gradient(G, ue);
-      if (stretch != 1.0) {
-        const Eigen::Matrix3d F_p = prestretch_tensor(tab.dN[g].transpose() * X, stretch);
-        material_response(mat, H, &F_p, S, C);
-      } else {
-        material_response(mat, H, nullptr, S, C);
-      }
+      const Eigen::Vector3d n = layer_normal(tab.dN[g], X);
+      material_response(mat, H, &n, stretch, S, C);
       const Vector6d sigma = cauchy_from_pk2(H + Eigen::Matrix3d::Identity(), S);
       out.gauss_stress.row(static_cast<Eigen::Index>(g)) = sigma.transpose();
       vm += w * von_mises(sigma);

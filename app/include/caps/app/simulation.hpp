@@ -61,8 +61,10 @@ struct SolverFields {
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
-    v(r.material, {"material", "linear (small strain, the 1992 model) or neo-hookean (finite "
-                               "strain, sutures closed in load steps by Newton-Raphson)"});
+    v(r.material, {"material", "linear (small strain, the 1992 model), neo-hookean (finite "
+                               "strain, sutures closed in load steps by Newton-Raphson) or goh "
+                               "(finite strain, skin with collagen fibres along the patient's "
+                               "left-right, the forehead's Langer lines; docs/fem.md)"});
     v(r.steps, {"steps", "neo-hookean: load steps that close the sutures (cut back by itself "
                          "when a step does not converge)"});
     v(r.prestretch, {"prestretch", "neo-hookean: the skin's in-vivo prestretch in its plane (1 = "

@@ -49,6 +49,21 @@ class Material {
   /// Strain energy per reference volume W(I + H), MPa = mJ/mm^3.
   virtual double strain_energy_density(const Eigen::Matrix3d& H) const = 0;
 
+  /// Whether the response depends on the plane of the element's layer (fibres in the skin's
+  /// plane): the elements then call the *_in_layer forms with the layer's unit normal n (LPS) at
+  /// the point. The isotropic materials ignore n.
+  virtual bool uses_layer_normal() const { return false; }
+  virtual void stress_and_tangent_in_layer(const Eigen::Matrix3d& H, const Eigen::Vector3d& n,
+                                           Vector6d& S, Matrix6d& C) const {
+    (void)n;
+    stress_and_tangent(H, S, C);
+  }
+  virtual double strain_energy_density_in_layer(const Eigen::Matrix3d& H,
+                                                 const Eigen::Vector3d& n) const {
+    (void)n;
+    return strain_energy_density(H);
+  }
+
  protected:
   /// Checks values() against parameters(); throws InvalidInput naming `where` and the parameter.
   void validate_parameters(const std::string& where) const;
@@ -125,6 +140,56 @@ class NeoHookean final : public IsotropicElastic {
   void stress_and_tangent(const Eigen::Matrix3d& H, Vector6d& S, Matrix6d& C) const override;
   double strain_energy_density(const Eigen::Matrix3d& H) const override;
 };
+
+/// Skin as a fibre-reinforced solid: the Gasser-Ogden-Holzapfel model (Gasser, Ogden & Holzapfel
+/// 2006, J R Soc Interface 3:15), in the decoupled form of FEBio and Abaqus, with the volumetric
+/// term of NeoHookean:
+///   W = mu/2 (I1bar - 3) + K/2 (J - 1)^2 + sum_i k1/(2 k2) (exp(k2 <Ebar_i>^2) - 1),
+///   Ebar_i = kappa (I1bar - 3) + (1 - 3 kappa) (I4bar_i - 1),  I4bar_i = J^(-2/3) a_i . C a_i
+/// (<x> = max(x, 0): collagen fibres carry no compression). The fibres lie in the skin's plane
+/// (the layer's, Material::uses_layer_normal): the reference direction `langer` (LPS, e.g. along
+/// Langer's lines; projected onto the plane at each point) turned by +-gamma in the plane gives
+/// two families; gamma = 0 gives one. Declared parameters (throws InvalidInput naming `where`):
+///   mu     ground-matrix shear modulus, MPa, (0, 1e3]
+///   K      bulk modulus, MPa, (0, 1e4], K > 2 mu / 3 (Poisson's ratio >= 0)
+///   k1     fibre stiffness, MPa, [0, 1e3]
+///   k2     fibre exponential stiffening, dimensionless, (0, 1e3]
+///   kappa  fibre dispersion, dimensionless, [0, 1/3] (1/3: isotropic)
+///   gamma  fibre angle from `langer`, deg, [0, 90]
+/// The stress and tangent follow Holzapfel 2000, sec. 6.7, written for any Ibar_h = J^(-2/3) Hs:C
+/// with Hs = kappa I + (1 - 3 kappa) a (x) a (tr Hs = 1, so Ebar = Ibar_h - 1).
+class GasserOgdenHolzapfel final : public Material {
+ public:
+  GasserOgdenHolzapfel(double mu_mpa, double K_mpa, double k1_mpa, double k2, double kappa,
+                       double gamma_deg, const Eigen::Vector3d& langer,
+                       const std::string& where = "material");
+
+  std::string name() const override { return "goh"; }
+  std::vector<ParameterSpec> parameters() const override;
+  std::vector<double> values() const override { return {mu_, K_, k1_, k2_, kappa_, gamma_deg_}; }
+  bool uses_layer_normal() const override { return true; }
+  /// The frame-free forms take the layer's normal as +z.
+  void stress_and_tangent(const Eigen::Matrix3d& H, Vector6d& S, Matrix6d& C) const override;
+  double strain_energy_density(const Eigen::Matrix3d& H) const override;
+  void stress_and_tangent_in_layer(const Eigen::Matrix3d& H, const Eigen::Vector3d& n, Vector6d& S,
+                                   Matrix6d& C) const override;
+  double strain_energy_density_in_layer(const Eigen::Matrix3d& H,
+                                        const Eigen::Vector3d& n) const override;
+  /// The unit fibre directions at a point whose layer normal is n (one or two).
+  std::vector<Eigen::Vector3d> fibres(const Eigen::Vector3d& n) const;
+  /// The ground matrix: the neo-Hookean solid of mu and K.
+  const NeoHookean& matrix() const { return matrix_; }
+
+ private:
+  double mu_, K_, k1_, k2_, kappa_, gamma_deg_;
+  Eigen::Vector3d langer_;
+  NeoHookean matrix_;
+};
+
+/// Porcine skin (Tepole group's Bayesian calibration, ../shared/docs/references.md): mu =
+/// 0.05 MPa, K = 0.24 MPa, k1 = 4.97 MPa, k2 = 2.88, kappa = 0.0498, one fibre family along
+/// `langer`.
+GasserOgdenHolzapfel default_goh_skin(const Eigen::Vector3d& langer = Eigen::Vector3d::UnitX());
 
 /// det(I + H) - 1 without the cancellation of det(F) - 1 at small strain:
 /// tr H + ((tr H)^2 - tr(H^2)) / 2 + det H.
