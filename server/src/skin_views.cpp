@@ -82,36 +82,6 @@ render::SkinSurfaces mesh_part(const render::SkinSurfaces& s, bool seam) {
   return part;
 }
 
-// The cells q = k n_theta + j of the model's range mesh (faces 2q and 2q + 1 of range_mesh())
-// that `s` leaves out around its finite-element mesh: where mesh_part(s, true) replaces the
-// model's skin. Found from the range faces `s` keeps, by the (theta, z) of their vertices.
-std::vector<int> replaced_cells(const CylinderGrid& g, const render::SkinSurfaces& s) {
-  const auto n_cells = static_cast<std::size_t>(g.n_theta) * static_cast<std::size_t>(g.n_z - 1);
-  std::vector<bool> kept(n_cells, false);
-  for (Eigen::Index f = 0; f < s.pre.n_faces(); ++f) {
-    if (s.face_part[static_cast<std::size_t>(f)] != render::SkinPart::Range) continue;
-    int j_min = g.n_theta, j_max = -1, k_min = g.n_z, k_max = -1;
-    for (int c = 0; c < 3; ++c) {
-      const Eigen::Index v = s.pre.F(f, c);
-      const long j = std::lround((s.theta_z(v, 0) - g.theta0_deg) / g.dtheta_deg());
-      const int k = static_cast<int>(std::lround((s.theta_z(v, 1) - g.z0_mm) / g.dz_mm));
-      const int jw = static_cast<int>(((j % g.n_theta) + g.n_theta) % g.n_theta);
-      j_min = std::min(j_min, jw);
-      j_max = std::max(j_max, jw);
-      k_min = std::min(k_min, k);
-      k_max = std::max(k_max, k);
-    }
-    if (k_max != k_min + 1) continue;  // a pole fan (its vertex on the axis shares the row)
-    const int j = j_max - j_min > 1 ? j_max : j_min;  // across the seam: the last column
-    kept[static_cast<std::size_t>(k_min) * static_cast<std::size_t>(g.n_theta) +
-         static_cast<std::size_t>(j)] = true;
-  }
-  std::vector<int> replaced;
-  for (std::size_t q = 0; q < n_cells; ++q)
-    if (!kept[q]) replaced.push_back(static_cast<int>(q));
-  return replaced;
-}
-
 }  // namespace
 
 std::string write_model_skin_glb(const PatientModel& model, SkinColouring colouring,
@@ -190,7 +160,9 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
   const fem::Mesh mesh = fem::read_mesh_dir(result_dir);
   const Eigen::MatrixX3d u = fem::read_result_displacement(result_dir, mesh.n_nodes());
   const int n = view_subdivisions(model, mesh);
-  auto skin = std::make_shared<render::SkinSurfaces>(render::displaced_skin(model, mesh, &u, n));
+  // Only the part the simulation moved: the page draws the model's own skin around it.
+  auto skin = std::make_shared<render::SkinSurfaces>(
+      render::displaced_skin(model, mesh, &u, n, nullptr, render::SkinExtent::Patch));
   const auto t1 = Clock::now();
   const render::ScalarMap tension = render::tension_map(
       *skin, mesh, fem::read_result_max_principal(result_dir, mesh.n_nodes()), 0);
@@ -210,7 +182,7 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
            {"tension", "tension.glb"},
            {"subdivisions", n},
            {"vertices", skin->pre.n_vertices()},
-           {"replaced_cells", replaced_cells(model.grid(), *skin)},
+           {"replaced_cells", skin->replaced_cells},
            {"tension_scale_max_kpa", tension.max_value},
            {"max_skin_tension_kpa", peak},
            {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},
