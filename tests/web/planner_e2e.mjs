@@ -207,7 +207,7 @@ try {
     const cell = await page.locator('#alternatives tbody tr').nth(i).locator('td.lengthening').innerText();
     const mm = await page.evaluate((k) => window.caps.results.rows[k].result.lengthening.mm, i);
     assert.ok(mm > 0, `Z-plasty ${i + 1} lengthens its central limb (${mm} mm)`);
-    assert.equal(Number(cell.split(' ')[0]), Number(mm.toFixed(1)), `lengthening cell ${cell}`);
+    assert.equal(Number(cell.split(/\s/)[0]), Number(mm.toFixed(1)), `lengthening cell ${cell}`);
   }
   // With the tension map, both views are coloured on one scale: the larger 99th percentile, the
   // colour bar's top.

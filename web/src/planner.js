@@ -404,8 +404,9 @@ export class Planner {
     const parameters = { ...state.parameters };
     for (const p of this.templates.get(state.procedure).parameters)
       if (p.unit === 'mm' && parameters[p.name] !== undefined)
-        parameters[p.name] = Math.round(Math.min(p.max, Math.max(p.min,
-          parameters[p.name] * factor)) * 10) / 10;
+        // to the sliders' half millimetres
+        parameters[p.name] = Math.min(p.max, Math.max(p.min,
+          Math.round(parameters[p.name] * factor * 2) / 2));
     return { ...state, parameters };
   }
 
