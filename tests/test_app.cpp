@@ -7,9 +7,13 @@
 #include "caps/app/plan.hpp"
 #include "caps/app/simulation.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
 #include "cli_run.hpp"
 #include "phantom_model.hpp"
 
+#include <Eigen/Geometry>
+
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -374,4 +378,47 @@ TEST_F(AppWithModel, AFreeIncisionIsOnePathThroughItsPointsWithNoSutures) {
   EXPECT_EQ(message("0,60", ""), "incision: 1 point given; a cut needs at least 2");
   EXPECT_NE(message("0,60;5,60", "0,60").find("drop --at"), std::string::npos);
   EXPECT_NE(message("0,60;five,60", "").find("--points 'five,60'"), std::string::npos);
+}
+
+// The lengthening along a plan's axis, worked by hand on a Z-plasty's loop (length 20, 60 deg;
+// plan.md: points 0 (0, 17.32), 1 (-10, 0), 2 (10, 0), 3 (0, -17.32); loop 0 1 2 3 4 5 with 4 on
+// 2 and 5 on 1), the axis along x: before, 20 mm between the limb's ends. After a closure that
+// moves the closed corners 5 to x = -12 and 2 to x = 13 and swings the flap tips 1 and 4 onto
+// x = 0 (1 to 3's place, 4 to 0's: 34.6 mm apart, across the axis), the limb is 25 mm: +5 mm,
+// +25 %. The same in a tilted frame (the axis turned 30 deg about z, everything shifted).
+TEST(AxisLengthening, ZPlastyLoopWorkedByHand) {
+  const double h = 20 * std::sin(kPi / 3);
+  Eigen::MatrixX3d pre(6, 3), post(6, 3);
+  pre << 0, h, 0, -10, 0, 0, 10, 0, 0, 0, -h, 0, 10, 0, 0, -10, 0, 0;
+  post << 0.5, h, 0, 0, -h, 0, 13, 0, 0, -0.5, -h, 0, 0, h, 0, -12, 0, 0;
+  const app::AxisLengthening l = app::axis_lengthening(pre, post, Eigen::Vector3d::UnitX());
+  EXPECT_NEAR(l.before_mm, 20, 1e-12);
+  EXPECT_NEAR(l.after_mm, 25, 1e-12);
+  EXPECT_NEAR(l.change_mm(), 5, 1e-12);
+  EXPECT_NEAR(l.change_percent(), 25, 1e-12);
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(kPi / 6, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const Eigen::RowVector3d shift(3, -4, 7);
+  const app::AxisLengthening t = app::axis_lengthening(
+      (pre * R.transpose()).rowwise() + shift, (post * R.transpose()).rowwise() + shift,
+      R * Eigen::Vector3d::UnitX());
+  EXPECT_NEAR(t.before_mm, 20, 1e-9);
+  EXPECT_NEAR(t.after_mm, 25, 1e-9);
+  EXPECT_THROW(app::axis_lengthening(pre, post.topRows(5), Eigen::Vector3d::UnitX()), InvalidInput);
+}
+
+// A simulated Z-plasty lengthens its central limb, by less than the rigid flaps' geometric
+// sqrt(5 - 4 cos 60) - 1 = 73 % (tests/test_fem_mesher.cpp); the result JSON carries it.
+TEST_F(AppWithModel, AZPlastyReportsTheLengtheningOfItsCentralLimb) {
+  app::SimulateRequest s;
+  s.model = kModel;
+  s.plan = plan_at("z-plasty", "0,60", {{"length", 15}}, "z_lengthening.json", kModel, 90).output;
+  s.output = (kTmp / "z_lengthening").string();
+  s.meshing.mesh_size = 2.5;
+  s.force = true;
+  const app::SimulateResult r = app::run_simulate(s);
+  EXPECT_NEAR(r.axis_length_before_mm, 15, 0.5);
+  const json l = json::parse(app::to_json(r)).at("lengthening");
+  EXPECT_GT(l.at("mm").get<double>(), 0.1 * 15);
+  EXPECT_LT(l.at("percent").get<double>(), 100 * (std::sqrt(5 - 4 * std::cos(kPi / 3)) - 1));
+  EXPECT_NEAR(l.at("mm").get<double>(), r.axis_length_after_mm - r.axis_length_before_mm, 1e-12);
 }

@@ -7,7 +7,9 @@
 #include "synthetic_model.hpp"
 
 #include <cmath>
+#include <array>
 #include <map>
+#include <set>
 
 #include "caps/core/units.hpp"
 #include "caps/fem/simulate.hpp"
@@ -121,6 +123,65 @@ TEST(SkinSurface, ClosedOrientedSurfaceWithoutCracks) {
   }
   EXPECT_GT(n_micro, 0);
   EXPECT_EQ(inward, 0);
+}
+
+// The patch alone (SkinExtent::Patch, what the planner page draws over the model's range mesh)
+// is the whole head's skin without its range cells: the same micropolygons, wound fill and seam
+// triangles at the same positions before and after, and the range cells it leaves out
+// (replaced_cells) are exactly those the whole head's range mesh does not draw, so the page's
+// range mesh without them and the patch together are the whole head's skin.
+TEST(SkinSurface, ThePatchIsTheWholeHeadWithoutItsRangeCells) {
+  const fem::Simulation& sim = bumpy_sim();
+  const fem::Mesh& mesh = sim.wound.continuum.mesh;
+  const SkinSurfaces whole = displaced_skin(bumpy(), mesh, &sim.result, 3);
+  const SkinSurfaces patch =
+      displaced_skin(bumpy(), mesh, &sim.result, 3, nullptr, SkinExtent::Patch);
+  using Tri = std::array<double, 18>;
+  auto triangles = [](const SkinSurfaces& s, bool range) {
+    std::multiset<Tri> out;
+    for (Eigen::Index f = 0; f < s.pre.F.rows(); ++f) {
+      if ((s.face_part[static_cast<std::size_t>(f)] == SkinPart::Range) != range) continue;
+      Tri t{};
+      for (int c = 0; c < 3; ++c)
+        for (int d = 0; d < 3; ++d) {
+          t[static_cast<std::size_t>(3 * c + d)] = s.pre.V(s.pre.F(f, c), d);
+          t[static_cast<std::size_t>(9 + 3 * c + d)] = s.post.V(s.pre.F(f, c), d);
+        }
+      out.insert(t);
+    }
+    return out;
+  };
+  EXPECT_TRUE(triangles(patch, true).empty());
+  EXPECT_EQ(triangles(patch, false), triangles(whole, false));
+  EXPECT_EQ(patch.n_micropolygon_vertices, whole.n_micropolygon_vertices);
+  EXPECT_LT(patch.pre.n_vertices(), whole.pre.n_vertices() / 10);
+  // The whole head's range cells: cell q = k n_theta + j is drawn as two triangles whose lowest
+  // vertex sits on row k (the end caps' fans are not cells).
+  const CylinderGrid& g = bumpy().grid();
+  std::vector<char> drawn(static_cast<std::size_t>(g.n_theta) * (g.n_z - 1), 0);
+  for (Eigen::Index f = 0; f < whole.pre.F.rows(); ++f) {
+    if (whole.face_part[static_cast<std::size_t>(f)] != SkinPart::Range) continue;
+    long j_min = g.n_theta, k_min = g.n_z, k_max = -1;
+    std::set<long> js;
+    for (int c = 0; c < 3; ++c) {
+      const Eigen::Index v = whole.pre.F(f, c);
+      const long j = std::lround((whole.theta_z(v, 0) - g.theta0_deg) / g.dtheta_deg());
+      const long k = std::lround((whole.theta_z(v, 1) - g.z0_mm) / g.dz_mm);
+      js.insert(((j % g.n_theta) + g.n_theta) % g.n_theta);
+      k_min = std::min(k_min, k);
+      k_max = std::max(k_max, k);
+    }
+    if (k_max != k_min + 1) continue;
+    j_min = *js.begin();
+    const long j = js.size() == 2 && *js.rbegin() - j_min > 1 ? *js.rbegin() : j_min;
+    drawn[static_cast<std::size_t>(k_min * g.n_theta + j)] = 1;
+  }
+  std::vector<int> missing;
+  for (std::size_t q = 0; q < drawn.size(); ++q)
+    if (!drawn[q]) missing.push_back(static_cast<int>(q));
+  EXPECT_EQ(patch.replaced_cells, missing);
+  EXPECT_EQ(whole.replaced_cells, missing);
+  EXPECT_FALSE(missing.empty());
 }
 
 TEST(SkinSurface, FixedNodesStayOnTheSkinAndTheWoundCloses) {

@@ -20,6 +20,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <cstring>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -700,6 +701,16 @@ TEST_F(ServerTest, ASimulationsSkinAndTensionAreServedAsGlb) {
     EXPECT_EQ(glb->body.substr(0, 4), "glTF");
     EXPECT_NE(glb->body.find("post-operative"), std::string::npos);  // the morph target
   }
+  // The tension at each vertex of tension.glb, as float32 kPa: their largest is the peak.
+  const auto values = get(v.at("tension_values").get<std::string>());
+  ASSERT_TRUE(values);
+  ASSERT_EQ(values->status, 200);
+  ASSERT_EQ(values->body.size() % 4, 0u);
+  ASSERT_GT(values->body.size(), 0u);
+  std::vector<float> kpa(values->body.size() / 4);
+  std::memcpy(kpa.data(), values->body.data(), values->body.size());
+  EXPECT_NEAR(*std::max_element(kpa.begin(), kpa.end()), v.at("max_skin_tension_kpa").get<double>(),
+              1e-5 * v.at("max_skin_tension_kpa").get<double>());
   // Asked again: the same answer, from the files written the first time.
   const auto again = get("/api/results/" + std::to_string(id) + "/view");
   ASSERT_TRUE(again);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -160,6 +161,44 @@ std::string summary(const MeshResult& m) {
 
 // ---- simulate -----------------------------------------------------------------------------
 
+AxisLengthening axis_lengthening(const Eigen::MatrixX3d& pre, const Eigen::MatrixX3d& post,
+                                 const Eigen::Vector3d& axis) {
+  if (pre.rows() < 2 || post.rows() != pre.rows())
+    throw InvalidInput(cat("axis lengthening: ", pre.rows(), " loop nodes before and ",
+                           post.rows(), " after closure; give the same nodes, at least two"));
+  const Eigen::VectorXd s = pre * axis, t = post * axis;
+  const double lo = s.minCoeff(), hi = s.maxCoeff(), tol = 1e-6 * std::max(hi - lo, 1.0);
+  double near = std::numeric_limits<double>::infinity(), far = -near;
+  for (Eigen::Index i = 0; i < s.size(); ++i) {
+    if (s[i] <= lo + tol) near = std::min(near, t[i]);
+    if (s[i] >= hi - tol) far = std::max(far, t[i]);
+  }
+  return {hi - lo, far - near};
+}
+
+namespace {
+
+// The simulation's lengthening along its plan's axis (the frame's x, the orientation, as the
+// tangent at the plan's centre).
+AxisLengthening plan_lengthening(const fem::Simulation& sim, const plan::Plan& plan,
+                                 const PatientModel& model) {
+  const std::vector<int>& loop = sim.wound.surface.loop_vertex;
+  const fem::Mesh& mesh = sim.wound.continuum.mesh;
+  Eigen::MatrixX3d pre(static_cast<Eigen::Index>(loop.size()), 3), post(pre.rows(), 3);
+  for (std::size_t i = 0; i < loop.size(); ++i) {
+    const int n = sim.wound.continuum.skin_node[static_cast<std::size_t>(loop[i])];
+    pre.row(static_cast<Eigen::Index>(i)) = mesh.nodes.row(n);
+    post.row(static_cast<Eigen::Index>(i)) = mesh.nodes.row(n) + sim.result.displacement_mm.row(n);
+  }
+  const auto on_skin = [&](double x_mm) {
+    const Eigen::Vector2d tz = plan.frame.to_theta_z(Eigen::Vector2d(x_mm, 0));
+    return model.skin_point(tz[0], tz[1]);
+  };
+  return axis_lengthening(pre, post, (on_skin(0.5) - on_skin(-0.5)).normalized());
+}
+
+}  // namespace
+
 SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   fem::SimulateOptions o = simulate_options(r.meshing, r.solver);
@@ -216,6 +255,9 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   s.max_force_per_suture_n = sim.sutures.max_suture_force_n;
   s.force_per_mm_n = sim.sutures.force_per_mm_n;
   s.wound_length_mm = sim.sutures.wound_length_mm;
+  const AxisLengthening lengthening = plan_lengthening(sim, plan, model);
+  s.axis_length_before_mm = lengthening.before_mm;
+  s.axis_length_after_mm = lengthening.after_mm;
   s.solve_s = res.timings.total_s;
   return s;
 }
@@ -235,6 +277,11 @@ std::string to_json(const SimulateResult& s) {
                                  {"force_per_mm_n", s.force_per_mm_n},
                                  {"wound_length_mm", s.wound_length_mm}}},
          {"strain_energy_mj", s.strain_energy_mj},
+         {"lengthening", {{"axis_before_mm", s.axis_length_before_mm},
+                          {"axis_after_mm", s.axis_length_after_mm},
+                          {"mm", s.axis_length_after_mm - s.axis_length_before_mm},
+                          {"percent", AxisLengthening{s.axis_length_before_mm,
+                                                      s.axis_length_after_mm}.change_percent()}}},
          {"material", s.material},
          {"prestretch", s.prestretch},
          {"gape_mm", s.gape_mm},

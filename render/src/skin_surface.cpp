@@ -184,9 +184,9 @@ int full_resolution_subdivisions(const PatientModel& model, const fem::Mesh& mes
 
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
                             const fem::SolveResult* result, int n_subdivisions,
-                            const DrawnSkin* drawn) {
+                            const DrawnSkin* drawn, SkinExtent extent) {
   return displaced_skin(model, mesh, result ? &result->displacement_mm : nullptr, n_subdivisions,
-                        drawn);
+                        drawn, extent);
 }
 
 Eigen::MatrixX3d vertex_normals(const TriMesh& m) {
@@ -476,27 +476,41 @@ void add_wound_fills(Builder& b, const std::vector<std::vector<int>>& loops, int
   }
 }
 
-// The range mesh's vertices, one per sample of the model's grid, from `first` on.
-struct RangeVertices {
-  int first = 0, nt = 0;
-  // the vertex of sample (j, k); j wraps around
-  int at(long j, long k) const {
-    const long jj = ((j % nt) + nt) % nt;
-    return first + static_cast<int>(k * nt + jj);
+// The range mesh's vertices, one per sample of the model's grid: all of them from `first` on
+// (the constructor), or, for SkinExtent::Patch, each added when first asked for.
+class RangeVertices {
+ public:
+  RangeVertices(Builder& b, const PatientModel& model, bool all)
+      : b_(b), model_(model), nt_(model.grid().n_theta), first_(static_cast<int>(b.pre.size())),
+        all_(all) {
+    if (!all_) return;
+    const CylinderGrid& g = model.grid();
+    for (int k = 0; k < g.n_z; ++k)
+      for (int j = 0; j < g.n_theta; ++j) add(j, k);
   }
-};
+  // the vertex of sample (j, k); j wraps around
+  int at(long j, long k) {
+    const long jj = ((j % nt_) + nt_) % nt_;
+    if (all_) return first_ + static_cast<int>(k * nt_ + jj);
+    const auto [it, added] = made_.try_emplace(k * nt_ + jj, 0);
+    if (added) it->second = add(jj, k);
+    return it->second;
+  }
 
-RangeVertices add_range_vertices(Builder& b, const PatientModel& model) {
-  const CylinderGrid& g = model.grid();
-  const RangeVertices range{static_cast<int>(b.pre.size()), g.n_theta};
-  for (int k = 0; k < g.n_z; ++k)
-    for (int j = 0; j < g.n_theta; ++j) {
-      const double th = g.theta_deg(j), z = g.z_mm(k);
-      const Eigen::Vector3d s = model.skin_point(th, z);
-      b.add(s, s, skin_color(model, th, z), Eigen::Vector3d::Zero(), {th, z}, -1);
-    }
-  return range;
-}
+ private:
+  int add(long j, long k) {
+    const CylinderGrid& g = model_.grid();
+    const double th = g.theta_deg(static_cast<int>(j)), z = g.z_mm(static_cast<int>(k));
+    const Eigen::Vector3d s = model_.skin_point(th, z);
+    return b_.add(s, s, skin_color(model_, th, z), Eigen::Vector3d::Zero(), {th, z}, -1);
+  }
+  Builder& b_;                  // not owned; outlives this
+  const PatientModel& model_;   // not owned
+  long nt_;
+  int first_;
+  bool all_;
+  std::map<long, int> made_;    // sample k n_theta + j -> vertex (Patch)
+};
 
 // (theta deg, z mm) of range grid vertex (j, k), j unwrapped.
 Eigen::Vector2d grid_corner(const CylinderGrid& g, long j, long k) {
@@ -605,10 +619,22 @@ Footprint footprint_cells(const CylinderGrid& g, const std::vector<Eigen::Vector
   return fp;
 }
 
+// The footprint's cells as q = k n_theta + j (j wrapped), sorted.
+std::vector<int> footprint_cell_indices(const CylinderGrid& g, const Footprint& fp) {
+  std::vector<int> cells;
+  for (long k = fp.k0; k <= fp.k1; ++k)
+    for (long j = fp.j0; j <= fp.j1; ++j)
+      if (fp.cell(j, k))
+        cells.push_back(static_cast<int>(k * g.n_theta + ((j % g.n_theta) + g.n_theta) % g.n_theta));
+  std::sort(cells.begin(), cells.end());
+  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+  return cells;
+}
+
 // The range cells outside the footprint and the undercut cells (`undercut`: grid.size() flags or
 // empty), and the caps closing the range mesh's two ends.
 void add_range_cells(Builder& b, const PatientModel& model, const Footprint& fp,
-                     const RangeVertices& range, const std::vector<std::uint8_t>& undercut) {
+                     RangeVertices& range, const std::vector<std::uint8_t>& undercut) {
   const CylinderGrid& g = model.grid();
   const int nt = g.n_theta, nz = g.n_z;
   for (long k = 0; k + 1 < nz; ++k)
@@ -714,7 +740,7 @@ double distance_to_loop(const std::vector<Eigen::Vector2d>& poly, const Eigen::V
 // two loops. The grid vertices keep the range image's sampling, so the skin around the patch is
 // the range surface itself rather than a strip stretched across it.
 void add_seam(Builder& b, const CylinderGrid& g, const std::vector<int>& P, const Footprint& fp,
-              const std::vector<std::pair<long, long>>& stair, const RangeVertices& range,
+              const std::vector<std::pair<long, long>>& stair, RangeVertices& range,
               double r_ref_mm) {
   const double mm_per_deg = deg_to_rad(1.0) * r_ref_mm;
   auto to_mm = [&](const Eigen::Vector2d& tz) {
@@ -816,7 +842,7 @@ void pack(Builder& b, SkinSurfaces& out) {
 
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
                             const Eigen::MatrixX3d* displacement_mm, int n_subdivisions,
-                            const DrawnSkin* drawn) {
+                            const DrawnSkin* drawn, SkinExtent extent) {
   check_skin_inputs(mesh, displacement_mm, n_subdivisions);
   const PatientModel& skin = drawn ? drawn->range : model;
   if (skin.grid().n_theta != model.grid().n_theta || skin.grid().n_z != model.grid().n_z ||
@@ -846,11 +872,15 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
   add_wound_fills(b, loops, rim);
 
   // The range mesh around the micropolygons, stitched to their rim.
-  const RangeVertices range = add_range_vertices(b, skin);
+  const bool whole = extent == SkinExtent::WholeHead;
+  RangeVertices range(b, skin, whole);
   const Footprint fp = footprint_cells(model.grid(), loop_theta_z(b, loops[rim]));
-  add_range_cells(b, skin, fp, range,
-                  drawn ? drawn->undercut_cells : std::vector<std::uint8_t>{});
-  if (drawn) add_undercuts(b, skin, *drawn, fp, theta_c);
+  out.replaced_cells = footprint_cell_indices(model.grid(), fp);
+  if (whole) {
+    add_range_cells(b, skin, fp, range,
+                    drawn ? drawn->undercut_cells : std::vector<std::uint8_t>{});
+    if (drawn) add_undercuts(b, skin, *drawn, fp, theta_c);
+  }
   const double r_ref = skin.r_skin(theta_c, model.to_cylindrical(centre).z_mm);
   add_seam(b, model.grid(), loops[rim], fp, footprint_border(fp), range, r_ref);
 

@@ -441,7 +441,7 @@ struct PlannerServer::Impl {
       tension_files[id] = std::async(std::launch::async, std::move(view.write_tension)).share();
     }
     json j = json::parse(read_file(info));
-    for (const char* k : {"skin", "tension"})
+    for (const char* k : {"skin", "tension", "tension_values"})
       j[k] = cat("/api/results/", id, "/", j[k].get<std::string>());
     return j;
   }
@@ -477,8 +477,9 @@ struct PlannerServer::Impl {
     return json{{"files", files}, {"render", rendered}};
   }
 
-  // A result's tension.glb, once result_view() has started writing it.
-  fs::path tension_file(const std::string& id) {
+  // A result's tension.glb or tension_kpa.f32 (`name`), once result_view() has started writing
+  // them.
+  fs::path tension_file(const std::string& id, const std::string& name) {
     std::shared_future<void> job;
     {
       std::lock_guard<std::mutex> lock(views_mutex);
@@ -486,7 +487,7 @@ struct PlannerServer::Impl {
       if (it != tension_files.end()) job = it->second;
     }
     if (job.valid()) job.get();  // rethrows the writer's error
-    return file_under(work / "results" / id, "tension.glb");
+    return file_under(work / "results" / id, name);
   }
 
   void add_routes() {
@@ -539,9 +540,9 @@ struct PlannerServer::Impl {
              guarded([this](const httplib::Request& req, httplib::Response& res) {
                send_json(res, result_view(req.matches[1]).dump());
              }));
-    http.Get(R"(/api/results/([0-9]+)/tension\.glb)",
+    http.Get(R"(/api/results/([0-9]+)/(tension\.glb|tension_kpa\.f32))",
              guarded([this](const httplib::Request& req, httplib::Response& res) {
-               send_file(res, tension_file(req.matches[1]));
+               send_file(res, tension_file(req.matches[1], req.matches[2]));
              }));
     http.Post(R"(/api/results/([0-9]+)/export)",
               guarded([this](const httplib::Request& req, httplib::Response& res) {

@@ -1,5 +1,6 @@
 #include "skin_views.hpp"
 
+#include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
 #include "caps/fem/mesh.hpp"
@@ -49,7 +50,9 @@ double percentile99(std::vector<double> values) {
 // The faces of `s` on the finite-element mesh (its micropolygons and the wound fill) and, with
 // `seam`, the seam to the range mesh, with their vertices renumbered: the part of the skin the
 // simulation moved (the tension is on the mesh's faces only; the seam has none).
-render::SkinSurfaces mesh_part(const render::SkinSurfaces& s, bool seam) {
+// `kept` (if given) receives the vertex of `s` each of the part's vertices is.
+render::SkinSurfaces mesh_part(const render::SkinSurfaces& s, bool seam,
+                               std::vector<Eigen::Index>* kept_out = nullptr) {
   std::vector<Eigen::Index> faces;
   for (Eigen::Index f = 0; f < s.pre.n_faces(); ++f)
     if (const render::SkinPart p = s.face_part[static_cast<std::size_t>(f)];
@@ -79,37 +82,8 @@ render::SkinSurfaces mesh_part(const render::SkinSurfaces& s, bool seam) {
     part.color.row(v) = s.color.row(kept[static_cast<std::size_t>(v)]);
   }
   part.post.F = part.pre.F;
+  if (kept_out) *kept_out = std::move(kept);
   return part;
-}
-
-// The cells q = k n_theta + j of the model's range mesh (faces 2q and 2q + 1 of range_mesh())
-// that `s` leaves out around its finite-element mesh: where mesh_part(s, true) replaces the
-// model's skin. Found from the range faces `s` keeps, by the (theta, z) of their vertices.
-std::vector<int> replaced_cells(const CylinderGrid& g, const render::SkinSurfaces& s) {
-  const auto n_cells = static_cast<std::size_t>(g.n_theta) * static_cast<std::size_t>(g.n_z - 1);
-  std::vector<bool> kept(n_cells, false);
-  for (Eigen::Index f = 0; f < s.pre.n_faces(); ++f) {
-    if (s.face_part[static_cast<std::size_t>(f)] != render::SkinPart::Range) continue;
-    int j_min = g.n_theta, j_max = -1, k_min = g.n_z, k_max = -1;
-    for (int c = 0; c < 3; ++c) {
-      const Eigen::Index v = s.pre.F(f, c);
-      const long j = std::lround((s.theta_z(v, 0) - g.theta0_deg) / g.dtheta_deg());
-      const int k = static_cast<int>(std::lround((s.theta_z(v, 1) - g.z0_mm) / g.dz_mm));
-      const int jw = static_cast<int>(((j % g.n_theta) + g.n_theta) % g.n_theta);
-      j_min = std::min(j_min, jw);
-      j_max = std::max(j_max, jw);
-      k_min = std::min(k_min, k);
-      k_max = std::max(k_max, k);
-    }
-    if (k_max != k_min + 1) continue;  // a pole fan (its vertex on the axis shares the row)
-    const int j = j_max - j_min > 1 ? j_max : j_min;  // across the seam: the last column
-    kept[static_cast<std::size_t>(k_min) * static_cast<std::size_t>(g.n_theta) +
-         static_cast<std::size_t>(j)] = true;
-  }
-  std::vector<int> replaced;
-  for (std::size_t q = 0; q < n_cells; ++q)
-    if (!kept[q]) replaced.push_back(static_cast<int>(q));
-  return replaced;
 }
 
 }  // namespace
@@ -190,7 +164,9 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
   const fem::Mesh mesh = fem::read_mesh_dir(result_dir);
   const Eigen::MatrixX3d u = fem::read_result_displacement(result_dir, mesh.n_nodes());
   const int n = view_subdivisions(model, mesh);
-  auto skin = std::make_shared<render::SkinSurfaces>(render::displaced_skin(model, mesh, &u, n));
+  // Only the part the simulation moved: the page draws the model's own skin around it.
+  auto skin = std::make_shared<render::SkinSurfaces>(
+      render::displaced_skin(model, mesh, &u, n, nullptr, render::SkinExtent::Patch));
   const auto t1 = Clock::now();
   const render::ScalarMap tension = render::tension_map(
       *skin, mesh, fem::read_result_max_principal(result_dir, mesh.n_nodes()), 0);
@@ -208,9 +184,10 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
   view.json =
       json{{"skin", "skin.glb"},
            {"tension", "tension.glb"},
+           {"tension_values", "tension_kpa.f32"},
            {"subdivisions", n},
            {"vertices", skin->pre.n_vertices()},
-           {"replaced_cells", replaced_cells(model.grid(), *skin)},
+           {"replaced_cells", skin->replaced_cells},
            {"tension_scale_max_kpa", tension.max_value},
            {"max_skin_tension_kpa", peak},
            {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},
@@ -218,11 +195,20 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
             {{"skin", seconds(t0, t1)}, {"tension", seconds(t1, t2)}, {"glb", seconds(t2, t3)}}}}
           .dump();
   // The mesh faces coloured by the tension: shown only when asked for, so written afterwards.
-  view.write_tension = [skin, tension, path = result_dir / "tension.glb"] {
+  view.write_tension = [skin, tension, path = result_dir / "tension.glb",
+                        values_path = result_dir / "tension_kpa.f32"] {
     render::SkinSurfaces by_tension = *skin;
     by_tension.color = render::scalar_colors(tension.value, tension.max_value);
     // Off the finite-element mesh the tension is 0 by definition: only the mesh's part is written.
-    render::write_gltf(mesh_part(by_tension, false), path);
+    std::vector<Eigen::Index> kept;
+    render::write_gltf(mesh_part(by_tension, false, &kept), path);
+    // Its values, so that a viewer can colour several results on one scale: a float32 (little
+    // endian, as every machine this runs on) per vertex of tension.glb, in its order, kPa.
+    std::vector<float> kpa(kept.size());
+    for (std::size_t v = 0; v < kept.size(); ++v)
+      kpa[v] = static_cast<float>(tension.value[kept[v]]);
+    write_text_atomic(values_path, std::string(reinterpret_cast<const char*>(kpa.data()),
+                                               kpa.size() * sizeof(float)));
   };
   return view;
 }
@@ -258,7 +244,18 @@ std::string plan_lines_json(const plan::Plan& plan, const PatientModel& model) {
     }
     edges.push_back(std::move(edge));
   }
+  // The handles that rotate and scale the plan, on the skin beyond each end of its x axis (the
+  // orientation): the plan's half extent along x (its points' largest |x|) and kHandleGapMm more.
   const plan::PlanFrame& f = plan.frame;
+  constexpr double kHandleGapMm = 5;
+  double half_mm = 0;
+  for (const plan::SkinPoint& p : plan.points)
+    half_mm = std::max(half_mm, std::abs(f.to_local(p.theta_deg, p.z_mm).x()));
+  const auto on_skin = [&](double x_mm) {
+    const Eigen::Vector2d tz = f.to_theta_z(Eigen::Vector2d(x_mm, 0));
+    return model.skin_point(tz[0], tz[1]);
+  };
+  const Eigen::Vector3d axis = (on_skin(0.5) - on_skin(-0.5)).normalized();
   return json{{"lines_lps", lines},
               {"points_lps", points},
               {"loop", {{"nodes", nodes}, {"edges_lps", edges}}},
@@ -267,7 +264,12 @@ std::string plan_lines_json(const plan::Plan& plan, const PatientModel& model) {
                 {"z_mm", f.z_mm},
                 {"orientation_deg", f.orientation_deg},
                 {"lps", lps_json(model.skin_point(f.theta_deg, f.z_mm))},
-                {"normal_lps", lps_json(model.skin_normal(f.theta_deg, f.z_mm))}}}}
+                {"normal_lps", lps_json(model.skin_normal(f.theta_deg, f.z_mm))},
+                {"axis_lps", lps_json(axis)},
+                {"half_extent_mm", half_mm},
+                {"handle_gap_mm", kHandleGapMm},
+                {"rotate_handle_lps", lps_json(on_skin(-half_mm - kHandleGapMm))},
+                {"scale_handle_lps", lps_json(on_skin(half_mm + kHandleGapMm))}}}}
       .dump();
 }
 

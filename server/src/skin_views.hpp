@@ -48,9 +48,11 @@ struct ResultView {
 /// written now, the part of render::displaced_skin() the simulation moved (the micropolygons at
 /// view_subdivisions(), the wound fill and the seam) coloured as the model, and tension.glb,
 /// written by the returned write_tension, its micropolygons and wound fill coloured by the skin
-/// tension (render::tension_map, viridis from 0 to the 99th percentile). The rest is the model's
+/// tension (render::tension_map, viridis from 0 to the 99th percentile), and beside it
+/// tension_kpa.f32, the tension at each of its vertices (float32, little endian, kPa), for
+/// colouring several results on one scale. The rest is the model's
 /// own skin (write_model_skin_glb()) without the cells listed in "replaced_cells". The JSON:
-/// {"skin", "tension", "replaced_cells" (cells q = k n_theta + j of range_mesh(), faces 2q and
+/// {"skin", "tension", "tension_values", "replaced_cells" (cells q = k n_theta + j of range_mesh(), faces 2q and
 /// 2q + 1), "subdivisions", "vertices", "tension_scale_max_kpa", "max_skin_tension_kpa",
 /// "wound_area_mm2": {"pre", "post"}, "timings_s": {"skin" (reading the result and building the
 /// skin), "tension" (its values), "glb" (writing skin.glb)}}.
@@ -60,7 +62,10 @@ ResultView write_result_skin_glbs(const PatientModel& model,
 /// The plan's cutting paths and points on the skin, LPS mm: {"lines_lps": [[[x, y, z], ...],
 /// ...], "points_lps": [[x, y, z], ...], "loop": {"nodes": [{"point", "lps", "normal_lps"}],
 /// "edges_lps": [edge i -> i + 1 as 9 points along the skin]} (the border loop, excision offsets
-/// applied), "centre": {"theta_deg", "z_mm", "orientation_deg", "lps", "normal_lps"}}.
+/// applied), "centre": {"theta_deg", "z_mm", "orientation_deg", "lps", "normal_lps", "axis_lps"
+/// (unit tangent along the plan's x axis, its orientation), "half_extent_mm" (the points' largest
+/// |x|), "handle_gap_mm", "rotate_handle_lps" and "scale_handle_lps" (on the skin at x = -/+
+/// (half_extent_mm + handle_gap_mm): where the page draws the handles that turn and scale it)}}.
 std::string plan_lines_json(const plan::Plan& plan, const PatientModel& model);
 
 }  // namespace caps::server::detail

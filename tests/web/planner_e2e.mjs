@@ -113,6 +113,57 @@ try {
   await page.keyboard.press('Control+z');
   await page.waitForFunction((z) => Math.abs(window.caps.planner.plan?.frame.z_mm - z) < 1e-6, before);
   await page.waitForSelector('body[data-check="ok"]');
+  // Drag the magenta handle outwards along the plan's axis (to 1.4 times its distance from the
+  // centre on the screen): the Z-plasty grows (its length, in mm, in proportion), then undo. Drag
+  // the cyan handle a quarter turn around the centre: the plan turns by about 90 degrees.
+  const onScreen = () => page.evaluate(() => {
+    const { viewA, planner } = window.caps;
+    const r = viewA.renderer.domElement.getBoundingClientRect();
+    const at = (o) => {
+      const p = o.position.clone().project(viewA.camera);
+      return { x: r.left + ((p.x + 1) / 2) * r.width, y: r.top + ((1 - p.y) / 2) * r.height };
+    };
+    const named = (n) => planner.axisHandles.find((o) => o.name === n);
+    return { centre: at(planner.handle), rotate: at(named('rotate')), scale: at(named('scale')) };
+  });
+  const drag = async (from, to) => {
+    await page.mouse.move(from.x, from.y);
+    await page.mouse.down();
+    for (let i = 1; i <= 5; ++i)
+      await page.mouse.move(from.x + (to.x - from.x) * i / 5, from.y + (to.y - from.y) * i / 5);
+    await page.mouse.up();
+  };
+  const length0 = await page.evaluate(() => window.caps.planner.state.parameters.length);
+  let h = await onScreen();
+  await drag(h.scale, { x: h.centre.x + 1.4 * (h.scale.x - h.centre.x),
+    y: h.centre.y + 1.4 * (h.scale.y - h.centre.y) });
+  await page.waitForFunction((l) => window.caps.planner.plan?.procedure.parameters.length > l + 2,
+    length0);
+  await page.waitForSelector('body[data-check="ok"]');
+  const length1 = await page.evaluate(() => window.caps.planner.plan.procedure.parameters.length);
+  assert.equal(Number(await page.locator('#param-length').inputValue()), length1);
+  log(`dragged the scale handle: length ${length0} -> ${length1} mm`);
+  await page.keyboard.press('Control+z');
+  await page.waitForFunction((l) => window.caps.planner.plan?.procedure.parameters.length === l,
+    length0);
+  await page.waitForSelector('body[data-check="ok"]');
+  h = await onScreen();
+  const orientation0 = await page.evaluate(() => window.caps.planner.plan.frame.orientation_deg);
+  await drag(h.rotate, { x: h.centre.x - (h.rotate.y - h.centre.y),
+    y: h.centre.y + (h.rotate.x - h.centre.x) });
+  await page.waitForFunction((o) => {
+    const s = window.caps.planner.state;
+    return Math.abs(s.orientation - o) > 30 && document.body.dataset.check !== 'pending';
+  }, orientation0);
+  const orientation1 = await page.evaluate(() => window.caps.planner.state.orientation);
+  const turned = Math.abs(((orientation1 - orientation0 + 540) % 360) - 180);
+  assert.ok(turned > 60 && turned < 120, `turned by ${turned} deg (${orientation0} -> ${orientation1})`);
+  assert.equal(Number(await page.locator('#param-orientation').inputValue()), Math.round(orientation1));
+  log(`dragged the rotate handle: orientation ${orientation0} -> ${orientation1} deg`);
+  await page.screenshot({ path: join(out, '2-turned.png') });
+  await page.keyboard.press('Control+z');
+  await page.waitForFunction((o) => window.caps.planner.state.orientation === o, orientation0);
+  await page.waitForSelector('body[data-check="ok"]');
   await page.click('[data-view="plan"]');
   await page.screenshot({ path: join(out, '2-placed.png') });
 
@@ -151,7 +202,28 @@ try {
   await page.waitForFunction(() => window.caps.results.shown[1]?.n === 1);
   assert.equal(await page.locator('#view-b').isVisible(), true);
   log(`alternatives: ${closing1} N (60 deg) and ${closing2} N (45 deg), side by side`);
+  // The lengthening column is the result's (the library computes it), for each alternative.
+  for (let i = 0; i < 2; ++i) {
+    const cell = await page.locator('#alternatives tbody tr').nth(i).locator('td.lengthening').innerText();
+    const mm = await page.evaluate((k) => window.caps.results.rows[k].result.lengthening.mm, i);
+    assert.ok(mm > 0, `Z-plasty ${i + 1} lengthens its central limb (${mm} mm)`);
+    assert.equal(Number(cell.split(/\s/)[0]), Number(mm.toFixed(1)), `lengthening cell ${cell}`);
+  }
+  // With the tension map, both views are coloured on one scale: the larger 99th percentile, the
+  // colour bar's top.
+  await page.check('#show-tension');
+  await page.waitForSelector('body[data-tension="shown"]');
+  await page.waitForFunction(() => window.caps.results.shown.every((r, i) => r.skins[i]));
+  const scales = await page.evaluate(() => {
+    const r = window.caps.results;
+    return { top: r.tensionScaleKpa, legend: Number(document.getElementById('tension-legend').dataset.maxKpa),
+      each: r.shown.map((row) => row.view.tension_scale_max_kpa) };
+  });
+  assert.equal(scales.top, Math.max(...scales.each));
+  assert.equal(scales.legend, scales.top);
+  log(`tension on one scale: 0..${scales.top.toFixed(1)} kPa (views' own: ${scales.each.map((v) => v.toFixed(1)).join(', ')})`);
   await page.screenshot({ path: join(out, '5-compare.png') });
+  await page.uncheck('#show-tension');
 
   // Save the plan and check it with the command line.
   const [download] = await Promise.all([page.waitForEvent('download'), page.click('#save')]);

@@ -9,6 +9,7 @@ import { loadModelSkin } from './skin.js';
 import { Viewer } from './viewer.js';
 
 const $ = (id) => document.getElementById(id);
+const kPlaceHint = 'Click on the skin to place the procedure.';
 
 function status(text) {
   $('status').textContent = text;
@@ -149,6 +150,7 @@ async function main() {
   const planner = new Planner(viewA, templates, {
     onState: (s) => {
       if (!s) return;
+      if ($('status').textContent === kPlaceHint) status('');  // placed: the hint has done its job
       if (s.procedure === 'loaded') {
         showTemplate(null);
         return;
@@ -335,7 +337,7 @@ async function main() {
 
   // For tests and the console: the page's parts.
   window.caps = { planner, results, viewA, viewB };
-  status('Click on the skin to place the procedure.');
+  status(kPlaceHint);
   document.body.dataset.ready = 'true';
 }
 

@@ -16,6 +16,8 @@ const lineMaterial = new MeshBasicMaterial({ color: 0x1030c0 });
 const refusedMaterial = new MeshBasicMaterial({ color: 0xd02020 });
 const pointMaterial = new MeshBasicMaterial({ color: 0x0a0a40 });
 const handleMaterial = new MeshStandardMaterial({ color: 0xffd21a, emissive: 0x554400 });
+const rotateMaterial = new MeshStandardMaterial({ color: 0x20c0e0, emissive: 0x0a3a44 });
+const scaleMaterial = new MeshStandardMaterial({ color: 0xe040c0, emissive: 0x44103a });
 
 /** Meshes for a plan's lines ({lines_lps, points_lps, centre} from /api/plan/lines). */
 export function planObjects(view, { refused = false } = {}) {
@@ -41,6 +43,19 @@ export function handleObject(centreLps) {
   m.position.copy(lpsToScene(centreLps));
   m.name = 'handle';
   return m;
+}
+
+/** The handles that turn (cyan, beyond the start of the plan's axis) and scale (magenta, beyond
+ * its end) a template, from /api/plan/lines' centre; named 'rotate' and 'scale'. */
+export function axisHandleObjects(centre) {
+  const make = (lps, material, name) => {
+    const m = new Mesh(new SphereGeometry(0.0017, 18, 12), material);
+    m.position.copy(lpsToScene(lps));
+    m.name = name;
+    return m;
+  };
+  return [make(centre.rotate_handle_lps, rotateMaterial, 'rotate'),
+    make(centre.scale_handle_lps, scaleMaterial, 'scale')];
 }
 
 /** Handles on a free incision's points (LPS mm), dragged to move them; userData.index is the

@@ -2,7 +2,8 @@
 // `caps plan new`) whenever it changes, its check shown in plain words, its lines drawn on the
 // skin; undo and redo. Three kinds of state:
 //   a template: {procedure, parameters, orientation, at | at_xyz, sutures} placed by clicking,
-//     moved by dragging the handle or with the arrow keys, rotated with R;
+//     moved by dragging the yellow handle or with the arrow keys, turned by dragging the cyan
+//     handle (or R), scaled by dragging the magenta one (every parameter in mm, in proportion);
 //   a free incision: {procedure: 'incision', points: [[x, y, z] LPS mm], sutures}, drawn by
 //     clicking along the skin (`caps plan new incision --points-xyz`), points dragged to move;
 //   a loaded plan the page cannot redraw: {procedure: 'loaded', plan, sutures}.
@@ -11,7 +12,7 @@
 import { api } from './api.js';
 import { sceneToLps } from './frames.js';
 import { History } from './history.js';
-import { handleObject, planObjects, pointHandles } from './overlays.js';
+import { axisHandleObjects, handleObject, planObjects, pointHandles } from './overlays.js';
 import { edgePair, pickEdge, remapIncisionSutures, sutureMarks } from './sutures.js';
 
 const kRotateStepDeg = 5;
@@ -289,11 +290,15 @@ export class Planner {
       if (lines && s.points.length >= 2) objects.push(...planObjects({ ...lines, points_lps: [] },
         { refused: !this.plan }));
       objects.push(...pointHandles(s.points));
-    } else if (lines && s && s.procedure !== 'loaded') objects.push(handleObject(lines.centre.lps));
+    } else if (lines && s && s.procedure !== 'loaded') {
+      objects.push(handleObject(lines.centre.lps));
+      if (lines.centre.rotate_handle_lps) objects.push(...axisHandleObjects(lines.centre));
+    }
     if (lines?.loop && this.plan && (this.showSutures || this.picking))
       objects.push(...sutureMarks(lines.loop, this.plan.suture_quadruples ?? [],
         { highlight: this.picking?.first ?? -1 }));
     this.handle = objects.find((o) => o.name === 'handle') ?? null;
+    this.axisHandles = objects.filter((o) => o.name === 'rotate' || o.name === 'scale');
     this.pointHandles = objects.filter((o) => o.name === 'point');
     this.viewer.setOverlay(objects);
   }
@@ -372,8 +377,42 @@ export class Planner {
     return true;
   }
 
+  // The state while the cyan (rotate) or magenta (scale) handle is dragged to the skin point
+  // `lps` (mm), from the plan as it was when the drag began (`start`: its state and centre). The
+  // page works in the skin's tangent plane at the centre (a the plan's axis, n the skin normal;
+  // the orientation turns from superior towards the patient's left, i.e. towards a x n):
+  // turning points the axis's start at the pointer, scaling puts the axis's end under it.
+  axisDragState(kind, start, lps) {
+    const { state, centre } = start;
+    const c = centre.lps, n = centre.normal_lps, a = centre.axis_lps;
+    const dot = (u, v) => u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+    let d = [0, 1, 2].map((i) => lps[i] - c[i]);
+    const dn = dot(d, n);
+    d = d.map((v, i) => v - dn * n[i]);  // into the tangent plane
+    if (Math.hypot(...d) < 1e-6) return null;
+    if (kind === 'rotate') {
+      const b = [a[1] * n[2] - a[2] * n[1], a[2] * n[0] - a[0] * n[2], a[0] * n[1] - a[1] * n[0]];
+      // the handle sits at the axis's start: the axis points away from it
+      const turn = Math.atan2(-dot(d, b), -dot(d, a)) * 180 / Math.PI;
+      let orientation = state.orientation + turn;
+      orientation = Math.round((((orientation + 180) % 360 + 360) % 360 - 180) * 10) / 10;
+      return { ...state, orientation };
+    }
+    const half = centre.half_extent_mm;
+    if (!(half > 0)) return null;
+    const factor = Math.max(0.05, (dot(d, a) - centre.handle_gap_mm) / half);
+    const parameters = { ...state.parameters };
+    for (const p of this.templates.get(state.procedure).parameters)
+      if (p.unit === 'mm' && parameters[p.name] !== undefined)
+        // to the sliders' half millimetres
+        parameters[p.name] = Math.min(p.max, Math.max(p.min,
+          Math.round(parameters[p.name] * factor * 2) / 2));
+    return { ...state, parameters };
+  }
+
   // Click on the skin: place (or add a point, or pick a suture's side); drag the handle or an
-  // incision's point: move it (one undo step per drag); else orbit.
+  // incision's point: move it; drag the cyan or magenta handle: turn or scale the template (one
+  // undo step per drag); else orbit.
   bindPointer() {
     const el = this.viewer.renderer.domElement;
     let down = null;
@@ -381,9 +420,12 @@ export class Planner {
       down = { x: e.clientX, y: e.clientY, drag: false };
       if (this.picking) return;
       const point = this.pointHandles?.length ? this.viewer.hits(e, this.pointHandles)[0] : null;
-      if (point || (this.handle && this.viewer.hits(e, [this.handle]).length)) {
+      const axis = this.axisHandles?.length ? this.viewer.hits(e, this.axisHandles)[0] : null;
+      if (point || axis || (this.handle && this.viewer.hits(e, [this.handle]).length)) {
         down.drag = true;
         down.point = point ? point.object.userData.index : -1;
+        down.axis = axis && !point ? { kind: axis.object.name,
+          start: { state: structuredClone(this.state), centre: this.lines.centre } } : null;
         this.dragStart = structuredClone(this.state);
         this.viewer.controls.enabled = false;
         el.setPointerCapture(e.pointerId);
@@ -394,7 +436,10 @@ export class Planner {
       const p = this.viewer.pickSkin(e);
       if (!p) return;
       const lps = sceneToLps(p);
-      if (down.point >= 0) {
+      if (down.axis) {
+        const next = this.axisDragState(down.axis.kind, down.axis.start, lps);
+        if (next) this.change(next, { transient: true });
+      } else if (down.point >= 0) {
         const points = this.state.points.map((q, i) => (i === down.point ? lps : q));
         this.change({ ...this.state, points }, { transient: true });
       } else {

@@ -103,7 +103,19 @@ export class Results {
       this.onShown?.(row);
     }
     this.el.result.hidden = false;
+    this.applyTensionScale();
     this.renderTable();
+  }
+
+  // Both views' tension on the one scale (tensionScaleKpa), and its colour bar.
+  applyTensionScale() {
+    const top = this.tensionScaleKpa;
+    this.shown.forEach((row, i) => {
+      if (!row?.skins[i]) return;
+      row.skins[i].setTensionScale(top);
+      this.views[i].requestRender();
+    });
+    this.showLegend();
   }
 
   /** Back to the model's skin in view A (the plan changed: the result no longer matches it). */
@@ -151,6 +163,7 @@ export class Results {
       ['Force per mm of wound', `${fmt(s.force_per_mm_n, 3)} N/mm over ${fmt(s.wound_length_mm, 1)} mm`],
       ['Skin tension (99th percentile)', `${fmt(row.view.tension_scale_max_kpa, 1)} kPa`],
       ['Largest displacement', `${fmt(r.max_displacement_mm)} mm`],
+      ['Lengthening along the plan\'s axis', `${fmt(r.lengthening?.mm, 1)} mm (${fmt(r.lengthening?.percent, 0)} %: ${fmt(r.lengthening?.axis_before_mm, 1)} → ${fmt(r.lengthening?.axis_after_mm, 1)} mm)`],
       ['Excised area', `${fmt(row.view.wound_area_mm2?.pre, 1)} mm²`],
       ['Model', `${r.elements} elements, ${escapeHtml(r.material)}`],
     ].map(([k, v]) => `<tr><th>${k}</th><td>${v}</td></tr>`).join('');
@@ -200,6 +213,12 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
     requestAnimationFrame(step);
   }
 
+  /** The top of the tension scale (kPa) both views share: the larger of their 99th
+   * percentiles, so one colour is one tension in A and in B. */
+  get tensionScaleKpa() {
+    return Math.max(0, ...this.shown.filter((r) => r).map((r) => r.view.tension_scale_max_kpa));
+  }
+
   // The skin's colours as chosen (the tension is read when first shown).
   async showColouring(skin, viewer) {
     const name = this.colouring;
@@ -214,11 +233,19 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
     this.shown.forEach((row, i) => {
       if (row) this.showColouring(row.skins[i], this.views[i]);
     });
-    const row = this.shown[0];
-    this.el.tensionLegend.hidden = !on || !row;
-    if (row)
-      this.el.tensionLegend.innerHTML =
-        `0<span class="bar"></span>${fmt(row.view.tension_scale_max_kpa, 1)} kPa`;
+    this.applyTensionScale();
+  }
+
+  // The colour bar of the tension scale, shared by the views shown.
+  showLegend() {
+    const on = this.colouring === 'tension' && this.shown.some((r) => r);
+    this.el.tensionLegend.hidden = !on;
+    if (!on) return;
+    const top = this.tensionScaleKpa, both = this.shown[0] && this.shown[1];
+    this.el.tensionLegend.dataset.maxKpa = top;
+    this.el.tensionLegend.innerHTML = `skin tension, kPa${both ? ' (A and B on one scale)' : ''}` +
+      `<span class="scale"><span class="bar"></span><span class="ticks"><span>0</span>` +
+      `<span>${fmt(top / 2, 1)}</span><span>${fmt(top, 1)}</span></span></span>`;
   }
 
   showSummary(row) {
@@ -252,6 +279,7 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
         <td class="closing">${fmt(r.closing_force_n)}</td>
         <td class="largest">${fmt(r.sutures_at_spacing?.max_force_per_suture_n)}</td>
         <td>${fmt(row.view.tension_scale_max_kpa, 1)}</td>
+        <td class="lengthening" title="along the plan's axis: ${fmt(r.lengthening?.axis_before_mm, 1)} → ${fmt(r.lengthening?.axis_after_mm, 1)} mm">${fmt(r.lengthening?.mm, 1)}<br>${fmt(r.lengthening?.percent, 0)} %</td>
         <td>${fmt(row.view.wound_area_mm2?.pre, 1)}</td>
         <td><button data-show="0" title="Show in view A">A</button><button data-show="1" title="Show in view B">B</button></td>`;
       tr.querySelectorAll('button').forEach((b) =>

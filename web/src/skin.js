@@ -59,6 +59,18 @@ export async function loadModelSkin(info) {
   return { skin, thicknessMax: info.thickness.scale_max_mm };
 }
 
+// viridis (image/src/colormap.cpp: 11 stops, sRGB 0..255), as the server colours tension.glb.
+const kViridis = [[68, 1, 84], [72, 36, 117], [65, 68, 135], [53, 95, 141], [42, 120, 142],
+  [33, 145, 140], [34, 168, 132], [68, 191, 112], [122, 209, 81], [189, 223, 38], [253, 231, 37]];
+const srgbToLinear = (c) => (c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4);
+
+/** viridis(t), t clamped to [0, 1], as sRGB in [0, 1]. */
+export function viridis(t) {
+  const x = Math.min(1, Math.max(0, t)) * 10;
+  const i = Math.min(9, Math.floor(x)), f = x - i;
+  return kViridis[i].map((a, k) => (a * (1 - f) + kViridis[i + 1][k] * f) / 255);
+}
+
 /** A simulation's skin (GET /api/results/ID/view) over the model's (`modelSkin`, a ColouredSkin):
  * the part the simulation moved (morph 0 = pre-operative, 1 = post-operative) and the model's
  * skin without the cells that part replaces. Its mesh faces coloured by the skin tension are
@@ -76,8 +88,27 @@ export async function loadResultSkin(view, modelSkin) {
   const mesh = new Group();
   mesh.add(new Mesh(rest, modelSkin.mesh.material), patch);
   let tension = null, morph = 1, wanted = 'skin';
+  let scaleMaxKpa = view.tension_scale_max_kpa, values = null;
+  // The tension mesh's colours on the scale 0..scaleMaxKpa (viridis; glTF colours are linear).
+  const recolour = (t) => {
+    if (!values) return;
+    const colour = t.geometry.getAttribute('color');
+    for (let v = 0; v < values.length; ++v) {
+      const c = viridis(values[v] / scaleMaxKpa);
+      colour.setXYZ(v, srgbToLinear(c[0]), srgbToLinear(c[1]), srgbToLinear(c[2]));
+    }
+    colour.needsUpdate = true;
+  };
   const loadTension = async () => {
-    const t = await loadMesh(view.tension);
+    const [t, kpa] = await Promise.all([loadMesh(view.tension),
+      view.tension_values ? getBinary(view.tension_values) : null]);
+    if (kpa) {
+      values = new Float32Array(kpa);
+      if (values.length !== t.geometry.getAttribute('position').count)
+        throw new Error(`${view.tension_values}: ${values.length} values for ` +
+          `${t.geometry.getAttribute('position').count} vertices`);
+    }
+    if (scaleMaxKpa !== view.tension_scale_max_kpa) recolour(t);
     // Drawn in front of the patch's faces at the same place (they coincide before and after).
     t.material.polygonOffset = true;
     t.material.polygonOffsetFactor = -2;
@@ -96,6 +127,12 @@ export async function loadResultSkin(view, modelSkin) {
         tension = await loading;
       }
       if (tension) tension.visible = wanted === 'tension';
+    },
+    /** Colours the tension from 0 to `kpa` (several results on one scale). */
+    setTensionScale(kpa) {
+      if (!(kpa > 0) || kpa === scaleMaxKpa) return;
+      scaleMaxKpa = kpa;
+      if (tension) recolour(tension);
     },
     setMorph(t) {
       morph = t;

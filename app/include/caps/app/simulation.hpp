@@ -163,10 +163,32 @@ struct SimulateResult {
   double suture_spacing_mm = 0, max_force_per_suture_n = 0, force_per_mm_n = 0,
          wound_length_mm = 0;
   int sutures = 0;
+  /// The wound's length along the plan's axis before and after closure (axis_lengthening(); for
+  /// a Z-plasty the central limb and the gain the transposition gives), mm.
+  double axis_length_before_mm = 0, axis_length_after_mm = 0;
   std::vector<std::string> images;  ///< with render
   std::vector<std::string> warnings;
   double solve_s = 0;  ///< the solver's wall time (not reproducible: under "timings_s")
 };
+
+/// The wound's length along a plan's axis, before and after closure.
+struct AxisLengthening {
+  double before_mm = 0, after_mm = 0;
+  double change_mm() const { return after_mm - before_mm; }
+  double change_percent() const { return before_mm > 0 ? 100.0 * (after_mm / before_mm - 1) : 0; }
+};
+
+/// The length of a wound's border along the plan's axis: its loop nodes projected on `axis`
+/// (unit, LPS), the ends being the nodes of least and greatest projection before closure
+/// (coincident nodes, the two lips of a cut, within 1e-6 of the extent all count); before: the
+/// distance between the two ends' projections, after: between the last of the far end's nodes
+/// and the first of the near end's, displaced. For a Z-plasty (axis along the central limb) the
+/// ends are the limb's two points, each on both lips: after the closure its closed corners
+/// (loop 5 and 2) mark the lengthened limb, the flap tips (1 and 4, swung across) do not count.
+/// @param pre   #L×3 loop node positions before closure (LPS mm)
+/// @param post  #L×3 the same nodes after closure (LPS mm)
+AxisLengthening axis_lengthening(const Eigen::MatrixX3d& pre, const Eigen::MatrixX3d& post,
+                                 const Eigen::Vector3d& axis);
 
 /// Meshes the plan on the model and solves the closure into `output`: the files of caps mesh
 /// and caps solve (result.json carries the warnings), and with `render` the images.

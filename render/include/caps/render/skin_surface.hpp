@@ -73,6 +73,10 @@ struct SkinSurfaces {
   std::vector<SkinPart> face_part;   ///< #F
   std::vector<int> skin_elements;    ///< elements whose top face lies on the skin
   int n_micropolygon_vertices = 0;
+  /// The cells q = k n_theta + j (0 <= j < n_theta, 0 <= k < n_z - 1) of the model's range mesh
+  /// left out under the mesh's footprint (where the micropolygons, the wound fill and the seam
+  /// replace the range image), sorted.
+  std::vector<int> replaced_cells;
   Eigen::Vector3d mesh_centre_lps = Eigen::Vector3d::Zero();  ///< centroid of the skin faces
   double mesh_radius_mm = 0;  ///< largest distance of a micropolygon vertex from the centre
 };
@@ -80,6 +84,14 @@ struct SkinSurfaces {
 /// A face lies on the skin when each of its nodes is within this distance (mm) of the range
 /// surface along the model's radial ray.
 inline constexpr double kOnSkinToleranceMm = 1e-4;
+
+/// How much of the head displaced_skin() builds.
+enum class SkinExtent {
+  WholeHead,  ///< the range mesh of the whole head around the patch, closed at both ends
+  Patch       ///< only the micropolygons, the wound fill and the seam (with the range vertices
+              ///< the seam uses): the rest is the model's range mesh without replaced_cells,
+              ///< which a viewer already draws (the planner page); a fraction of the time
+};
 
 /// The elements whose top face lies on the skin (each face node within kOnSkinToleranceMm).
 std::vector<int> skin_elements(const PatientModel& model, const fem::Mesh& mesh);
@@ -98,15 +110,19 @@ int full_resolution_subdivisions(const PatientModel& model, const fem::Mesh& mes
 /// the smoothed isosurface, slice terraces filtered), and the isosurface's triangles that replace
 /// the range cells in undercuts (outside the mesh's footprint; SkinPart::Isosurface, not stitched
 /// to the range cells but overlapping them, so the skin is then no longer one closed manifold).
-/// The skin faces are still found on `model`.
+/// The skin faces are still found on `model`. `extent` Patch builds the part around the mesh
+/// only (no SkinPart::Range or Isosurface faces; the seam's range vertices are the model's
+/// samples, as in WholeHead, so the patch fits the range mesh without its replaced_cells).
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
                             const Eigen::MatrixX3d* displacement_mm, int n_subdivisions,
-                            const DrawnSkin* drawn = nullptr);
+                            const DrawnSkin* drawn = nullptr,
+                            SkinExtent extent = SkinExtent::WholeHead);
 
 /// The same with a solve result (null: no displacement).
 SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
                             const fem::SolveResult* result, int n_subdivisions,
-                            const DrawnSkin* drawn = nullptr);
+                            const DrawnSkin* drawn = nullptr,
+                            SkinExtent extent = SkinExtent::WholeHead);
 
 /// Area-weighted unit vertex normals of a mesh (V #V×3, F #F×3 counter-clockwise outward); a
 /// vertex in no non-degenerate triangle gets a zero row.
