@@ -78,7 +78,9 @@ TEST(CliLandmarks, FromVolumeWritesThemAndLandmarksPrintsThem) {
                         "tragion_right"}) {
     ASSERT_TRUE(m["landmarks"]["items"].contains(n)) << n;
     EXPECT_TRUE(m["landmarks"]["items"][n]["found"].get<bool>()) << n;
-    EXPECT_GT(m["landmarks"]["items"][n]["thickness_mm"].get<double>(), 2.0) << n;
+    // The phantom's soft tissue is 2.5 .. 8.5 mm under the head radius plus the relief: at least
+    // a millimetre everywhere (1.9 mm at the subnasale's dip, along the normal).
+    EXPECT_GT(m["landmarks"]["items"][n]["thickness_mm"].get<double>(), 1.0) << n;
   }
   const auto gl = m["landmarks"]["items"]["glabella"]["lps"];
   const V3 p = v3(gl);
@@ -101,24 +103,20 @@ TEST(CliLandmarks, PlanAtGlabellaLandsOnTheAnalyticGlabella) {
   ASSERT_EQ(run.code, 0) << run.out;
   const json p = read_json(plan);
   EXPECT_EQ(p["at"]["landmark"], "glabella");
-  // The plan's centre is on the skin at the glabella: the mean of its points' LPS lies within
-  // 1 mm of it along the skin (an ellipse is symmetric about its centre) and its frame's centre
-  // is the landmark's (theta, z).
+  // The plan's centre is the landmark's (theta, z), and its skin point (caps model site at that
+  // theta, z) is the analytic glabella within 1 mm.
   const json m = read_json(face_model() / "model.json");
   EXPECT_NEAR(p["frame"]["theta_deg"].get<double>(),
               m["landmarks"]["items"]["glabella"]["theta_deg"].get<double>(), 1e-6);
   EXPECT_NEAR(p["frame"]["z_mm"].get<double>(),
               m["landmarks"]["items"]["glabella"]["z_mm"].get<double>(), 1e-6);
-  V3 mean;
-  for (const auto& q : p["points"]) {
-    const V3 a = v3(q["lps"]);
-    mean.x += a.x;
-    mean.z += a.z;
-  }
-  mean.x /= static_cast<double>(p["points"].size());
-  mean.z /= static_cast<double>(p["points"].size());
-  const V3 g = analytic_glabella();
-  EXPECT_LT(std::hypot(mean.x - g.x, mean.z - g.z), 1.0) << mean.x << " " << mean.z;
+  std::ostringstream at;
+  at.precision(17);
+  at << p["frame"]["theta_deg"].get<double>() << "," << p["frame"]["z_mm"].get<double>();
+  const auto site = caps("model site " + face_model().string() + " --at=" + at.str() + " --json");
+  ASSERT_EQ(site.code, 0) << site.out;
+  const V3 centre = v3(json::parse(site.out)["lps"]);
+  EXPECT_LT(dist(centre, analytic_glabella()), 1.0) << centre.x << " " << centre.y << " " << centre.z;
 
   // 15 mm to the left and 20 mm up: the centre moves to the patient's left (+x) and up (+z), 25 mm
   // along the skin (the chord is a little shorter).

@@ -167,14 +167,18 @@ Landmarks find_landmarks(const SkinRangeView& view) {
   const Profile mid = profile(view, tm, zp - 110.0, zp + 90.0);
   {
     // A nose tip, not the edge of a scan that ends at the nose or above it (the brow): the
-    // skin is measured 6 mm below it and lies lower there, and the tip stands at least 8 mm in
-    // front of the nasal root (the profile 15..45 mm above it).
+    // skin is measured 6 mm below it and lies lower there, and above it the profile has a
+    // nasal root (a concavity 8..70 mm above with the brow at least 2 mm in front of it) that
+    // the tip stands at least 8 mm in front of.
     bool below = true;
     for (double z = zp - view.dz_mm; z >= zp - 6.0; z -= view.dz_mm)
       below = below && view.measured(tm, z);
     below = below && view.r_mm(tm, zp - 6.0) < view.r_mm(tm, zp) - 1.0;
-    const auto root = range_over(mid, zp + 15.0, zp + 45.0);
-    const double projection = view.r_mm(tm, zp) - root.first;
+    double projection = 0;
+    for (int i : extrema(mid, -1))
+      if (mid.z[i] >= zp + 8.0 && mid.z[i] <= zp + 70.0 &&
+          range_over(mid, mid.z[i], mid.z[i] + 30.0).second - mid.v[i] >= 2.0)
+        projection = std::max(projection, view.r_mm(tm, zp) - mid.v[i]);
     std::string why;
     if (!below)
       why = cat("the most prominent point in front (theta ", std::round(tm), " deg, z ",
@@ -182,9 +186,8 @@ Landmarks find_landmarks(const SkinRangeView& view) {
                 "the nose tip");
     else if (!(projection >= 8.0))
       why = cat("the most prominent point in front (theta ", std::round(tm), " deg, z ",
-                std::round(zp), " mm) stands only ", mm(std::max(0.0, projection)),
-                " in front of the skin 15..45 mm above it: not a nose (the scan may end above "
-                "the nose tip)");
+                std::round(zp), " mm) has no nasal root above it that it stands 8 mm in front "
+                "of: not a nose (the scan may end above the nose tip)");
     if (!why.empty()) {
       for (const auto& n : landmark_names())
         put(absent(n, n == "pronasale" ? why
@@ -211,7 +214,7 @@ Landmarks find_landmarks(const SkinRangeView& view) {
         best = i;
       }
     }
-    if (best < 0 || depth < 0.5) {
+    if (best < 0 || depth < 2.0) {
       put(absent("nasion", "no concavity between the forehead and the nose on the midline "
                            "(8..70 mm above the pronasale)"));
     } else {
@@ -435,7 +438,7 @@ Landmarks find_landmarks(const SkinRangeView& view) {
           exo.push_back(absent("exocanthion" + suffix, "the eye's depression has no lateral end"));
         else
           exo.push_back(at("exocanthion" + suffix, theta_of(*edge), tz[1],
-                           0.5 * std::min(1.0, dmax / 2.0) *
+                           0.3 * std::min(1.0, dmax / 2.0) *
                                measured_factor(view, theta_of(*edge), tz[1]),
                            cat("the lateral end (half depth) of the eye's depression, ",
                                mm(dmax), " deep")));

@@ -23,6 +23,17 @@ def number(x):
         return None
 
 
+def finish(fig, ax, title, path):
+    """Labels the force axis, titles the plot and writes it to `path` (renamed into place)."""
+    ax.set_ylabel("closing force (N)")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path + ".tmp.png", dpi=100)
+    os.replace(path + ".tmp.png", path)
+    plt.close(fig)
+
+
 def main(table, report, by_procedure, by_thickness):
     with open(table, newline="") as f:
         rows = list(csv.DictReader(f, delimiter="\t"))
@@ -43,13 +54,7 @@ def main(table, report, by_procedure, by_thickness):
         ax.scatter(xs, ys, label=patient)
     ax.set_xticks(range(len(plans)))
     ax.set_xticklabels(plans)
-    ax.set_ylabel("closing force (N)")
-    ax.set_title("Closing force by procedure")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(by_procedure + ".tmp.png", dpi=100)
-    os.replace(by_procedure + ".tmp.png", by_procedure)
-    plt.close(fig)
+    finish(fig, ax, "Closing force by procedure", by_procedure)
 
     # Closing force against the soft-tissue thickness at the plan's centre.
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -59,13 +64,7 @@ def main(table, report, by_procedure, by_thickness):
         pts = [p for p in pts if None not in p]
         ax.scatter([p[0] for p in pts], [p[1] for p in pts], label=plan)
     ax.set_xlabel("soft-tissue thickness at the site, along the normal (mm)")
-    ax.set_ylabel("closing force (N)")
-    ax.set_title("Closing force against local thickness")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(by_thickness + ".tmp.png", dpi=100)
-    os.replace(by_thickness + ".tmp.png", by_thickness)
-    plt.close(fig)
+    finish(fig, ax, "Closing force against local thickness", by_thickness)
 
     columns = list(rows[0].keys()) if rows else []
     head = "".join(f"<th>{html.escape(c)}</th>" for c in columns)
