@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
 # Runs the cohort workflow into WORK_DIR with the given caps program and checks it:
-#   * the cohort is patients.tsv (two face phantoms of different size) plus a deliberately broken
-#     patient (a volume file that is not a volume), with the two plans of plans.tsv placed at the
-#     glabella, on 2 cores;
+#   * the cohort is patients.tsv (two face phantoms of different size and Cranium) plus a
+#     deliberately broken patient (a volume file that is not a volume), with the two plans of
+#     plans.tsv placed relative to the glabella, on 2 cores;
 #   * results.tsv has one row per patient x plan; the broken patient's rows are "failed" with
 #     the error and every other row is "ok" (it failed alone), and report.html lists it;
 #   * the closing forces in the table equal `caps simulate` run by hand on the same model and plan;
 #   * a rerun has nothing to do.
 #   workflows/cohort/run_check.sh build/tools/caps /tmp/cohort [CONFIG]
-# CONFIG defaults to config.yaml (the CI cohort); config_full.yaml adds Cranium.
+# CONFIG defaults to config.yaml.
 set -euo pipefail
 caps="$1"
 work="$2"
