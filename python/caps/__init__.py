@@ -103,7 +103,8 @@ def verbs():
 
 def phantom(output, **fields):
     """Writes the analytic head phantom CT (.nii/.nii.gz); fields: voxels "L,P,S",
-    spacing "L,P,S" (mm), no_holder, force. Returns output, dims, spacing_mm."""
+    spacing "L,P,S" (mm), no_holder, layered, thin_bone, face (a face of analytic landmarks),
+    scale (head size), force. Returns output, dims, spacing_mm."""
     return run("phantom", output=output, **fields)
 
 
