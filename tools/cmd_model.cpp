@@ -52,6 +52,16 @@ void add_model(CLI::App& app, Common& common, Action& action) {
            &app::run_from_scan, common, action);
   add_verb(model, "info", "Print a model directory's summary.\nExample: caps model info cranium --json",
            &app::run_model_info, common, action, Print::Stdout);
+  add_verb(model, "landmarks",
+           "Find a model's anatomical landmarks (glabella, nasion, pronasale, subnasale, "
+           "pogonion,\nzygion, exocanthion, tragion; docs/landmarks.md), write them into its "
+           "model.json and print them.\nExample: caps model landmarks cranium",
+           &app::run_model_landmarks, common, action, Print::Stdout);
+  add_verb(model, "site",
+           "Print the skin point and the soft tissue (thickness, layers) at a place on a model,\n"
+           "given as THETA,Z or relative to a landmark.\n"
+           "Example: caps model site cranium --at glabella+0,20 --json",
+           &app::run_model_site, common, action, Print::Stdout);
   add_verb(model, "export-range",
            "Write a model's skin as a Cyberware-style cylindrical range image: range.png (16-bit "
            "grey),\ncolor.png and the sidecar range.json that from-scan reads.\n"

@@ -9,6 +9,8 @@
 #include "caps/core/error.hpp"
 #include "caps/surface/color_picture.hpp"
 #include "caps/surface/cylindrical_scan.hpp"
+#include "caps/plan/placement.hpp"
+#include "caps/surface/landmarks.hpp"
 #include "caps/surface/picking.hpp"
 #include "caps/volume/read_volume.hpp"
 #include "json_fields.hpp"
@@ -24,6 +26,8 @@ CAPS_APP_REQUEST_JSON(caps::app::ExportRangeRequest)
 CAPS_APP_REQUEST_JSON(caps::app::ColorPictureRequest)
 CAPS_APP_REQUEST_JSON(caps::app::VolumeInfoRequest)
 CAPS_APP_REQUEST_JSON(caps::app::PhantomRequest)
+CAPS_APP_REQUEST_JSON(caps::app::LandmarksRequest)
+CAPS_APP_REQUEST_JSON(caps::app::SiteRequest)
 
 namespace caps::app {
 
@@ -35,6 +39,17 @@ namespace {
 Eigen::Vector3d triple(const std::string& s, const std::string& option, const std::string& meaning) {
   const auto t = parse_numbers<3>(s, option, meaning);
   return {t[0], t[1], t[2]};
+}
+
+// Finds the landmarks of the model in `dir` and writes them into its model.json; an absent
+// landmark is a note (the model.json entry says why).
+Landmarks add_landmarks(const std::string& dir, Reporter* reporter) {
+  const PatientModel model = PatientModel::load(dir);
+  const Landmarks l = find_landmarks(model);
+  write_model_landmarks(dir, landmarks_to_json(l));
+  for (const auto& item : l.items)
+    if (!item.found) note(reporter, cat("landmark ", item.name, " absent: ", item.note));
+  return l;
 }
 
 }  // namespace
@@ -119,6 +134,7 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   }
   const VolumeModel m = build_volume_model(v, o, reporter);
   write_model(m, r.output, r.force, reporter);
+  add_landmarks(r.output, reporter);
   return detail::model_result(r.output, r.output);
 }
 
@@ -175,6 +191,7 @@ ModelResult run_from_scan(const FromScanRequest& r, Reporter* reporter) {
   const ScanMesh scan = read_any_scan(r);
   const ScanModel m = build_scan_model(scan, o, reporter);
   write_scan_model(m, r.output, r.force, reporter);
+  add_landmarks(r.output, reporter);
   return detail::model_result(r.output, r.output);
 }
 
@@ -182,6 +199,88 @@ ModelResult run_from_scan(const FromScanRequest& r, Reporter* reporter) {
 
 ModelResult run_model_info(const ModelInfoRequest& r, Reporter*) {
   return detail::model_result(r.model, "");
+}
+
+LandmarksResult run_model_landmarks(const LandmarksRequest& r, Reporter* reporter) {
+  LandmarksResult out;
+  out.model = r.model;
+  Landmarks l;
+  if (r.no_write) {
+    l = find_landmarks(PatientModel::load(r.model));
+  } else {
+    l = add_landmarks(r.model, reporter);
+    out.written = true;
+  }
+  out.landmarks_json = landmarks_to_json(l);
+  out.table = landmarks_table(l);
+  return out;
+}
+
+std::string to_json(const LandmarksResult& r) {
+  json j = json::parse(r.landmarks_json);
+  j["model"] = r.model;
+  j["written"] = r.written;
+  j["warnings"] = r.warnings;
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
+std::string summary(const LandmarksResult& r) {
+  std::string s = r.table;
+  while (!s.empty() && s.back() == '\n') s.pop_back();
+  return s;
+}
+
+SiteResult run_model_site(const SiteRequest& r, Reporter*) {
+  const PatientModel model = PatientModel::load(r.model);
+  SiteResult out;
+  out.model = r.model;
+  out.at = r.at;
+  if (const auto placement = plan::parse_landmark_placement(r.at)) {
+    const Eigen::Vector2d tz =
+        plan::resolve_placement(model, plan::model_landmarks(r.model, model), *placement);
+    out.theta_deg = tz[0];
+    out.z_mm = tz[1];
+  } else {
+    const auto tz = parse_numbers<2>(r.at, "--at", "THETA,Z in degrees and mm, e.g. --at 0,95");
+    out.theta_deg = tz[0];
+    out.z_mm = tz[1];
+  }
+  const auto& maps = model.maps();
+  out.lps = model.skin_point(out.theta_deg, out.z_mm);
+  out.thickness_mm = model.thickness_normal(out.theta_deg, out.z_mm);
+  out.thickness_radial_mm = model.thickness(out.theta_deg, out.z_mm);
+  out.has_layers = maps.has_layers() && !maps.thickness_skin_normal.empty();
+  if (out.has_layers) {
+    out.skin_mm = model.sample(maps.thickness_skin_normal, out.theta_deg, out.z_mm);
+    out.fat_mm = model.sample(maps.thickness_fat_normal, out.theta_deg, out.z_mm);
+    out.deep_mm = model.sample(maps.thickness_deep_normal, out.theta_deg, out.z_mm);
+  }
+  out.flags = describe_flags(model.flags_at(out.theta_deg, out.z_mm));
+  return out;
+}
+
+std::string to_json(const SiteResult& r) {
+  json j = {{"model", r.model},
+            {"at", r.at},
+            {"theta_deg", r.theta_deg},
+            {"z_mm", r.z_mm},
+            {"lps", {r.lps[0], r.lps[1], r.lps[2]}},
+            {"thickness_mm", r.thickness_mm},
+            {"thickness_radial_mm", r.thickness_radial_mm},
+            {"flags", r.flags},
+            {"warnings", r.warnings}};
+  if (r.has_layers)
+    j["layers_mm"] = {{"skin", r.skin_mm}, {"fat", r.fat_mm}, {"deep", r.deep_mm}};
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
+std::string summary(const SiteResult& r) {
+  std::string s = cat(r.at, ": theta ", round_to(r.theta_deg, 2), " deg, z ", round_to(r.z_mm, 2),
+                      " mm, soft tissue ", round_to(r.thickness_mm, 2), " mm along the normal");
+  if (r.has_layers)
+    s += cat(" (skin ", round_to(r.skin_mm, 2), ", fat ", round_to(r.fat_mm, 2), ", deep ",
+             round_to(r.deep_mm, 2), ")");
+  return s + cat(", ", r.flags);
 }
 
 PickResult run_pick(const PickRequest& r, Reporter*) {
@@ -309,9 +408,11 @@ PhantomResult run_phantom(const PhantomRequest& r, Reporter*) {
   o.head_holder = !r.no_holder;
   o.layered = r.layered;
   o.thin_bone = r.thin_bone;
+  o.face = r.face;
+  o.scale = r.scale;
   const Volume v = make_phantom(o);
   write_nifti(v, path);
-  return {r.output, o.dims, o.spacing_mm, o.head_holder, o.layered, o.thin_bone};
+  return {r.output, o.dims, o.spacing_mm, o.head_holder, o.layered, o.thin_bone, o.face, o.scale};
 }
 
 std::string to_json(const PhantomResult& p) {
@@ -320,7 +421,9 @@ std::string to_json(const PhantomResult& p) {
               {"spacing_mm", {p.spacing_mm[0], p.spacing_mm[1], p.spacing_mm[2]}},
               {"head_holder", p.head_holder},
               {"layered", p.layered},
-              {"thin_bone", p.thin_bone}}
+              {"thin_bone", p.thin_bone},
+              {"face", p.face},
+              {"scale", p.scale}}
       .dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 

@@ -16,6 +16,7 @@
 #include "caps/core/units.hpp"
 #include "caps/plan/check.hpp"
 #include "caps/plan/plan_figure.hpp"
+#include "caps/plan/placement.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/surface/patient_model.hpp"
@@ -165,7 +166,7 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
     throw InvalidInput(cat("--points and --points-xyz are for a free incision (caps plan new ",
                            kFreeIncision, "); ", r.procedure, " is placed with --at"));
   if (r.at.empty() == r.at_xyz.empty())
-    throw InvalidInput("give the centre with --at THETA,Z or --at-xyz X,Y,Z");
+    throw InvalidInput("give the centre with --at THETA,Z, --at LANDMARK+LEFT,UP or --at-xyz X,Y,Z");
   // The plan records its model's folder to find it again: with its bytes replaced it could not.
   require_utf8(r.model, "the model folder");
   const bool from_file = fs::path(r.procedure).extension() == ".json";
@@ -178,7 +179,14 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
   double theta = 0, z = 0;
-  if (!r.at.empty()) {
+  std::optional<plan::LandmarkPlacement> placement;
+  if (!r.at.empty()) placement = plan::parse_landmark_placement(r.at);
+  if (placement) {
+    const Eigen::Vector2d tz =
+        plan::resolve_placement(model, plan::model_landmarks(r.model, model), *placement);
+    theta = tz[0];
+    z = tz[1];
+  } else if (!r.at.empty()) {
     const auto tz = parse_numbers<2>(r.at, "--at", "THETA,Z in degrees and mm, e.g. --at 0,95");
     theta = tz[0];
     z = tz[1];
@@ -189,6 +197,7 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
     z = cp.z_mm;
   }
   plan::Plan p = plan::place_procedure(proc, model, theta, z, r.orientation);
+  p.placement = placement;
   p.model = r.model;
   p.model_hash = model.content_hash();
   const plan::PlanReport report = plan::check_plan(p, model);

@@ -27,6 +27,13 @@ std::string plan_to_json(const Plan& plan, const PlanReport* report) {
                 {"z_mm", plan.frame.z_mm},
                 {"orientation_deg", plan.frame.orientation_deg},
                 {"local_to_theta_z", {{m(0, 0), m(0, 1)}, {m(1, 0), m(1, 1)}}}};
+  // Where the plan was placed: at (theta, z), or relative to a landmark (and where it resolved).
+  j["at"] = {{"theta_deg", plan.frame.theta_deg}, {"z_mm", plan.frame.z_mm}};
+  if (plan.placement) {
+    j["at"]["landmark"] = plan.placement->landmark;
+    j["at"]["left_mm"] = plan.placement->left_mm;
+    j["at"]["up_mm"] = plan.placement->up_mm;
+  }
   j["points"] = json::array();
   for (const auto& p : plan.points)
     j["points"].push_back({{"theta_deg", p.theta_deg}, {"z_mm", p.z_mm},
@@ -95,6 +102,12 @@ Plan parse_plan_json(const std::string& text, const std::string& source) {
       plan.procedure = j["procedure"].value("name", "custom");
       if (j["procedure"].contains("parameters"))
         plan.parameters = j["procedure"]["parameters"].get<std::map<std::string, double>>();
+    }
+    field = "at";
+    if (j.contains("at") && j["at"].contains("landmark")) {
+      const auto& a = j["at"];
+      plan.placement = LandmarkPlacement{a.at("landmark").get<std::string>(),
+                                         a.value("left_mm", 0.0), a.value("up_mm", 0.0)};
     }
     field = "frame";
     const auto& f = j.at("frame");

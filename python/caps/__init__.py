@@ -25,7 +25,7 @@ __all__ = [
     "Error", "InvalidInput", "InvalidParameter", "IoError", "SolverError", "Cancelled",
     "CapsWarning", "run", "defaults", "verbs", "phantom", "model_from_volume", "model_from_scan",
     "model_info", "plan_new", "plan_check", "plan_templates", "mesh", "simulate", "render",
-    "load_model", "read_result",
+    "load_model", "read_result", "model_landmarks", "model_site",
 ]
 
 
@@ -103,7 +103,8 @@ def verbs():
 
 def phantom(output, **fields):
     """Writes the analytic head phantom CT (.nii/.nii.gz); fields: voxels "L,P,S",
-    spacing "L,P,S" (mm), no_holder, force. Returns output, dims, spacing_mm."""
+    spacing "L,P,S" (mm), no_holder, layered, thin_bone, face (a face of analytic landmarks),
+    scale (head size), force. Returns output, dims, spacing_mm."""
     return run("phantom", output=output, **fields)
 
 
@@ -169,10 +170,25 @@ def load_model(model):
     "z_mm" (n_z,), "axis" (origin_lps, direction, front: LPS), and the maps as numpy arrays of
     shape (n_z, n_theta), row k at z_mm[k], column j at theta_deg[j]: "r_skin", "r_bone",
     "thickness", "thickness_normal" (float32, mm; invalid cells filled), "flags" (uint8,
-    0 = valid), "valid", "measured_skin", "measured_bone" (bool)."""
+    0 = valid), "valid", "measured_skin", "measured_bone" (bool); "landmarks": the anatomical
+    landmarks by name (docs/landmarks.md: found, theta_deg, z_mm, lps, confidence, thickness_mm,
+    note), or None for a model built before landmarks existed (``model_landmarks(model)``)."""
     d = _caps.load_model(_os.fspath(model))
     d["info"] = _json.loads(d.pop("model_json"))
     return d
+
+
+def model_landmarks(model, write=True):
+    """Finds a model's anatomical landmarks (``caps model landmarks``), writes them into its
+    model.json unless ``write`` is False, and returns them by name."""
+    r = run("model landmarks", {"model": _os.fspath(model), "no_write": not write})
+    return r["items"]
+
+
+def model_site(model, at):
+    """The skin point and soft tissue at ``at`` ("THETA,Z" or "glabella+15,20"): theta_deg,
+    z_mm, lps, thickness_mm, layers_mm (where measured), flags (``caps model site``)."""
+    return run("model site", {"model": _os.fspath(model), "at": at})
 
 
 def read_result(result):

@@ -132,6 +132,8 @@ const std::map<std::string, VerbEntry>& verbs() {
       {"model_from_volume", entry(&app::run_from_volume)},
       {"model_from_scan", entry(&app::run_from_scan)},
       {"model_info", entry(&app::run_model_info)},
+      {"model_landmarks", entry(&app::run_model_landmarks)},
+      {"model_site", entry(&app::run_model_site)},
       {"model_pick", entry(&app::run_pick)},
       {"model_export_range", entry(&app::run_export_range)},
       {"model_color_picture", entry(&app::run_color_picture)},
@@ -274,6 +276,12 @@ py::dict load_model(const std::string& dir) {
   d["valid"] = py::array_t<bool>(owned_array(std::move(valid), shape));
   d["measured_skin"] = py::array_t<bool>(owned_array(std::move(maps.measured_skin), shape));
   d["measured_bone"] = py::array_t<bool>(owned_array(std::move(maps.measured_bone), shape));
+  // model.json's "landmarks" (docs/landmarks.md): {name: {found, theta_deg, z_mm, lps, ...}},
+  // or None for a model built before landmarks existed (caps.run("model landmarks", ...)).
+  if (info.landmarks_json.empty())
+    d["landmarks"] = py::none();
+  else
+    d["landmarks"] = py::module_::import("json").attr("loads")(info.landmarks_json)["items"];
   return d;
 }
 
@@ -322,7 +330,8 @@ PYBIND11_MODULE(_caps, m) {
         "A model directory's model.json (text) and maps: numpy arrays of shape (n_z, n_theta), "
         "row k at z_mm[k], column j at theta_deg[j]: r_skin, r_bone, thickness, "
         "thickness_normal (float32, mm), flags (uint8, 0 = valid), valid, measured_skin, "
-        "measured_bone (bool); the axis (LPS mm).");
+        "measured_bone (bool); the axis (LPS mm); landmarks: model.json's landmarks by name "
+        "(found, theta_deg, z_mm, lps, confidence, thickness_mm, note) or None.");
 
   m.def("read_result", &read_result, py::arg("result_dir"),
         "A solve's or simulation's result directory: nodes (#N x 3, LPS mm), displacement "

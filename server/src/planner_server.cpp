@@ -1,6 +1,7 @@
 #include "caps/server/planner_server.hpp"
 
 #include "caps/app/loaded_model.hpp"
+#include "caps/app/model.hpp"
 #include "caps/app/plan.hpp"
 #include "caps/app/render.hpp"
 #include "caps/app/simulation.hpp"
@@ -512,6 +513,14 @@ struct PlannerServer::Impl {
     const fs::path model_dir(options.model_dir);
     http.Get("/api/model", guarded([model_dir](const httplib::Request&, httplib::Response& res) {
                send_file(res, file_under(model_dir, "model.json"));
+             }));
+    // The model's anatomical landmarks (docs/landmarks.md), found without writing model.json.
+    http.Get("/api/landmarks",
+             guarded([model_dir](const httplib::Request&, httplib::Response& res) {
+               app::LandmarksRequest r;
+               r.model = model_dir.string();
+               r.no_write = true;
+               send_json(res, app::to_json(app::run_model_landmarks(r)));
              }));
     http.Get(R"(/api/model/(.+))",
              guarded([model_dir](const httplib::Request& req, httplib::Response& res) {

@@ -181,6 +181,7 @@ json to_json(const ModelInfo& info) {
   j["files"] = files_json(info.has_color, info.has_layers);
   j["meshes"] = {{"skin", mesh_json(info.skin)}, {"bone", mesh_json(info.bone)}};
   if (!info.content_hash.empty()) j["content_hash"] = info.content_hash;
+  if (!info.landmarks_json.empty()) j["landmarks"] = parse_object(info.landmarks_json, "landmarks");
   j["warnings"] = info.warnings;
   return j;
 }
@@ -297,10 +298,19 @@ ModelInfo read_model_info_fields(const fs::path& dir) {
   if (j.contains("warnings") && j["warnings"].is_array())
     for (const auto& w : j["warnings"])
       if (w.is_string()) info.warnings.push_back(w.get<std::string>());
+  if (j.contains("landmarks") && j["landmarks"].is_object())
+    info.landmarks_json = j["landmarks"].dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   return info;
 }
 
 }  // namespace
+
+void write_model_landmarks(const fs::path& dir, const std::string& landmarks_json) {
+  ModelInfo info = read_model_info(dir);
+  parse_object(landmarks_json, "landmarks");
+  info.landmarks_json = landmarks_json;
+  write_text_atomic(dir / model_file::kJson, model_json_text(info));
+}
 
 std::string read_model_json(const fs::path& dir) {
   read_model_info(dir);

@@ -43,9 +43,39 @@ double HeadPhantom::head_radius(double theta, double z) const {
   return std::abs(u) >= 1.0 ? 0.0 : ellipse * std::sqrt(1.0 - u * u);
 }
 
+double HeadPhantom::face_relief(double theta, double z) const {
+  if (!face_) return 0.0;
+  const double t = dtheta(theta, 0.0);
+  // A midline feature: height (mm, negative for a dip), half-width in theta (rad) and z (mm).
+  auto mid = [&](double h, double wt, double z0, double wz) {
+    return h * gauss(t / wt) * gauss((z - z0) / wz);
+  };
+  // A pair of features at +-theta0 (rad).
+  auto pair = [&](double h, double t0, double wt, double z0, double wz) {
+    return h * (gauss((t - t0) / wt) + gauss((t + t0) / wt)) * gauss((z - z0) / wz);
+  };
+  constexpr double deg = kPi / 180.0;
+  return mid(5.0, 0.30, 28.0, 6.0)      // glabella (brow)
+         + mid(-3.0, 0.25, 12.0, 5.0)   // nasion
+         + mid(16.0, 0.16, -12.0, 9.0)  // nose
+         + mid(-4.0, 0.20, -27.0, 4.0)  // subnasale
+         + mid(4.0, 0.30, -36.0, 5.0)   // upper lip
+         + mid(3.5, 0.30, -48.0, 5.0)   // lower lip
+         + mid(-2.5, 0.30, -58.0, 4.0)  // labiomental fold
+         + mid(6.0, 0.30, -70.0, 8.0)   // chin
+         + pair(-5.0, 20.0 * deg, 0.12, 5.0, 5.0)   // eyes
+         + pair(7.0, 65.0 * deg, 0.14, -5.0, 12.0)  // cheeks
+         + pair(14.0, 100.0 * deg, 0.10, 0.0, 14.0);  // ears
+}
+
 double HeadPhantom::skin_radius(double theta, double z) const {
   const double head = head_radius(theta, z);
   if (head <= 0) return 0.0;
+  if (face_) {
+    const double marker =
+        8.0 * gauss(dtheta(theta, kMarkerTheta) / 0.12) * gauss((z - kMarkerZ) / 9.0);
+    return head + face_relief(theta, z) + marker;
+  }
   const double nose = 18.0 * gauss(dtheta(theta, 0.0) / 0.2) * gauss((z - kNoseZ) / 18.0);
   const double marker =
       8.0 * gauss(dtheta(theta, kMarkerTheta) / 0.12) * gauss((z - kMarkerZ) / 9.0);
@@ -90,9 +120,12 @@ double HeadPhantom::bone_radius(double theta, double z) const {
   return head_radius(theta, z) - thickness(theta, z);
 }
 
-double HeadPhantom::hu_at(const Eigen::Vector3d& p, const Eigen::Vector3d& voxel_mm,
+double HeadPhantom::hu_at(const Eigen::Vector3d& p_scaled, const Eigen::Vector3d& voxel_scaled,
                           bool head_holder) const {
   const Eigen::Vector3d a = axis_point();
+  // The head at scale 1: the point and the voxel in its lengths.
+  const Eigen::Vector3d p = a + (p_scaled - a) / scale_;
+  const Eigen::Vector3d voxel_mm = voxel_scaled / scale_;
   const double x = p[0] - a[0], y = p[1] - a[1], z = p[2] - a[2];
   const double r = std::hypot(x, y);
   const double theta = std::atan2(x, -y);
@@ -187,12 +220,15 @@ Volume make_phantom(const PhantomOptions& options) {
   const Eigen::Vector3d extent = (options.dims.cast<double>() - Eigen::Vector3d::Ones())
                                      .cwiseProduct(options.spacing_mm);
   v.geom.origin_lps = -0.5 * extent;
-  v.geom.origin_lps[2] = 115.0 - extent[2];  // the top slice is 10 mm above the vertex
+  if (!(options.scale >= 0.7 && options.scale <= 1.3))
+    throw InvalidInput(cat("phantom: scale ", options.scale, " must be between 0.7 and 1.3"));
+  // the top slice is 10 mm (times the scale) above the vertex
+  v.geom.origin_lps[2] = 115.0 * options.scale - extent[2];
   v.modality = Modality::CT;
   v.source = "phantom";
   v.format = "phantom";
   v.data.resize(v.geom.n_voxels());
-  const HeadPhantom head(options.layered, options.thin_bone);
+  const HeadPhantom head(options.layered, options.thin_bone, options.face, options.scale);
   const auto& d = v.geom.dims;
   tbb::parallel_for(0, d[2], [&](int k) {
     for (int j = 0; j < d[1]; ++j)
@@ -208,6 +244,8 @@ Volume make_phantom(const PhantomOptions& options) {
                                      : "analytic head phantom (caps phantom)");
   if (options.thin_bone)
     v.notes.push_back("with a thin bone plate (0.5 .. 1.5 mm) under the right cheek");
+  if (options.face) v.notes.push_back("with a face of analytic landmarks (caps phantom --face)");
+  if (options.scale != 1.0) v.notes.push_back(cat("head scaled by ", options.scale));
   return v;
 }
 

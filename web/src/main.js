@@ -3,6 +3,7 @@
 import { api } from './api.js';
 import { lpsToScene } from './frames.js';
 import { kIncision, Planner } from './planner.js';
+import { showLandmarks } from './landmarks.js';
 import { Results, escapeHtml } from './results.js';
 import { pairColour, sideText } from './sutures.js';
 import { loadModelSkin } from './skin.js';
@@ -180,6 +181,7 @@ async function main() {
     },
     onPlanChanged: () => results.showPlanning(),
   });
+  showLandmarks(planner);
   const onParameter = (name, value) =>
     name === 'orientation' ? planner.setOrientation(value) : planner.setParameter(name, value);
   // The panel for the procedure `name` (a template, the free incision, or null: a loaded plan).

@@ -1,16 +1,65 @@
 #!/usr/bin/env bash
-# Runs the cohort workflow on its two phantoms and two plans into WORK_DIR with the given caps
-# program, checks that results.tsv has one row per patient x plan and that a rerun has nothing to do.
-#   workflows/cohort/run_check.sh build/tools/caps /tmp/cohort
+# Runs the cohort workflow into WORK_DIR with the given caps program and checks it:
+#   * the cohort is patients.tsv (two face phantoms of different size and Cranium) plus a
+#     deliberately broken patient (a volume file that is not a volume), with the two plans of
+#     plans.tsv placed relative to the glabella, on 2 cores;
+#   * results.tsv has one row per patient x plan; the broken patient's rows are "failed" with
+#     the error and every other row is "ok" (it failed alone), and report.html lists it;
+#   * the closing forces in the table equal `caps simulate` run by hand on the same model and plan;
+#   * a rerun has nothing to do.
+#   workflows/cohort/run_check.sh build/tools/caps /tmp/cohort [CONFIG]
+# CONFIG defaults to config.yaml.
 set -euo pipefail
 caps="$1"
 work="$2"
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+config="${3:-$here/config.yaml}"
+python=/usr/bin/python3
 rm -rf "$work"
-args=(-s "$here/Snakefile" --configfile "$here/config.yaml" --config "caps=$caps"
+mkdir -p "$work"
+# The cohort's patients and the broken one.
+table_path() {  # the config's table KEY as a path
+  "$python" -c "import sys,yaml,os; p=yaml.safe_load(open(sys.argv[1]))[sys.argv[3]]; print(p if os.path.isabs(p) else os.path.join(sys.argv[2], p))" "$config" "$here" "$1"
+}
+patients_src=$(table_path patients)
+export CAPS_PLANS=$(table_path plans)
+cp "$patients_src" "$work/patients.tsv"
+echo "this is not a volume" > "$work/broken.nii.gz"
+printf 'broken\tvolume\t%s\t\n' "$work/broken.nii.gz" >> "$work/patients.tsv"
+args=(-s "$here/Snakefile" --configfile "$config" --config "caps=$caps" "patients=$work/patients.tsv"
       --directory "$work" --cores 2)
-snakemake "${args[@]}" --keep-going -q
-rows=$(($(wc -l < "$work/results.tsv") - 1))
-[ "$rows" -eq 4 ] || { echo "results.tsv has $rows rows, expected 4"; exit 1; }
-snakemake "${args[@]}" -n | grep -q "Nothing to be done" || { echo "a rerun would do work"; exit 1; }
-echo "cohort: $rows rows; a rerun has nothing to do"
+start=$(date +%s.%N)
+snakemake "${args[@]}" -q > "$work/snakemake.log" 2>&1 || { cat "$work/snakemake.log"; exit 1; }
+end=$(date +%s.%N)
+"$python" - "$work" "$caps" <<'EOF'
+import csv, json, os, subprocess, sys
+work, caps = sys.argv[1], sys.argv[2]
+patients = [r["patient"] for r in csv.DictReader(open(f"{work}/patients.tsv"), delimiter="\t")]
+rows = list(csv.DictReader(open(f"{work}/results.tsv"), delimiter="\t"))
+plans = sorted({r["plan"] for r in rows})
+assert len(rows) == len(patients) * len(plans) == len({(r["patient"], r["plan"]) for r in rows}), \
+    f"{len(rows)} rows for {len(patients)} patients x {len(plans)} plans"
+for r in rows:
+    if r["patient"] == "broken":
+        assert r["status"] == "failed" and r["error"], r
+    else:
+        assert r["status"] == "ok", r
+        assert float(r["closing_force_n"]) > 0 and float(r["thickness_mm"]) > 0, r
+report = open(f"{work}/report.html").read()
+assert "broken" in report and "failed" in report
+# The table's closing forces are caps simulate's on the same model and plan (one per plan).
+for r in [next(r for r in rows if r["status"] == "ok" and r["plan"] == p) for p in plans]:
+    out = f"{work}/direct_{r['patient']}_{r['plan']}"
+    plan_rows = {p["plan"]: p for p in csv.DictReader(open(os.environ["CAPS_PLANS"]), delimiter="\t")}
+    subprocess.run([caps, "simulate", "--model", f"{work}/models/{r['patient']}",
+                    "--plan", f"{work}/plans/{r['patient']}/{r['plan']}.json", "-o", out,
+                    "--mesh-size", plan_rows[r["plan"]]["mesh_size"] or "2.0", "-q"], check=True)
+    direct = json.load(open(f"{out}/result.json"))["total_suture_force_n"]
+    assert abs(direct - float(r["closing_force_n"])) <= 1e-9 * max(1.0, abs(direct)), \
+        (r["patient"], r["plan"], direct, r["closing_force_n"])
+print(f"cohort: {len(rows)} rows ({sum(r['status'] == 'ok' for r in rows)} ok, broken failed alone); "
+      "closing forces equal caps simulate's")
+EOF
+snakemake "${args[@]}" -n > "$work/rerun.log" 2>&1
+grep -q "Nothing to be done" "$work/rerun.log" || { cat "$work/rerun.log"; echo "a rerun would do work"; exit 1; }
+echo "cohort: wall time $(echo "$end - $start" | bc) s on 2 cores; a rerun has nothing to do"

@@ -218,6 +218,63 @@ struct ColorPictureRequest {
 
 PathResult run_color_picture(const ColorPictureRequest& request, Reporter* reporter = nullptr);
 
+// ---- caps model landmarks -----------------------------------------------------------------
+
+struct LandmarksRequest {
+  std::string model;
+  bool no_write = false;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "a model directory", FieldKind::Positional, "MODEL_DIR"});
+    v(r.no_write, {"no_write", "print the landmarks without writing them into model.json",
+                   FieldKind::Flag});
+  }
+};
+
+/// The anatomical landmarks of a model (surface/landmarks.hpp), as model.json stores them.
+struct LandmarksResult {
+  std::string model;
+  std::string landmarks_json;  ///< model.json's "landmarks" object
+  std::string table;           ///< landmarks_table(): one line per landmark
+  bool written = false;        ///< model.json was updated
+  std::vector<std::string> warnings;
+};
+/// Finds the model's landmarks and (unless no_write) writes them into its model.json, so a model
+/// built before landmarks existed gains them.
+LandmarksResult run_model_landmarks(const LandmarksRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const LandmarksResult& result);
+std::string summary(const LandmarksResult& result);
+
+// ---- caps model site ----------------------------------------------------------------------
+
+struct SiteRequest {
+  std::string model, at;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "a model directory", FieldKind::Positional, "MODEL_DIR"});
+    v(r.at, {"at", "the point on the skin: THETA,Z (deg, mm) or a landmark and mm to the "
+                   "patient's left and up along the skin: glabella+15,20", FieldKind::Required});
+  }
+};
+
+/// The skin and the soft tissue at one point of a model (where `caps plan new --at` would put a
+/// plan's centre).
+struct SiteResult {
+  std::string model, at;
+  double theta_deg = 0, z_mm = 0;
+  Eigen::Vector3d lps{0, 0, 0};          ///< the skin point, LPS mm
+  double thickness_mm = 0;               ///< soft tissue along the skin normal (thickness_normal)
+  double thickness_radial_mm = 0;        ///< soft tissue along the ray from the axis
+  bool has_layers = false;               ///< the model has measured tissue layers
+  double skin_mm = 0, fat_mm = 0, deep_mm = 0;  ///< the layers along the normal (has_layers)
+  std::string flags;                     ///< describe_flags() of the cells there ("valid")
+  std::vector<std::string> warnings;
+};
+/// Resolves `at` on the model (a landmark placement as plan new does) and samples its maps there.
+SiteResult run_model_site(const SiteRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const SiteResult& result);
+std::string summary(const SiteResult& result);
+
 // ---- caps volume info ---------------------------------------------------------------------
 
 struct VolumeInfoRequest {
@@ -245,7 +302,8 @@ std::string summary(const VolumeInfoResult& result);
 
 struct PhantomRequest {
   std::string output, voxels = "256,256,240", spacing = "1,1,1";
-  bool no_holder = false, layered = false, thin_bone = false, force = false;
+  bool no_holder = false, layered = false, thin_bone = false, face = false, force = false;
+  double scale = PhantomOptions{}.scale;
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
     v(r.output, {"output", "output .nii or .nii.gz", FieldKind::Required, "-o,--output"});
@@ -256,6 +314,9 @@ struct PhantomRequest {
                   FieldKind::Flag});
     v(r.thin_bone, {"thin_bone", "a thin bone plate (0.5-1.5 mm, partial volume) under the right "
                                  "cheek", FieldKind::Flag});
+    v(r.face, {"face", "a face of analytic landmarks (brow, nose, lips, chin, eyes, cheeks, "
+                       "ears) instead of the plain nose", FieldKind::Flag});
+    v(r.scale, {"scale", "the head's size: every length of the head times this (0.7..1.3)"});
     v(r.force, {"force", "replace an existing output", FieldKind::Flag});
   }
 };
@@ -267,6 +328,8 @@ struct PhantomResult {
   bool head_holder = true;
   bool layered = false;
   bool thin_bone = false;
+  bool face = false;
+  double scale = 1.0;
 };
 PhantomResult run_phantom(const PhantomRequest& request, Reporter* reporter = nullptr);
 std::string to_json(const PhantomResult& result);

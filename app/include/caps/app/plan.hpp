@@ -43,7 +43,8 @@ struct PlanNewRequest {
                     "incision (a free cut through --points or --points-xyz)",
                     FieldKind::Positional, "TEMPLATE"});
     v(r.model, {"model", "the patient model directory", FieldKind::Required});
-    v(r.at, {"at", "the centre on the skin: THETA,Z (deg, mm)"});
+    v(r.at, {"at", "the centre on the skin: THETA,Z (deg, mm), or a landmark and mm to the "
+                   "patient's left and up along the skin: glabella+15,20 (docs/landmarks.md)"});
     v(r.at_xyz, {"at_xyz", "the centre as an LPS point X,Y,Z (mm)"});
     v(r.points, {"points", "incision: the cut's points THETA,Z;THETA,Z;... (deg, mm), in order"});
     v(r.points_xyz, {"points_xyz", "incision: the cut's points as LPS X,Y,Z;X,Y,Z;... (mm)"});

@@ -35,6 +35,7 @@
 #include <Eigen/Core>
 #include <array>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -96,6 +97,14 @@ struct PlanFrame {
 PlanFrame make_frame(const PatientModel& model, double theta_deg, double z_mm,
                      double orientation_deg);
 
+/// Where a plan was placed relative to an anatomical landmark (surface/landmarks.hpp): its centre
+/// is `left_mm` towards the patient's left and `up_mm` up along the skin from the landmark
+/// (plan/placement.hpp). Plan files record it as "at" (docs/plan-format.md).
+struct LandmarkPlacement {
+  std::string landmark;  ///< a name of landmark_names(), e.g. "glabella"
+  double left_mm = 0, up_mm = 0;
+};
+
 /// A surgical plan. Stored as JSON (docs/plan-format.md).
 struct Plan {
   /// The patient model directory: as given when the plan was made; read_plan() resolves it
@@ -108,6 +117,9 @@ struct Plan {
   std::string procedure = "custom";         ///< a template name, or "custom"
   std::map<std::string, double> parameters; ///< the procedure's parameters (mm, deg, counts)
   PlanFrame frame;
+  /// Set when the plan was placed relative to a landmark (its frame's centre is where that
+  /// placement resolved on the model); empty for a plan placed at (theta, z) or an LPS point.
+  std::optional<LandmarkPlacement> placement;
   std::vector<SkinPoint> points;            ///< the surgeon's points
   std::vector<std::vector<int>> paths;      ///< cutting paths, as indices into `points`
   std::vector<ExcisionOffset> excisions;

@@ -61,6 +61,9 @@ class PatientModel {
   double r_bone(double theta_deg, double z_mm) const;
   double thickness(double theta_deg, double z_mm) const;
   double thickness_normal(double theta_deg, double z_mm) const;
+  /// Bilinear sample of any of the maps' images (e.g. maps().thickness_skin_normal) at
+  /// (theta deg, z mm), as the samplers above. `img` holds grid().size() values.
+  double sample(const std::vector<float>& img, double theta_deg, double z_mm) const;
   /// Bilinear colour, RGB in [0, 1]; (0.5, 0.5, 0.5) when the model has no colour.
   Eigen::Vector3d color_at(double theta_deg, double z_mm) const;
   /// The OR of the validity flags of the (up to four) cells that the bilinear sample uses:
@@ -86,7 +89,6 @@ class PatientModel {
     double fu, fv;
   };
   Stencil stencil(double theta_deg, double z_mm) const;
-  double sample(const std::vector<float>& img, double theta_deg, double z_mm) const;
 
   CylindricalMaps maps_;
   RgbImage color_;

@@ -87,6 +87,9 @@ struct ModelInfo {
   /// tell a copy of this model from another one. Empty for models written before it existed.
   std::string content_hash;
   std::vector<std::string> warnings;  ///< what building the model warned about
+  /// "landmarks": the anatomical landmarks found on the skin (surface/landmarks.hpp), as JSON
+  /// text; empty for a model without them (written before they existed).
+  std::string landmarks_json;
 
   /// source.kind; "volume" if absent.
   std::string source_kind() const;
@@ -145,6 +148,11 @@ struct ModelProvenance {
 void write_model_directory(const ModelContent& model, const ModelProvenance& provenance,
                            const std::filesystem::path& dir, bool force,
                            Reporter* reporter = nullptr);
+
+/// Replaces model.json's "landmarks" object of the model directory `dir` by `landmarks_json`
+/// (JSON text) and rewrites model.json atomically; nothing else changes. Throws as
+/// read_model_info(), InvalidInput for text that is not a JSON object.
+void write_model_landmarks(const std::filesystem::path& dir, const std::string& landmarks_json);
 
 /// A few human-readable lines summarising a model directory.
 std::string model_summary(const std::filesystem::path& dir);

@@ -21,6 +21,12 @@
 /// t / kThinBoneBlurMm, 227 .. 600 HU) is below the 250 HU bone threshold where the plate is
 /// thinner than 0.56 mm, and sampled along oblique rays below it to about 0.65 mm, as the
 /// anterior maxilla and the nasal bones are in a head CT.
+/// The face variant (`face`) replaces the plain nose by a face of analytic features on the midline
+/// (theta = 0) and both sides, each a separable Gaussian bump or dip added to the head radius
+/// (face_relief()): a brow (glabella), a nasion dip, a nose, a subnasale dip, upper and lower
+/// lips, a labiomental fold, a chin (pogonion), eye depressions (exocanthion), cheek
+/// prominences (zygion) and ears (tragion), so the anatomical landmarks have known positions
+/// (docs/landmarks.md).
 /// Voxels carry partial-volume values (a linear ramp one voxel wide across each interface), so
 /// sub-voxel measurements can be checked against the analytic surfaces.
 
@@ -36,14 +42,17 @@ struct PhantomOptions {
   bool head_holder = true;                 ///< include the plastic head-holder arc
   bool layered = false;  ///< dermis, fat and muscle instead of one soft tissue (HeadPhantom)
   bool thin_bone = false;  ///< a thin bone plate under the right cheek (HeadPhantom)
+  bool face = false;       ///< a face of analytic landmarks instead of the plain nose (HeadPhantom)
+  double scale = 1.0;      ///< the head's size: every length of the head times this (0.7 .. 1.3)
 };
 
 /// Analytic description of the phantom head (all lengths in mm, angles in radians).
 class HeadPhantom {
  public:
   /// The single-tissue phantom, or with `layered` the three-layer one (dermis, fat, muscle).
-  explicit HeadPhantom(bool layered = false, bool thin_bone = false)
-      : layered_(layered), thin_bone_(thin_bone) {}
+  explicit HeadPhantom(bool layered = false, bool thin_bone = false, bool face = false,
+                       double scale = 1.0)
+      : layered_(layered), thin_bone_(thin_bone), face_(face), scale_(scale) {}
 
   static constexpr double kAirHu = -1000.0;
   static constexpr double kTissueHu = 40.0;
@@ -68,8 +77,18 @@ class HeadPhantom {
 
   /// Skin radius without the nose and marker bumps.
   double head_radius(double theta, double z) const;
-  /// Skin radius (outer envelope) including the nose and the marker.
+  /// Skin radius (outer envelope) including the nose (or the face) and the marker.
   double skin_radius(double theta, double z) const;
+  bool has_face() const { return face_; }
+  double scale() const { return scale_; }
+  /// face: the relief the face adds to the head radius at (theta rad, z mm), mm (0 without
+  /// `face`): glabella bump 5 mm at z = 28, nasion dip 3 mm at z = 12, nose 16 mm at z = -12,
+  /// subnasale dip 4 mm at z = -27, lips 4 and 3.5 mm at z = -36 and -48, labiomental dip 2.5 mm
+  /// at z = -58, chin 6 mm at z = -70 (all on the midline); eye dips 5 mm at theta = +-20 deg,
+  /// z = 5; cheeks 7 mm at theta = +-65 deg, z = -5; ears 14 mm at theta = +-100 deg, z = 0.
+  /// These and every other analytic function here describe the head at scale 1: with scale s the
+  /// volume's point p is the point axis_point() + (p - axis_point()) / s of that head.
+  double face_relief(double theta, double z) const;
   bool is_layered() const { return layered_; }
   bool has_thin_bone() const { return thin_bone_; }
   /// thin_bone: the plate's thickness (mm) under (theta, z), 0.5 mm at kThinZMin rising as the
@@ -102,10 +121,13 @@ class HeadPhantom {
  private:
   bool layered_ = false;
   bool thin_bone_ = false;
+  bool face_ = false;
+  double scale_ = 1.0;
 };
 
 /// Samples the phantom on a grid centred on the head, identity direction, as a CT in HU
-/// (options.layered: the layered HeadPhantom; options.thin_bone: with the thin plate).
+/// (options.layered: the layered HeadPhantom; options.thin_bone: with the thin plate; options.face:
+/// the face of analytic landmarks; options.scale: the head's size).
 Volume make_phantom(const PhantomOptions& options = {});
 
 }  // namespace caps

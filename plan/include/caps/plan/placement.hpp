@@ -1,0 +1,34 @@
+#pragma once
+/// @brief Placing a plan relative to an anatomical landmark: "glabella+15,20" is 15 mm towards
+/// the patient's left and 20 mm up along the skin from the glabella (docs/landmarks.md).
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "caps/plan/plan.hpp"
+#include "caps/surface/landmarks.hpp"
+#include "caps/surface/patient_model.hpp"
+
+namespace caps::plan {
+
+/// Parses "NAME", "NAME+LEFT,UP" or "NAME-LEFT,UP" (mm; "glabella+15,20", "nasion-10,-5",
+/// "pogonion+0,0"). Returns nullopt for text that does not start with a letter (the THETA,Z
+/// form "0,95"). Throws InvalidInput for an unknown landmark name (listing the names) or offsets
+/// that are not two finite numbers.
+std::optional<LandmarkPlacement> parse_landmark_placement(const std::string& text);
+
+/// The landmarks of the model directory `dir`: model.json's "landmarks" if it has them, else
+/// found now on `model` (the model in that directory).
+Landmarks model_landmarks(const std::filesystem::path& dir, const PatientModel& model);
+
+/// (theta deg, z mm) of the placement on `model`: from the landmark, a walk on the skin of
+/// hypot(left_mm, up_mm) mm in the direction (left_mm, up_mm) of the skin's tangent frame there
+/// (left = along +theta at constant z, up = the skin's superior direction perpendicular to it;
+/// walk_on_skin(), a geodesic on a cylinder). Throws InvalidInput naming the landmark and why it
+/// is absent when the model does not have it, or when the walk leaves the model.
+Eigen::Vector2d resolve_placement(const PatientModel& model, const Landmarks& landmarks,
+                                  const LandmarkPlacement& placement);
+
+}  // namespace caps::plan

@@ -1,0 +1,84 @@
+#include "caps/plan/placement.hpp"
+
+#include <cctype>
+#include <cmath>
+#include <sstream>
+
+#include "caps/core/error.hpp"
+#include "caps/plan/skin_walk.hpp"
+#include "caps/volume/model_dir.hpp"
+
+namespace caps::plan {
+
+namespace {
+
+std::string names_list() {
+  std::string s;
+  for (const auto& n : landmark_names()) s += (s.empty() ? "" : ", ") + n;
+  return s;
+}
+
+}  // namespace
+
+std::optional<LandmarkPlacement> parse_landmark_placement(const std::string& text) {
+  if (text.empty() || !std::isalpha(static_cast<unsigned char>(text[0]))) return std::nullopt;
+  const std::size_t sign = text.find_first_of("+-");
+  LandmarkPlacement p;
+  p.landmark = text.substr(0, sign);
+  bool known = false;
+  for (const auto& n : landmark_names()) known = known || n == p.landmark;
+  if (!known)
+    throw InvalidInput(cat("'", text, "': ", p.landmark, " is not a landmark; use one of ",
+                           names_list(), ", e.g. glabella+15,20 (mm to the patient's left, up)"));
+  if (sign == std::string::npos) return p;
+  const std::string rest = text.substr(sign);  // "+15,20" or "-10,-5"
+  const std::size_t comma = rest.find(',');
+  try {
+    if (comma == std::string::npos) throw std::invalid_argument("no comma");
+    std::size_t used = 0;
+    p.left_mm = std::stod(rest.substr(0, comma), &used);
+    if (used != comma) throw std::invalid_argument("left");
+    const std::string up = rest.substr(comma + 1);
+    p.up_mm = std::stod(up, &used);
+    if (used != up.size()) throw std::invalid_argument("up");
+  } catch (const std::exception&) {
+    throw InvalidInput(cat("'", text, "': after the landmark give +LEFT,UP in mm, e.g. ",
+                           p.landmark, "+15,20 or ", p.landmark, "-10,-5"));
+  }
+  if (!std::isfinite(p.left_mm) || !std::isfinite(p.up_mm) || std::abs(p.left_mm) > 500 ||
+      std::abs(p.up_mm) > 500)
+    throw InvalidInput(cat("'", text, "': the offsets must be finite and within 500 mm"));
+  return p;
+}
+
+Landmarks model_landmarks(const std::filesystem::path& dir, const PatientModel& model) {
+  const ModelInfo info = read_model_info(dir);
+  if (!info.landmarks_json.empty())
+    return landmarks_from_json(info.landmarks_json, (dir / model_file::kJson).string());
+  return find_landmarks(model);
+}
+
+Eigen::Vector2d resolve_placement(const PatientModel& model, const Landmarks& landmarks,
+                                  const LandmarkPlacement& placement) {
+  const Landmark* l = landmarks.find(placement.landmark);
+  if (!l)
+    throw InvalidInput(cat(placement.landmark, " is not a landmark; use one of ", names_list()));
+  if (!l->found)
+    throw InvalidInput(cat("the model has no ", placement.landmark, " (", l->note,
+                           "); place the plan with --at THETA,Z or another landmark"));
+  Eigen::Vector2d tz(l->theta_deg, l->z_mm);
+  const Eigen::Vector2d step(placement.left_mm, placement.up_mm);
+  if (step.norm() > 0) {
+    const SkinFrame start = skin_frame(model, l->theta_deg, l->z_mm, 90.0);
+    tz = walk_on_skin(model, start, step).theta_z;
+  }
+  tz[0] = std::remainder(tz[0], 360.0);
+  if (tz[0] >= 180.0) tz[0] -= 360.0;
+  if (!model.has_z(tz[1]))
+    throw InvalidInput(cat(placement.landmark, std::showpos, placement.left_mm, ",",
+                           placement.up_mm, std::noshowpos, ": the point lies at z = ", tz[1],
+                           " mm, outside the model"));
+  return tz;
+}
+
+}  // namespace caps::plan

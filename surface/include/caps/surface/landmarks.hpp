@@ -1,0 +1,90 @@
+#pragma once
+/// @brief Soft-tissue anatomical landmarks found on the skin's range image r(theta, z): glabella,
+/// nasion, pronasale, subnasale, pogonion and, on both sides, zygion, exocanthion and tragion
+/// (Farkas' soft-tissue anthropometry; the definitions caps uses are in docs/landmarks.md),
+/// each with a confidence and the soft-tissue thickness under it.
+///
+/// The detector reads only the range image: "anterior" is along the ray of the midline theta (the
+/// pronasale's), "lateral" perpendicular to it in the axial plane, "up" along the model's axis.
+/// A landmark the skin does not show (outside the scan, no feature in its search window) is
+/// returned with found = false and the reason, never guessed.
+
+#include <Eigen/Core>
+#include <functional>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "caps/surface/patient_model.hpp"
+
+namespace caps {
+
+/// One landmark on a model. Positions on the skin: (theta deg, z mm) of the model's cylinder and
+/// the LPS point; lengths in mm.
+struct Landmark {
+  std::string name;            ///< e.g. "glabella", "zygion_left" (landmark_names())
+  bool found = false;          ///< false: absent, `note` says why
+  double theta_deg = 0, z_mm = 0;
+  Eigen::Vector3d lps{0, 0, 0};
+  double confidence = 0;       ///< 0..1: how clearly the skin shows the feature (docs/landmarks.md)
+  /// The soft-tissue thickness at the point along the skin normal (the model's thickness_normal
+  /// map), mm; and its layers along the normal where the model has them (else NaN).
+  double thickness_mm = 0;
+  double skin_mm = std::numeric_limits<double>::quiet_NaN();
+  double fat_mm = std::numeric_limits<double>::quiet_NaN();
+  double deep_mm = std::numeric_limits<double>::quiet_NaN();
+  bool measured = false;       ///< the skin and thickness there were measured, not filled
+  std::string note;            ///< how it was found, or why it is absent
+};
+
+/// The landmarks of one model, in the order of landmark_names().
+struct Landmarks {
+  std::vector<Landmark> items;
+  double midline_theta_deg = 0;  ///< theta of the midsagittal profile (the pronasale's)
+  /// The landmark of that name, or nullptr for a name that is not a landmark.
+  const Landmark* find(const std::string& name) const;
+};
+
+/// The names caps detects, in order: glabella, nasion, pronasale, subnasale, pogonion,
+/// zygion_left, zygion_right, exocanthion_left, exocanthion_right, tragion_left, tragion_right.
+const std::vector<std::string>& landmark_names();
+
+/// What the detector reads: the skin radius r(theta deg, z mm) in mm about the model's axis, where
+/// it was measured, and the sampling steps and z extent of the range image.
+struct SkinRangeView {
+  std::function<double(double theta_deg, double z_mm)> r_mm;
+  /// True where the skin at (theta, z) was measured (not filled, not undercut or truncated).
+  std::function<bool(double theta_deg, double z_mm)> measured;
+  /// True where the skin crosses the ray more than once (an ear): counts as ear in the search.
+  std::function<bool(double theta_deg, double z_mm)> undercut;
+  double z_min_mm = 0, z_max_mm = 0;   ///< the range image's extent along the axis
+  double dtheta_deg = 1, dz_mm = 1;    ///< the sampling steps of the search
+  double r_typical_mm = 90;            ///< a typical radius, to turn mm along the skin into degrees
+};
+
+/// Finds the landmarks on a range image (theta, z, found, confidence, note; lps and the
+/// thicknesses are left for the caller). Never throws for a head without a feature: that
+/// landmark is absent.
+Landmarks find_landmarks(const SkinRangeView& view);
+
+/// The model's range view: bilinear r_skin, measured where every blended cell is valid and its
+/// skin measured, undercut from the cells' flags; the grid's steps and extent.
+SkinRangeView skin_range_view(const PatientModel& model);
+
+/// Finds the landmarks on a model and fills in their LPS points (skin_point()) and the
+/// soft-tissue thickness along the normal (and its layers where the model has them).
+Landmarks find_landmarks(const PatientModel& model);
+
+/// The landmarks as model.json's "landmarks" object (JSON text): {"definitions": "...",
+/// "midline_theta_deg": t, "items": {name: {found, theta_deg, z_mm, lps, confidence,
+/// thickness_mm, layers_mm?, measured, note}}}.
+std::string landmarks_to_json(const Landmarks& landmarks);
+
+/// Parses landmarks_to_json()'s text. Throws InvalidInput naming `source` for other text.
+Landmarks landmarks_from_json(const std::string& text, const std::string& source);
+
+/// A table for reading: one line per landmark (name, theta, z, LPS, confidence, thickness or the
+/// reason it is absent).
+std::string landmarks_table(const Landmarks& landmarks);
+
+}  // namespace caps

@@ -1,0 +1,593 @@
+#include "caps/surface/landmarks.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <iomanip>
+#include <optional>
+#include <sstream>
+
+#include "caps/core/error.hpp"
+
+namespace caps {
+namespace {
+
+using nlohmann::json;
+
+constexpr double kPi = 3.14159265358979323846;
+
+double wrap_deg(double t) {
+  t = std::fmod(t + 180.0, 360.0);
+  if (t < 0) t += 360.0;
+  return t - 180.0;
+}
+
+// The vertex offset (in steps, within [-1, 1]) of the parabola through f(-1), f(0), f(1).
+double parabola_offset(double fm, double f0, double fp) {
+  const double d = fm - 2 * f0 + fp;
+  if (std::abs(d) < 1e-12) return 0.0;
+  return std::clamp(0.5 * (fm - fp) / d, -1.0, 1.0);
+}
+
+// A profile sampled along z on the midline: z_i, values and whether they were measured.
+struct Profile {
+  std::vector<double> z, v;
+  std::vector<bool> ok;
+  int size() const { return static_cast<int>(z.size()); }
+};
+
+Profile profile(const SkinRangeView& view, double theta, double z0, double z1) {
+  Profile p;
+  z0 = std::max(z0, view.z_min_mm + view.dz_mm);
+  z1 = std::min(z1, view.z_max_mm - view.dz_mm);
+  for (double z = z0; z <= z1 + 1e-9; z += view.dz_mm) {
+    p.z.push_back(z);
+    p.v.push_back(view.r_mm(theta, z));
+    p.ok.push_back(view.measured(theta, z));
+  }
+  return p;
+}
+
+// Interior local extrema (sign +1: maxima, -1: minima) with all three samples measured.
+std::vector<int> extrema(const Profile& p, int sign) {
+  std::vector<int> out;
+  for (int i = 1; i + 1 < p.size(); ++i) {
+    if (!(p.ok[i - 1] && p.ok[i] && p.ok[i + 1])) continue;
+    const double a = sign * p.v[i - 1], b = sign * p.v[i], c = sign * p.v[i + 1];
+    if (b >= a && b > c) out.push_back(i);
+  }
+  return out;
+}
+
+// The profile's value range over z in [za, zb] (measured samples): {min, max}.
+std::pair<double, double> range_over(const Profile& p, double za, double zb) {
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (int i = 0; i < p.size(); ++i)
+    if (p.ok[i] && p.z[i] >= za - 1e-9 && p.z[i] <= zb + 1e-9) {
+      lo = std::min(lo, p.v[i]);
+      hi = std::max(hi, p.v[i]);
+    }
+  return {lo, hi};
+}
+
+// z of the extremum at sample i, refined by a parabola.
+double refine_z(const Profile& p, int i) {
+  return p.z[i] + parabola_offset(p.v[i - 1], p.v[i], p.v[i + 1]) * (p.z[1] - p.z[0]);
+}
+
+Landmark absent(const std::string& name, const std::string& why) {
+  Landmark l;
+  l.name = name;
+  l.note = why;
+  return l;
+}
+
+Landmark at(const std::string& name, double theta, double z, double confidence,
+            const std::string& note) {
+  Landmark l;
+  l.name = name;
+  l.found = true;
+  l.theta_deg = wrap_deg(theta);
+  l.z_mm = z;
+  l.confidence = std::clamp(confidence, 0.0, 1.0);
+  l.note = note;
+  return l;
+}
+
+std::string mm(double x) {
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(1) << x << " mm";
+  return s.str();
+}
+
+// Pronasale: the largest radius in front (|theta| <= 60 deg), refined in theta and z.
+std::optional<Eigen::Vector2d> nose_tip(const SkinRangeView& view) {
+  double best = -1;
+  Eigen::Vector2d tz(0, 0);
+  for (double z = view.z_min_mm + 2 * view.dz_mm; z <= view.z_max_mm - 2 * view.dz_mm;
+       z += view.dz_mm)
+    for (double t = -60.0; t <= 60.0; t += view.dtheta_deg) {
+      if (!view.measured(t, z)) continue;
+      const double r = view.r_mm(t, z);
+      if (r > best) {
+        best = r;
+        tz = {t, z};
+      }
+    }
+  if (best < 0) return std::nullopt;
+  for (int pass = 0; pass < 3; ++pass) {
+    const double ht = view.dtheta_deg, hz = view.dz_mm;
+    tz[0] += ht * parabola_offset(view.r_mm(tz[0] - ht, tz[1]), view.r_mm(tz[0], tz[1]),
+                                  view.r_mm(tz[0] + ht, tz[1]));
+    tz[1] += hz * parabola_offset(view.r_mm(tz[0], tz[1] - hz), view.r_mm(tz[0], tz[1]),
+                                  view.r_mm(tz[0], tz[1] + hz));
+  }
+  return tz;
+}
+
+double measured_factor(const SkinRangeView& view, double t, double z) {
+  return view.measured(t, z) ? 1.0 : 0.3;
+}
+
+}  // namespace
+
+const std::vector<std::string>& landmark_names() {
+  static const std::vector<std::string> names = {
+      "glabella",    "nasion",           "pronasale",         "subnasale",
+      "pogonion",    "zygion_left",      "zygion_right",      "exocanthion_left",
+      "exocanthion_right", "tragion_left", "tragion_right"};
+  return names;
+}
+
+const Landmark* Landmarks::find(const std::string& name) const {
+  for (const auto& l : items)
+    if (l.name == name) return &l;
+  return nullptr;
+}
+
+Landmarks find_landmarks(const SkinRangeView& view) {
+  if (!view.r_mm || !view.measured || !(view.dz_mm > 0) || !(view.dtheta_deg > 0) ||
+      !(view.z_max_mm > view.z_min_mm))
+    throw InvalidInput("find_landmarks: the range view needs r, measured, positive steps and a z "
+                       "extent");
+  Landmarks out;
+  std::vector<Landmark> found;
+  auto put = [&](Landmark l) { found.push_back(std::move(l)); };
+  const auto tip = nose_tip(view);
+  if (!tip) {
+    for (const auto& n : landmark_names())
+      put(absent(n, "no measured skin in front of the axis (|theta| <= 60 deg)"));
+    out.items = found;
+    return out;
+  }
+  const double tm = (*tip)[0], zp = (*tip)[1];
+  out.midline_theta_deg = wrap_deg(tm);
+  // The midsagittal profile, from 110 mm below the nose tip to 90 mm above it.
+  const Profile mid = profile(view, tm, zp - 110.0, zp + 90.0);
+  {
+    // A nose tip, not the edge of a scan that ends at the nose or above it (the brow): the
+    // skin is measured 6 mm below it and lies lower there, and above it the profile has a
+    // nasal root (a concavity 8..70 mm above with the brow at least 2 mm in front of it) that
+    // the tip stands at least 8 mm in front of.
+    bool below = true;
+    for (double z = zp - view.dz_mm; z >= zp - 6.0; z -= view.dz_mm)
+      below = below && view.measured(tm, z);
+    below = below && view.r_mm(tm, zp - 6.0) < view.r_mm(tm, zp) - 1.0;
+    double projection = 0;
+    for (int i : extrema(mid, -1))
+      if (mid.z[i] >= zp + 8.0 && mid.z[i] <= zp + 70.0 &&
+          range_over(mid, mid.z[i], mid.z[i] + 30.0).second - mid.v[i] >= 2.0)
+        projection = std::max(projection, view.r_mm(tm, zp) - mid.v[i]);
+    std::string why;
+    if (!below)
+      why = cat("the most prominent point in front (theta ", std::round(tm), " deg, z ",
+                std::round(zp), " mm) lies at the edge of the scan: the scan ends at or above "
+                "the nose tip");
+    else if (!(projection >= 8.0))
+      why = cat("the most prominent point in front (theta ", std::round(tm), " deg, z ",
+                std::round(zp), " mm) has no nasal root above it that it stands 8 mm in front "
+                "of: not a nose (the scan may end above the nose tip)");
+    if (!why.empty()) {
+      for (const auto& n : landmark_names())
+        put(absent(n, n == "pronasale" ? why
+                                       : "found from the pronasale, which is absent: " + why));
+      out.items = found;
+      return out;
+    }
+    put(at("pronasale", tm, zp, std::min(1.0, projection / 15.0) * measured_factor(view, tm, zp),
+           cat("the most prominent point in front (largest radius), ", mm(projection),
+               " in front of the nasal root")));
+  }
+
+  // Nasion: the deepest midline concavity 8..70 mm above the nose tip, depth against the
+  // highest point within 30 mm above it (the brow).
+  std::optional<double> zn;
+  {
+    int best = -1;
+    double depth = 0;
+    for (int i : extrema(mid, -1)) {
+      if (mid.z[i] < zp + 8.0 || mid.z[i] > zp + 70.0) continue;
+      const double d = range_over(mid, mid.z[i], mid.z[i] + 30.0).second - mid.v[i];
+      if (d > depth) {
+        depth = d;
+        best = i;
+      }
+    }
+    if (best < 0 || depth < 2.0) {
+      put(absent("nasion", "no concavity between the forehead and the nose on the midline "
+                           "(8..70 mm above the pronasale)"));
+    } else {
+      zn = refine_z(mid, best);
+      put(at("nasion", tm, *zn, std::min(1.0, depth / 2.0) * measured_factor(view, tm, *zn),
+             cat("the deepest midline point between the brow and the nose, ", mm(depth),
+                 " below the brow")));
+    }
+  }
+  // Glabella: the most prominent midline point within 30 mm above the nasion.
+  if (!zn) {
+    put(absent("glabella", "found from the nasion, which is absent"));
+  } else {
+    int best = -1;
+    for (int i = 0; i < mid.size(); ++i)
+      if (mid.ok[i] && mid.z[i] > *zn && mid.z[i] <= *zn + 30.0 &&
+          (best < 0 || mid.v[i] > mid.v[best]))
+        best = i;
+    if (best <= 0 || best + 1 >= mid.size() || mid.z[best + 1] > *zn + 30.0 ||
+        !(mid.v[best] >= mid.v[best + 1]))
+      put(absent("glabella", "the forehead rises without a brow prominence within 30 mm above "
+                             "the nasion"));
+    else {
+      const double z = refine_z(mid, best);
+      const double depth = mid.v[best] - view.r_mm(tm, *zn);
+      put(at("glabella", tm, z, std::min(1.0, depth / 2.0) * measured_factor(view, tm, z),
+             cat("the most prominent midline point above the nasion, ", mm(depth),
+                 " in front of it")));
+    }
+  }
+  // Subnasale: the vertex of the nasolabial angle, where the midline profile turns most sharply
+  // concave (the columella meeting the upper lip) 4..40 mm below the nose tip: the largest
+  // turning angle atan((r(z + h) - r(z)) / h) - atan((r(z) - r(z - h)) / h), h = 3 mm.
+  std::optional<double> zs;
+  {
+    constexpr double h = 3.0;
+    auto measured3 = [&](double z) {
+      return view.measured(tm, z) && view.measured(tm, z - h) && view.measured(tm, z + h);
+    };
+    auto turning = [&](double z) {
+      const double r0 = view.r_mm(tm, z);
+      return std::atan((view.r_mm(tm, z + h) - r0) / h) - std::atan((r0 - view.r_mm(tm, z - h)) / h);
+    };
+    double best = 0;
+    std::optional<double> zb;
+    for (double z = zp - 40.0; z <= zp - 4.0; z += view.dz_mm)
+      if (z - h >= view.z_min_mm && measured3(z) && turning(z) > best) {
+        best = turning(z);
+        zb = z;
+      }
+    if (!zb || best < 0.1) {
+      put(absent("subnasale", "no concave angle between the nose and the upper lip on the "
+                              "midline (4..40 mm below the pronasale)"));
+    } else {
+      const double hz = view.dz_mm;
+      zs = *zb + hz * parabola_offset(turning(*zb - hz), turning(*zb), turning(*zb + hz));
+      put(at("subnasale", tm, *zs, std::min(1.0, best / 0.5) * measured_factor(view, tm, *zs),
+             cat("the sharpest concave turn of the midline profile below the pronasale (",
+                 std::round(best * 180.0 / kPi), " deg over 3 mm)")));
+    }
+  }
+  // Pogonion: the lowest prominent midline point 15..75 mm below the subnasale.
+  if (!zs) {
+    put(absent("pogonion", "found below the subnasale, which is absent"));
+  } else {
+    int best = -1;
+    double prominence = 0;
+    for (int i : extrema(mid, +1)) {
+      if (mid.z[i] > *zs - 15.0 || mid.z[i] < *zs - 75.0) continue;
+      const double below = range_over(mid, mid.z[i] - 12.0, mid.z[i]).first;
+      const double above = range_over(mid, mid.z[i], mid.z[i] + 12.0).first;
+      const double p = mid.v[i] - std::max(below, above);
+      if (p >= 1.0 && (best < 0 || mid.z[i] < mid.z[best])) {
+        best = i;
+        prominence = p;
+      }
+    }
+    if (best < 0)
+      put(absent("pogonion", "no measured chin prominence 15..75 mm below the subnasale (the "
+                             "scan may end above the chin)"));
+    else {
+      const double z = refine_z(mid, best);
+      put(at("pogonion", tm, z, std::min(1.0, prominence / 3.0) * measured_factor(view, tm, z),
+             cat("the lowest midline prominence below the lips, ", mm(prominence),
+                 " above its surroundings")));
+    }
+  }
+
+  const double z_lo = zs ? *zs : zp - 20.0, z_hi = zn ? *zn : zp + 45.0;
+  const double deg_per_mm = 180.0 / (kPi * view.r_typical_mm);
+  std::vector<Landmark> zyg, exo, tra;
+  for (int side : {+1, -1}) {
+    const std::string suffix = side > 0 ? "_left" : "_right";
+    auto theta_of = [&](double dt) { return tm + side * dt; };
+    // Tragion: the ear stands out of the chord from 70 to 135 deg off the midline (or crosses
+    // the ray twice); its front edge at the height of its centroid.
+    std::optional<double> ear_front;
+    {
+      const double a = 70.0, b = 135.0;
+      const double za = z_lo - 20.0, zb = z_hi + 20.0;
+      auto excess = [&](double dt, double z) {
+        const double ra = view.r_mm(theta_of(a), z), rb = view.r_mm(theta_of(b), z);
+        return view.r_mm(theta_of(dt), z) - (ra + (rb - ra) * (dt - a) / (b - a));
+      };
+      auto is_ear = [&](double dt, double z) {
+        return (view.undercut && view.undercut(theta_of(dt), z)) ||
+               (view.measured(theta_of(dt), z) && excess(dt, z) >= 4.0);
+      };
+      double area = 0, wz = 0, w = 0;
+      for (double z = std::max(za, view.z_min_mm); z <= std::min(zb, view.z_max_mm);
+           z += view.dz_mm)
+        for (double dt = a; dt <= b; dt += view.dtheta_deg)
+          if (is_ear(dt, z)) {
+            area += view.dz_mm * view.dtheta_deg / deg_per_mm;
+            const double e = std::clamp(excess(dt, z), 4.0, 20.0);
+            wz += e * z;
+            w += e;
+          }
+      if (area < 80.0) {
+        tra.push_back(absent("tragion" + suffix,
+                             cat("no ear 70..135 deg off the midline (", mm(area),
+                                 "^2 stand out 4 mm): the scan may not cover it")));
+      } else {
+        const double zc = wz / w;
+        double prev = a, e_prev = excess(a, zc);
+        for (double dt = a; dt <= b; dt += 0.25 * view.dtheta_deg) {
+          if (is_ear(dt, zc)) {
+            const double e = excess(dt, zc);
+            double f = dt;
+            if (!(view.undercut && view.undercut(theta_of(dt), zc)) && e > e_prev && dt > a)
+              f = prev + (dt - prev) * (4.0 - e_prev) / (e - e_prev);
+            ear_front = f;
+            break;
+          }
+          prev = dt;
+          e_prev = excess(dt, zc);
+        }
+        if (!ear_front)
+          tra.push_back(absent("tragion" + suffix, "the ear's row has no front edge"));
+        else
+          tra.push_back(at("tragion" + suffix, theta_of(*ear_front), zc,
+                           0.6 * measured_factor(view, theta_of(*ear_front), zc),
+                           cat("the front edge of the ear at its centroid's height (", mm(area),
+                               "^2 of ear)")));
+      }
+    }
+    // Zygion: the most lateral point between the subnasale's and the nasion's heights, 30 deg off
+    // the midline up to 8 deg in front of the ear.
+    {
+      const double a = 30.0, b = ear_front ? *ear_front - 8.0 : 85.0;
+      double best = -1;
+      Eigen::Vector2d tz(0, 0);
+      for (double z = z_lo; z <= z_hi; z += view.dz_mm)
+        for (double dt = a; dt <= b; dt += view.dtheta_deg) {
+          if (!view.measured(theta_of(dt), z)) continue;
+          const double lat = view.r_mm(theta_of(dt), z) * std::sin(dt * kPi / 180.0);
+          if (lat > best) {
+            best = lat;
+            tz = {dt, z};
+          }
+        }
+      const double h = view.dtheta_deg;
+      if (best < 0) {
+        zyg.push_back(absent("zygion" + suffix, "no measured skin on the side of the face"));
+      } else if (tz[0] + h > b || tz[0] - h < a) {
+        zyg.push_back(absent("zygion" + suffix,
+                             cat("the face is widest at the edge of the search (", tz[0],
+                                 " deg off the midline): no zygomatic prominence")));
+      } else {
+        auto lat = [&](double dt, double z) {
+          return view.r_mm(theta_of(dt), z) * std::sin(dt * kPi / 180.0);
+        };
+        for (int pass = 0; pass < 3; ++pass) {
+          tz[0] += h * parabola_offset(lat(tz[0] - h, tz[1]), lat(tz[0], tz[1]),
+                                       lat(tz[0] + h, tz[1]));
+          const double hz = view.dz_mm;
+          tz[1] += hz * parabola_offset(lat(tz[0], tz[1] - hz), lat(tz[0], tz[1]),
+                                        lat(tz[0], tz[1] + hz));
+        }
+        const bool z_edge = tz[1] < z_lo + view.dz_mm || tz[1] > z_hi - view.dz_mm;
+        zyg.push_back(at("zygion" + suffix, theta_of(tz[0]), tz[1],
+                         (z_edge ? 0.4 : 0.8) * measured_factor(view, theta_of(tz[0]), tz[1]),
+                         cat("the most lateral point of the face between the subnasale's and "
+                             "the nasion's heights", z_edge ? " (at the edge of that band)" : "")));
+      }
+    }
+    // Exocanthion: the lateral end of the eye's depression (its depth against the skin 12 mm to
+    // either side falls to half) on the row of its deepest point, 8..55 deg off the midline
+    // from 20 mm below to 8 mm above the nasion's height (lower, the flank of the nose is the
+    // deepest concavity beside the midline).
+    {
+      const double half = 12.0 * deg_per_mm;
+      auto depth = [&](double dt, double z) {
+        return 0.5 * (view.r_mm(theta_of(dt - half), z) + view.r_mm(theta_of(dt + half), z)) -
+               view.r_mm(theta_of(dt), z);
+      };
+      double best = 0;
+      Eigen::Vector2d tz(0, 0);
+      for (double z = std::max(zp, z_hi - 20.0); z <= z_hi + 8.0; z += view.dz_mm)
+        for (double dt = 8.0; dt <= 55.0; dt += view.dtheta_deg)
+          if (view.measured(theta_of(dt), z) && depth(dt, z) > best) {
+            best = depth(dt, z);
+            tz = {dt, z};
+          }
+      if (best < 0.5) {
+        exo.push_back(absent("exocanthion" + suffix, "no eye depression beside the nose"));
+      } else {
+        const double hz = view.dz_mm;
+        tz[1] += hz * parabola_offset(depth(tz[0], tz[1] - hz), depth(tz[0], tz[1]),
+                                      depth(tz[0], tz[1] + hz));
+        const double dmax = depth(tz[0], tz[1]);
+        const double step = 0.25 * view.dtheta_deg;
+        std::optional<double> edge;
+        for (double dt = tz[0]; dt <= 75.0; dt += step)
+          if (depth(dt + step, tz[1]) <= 0.5 * dmax) {
+            const double d0 = depth(dt, tz[1]), d1 = depth(dt + step, tz[1]);
+            edge = dt + step * (d0 - 0.5 * dmax) / std::max(1e-12, d0 - d1);
+            break;
+          }
+        if (!edge)
+          exo.push_back(absent("exocanthion" + suffix, "the eye's depression has no lateral end"));
+        else
+          exo.push_back(at("exocanthion" + suffix, theta_of(*edge), tz[1],
+                           0.3 * std::min(1.0, dmax / 2.0) *
+                               measured_factor(view, theta_of(*edge), tz[1]),
+                           cat("the lateral end (half depth) of the eye's depression, ",
+                               mm(dmax), " deep")));
+      }
+    }
+  }
+  for (auto& l : zyg) put(l);
+  for (auto& l : exo) put(l);
+  for (auto& l : tra) put(l);
+  // In the order of landmark_names().
+  for (const auto& n : landmark_names())
+    for (const auto& l : found)
+      if (l.name == n) out.items.push_back(l);
+  return out;
+}
+
+SkinRangeView skin_range_view(const PatientModel& model) {
+  const auto& g = model.grid();
+  SkinRangeView v;
+  const PatientModel* m = &model;
+  v.r_mm = [m](double t, double z) { return m->r_skin(t, z); };
+  v.measured = [m](double t, double z) {
+    if (!m->has_z(z)) return false;
+    const auto& maps = m->maps();
+    const auto& gg = maps.grid;
+    const int j = static_cast<int>(std::lround((wrap_deg(t) - gg.theta0_deg) / gg.dtheta_deg())) %
+                  gg.n_theta;
+    const int k = std::clamp(static_cast<int>(std::lround((z - gg.z0_mm) / gg.dz_mm)), 0,
+                             gg.n_z - 1);
+    const std::size_t c = gg.index((j + gg.n_theta) % gg.n_theta, k);
+    // The skin was measured (no bone under it does not matter for the skin's shape).
+    constexpr std::uint8_t kNotSkin = kNoSkin | kUndercut | kTruncated;
+    return (m->flags_at(t, z) & kNotSkin) == 0 &&
+           (maps.measured_skin.empty() || maps.measured_skin[c] != 0);
+  };
+  v.undercut = [m](double t, double z) {
+    return m->has_z(z) && (m->flags_at(t, z) & kUndercut) != 0;
+  };
+  v.z_min_mm = g.z0_mm;
+  v.z_max_mm = g.z_mm(g.n_z - 1);
+  v.dtheta_deg = g.dtheta_deg();
+  v.dz_mm = g.dz_mm;
+  std::vector<float> r = model.maps().r_skin;
+  if (!r.empty()) {
+    std::nth_element(r.begin(), r.begin() + r.size() / 2, r.end());
+    if (r[r.size() / 2] > 10.0) v.r_typical_mm = r[r.size() / 2];
+  }
+  return v;
+}
+
+Landmarks find_landmarks(const PatientModel& model) {
+  Landmarks out = find_landmarks(skin_range_view(model));
+  const auto& maps = model.maps();
+  for (auto& l : out.items) {
+    if (!l.found) continue;
+    l.lps = model.skin_point(l.theta_deg, l.z_mm);
+    l.thickness_mm = model.thickness_normal(l.theta_deg, l.z_mm);
+    l.measured = flags_valid(model.flags_at(l.theta_deg, l.z_mm));
+    if (maps.has_layers() && !maps.thickness_skin_normal.empty()) {
+      l.skin_mm = model.sample(maps.thickness_skin_normal, l.theta_deg, l.z_mm);
+      l.fat_mm = model.sample(maps.thickness_fat_normal, l.theta_deg, l.z_mm);
+      l.deep_mm = model.sample(maps.thickness_deep_normal, l.theta_deg, l.z_mm);
+    }
+  }
+  return out;
+}
+
+std::string landmarks_to_json(const Landmarks& landmarks) {
+  json items = json::object();
+  auto r3 = [](double x) { return std::round(x * 1000.0) / 1000.0; };
+  for (const auto& l : landmarks.items) {
+    json o = {{"found", l.found}, {"note", l.note}};
+    if (l.found) {
+      o["theta_deg"] = r3(l.theta_deg);
+      o["z_mm"] = r3(l.z_mm);
+      o["lps"] = {r3(l.lps[0]), r3(l.lps[1]), r3(l.lps[2])};
+      o["confidence"] = r3(l.confidence);
+      o["thickness_mm"] = r3(l.thickness_mm);
+      o["measured"] = l.measured;
+      if (std::isfinite(l.skin_mm))
+        o["layers_mm"] = {{"skin", r3(l.skin_mm)}, {"fat", r3(l.fat_mm)}, {"deep", r3(l.deep_mm)}};
+    }
+    items[l.name] = o;
+  }
+  return json{{"definitions", "docs/landmarks.md (soft-tissue landmarks after Farkas)"},
+              {"midline_theta_deg", r3(landmarks.midline_theta_deg)},
+              {"items", items}}
+      .dump(-1, ' ', false, json::error_handler_t::replace);
+}
+
+Landmarks landmarks_from_json(const std::string& text, const std::string& source) {
+  Landmarks out;
+  try {
+    const json j = json::parse(text);
+    out.midline_theta_deg = j.value("midline_theta_deg", 0.0);
+    const json& items = j.at("items");
+    if (!items.is_object()) throw InvalidInput(cat(source, ": landmarks: \"items\" must be an object"));
+    for (const auto& n : landmark_names()) {
+      if (!items.contains(n)) {
+        out.items.push_back(absent(n, "not in the model's landmarks"));
+        continue;
+      }
+      const json& o = items.at(n);
+      Landmark l;
+      l.name = n;
+      l.found = o.at("found").get<bool>();
+      l.note = o.value("note", std::string());
+      if (l.found) {
+        l.theta_deg = o.at("theta_deg").get<double>();
+        l.z_mm = o.at("z_mm").get<double>();
+        const auto& p = o.at("lps");
+        l.lps = {p.at(0).get<double>(), p.at(1).get<double>(), p.at(2).get<double>()};
+        l.confidence = o.at("confidence").get<double>();
+        l.thickness_mm = o.at("thickness_mm").get<double>();
+        l.measured = o.value("measured", false);
+        if (o.contains("layers_mm")) {
+          l.skin_mm = o["layers_mm"].at("skin").get<double>();
+          l.fat_mm = o["layers_mm"].at("fat").get<double>();
+          l.deep_mm = o["layers_mm"].at("deep").get<double>();
+        }
+      }
+      out.items.push_back(l);
+    }
+  } catch (const json::exception& e) {
+    throw InvalidInput(cat(source, ": landmarks: ", e.what(),
+                           "; recompute them with `caps model landmarks MODEL_DIR`"));
+  }
+  return out;
+}
+
+std::string landmarks_table(const Landmarks& landmarks) {
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(1);
+  for (const auto& l : landmarks.items) {
+    s << std::left << std::setw(18) << l.name;
+    if (!l.found) {
+      s << "absent: " << l.note << "\n";
+      continue;
+    }
+    s << "theta " << std::setw(6) << l.theta_deg << " z " << std::setw(6) << l.z_mm << " LPS ("
+      << l.lps[0] << ", " << l.lps[1] << ", " << l.lps[2] << ")  confidence "
+      << std::setprecision(2) << l.confidence << std::setprecision(1) << "  thickness "
+      << l.thickness_mm << " mm";
+    if (std::isfinite(l.skin_mm))
+      s << " (skin " << l.skin_mm << ", fat " << l.fat_mm << ", deep " << l.deep_mm << ")";
+    if (!l.measured) s << "  [filled, not measured]";
+    s << "\n";
+  }
+  return s.str();
+}
+
+}  // namespace caps

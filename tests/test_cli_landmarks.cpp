@@ -1,0 +1,156 @@
+// Landmarks through the caps program: `caps model from-volume` writes them into model.json,
+// `caps model landmarks` recomputes and prints them, `caps plan new --at glabella+L,U` places a
+// plan relative to one (at the analytic glabella of the face phantom for +0,0), and a landmark the
+// model lacks is refused with exit 2.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "cli_run.hpp"
+
+namespace fs = std::filesystem;
+using caps_test::caps;
+using nlohmann::json;
+
+namespace {
+
+struct V3 {
+  double x = 0, y = 0, z = 0;
+};
+double dist(const V3& a, const V3& b) { return std::sqrt((a.x - b.x) * (a.x - b.x) + (a.y - b.y) * (a.y - b.y) + (a.z - b.z) * (a.z - b.z)); }
+V3 v3(const json& a) { return {a[0].get<double>(), a[1].get<double>(), a[2].get<double>()}; }
+
+const fs::path kTmp = fs::temp_directory_path() / "caps_test_cli_landmarks";
+
+json read_json(const fs::path& p) {
+  std::ifstream in(p);
+  return json::parse(in);
+}
+
+// The face phantom (1.5 mm voxels) and its model, built once.
+const fs::path& face_model() {
+  static const fs::path dir = [] {
+    fs::remove_all(kTmp);
+    fs::create_directories(kTmp);
+    const auto ph = caps("phantom --face --no-holder --voxels 160,160,150 --spacing 1.5,1.5,1.5 -o " +
+                         (kTmp / "face.nii.gz").string() + " -q");
+    EXPECT_EQ(ph.code, 0) << ph.out;
+    const auto m = caps("model from-volume " + (kTmp / "face.nii.gz").string() + " -o " +
+                        (kTmp / "face").string() + " --n-theta 512 --n-z 256 -q");
+    EXPECT_EQ(m.code, 0) << m.out;
+    return kTmp / "face";
+  }();
+  return dir;
+}
+
+// The phantom's analytic glabella (HeadPhantom with face: the brow's top on the midline), LPS:
+// the maximum of its midline profile 95 sqrt(1 - (z/105)^2) + relief(0, z) for z in 15..40 mm,
+// about the axis point (2, 6, 0) towards anterior (-y). Computed here from the formula of
+// volume/src/phantom.cpp's face_relief().
+V3 analytic_glabella() {
+  auto g = [](double x) { return std::exp(-x * x); };
+  auto profile = [&](double z) {
+    const double head = 95.0 * std::sqrt(1.0 - (z / 105.0) * (z / 105.0));
+    return head + 5.0 * g((z - 28.0) / 6.0) - 3.0 * g((z - 12.0) / 5.0) +
+           16.0 * g((z + 12.0) / 9.0);
+  };
+  double best_z = 15, best = -1;
+  for (double z = 15; z <= 40; z += 0.001)
+    if (profile(z) > best) {
+      best = profile(z);
+      best_z = z;
+    }
+  return {2.0, 6.0 - best, best_z};
+}
+
+}  // namespace
+
+TEST(CliLandmarks, FromVolumeWritesThemAndLandmarksPrintsThem) {
+  const json m = read_json(face_model() / "model.json");
+  ASSERT_TRUE(m.contains("landmarks"));
+  for (const char* n : {"glabella", "nasion", "pronasale", "subnasale", "pogonion", "zygion_left",
+                        "zygion_right", "exocanthion_left", "exocanthion_right", "tragion_left",
+                        "tragion_right"}) {
+    ASSERT_TRUE(m["landmarks"]["items"].contains(n)) << n;
+    EXPECT_TRUE(m["landmarks"]["items"][n]["found"].get<bool>()) << n;
+    // The phantom's soft tissue is 2.5 .. 8.5 mm under the head radius plus the relief: at least
+    // a millimetre everywhere (1.9 mm at the subnasale's dip, along the normal).
+    EXPECT_GT(m["landmarks"]["items"][n]["thickness_mm"].get<double>(), 1.0) << n;
+  }
+  const auto gl = m["landmarks"]["items"]["glabella"]["lps"];
+  const V3 p = v3(gl);
+  EXPECT_LT(dist(p, analytic_glabella()), 1.0) << p.x << " " << p.y << " " << p.z;
+
+  const auto run = caps("model landmarks " + face_model().string() + " --json");
+  ASSERT_EQ(run.code, 0) << run.out;
+  const json j = json::parse(run.out);
+  EXPECT_TRUE(j["written"].get<bool>());
+  EXPECT_EQ(j["items"]["glabella"]["lps"], gl);
+  const auto text = caps("model landmarks " + face_model().string() + " --no-write");
+  ASSERT_EQ(text.code, 0) << text.out;
+  EXPECT_NE(text.out.find("pogonion"), std::string::npos) << text.out;
+}
+
+TEST(CliLandmarks, PlanAtGlabellaLandsOnTheAnalyticGlabella) {
+  const fs::path plan = kTmp / "at_glabella.json";
+  const auto run = caps("plan new ellipse --model " + face_model().string() +
+                        " --at glabella+0,0 --orientation 90 -o " + plan.string() + " --force -q");
+  ASSERT_EQ(run.code, 0) << run.out;
+  const json p = read_json(plan);
+  EXPECT_EQ(p["at"]["landmark"], "glabella");
+  // The plan's centre is the landmark's (theta, z), and its skin point (caps model site at that
+  // theta, z) is the analytic glabella within 1 mm.
+  const json m = read_json(face_model() / "model.json");
+  EXPECT_NEAR(p["frame"]["theta_deg"].get<double>(),
+              m["landmarks"]["items"]["glabella"]["theta_deg"].get<double>(), 1e-6);
+  EXPECT_NEAR(p["frame"]["z_mm"].get<double>(),
+              m["landmarks"]["items"]["glabella"]["z_mm"].get<double>(), 1e-6);
+  std::ostringstream at;
+  at.precision(17);
+  at << p["frame"]["theta_deg"].get<double>() << "," << p["frame"]["z_mm"].get<double>();
+  const auto site = caps("model site " + face_model().string() + " --at=" + at.str() + " --json");
+  ASSERT_EQ(site.code, 0) << site.out;
+  const V3 centre = v3(json::parse(site.out)["lps"]);
+  EXPECT_LT(dist(centre, analytic_glabella()), 1.0) << centre.x << " " << centre.y << " " << centre.z;
+
+  // 15 mm to the left and 20 mm up: the centre moves to the patient's left (+x) and up (+z), 25 mm
+  // along the skin (the chord is a little shorter).
+  const fs::path moved = kTmp / "moved.json";
+  ASSERT_EQ(caps("plan new ellipse --model " + face_model().string() +
+                 " --at glabella+15,20 --orientation 90 -o " + moved.string() + " --force -q")
+                .code,
+            0);
+  const json q = read_json(moved);
+  EXPECT_EQ(q["at"]["left_mm"].get<double>(), 15.0);
+  EXPECT_EQ(q["at"]["up_mm"].get<double>(), 20.0);
+  EXPECT_GT(q["frame"]["theta_deg"].get<double>(), p["frame"]["theta_deg"].get<double>() + 5);
+  EXPECT_NEAR(q["frame"]["z_mm"].get<double>() - p["frame"]["z_mm"].get<double>(), 20.0, 3.0);
+}
+
+TEST(CliLandmarks, AnAbsentOrUnknownLandmarkIsInvalidInput) {
+  // The plain phantom has a nose but no brow: no nasion, no glabella.
+  const fs::path ct = kTmp / "plain.nii.gz", model = kTmp / "plain";
+  ASSERT_EQ(caps("phantom --voxels 96,96,90 --spacing 2.5,2.5,2.5 -o " + ct.string() +
+                 " --force -q").code, 0);
+  ASSERT_EQ(caps("model from-volume " + ct.string() + " -o " + model.string() +
+                 " --n-theta 128 --n-z 64 --force -q").code, 0);
+  const auto absent = caps("plan new ellipse --model " + model.string() +
+                           " --at glabella+0,10 -o " + (kTmp / "x.json").string());
+  EXPECT_EQ(absent.code, 2) << absent.out;
+  EXPECT_NE(absent.out.find("has no glabella"), std::string::npos) << absent.out;
+  const auto unknown = caps("plan new ellipse --model " + model.string() +
+                            " --at forehead+0,10 -o " + (kTmp / "x.json").string());
+  EXPECT_EQ(unknown.code, 2) << unknown.out;
+  EXPECT_NE(unknown.out.find("not a landmark"), std::string::npos) << unknown.out;
+  const auto bad = caps("plan new ellipse --model " + model.string() +
+                        " --at pronasale+a,b -o " + (kTmp / "x.json").string());
+  EXPECT_EQ(bad.code, 2) << bad.out;
+  // The theta,z form still works.
+  EXPECT_EQ(caps("plan new ellipse --model " + model.string() + " --at 0,60 -o " +
+                 (kTmp / "y.json").string() + " --force -q").code, 0);
+}

@@ -1,0 +1,190 @@
+// Anatomical landmarks (surface/landmarks.hpp) on the face phantom, whose skin is known in closed
+// form: the detector on the model built from its CT lands within 1 mm of the same definitions
+// applied to the analytic skin, and the midline landmarks of the analytic skin are the extrema of
+// its midline profile found independently here.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+
+#include "caps/surface/landmarks.hpp"
+#include "caps/volume/model.hpp"
+#include "caps/volume/phantom.hpp"
+
+using namespace caps;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+struct FaceFixture {
+  HeadPhantom head{false, false, true, 1.0};
+  std::unique_ptr<PatientModel> model;
+};
+
+const FaceFixture& face() {
+  static const FaceFixture* f = [] {
+    auto* out = new FaceFixture;
+    PhantomOptions o;
+    o.dims = {160, 160, 150};
+    o.spacing_mm = {1.5, 1.5, 1.5};
+    o.face = true;
+    o.head_holder = false;
+    const Volume ct = make_phantom(o);
+    ModelOptions mo;
+    mo.maps.n_theta = 512;
+    mo.maps.n_z = 256;
+    const VolumeModel vm = build_volume_model(ct, mo);
+    out->model = std::make_unique<PatientModel>(vm.maps);
+    return out;
+  }();
+  return *f;
+}
+
+// The analytic skin along the model's rays: the outermost point of the phantom's skin on the ray
+// at (theta deg, z mm) of `model`'s cylinder (a fixed-point iteration on the phantom's radius).
+double analytic_r(const HeadPhantom& head, const PatientModel& model, double theta, double z) {
+  const Eigen::Vector3d a = head.axis_point();
+  double t = 100.0;
+  for (int i = 0; i < 40; ++i) {
+    const Eigen::Vector3d p = model.to_lps(theta, z, t);
+    const Eigen::Vector3d q = p - a;
+    const double rp = std::hypot(q[0], q[1]);
+    const double tp = std::atan2(q[0], -q[1]);
+    const double next = t + (head.skin_radius(tp, q[2]) - rp);
+    if (std::abs(next - t) < 1e-7) break;
+    t = next;
+  }
+  return t;
+}
+
+SkinRangeView analytic_view(const HeadPhantom& head, const PatientModel& model) {
+  SkinRangeView v = skin_range_view(model);
+  v.r_mm = [&head, &model](double t, double z) { return analytic_r(head, model, t, z); };
+  v.measured = [&model](double, double z) { return model.has_z(z); };
+  v.undercut = nullptr;
+  v.dtheta_deg *= 0.5;
+  v.dz_mm *= 0.5;
+  return v;
+}
+
+// The phantom's midline extremum of skin_radius(0, z) in [z0, z1] (sign +1 max, -1 min; 0: the
+// sharpest concave turn over 3 mm, the subnasale's definition).
+double midline_extremum(const HeadPhantom& head, double z0, double z1, int sign) {
+  auto r = [&](double z) { return head.skin_radius(0.0, z); };
+  auto turning = [&](double z) {
+    return std::atan((r(z + 3) - r(z)) / 3) - std::atan((r(z) - r(z - 3)) / 3);
+  };
+  double best_z = z0, best = -1e9;
+  for (double z = z0; z <= z1; z += 0.001) {
+    const double v = sign == 0 ? turning(z) : sign * r(z);
+    if (v > best) {
+      best = v;
+      best_z = z;
+    }
+  }
+  return best_z;
+}
+
+}  // namespace
+
+TEST(Landmarks, AnalyticDefinitionsMatchTheMidlineExtrema) {
+  const auto& f = face();
+  const Landmarks truth = find_landmarks(analytic_view(f.head, *f.model));
+  // The midline extrema of the phantom's profile (its axis and the model's are both vertical;
+  // the midline is theta = 0 by symmetry).
+  struct Case {
+    const char* name;
+    double z0, z1;
+    int sign;
+  } cases[] = {{"glabella", 15, 40, +1},
+               {"nasion", 2, 20, -1},
+               {"pronasale", -25, 0, +1},
+               {"subnasale", -32, -20, 0},
+               {"pogonion", -85, -60, +1}};
+  for (const auto& c : cases) {
+    const Landmark* l = truth.find(c.name);
+    ASSERT_TRUE(l && l->found) << c.name << ": " << (l ? l->note : "");
+    const double z = midline_extremum(f.head, c.z0, c.z1, c.sign);
+    const Eigen::Vector3d expect =
+        f.head.axis_point() + HeadPhantom::ray_direction(0.0) * f.head.skin_radius(0.0, z) +
+        Eigen::Vector3d(0, 0, z);
+    const Eigen::Vector3d got = f.model->to_lps(l->theta_deg, l->z_mm,
+                                                analytic_r(f.head, *f.model, l->theta_deg, l->z_mm));
+    EXPECT_LT((got - expect).norm(), 0.3) << c.name << " analytic z " << z << " found z "
+                                          << l->z_mm << " theta " << l->theta_deg;
+  }
+  // Left is left: the zygion, exocanthion and tragion on the patient's left have theta > 0.
+  for (const char* n : {"zygion_left", "exocanthion_left", "tragion_left"}) {
+    const Landmark* l = truth.find(n);
+    ASSERT_TRUE(l && l->found) << n;
+    EXPECT_GT(l->theta_deg, 10.0) << n;
+  }
+  // The cheek's most lateral point is near the cheek bump (65 deg, z = -5) and the ear's front
+  // edge in front of the ear's centre (100 deg).
+  EXPECT_NEAR(truth.find("zygion_right")->theta_deg, -65.0, 8.0);
+  EXPECT_GT(truth.find("tragion_left")->theta_deg, 85.0);
+  EXPECT_LT(truth.find("tragion_left")->theta_deg, 100.0);
+  EXPECT_NEAR(truth.find("tragion_left")->z_mm, 0.0, 3.0);
+  EXPECT_GT(truth.find("exocanthion_left")->theta_deg, 20.0);
+  EXPECT_LT(truth.find("exocanthion_left")->theta_deg, 35.0);
+}
+
+TEST(Landmarks, FacePhantomModelWithin1mmOfTheAnalyticSkin) {
+  const auto& f = face();
+  const Landmarks truth = find_landmarks(analytic_view(f.head, *f.model));
+  const Landmarks got = find_landmarks(*f.model);
+  ASSERT_EQ(got.items.size(), landmark_names().size());
+  for (const auto& n : landmark_names()) {
+    const Landmark* t = truth.find(n);
+    const Landmark* g = got.find(n);
+    ASSERT_TRUE(t && t->found) << n;
+    ASSERT_TRUE(g && g->found) << n << ": " << g->note;
+    const Eigen::Vector3d pt =
+        f.model->to_lps(t->theta_deg, t->z_mm, analytic_r(f.head, *f.model, t->theta_deg, t->z_mm));
+    EXPECT_LT((g->lps - pt).norm(), 1.0)
+        << n << ": model (" << g->theta_deg << ", " << g->z_mm << ") analytic (" << t->theta_deg
+        << ", " << t->z_mm << ")";
+    EXPECT_GT(g->confidence, 0.2) << n;
+    EXPECT_TRUE(std::isfinite(g->thickness_mm)) << n;
+  }
+  // The soft tissue at the glabella: the phantom's radial thickness there plus the brow's 5 mm
+  // (along the normal, which is radial at the top of the brow).
+  const Landmark* gl = got.find("glabella");
+  const double z = gl->z_mm + f.model->axis().origin_lps[2];
+  const double expect = f.head.thickness(0.0, z) + f.head.face_relief(0.0, z);
+  EXPECT_NEAR(gl->thickness_mm, expect, 0.6);
+}
+
+TEST(Landmarks, PlainPhantomWithoutABrowHasNone) {
+  // The plain phantom's nose (18 mm at z = -20) has no nasal root above it (the head's profile
+  // falls away monotonically): it is not taken for a nose, and every landmark is absent with the
+  // reason, none guessed.
+  PhantomOptions o;
+  o.dims = {96, 96, 90};
+  o.spacing_mm = {2.5, 2.5, 2.5};
+  const VolumeModel vm = build_volume_model(make_phantom(o));
+  const Landmarks l = find_landmarks(PatientModel(vm.maps));
+  ASSERT_EQ(l.items.size(), landmark_names().size());
+  EXPECT_NE(l.find("pronasale")->note.find("no nasal root"), std::string::npos)
+      << l.find("pronasale")->note;
+  for (const auto& n : landmark_names()) {
+    EXPECT_FALSE(l.find(n)->found) << n;
+    EXPECT_FALSE(l.find(n)->note.empty()) << n;
+  }
+}
+
+TEST(Landmarks, JsonRoundTrip) {
+  const Landmarks l = find_landmarks(*face().model);
+  const Landmarks back = landmarks_from_json(landmarks_to_json(l), "test");
+  ASSERT_EQ(back.items.size(), l.items.size());
+  for (std::size_t i = 0; i < l.items.size(); ++i) {
+    EXPECT_EQ(back.items[i].name, l.items[i].name);
+    EXPECT_EQ(back.items[i].found, l.items[i].found);
+    EXPECT_NEAR(back.items[i].z_mm, l.items[i].z_mm, 1e-3);
+    EXPECT_NEAR((back.items[i].lps - l.items[i].lps).norm(), 0.0, 2e-3);
+  }
+  EXPECT_THROW(landmarks_from_json("{\"items\": 3}", "test"), InvalidInput);
+  EXPECT_THROW(landmarks_from_json("not json", "test"), InvalidInput);
+}
