@@ -3,6 +3,8 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <map>
+#include <optional>
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
@@ -33,10 +35,18 @@ double similarity_scale(const Eigen::Matrix4d& T) {
   return s;
 }
 
-bool is_library_template(const std::string& name) {
-  for (const auto& p : plan::procedure_library())
-    if (p.name == name) return true;
-  return false;
+// The plan's template from its parameters as the user gave them: a plan records both of two
+// alternative parameters (an ellipse's width and the apex angle it sets), and the layout takes
+// only one, the primary. Null when the procedure is not a library template.
+std::optional<plan::LocalProcedure> template_layout(const plan::Plan& plan) {
+  for (const auto& info : plan::procedure_library()) {
+    if (info.name != plan.procedure) continue;
+    std::map<std::string, double> given = plan.parameters;
+    for (const auto& p : info.parameters)
+      if (!p.alternative_to.empty() && given.count(p.alternative_to)) given.erase(p.name);
+    return plan::layout_procedure(plan.procedure, given);
+  }
+  return std::nullopt;
 }
 
 }  // namespace
@@ -59,9 +69,8 @@ TransferredPlan transfer_plan(const plan::Plan& plan, const PatientModel& from, 
   const Eigen::Vector3d right = t.d_theta.normalized();
   const Eigen::Vector3d up = t.normal.cross(right);
   const double orientation = rad_to_deg(std::atan2(d.dot(right), d.dot(up)));
-  const plan::LocalProcedure local = is_library_template(plan.procedure)
-                                         ? plan::layout_procedure(plan.procedure, plan.parameters)
-                                         : plan::procedure_from_plan(plan);
+  const std::optional<plan::LocalProcedure> laid_out = template_layout(plan);
+  const plan::LocalProcedure local = laid_out ? *laid_out : plan::procedure_from_plan(plan);
   TransferredPlan out;
   out.plan = plan::place_procedure(local, to, c.theta_deg, c.z_mm, orientation);
   out.plan.model_hash = to.content_hash();
