@@ -2,7 +2,9 @@
 
 #include <Eigen/LU>
 #include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <map>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
@@ -180,13 +182,23 @@ SensitivityResult run_sensitivity(const SensitivityRequest& r, Reporter* reporte
   s.constant_thickness_mm = map.constant_thickness_mm;
   std::vector<double> f, d;
   int within = 0;
+  std::map<std::string, std::pair<std::string, int>> warning_kinds;
   for (const auto& p : map.points) {
     if (!p.planned) continue;
     f.push_back(std::abs(p.force_change));
     d.push_back(std::abs(p.displacement_change));
     within += std::abs(p.force_change) <= 0.1 && std::abs(p.displacement_change) <= 0.1;
-    for (const auto& w : p.warnings) s.warnings.push_back(cat("(", p.theta_deg, " deg, ", p.z_mm, " mm) ", w));
+    for (const auto& w : p.warnings) {
+      // One line per kind of warning (its text without the numbers), with how many centres had it.
+      std::string kind;
+      for (char ch : w) kind += std::isdigit(static_cast<unsigned char>(ch)) || ch == '.' ? '#' : ch;
+      auto& [first, count] = warning_kinds[kind];
+      if (count++ == 0) first = cat("(theta ", p.theta_deg, " deg, z ", p.z_mm, " mm) ", w);
+    }
   }
+  for (const auto& [kind, entry] : warning_kinds)
+    s.warnings.push_back(entry.second > 1 ? cat(entry.first, " (and at ", entry.second - 1, " more centres)")
+                                          : entry.first);
   if (!f.empty()) {
     s.median_force_change = median_of(f);
     s.max_force_change = *std::max_element(f.begin(), f.end());
