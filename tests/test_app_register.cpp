@@ -21,6 +21,7 @@
 #include "caps/volume/mesh_io.hpp"
 #include "cli_run.hpp"
 #include "phantom_model.hpp"
+#include "phantom_model_256.hpp"
 
 namespace fs = std::filesystem;
 using namespace caps;
@@ -38,22 +39,8 @@ const fs::path& folder() {
   return d;
 }
 
-// The phantom CT model at a 256 x 128 grid (cells of about 2 mm on the face).
 const std::string& model_dir() {
-  static const std::string dir = [] {
-    app::PhantomRequest ph;
-    ph.output = (folder() / "ct.nii.gz").string();
-    ph.voxels = "96,96,90";
-    ph.spacing = "2.5,2.5,2.5";
-    app::run_phantom(ph);
-    app::FromVolumeRequest fv;
-    fv.input = ph.output;
-    fv.output = (folder() / "model").string();
-    fv.n_theta = 256;
-    fv.n_z = 128;
-    app::run_from_volume(fv);
-    return fv.output;
-  }();
+  static const std::string dir = caps_test::make_phantom_model_256(folder());
   return dir;
 }
 

@@ -124,54 +124,6 @@ SkinDifference skin_difference(const SkinSurfaces& reference, const Eigen::Vecto
   return d;
 }
 
-Eigen::MatrixX3d signed_colors(const Eigen::VectorXd& value, double max_value) {
-  if (!(max_value > 0)) throw InvalidInput(cat("signed colours: the range ", max_value, " must be positive"));
-  const Eigen::Vector3d blue(0.13, 0.35, 0.75), white(0.97, 0.97, 0.97), red(0.78, 0.12, 0.12);
-  Eigen::MatrixX3d c(value.size(), 3);
-  for (Eigen::Index i = 0; i < value.size(); ++i) {
-    const double t = std::clamp(value[i] / max_value, -1.0, 1.0);
-    c.row(i) = (t < 0 ? white + (-t) * (blue - white) : white + t * (red - white)).transpose();
-  }
-  return c;
-}
-
-void draw_signed_color_bar(RgbImage& image, double max_value, const std::string& unit,
-                           const std::string& title) {
-  if (!(max_value > 0) || !std::isfinite(max_value))
-    throw InvalidInput(cat("colour bar: the range ", max_value, " must be positive"));
-  Canvas canvas(image);
-  const double h = 0.55 * image.height, w = std::max(12.0, 0.025 * image.width);
-  const double x0 = image.width - w - 0.12 * image.width, y0 = 0.5 * (image.height - h);
-  const double font = std::max(10.0, 0.018 * image.width), line = 1.25 * font;
-  std::vector<std::string> lines;
-  for (std::size_t s = 0, nl;; s = nl + 1) {
-    nl = title.find('\n', s);
-    lines.push_back(title.substr(s, nl == std::string::npos ? std::string::npos : nl - s));
-    if (nl == std::string::npos) break;
-  }
-  double left = x0 - 0.4 * w;
-  for (const auto& t : lines) left = std::min(left, image.width - 8.0 - canvas.text_width(t, font));
-  left = std::max(0.0, left);
-  const double top = y0 - 2.6 * font - (lines.size() - 1) * line;
-  canvas.fill_rect(left, top, image.width - left, h + (y0 - top) + 1.4 * font, {1, 1, 1}, 0.85);
-  canvas.colour_bar(x0, y0, w, h, [&](double t) {
-    return Eigen::Vector3d(signed_colors(Eigen::VectorXd::Constant(1, 2 * t - 1), 1.0).row(0).transpose());
-  });
-  canvas.stroke_rect(x0, y0, w, h, Pen{.colour = {0.4, 0.4, 0.4}, .width_px = 0.5});
-  const TextStyle style{.size_px = font};
-  for (int k = -2; k <= 2; ++k) {
-    const double v = k * max_value / 2;
-    const double y = y0 + h / 2 - v / max_value * h / 2;
-    canvas.line(Eigen::Vector2d(x0 + w, y), Eigen::Vector2d(x0 + w + 4, y));
-    const int decimals = max_value >= 20 ? 0 : max_value >= 2 ? 1 : 2;
-    canvas.text(x0 + w + 6, y + 0.35 * font, (v > 0 ? "+" : "") + fmt(v, decimals) + " " + unit, style);
-  }
-  for (std::size_t i = 0; i < lines.size(); ++i)
-    canvas.text(std::max(left + 4, std::min(x0 - 0.3 * w, image.width - 4.0 - canvas.text_width(lines[i], font))),
-                y0 - 1.0 * font - double(lines.size() - 1 - i) * line, lines[i], style);
-  image = canvas.image();
-}
-
 void write_model_comparison_report(const fem::ModelComparison& c,
                                    const std::vector<const PatientModel*>& models,
                                    const fem::SimulateOptions& options, const fs::path& dir,

@@ -9,7 +9,7 @@
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
 #include "caps/image/canvas.hpp"
-#include "caps/render/model_comparison_report.hpp"
+#include "caps/render/overlay.hpp"
 #include "caps/render/render.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "caps/surface/range_mesh.hpp"
@@ -110,7 +110,7 @@ RgbImage sensitivity_picture(const fem::SensitivityMap& map, const PatientModel&
         c = sensitivity_at(map, std::remainder(g.theta_deg(j), 360.0), g.z_mm(k), force);
       }
       if (std::isfinite(c))
-        colour.row(v) = signed_colors(Eigen::VectorXd::Constant(1, 100 * c), top).row(0);
+        colour.row(v) = signed_colour(100 * c / top).transpose();
       else
         colour.row(v) << 0.72, 0.70, 0.68;
     }
@@ -135,9 +135,7 @@ RgbImage sensitivity_picture(const fem::SensitivityMap& map, const PatientModel&
   }
   // The colour bar.
   const double bx = 2 * panel_px + 30, by = head + 0.2 * panel_px, bw = 22, bh = 0.6 * panel_px;
-  canvas.colour_bar(bx, by, bw, bh, [&](double t) {
-    return Eigen::Vector3d(signed_colors(Eigen::VectorXd::Constant(1, 2 * t - 1), 1.0).row(0).transpose());
-  });
+  canvas.colour_bar(bx, by, bw, bh, [](double t) { return signed_colour(2 * t - 1); });
   canvas.stroke_rect(bx, by, bw, bh, Pen{.colour = {0.4, 0.4, 0.4}, .width_px = 0.5});
   const TextStyle tick{.size_px = font};
   for (int k = -2; k <= 2; ++k) {

@@ -37,15 +37,6 @@ SkinDifference skin_difference(const SkinSurfaces& reference, const Eigen::Vecto
                                const SkinSurfaces& other, const Eigen::VectorXd& other_tension_kpa,
                                const Eigen::Matrix4d& reference_to_other, double match_mm = 2.0);
 
-/// Colours of a signed field: blue at -max_value, white at 0, red at +max_value (clamped).
-/// #V×3 RGB in [0, 1]. Throws InvalidInput unless max_value > 0.
-Eigen::MatrixX3d signed_colors(const Eigen::VectorXd& value, double max_value);
-
-/// signed_colors()' colour bar from -max_value to +max_value on the image's right, with ticks in
-/// `unit` and the title above it (lines separated by '\n').
-void draw_signed_color_bar(RgbImage& image, double max_value, const std::string& unit,
-                           const std::string& title);
-
 /// Writes the report into an existing folder: <key>/ for each side (fem::write_simulation and
 /// its post_plan.png and pre_plan.png with the plan's lines), for each side but the reference
 /// difference_<key>_displacement.png and difference_<key>_tension.png (the reference's skin
