@@ -40,8 +40,11 @@ std::string html_escape(const std::string& text) {
 // about 0.5 mm apart, so a query looks at 27 buckets of a few vertices each).
 class VertexGrid {
  public:
-  VertexGrid(const Eigen::MatrixX3d& V, double cell) : V_(V), cell_(cell) {
-    for (Eigen::Index v = 0; v < V.rows(); ++v) buckets_[key(cell_of(V.row(v).transpose()))].push_back(v);
+  // The vertices v of V with keep(v).
+  template <class Keep>
+  VertexGrid(const Eigen::MatrixX3d& V, double cell, Keep keep) : V_(V), cell_(cell) {
+    for (Eigen::Index v = 0; v < V.rows(); ++v)
+      if (keep(v)) buckets_[key(cell_of(V.row(v).transpose()))].push_back(v);
   }
   // The nearest vertex within `radius` (<= cell), or -1.
   Eigen::Index nearest(const Eigen::Vector3d& p, double radius) const {
@@ -102,7 +105,12 @@ SkinDifference skin_difference(const SkinSurfaces& reference, const Eigen::Vecto
   if (!T.allFinite() || !(A.determinant() > 0))
     throw InvalidInput("skin_difference: the transform must be a finite similarity");
   const Eigen::Matrix3d A_inv = A.inverse();
-  const VertexGrid grid(other.pre.V, match_mm);
+  // A vertex on the finite elements is matched to one on the other's elements, a vertex of the
+  // range mesh to one of its range mesh: where the two skins' patches overlap the other's range
+  // vertices at their rims (which do not move) would otherwise stand in for its moving skin.
+  const auto on_mesh = [&](Eigen::Index v) { return other.vertex_element[v] >= 0; };
+  const VertexGrid mesh_grid(other.pre.V, match_mm, on_mesh);
+  const VertexGrid range_grid(other.pre.V, match_mm, [&](Eigen::Index v) { return !on_mesh(v); });
   SkinDifference d;
   d.displacement_mm = Eigen::VectorXd::Zero(n);
   d.tension_kpa = Eigen::VectorXd::Zero(n);
@@ -110,7 +118,9 @@ SkinDifference skin_difference(const SkinSurfaces& reference, const Eigen::Vecto
   std::vector<double> abs_tension;
   for (Eigen::Index v = 0; v < n; ++v) {
     const Eigen::Vector3d p = reference.pre.V.row(v).transpose();
-    const Eigen::Index w = grid.nearest(A * p + T.topRightCorner<3, 1>(), match_mm);
+    const Eigen::Vector3d q = A * p + T.topRightCorner<3, 1>();
+    Eigen::Index w = reference.vertex_element[v] >= 0 ? mesh_grid.nearest(q, match_mm) : range_grid.nearest(q, match_mm);
+    if (w < 0) w = reference.vertex_element[v] >= 0 ? range_grid.nearest(q, match_mm) : mesh_grid.nearest(q, match_mm);
     if (w < 0) continue;
     d.matched[v] = 1;
     const Eigen::Vector3d u_ref = (reference.post.V.row(v) - reference.pre.V.row(v)).transpose();
