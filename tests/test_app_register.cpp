@@ -21,7 +21,6 @@
 #include "caps/volume/mesh_io.hpp"
 #include "cli_run.hpp"
 #include "phantom_model.hpp"
-#include "phantom_model_256.hpp"
 
 namespace fs = std::filesystem;
 using namespace caps;
@@ -40,7 +39,11 @@ const fs::path& folder() {
 }
 
 const std::string& model_dir() {
-  static const std::string dir = caps_test::make_phantom_model_256(folder());
+  static const std::string dir = [] {
+    const std::string d = (folder() / "model").string();
+    caps_test::make_phantom_model(folder(), d, 256, 128);
+    return d;
+  }();
   return dir;
 }
 
