@@ -19,8 +19,11 @@ inline std::string slurp(const std::filesystem::path& p) {
   return ss.str();
 }
 
-/// Writes the phantom CT into `folder`/ct.nii.gz and its patient model into `model`.
-inline void make_phantom_model(const std::filesystem::path& folder, const std::string& model) {
+/// Writes the phantom CT into `folder`/ct.nii.gz and its patient model into `model`, on an
+/// n_theta x n_z grid (256 x 128: cells of about 2 mm on the face, what the registration tests
+/// cut their face scans from).
+inline void make_phantom_model(const std::filesystem::path& folder, const std::string& model,
+                               int n_theta = 128, int n_z = 64) {
   caps::app::PhantomRequest ph;
   ph.output = (folder / "ct.nii.gz").string();
   ph.voxels = "96,96,90";
@@ -29,8 +32,8 @@ inline void make_phantom_model(const std::filesystem::path& folder, const std::s
   caps::app::FromVolumeRequest fv;
   fv.input = ph.output;
   fv.output = model;
-  fv.n_theta = 128;
-  fv.n_z = 64;
+  fv.n_theta = n_theta;
+  fv.n_z = n_z;
   caps::app::run_from_volume(fv);
 }
 

@@ -38,21 +38,11 @@ const fs::path& folder() {
   return d;
 }
 
-// The phantom CT model at a 256 x 128 grid (cells of about 2 mm on the face).
 const std::string& model_dir() {
   static const std::string dir = [] {
-    app::PhantomRequest ph;
-    ph.output = (folder() / "ct.nii.gz").string();
-    ph.voxels = "96,96,90";
-    ph.spacing = "2.5,2.5,2.5";
-    app::run_phantom(ph);
-    app::FromVolumeRequest fv;
-    fv.input = ph.output;
-    fv.output = (folder() / "model").string();
-    fv.n_theta = 256;
-    fv.n_z = 128;
-    app::run_from_volume(fv);
-    return fv.output;
+    const std::string d = (folder() / "model").string();
+    caps_test::make_phantom_model(folder(), d, 256, 128);
+    return d;
   }();
   return dir;
 }

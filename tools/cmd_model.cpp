@@ -9,6 +9,8 @@
 //   caps model color-picture /tmp/lps -o /tmp/lps_color.png --force
 //   caps model register ../shared/data/scan/leeperrysmith/LeePerrySmith.glb --to /tmp/cranium --scan-scale 29 --up +y --front +z --accept-other-head --credit "Infinite, 3D Head Scan by Lee Perry-Smith, CC BY 3.0 (www.triplegangers.com)" -o /tmp/lps_reg
 //   caps model fuse ../shared/data/scan/leeperrysmith/LeePerrySmith.glb --to /tmp/cranium --registration /tmp/lps_reg/registration.json --texture ../shared/data/scan/leeperrysmith/Map-COL.jpg --flip-v -o /tmp/cranium_fused
+//   caps model sensitivity /tmp/cranium --theta -60,60,30 --z 60,120,30 -o /tmp/cranium_sensitivity
+#include "caps/app/compare_models.hpp"
 #include "caps/app/model.hpp"
 #include "caps/app/register.hpp"
 #include "commands.hpp"
@@ -84,6 +86,12 @@ void add_model(CLI::App& app, Common& common, Action& action) {
            "Example: caps model fuse face.ply --to cranium --registration face_reg/registration.json "
            "-o cranium_fused",
            &app::run_fuse, common, action);
+  add_verb(model, "sensitivity",
+           "Map where a constant soft-tissue thickness misleads: a small standard plan (a 20 x 7 mm\n"
+           "ellipse) at a grid of points over the face, simulated with the measured and with one\n"
+           "constant thickness; sensitivity.png shows the change in closing force and displacement.\n"
+           "Example: caps model sensitivity cranium -o cranium_sensitivity",
+           &app::run_sensitivity, common, action);
   add_verb(model, "color-picture",
            "Draw a model's skin colour with axes and its credit line.\n"
            "Example: caps model color-picture head -o head_color.png",

@@ -110,6 +110,7 @@ void add_solve(CLI::App& app, Common& common, Action& action);
 void add_fem(CLI::App& app, Common& common, Action& action);
 void add_render(CLI::App& app, Common& common, Action& action);
 void add_compare(CLI::App& app, Common& common, Action& action);
+void add_compare_models(CLI::App& app, Common& common, Action& action);
 void add_serve(CLI::App& app, Common& common, Action& action);
 
 }  // namespace caps::cli

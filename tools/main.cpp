@@ -34,6 +34,7 @@ int main(int argc, char** argv) {
   cli::add_simulate(app, common, action);
   cli::add_render(app, common, action);
   cli::add_compare(app, common, action);
+  cli::add_compare_models(app, common, action);
   cli::add_serve(app, common, action);
   try {
     app.parse(argc, argv);

@@ -209,6 +209,24 @@ std::string summary(const RegisterResult& r) {
 
 // ---- fuse ---------------------------------------------------------------------------------
 
+Eigen::Matrix4d read_registration_matrix(const std::string& path) {
+  const std::string text = slurp(path);
+  check_json_depth(text, path);
+  Eigen::Matrix4d T;
+  try {
+    const json j = json::parse(text);
+    const auto& rows = j.at("scan_to_model");
+    if (!rows.is_array() || rows.size() != 4) throw InvalidInput("not 4 rows");
+    for (int i = 0; i < 4; ++i)
+      for (int k = 0; k < 4; ++k) T(i, k) = rows.at(i).at(k).get<double>();
+  } catch (const std::exception& e) {
+    throw InvalidInput(cat(path, ": no 4x4 \"scan_to_model\" matrix (", e.what(),
+                           "); give the registration.json of `caps model register`"));
+  }
+  if (!T.allFinite()) throw InvalidInput(cat(path, ": the \"scan_to_model\" matrix is not finite"));
+  return T;
+}
+
 ModelResult run_fuse(const FuseRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   { OutputDirectory probe(r.output, r.force); }
@@ -223,18 +241,7 @@ ModelResult run_fuse(const FuseRequest& r, Reporter* reporter) {
   Eigen::Matrix4d T;
   std::string how;
   if (!r.registration.empty()) {
-    const std::string text = slurp(r.registration);
-    check_json_depth(text, r.registration);
-    try {
-      const json j = json::parse(text);
-      const auto& rows = j.at("scan_to_model");
-      if (!rows.is_array() || rows.size() != 4) throw InvalidInput("not 4 rows");
-      for (int i = 0; i < 4; ++i)
-        for (int k = 0; k < 4; ++k) T(i, k) = rows.at(i).at(k).get<double>();
-    } catch (const std::exception& e) {
-      throw InvalidInput(cat(r.registration, ": no 4x4 \"scan_to_model\" matrix (", e.what(),
-                             "); give the registration.json of `caps model register`"));
-    }
+    T = read_registration_matrix(r.registration);
     how = r.registration;
   } else {
     T = register_checked(scan, ct.skin, r, r.to, reporter).scan_to_model;

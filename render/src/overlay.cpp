@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <cstdio>
 #include <map>
 #include <set>
@@ -107,10 +108,13 @@ ScalarMap tension_map(const SkinSurfaces& skin, const fem::Mesh& mesh,
   return m;
 }
 
-void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
-                    const std::string& title, const std::string& note) {
-  if (!(max_value > 0) || !std::isfinite(max_value))
-    throw InvalidInput(cat("colour bar: the range ", max_value, " must be positive"));
+namespace {
+
+// A vertical colour bar from lo (bottom) to hi (top) in colours map((v - lo) / (hi - lo)), ticks
+// at the multiples of a round step labelled in `unit` (with a '+' on positive ones if
+// `plus_sign`), and the ends labelled when no tick is close to them.
+void draw_bar(RgbImage& image, double lo, double hi, const std::function<Eigen::Vector3d(double)>& map,
+              const std::string& unit, const std::string& title, const std::string& note, bool plus_sign) {
   Canvas canvas(image);
   const double h = 0.55 * image.height, w = std::max(12.0, 0.025 * image.width);
   const double x0 = image.width - w - 0.12 * image.width, y0 = 0.5 * (image.height - h);
@@ -130,28 +134,63 @@ void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
   const double top = y0 - 2.6 * font - (n_title - 1) * line;
   const double bottom = y0 + h + 1.4 * font + note_lines.size() * line;
   canvas.fill_rect(left, top, image.width - left, bottom - top, {1, 1, 1}, 0.85);
-  canvas.colour_bar(x0, y0, w, h);
-  const double step = nice_step(max_value);
+  canvas.colour_bar(x0, y0, w, h, map);
+  const double range = hi - lo;
+  const double step = nice_step(hi > 0 && lo < 0 ? std::max(hi, -lo) : range);
   const int decimals = decimals_of(step);
   auto tick = [&](double v, int decimals) {
-    const double y = y0 + h - v / max_value * h;
+    const double y = y0 + h - (v - lo) / range * h;
     canvas.line(Eigen::Vector2d(x0 + w, y), Eigen::Vector2d(x0 + w + 4, y));
     char label[48];
-    std::snprintf(label, sizeof label, "%.*f", decimals, v);
+    std::snprintf(label, sizeof label, "%s%.*f", plus_sign && v > 0 ? "+" : "", decimals, v);
     canvas.text(x0 + w + 6, y + 0.35 * font, std::string(label) + " " + unit, style);
   };
-  int k = 0;
-  for (; k * step <= max_value * (1 + 1e-9); ++k) tick(k * step, decimals);
-  // The top of the scale gets its own label (three significant digits) unless a tick is close to
-  // it, so that the largest value can be read off the bar.
-  if (max_value - (k - 1) * step > 0.3 * step)
-    tick(max_value, std::max(decimals, 2 - static_cast<int>(std::floor(std::log10(max_value)))));
+  const int k0 = static_cast<int>(std::ceil(lo / step - 1e-9)), k1 = static_cast<int>(std::floor(hi / step + 1e-9));
+  for (int k = k0; k <= k1; ++k) tick(k * step, decimals);
+  // The ends of the scale get their own labels (three significant digits) unless a tick is close
+  // to them, so that the extreme values can be read off the bar.
+  auto end_decimals = [&](double v) {
+    return std::max(decimals, 2 - static_cast<int>(std::floor(std::log10(std::abs(v)))));
+  };
+  if (hi - k1 * step > 0.3 * step) tick(hi, end_decimals(hi));
+  if (lo < 0 && k0 * step - lo > 0.3 * step) tick(lo, end_decimals(lo));
   for (std::size_t i = 0; i < title_lines.size(); ++i)
     canvas.text(text_x(title_lines[i]), y0 - 1.0 * font - double(title_lines.size() - 1 - i) * line,
                 title_lines[i], style);
   for (std::size_t i = 0; i < note_lines.size(); ++i)
     canvas.text(text_x(note_lines[i]), y0 + h + 1.5 * font + double(i) * line, note_lines[i], style);
   image = canvas.image();
+}
+
+}  // namespace
+
+void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
+                    const std::string& title, const std::string& note) {
+  if (!(max_value > 0) || !std::isfinite(max_value))
+    throw InvalidInput(cat("colour bar: the range ", max_value, " must be positive"));
+  draw_bar(image, 0.0, max_value, viridis, unit, title, note, false);
+}
+
+Eigen::MatrixX3d signed_colors(const Eigen::VectorXd& value, double max_value) {
+  if (!(max_value > 0) || !std::isfinite(max_value))
+    throw InvalidInput(cat("signed colours: the range ", max_value, " must be positive"));
+  Eigen::MatrixX3d c(value.size(), 3);
+  for (Eigen::Index i = 0; i < value.size(); ++i) c.row(i) = signed_colour(value[i] / max_value).transpose();
+  return c;
+}
+
+Eigen::Vector3d signed_colour(double t) {
+  const Eigen::Vector3d blue(0.13, 0.35, 0.75), white(0.97, 0.97, 0.97), red(0.78, 0.12, 0.12);
+  t = std::clamp(t, -1.0, 1.0);
+  return t < 0 ? Eigen::Vector3d(white + (-t) * (blue - white)) : Eigen::Vector3d(white + t * (red - white));
+}
+
+void draw_signed_color_bar(RgbImage& image, double max_value, const std::string& unit,
+                           const std::string& title, const std::string& note) {
+  if (!(max_value > 0) || !std::isfinite(max_value))
+    throw InvalidInput(cat("colour bar: the range ", max_value, " must be positive"));
+  draw_bar(image, -max_value, max_value, [](double t) { return signed_colour(2 * t - 1); }, unit, title,
+           note, true);
 }
 
 namespace {

@@ -92,6 +92,10 @@ RegisterResult run_register(const RegisterRequest& request, Reporter* reporter =
 std::string to_json(const RegisterResult& result);
 std::string summary(const RegisterResult& result);
 
+/// The 4×4 "scan_to_model" matrix of a registration.json (`caps model register`): scan file
+/// units to the model's LPS mm. Throws IoError (unreadable) or InvalidInput (no finite 4×4 matrix).
+Eigen::Matrix4d read_registration_matrix(const std::string& path);
+
 // ---- caps model fuse ----------------------------------------------------------------------
 
 struct FuseRequest : ScanRegistrationFields {

@@ -60,6 +60,18 @@ ScalarMap tension_map(const SkinSurfaces& skin, const fem::Mesh& mesh,
 void draw_color_bar(RgbImage& image, double max_value, const std::string& unit,
                     const std::string& title, const std::string& note = "");
 
+/// The colour of a signed value t in [-1, 1] (clamped): blue at -1, white at 0, red at +1.
+Eigen::Vector3d signed_colour(double t);
+
+/// Per-vertex colours signed_colour(value / max_value) of a signed field (e.g. a difference):
+/// #V×3 RGB in [0, 1]. Throws InvalidInput unless max_value > 0.
+Eigen::MatrixX3d signed_colors(const Eigen::VectorXd& value, double max_value);
+
+/// draw_color_bar() for signed_colors(): from -max_value (bottom) to +max_value (top), positive
+/// ticks with a '+'. Throws InvalidInput unless max_value > 0.
+void draw_signed_color_bar(RgbImage& image, double max_value, const std::string& unit,
+                           const std::string& title, const std::string& note = "");
+
 /// Draws polylines given in LPS mm (e.g. a plan's cutting paths) over the image, in a dashed dark
 /// line, as the surgeon's marker would, at their pixels camera.project(p). With `hits`
 /// (pixel_hits() of the surface drawn, same camera) the parts of the lines behind the surface
