@@ -201,6 +201,8 @@ LocalProcedure rotation_flap(std::map<std::string, double>& p) {
   // Mirrored, the path is reversed so that the same side stays on the left.
   if (mirror) std::reverse(path.begin(), path.end());
   out.paths = {path};
+  // Every point walked from O (the centre): the radius and the angles at O hold on the skin.
+  out.laid_from.assign(out.points_mm.size(), -1);
   // The flap: the sector O, S, the arc to P (and the back-cut's end B).
   out.flaps = {{iO, iS}};
   for (int k = 1; k <= m; ++k) out.flaps[0].push_back(A(k));
@@ -387,6 +389,29 @@ Plan place_procedure(const LocalProcedure& proc, const PatientModel& model, doub
     }
   std::vector<SkinFrame> at(np);
   std::vector<char> placed(np, 0);
+  if (!proc.laid_from.empty()) {
+    // Each point walked from the one it is laid from (-1: the centre), in index order of need.
+    if (proc.laid_from.size() != np)
+      throw InvalidInput(cat(plan.procedure, ": laid_from has ", proc.laid_from.size(),
+                             " entries for ", np, " points"));
+    std::vector<char> busy(np, 0);
+    auto lay = [&](auto&& self, int i) -> void {
+      if (placed[i]) return;
+      if (busy[i]) throw InvalidInput(cat(plan.procedure, ": laid_from has a cycle through point ", i));
+      busy[i] = 1;
+      const int from = proc.laid_from[i];
+      if (from < -1 || from >= static_cast<int>(np))
+        throw InvalidInput(cat(plan.procedure, ": laid_from names point ", from, " for point ", i));
+      if (from < 0) {
+        at[i] = walk_on_skin(model, centre, proc.points_mm[i]);
+      } else {
+        self(self, from);
+        at[i] = walk_on_skin(model, at[from], proc.points_mm[i] - proc.points_mm[from]);
+      }
+      placed[i] = 1;
+    };
+    for (std::size_t i = 0; i < np; ++i) lay(lay, static_cast<int>(i));
+  }
   for (;;) {
     int root = -1;
     for (std::size_t i = 0; i < np; ++i)
@@ -413,6 +438,27 @@ Plan place_procedure(const LocalProcedure& proc, const PatientModel& model, doub
   }
   plan.paths = proc.paths;
   plan.excisions = proc.excisions;
+  // An excised node is walked on the skin from its point by its offset (in the frame carried to
+  // that point), and its offset rewritten in the plan's linear frame so that border_loop() puts
+  // it exactly there: the linear frame at the centre would stretch and turn the offset where
+  // the skin curves.
+  if (!plan.excisions.empty() && !proc.paths.empty()) {
+    std::vector<int> loop;
+    try {
+      loop = walk_around_cut(proc.points_mm, proc.paths);
+    } catch (const InvalidInput&) {
+      // Not a tree: check_plan() says why; the offsets stay as given.
+    }
+    for (auto& e : plan.excisions) {
+      if (e.loop_index < 0 || e.loop_index >= static_cast<int>(loop.size()) ||
+          !e.offset_mm.allFinite())
+        continue;  // refused by check_plan() with the entry named
+      const int p = loop[e.loop_index];
+      const SkinFrame to = walk_on_skin(model, at[p], e.offset_mm);
+      e.offset_mm = plan.frame.to_local(to.theta_z[0], to.theta_z[1]) -
+                    plan.frame.to_local(plan.points[p].theta_deg, plan.points[p].z_mm);
+    }
+  }
   plan.sutures = proc.sutures;
   plan.flaps = proc.flaps;
   plan.notes = proc.notes;
