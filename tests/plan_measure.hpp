@@ -103,6 +103,11 @@ struct Measured {
   /// Whether a parameter of the template sets it (a limb, the width, an apex angle), or it
   /// follows from them in the flat layout (the ellipse's sides, the rotation flap's arc chords).
   bool requested = true;
+  /// A requested quantity that closes a figure (the rhombus's corners B, A, D' and its sides
+  /// from C; the turns of the W-plasty's moved sides): segments drawn straight in (theta, z)
+  /// curve on skin inclined to the axis, so these hold only where the chart is not curved
+  /// (docs/plan.md, "Accuracy").
+  bool closure = false;
   /// Relative error for lengths, degrees (signed for 'O', absolute difference otherwise).
   double error() const {
     if (kind == 'L') return std::abs(measured - asked) / asked;
@@ -135,6 +140,9 @@ struct TemplateAxes {
   /// Border edges (by their first loop node) and loop-node angles no parameter sets.
   std::vector<int> derived_edges, derived_angles;
   bool across_derived = false;              ///< the distances across follow from the parameters
+  std::vector<int> closure_edges, closure_angles;  ///< see Measured::closure
+  bool extra_angles_closure = false;
+  bool axis_closure = false;  ///< the axis is the chord of a chain of segments (the W-plasty)
 };
 
 /// What each library template names, as loop indices (docs/plan.md has the loops).
@@ -161,13 +169,22 @@ inline TemplateAxes template_axes(const caps::plan::LocalProcedure& proc) {
   } else if (proc.name == "w-plasty") {
     const int last = static_cast<int>(proc.points_mm.size()) - 1;
     t.across = {{0, last}};  // end to end along the scar
+    for (int k = 1; k < last; ++k) t.across.push_back({k, n - k});  // the width at each tooth
     t.axis = {{0, last}};
+    // The edges from the apices to the moved sides and the turns there follow from the width.
+    t.derived_edges = {0, last - 1, last, n - 1};
+    t.derived_angles = {0, 1, last - 1, last, last + 1, n - 1};
+    for (int i = 0; i < n; ++i) t.closure_angles.push_back(i);  // every node is moved
+    t.axis_closure = true;  // end to end over the whole zigzag
   } else if (proc.name == "rhomboid") {
     // Loop F0 E1 D2 C3 B4 A5 D'6 E'7: the long diagonal C-A and the short one D-B.
     t.across = {{3, 5}, {2, 4}};  // the diagonals follow from the side and the 60 deg
     t.across_derived = true;
     t.axis = {{2, 4}};
     t.angles = {{5, 4, 6}, {3, 2, 4}};  // the rhombus's 60 deg corners
+    t.extra_angles_closure = true;
+    t.closure_edges = {2, 3};            // D-C and C-B; B-A and A-D' are laid at their length
+    t.closure_angles = {2, 3, 4, 5, 6};  // the corners; the flap's turn at E is walked
   } else if (proc.name == "rotation-flap") {
     // O (point 1) to S and every arc point: the radius; the angles at O.
     const int o = node_of_point(1);
@@ -216,6 +233,7 @@ inline std::vector<Measured> measure_plan(const caps::plan::LocalProcedure& proc
     if (asked < 1e-9) continue;
     out.push_back({caps::cat("edge ", i, "-", j), 'L', asked, skin_length(m, tz[i], tz[j])});
     out.back().requested = !is_in(t.derived_edges, i);
+    out.back().closure = is_in(t.closure_edges, i);
   }
   for (int i = 0; i < n; ++i) {
     const int a = (i + n - 1) % n, b = (i + 1) % n;
@@ -225,20 +243,24 @@ inline std::vector<Measured> measure_plan(const caps::plan::LocalProcedure& proc
     out.push_back({caps::cat("angle at ", i), 'A', flat_angle_deg(xy[i], xy[a], xy[b]),
                    skin_angle(m, tz[i], tz[a], tz[b])});
     out.back().requested = !is_in(t.derived_angles, i);
+    out.back().closure = is_in(t.closure_angles, i);
   }
   for (const auto& [a, b] : t.across)
     out.push_back({caps::cat("across ", a, "-", b), 'L', (xy[b] - xy[a]).norm(),
                    skin_length(m, tz[a], tz[b])});
     out.back().requested = !t.across_derived;
-  for (const auto& [v, a, b] : t.angles)
+  for (const auto& [v, a, b] : t.angles) {
     out.push_back({caps::cat("angle ", a, "-", v, "-", b), 'A', flat_angle_deg(xy[v], xy[a], xy[b]),
                    skin_angle(m, tz[v], tz[a], tz[b])});
+    out.back().closure = t.extra_angles_closure;
+  }
   const Vector2d centre(plan.frame.theta_deg, plan.frame.z_mm);
   for (const auto& [a, b] : t.axis) {
     const Vector2d d = xy[b] - xy[a];
     const double asked = plan.frame.orientation_deg - caps::rad_to_deg(std::atan2(d.y(), d.x()));
     out.push_back({caps::cat("orientation ", a, "-", b), 'O', asked,
                    skin_heading(m, tz[a], tz[b], centre)});
+    out.back().closure = t.axis_closure;
   }
   return out;
 }
@@ -249,13 +271,20 @@ struct WorstError {
   std::string length_what, angle_what;
 };
 
-/// The worst errors among the requested quantities (or, with `derived`, among the others).
-inline WorstError worst(const std::vector<Measured>& v, bool derived = false) {
+/// Which quantities worst() looks at.
+enum class Kind { kByConstruction, kClosure, kDerived };
+
+inline Kind kind_of(const Measured& x) {
+  return !x.requested ? Kind::kDerived : x.closure ? Kind::kClosure : Kind::kByConstruction;
+}
+
+/// The worst errors among the quantities of one kind.
+inline WorstError worst(const std::vector<Measured>& v, Kind kind) {
   WorstError w;
   double o_sum = 0;
   int o_n = 0;
   for (const auto& x : v) {
-    if (x.requested == derived) continue;
+    if (kind_of(x) != kind) continue;
     if (x.kind == 'L' && x.error() > w.length_rel) w.length_rel = x.error(), w.length_what = x.what;
     if (x.kind == 'A' && x.error() > w.angle_deg) w.angle_deg = x.error(), w.angle_what = x.what;
     if (x.kind == 'O') o_sum += x.error(), ++o_n;

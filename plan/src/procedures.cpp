@@ -149,6 +149,9 @@ LocalProcedure rhomboid(std::map<std::string, double>& p) {
   const V2 D(0, -0.5 * L), B(0, 0.5 * L);
   out.points_mm = {F, E, D, C, B};
   out.paths = {{0, 1, 2, 3, 4}};
+  // The rhombus's corners walked from its centre along the diagonals, the flap's E from D and F
+  // from E; A (C's twin, moved) is put at the side's length from B and from D.
+  out.laid_from = {1, 2, -1, -1, -1};
   out.excisions = {{5, A - C}};  // the twin of C becomes the rhombus corner A
   out.sutures = {sp(1, 2, 5, 4), sp(3, 2, 3, 4), sp(0, 1, 6, 5), sp(7, 0, 7, 6)};
   out.flaps = {{2, 1, 0, 3}};  // D E F C
@@ -317,6 +320,84 @@ const std::vector<Template>& templates() {
   return t;
 }
 
+
+// Where the excised nodes go on the skin (loop index -> theta deg, z mm), given the points laid
+// with their carried frames `at`. Each is walked from its point by its offset, in the frame
+// carried there. A node moved away from both its loop neighbours, which stay on their points,
+// and not in line with them (the rhomboid's corner A) is then put at its distances from both
+// (the two sides of the rhombus keep their length). The ellipse: the widest points 1 and 5 are
+// walked W/2 to either side of the axis at the station where the apex angle at 0 is the one
+// asked for, and 2 and 4 are walked from the apex 3 in the apex's directions, so that the
+// length, the width and both apex angles hold on the skin (docs/plan.md).
+std::map<int, V2> lay_excisions(const LocalProcedure& proc, const PatientModel& model,
+                                const std::vector<int>& loop, const std::vector<SkinFrame>& at) {
+  std::map<int, V2> to;
+  const int n = static_cast<int>(loop.size());
+  if (n == 0) return to;
+  std::vector<V2> xy(n);
+  std::vector<char> moved(n, 0);
+  for (int i = 0; i < n; ++i) xy[i] = proc.points_mm[loop[i]];
+  std::map<int, V2> offset;
+  for (const auto& e : proc.excisions) {
+    if (e.loop_index < 0 || e.loop_index >= n || !e.offset_mm.allFinite() || moved[e.loop_index])
+      continue;  // refused by check_plan() with the entry named
+    xy[e.loop_index] += e.offset_mm;
+    moved[e.loop_index] = 1;
+    offset[e.loop_index] = e.offset_mm;
+  }
+  for (const auto& [i, off] : offset) to[i] = walk_on_skin(model, at[loop[i]], off).theta_z;
+  auto flat_angle = [&](int v, int a, int b) {
+    const V2 u = xy[a] - xy[v], w = xy[b] - xy[v];
+    return std::atan2(std::abs(u.x() * w.y() - u.y() * w.x()), u.dot(w));
+  };
+  auto skin_angle = [&](const V2& v, const V2& a, const V2& b) {
+    const Eigen::Vector3d u = segment_direction_on_skin(model, v, a);
+    const Eigen::Vector3d w = segment_direction_on_skin(model, v, b);
+    return std::atan2(u.cross(w).norm(), u.dot(w));
+  };
+  const bool ellipse = proc.name == "ellipse" && proc.points_mm.size() == 4 && n == 6 &&
+                       moved[1] && moved[2] && moved[4] && moved[5] && !moved[0] && !moved[3];
+  if (ellipse) {
+    const double apex = flat_angle(0, 1, 5), L = (proc.points_mm[3] - proc.points_mm[0]).norm();
+    const V2 o1 = xy[1] - proc.points_mm[1], o5 = xy[5] - proc.points_mm[1];
+    const V2 apex0 = at[0].theta_z;
+    auto sides = [&](double d) {
+      const SkinFrame station = walk_on_skin(model, at[1], V2(d, 0));
+      return std::pair{walk_on_skin(model, station, o1).theta_z,
+                       walk_on_skin(model, station, o5).theta_z};
+    };
+    auto miss = [&](double d) {
+      const auto [u1, u5] = sides(d);
+      return skin_angle(apex0, u1, u5) - apex;
+    };
+    // Secant on the station d (mm along the axis from the centre), within a quarter length.
+    double d0 = 0, d1 = 0.5, f0 = miss(d0), f1 = miss(d1);
+    double best = std::abs(f0) < std::abs(f1) ? d0 : d1, fbest = std::min(std::abs(f0), std::abs(f1));
+    for (int it = 0; it < 20 && fbest > 1e-6 && f1 != f0; ++it) {
+      const double d2 = std::clamp(d1 - f1 * (d1 - d0) / (f1 - f0), -L / 4, L / 4);
+      d0 = d1, f0 = f1, d1 = d2, f1 = miss(d2);
+      if (std::abs(f1) < fbest) fbest = std::abs(f1), best = d1;
+    }
+    const auto [u1, u5] = sides(best);
+    to[1] = u1;
+    to[5] = u5;
+    to[2] = walk_on_skin(model, at[3], xy[2] - proc.points_mm[3]).theta_z;
+    to[4] = walk_on_skin(model, at[3], xy[4] - proc.points_mm[3]).theta_z;
+    return to;
+  }
+  for (auto& [i, u] : to) {
+    const int a = (i + n - 1) % n, b = (i + 1) % n;
+    const double da = (xy[i] - xy[a]).norm(), db = (xy[i] - xy[b]).norm();
+    if (moved[a] || moved[b] || !(da > 1e-6) || !(db > 1e-6) ||
+        flat_angle(i, a, b) > deg_to_rad(170.0))
+      continue;
+    V2 solved;
+    if (point_at_skin_distances(model, at[loop[a]].theta_z, da, at[loop[b]].theta_z, db, u, solved))
+      u = solved;
+  }
+  return to;
+}
+
 }  // namespace
 
 const std::vector<ProcedureInfo>& procedure_library() {
@@ -438,10 +519,9 @@ Plan place_procedure(const LocalProcedure& proc, const PatientModel& model, doub
   }
   plan.paths = proc.paths;
   plan.excisions = proc.excisions;
-  // An excised node is walked on the skin from its point by its offset (in the frame carried to
-  // that point), and its offset rewritten in the plan's linear frame so that border_loop() puts
-  // it exactly there: the linear frame at the centre would stretch and turn the offset where
-  // the skin curves.
+  // Excised nodes on the skin (lay_excisions()), their offsets rewritten in the plan's linear
+  // frame so that border_loop() puts each exactly where it was laid: the linear frame at the
+  // centre would stretch and turn the offsets where the skin curves.
   if (!plan.excisions.empty() && !proc.paths.empty()) {
     std::vector<int> loop;
     try {
@@ -449,13 +529,12 @@ Plan place_procedure(const LocalProcedure& proc, const PatientModel& model, doub
     } catch (const InvalidInput&) {
       // Not a tree: check_plan() says why; the offsets stay as given.
     }
+    const std::map<int, V2> to = lay_excisions(proc, model, loop, at);
     for (auto& e : plan.excisions) {
-      if (e.loop_index < 0 || e.loop_index >= static_cast<int>(loop.size()) ||
-          !e.offset_mm.allFinite())
-        continue;  // refused by check_plan() with the entry named
+      auto it = to.find(e.loop_index);
+      if (it == to.end()) continue;
       const int p = loop[e.loop_index];
-      const SkinFrame to = walk_on_skin(model, at[p], e.offset_mm);
-      e.offset_mm = plan.frame.to_local(to.theta_z[0], to.theta_z[1]) -
+      e.offset_mm = plan.frame.to_local(it->second[0], it->second[1]) -
                     plan.frame.to_local(plan.points[p].theta_deg, plan.points[p].z_mm);
     }
   }
