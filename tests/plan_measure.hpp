@@ -160,6 +160,7 @@ inline TemplateAxes template_axes(const caps::plan::LocalProcedure& proc) {
     t.axis = {{0, 3}};            // the apices (1 and 2 are moved to the sides)
     t.derived_edges = {0, 1, 2, 3, 4, 5};  // the sides follow from length and width
     t.derived_angles = {1, 2, 4, 5};       // only the apices (0, 3) are asked for
+    t.closure_angles = {0};  // 3 is laid; 0 follows from the length and the width
   } else if (proc.name == "z-plasty") {
     t.axis = {{1, 2}};
   } else if (proc.name == "multiple-z-plasty") {

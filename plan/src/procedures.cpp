@@ -326,9 +326,9 @@ const std::vector<Template>& templates() {
 // carried there. A node moved away from both its loop neighbours, which stay on their points,
 // and not in line with them (the rhomboid's corner A) is then put at its distances from both
 // (the two sides of the rhombus keep their length). The ellipse: the widest points 1 and 5 are
-// walked W/2 to either side of the axis at the station where the apex angle at 0 is the one
-// asked for, and 2 and 4 are walked from the apex 3 in the apex's directions, so that the
-// length, the width and both apex angles hold on the skin (docs/plan.md).
+// walked W/2 to either side of the centre, and 2 and 4 are walked from the apex 3 in the apex's
+// directions, so that the length, the width and the apex angle at 3 hold on the skin; the apex
+// angle at 0 follows from length and width (docs/plan.md).
 std::map<int, V2> lay_excisions(const LocalProcedure& proc, const PatientModel& model,
                                 const std::vector<int>& loop, const std::vector<SkinFrame>& at) {
   std::map<int, V2> to;
@@ -350,37 +350,10 @@ std::map<int, V2> lay_excisions(const LocalProcedure& proc, const PatientModel& 
     const V2 u = xy[a] - xy[v], w = xy[b] - xy[v];
     return std::atan2(std::abs(u.x() * w.y() - u.y() * w.x()), u.dot(w));
   };
-  auto skin_angle = [&](const V2& v, const V2& a, const V2& b) {
-    const Eigen::Vector3d u = segment_direction_on_skin(model, v, a);
-    const Eigen::Vector3d w = segment_direction_on_skin(model, v, b);
-    return std::atan2(u.cross(w).norm(), u.dot(w));
-  };
   const bool ellipse = proc.name == "ellipse" && proc.points_mm.size() == 4 && n == 6 &&
                        moved[1] && moved[2] && moved[4] && moved[5] && !moved[0] && !moved[3];
   if (ellipse) {
-    const double apex = flat_angle(0, 1, 5), L = (proc.points_mm[3] - proc.points_mm[0]).norm();
-    const V2 o1 = xy[1] - proc.points_mm[1], o5 = xy[5] - proc.points_mm[1];
-    const V2 apex0 = at[0].theta_z;
-    auto sides = [&](double d) {
-      const SkinFrame station = walk_on_skin(model, at[1], V2(d, 0));
-      return std::pair{walk_on_skin(model, station, o1).theta_z,
-                       walk_on_skin(model, station, o5).theta_z};
-    };
-    auto miss = [&](double d) {
-      const auto [u1, u5] = sides(d);
-      return skin_angle(apex0, u1, u5) - apex;
-    };
-    // Secant on the station d (mm along the axis from the centre), within a quarter length.
-    double d0 = 0, d1 = 0.5, f0 = miss(d0), f1 = miss(d1);
-    double best = std::abs(f0) < std::abs(f1) ? d0 : d1, fbest = std::min(std::abs(f0), std::abs(f1));
-    for (int it = 0; it < 20 && fbest > 1e-6 && f1 != f0; ++it) {
-      const double d2 = std::clamp(d1 - f1 * (d1 - d0) / (f1 - f0), -L / 4, L / 4);
-      d0 = d1, f0 = f1, d1 = d2, f1 = miss(d2);
-      if (std::abs(f1) < fbest) fbest = std::abs(f1), best = d1;
-    }
-    const auto [u1, u5] = sides(best);
-    to[1] = u1;
-    to[5] = u5;
+    // The widest points stay walked W/2 from the centre (the width); 2 and 4 from the apex 3.
     to[2] = walk_on_skin(model, at[3], xy[2] - proc.points_mm[3]).theta_z;
     to[4] = walk_on_skin(model, at[3], xy[4] - proc.points_mm[3]).theta_z;
     return to;
@@ -571,6 +544,7 @@ std::string procedure_to_json(const LocalProcedure& p) {
     j["excisions"].push_back({{"loop_index", e.loop_index}, {"offset_mm", {e.offset_mm.x(), e.offset_mm.y()}}});
   j["sutures"] = sutures_json(p.sutures);
   if (!p.flaps.empty()) j["flaps"] = p.flaps;
+  if (!p.laid_from.empty()) j["laid_from"] = p.laid_from;
   j["notes"] = p.notes;
   return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
@@ -599,6 +573,14 @@ LocalProcedure parse_procedure_json(const std::string& text, const std::string& 
                                V2(e.at("offset_mm").at(0).get<double>(), e.at("offset_mm").at(1).get<double>())});
     for (const auto& s : j.at("sutures")) p.sutures.push_back(detail::suture_from_json(s, source));
     if (j.contains("flaps")) p.flaps = detail::index_lists(j["flaps"], cat(source, ": flaps"));
+    if (j.contains("laid_from")) {
+      // Indices, or -1 for the centre (index_list() takes whole numbers of any sign).
+      p.laid_from = detail::index_list(j["laid_from"], cat(source, ": laid_from"));
+      if (p.laid_from.size() != p.points_mm.size())
+        throw InvalidInput(cat(source, ": laid_from has ", p.laid_from.size(), " entries for ",
+                               p.points_mm.size(), " points (one per point: the point it is laid "
+                               "from, or -1 for the centre)"));
+    }
     p.notes = j.value("notes", "");
     return p;
   } catch (const json::exception& e) {

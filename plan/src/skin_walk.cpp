@@ -106,13 +106,6 @@ double segment_length_on_skin(const PatientModel& model, const Eigen::Vector2d& 
   return len;
 }
 
-Eigen::Vector3d segment_direction_on_skin(const PatientModel& model, const Eigen::Vector2d& a,
-                                          const Eigen::Vector2d& b) {
-  const SkinTangent t = skin_tangent(model, a[0], a[1]);
-  const Eigen::Vector2d d(std::remainder(b[0] - a[0], 360.0), b[1] - a[1]);
-  return (d[0] * t.d_theta + d[1] * t.d_z).normalized();
-}
-
 bool point_at_skin_distances(const PatientModel& model, const Eigen::Vector2d& a, double da,
                              const Eigen::Vector2d& b, double db, const Eigen::Vector2d& guess,
                              Eigen::Vector2d& u) {

@@ -55,11 +55,6 @@ SkinFrame walk_on_skin(const PatientModel& model, const SkinFrame& start,
 double segment_length_on_skin(const PatientModel& model, const Eigen::Vector2d& a,
                               const Eigen::Vector2d& b);
 
-/// The unit tangent (LPS) in which the segment from a to b (drawn straight in (theta, z))
-/// leaves a, in the skin's tangent plane at a (skin_tangent()).
-Eigen::Vector3d segment_direction_on_skin(const PatientModel& model, const Eigen::Vector2d& a,
-                                          const Eigen::Vector2d& b);
-
 /// The point u (theta deg, z mm) whose segments from a and from b (drawn straight in (theta,
 /// z)) are da and db mm long on the skin, found by Newton's method from `guess` (which picks
 /// the side of a-b). Returns false (u untouched) when it does not converge to 1e-4 mm in 30
