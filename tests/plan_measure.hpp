@@ -97,8 +97,8 @@ inline double skin_heading(const PatientModel& m, const Vector2d& a, Vector2d b,
 
 /// One requested quantity of a placed template: asked (from the flat layout) and measured.
 struct Measured {
-  std::string what;      ///< e.g. "edge 0-1", "angle at 3", "width 1-5", "orientation"
-  char kind = 'L';       ///< 'L' length (mm), 'A' angle (deg), 'O' orientation (deg)
+  std::string what;  ///< e.g. "edge 0-1", "angle at 3", "width 1-5", "orientation"
+  char kind = 'L';   ///< 'L' length (mm), 'A' angle (deg), 'O' orientation (deg)
   double asked = 0, measured = 0;
   /// Whether a parameter of the template sets it (a limb, the width, an apex angle), or it
   /// follows from them in the flat layout (the ellipse's sides, the rotation flap's arc chords).
@@ -136,10 +136,11 @@ inline double flat_angle_deg(const Vector2d& v, const Vector2d& a, const Vector2
 struct TemplateAxes {
   std::vector<std::pair<int, int>> across;
   std::vector<std::pair<int, int>> axis;
-  std::vector<std::array<int, 3>> angles;   ///< extra angles (at, a, b) between non-consecutive nodes
+  std::vector<std::array<int, 3>>
+      angles;  ///< extra angles (at, a, b) between non-consecutive nodes
   /// Border edges (by their first loop node) and loop-node angles no parameter sets.
   std::vector<int> derived_edges, derived_angles;
-  bool across_derived = false;              ///< the distances across follow from the parameters
+  bool across_derived = false;  ///< the distances across follow from the parameters
   std::vector<int> closure_edges, closure_angles;  ///< see Measured::closure
   bool extra_angles_closure = false;
   bool axis_closure = false;  ///< the axis is the chord of a chain of segments (the W-plasty)
@@ -156,27 +157,27 @@ inline TemplateAxes template_axes(const caps::plan::LocalProcedure& proc) {
     return -1;
   };
   if (proc.name == "ellipse") {
-    t.across = {{1, 5}, {0, 3}};  // the width; apex to apex
-    t.axis = {{0, 3}};            // the apices (1 and 2 are moved to the sides)
+    t.across = {{1, 5}, {0, 3}};           // the width; apex to apex
+    t.axis = {{0, 3}};                     // the apices (1 and 2 are moved to the sides)
     t.derived_edges = {0, 1, 2, 3, 4, 5};  // the sides follow from length and width
     t.derived_angles = {1, 2, 4, 5};       // only the apices (0, 3) are asked for
-    t.closure_angles = {0};  // 3 is laid; 0 follows from the length and the width
+    t.closure_angles = {0};                // 3 is laid; 0 follows from the length and the width
   } else if (proc.name == "z-plasty") {
     t.axis = {{1, 2}};
   } else if (proc.name == "multiple-z-plasty") {
     const int segs = static_cast<int>(std::lround(proc.parameters.at("segments")));
-    t.across = {{node_of_point(0), node_of_point(segs)}};  // the whole central line
+    t.across = {{node_of_point(0), node_of_point(segs)}};               // the whole central line
     t.axis = {{node_of_point(segs / 2), node_of_point(segs / 2 + 1)}};  // through the centre
   } else if (proc.name == "w-plasty") {
     const int last = static_cast<int>(proc.points_mm.size()) - 1;
-    t.across = {{0, last}};  // end to end along the scar
+    t.across = {{0, last}};                                         // end to end along the scar
     for (int k = 1; k < last; ++k) t.across.push_back({k, n - k});  // the width at each tooth
     t.axis = {{0, last}};
     // The edges from the apices to the moved sides and the turns there follow from the width.
     t.derived_edges = {0, last - 1, last, n - 1};
     t.derived_angles = {0, 1, last - 1, last, last + 1, n - 1};
     for (int i = 0; i < n; ++i) t.closure_angles.push_back(i);  // every node is moved
-    t.axis_closure = true;  // end to end over the whole zigzag
+    t.axis_closure = true;                                      // end to end over the whole zigzag
   } else if (proc.name == "rhomboid") {
     // Loop F0 E1 D2 C3 B4 A5 D'6 E'7: the long diagonal C-A and the short one D-B.
     t.across = {{3, 5}, {2, 4}};  // the diagonals follow from the side and the 60 deg
@@ -192,7 +193,8 @@ inline TemplateAxes template_axes(const caps::plan::LocalProcedure& proc) {
     const int m = static_cast<int>(std::lround(proc.parameters.at("segments")));
     for (int k = 0; k <= m; ++k) t.across.push_back({o, node_of_point(2 + k)});
     t.axis = {{o, node_of_point(2)}};
-    t.angles = {{o, node_of_point(0), node_of_point(2)}, {o, node_of_point(2), node_of_point(2 + m)}};
+    t.angles = {{o, node_of_point(0), node_of_point(2)},
+                {o, node_of_point(2), node_of_point(2 + m)}};
     // Asked: the legs O-F, O-S, the back-cut and the angles at O; the arc's chords, the base's
     // halves and the turns along the arc follow from them.
     const std::vector<Vector2d> xy = flat_loop(proc);
@@ -200,9 +202,9 @@ inline TemplateAxes template_axes(const caps::plan::LocalProcedure& proc) {
       const int a = loop[i], b = loop[(i + 1) % n];
       const bool at_o = xy[i].norm() < 1e-9 || xy[(i + 1) % n].norm() < 1e-9;  // O, not M
       const bool leg = at_o && (a == 1 || b == 1) && (a <= 2 && b <= 2);
-      const bool back = proc.parameters.at("back_cut") > 0 &&
-                        (a == static_cast<int>(proc.points_mm.size()) - 1 ||
-                         b == static_cast<int>(proc.points_mm.size()) - 1);
+      const bool back =
+          proc.parameters.at("back_cut") > 0 && (a == static_cast<int>(proc.points_mm.size()) - 1 ||
+                                                 b == static_cast<int>(proc.points_mm.size()) - 1);
       if (!leg && !back) t.derived_edges.push_back(i);
       if (loop[i] != 1 || (xy[i] - proc.points_mm[1]).norm() > 1e-9)  // O, not its moved twin
         t.derived_angles.push_back(i);
@@ -249,7 +251,7 @@ inline std::vector<Measured> measure_plan(const caps::plan::LocalProcedure& proc
   for (const auto& [a, b] : t.across)
     out.push_back({caps::cat("across ", a, "-", b), 'L', (xy[b] - xy[a]).norm(),
                    skin_length(m, tz[a], tz[b])});
-    out.back().requested = !t.across_derived;
+  out.back().requested = !t.across_derived;
   for (const auto& [v, a, b] : t.angles) {
     out.push_back({caps::cat("angle ", a, "-", v, "-", b), 'A', flat_angle_deg(xy[v], xy[a], xy[b]),
                    skin_angle(m, tz[v], tz[a], tz[b])});
@@ -259,8 +261,8 @@ inline std::vector<Measured> measure_plan(const caps::plan::LocalProcedure& proc
   for (const auto& [a, b] : t.axis) {
     const Vector2d d = xy[b] - xy[a];
     const double asked = plan.frame.orientation_deg - caps::rad_to_deg(std::atan2(d.y(), d.x()));
-    out.push_back({caps::cat("orientation ", a, "-", b), 'O', asked,
-                   skin_heading(m, tz[a], tz[b], centre)});
+    out.push_back(
+        {caps::cat("orientation ", a, "-", b), 'O', asked, skin_heading(m, tz[a], tz[b], centre)});
     out.back().closure = t.axis_closure;
   }
   return out;

@@ -39,7 +39,8 @@ const PatientModel& cylinder() {
 // A sphere of radius 90 mm centred on the axis at z = 0.
 const PatientModel& sphere() {
   static const PatientModel m(caps_test::synthetic_maps(
-      caps_test::grid(1440, 641, -80, 0.25), [](double, double z) { return std::sqrt(90.0 * 90.0 - z * z); },
+      caps_test::grid(1440, 641, -80, 0.25),
+      [](double, double z) { return std::sqrt(90.0 * 90.0 - z * z); },
       [](double, double) { return 6.0; }));
   return m;
 }
@@ -83,11 +84,16 @@ const PatientModel* hd() { return &head(); }
 // (strongly curved) and an oblique one; Cranium's forehead and temple.
 const std::vector<Site>& sites() {
   static const std::vector<Site> s = {
-      {"cylinder 0,60 h", cyl, 0, 60, 90},        {"cylinder 20,60 o35", cyl, 20, 60, 35},
-      {"sphere 0,0 h", sph, 0, 0, 90},            {"sphere 45,40 h", sph, 45, 40, 90},
-      {"sphere -120,-30 o20", sph, -120, -30, 20}, {"head 0,40 h", hd, 0, 40, 90},
-      {"head 0,75 h", hd, 0, 75, 90},             {"head 0,75 v", hd, 0, 75, 0},
-      {"head 90,20 h", hd, 90, 20, 90},           {"head 45,60 o30", hd, 45, 60, 30},
+      {"cylinder 0,60 h", cyl, 0, 60, 90},
+      {"cylinder 20,60 o35", cyl, 20, 60, 35},
+      {"sphere 0,0 h", sph, 0, 0, 90},
+      {"sphere 45,40 h", sph, 45, 40, 90},
+      {"sphere -120,-30 o20", sph, -120, -30, 20},
+      {"head 0,40 h", hd, 0, 40, 90},
+      {"head 0,75 h", hd, 0, 75, 90},
+      {"head 0,75 v", hd, 0, 75, 0},
+      {"head 90,20 h", hd, 90, 20, 90},
+      {"head 45,60 o30", hd, 45, 60, 30},
       {"head -25,-15 v (nose)", hd, -25, -15, 0},
       {"Cranium 30,110 h (forehead)", cranium, 30, 110, 90},
       {"Cranium 75,100 h (temple)", cranium, 75, 100, 90},
@@ -148,8 +154,9 @@ TEST(PlanMeasure, KnownAnswersOnACylinderAndASphere) {
 // reported elsewhere. The table (worst errors per template and site) is printed for
 // docs/plan.md.
 TEST(PlanGeometry, EveryTemplateLaysWhatWasAskedOnTheSkin) {
-  std::printf("| site | template | length | angle | orientation | closure length | closure angle "
-              "| derived length | derived angle |\n");
+  std::printf(
+      "| site | template | length | angle | orientation | closure length | closure angle "
+      "| derived length | derived angle |\n");
   for (const Site& site : sites()) {
     const PatientModel* m = site.model();
     if (!m) {
@@ -166,8 +173,12 @@ TEST(PlanGeometry, EveryTemplateLaysWhatWasAskedOnTheSkin) {
       const caps_test::WorstError w = caps_test::worst(v, Kind::kByConstruction),
                                   k = caps_test::worst(v, Kind::kClosure),
                                   d = caps_test::worst(v, Kind::kDerived);
-      auto pct = [](double x, const std::string& what) { return cat(std::round(x * 1e4) / 100, " % (", what, ")"); };
-      auto deg = [](double x, const std::string& what) { return cat(std::round(x * 100) / 100, " deg (", what, ")"); };
+      auto pct = [](double x, const std::string& what) {
+        return cat(std::round(x * 1e4) / 100, " % (", what, ")");
+      };
+      auto deg = [](double x, const std::string& what) {
+        return cat(std::round(x * 100) / 100, " deg (", what, ")");
+      };
       std::printf("| %s | %s | %s | %s | %.2f deg | %s | %s | %s | %s |\n", site.name,
                   label(c).c_str(), pct(w.length_rel, w.length_what).c_str(),
                   deg(w.angle_deg, w.angle_what).c_str(),
@@ -177,8 +188,8 @@ TEST(PlanGeometry, EveryTemplateLaysWhatWasAskedOnTheSkin) {
       for (const Measured& x : v) {
         if (!x.requested || (x.closure && !chart_flat)) continue;
         if (x.kind == 'L')
-          EXPECT_LE(x.error(), kLengthTol) << x.what << ": asked " << x.asked << " mm, measured "
-                                           << x.measured << " mm";
+          EXPECT_LE(x.error(), kLengthTol)
+              << x.what << ": asked " << x.asked << " mm, measured " << x.measured << " mm";
         else if (x.kind == 'A')
           EXPECT_LE(std::abs(x.error()), kAngleTolDeg)
               << x.what << ": asked " << x.asked << " deg, measured " << x.measured << " deg";
@@ -218,7 +229,8 @@ TEST(PlanGeometry, LaidFromInProcedureFiles) {
   const LocalProcedure back = parse_procedure_json(procedure_to_json(rot), "rot.json");
   EXPECT_EQ(back.laid_from, rot.laid_from);
   // Laid from the file, the flap is the library's: the same points on the sphere.
-  const Plan a = place_procedure(rot, sphere(), 45, 40, 90), b = place_procedure(back, sphere(), 45, 40, 90);
+  const Plan a = place_procedure(rot, sphere(), 45, 40, 90),
+             b = place_procedure(back, sphere(), 45, 40, 90);
   for (std::size_t i = 0; i < a.points.size(); ++i) {
     EXPECT_NEAR(a.points[i].theta_deg, b.points[i].theta_deg, 1e-9);
     EXPECT_NEAR(a.points[i].z_mm, b.points[i].z_mm, 1e-9);
