@@ -149,6 +149,9 @@ LocalProcedure rhomboid(std::map<std::string, double>& p) {
   const V2 D(0, -0.5 * L), B(0, 0.5 * L);
   out.points_mm = {F, E, D, C, B};
   out.paths = {{0, 1, 2, 3, 4}};
+  // The rhombus's corners walked from its centre along the diagonals, the flap's E from D and F
+  // from E; A (C's twin, moved) is put at the side's length from B and from D.
+  out.laid_from = {1, 2, -1, -1, -1};
   out.excisions = {{5, A - C}};  // the twin of C becomes the rhombus corner A
   out.sutures = {sp(1, 2, 5, 4), sp(3, 2, 3, 4), sp(0, 1, 6, 5), sp(7, 0, 7, 6)};
   out.flaps = {{2, 1, 0, 3}};  // D E F C
@@ -201,6 +204,8 @@ LocalProcedure rotation_flap(std::map<std::string, double>& p) {
   // Mirrored, the path is reversed so that the same side stays on the left.
   if (mirror) std::reverse(path.begin(), path.end());
   out.paths = {path};
+  // Every point walked from O (the centre): the radius and the angles at O hold on the skin.
+  out.laid_from.assign(out.points_mm.size(), -1);
   // The flap: the sector O, S, the arc to P (and the back-cut's end B).
   out.flaps = {{iO, iS}};
   for (int k = 1; k <= m; ++k) out.flaps[0].push_back(A(k));
@@ -315,6 +320,57 @@ const std::vector<Template>& templates() {
   return t;
 }
 
+
+// Where the excised nodes go on the skin (loop index -> theta deg, z mm), given the points laid
+// with their carried frames `at`. Each is walked from its point by its offset, in the frame
+// carried there. A node moved away from both its loop neighbours, which stay on their points,
+// and not in line with them (the rhomboid's corner A) is then put at its distances from both
+// (the two sides of the rhombus keep their length). The ellipse: the widest points 1 and 5 are
+// walked W/2 to either side of the centre, and 2 and 4 are walked from the apex 3 in the apex's
+// directions, so that the length, the width and the apex angle at 3 hold on the skin; the apex
+// angle at 0 follows from length and width (docs/plan.md).
+std::map<int, V2> lay_excisions(const LocalProcedure& proc, const PatientModel& model,
+                                const std::vector<int>& loop, const std::vector<SkinFrame>& at) {
+  std::map<int, V2> to;
+  const int n = static_cast<int>(loop.size());
+  if (n == 0) return to;
+  std::vector<V2> xy(n);
+  std::vector<char> moved(n, 0);
+  for (int i = 0; i < n; ++i) xy[i] = proc.points_mm[loop[i]];
+  std::map<int, V2> offset;
+  for (const auto& e : proc.excisions) {
+    if (e.loop_index < 0 || e.loop_index >= n || !e.offset_mm.allFinite() || moved[e.loop_index])
+      continue;  // refused by check_plan() with the entry named
+    xy[e.loop_index] += e.offset_mm;
+    moved[e.loop_index] = 1;
+    offset[e.loop_index] = e.offset_mm;
+  }
+  for (const auto& [i, off] : offset) to[i] = walk_on_skin(model, at[loop[i]], off).theta_z;
+  auto flat_angle = [&](int v, int a, int b) {
+    const V2 u = xy[a] - xy[v], w = xy[b] - xy[v];
+    return std::atan2(std::abs(u.x() * w.y() - u.y() * w.x()), u.dot(w));
+  };
+  const bool ellipse = proc.name == "ellipse" && proc.points_mm.size() == 4 && n == 6 &&
+                       moved[1] && moved[2] && moved[4] && moved[5] && !moved[0] && !moved[3];
+  if (ellipse) {
+    // The widest points stay walked W/2 from the centre (the width); 2 and 4 from the apex 3.
+    to[2] = walk_on_skin(model, at[3], xy[2] - proc.points_mm[3]).theta_z;
+    to[4] = walk_on_skin(model, at[3], xy[4] - proc.points_mm[3]).theta_z;
+    return to;
+  }
+  for (auto& [i, u] : to) {
+    const int a = (i + n - 1) % n, b = (i + 1) % n;
+    const double da = (xy[i] - xy[a]).norm(), db = (xy[i] - xy[b]).norm();
+    if (moved[a] || moved[b] || !(da > 1e-6) || !(db > 1e-6) ||
+        flat_angle(i, a, b) > deg_to_rad(170.0))
+      continue;
+    V2 solved;
+    if (point_at_skin_distances(model, at[loop[a]].theta_z, da, at[loop[b]].theta_z, db, u, solved))
+      u = solved;
+  }
+  return to;
+}
+
 }  // namespace
 
 const std::vector<ProcedureInfo>& procedure_library() {
@@ -387,6 +443,29 @@ Plan place_procedure(const LocalProcedure& proc, const PatientModel& model, doub
     }
   std::vector<SkinFrame> at(np);
   std::vector<char> placed(np, 0);
+  if (!proc.laid_from.empty()) {
+    // Each point walked from the one it is laid from (-1: the centre), in index order of need.
+    if (proc.laid_from.size() != np)
+      throw InvalidInput(cat(plan.procedure, ": laid_from has ", proc.laid_from.size(),
+                             " entries for ", np, " points"));
+    std::vector<char> busy(np, 0);
+    auto lay = [&](auto&& self, int i) -> void {
+      if (placed[i]) return;
+      if (busy[i]) throw InvalidInput(cat(plan.procedure, ": laid_from has a cycle through point ", i));
+      busy[i] = 1;
+      const int from = proc.laid_from[i];
+      if (from < -1 || from >= static_cast<int>(np))
+        throw InvalidInput(cat(plan.procedure, ": laid_from names point ", from, " for point ", i));
+      if (from < 0) {
+        at[i] = walk_on_skin(model, centre, proc.points_mm[i]);
+      } else {
+        self(self, from);
+        at[i] = walk_on_skin(model, at[from], proc.points_mm[i] - proc.points_mm[from]);
+      }
+      placed[i] = 1;
+    };
+    for (std::size_t i = 0; i < np; ++i) lay(lay, static_cast<int>(i));
+  }
   for (;;) {
     int root = -1;
     for (std::size_t i = 0; i < np; ++i)
@@ -413,6 +492,25 @@ Plan place_procedure(const LocalProcedure& proc, const PatientModel& model, doub
   }
   plan.paths = proc.paths;
   plan.excisions = proc.excisions;
+  // Excised nodes on the skin (lay_excisions()), their offsets rewritten in the plan's linear
+  // frame so that border_loop() puts each exactly where it was laid: the linear frame at the
+  // centre would stretch and turn the offsets where the skin curves.
+  if (!plan.excisions.empty() && !proc.paths.empty()) {
+    std::vector<int> loop;
+    try {
+      loop = walk_around_cut(proc.points_mm, proc.paths);
+    } catch (const InvalidInput&) {
+      // Not a tree: check_plan() says why; the offsets stay as given.
+    }
+    const std::map<int, V2> to = lay_excisions(proc, model, loop, at);
+    for (auto& e : plan.excisions) {
+      auto it = to.find(e.loop_index);
+      if (it == to.end()) continue;
+      const int p = loop[e.loop_index];
+      e.offset_mm = plan.frame.to_local(it->second[0], it->second[1]) -
+                    plan.frame.to_local(plan.points[p].theta_deg, plan.points[p].z_mm);
+    }
+  }
   plan.sutures = proc.sutures;
   plan.flaps = proc.flaps;
   plan.notes = proc.notes;
@@ -446,6 +544,7 @@ std::string procedure_to_json(const LocalProcedure& p) {
     j["excisions"].push_back({{"loop_index", e.loop_index}, {"offset_mm", {e.offset_mm.x(), e.offset_mm.y()}}});
   j["sutures"] = sutures_json(p.sutures);
   if (!p.flaps.empty()) j["flaps"] = p.flaps;
+  if (!p.laid_from.empty()) j["laid_from"] = p.laid_from;
   j["notes"] = p.notes;
   return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
@@ -474,6 +573,14 @@ LocalProcedure parse_procedure_json(const std::string& text, const std::string& 
                                V2(e.at("offset_mm").at(0).get<double>(), e.at("offset_mm").at(1).get<double>())});
     for (const auto& s : j.at("sutures")) p.sutures.push_back(detail::suture_from_json(s, source));
     if (j.contains("flaps")) p.flaps = detail::index_lists(j["flaps"], cat(source, ": flaps"));
+    if (j.contains("laid_from")) {
+      // Indices, or -1 for the centre (index_list() takes whole numbers of any sign).
+      p.laid_from = detail::index_list(j["laid_from"], cat(source, ": laid_from"));
+      if (p.laid_from.size() != p.points_mm.size())
+        throw InvalidInput(cat(source, ": laid_from has ", p.laid_from.size(), " entries for ",
+                               p.points_mm.size(), " points (one per point: the point it is laid "
+                               "from, or -1 for the centre)"));
+    }
     p.notes = j.value("notes", "");
     return p;
   } catch (const json::exception& e) {

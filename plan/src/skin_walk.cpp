@@ -89,4 +89,53 @@ SkinFrame walk_on_skin(const PatientModel& model, const SkinFrame& start,
   return f;
 }
 
+double segment_length_on_skin(const PatientModel& model, const Eigen::Vector2d& a,
+                              const Eigen::Vector2d& b_in) {
+  Eigen::Vector2d b = b_in;
+  b[0] = a[0] + std::remainder(b[0] - a[0], 360.0);
+  Eigen::Vector3d last = model.skin_point(a[0], a[1]);
+  const double chord = (model.skin_point(b[0], b[1]) - last).norm();
+  const int n = std::clamp(static_cast<int>(std::ceil(chord / 0.1)), 16, 4000);
+  double len = 0;
+  for (int s = 1; s <= n; ++s) {
+    const Eigen::Vector2d t = a + (b - a) * (static_cast<double>(s) / n);
+    const Eigen::Vector3d x = model.skin_point(t[0], t[1]);
+    len += (x - last).norm();
+    last = x;
+  }
+  return len;
+}
+
+bool point_at_skin_distances(const PatientModel& model, const Eigen::Vector2d& a, double da,
+                             const Eigen::Vector2d& b, double db, const Eigen::Vector2d& guess,
+                             Eigen::Vector2d& u) {
+  Eigen::Vector2d x = guess;
+  auto residual = [&](const Eigen::Vector2d& p) {
+    return Eigen::Vector2d(segment_length_on_skin(model, a, p) - da,
+                           segment_length_on_skin(model, b, p) - db);
+  };
+  for (int it = 0; it < 30; ++it) {
+    const Eigen::Vector2d r = residual(x);
+    if (!r.allFinite()) return false;
+    if (r.norm() < 1e-4) {
+      u = x;
+      return true;
+    }
+    Eigen::Matrix2d J;
+    const double h = 1e-3;
+    for (int k = 0; k < 2; ++k) {
+      Eigen::Vector2d e = Eigen::Vector2d::Zero();
+      e[k] = h;
+      J.col(k) = (residual(x + e) - residual(x - e)) / (2 * h);
+    }
+    if (!(std::abs(J.determinant()) > 1e-12)) return false;
+    Eigen::Vector2d step = J.partialPivLu().solve(r);
+    // Steps of at most 2 mm of skin (about 2 / r rad of theta).
+    const double s = step.norm();
+    if (s > 2.0) step *= 2.0 / s;
+    x -= step;
+  }
+  return false;
+}
+
 }  // namespace caps::plan

@@ -8,6 +8,7 @@
 
 #include <CGAL/Constrained_Delaunay_triangulation_2.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Triangulation_face_base_with_info_2.h>
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
 
 #include <algorithm>
@@ -24,7 +25,8 @@ using Cdt = CGAL::Constrained_Delaunay_triangulation_2<
     CdtKernel,
     CGAL::Triangulation_data_structure_2<
         CGAL::Triangulation_vertex_base_with_info_2<int, CdtKernel>,
-        CGAL::Constrained_triangulation_face_base_2<CdtKernel>>,
+        CGAL::Constrained_triangulation_face_base_2<
+            CdtKernel, CGAL::Triangulation_face_base_with_info_2<int, CdtKernel>>>,
     CGAL::Exact_predicates_tag>;
 using CdtPoint = CdtKernel::Point_2;
 
@@ -731,13 +733,41 @@ double distance_to_loop(const std::vector<Eigen::Vector2d>& poly, const Eigen::V
   return best;
 }
 
+// Each face's info set to its nesting level in the constraint loops: 0 for the faces reached from
+// the infinite face without crossing a constrained edge, and one more for each loop crossed. It is
+// found by walking the faces' adjacency, so it is exact whatever the faces' shapes: a point-in-
+// polygon test at a face's centroid is not, for a sliver of three nearly collinear vertices has
+// its centroid on (or at rounding distance from) a loop.
+void mark_nesting_levels(Cdt& cdt) {
+  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->info() = -1;
+  std::vector<Cdt::Face_handle> level{cdt.infinite_face()}, next;  // the current level's seeds
+  for (int depth = 0; !level.empty(); ++depth) {
+    std::vector<Cdt::Face_handle> stack = level;
+    while (!stack.empty()) {
+      const Cdt::Face_handle f = stack.back();
+      stack.pop_back();
+      if (f->info() >= 0) continue;
+      f->info() = depth;
+      for (int i = 0; i < 3; ++i) {
+        const Cdt::Face_handle n = f->neighbor(i);
+        if (n->info() >= 0) continue;
+        (cdt.is_constrained(Cdt::Edge(f, i)) ? next : stack).push_back(n);
+      }
+    }
+    level.swap(next);
+    next.clear();
+  }
+}
+
 // The seam between the micropolygons' rim `P` and the footprint's border `stair`: a constrained
 // Delaunay triangulation, in (theta as arc at r_ref_mm, z) mm, of the rim's vertices, the
 // border's, and the range vertices of the footprint that lie outside the rim (those closer to the
 // rim than a quarter of the finer grid spacing are left out, so no sliver pinches). Rim and
 // border are constraints, so each of their edges is a triangle edge: the seam shares every edge
-// with the micropolygons or the range cells and cannot crack. Triangles are kept between the
-// two loops. The grid vertices keep the range image's sampling, so the skin around the patch is
+// with the micropolygons or the range cells and cannot crack. The triangles kept are those between
+// the two loops, found by the loops they are nested in (mark_nesting_levels), not by where their
+// centroids fall: the triangulation's convex hull holds slivers outside the border, along its
+// concave staircase, whose centroids lie on it. The grid vertices keep the range image's sampling, so the skin around the patch is
 // the range surface itself rather than a strip stretched across it.
 void add_seam(Builder& b, const CylinderGrid& g, const std::vector<int>& P, const Footprint& fp,
               const std::vector<std::pair<long, long>>& stair, RangeVertices& range,
@@ -781,13 +811,16 @@ void add_seam(Builder& b, const CylinderGrid& g, const std::vector<int>& P, cons
   if (cdt.number_of_vertices() != n_inserted)
     throw Error(cat("render: the seam's rim and border cross (", cdt.number_of_vertices() - n_inserted,
                     " crossings); the mesh's rim is not a simple loop (internal error)"));
-  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
-    Eigen::Vector2d c = Eigen::Vector2d::Zero();
-    for (int i = 0; i < 3; ++i) c += Eigen::Vector2d(f->vertex(i)->point().x(), f->vertex(i)->point().y());
-    c /= 3.0;
-    if (inside(rim, c) || !inside(border, c)) continue;
-    b.tri(f->vertex(0)->info(), f->vertex(1)->info(), f->vertex(2)->info(), SkinPart::Seam);
-  }
+  for (const auto* loop : {&rim_h, &border_h})
+    for (std::size_t i = 0; i < loop->size(); ++i)
+      if (!cdt.is_edge((*loop)[i], (*loop)[(i + 1) % loop->size()]))
+        throw Error("render: a vertex of the seam lies on the rim or the border, or two of their "
+                    "vertices coincide (internal error)");
+  // the border encloses the rim: level 0 outside the border, 1 between the loops, 2 in the rim
+  mark_nesting_levels(cdt);
+  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f)
+    if (f->info() == 1)
+      b.tri(f->vertex(0)->info(), f->vertex(1)->info(), f->vertex(2)->info(), SkinPart::Seam);
 }
 
 // normal_pre: the drawn surface's normal field at each vertex's (theta, z) (the end caps' centres:

@@ -49,4 +49,18 @@ SkinFrame skin_frame(const PatientModel& model, double theta_deg, double z_mm,
 SkinFrame walk_on_skin(const PatientModel& model, const SkinFrame& start,
                        const Eigen::Vector2d& step_mm);
 
+/// The skin length (mm) of the segment from a to b (theta deg, z mm; b's theta unwrapped next
+/// to a's) drawn straight in (theta, z), as plans draw it: the 3-D polyline through skin_point()
+/// in steps of at most about 0.1 mm.
+double segment_length_on_skin(const PatientModel& model, const Eigen::Vector2d& a,
+                              const Eigen::Vector2d& b);
+
+/// The point u (theta deg, z mm) whose segments from a and from b (drawn straight in (theta,
+/// z)) are da and db mm long on the skin, found by Newton's method from `guess` (which picks
+/// the side of a-b). Returns false (u untouched) when it does not converge to 1e-4 mm in 30
+/// iterations, e.g. when da + db is shorter than the skin between a and b.
+bool point_at_skin_distances(const PatientModel& model, const Eigen::Vector2d& a, double da,
+                             const Eigen::Vector2d& b, double db, const Eigen::Vector2d& guess,
+                             Eigen::Vector2d& u);
+
 }  // namespace caps::plan
