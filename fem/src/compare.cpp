@@ -68,6 +68,7 @@ SimulationSummary summarize(const Simulation& sim, const PatientModel& model, co
   if (near) s.mean_displacement_mm /= near;
   s.closing_force_n = r.total_suture_force_n;
   s.max_suture_force_n = max_suture_pair_force_n(r);
+  s.max_suture_at_spacing_n = sim.sutures.max_suture_force_n;
   s.strain_energy_mj = r.strain_energy_mj;
   s.elements = static_cast<int>(c.mesh.n_elements());
   s.nodes = static_cast<int>(c.mesh.n_nodes());
@@ -125,6 +126,7 @@ std::string comparison_json(const Comparison& c, const std::string& plan_name) {
                           {"mean_displacement_near_wound_mm", s.mean_displacement_mm},
                           {"closing_force_n", s.closing_force_n},
                           {"max_suture_force_n", s.max_suture_force_n},
+                          {"max_suture_at_spacing_n", s.max_suture_at_spacing_n},
                           {"max_skin_tension_kpa", s.max_skin_tension_kpa},
                           {"strain_energy_mj", s.strain_energy_mj},
                           {"elements", s.elements},

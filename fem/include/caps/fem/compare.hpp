@@ -22,6 +22,8 @@ struct SimulationSummary {
   double mean_displacement_mm = 0;  ///< over the skin nodes within one wound size of the wound
   double closing_force_n = 0;       ///< net force across the wound
   double max_suture_force_n = 0;    ///< the largest force on one sutured node pair
+  /// The largest single-suture force with sutures every SimulateOptions::suture_spacing_mm (N).
+  double max_suture_at_spacing_n = 0;
   double max_skin_tension_kpa = 0;  ///< largest maximum principal stress at a skin node
   double strain_energy_mj = 0;
   int elements = 0, nodes = 0;
