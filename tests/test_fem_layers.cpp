@@ -218,6 +218,16 @@ TEST(MeasuredLayers, WithoutLayerMapsAutoIsUniformAndMeasuredIsRefused) {
       [](double, double) { return 2.0; }, [](double, double) { return 0.0; },
       [](double, double) { return 3.0; }, [](double, double) -> std::uint8_t { return kLayerNoFat; });
   EXPECT_EQ(mesh_wound(lens(), none, small_surface(), {}).continuum.tissue, TissueLayers::Uniform);
+  // Auto needs a quarter of the surface vertices on measured cells: the lens's mesh spans theta
+  // about -23..+23 deg; measured beyond +20 deg is too few, beyond -5 deg enough.
+  auto measured_beyond = [&](double theta0) {
+    return layered_cylinder(
+        [](double, double) { return 2.0; }, [](double, double) { return 1.0; },
+        [](double, double) { return 3.0; },
+        [=](double t, double) -> std::uint8_t { return t > theta0 ? 0 : kLayerSeveralBands; });
+  };
+  EXPECT_EQ(mesh_wound(lens(), measured_beyond(20), small_surface(), {}).continuum.tissue, TissueLayers::Uniform);
+  EXPECT_EQ(mesh_wound(lens(), measured_beyond(-5), small_surface(), {}).continuum.tissue, TissueLayers::Measured);
   EXPECT_EQ(parse_tissue_layers("measured"), TissueLayers::Measured);
   EXPECT_STREQ(tissue_layers_name(TissueLayers::Auto), "auto");
   EXPECT_THROW(parse_tissue_layers("layered"), InvalidInput);

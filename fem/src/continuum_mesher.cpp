@@ -92,8 +92,9 @@ bool inside_or_on(const std::vector<Eigen::Vector2d>& poly, const Eigen::Vector2
   return inside;
 }
 
-// Auto resolved: measured where the model has layer maps and one of the surface mesh's vertices
-// lies on cells whose layers were measured. Measured without layer maps is refused.
+// Auto resolved: measured where the model has layer maps and at least a quarter of the surface
+// mesh's vertices lie on cells whose layers were measured (a stray measured cell in a model
+// without fat does not switch a whole mesh). Measured without layer maps is refused.
 TissueLayers resolve_tissue(const SurfaceMesh& surface, const PatientModel& model,
                             TissueLayers tissue) {
   if (tissue == TissueLayers::Uniform) return tissue;
@@ -104,11 +105,12 @@ TissueLayers resolve_tissue(const SurfaceMesh& surface, const PatientModel& mode
                        "model, or one built with --no-layers); use {tissue} uniform");
   }
   if (tissue == TissueLayers::Measured) return tissue;
+  int n_measured = 0;
   for (int v = 0; v < surface.n_vertices(); ++v) {
     const double theta = surface.theta_z(v, 0), z = surface.theta_z(v, 1);
-    if (model.has_z(z) && model.layer_flags_at(theta, z) == 0) return TissueLayers::Measured;
+    n_measured += model.has_z(z) && model.layer_flags_at(theta, z) == 0;
   }
-  return TissueLayers::Uniform;
+  return 4 * n_measured >= surface.n_vertices() ? TissueLayers::Measured : TissueLayers::Uniform;
 }
 
 // A continuum mesh, or why the surface mesh reaches where the model has no valid tissue (the

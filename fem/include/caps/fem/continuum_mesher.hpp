@@ -55,8 +55,8 @@ BaseCondition parse_base_condition(const std::string& name);
 /// Uniform: one material (ContinuumMeshOptions::material) in n_layers element layers at fixed
 /// fractions of the depth (the 1992 model). Measured: the model's measured tissue layers, each
 /// with its own material (refused when the model has no layer maps). Auto: Measured where the
-/// model has layer maps and at least one of the mesh's columns had its layers measured (no layer
-/// flag), else Uniform.
+/// model has layer maps and at least a quarter of the surface mesh's vertices lie on cells whose
+/// layers were measured (no layer flag), else Uniform.
 enum class TissueLayers { Auto, Uniform, Measured };
 
 /// "auto" / "uniform" / "measured".
