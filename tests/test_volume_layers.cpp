@@ -9,6 +9,7 @@
 #include "caps/volume/model.hpp"
 #include "caps/volume/model_dir.hpp"
 #include "caps/volume/phantom.hpp"
+#include "layered_phantom_model.hpp"
 #include "phantom_crossing.hpp"
 
 namespace fs = std::filesystem;
@@ -29,31 +30,6 @@ double profile(double s, const std::vector<Layer>& layers, double w) {
     hu += step(s - depth) * (next - layers[i].hu);
   }
   return hu;
-}
-
-struct LayeredModel {
-  HeadPhantom ph{true};
-  Volume ct;
-  VolumeModel model;
-  LayeredModel() {
-    PhantomOptions po;
-    // 162 x 210 x 90 mm at 0.75 mm: the head from 15 mm above its centre to the vertex (the
-    // sampling of the phantom dominates the test's time).
-    po.dims = {216, 280, 120};
-    po.spacing_mm = {0.75, 0.75, 0.75};
-    po.head_holder = false;
-    po.layered = true;
-    ModelOptions o;
-    o.maps.n_theta = 256;
-    o.maps.n_z = 128;
-    ct = make_phantom(po);
-    model = build_volume_model(ct, o);
-  }
-};
-
-const LayeredModel& layered_model() {
-  static const LayeredModel m;
-  return m;
 }
 
 }  // namespace
@@ -99,7 +75,7 @@ TEST(Layers, ThinFatAndSeveralBandsAreFlagged) {
 }
 
 TEST(Layers, LayeredPhantomDepthsRecoveredWithinAFifthOfAMillimetre) {
-  const auto& lm = layered_model();
+  const auto& lm = caps_test::layered_model();
   const auto& maps = lm.model.maps;
   const auto& g = maps.grid;
   ASSERT_TRUE(maps.has_layers());
@@ -146,7 +122,7 @@ TEST(Layers, LayeredPhantomDepthsRecoveredWithinAFifthOfAMillimetre) {
 }
 
 TEST(Layers, LayersSumToTheThicknessEverywhere) {
-  const auto& maps = layered_model().model.maps;
+  const auto& maps = caps_test::layered_model().model.maps;
   for (std::size_t c = 0; c < maps.grid.size(); ++c) {
     ASSERT_NEAR(maps.thickness_skin[c] + maps.thickness_fat[c] + maps.thickness_deep[c],
                 maps.thickness[c], 1e-3);
@@ -161,7 +137,7 @@ TEST(Layers, LayersSumToTheThicknessEverywhere) {
 TEST(Layers, NormalLayersMatchWhereTheHeadIsLocallyFlat) {
   // At theta = +-90, z = 30 the nearest bone is close to the radius: the layers along the normal
   // match the phantom's radial depths within the radial bar plus the small obliquity.
-  const auto& lm = layered_model();
+  const auto& lm = caps_test::layered_model();
   const auto& maps = lm.model.maps;
   const auto& g = maps.grid;
   for (double th : {-90.0, 90.0}) {
@@ -177,7 +153,7 @@ TEST(Layers, NormalLayersMatchWhereTheHeadIsLocallyFlat) {
 }
 
 TEST(Layers, ModelDirectoryHoldsTheLayersAndReadsThemBack) {
-  const auto& lm = layered_model();
+  const auto& lm = caps_test::layered_model();
   const fs::path dir = fs::temp_directory_path() / ("caps_layers_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   write_model(lm.model, dir, false);

@@ -49,6 +49,7 @@ fem::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields
   o.continuum.constant_thickness_mm = m.constant_thickness;
   o.continuum.undermine_mm = m.undermine;
   o.continuum.base = fem::parse_base_condition(m.base);
+  o.continuum.tissue = fem::parse_tissue_layers(m.tissue);
   o.solve.solver = fem::parse_solver(s.solver);
   o.solve.mixed_precision = fem::parse_precision(s.precision);
   if (s.material == "goh") {
@@ -126,6 +127,7 @@ MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
   m.fixed_nodes = static_cast<int>(c.mesh.fixed_nodes.size());
   m.suture_pairs = static_cast<int>(c.mesh.sutures.size());
   m.rim = r.meshing.rim;
+  m.tissue = fem::tissue_layers_name(c.tissue);
   m.min_thickness_mm = c.min_thickness_mm;
   m.max_thickness_mm = c.max_thickness_mm;
   m.min_jacobian = c.min_jacobian;
@@ -146,7 +148,7 @@ std::string to_json(const MeshResult& m) {
          {"continuum", {{"nodes", m.nodes}, {"elements", m.elements}, {"hex20", m.hex20},
                         {"wedge15", m.wedge15}, {"layers", m.layers},
                         {"fixed_nodes", m.fixed_nodes}, {"suture_pairs", m.suture_pairs},
-                        {"rim", m.rim},
+                        {"rim", m.rim}, {"tissue", m.tissue},
                         {"thickness_mm", {m.min_thickness_mm, m.max_thickness_mm}},
                         {"min_jacobian", m.min_jacobian}}},
          {"warnings", m.warnings}};
@@ -422,6 +424,9 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
   s.constant_closing_force_n = c.constant_summary.closing_force_n;
   s.measured_max_displacement_mm = c.measured_summary.max_displacement_mm;
   s.constant_max_displacement_mm = c.constant_summary.max_displacement_mm;
+  s.layers_closing_force_n = c.layered_summary.closing_force_n;
+  s.layers_max_displacement_mm = c.layered_summary.max_displacement_mm;
+  s.layers_tissue = c.layered_summary.tissue;
   s.constant_thickness_mm = c.constant_thickness_mm;
   s.warnings = c.warnings;
   return s;
@@ -436,9 +441,11 @@ std::string to_json(const CompareResult& s) {
 std::string summary(const CompareResult& s) {
   return cat("caps compare: closing force ", round_to(s.measured_closing_force_n, 2),
              " N (measured) vs ", round_to(s.constant_closing_force_n, 2), " N (constant ",
-             round_to(s.constant_thickness_mm, 1), " mm); largest displacement ",
-             round_to(s.measured_max_displacement_mm, 2), " vs ",
-             round_to(s.constant_max_displacement_mm, 2), " mm -> ", s.output, "/report.html");
+             round_to(s.constant_thickness_mm, 1), " mm) vs ", round_to(s.layers_closing_force_n, 2),
+             " N (", s.layers_tissue == "measured" ? "measured layers" : "no layers: one material",
+             "); largest displacement ", round_to(s.measured_max_displacement_mm, 2), " vs ",
+             round_to(s.constant_max_displacement_mm, 2), " vs ",
+             round_to(s.layers_max_displacement_mm, 2), " mm -> ", s.output, "/report.html");
 }
 
 }  // namespace caps::app

@@ -38,6 +38,7 @@ SimulationSummary summarize(const Simulation& sim, const PatientModel& model, co
                             double constant_thickness_mm) {
   SimulationSummary s;
   s.label = label;
+  s.tissue = tissue_layers_name(sim.wound.continuum.tissue);
   if (constant_thickness_mm > 0) {
     s.thickness_mean_mm = s.thickness_min_mm = s.thickness_max_mm = constant_thickness_mm;
   } else {
@@ -67,6 +68,7 @@ SimulationSummary summarize(const Simulation& sim, const PatientModel& model, co
   if (near) s.mean_displacement_mm /= near;
   s.closing_force_n = r.total_suture_force_n;
   s.max_suture_force_n = max_suture_pair_force_n(r);
+  s.max_suture_at_spacing_n = sim.sutures.max_suture_force_n;
   s.strain_energy_mj = r.strain_energy_mj;
   s.elements = static_cast<int>(c.mesh.n_elements());
   s.nodes = static_cast<int>(c.mesh.n_nodes());
@@ -81,26 +83,42 @@ Comparison compare_thickness(const PatientModel& model, const plan::Plan& plan, 
   Comparison c;
   SimulateOptions measured = options;
   measured.continuum.constant_thickness_mm = 0;
+  measured.continuum.tissue = TissueLayers::Uniform;
   c.measured = simulate(model, plan, measured, reporter);
   c.constant_thickness_mm =
       constant_mm > 0 ? constant_mm : median(thickness_under_wound(c.measured, model));
   SimulateOptions constant = options;
   constant.continuum.constant_thickness_mm = c.constant_thickness_mm;
+  constant.continuum.tissue = TissueLayers::Uniform;
   // The same surface mesh for both: fix the extent the measured run settled on.
   constant.surface.extent_mm = c.measured.wound.surface.extent_mm;
   c.constant = simulate(model, plan, constant, reporter);
+  SimulateOptions layered = measured;
+  layered.continuum.tissue = TissueLayers::Auto;
+  layered.surface.extent_mm = c.measured.wound.surface.extent_mm;
+  c.layered = simulate(model, plan, layered, reporter);
   c.measured_summary = summarize(c.measured, model, "measured thickness (volume)");
   c.constant_summary = summarize(c.constant, model,
                                  cat("constant ", fmt(c.constant_thickness_mm, 1), " mm (1992 assumption)"),
                                  c.constant_thickness_mm);
   for (const std::string& w : c.measured.wound.continuum.mesh.warnings) c.warnings.push_back("measured: " + w);
   for (const std::string& w : c.constant.wound.continuum.mesh.warnings) c.warnings.push_back("constant: " + w);
+  const bool has_layers = c.layered.wound.continuum.tissue == TissueLayers::Measured;
+  c.layered_summary = summarize(c.layered, model,
+                                has_layers ? "measured layers (dermis, fat, deep tissue)"
+                                           : "measured layers (none measured: one material)");
+  for (const std::string& w : c.layered.wound.continuum.mesh.warnings) c.warnings.push_back("layers: " + w);
+  if (!has_layers)
+    c.warnings.push_back("layers: the model has no measured tissue layers under this mesh (no "
+                         "layer maps, or no fat or skin interface seen there): the third column "
+                         "is one material, as the first");
   return c;
 }
 
 std::string comparison_json(const Comparison& c, const std::string& plan_name) {
   auto side = [](const SimulationSummary& s) {
     return nlohmann::json{{"label", s.label},
+                          {"tissue", s.tissue},
                           {"thickness_under_wound_mm", {{"mean", s.thickness_mean_mm},
                                                         {"min", s.thickness_min_mm},
                                                         {"max", s.thickness_max_mm}}},
@@ -108,6 +126,7 @@ std::string comparison_json(const Comparison& c, const std::string& plan_name) {
                           {"mean_displacement_near_wound_mm", s.mean_displacement_mm},
                           {"closing_force_n", s.closing_force_n},
                           {"max_suture_force_n", s.max_suture_force_n},
+                          {"max_suture_at_spacing_n", s.max_suture_at_spacing_n},
                           {"max_skin_tension_kpa", s.max_skin_tension_kpa},
                           {"strain_energy_mj", s.strain_energy_mj},
                           {"elements", s.elements},
@@ -117,6 +136,7 @@ std::string comparison_json(const Comparison& c, const std::string& plan_name) {
                         {"constant_thickness_mm", c.constant_thickness_mm},
                         {"measured", side(c.measured_summary)},
                         {"constant", side(c.constant_summary)},
+                        {"layers", side(c.layered_summary)},
                         {"warnings", c.warnings}}
       .dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }

@@ -6,7 +6,9 @@
 #include "caps/surface/patient_model.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <memory>
 #include <map>
 #include <optional>
 #include <set>
@@ -26,6 +28,22 @@ BaseCondition parse_base_condition(const std::string& name) {
   if (name == "slide") return BaseCondition::Slide;
   if (name == "free") return BaseCondition::Free;
   throw InvalidInput(cat("base condition '", name, "': expected slide or free"));
+}
+
+const char* tissue_layers_name(TissueLayers tissue) {
+  switch (tissue) {
+    case TissueLayers::Uniform: return "uniform";
+    case TissueLayers::Measured: return "measured";
+    case TissueLayers::Auto: break;
+  }
+  return "auto";
+}
+
+TissueLayers parse_tissue_layers(const std::string& name) {
+  if (name == "auto") return TissueLayers::Auto;
+  if (name == "uniform") return TissueLayers::Uniform;
+  if (name == "measured") return TissueLayers::Measured;
+  throw InvalidInput(cat("tissue layers '", name, "': expected auto, uniform or measured"));
 }
 
 RimCondition parse_rim_condition(const std::string& name) {
@@ -74,6 +92,27 @@ bool inside_or_on(const std::vector<Eigen::Vector2d>& poly, const Eigen::Vector2
   return inside;
 }
 
+// Auto resolved: measured where the model has layer maps and at least a quarter of the surface
+// mesh's vertices lie on cells whose layers were measured (a stray measured cell in a model
+// without fat does not switch a whole mesh). Measured without layer maps is refused.
+TissueLayers resolve_tissue(const SurfaceMesh& surface, const PatientModel& model,
+                            TissueLayers tissue) {
+  if (tissue == TissueLayers::Uniform) return tissue;
+  if (!model.has_layers()) {
+    if (tissue == TissueLayers::Auto) return TissueLayers::Uniform;
+    throw InvalidParameter("mesh: measured tissue layers need the model's layer maps "
+                       "(thickness_skin/fat/deep.nrrd), which this model has not (an MR or scan "
+                       "model, or one built with --no-layers); use {tissue} uniform");
+  }
+  if (tissue == TissueLayers::Measured) return tissue;
+  int n_measured = 0;
+  for (int v = 0; v < surface.n_vertices(); ++v) {
+    const double theta = surface.theta_z(v, 0), z = surface.theta_z(v, 1);
+    n_measured += model.has_z(z) && model.layer_flags_at(theta, z) == 0;
+  }
+  return 4 * n_measured >= surface.n_vertices() ? TissueLayers::Measured : TissueLayers::Uniform;
+}
+
 // A continuum mesh, or why the surface mesh reaches where the model has no valid tissue (the
 // message of an OffModelError): a caller with room to mesh less can try a smaller extent.
 struct ContinuumAttempt {
@@ -83,28 +122,35 @@ struct ContinuumAttempt {
 
 ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
                                     const ContinuumMeshOptions& o) {
-  const int NL = o.n_layers;
-  if (NL < 1 || NL > 50 || !(o.grading > 0) || !std::isfinite(o.grading))
-    throw InvalidInput(cat("continuum mesher: layers ", NL, " must be in 1..50 and grading ",
+  if (o.n_layers < 1 || o.n_layers > 50 || !(o.grading > 0) || !std::isfinite(o.grading))
+    throw InvalidInput(cat("continuum mesher: layers ", o.n_layers, " must be in 1..50 and grading ",
                            o.grading, " positive"));
   if (!(o.undermine_mm >= 0) || !std::isfinite(o.undermine_mm))
     throw InvalidInput(cat("continuum mesher: undermining ", o.undermine_mm,
                            " mm must be 0 (none) or a positive distance from the wound"));
   if (surface.polygons.empty())
     throw InvalidInput("continuum mesher: the surface mesh has no polygons");
+  if (!(o.min_tissue_layer_mm > 0) || !std::isfinite(o.min_tissue_layer_mm))
+    throw InvalidInput(cat("continuum mesher: the thinnest tissue layer ", o.min_tissue_layer_mm,
+                           " mm must be positive"));
+  const bool measured = resolve_tissue(surface, model, o.tissue) == TissueLayers::Measured;
+  // Measured: `per` element layers in each tissue layer (dermis, fat, deep).
+  const int per = measured ? std::max(1, static_cast<int>(std::lround(o.n_layers / 3.0))) : 0;
+  const int NL = measured ? 3 * per : o.n_layers;  // element layers
   ContinuumAttempt attempt;
   ContinuumMesh& out = attempt.mesh.emplace();
   out.n_layers = NL;
+  out.tissue = measured ? TissueLayers::Measured : TissueLayers::Uniform;
+  if (measured) {
+    out.fat_top_level = per;
+    out.fat_bottom_level = 2 * per;
+  }
   Mesh& mesh = out.mesh;
 
-  // Layer interfaces as fractions of the depth: layer k is grading^k times the first.
+  // Uniform: layer interfaces as fractions of the depth, layer k grading^k times the first.
   std::vector<double> F(NL + 1, 0.0);
   for (int k = 0; k < NL; ++k) F[k + 1] = F[k] + std::pow(o.grading, k);
   for (double& f : F) f /= F[NL];
-  auto fraction = [&](int half_level) {
-    return half_level % 2 == 0 ? F[half_level / 2]
-                               : 0.5 * (F[half_level / 2] + F[half_level / 2 + 1]);
-  };
 
   // Surface edges.
   std::map<std::pair<int, int>, int> edge_id;
@@ -120,6 +166,7 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
 
   const int NV = surface.n_vertices();
   const int NE = static_cast<int>(edges.size());
+  std::vector<char> fatless(static_cast<std::size_t>(NV), 0);  // measured: a vertex without fat
   const int per_vertex = 2 * NL + 1, per_edge = NL + 1;
   auto vnode = [&](int v, int half_level) { return v * per_vertex + half_level; };
   auto enode = [&](int e, int level) { return NV * per_vertex + e * per_edge + level; };
@@ -133,8 +180,39 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   out.max_thickness_mm = 0;
 
   // The nodes of one column; returns why the site cannot be meshed (empty if it can).
+  // The depths (mm) of the NL + 1 element-layer interfaces of a column of thickness T at
+  // (theta, z); *no_fat: measured, and the fat there was thinner than the thinnest layer.
+  std::vector<double> D(static_cast<std::size_t>(NL) + 1);
+  auto interfaces = [&](double theta, double z, double T, bool* no_fat) {
+    if (!measured) {
+      for (int k = 0; k <= NL; ++k) D[k] = F[k] * T;
+      return;
+    }
+    std::array<double, 3> t{std::max(0.0, model.thickness_skin(theta, z)),
+                            std::max(0.0, model.thickness_fat(theta, z)),
+                            std::max(0.0, model.thickness_deep(theta, z))};
+    const double sum = t[0] + t[1] + t[2];
+    // The layers in proportion to T (they sum to the model's thickness; a constant depth scales
+    // them); without any depth the column is skin (cannot happen on a model with layers).
+    if (sum > 0)
+      for (double& x : t) x *= T / sum;
+    else
+      t = {T, 0, 0};
+    const double thinnest = std::min(o.min_tissue_layer_mm, T / 4);
+    *no_fat = t[kFatLayer] < thinnest;
+    for (int l = 0; l < 3; ++l)
+      if (t[l] < thinnest) {
+        const int thickest = static_cast<int>(std::max_element(t.begin(), t.end()) - t.begin());
+        t[thickest] -= thinnest - t[l];
+        t[l] = thinnest;
+      }
+    D[0] = 0;
+    for (int l = 0; l < 3; ++l)
+      for (int i = 1; i <= per; ++i) D[l * per + i] = D[l * per] + i * t[l] / per;
+    D[NL] = T;  // exactly, whatever the round-off of the sums
+  };
   auto column = [&](const Eigen::Vector2d& tz, auto&& node_of, int n_half_levels,
-                    int step) -> std::string {
+                    int step, bool* no_fat) -> std::string {
     const double theta = tz.x(), z = tz.y();
     const auto& g = model.grid();
     const double margin_mm = kEndRowsKeptFree * g.dz_mm;
@@ -159,10 +237,15 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
                  " mm); there is no valid tissue layer to mesh there");
     out.min_thickness_mm = std::min(out.min_thickness_mm, T);
     out.max_thickness_mm = std::max(out.max_thickness_mm, T);
+    bool thin_fat = false;
+    interfaces(theta, z, T, &thin_fat);
+    if (thin_fat) ++out.widened_fat_columns;
+    if (no_fat) *no_fat = thin_fat;
     for (int h = 0; h <= n_half_levels; h += step) {
       const int id = node_of(h);
+      const double depth = h % 2 == 0 ? D[h / 2] : 0.5 * (D[h / 2] + D[h / 2 + 1]);
       // Nodes lie on the line from the skin point to the axis (paper section 6).
-      mesh.nodes.row(id) = model.to_lps(theta, z, r_top - fraction(h) * T).transpose();
+      mesh.nodes.row(id) = model.to_lps(theta, z, r_top - depth).transpose();
       out.node_theta_z.row(id) = tz.transpose();
       out.node_level[id] = 0.5 * h;
     }
@@ -171,23 +254,38 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   const auto off_model = [](std::string why) {
     return ContinuumAttempt{std::nullopt, std::move(why)};
   };
-  for (int v = 0; v < NV; ++v)
+  for (int v = 0; v < NV; ++v) {
+    bool no_fat = false;
     if (std::string why = column(surface.theta_z.row(v).transpose(),
-                                 [&](int h) { return vnode(v, h); }, 2 * NL, 1);
+                                 [&](int h) { return vnode(v, h); }, 2 * NL, 1, &no_fat);
         !why.empty())
       return off_model(std::move(why));
+    fatless[v] = no_fat;
+  }
   for (int e = 0; e < NE; ++e) {
     // The mid-edge node of the top face: the midpoint in (theta, z), snapped to the skin.
     const Eigen::Vector2d tz =
         0.5 * (surface.theta_z.row(edges[e].first) + surface.theta_z.row(edges[e].second)).transpose();
-    if (std::string why = column(tz, [&](int h) { return enode(e, h / 2); }, 2 * NL, 2);
+    if (std::string why = column(tz, [&](int h) { return enode(e, h / 2); }, 2 * NL, 2, nullptr);
         !why.empty())
       return off_model(std::move(why));
   }
 
   // Elements: polygons run counter-clockwise in (theta, z), i.e. seen from outside the skin;
   // reversed, their right-hand normal points into the tissue as the element numbering needs.
-  for (int k = 0; k < NL; ++k) mesh.materials.emplace(k, o.material);
+  if (measured) {
+    // Element layer ids are the tissue layers; the finite-strain solve gets each one's
+    // neo-Hookean solid (the same E and nu).
+    const std::array<std::pair<int, const LinearElastic*>, 3> tissues{
+        {{kDermisLayer, &o.dermis}, {kFatLayer, &o.fat}, {kDeepLayer, &o.deep}}};
+    for (const auto& [id, m] : tissues) {
+      mesh.materials.emplace(id, *m);
+      mesh.finite_materials[id] =
+          std::make_shared<NeoHookean>(*m, cat(id == kDermisLayer ? "dermis" : id == kFatLayer ? "fat" : "deep tissue"));
+    }
+  } else {
+    for (int k = 0; k < NL; ++k) mesh.materials.emplace(k, o.material);
+  }
   mesh.flaps.assign(surface.flaps_theta_z.size(), {});
   for (std::size_t p = 0; p < surface.polygons.size(); ++p) {
     std::vector<int> v(surface.polygons[p].rbegin(), surface.polygons[p].rend());
@@ -198,9 +296,17 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
     int flap = -1;
     for (std::size_t f = 0; f < surface.flaps_theta_z.size() && flap < 0; ++f)
       if (inside_or_on(surface.flaps_theta_z[f], centroid)) flap = static_cast<int>(f);
+    // Measured: a fat element whose corner columns mostly had no fat is deep tissue.
+    int n_fatless = 0;
+    for (int i : v) n_fatless += fatless[i];
+    const bool fat_absent = 2 * n_fatless > n;
     for (int k = 0; k < NL; ++k) {
       Element el;
       el.layer = k;
+      if (measured) {
+        el.layer = k / per;
+        if (el.layer == kFatLayer && fat_absent) el.layer = kDeepLayer;
+      }
       el.type = n == 4 ? ElementType::Hex20 : ElementType::Wedge15;
       const int top_mid_off = n == 4 ? 8 : 6, bot_mid_off = n == 4 ? 12 : 9;
       const int centre = n == 4 ? 16 : 12;
@@ -315,12 +421,14 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   // (their twins across the wound lie on other normals).
   if (o.base == BaseCondition::Slide) {
     constexpr double kSlidingStiffness = 1e5;
+    const double E_sliding = measured ? std::max({o.dermis.E_mpa(), o.fat.E_mpa(), o.deep.E_mpa()})
+                                      : o.material.E_mpa();
     auto slide = [&](int bottom, int top) {
       if (fixed.count(bottom) || sutured.count(bottom) || free_base.count(bottom)) return;
       const Eigen::Vector3d up = (mesh.nodes.row(top) - mesh.nodes.row(bottom)).transpose();
       const double height = up.norm();
       if (!(height > 0)) return;
-      mesh.sliding.push_back({bottom, up / height, kSlidingStiffness * o.material.E_mpa() * height});
+      mesh.sliding.push_back({bottom, up / height, kSlidingStiffness * E_sliding * height});
     };
     for (int v = 0; v < NV; ++v) slide(vnode(v, 2 * NL), vnode(v, 0));
     for (int e = 0; e < NE; ++e) slide(enode(e, NL), enode(e, 0));

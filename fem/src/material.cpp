@@ -244,3 +244,12 @@ LinearElastic default_skin() { return LinearElastic(0.1, 0.45, "default skin"); 
 LinearElastic default_subcutaneous() { return LinearElastic(0.005, 0.45, "default subcutaneous"); }
 
 }  // namespace caps::fem
+
+namespace caps::fem {
+
+// The measured tissue layers; sources in docs/fem.md ("Measured layers").
+LinearElastic default_dermis() { return LinearElastic(0.1, 0.45, "default dermis"); }
+LinearElastic default_fat() { return LinearElastic(0.003, 0.45, "default fat"); }
+LinearElastic default_deep() { return LinearElastic(0.02, 0.45, "default deep tissue"); }
+
+}  // namespace caps::fem

@@ -80,15 +80,35 @@ Eigen::Vector3d PatientModel::color_at(double theta_deg, double z_mm) const {
          s.fv * ((1 - s.fu) * px(s.c01) + s.fu * px(s.c11));
 }
 
-std::uint8_t PatientModel::flags_at(double theta_deg, double z_mm) const {
+std::uint8_t PatientModel::or_flags(const std::vector<std::uint8_t>& img, double theta_deg,
+                                    double z_mm) const {
   const Stencil s = stencil(theta_deg, z_mm);
   std::uint8_t f = 0;
   const bool u_used = s.fu > 1e-12, v_used = s.fv > 1e-12;
-  f |= maps_.flags[s.c00];
-  if (u_used) f |= maps_.flags[s.c10];
-  if (v_used) f |= maps_.flags[s.c01];
-  if (u_used && v_used) f |= maps_.flags[s.c11];
+  f |= img[s.c00];
+  if (u_used) f |= img[s.c10];
+  if (v_used) f |= img[s.c01];
+  if (u_used && v_used) f |= img[s.c11];
   return f;
+}
+
+std::uint8_t PatientModel::flags_at(double theta_deg, double z_mm) const {
+  return or_flags(maps_.flags, theta_deg, z_mm);
+}
+
+double PatientModel::thickness_skin(double t, double z) const {
+  return has_layers() ? sample(maps_.thickness_skin, t, z) : 0.0;
+}
+double PatientModel::thickness_fat(double t, double z) const {
+  return has_layers() ? sample(maps_.thickness_fat, t, z) : 0.0;
+}
+double PatientModel::thickness_deep(double t, double z) const {
+  return has_layers() ? sample(maps_.thickness_deep, t, z) : 0.0;
+}
+
+std::uint8_t PatientModel::layer_flags_at(double theta_deg, double z_mm) const {
+  if (!has_layers() || maps_.layer_flags.size() != maps_.grid.size()) return kLayerNoThickness;
+  return or_flags(maps_.layer_flags, theta_deg, z_mm);
 }
 
 Eigen::Vector3d PatientModel::to_lps(double theta_deg, double z_mm, double r_mm) const {

@@ -27,6 +27,7 @@ struct MeshingFields {
   double stage1_angle = fem::SurfaceMeshOptions{}.stage1_min_angle_deg;
   double t2 = fem::SurfaceMeshOptions{}.t2_deg;
   double constant_thickness = fem::ContinuumMeshOptions{}.constant_thickness_mm;
+  std::string tissue = fem::tissue_layers_name(fem::ContinuumMeshOptions{}.tissue);
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
@@ -48,6 +49,9 @@ struct MeshingFields {
     v(r.t2, {"t2", "stage 2: expand corners sharper than this (deg)"});
     v(r.constant_thickness, {"constant_thickness", "mesh a constant depth (mm) instead of the "
                                                    "model's thickness (the 1992 paper); 0 = measured"});
+    v(r.tissue, {"tissue", "tissue layers: measured (dermis, fat and deep tissue from the model's "
+                           "layer maps, each its own material), uniform (one material, the 1992 "
+                           "model) or auto (measured where the model has them)"});
   }
 };
 
@@ -110,6 +114,7 @@ struct MeshResult {
   int nodes = 0, elements = 0, hex20 = 0, wedge15 = 0, layers = 0, fixed_nodes = 0,
       suture_pairs = 0;
   std::string rim;
+  std::string tissue;  ///< the tissue layering used: uniform or measured
   double min_thickness_mm = 0, max_thickness_mm = 0, min_jacobian = 0;
   std::vector<std::string> warnings;
 };
@@ -283,12 +288,16 @@ struct CompareResult {
   std::string comparison_json;  ///< comparison.json (the table, warnings included)
   double measured_closing_force_n = 0, constant_closing_force_n = 0;
   double measured_max_displacement_mm = 0, constant_max_displacement_mm = 0;
+  /// The third column: the measured thickness in the measured tissue layers.
+  double layers_closing_force_n = 0, layers_max_displacement_mm = 0;
+  std::string layers_tissue;  ///< "measured", or "uniform" where the model has no layers
   double constant_thickness_mm = 0;
   std::vector<std::string> warnings;
 };
 
-/// Simulates the plan with the measured and with a constant thickness and writes measured/,
-/// constant/, comparison.json and report.html into `output`.
+/// Simulates the plan with the measured and with a constant thickness (one material), and with
+/// the measured thickness in the measured tissue layers, and writes measured/, constant/,
+/// comparison.json (all three columns) and report.html (the first two) into `output`.
 CompareResult run_compare(const CompareRequest& request, Reporter* reporter = nullptr);
 std::string to_json(const CompareResult& result);
 std::string summary(const CompareResult& result);

@@ -10,6 +10,14 @@
 /// interface and a centre node in the middle of every layer; edge columns carry the mid-edge nodes
 /// at every interface. Elements of one column share those nodes, so neighbouring elements share
 /// faces and mid-edge nodes.
+/// Tissue layers (TissueLayers::Measured; docs/fem.md, "Measured layers"): the element layers
+/// follow the model's measured skin/fat and fat/deep interfaces instead of fixed fractions: each
+/// column's depths come from the layer maps at its site (bilinear, like the thickness), every
+/// tissue layer (dermis, subcutaneous fat, deep tissue) gets the same number of element layers
+/// and its own material (element layer id 0 dermis, 1 fat, 2 deep). A tissue layer thinner than
+/// min_tissue_layer_mm (the fat where none was seen) is widened to it at the expense of the
+/// thickest one; the elements of such a fat layer whose corner columns mostly had no fat of that
+/// thickness carry the deep tissue's material (no fat is there).
 /// Sutures: for each suture ((a,b),(c,d)) the nodes along the two sides (border edges, or runs of
 /// them, which the surface mesher gave matching nodes by arc length) are paired at every depth
 /// (corners, mid-edge and centre nodes); the shared point of a closed corner is skipped.
@@ -43,14 +51,32 @@ const char* base_condition_name(BaseCondition base);
 /// Parses "slide" / "free"; throws InvalidInput otherwise.
 BaseCondition parse_base_condition(const std::string& name);
 
+/// How the soft tissue between skin and bone is layered.
+/// Uniform: one material (ContinuumMeshOptions::material) in n_layers element layers at fixed
+/// fractions of the depth (the 1992 model). Measured: the model's measured tissue layers, each
+/// with its own material (refused when the model has no layer maps). Auto: Measured where the
+/// model has layer maps and at least a quarter of the surface mesh's vertices lie on cells whose
+/// layers were measured (no layer flag), else Uniform.
+enum class TissueLayers { Auto, Uniform, Measured };
+
+/// "auto" / "uniform" / "measured".
+const char* tissue_layers_name(TissueLayers tissue);
+/// Parses "auto" / "uniform" / "measured"; throws InvalidInput otherwise.
+TissueLayers parse_tissue_layers(const std::string& name);
+
+/// Element layer ids (Element::layer, Mesh::materials) of the measured tissue layers.
+inline constexpr int kDermisLayer = 0, kFatLayer = 1, kDeepLayer = 2;
+
 /// "fixed" / "free".
 const char* rim_condition_name(RimCondition rim);
 /// Parses "fixed" / "free"; throws InvalidInput otherwise.
 RimCondition parse_rim_condition(const std::string& name);
 
 struct ContinuumMeshOptions {
-  int n_layers = 2;             ///< element layers between skin and bone, >= 1
-  double grading = 1.0;         ///< thickness ratio of each layer to the one above, > 0
+  /// Element layers between skin and bone, >= 1. Measured tissue layers: each of the three gets
+  /// max(1, round(n_layers / 3)) of them.
+  int n_layers = 2;
+  double grading = 1.0;         ///< uniform: thickness ratio of each layer to the one above, > 0
   RimCondition rim = RimCondition::Fixed;
   double min_thickness_mm = 0.5;  ///< refuse sites with less soft tissue than this
   /// > 0: a constant depth (mm) as in the 1992 paper, instead of the model's thickness map.
@@ -64,7 +90,16 @@ struct ContinuumMeshOptions {
   /// their whole area whatever this is.
   double undermine_mm = 10;
   BaseCondition base = BaseCondition::Slide;  ///< the freed base: slides on the deep tissue or is free
-  LinearElastic material = default_skin();  ///< used for every layer
+  LinearElastic material = default_skin();  ///< uniform: used for every layer
+  /// Uniform (default) or measured tissue layers (Auto: measured when the model has them).
+  /// Measured layers are not the default yet: on Cranium the large-deformation Z-plasty did not
+  /// converge with them and the small-strain one inverts the thin fat (docs/fem.md).
+  TissueLayers tissue = TissueLayers::Uniform;
+  /// Measured: the thinnest a tissue layer is meshed (mm; at most a quarter of the column).
+  double min_tissue_layer_mm = 0.5;
+  LinearElastic dermis = default_dermis();  ///< measured: the skin layer's material
+  LinearElastic fat = default_fat();        ///< measured: the subcutaneous fat's
+  LinearElastic deep = default_deep();      ///< measured: the deep tissue's (muscle, fascia)
 };
 
 /// The continuum mesh and where its nodes came from.
@@ -75,6 +110,12 @@ struct ContinuumMesh {
   std::vector<int> element_polygon;   ///< element -> surface polygon
   std::vector<int> skin_node;         ///< surface vertex -> its node on the skin
   int n_layers = 0;
+  /// The tissue layering used (Uniform or Measured; Auto is resolved).
+  TissueLayers tissue = TissueLayers::Uniform;
+  /// Measured: the node levels of the skin/fat and the fat/deep interfaces (-1 when uniform).
+  int fat_top_level = -1, fat_bottom_level = -1;
+  /// Measured: columns (vertex and edge sites) whose fat was widened to min_tissue_layer_mm.
+  int widened_fat_columns = 0;
   double min_thickness_mm = 0, max_thickness_mm = 0;  ///< over the mesh's sites
   double min_jacobian = 0;  ///< smallest det J over all Gauss points (mm^3 per unit volume)
 };

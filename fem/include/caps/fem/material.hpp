@@ -201,3 +201,18 @@ LinearElastic default_skin();
 LinearElastic default_subcutaneous();
 
 }  // namespace caps::fem
+
+namespace caps::fem {
+
+/// The tissue layers the continuum mesher follows with TissueLayers::Measured (docs/fem.md,
+/// "Measured layers", has the sources). Small-strain constants; the finite-strain solve uses the
+/// neo-Hookean solid with the same E and nu.
+/// Dermis (skin layer down to the subcutaneous fat): E = 100 kPa, nu = 0.45 (as default_skin()).
+LinearElastic default_dermis();
+/// Subcutaneous fat: E = 3 kPa, nu = 0.45.
+LinearElastic default_fat();
+/// Deep soft tissue between the fat and the bone (muscle, fascia, galea, SMAS): E = 20 kPa,
+/// nu = 0.45.
+LinearElastic default_deep();
+
+}  // namespace caps::fem

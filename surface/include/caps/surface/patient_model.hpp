@@ -64,6 +64,17 @@ class PatientModel {
   /// Bilinear sample of any of the maps' images (e.g. maps().thickness_skin_normal) at
   /// (theta deg, z mm), as the samplers above. `img` holds grid().size() values.
   double sample(const std::vector<float>& img, double theta_deg, double z_mm) const;
+  /// Whether the model carries tissue-layer maps (CT models: thickness_{skin,fat,deep}.nrrd).
+  bool has_layers() const { return maps_.has_layers(); }
+  /// Bilinear radial depths (mm) of the tissue layers along the same ray as thickness():
+  /// skin (dermis, surface to the top of the fat), subcutaneous fat, deep tissue (fat to bone);
+  /// they sum to thickness(). 0 when the model has no layers (has_layers()).
+  double thickness_skin(double theta_deg, double z_mm) const;
+  double thickness_fat(double theta_deg, double z_mm) const;
+  double thickness_deep(double theta_deg, double z_mm) const;
+  /// The OR of the radial layer flags (LayerFlag) of the cells the bilinear sample uses: 0 means
+  /// every cell it blends had its layers measured; kLayerNoThickness without layer maps.
+  std::uint8_t layer_flags_at(double theta_deg, double z_mm) const;
   /// Bilinear colour, RGB in [0, 1]; (0.5, 0.5, 0.5) when the model has no colour.
   Eigen::Vector3d color_at(double theta_deg, double z_mm) const;
   /// The OR of the validity flags of the (up to four) cells that the bilinear sample uses:
@@ -89,6 +100,8 @@ class PatientModel {
     double fu, fv;
   };
   Stencil stencil(double theta_deg, double z_mm) const;
+  // The OR of the flags of the cells the bilinear sample uses.
+  std::uint8_t or_flags(const std::vector<std::uint8_t>& img, double theta_deg, double z_mm) const;
 
   CylindricalMaps maps_;
   RgbImage color_;
