@@ -204,7 +204,9 @@ TEST(MeasuredLayers, WithoutLayerMapsAutoIsUniformAndMeasuredIsRefused) {
   ContinuumMeshOptions uniform;
   uniform.tissue = TissueLayers::Uniform;
   const ContinuumMesh u = mesh_wound(lens(), model, small_surface(), uniform).continuum;
-  const ContinuumMesh a = mesh_wound(lens(), model, small_surface(), {}).continuum;  // Auto
+  ContinuumMeshOptions automatic;  // the default is uniform: auto is asked for
+  automatic.tissue = TissueLayers::Auto;
+  const ContinuumMesh a = mesh_wound(lens(), model, small_surface(), automatic).continuum;
   EXPECT_EQ(a.tissue, TissueLayers::Uniform);
   EXPECT_EQ(a.fat_top_level, -1);
   ASSERT_EQ(a.mesh.n_nodes(), u.mesh.n_nodes());
@@ -217,7 +219,7 @@ TEST(MeasuredLayers, WithoutLayerMapsAutoIsUniformAndMeasuredIsRefused) {
   const PatientModel none = layered_cylinder(
       [](double, double) { return 2.0; }, [](double, double) { return 0.0; },
       [](double, double) { return 3.0; }, [](double, double) -> std::uint8_t { return kLayerNoFat; });
-  EXPECT_EQ(mesh_wound(lens(), none, small_surface(), {}).continuum.tissue, TissueLayers::Uniform);
+  EXPECT_EQ(mesh_wound(lens(), none, small_surface(), automatic).continuum.tissue, TissueLayers::Uniform);
   // Auto needs a quarter of the surface vertices on measured cells: the lens's mesh spans theta
   // about -23..+23 deg; measured beyond +20 deg is too few, beyond -5 deg enough.
   auto measured_beyond = [&](double theta0) {
@@ -226,8 +228,9 @@ TEST(MeasuredLayers, WithoutLayerMapsAutoIsUniformAndMeasuredIsRefused) {
         [](double, double) { return 3.0; },
         [=](double t, double) -> std::uint8_t { return t > theta0 ? 0 : kLayerSeveralBands; });
   };
-  EXPECT_EQ(mesh_wound(lens(), measured_beyond(20), small_surface(), {}).continuum.tissue, TissueLayers::Uniform);
-  EXPECT_EQ(mesh_wound(lens(), measured_beyond(-5), small_surface(), {}).continuum.tissue, TissueLayers::Measured);
+  EXPECT_EQ(mesh_wound(lens(), measured_beyond(20), small_surface(), automatic).continuum.tissue, TissueLayers::Uniform);
+  EXPECT_EQ(mesh_wound(lens(), measured_beyond(-5), small_surface(), automatic).continuum.tissue, TissueLayers::Measured);
+  EXPECT_EQ(mesh_wound(lens(), measured_beyond(-5), small_surface(), {}).continuum.tissue, TissueLayers::Uniform);
   EXPECT_EQ(parse_tissue_layers("measured"), TissueLayers::Measured);
   EXPECT_STREQ(tissue_layers_name(TissueLayers::Auto), "auto");
   EXPECT_THROW(parse_tissue_layers("layered"), InvalidInput);
