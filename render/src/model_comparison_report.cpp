@@ -13,28 +13,15 @@
 #include "caps/render/simulation_report.hpp"
 #include "caps/surface/patient_model.hpp"
 
+#include "html_text.hpp"
+
 namespace fs = std::filesystem;
 
 namespace caps::render {
 namespace {
 
-std::string fmt(double x, int digits = 2) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", digits, x);
-  return buf;
-}
-
-std::string html_escape(const std::string& text) {
-  std::string out;
-  for (const char ch : text) {
-    if (ch == '<') out += "&lt;";
-    else if (ch == '>') out += "&gt;";
-    else if (ch == '&') out += "&amp;";
-    else if (ch == '"') out += "&quot;";
-    else out += ch;
-  }
-  return out;
-}
+using detail::fmt;
+using detail::html_escape;
 
 // Nearest vertex queries on a uniform grid of `cell` mm buckets (the skins' micropolygons are
 // about 0.5 mm apart, so a query looks at 27 buckets of a few vertices each).

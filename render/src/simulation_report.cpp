@@ -10,28 +10,15 @@
 #include "caps/image/image_io.hpp"
 #include "caps/surface/patient_model.hpp"
 
+#include "html_text.hpp"
+
 namespace fs = std::filesystem;
 
 namespace caps::render {
 namespace {
 
-std::string fmt(double x, int digits = 2) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", digits, x);
-  return buf;
-}
-
-std::string html_escape(const std::string& text) {
-  std::string out;
-  for (const char ch : text) {
-    if (ch == '<') out += "&lt;";
-    else if (ch == '>') out += "&gt;";
-    else if (ch == '&') out += "&amp;";
-    else if (ch == '"') out += "&quot;";
-    else out += ch;
-  }
-  return out;
-}
+using detail::fmt;
+using detail::html_escape;
 
 // The warnings as a highlighted list (empty when there are none).
 std::string warnings_html(const std::vector<std::string>& warnings) {
