@@ -147,8 +147,9 @@ int brow_above(const Profile& mid, double zn, double reach = 30.0) {
 
 // The face's midline without a nose tip: the theta within 45 deg of the front about which the
 // skin is most left-right symmetric, the mean of (r(t + d, z) - r(t - d, z))^2 over d = 4..40
-// deg and every z where both sides are measured, refined by a parabola. Also the rms asymmetry
-// there (mm). nullopt with fewer than 200 measured pairs at the best theta.
+// deg and every z where both sides are measured (among the thetas with at least half the most
+// pairs), refined by a parabola. Also the rms asymmetry there (mm). nullopt with fewer than 200
+// measured pairs at the best theta.
 std::optional<std::pair<double, double>> symmetric_midline(const SkinRangeView& view) {
   const double step = std::max(view.dtheta_deg, 0.5);
   std::vector<double> ts, cost;
@@ -168,8 +169,13 @@ std::optional<std::pair<double, double>> symmetric_midline(const SkinRangeView& 
     cost.push_back(n > 0 ? sum / n : std::numeric_limits<double>::infinity());
     count.push_back(n);
   }
-  const auto best = static_cast<int>(std::min_element(cost.begin(), cost.end()) - cost.begin());
-  if (count[best] < 200) return std::nullopt;
+  // Only thetas with at least half the most measured pairs compete (a few symmetric pairs at the
+  // edge of a scan are not a face's symmetry).
+  const int most = *std::max_element(count.begin(), count.end());
+  int best = -1;
+  for (int i = 0; i < static_cast<int>(ts.size()); ++i)
+    if (2 * count[i] >= most && (best < 0 || cost[i] < cost[best])) best = i;
+  if (best < 0 || count[best] < 200) return std::nullopt;
   double t = ts[best];
   if (best > 0 && best + 1 < static_cast<int>(ts.size()) && std::isfinite(cost[best - 1]) &&
       std::isfinite(cost[best + 1]))
@@ -181,8 +187,10 @@ std::optional<std::pair<double, double>> symmetric_midline(const SkinRangeView& 
 // them (docs/landmarks.md, "Without the nose tip"). The nasion is the deepest midline concavity
 // with a brow at least 2 mm in front of it within 30 mm above and the skin measured for 6 mm
 // below it and rising there (the nose's root) by 1 mm; the glabella the most prominent point
-// within 30 mm above it. Without such a nasion, the glabella is the most anterior midline point
-// the skin falls away from by 2 mm both above (within 30 mm) and below (within the scan).
+// within 40 mm above it, not at the scan's edge (a flat brow, ch2's, peaks near 30 mm above).
+// Without such a nasion, the glabella is the most anterior midline point the skin falls away
+// from by 2 mm both above (within 30 mm) and below (within the scan), on a band across the face
+// (20 mm to either side the skin lies within 5 mm behind it: not a nose).
 // Confidences are half (nasion, glabella above it) or a quarter (glabella alone) of the
 // pronasale-based ones. Puts both landmarks; returns the midline theta used (NaN without one).
 double brow_without_nose(const SkinRangeView& view, const std::string& why,
