@@ -232,7 +232,8 @@ double brow_without_nose(const SkinRangeView& view, const std::string& why,
   }
   if (best >= 0) {
     const double zn = refine_z(mid, best);
-    put.push_back(at("nasion", tm, zn, 0.5 * std::min(1.0, depth / 2.0) * measured_factor(view, tm, zn),
+    put.push_back(at("nasion", tm, zn,
+                     0.5 * std::min(1.0, depth / 2.0) * measured_factor(view, tm, zn),
                      cat("without the pronasale: the deepest midline point below the brow, ",
                          mm(depth), " below it, the nasal root measured below; ", how)));
     int g = brow_above(mid, zn, 40.0);
@@ -250,7 +251,8 @@ double brow_without_nose(const SkinRangeView& view, const std::string& why,
     } else {
       const double z = refine_z(mid, g);
       const double d = mid.v[g] - view.r_mm(tm, zn);
-      put.push_back(at("glabella", tm, z, 0.5 * std::min(1.0, d / 2.0) * measured_factor(view, tm, z),
+      put.push_back(at("glabella", tm, z,
+                       0.5 * std::min(1.0, d / 2.0) * measured_factor(view, tm, z),
                        cat("without the pronasale: the most prominent midline point above the "
                            "nasion, ", mm(d), " in front of it; ", how)));
     }
@@ -282,7 +284,8 @@ double brow_without_nose(const SkinRangeView& view, const std::string& why,
                                             "away from by 2 mm above and below within the scan)"));
   } else {
     const double z = refine_z(mid, g);
-    put.push_back(at("glabella", tm, z, 0.25 * std::min(1.0, prominence / 2.0) * measured_factor(view, tm, z),
+    put.push_back(at("glabella", tm, z,
+                     0.25 * std::min(1.0, prominence / 2.0) * measured_factor(view, tm, z),
                      cat("without the pronasale or the nasion: the most anterior midline brow "
                          "point, the skin ", mm(prominence), " behind it above and below; ", how)));
   }
