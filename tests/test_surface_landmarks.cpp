@@ -188,3 +188,74 @@ TEST(Landmarks, JsonRoundTrip) {
   EXPECT_THROW(landmarks_from_json("{\"items\": 3}", "test"), InvalidInput);
   EXPECT_THROW(landmarks_from_json("not json", "test"), InvalidInput);
 }
+
+namespace {
+
+// The model's range view with the skin below z_cut (model mm) not measured: a scan that ends
+// there, as the tilted GE CT ends at the nose and ch2 at the eyes.
+SkinRangeView cut_below(const PatientModel& model, double z_cut) {
+  SkinRangeView v = skin_range_view(model);
+  auto inner = v.measured;
+  v.measured = [inner, z_cut](double t, double z) { return z >= z_cut && inner(t, z); };
+  return v;
+}
+
+double distance_on_skin(const PatientModel& model, const HeadPhantom& head, const Landmark& a,
+                        const Landmark& b) {
+  return (model.to_lps(a.theta_deg, a.z_mm, analytic_r(head, model, a.theta_deg, a.z_mm)) -
+          model.to_lps(b.theta_deg, b.z_mm, analytic_r(head, model, b.theta_deg, b.z_mm)))
+      .norm();
+}
+
+}  // namespace
+
+TEST(Landmarks, WithoutTheNoseTipTheBrowIsFoundOnTheSymmetricMidline) {
+  // The face cut 4 mm above the nose tip: the most prominent point in front is the cut edge of
+  // the nose, so the pronasale is absent; the glabella and the nasion are found on the midline
+  // of the forehead's left-right symmetry, within 1 mm of the analytic ones, with a lower
+  // confidence and the method in the note. Nothing below the cut is guessed.
+  const auto& f = face();
+  const Landmarks truth = find_landmarks(analytic_view(f.head, *f.model));
+  const Landmarks full = find_landmarks(*f.model);
+  const double z_tip = truth.find("pronasale")->z_mm;
+  const Landmarks cut = find_landmarks(cut_below(*f.model, z_tip + 4.0));
+  ASSERT_EQ(cut.items.size(), landmark_names().size());
+  EXPECT_FALSE(cut.find("pronasale")->found);
+  EXPECT_NEAR(cut.midline_theta_deg, 0.0, 1.0);
+  for (const char* n : {"glabella", "nasion"}) {
+    const Landmark* g = cut.find(n);
+    ASSERT_TRUE(g->found) << n << ": " << g->note;
+    EXPECT_LT(distance_on_skin(*f.model, f.head, *g, *truth.find(n)), 1.0)
+        << n << ": cut (" << g->theta_deg << ", " << g->z_mm << ") analytic ("
+        << truth.find(n)->theta_deg << ", " << truth.find(n)->z_mm << ")";
+    EXPECT_GT(g->confidence, 0.1) << n;
+    EXPECT_LT(g->confidence, full.find(n)->confidence) << n;
+    EXPECT_NE(g->note.find("without the pronasale"), std::string::npos) << g->note;
+    EXPECT_NE(g->note.find("symmetry"), std::string::npos) << g->note;
+  }
+  for (const auto& n : landmark_names())
+    if (n != "glabella" && n != "nasion") {
+      EXPECT_FALSE(cut.find(n)->found) << n;
+      EXPECT_FALSE(cut.find(n)->note.empty()) << n;
+    }
+}
+
+TEST(Landmarks, AScanEndingJustBelowTheNasionDoesNotGuessIt) {
+  // Cut 2 mm below the nasion: the concavity is there but not the nasal root below it, so the
+  // nasion is refused with the reason; the glabella (the brow the skin falls away from above
+  // and below) is still found within 1 mm, with a lower confidence again.
+  const auto& f = face();
+  const Landmarks truth = find_landmarks(analytic_view(f.head, *f.model));
+  const Landmarks cut = find_landmarks(cut_below(*f.model, truth.find("nasion")->z_mm - 2.0));
+  EXPECT_FALSE(cut.find("pronasale")->found);
+  const Landmark* n = cut.find("nasion");
+  EXPECT_FALSE(n->found) << n->z_mm;
+  EXPECT_NE(n->note.find("too close"), std::string::npos) << n->note;
+  const Landmark* g = cut.find("glabella");
+  ASSERT_TRUE(g->found) << g->note;
+  EXPECT_LT(distance_on_skin(*f.model, f.head, *g, *truth.find("glabella")), 1.0)
+      << "cut (" << g->theta_deg << ", " << g->z_mm << ") analytic ("
+      << truth.find("glabella")->theta_deg << ", " << truth.find("glabella")->z_mm << ")";
+  EXPECT_LT(g->confidence, 0.3);
+  EXPECT_NE(g->note.find("or the nasion"), std::string::npos) << g->note;
+}

@@ -130,6 +130,168 @@ double measured_factor(const SkinRangeView& view, double t, double z) {
   return view.measured(t, z) ? 1.0 : 0.3;
 }
 
+// The glabella above a nasion at zn on the midline profile: the index of the most prominent
+// measured sample within `reach` mm above it, or -1 where that is the end of the window or of the
+// profile (the forehead rises on: no brow prominence).
+int brow_above(const Profile& mid, double zn, double reach = 30.0) {
+  int best = -1;
+  for (int i = 0; i < mid.size(); ++i)
+    if (mid.ok[i] && mid.z[i] > zn && mid.z[i] <= zn + reach &&
+        (best < 0 || mid.v[i] > mid.v[best]))
+      best = i;
+  if (best <= 0 || best + 1 >= mid.size() || mid.z[best + 1] > zn + reach ||
+      !(mid.v[best] >= mid.v[best + 1]))
+    return -1;
+  return best;
+}
+
+// The face's midline without a nose tip: the theta within 45 deg of the front about which the
+// skin is most left-right symmetric, the mean of (r(t + d, z) - r(t - d, z))^2 over d = 4..40
+// deg and every z where both sides are measured (among the thetas with at least half the most
+// pairs), refined by a parabola. Also the rms asymmetry there (mm). nullopt with fewer than 200
+// measured pairs at the best theta.
+std::optional<std::pair<double, double>> symmetric_midline(const SkinRangeView& view) {
+  const double step = std::max(view.dtheta_deg, 0.5);
+  std::vector<double> ts, cost;
+  std::vector<int> count;
+  for (double t = -45.0; t <= 45.0 + 1e-9; t += step) {
+    double sum = 0;
+    int n = 0;
+    for (double z = view.z_min_mm + view.dz_mm; z <= view.z_max_mm - view.dz_mm;
+         z += view.dz_mm)
+      for (double d = 4.0; d <= 40.0 + 1e-9; d += 4.0) {
+        if (!view.measured(t + d, z) || !view.measured(t - d, z)) continue;
+        const double e = view.r_mm(t + d, z) - view.r_mm(t - d, z);
+        sum += e * e;
+        ++n;
+      }
+    ts.push_back(t);
+    cost.push_back(n > 0 ? sum / n : std::numeric_limits<double>::infinity());
+    count.push_back(n);
+  }
+  // Only thetas with at least half the most measured pairs compete (a few symmetric pairs at the
+  // edge of a scan are not a face's symmetry).
+  const int most = *std::max_element(count.begin(), count.end());
+  int best = -1;
+  for (int i = 0; i < static_cast<int>(ts.size()); ++i)
+    if (2 * count[i] >= most && (best < 0 || cost[i] < cost[best])) best = i;
+  if (best < 0 || count[best] < 200) return std::nullopt;
+  double t = ts[best];
+  if (best > 0 && best + 1 < static_cast<int>(ts.size()) && std::isfinite(cost[best - 1]) &&
+      std::isfinite(cost[best + 1]))
+    t += step * parabola_offset(cost[best - 1], cost[best], cost[best + 1]);
+  return std::make_pair(t, std::sqrt(cost[best]));
+}
+
+// Without a pronasale: the glabella and the nasion on the symmetric midline where the scan shows
+// them (docs/landmarks.md, "Without the nose tip"). The nasion is the deepest midline concavity
+// with a brow at least 2 mm in front of it within 30 mm above and the skin measured for 6 mm
+// below it and rising there (the nose's root) by 1 mm; the glabella the most prominent point
+// within 40 mm above it, not at the scan's edge (a flat brow, ch2's, peaks near 30 mm above).
+// Without such a nasion, the glabella is the most anterior midline point the skin falls away
+// from by 2 mm both above (within 30 mm) and below (within the scan), on a band across the face
+// (20 mm to either side the skin lies within 5 mm behind it: not a nose).
+// Confidences are half (nasion, glabella above it) or a quarter (glabella alone) of the
+// pronasale-based ones. Puts both landmarks; returns the midline theta used (NaN without one).
+double brow_without_nose(const SkinRangeView& view, const std::string& why,
+                         std::vector<Landmark>& put) {
+  const std::string lost = "without the pronasale (" + why + "): ";
+  const auto sym = symmetric_midline(view);
+  if (!sym) {
+    put.push_back(absent("glabella", lost + "too little measured skin in front to find the "
+                                            "midline by left-right symmetry"));
+    put.push_back(absent("nasion", lost + "too little measured skin in front to find the "
+                                          "midline by left-right symmetry"));
+    return std::numeric_limits<double>::quiet_NaN();
+  }
+  const double tm = sym->first;
+  const std::string how = cat("midline theta ", std::round(tm * 10.0) / 10.0,
+                              " deg from the left-right symmetry of the skin (rms asymmetry ",
+                              mm(sym->second), ")");
+  const Profile mid = profile(view, tm, view.z_min_mm, view.z_max_mm);
+  const double h = view.dz_mm;
+  int best = -1;
+  double depth = 0;
+  std::string refused;
+  for (int i : extrema(mid, -1)) {
+    const double d = range_over(mid, mid.z[i], mid.z[i] + 30.0).second - mid.v[i];
+    if (d < 2.0) continue;
+    bool below = true;
+    for (double z = mid.z[i] - h; z >= mid.z[i] - 6.0 - 1e-9; z -= h)
+      below = below && view.measured(tm, z);
+    if (!below || view.r_mm(tm, mid.z[i] - 6.0) < mid.v[i] + 1.0) {
+      refused = cat("the midline concavity at z ", std::round(mid.z[i]), " mm ", mm(d),
+                    " below the brow has no measured nasal root 6 mm below it (the scan ends "
+                    "too close to tell it from the scan's edge)");
+      continue;
+    }
+    if (d > depth) {
+      depth = d;
+      best = i;
+    }
+  }
+  if (best >= 0) {
+    const double zn = refine_z(mid, best);
+    put.push_back(at("nasion", tm, zn,
+                     0.5 * std::min(1.0, depth / 2.0) * measured_factor(view, tm, zn),
+                     cat("without the pronasale: the deepest midline point below the brow, ",
+                         mm(depth), " below it, the nasal root measured below; ", how)));
+    int g = brow_above(mid, zn, 40.0);
+    if (g >= 0 && !(mid.ok[g - 1] && mid.ok[g + 1])) g = -1;  // at the scan's edge
+    std::optional<double> cut;  // the lowest unmeasured height within the window
+    for (int i = 0; i < mid.size() && !cut; ++i)
+      if (!mid.ok[i] && mid.z[i] > zn && mid.z[i] <= zn + 40.0) cut = mid.z[i];
+    if (g < 0 && cut) {
+      put.push_back(absent("glabella", lost + cat("the skin above the nasion is not measured "
+                                                  "from z ", std::round(*cut), " mm (the edge "
+                                                  "of the scan cuts the brow)")));
+    } else if (g < 0) {
+      put.push_back(absent("glabella", lost + "the forehead rises without a brow prominence "
+                                              "within 40 mm above the nasion"));
+    } else {
+      const double z = refine_z(mid, g);
+      const double d = mid.v[g] - view.r_mm(tm, zn);
+      put.push_back(at("glabella", tm, z,
+                       0.5 * std::min(1.0, d / 2.0) * measured_factor(view, tm, z),
+                       cat("without the pronasale: the most prominent midline point above the "
+                           "nasion, ", mm(d), " in front of it; ", how)));
+    }
+    return tm;
+  }
+  put.push_back(absent("nasion", lost + (refused.empty()
+                                             ? std::string("no midline concavity 2 mm below a "
+                                                           "brow with the nose's root below it")
+                                             : refused)));
+  int g = -1;
+  double prominence = 0;
+  for (int i : extrema(mid, +1)) {
+    const double above = mid.v[i] - range_over(mid, mid.z[i], mid.z[i] + 30.0).first;
+    int j = i;
+    while (j > 0 && mid.ok[j - 1]) --j;
+    const double below = mid.v[i] - range_over(mid, mid.z[j], mid.z[i]).first;
+    // A brow is a band across the forehead, a nose (the plain phantom's, a nose tip cut off
+    // by the scan) is not: 20 mm to either side the skin lies within 5 mm behind it.
+    const double side = 20.0 / view.r_typical_mm * 180.0 / kPi;
+    const double fall = mid.v[i] - std::max(view.r_mm(tm - side, mid.z[i]),
+                                            view.r_mm(tm + side, mid.z[i]));
+    if (above >= 2.0 && below >= 2.0 && fall <= 5.0 && (g < 0 || mid.v[i] > mid.v[g])) {
+      g = i;
+      prominence = std::min(above, below);
+    }
+  }
+  if (g < 0) {
+    put.push_back(absent("glabella", lost + "no midline brow prominence (a point the skin falls "
+                                            "away from by 2 mm above and below within the scan)"));
+  } else {
+    const double z = refine_z(mid, g);
+    put.push_back(at("glabella", tm, z,
+                     0.25 * std::min(1.0, prominence / 2.0) * measured_factor(view, tm, z),
+                     cat("without the pronasale or the nasion: the most anterior midline brow "
+                         "point, the skin ", mm(prominence), " behind it above and below; ", how)));
+  }
+  return tm;
+}
+
 }  // namespace
 
 const std::vector<std::string>& landmark_names() {
@@ -189,10 +351,15 @@ Landmarks find_landmarks(const SkinRangeView& view) {
                 std::round(zp), " mm) has no nasal root above it that it stands 8 mm in front "
                 "of: not a nose (the scan may end above the nose tip)");
     if (!why.empty()) {
+      const double t = brow_without_nose(view, why, found);
+      if (std::isfinite(t)) out.midline_theta_deg = wrap_deg(t);
       for (const auto& n : landmark_names())
-        put(absent(n, n == "pronasale" ? why
-                                       : "found from the pronasale, which is absent: " + why));
-      out.items = found;
+        if (n != "glabella" && n != "nasion")
+          put(absent(n, n == "pronasale" ? why
+                                         : "found from the pronasale, which is absent: " + why));
+      for (const auto& n : landmark_names())
+        for (const auto& l : found)
+          if (l.name == n) out.items.push_back(l);
       return out;
     }
     put(at("pronasale", tm, zp, std::min(1.0, projection / 15.0) * measured_factor(view, tm, zp),
@@ -228,13 +395,8 @@ Landmarks find_landmarks(const SkinRangeView& view) {
   if (!zn) {
     put(absent("glabella", "found from the nasion, which is absent"));
   } else {
-    int best = -1;
-    for (int i = 0; i < mid.size(); ++i)
-      if (mid.ok[i] && mid.z[i] > *zn && mid.z[i] <= *zn + 30.0 &&
-          (best < 0 || mid.v[i] > mid.v[best]))
-        best = i;
-    if (best <= 0 || best + 1 >= mid.size() || mid.z[best + 1] > *zn + 30.0 ||
-        !(mid.v[best] >= mid.v[best + 1]))
+    const int best = brow_above(mid, *zn);
+    if (best < 0)
       put(absent("glabella", "the forehead rises without a brow prominence within 30 mm above "
                              "the nasion"));
     else {

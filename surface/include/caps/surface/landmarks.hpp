@@ -6,6 +6,8 @@
 ///
 /// The detector reads only the range image: "anterior" is along the ray of the midline theta (the
 /// pronasale's), "lateral" perpendicular to it in the axial plane, "up" along the model's axis.
+/// Without a pronasale (a scan cut at the nose or above it) only the glabella and the nasion are
+/// looked for, on the midline of the skin's left-right symmetry and at a lower confidence.
 /// A landmark the skin does not show (outside the scan, no feature in its search window) is
 /// returned with found = false and the reason, never guessed.
 
@@ -40,7 +42,9 @@ struct Landmark {
 /// The landmarks of one model, in the order of landmark_names().
 struct Landmarks {
   std::vector<Landmark> items;
-  double midline_theta_deg = 0;  ///< theta of the midsagittal profile (the pronasale's)
+  /// theta of the midsagittal profile (the pronasale's; without one, that of the skin's
+  /// left-right symmetry, docs/landmarks.md; 0 when neither was found)
+  double midline_theta_deg = 0;
   /// The landmark of that name, or nullptr for a name that is not a landmark.
   const Landmark* find(const std::string& name) const;
 };
