@@ -8,6 +8,7 @@ reason.
 """
 
 import sys
+import textwrap
 
 import matplotlib
 
@@ -65,9 +66,10 @@ def main(model, out, title=None):
         a.set_title(name)
         a.set_xlabel("LPS x (mm)" if h == 0 else "anterior <- LPS y (mm) ->  posterior")
         a.set_ylabel("LPS z (mm)")
-    absent = [f"{k}: {l['note']}" for k, l in lm.items() if not l["found"]]
-    fig.suptitle((title or str(model)) + ("\nabsent: " + "; ".join(absent) if absent else ""),
-                 fontsize=9)
+    # One short line per absent landmark, so that the notes stay inside the picture.
+    absent = [textwrap.shorten(f"absent: {k}: {l['note']}", width=150, placeholder=" ...")
+              for k, l in lm.items() if not l["found"]]
+    fig.suptitle("\n".join([title or str(model)] + absent), fontsize=8)
     fig.tight_layout()
     fig.savefig(out, dpi=90)
 
