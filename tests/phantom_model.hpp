@@ -2,6 +2,8 @@
 // The small phantom patient model the app and server tests share (96 x 96 x 90 voxels of 2.5 mm,
 // a 128 x 64 cylindrical grid), built through app:: as a user would, and a file reader.
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -35,6 +37,29 @@ inline void make_phantom_model(const std::filesystem::path& folder, const std::s
   fv.n_theta = n_theta;
   fv.n_z = n_z;
   caps::app::run_from_volume(fv);
+}
+
+/// A fresh temporary folder `prefix`_<pid> for the test program, made once.
+inline const std::filesystem::path& program_folder(const std::string& prefix) {
+  static const std::filesystem::path d = [&] {
+    const std::filesystem::path p =
+        std::filesystem::temp_directory_path() / (prefix + "_" + std::to_string(::getpid()));
+    std::filesystem::remove_all(p);
+    std::filesystem::create_directories(p);
+    return p;
+  }();
+  return d;
+}
+
+/// The phantom's patient model on the 256 x 128 grid, made once per test program in
+/// program_folder(prefix)/model.
+inline const std::string& program_phantom_model(const std::string& prefix) {
+  static const std::string dir = [&] {
+    const std::string d = (program_folder(prefix) / "model").string();
+    make_phantom_model(program_folder(prefix), d, 256, 128);
+    return d;
+  }();
+  return dir;
 }
 
 }  // namespace caps_test

@@ -28,24 +28,9 @@ using nlohmann::json;
 
 namespace {
 
-const fs::path& folder() {
-  static const fs::path d = [] {
-    const fs::path p = fs::temp_directory_path() / ("caps_register_" + std::to_string(::getpid()));
-    fs::remove_all(p);
-    fs::create_directories(p);
-    return p;
-  }();
-  return d;
-}
+const fs::path& folder() { return caps_test::program_folder("caps_register"); }
 
-const std::string& model_dir() {
-  static const std::string dir = [] {
-    const std::string d = (folder() / "model").string();
-    caps_test::make_phantom_model(folder(), d, 256, 128);
-    return d;
-  }();
-  return dir;
-}
+const std::string& model_dir() { return caps_test::program_phantom_model("caps_register"); }
 
 // model -> scan: 14 degrees about a skew axis, then (-30, 20, 35) mm.
 Eigen::Matrix4d model_to_scan() {
