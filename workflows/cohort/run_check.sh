@@ -62,4 +62,4 @@ print(f"cohort: {len(rows)} rows ({sum(r['status'] == 'ok' for r in rows)} ok, b
 EOF
 snakemake "${args[@]}" -n > "$work/rerun.log" 2>&1
 grep -q "Nothing to be done" "$work/rerun.log" || { cat "$work/rerun.log"; echo "a rerun would do work"; exit 1; }
-echo "cohort: wall time $(echo "$end - $start" | bc) s on 2 cores; a rerun has nothing to do"
+echo "cohort: wall time $(python3 -c "print(round($end - $start, 1))") s on 2 cores; a rerun has nothing to do"
