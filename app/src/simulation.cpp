@@ -57,8 +57,12 @@ fem::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields
     o.solve.kinematics = fem::Kinematics::Finite;
     o.skin_finite_material = std::make_shared<fem::GasserOgdenHolzapfel>(
         fem::default_goh_skin(Eigen::Vector3d::UnitX()));
-  } else {
+  } else if (s.material == "linear" || s.material == "neo-hookean") {
     o.solve.kinematics = fem::parse_kinematics(s.material);
+  } else {
+    throw InvalidParameter(cat("{material} '", s.material, "' is unknown: use linear (small "
+                               "strain, the 1992 model), neo-hookean (finite strain) or goh "
+                               "(finite strain, skin with collagen fibres)"));
   }
   o.solve.prestretch = s.prestretch;
   if (s.steps < 1 || s.steps > 1000)
