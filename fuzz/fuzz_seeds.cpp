@@ -6,6 +6,7 @@
 
 #include <gdcmAttribute.h>
 #include <gdcmImage.h>
+#include <gdcmImageChangeTransferSyntax.h>
 #include <gdcmImageWriter.h>
 #include <gdcmTrace.h>
 
@@ -96,28 +97,36 @@ void volume_seeds(const fs::path& tmp) {
   seed("fuzz_metaimage", "detached.mhd", join(mha_head + "ElementDataFile = data.raw\n", raw));
   seed("fuzz_metaimage", "list.mhd",
        join(mha_head + "ElementDataFile = data.raw%d 1 1 1\n", raw));
-  // DICOM: two 8x8 slices of the phantom through GDCM's writer, as one series.
+  // DICOM through GDCM's writer: two 8x8 slices of the phantom as one series, one of them
+  // compressed (RLE, JPEG lossless: the codecs' paths), and the whole phantom as one multi-frame
+  // file of 8 frames.
   gdcm::Trace::SetWarning(false);
-  std::string slices[2];
-  for (int k = 0; k < 2; ++k) {
+  auto dicom = [&](int k, int frames, const gdcm::TransferSyntax& ts) {
     gdcm::ImageWriter w;
     gdcm::Image& im = w.GetImage();
-    im.SetNumberOfDimensions(2);
+    im.SetNumberOfDimensions(frames > 1 ? 3 : 2);
     im.SetDimension(0, 8);
     im.SetDimension(1, 8);
+    if (frames > 1) im.SetDimension(2, static_cast<unsigned>(frames));
     im.SetPhotometricInterpretation(gdcm::PhotometricInterpretation::MONOCHROME2);
     im.SetPixelFormat(gdcm::PixelFormat(gdcm::PixelFormat::INT16));
-    im.SetSpacing(0, 10);
-    im.SetSpacing(1, 10);
+    for (int a = 0; a < 3; ++a) im.SetSpacing(a, 10);
     im.SetOrigin(0, -100);
     im.SetOrigin(1, -100);
     im.SetOrigin(2, -100 + 10 * k);
     im.SetIntercept(0);
     im.SetSlope(1);
-    const std::string slice = raw.substr(static_cast<std::size_t>(k) * 128, 128);
+    const std::string pixels_bytes = raw.substr(static_cast<std::size_t>(k) * 128, 128 * frames);
     gdcm::DataElement pixels(gdcm::Tag(0x7fe0, 0x0010));
-    pixels.SetByteValue(slice.data(), static_cast<std::uint32_t>(slice.size()));
+    pixels.SetByteValue(pixels_bytes.data(), static_cast<std::uint32_t>(pixels_bytes.size()));
     im.SetDataElement(pixels);
+    if (ts != gdcm::TransferSyntax::ExplicitVRLittleEndian) {
+      gdcm::ImageChangeTransferSyntax change;
+      change.SetTransferSyntax(ts);
+      change.SetInput(im);
+      if (!change.Change()) throw std::runtime_error("GDCM could not compress the DICOM seed");
+      w.SetImage(change.GetOutput());
+    }
     gdcm::DataSet& ds = w.GetFile().GetDataSet();
     gdcm::Attribute<0x0008, 0x0060> modality = {"CT"};
     ds.Replace(modality.GetAsDataElement());
@@ -125,13 +134,18 @@ void volume_seeds(const fs::path& tmp) {
     ds.Replace(series.GetAsDataElement());
     gdcm::Attribute<0x0020, 0x0013> number = {k + 1};
     ds.Replace(number.GetAsDataElement());
-    const fs::path p = tmp / ("slice" + std::to_string(k) + ".dcm");
+    const fs::path p = tmp / ("dicom" + std::to_string(k) + "-" + std::to_string(frames) + ".dcm");
     w.SetFileName(p.string().c_str());
     if (!w.Write()) throw std::runtime_error("GDCM could not write the DICOM seed");
-    slices[k] = slurp(p);
-  }
-  seed("fuzz_dicom", "one_slice.dcm", slices[0]);
-  seed("fuzz_dicom", "two_slices", join(slices[0], slices[1]));
+    return slurp(p);
+  };
+  const auto native = gdcm::TransferSyntax::ExplicitVRLittleEndian;
+  const std::string slice0 = dicom(0, 1, native), slice1 = dicom(1, 1, native);
+  seed("fuzz_dicom", "one_slice.dcm", slice0);
+  seed("fuzz_dicom", "two_slices", join(slice0, slice1));
+  seed("fuzz_dicom", "rle_slices", join(dicom(0, 1, gdcm::TransferSyntax::RLELossless), slice1));
+  seed("fuzz_dicom", "jpeg_lossless.dcm", dicom(0, 1, gdcm::TransferSyntax::JPEGLosslessProcess14_1));
+  seed("fuzz_dicom", "multi_frame.dcm", dicom(0, 8, native));
   // InVesalius: a tar (plain and gzip) of main.plist and the raw volume, through tar(1).
   const fs::path inv = tmp / "inv3";
   fs::create_directories(inv);

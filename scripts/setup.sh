@@ -4,7 +4,7 @@
 set -euo pipefail
 
 packages=(
-  build-essential cmake pkg-config
+  build-essential cmake pkg-config ccache
   libeigen3-dev libcgal-dev libopenvdb-dev libboost-iostreams-dev libtbb-dev
   libsuitesparse-dev libmumps-seq-dev libopenblas0-pthread libgdcm-dev libgdcm-tools
   nlohmann-json3-dev libcli11-dev libgtest-dev libbenchmark-dev

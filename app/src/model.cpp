@@ -369,7 +369,12 @@ VolumeInfoResult run_volume_info(const VolumeInfoRequest& r, Reporter*) {
          {"notes", v.notes}};
   if (v.format == "DICOM") {
     json list = json::array();
-    for (const auto& s : list_dicom_series(r.input))
+    // A single .dcm file is read with its series from its folder: list that folder's series.
+    std::error_code ec;
+    fs::path folder = r.input;
+    if (!fs::is_directory(folder, ec))
+      folder = folder.has_parent_path() ? folder.parent_path() : fs::path(".");
+    for (const auto& s : list_dicom_series(folder))
       list.push_back({{"uid", s.uid}, {"description", s.description}, {"modality", s.modality},
                       {"files", s.n_files}});
     j["series"] = list;

@@ -23,6 +23,7 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <set>
 #include <sstream>
@@ -33,9 +34,10 @@
 #include "volume_io_detail.hpp"
 
 #include <Eigen/Geometry>
-#include <gdcmImageReader.h>
+#include <gdcmImage.h>
 #include <gdcmPixelFormat.h>
 #include <gdcmReader.h>
+#include <gdcmSequenceOfItems.h>
 #include <gdcmStringFilter.h>
 #include <gdcmTrace.h>
 #include <tbb/parallel_for.h>
@@ -53,8 +55,9 @@ struct SliceHeader {
   int rows = 0, cols = 0, frames = 1, instance = 0;
   double slope = 1.0, intercept = 0.0;
   double d = 0.0;  // position along the slice normal
-  int bits_allocated = 16;
-  bool encapsulated = false;
+  int bits_allocated = 16, bits_stored = 0, pixel_representation = 0, samples_per_pixel = 1;
+  std::string photometric;
+  bool encapsulated = false, big_endian = false;
   std::uintmax_t pixel_bytes_in_file = 0;  // file size minus the offset of the PixelData value
 };
 
@@ -138,13 +141,21 @@ bool read_header(const fs::path& file, SliceHeader& h) {
   h.instance = std::atoi(str(0x0020, 0x0013).c_str());
   const auto slope = split_numbers(str(0x0028, 0x1053));
   const auto intercept = split_numbers(str(0x0028, 0x1052));
-  if (slope.size() == 1 && std::isfinite(slope[0]) && slope[0] != 0.0) h.slope = slope[0];
+  if (slope.size() == 1 && (!std::isfinite(slope[0]) || slope[0] == 0.0))
+    throw InvalidInput(cat(file.string(), ": RescaleSlope (0028,1053) = ", str(0x0028, 0x1053),
+                           " would map every pixel to one value; the file is damaged"));
+  if (slope.size() == 1) h.slope = slope[0];
   if (intercept.size() == 1 && std::isfinite(intercept[0])) h.intercept = intercept[0];
   const gdcm::TransferSyntax& ts = reader.GetFile().GetHeader().GetDataSetTransferSyntax();
   h.transfer_syntax = ts.GetString() ? ts.GetString() : "";
   h.encapsulated = ts.IsEncapsulated();
+  h.big_endian = ts == gdcm::TransferSyntax::ExplicitVRBigEndian;
   const std::string bits = str(0x0028, 0x0100);
   if (!bits.empty()) h.bits_allocated = std::atoi(bits.c_str());
+  h.bits_stored = std::atoi(str(0x0028, 0x0101).c_str());
+  h.pixel_representation = std::atoi(str(0x0028, 0x0103).c_str());
+  if (!spp.empty()) h.samples_per_pixel = std::atoi(spp.c_str());
+  h.photometric = str(0x0028, 0x0004);
   // ReadUpToTag stops just after the PixelData element header, so the rest of the file is what
   // the pixel data can hold; GDCM itself pads short native pixel data with a mere warning.
   std::error_code ec;
@@ -219,69 +230,98 @@ Modality modality_from_tag(const std::string& m, std::vector<std::string>& notes
   return Modality::Unknown;
 }
 
-/// Decoded pixels of one file as floats (rescale applied), rows*cols*frames values.
+/// The full data set of one file (GDCM's parser only: none of its image helpers, which abort
+/// the process on assertions a damaged header reaches, such as a RescaleSlope of 0).
+gdcm::File read_data_set(const fs::path& file) {
+  gdcm::Reader reader;
+  reader.SetFileName(file.c_str());
+  if (!reader.Read())
+    throw IoError(cat(file.string(), ": GDCM cannot read the file (truncated or damaged); "
+                                     "re-export or re-copy it"));
+  return reader.GetFile();
+}
+
+/// Decoded pixels of one file as floats (rescale applied), rows*cols*frames values. The pixel
+/// format is the one read_header took from the header and checked here; native pixel data are
+/// copied from the file as they are, encapsulated (compressed) ones go through GDCM's codec for
+/// the transfer syntax.
 std::vector<float> read_pixels(const SliceHeader& h, int expected_frames) {
   const std::string name = h.file.string();
-  gdcm::ImageReader reader;
-  reader.SetFileName(h.file.c_str());
-  if (!reader.Read())
-    throw IoError(cat(name, ": GDCM cannot read the image (truncated file, or a transfer syntax "
-                            "GDCM cannot decode: ", h.transfer_syntax, ")"));
-  const gdcm::Image& img = reader.GetImage();
-  const unsigned* dims = img.GetDimensions();
-  const unsigned frames = img.GetNumberOfDimensions() > 2 ? dims[2] : 1;
-  if (static_cast<int>(dims[0]) != h.cols || static_cast<int>(dims[1]) != h.rows ||
-      static_cast<int>(frames) != expected_frames)
-    throw InvalidInput(cat(name, ": pixel data are ", dims[0], "x", dims[1], "x", frames,
-                           " but Columns/Rows/NumberOfFrames say ", h.cols, "x", h.rows, "x",
-                           expected_frames));
-  const gdcm::PixelFormat& pf = img.GetPixelFormat();
-  if (pf.GetSamplesPerPixel() != 1)
-    throw InvalidInput(cat(name, ": ", pf.GetSamplesPerPixel(),
+  if (h.samples_per_pixel != 1)
+    throw InvalidInput(cat(name, ": ", h.samples_per_pixel,
                            " samples per pixel (colour); caps reads greyscale CT/MR only"));
-  const std::size_t n = static_cast<std::size_t>(h.cols) * h.rows * frames;
-  const unsigned bits = pf.GetBitsAllocated();
-  if (bits != 8 && bits != 16 && bits != 32 && bits != 64)
-    throw InvalidInput(cat(name, ": BitsAllocated = ", bits, " is not supported"));
-  // GDCM accepts native pixel data that stop short ("Incomplete Pixel Data") and pads the
-  // buffer, so compare the bytes present in the file with what the header promises.
-  if (!h.encapsulated && h.pixel_bytes_in_file < n * bits / 8)
-    throw IoError(cat(name, ": truncated: the file holds ", h.pixel_bytes_in_file,
-                      " bytes of pixel data, ", n * bits / 8, " expected for ", h.cols, "x",
-                      h.rows, "x", frames, " pixels of ", bits,
-                      " bits; re-export or re-copy the file"));
-  std::vector<char> buf(img.GetBufferLength());
-  if (buf.size() < n * bits / 8)
-    throw IoError(cat(name, ": the pixel data hold ", buf.size(), " bytes, ", n * bits / 8,
-                      " expected; the file is truncated"));
-  if (!img.GetBuffer(buf.data()))
-    throw IoError(cat(name, ": the pixel data could not be decoded (transfer syntax ",
-                      h.transfer_syntax, "); the file is truncated or corrupt"));
-
-  std::vector<float> out(n);
-  const auto st = pf.GetScalarType();
-  if (st == gdcm::PixelFormat::FLOAT32 || st == gdcm::PixelFormat::FLOAT64) {
-    decode_to_float(buf.data(), n, st == gdcm::PixelFormat::FLOAT32 ? "f32" : "f64", false,
-                    out.data());
-  } else {
-    const bool is_signed = pf.GetPixelRepresentation() == 1;
-    const unsigned stored = std::clamp<unsigned>(pf.GetBitsStored(), 1, bits);
-    decode_to_float(buf.data(), n,
-                    cat(is_signed ? "i" : "u", bits), false, out.data());
-    if (stored < bits && bits <= 32) {
-      // Keep only the stored bits and sign-extend them (BitsStored 12 in a 16-bit word).
-      const std::int64_t mask = (std::int64_t{1} << stored) - 1;
-      const std::int64_t sign = std::int64_t{1} << (stored - 1);
-      for (auto& x : out) {
-        std::int64_t raw = static_cast<std::int64_t>(x) & mask;
-        if (is_signed && (raw & sign)) raw -= (std::int64_t{1} << stored);
-        x = static_cast<float>(raw);
-      }
-    }
-  }
-  if (img.GetPhotometricInterpretation() == gdcm::PhotometricInterpretation::MONOCHROME1)
+  if (h.photometric == "MONOCHROME1")
     throw InvalidInput(cat(name, ": MONOCHROME1 (inverted greyscale) images are not supported "
                                  "for CT/MR volumes"));
+  if (!h.photometric.empty() && h.photometric != "MONOCHROME2")
+    throw InvalidInput(cat(name, ": PhotometricInterpretation ", h.photometric,
+                           " is not greyscale (MONOCHROME2); caps reads CT/MR only"));
+  const unsigned bits = static_cast<unsigned>(h.bits_allocated);
+  if (bits != 8 && bits != 16 && bits != 32)
+    throw InvalidInput(cat(name, ": BitsAllocated = ", h.bits_allocated,
+                           " is not supported (8, 16 or 32)"));
+  const unsigned stored = h.bits_stored >= 1 && h.bits_stored <= h.bits_allocated
+                              ? static_cast<unsigned>(h.bits_stored) : bits;
+  if (h.pixel_representation != 0 && h.pixel_representation != 1)
+    throw InvalidInput(cat(name, ": PixelRepresentation (0028,0103) = ", h.pixel_representation,
+                           " is neither 0 (unsigned) nor 1 (signed); the file is damaged"));
+  const bool is_signed = h.pixel_representation == 1;
+  const std::size_t n = static_cast<std::size_t>(h.cols) * h.rows * expected_frames;
+  const std::size_t bytes = n * (bits / 8);
+  // GDCM accepts native pixel data that stop short ("Incomplete Pixel Data") and pads the
+  // buffer, so compare the bytes present in the file with what the header promises.
+  if (!h.encapsulated && h.pixel_bytes_in_file < bytes)
+    throw IoError(cat(name, ": truncated: the file holds ", h.pixel_bytes_in_file,
+                      " bytes of pixel data, ", bytes, " expected for ", h.cols, "x", h.rows, "x",
+                      expected_frames, " pixels of ", bits, " bits; re-export or re-copy the file"));
+
+  const gdcm::File file = read_data_set(h.file);
+  const gdcm::DataSet& ds = file.GetDataSet();
+  const gdcm::Tag pixel_data(0x7fe0, 0x0010);
+  if (!ds.FindDataElement(pixel_data))
+    throw InvalidInput(cat(name, ": no PixelData (7FE0,0010); not an image"));
+  const gdcm::DataElement& de = ds.GetDataElement(pixel_data);
+  std::vector<char> buf;
+  if (!h.encapsulated) {
+    const gdcm::ByteValue* bv = de.GetByteValue();
+    if (bv == nullptr || bv->GetLength() < bytes)
+      throw IoError(cat(name, ": the pixel data hold ", bv ? std::size_t{bv->GetLength()} : std::size_t{0}, " bytes, ",
+                        bytes, " expected; the file is truncated"));
+    buf.assign(bv->GetPointer(), bv->GetPointer() + bytes);
+  } else {
+    gdcm::Image img;
+    img.SetNumberOfDimensions(expected_frames > 1 ? 3 : 2);
+    img.SetDimension(0, static_cast<unsigned>(h.cols));
+    img.SetDimension(1, static_cast<unsigned>(h.rows));
+    if (expected_frames > 1) img.SetDimension(2, static_cast<unsigned>(expected_frames));
+    img.SetPixelFormat(gdcm::PixelFormat(1, static_cast<unsigned short>(bits),
+                                         static_cast<unsigned short>(stored),
+                                         static_cast<unsigned short>(stored - 1),
+                                         static_cast<unsigned short>(h.pixel_representation)));
+    img.SetPhotometricInterpretation(gdcm::PhotometricInterpretation::MONOCHROME2);
+    img.SetTransferSyntax(file.GetHeader().GetDataSetTransferSyntax());
+    img.SetDataElement(de);
+    if (img.GetBufferLength() != bytes)
+      throw InvalidInput(cat(name, ": the pixel data decode to ", img.GetBufferLength(),
+                             " bytes, ", bytes, " expected; the file is damaged"));
+    buf.resize(bytes);
+    if (!img.GetBuffer(buf.data()))
+      throw IoError(cat(name, ": the pixel data could not be decoded (transfer syntax ",
+                        h.transfer_syntax, "); the file is truncated or corrupt"));
+  }
+
+  std::vector<float> out(n);
+  decode_to_float(buf.data(), n, cat(is_signed ? "i" : "u", bits), h.big_endian, out.data());
+  if (stored < bits) {
+    // Keep only the stored bits and sign-extend them (BitsStored 12 in a 16-bit word).
+    const std::int64_t mask = (std::int64_t{1} << stored) - 1;
+    const std::int64_t sign = std::int64_t{1} << (stored - 1);
+    for (auto& x : out) {
+      std::int64_t raw = static_cast<std::int64_t>(x) & mask;
+      if (is_signed && (raw & sign)) raw -= (std::int64_t{1} << stored);
+      x = static_cast<float>(raw);
+    }
+  }
   for (auto& x : out) x = static_cast<float>(h.slope * x + h.intercept);
   return out;
 }
@@ -294,32 +334,112 @@ std::string fmt(double x, int digits = 2) {
   return os.str();
 }
 
+/// The text of an element of `ds` (a DS/IS/CS value: ASCII), empty when it is absent.
+std::string element_text(const gdcm::DataSet& ds, const gdcm::Tag& t) {
+  if (!ds.FindDataElement(t)) return {};
+  const gdcm::ByteValue* bv = ds.GetDataElement(t).GetByteValue();
+  if (bv == nullptr || bv->GetPointer() == nullptr) return {};
+  return trim(std::string(bv->GetPointer(), bv->GetLength()));
+}
+
+/// The items of the sequence `t` in `ds` (null when it is absent or not a sequence).
+gdcm::SmartPointer<gdcm::SequenceOfItems> sequence(const gdcm::DataSet& ds, const gdcm::Tag& t) {
+  if (!ds.FindDataElement(t)) return nullptr;
+  return ds.GetDataElement(t).GetValueAsSQ();
+}
+
+/// The data set of item `k` (1-based) of `sq`, or nullptr.
+const gdcm::DataSet* item(const gdcm::SmartPointer<gdcm::SequenceOfItems>& sq, std::size_t k) {
+  if (!sq || k < 1 || k > sq->GetNumberOfItems()) return nullptr;
+  return &sq->GetItem(k).GetNestedDataSet();
+}
+
+/// A multi-frame image's functional groups (enhanced CT/MR): per frame and shared.
+struct FunctionalGroups {
+  gdcm::SmartPointer<gdcm::SequenceOfItems> per_frame, shared;
+  explicit FunctionalGroups(const gdcm::DataSet& ds)
+      : per_frame(sequence(ds, gdcm::Tag(0x5200, 0x9230))),
+        shared(sequence(ds, gdcm::Tag(0x5200, 0x9229))) {}
+
+  /// A numeric attribute `t` of frame `frame`: in the functional group `group` (e.g.
+  /// PlanePositionSequence) of that frame's item, of the shared item, or else in `ds` itself.
+  std::vector<double> numbers(const gdcm::DataSet& ds, const gdcm::Tag& group, const gdcm::Tag& t,
+                              std::size_t frame) const {
+    for (const gdcm::DataSet* top : {item(per_frame, frame), item(shared, 1)}) {
+      if (top == nullptr) continue;
+      if (const gdcm::DataSet* g = item(sequence(*top, group), 1)) {
+        auto v = split_numbers(element_text(*g, t));
+        if (!v.empty()) return v;
+      }
+    }
+    return split_numbers(element_text(ds, t));
+  }
+};
+
+/// A multi-frame file (classic or enhanced CT/MR): the geometry from ImagePositionPatient,
+/// ImageOrientationPatient and PixelSpacing, per frame in the functional groups of an enhanced
+/// image or once at the top of a classic one (then SpacingBetweenSlices or SliceThickness gives
+/// the frame step). The frames must be evenly spaced along the normal.
 Volume read_multiframe(const SliceHeader& h, const ReadOptions& options) {
-  // GDCM allocates the whole pixel data as the header declares it: check the budget first.
+  // The whole pixel data are read at once: check the budget first.
   check_dims(h.file, "Columns x Rows x NumberOfFrames", {h.cols, h.rows, h.frames}, options,
              static_cast<double>(h.cols) * h.rows * h.frames * std::max(1, h.bits_allocated / 8));
+  const std::string name = h.file.string();
   Volume v;
-  v.source = h.file.string();
+  v.source = name;
   v.format = "DICOM";
-  gdcm::ImageReader reader;
-  reader.SetFileName(h.file.c_str());
-  if (!reader.Read()) throw IoError(cat(v.source, ": GDCM cannot read the multi-frame image"));
-  const gdcm::Image& img = reader.GetImage();
-  const double* sp = img.GetSpacing();
-  const double* org = img.GetOrigin();
-  const double* dc = img.GetDirectionCosines();
-  const Eigen::Vector3d r(dc[0], dc[1], dc[2]), c(dc[3], dc[4], dc[5]);
+  const gdcm::File file = read_data_set(h.file);
+  const gdcm::DataSet& ds = file.GetDataSet();
+  const gdcm::Tag position_group(0x0020, 0x9113), orientation_group(0x0020, 0x9116),
+      measures_group(0x0028, 0x9110), ipp_tag(0x0020, 0x0032), iop_tag(0x0020, 0x0037),
+      spacing_tag(0x0028, 0x0030);
+  const FunctionalGroups groups(ds);
+  const auto iop = groups.numbers(ds, orientation_group, iop_tag, 1);
+  const auto sp = groups.numbers(ds, measures_group, spacing_tag, 1);
+  const auto first = groups.numbers(ds, position_group, ipp_tag, 1);
+  if (iop.size() != 6 || first.size() != 3 || sp.size() != 2 || !(sp[0] > 0) || !(sp[1] > 0))
+    throw InvalidInput(cat(name, ": a multi-frame image without ImagePositionPatient, "
+                                 "ImageOrientationPatient and PixelSpacing (at the top or in its "
+                                 "functional groups); caps cannot place its frames"));
+  const Eigen::Vector3d r(iop[0], iop[1], iop[2]), c(iop[3], iop[4], iop[5]);
+  const Eigen::Vector3d nrm = r.cross(c);
+  if (!(std::abs(r.norm() - 1) < 1e-2 && std::abs(c.norm() - 1) < 1e-2 && nrm.norm() > 0.99))
+    throw InvalidInput(cat(name, ": ImageOrientationPatient is not two orthogonal unit vectors"));
+  const Eigen::Vector3d p0(first[0], first[1], first[2]);
+  double step = 0.0;
+  const auto second = groups.numbers(ds, position_group, ipp_tag, 2);
+  if (second.size() == 3 && second != first) {
+    // Enhanced image: every frame has its position; they must lie evenly along the normal.
+    step = (Eigen::Vector3d(second[0], second[1], second[2]) - p0).dot(nrm.normalized());
+    for (int k = 3; k <= h.frames; ++k) {
+      const auto pk = groups.numbers(ds, position_group, ipp_tag, static_cast<std::size_t>(k));
+      const double dk = pk.size() == 3
+                            ? (Eigen::Vector3d(pk[0], pk[1], pk[2]) - p0).dot(nrm.normalized())
+                            : std::numeric_limits<double>::quiet_NaN();
+      if (!(std::abs(dk - (k - 1) * step) <= 0.01 * std::abs(step) + 1e-3))
+        throw InvalidInput(cat(name, ": frame ", k, " is not where even spacing puts it; caps "
+                                     "reads multi-frame images with evenly spaced frames"));
+    }
+  } else {
+    for (const gdcm::Tag& t : {gdcm::Tag(0x0018, 0x0088), gdcm::Tag(0x0018, 0x0050)}) {
+      const auto x = split_numbers(element_text(ds, t));
+      if (x.size() == 1 && x[0] > 0) { step = x[0]; break; }
+    }
+  }
+  if (!(std::abs(step) > 1e-6) || !std::isfinite(step))
+    throw InvalidInput(cat(name, ": the spacing between frames is unknown or 0 (no per-frame "
+                                 "positions, SpacingBetweenSlices or SliceThickness)"));
   auto& g = v.geom;
   g.dims = Eigen::Vector3i(h.cols, h.rows, h.frames);
-  g.spacing_mm = Eigen::Vector3d(sp[0], sp[1], sp[2]);
-  g.origin_lps = Eigen::Vector3d(org[0], org[1], org[2]);
+  g.spacing_mm = Eigen::Vector3d(sp[1], sp[0], std::abs(step));
+  g.origin_lps = p0;
   g.direction.col(0) = r.normalized();
   g.direction.col(1) = c.normalized();
-  g.direction.col(2) = r.cross(c).normalized();
+  g.direction.col(2) = (step > 0 ? 1.0 : -1.0) * nrm.normalized();
   v.data = read_pixels(h, h.frames);
   v.modality = modality_from_tag(h.modality, v.notes);
-  v.notes.push_back("multi-frame DICOM: frame positions and spacing as GDCM reports them "
-                    "(assumed regular)");
+  v.notes.push_back(cat("multi-frame DICOM: ", h.frames, " frames ", fmt(std::abs(step), 3),
+                        " mm apart"));
   validate_volume(v);
   return v;
 }
