@@ -228,6 +228,12 @@ TEST_F(Hostile, DicomFolderWithAStrayTextFileIsReadWithAWarning) {
   const Outcome r = run("volume info " + folder.string());
   EXPECT_EQ(r.code, 0) << r.err;
   EXPECT_NE((r.out + r.err).find("skipped 4 non-DICOM file"), std::string::npos) << r.out << r.err;
+  // One slice given on its own reads its series from the folder, and lists the folder's series
+  // (it used to fail with "not a folder").
+  const Outcome one = run("volume info " + (folder / "01.dcm").string() + " --json");
+  EXPECT_EQ(one.code, 0) << one.err;
+  EXPECT_NE(one.out.find("\"series\""), std::string::npos) << one.out;
+  EXPECT_NE(one.out.find("\"files\": 28"), std::string::npos) << one.out;
   // The stray file given on its own is refused.
   expect_refused_new("volume info " + (folder / "x.dcm").string(), {"x.dcm", "not a DICOM"},
                      dir / "none", folder / "x.dcm");
