@@ -35,10 +35,14 @@ export LSAN_OPTIONS="suppressions=$here/scripts/lsan.supp:print_suppressions=0"
 # The test programs run side by side, as many at a time as there are cores (each is one process
 # and its tests use folders of their own under TMPDIR).
 jobs="$(nproc)"
+# One accuracy test is left to the unsanitized suite (ctest runs it): it builds the volume model
+# of the full 1 mm phantom head, which took 3 of test_surface's 3.3 minutes under ASan; the other
+# surface tests, the readers and the scan model keep running here.
+filter="-ScanModel.PhantomSkinMeshReproducesVolumeRSkin"
 run_test() {
   local p="$1" s
   s=$(date +%s)
-  if "$build/tests/$p" --gtest_brief=1 >"$TMPDIR/$p.log" 2>&1; then
+  if "$build/tests/$p" --gtest_brief=1 --gtest_filter="$filter" >"$TMPDIR/$p.log" 2>&1; then
     echo "sanitize: $p clean ($(( $(date +%s) - s )) s)"
   else
     echo "sanitize: $p FAILED under ASan/UBSan:"
