@@ -113,6 +113,57 @@ TissueLayers resolve_tissue(const SurfaceMesh& surface, const PatientModel& mode
   return 4 * n_measured >= surface.n_vertices() ? TissueLayers::Measured : TissueLayers::Uniform;
 }
 
+}  // namespace
+
+LayerStack::LayerStack(const SurfaceMesh& surface, const PatientModel& model,
+                       const ContinuumMeshOptions& o)
+    : model_(&model), min_tissue_layer_mm_(o.min_tissue_layer_mm) {
+  if (resolve_tissue(surface, model, o.tissue) == TissueLayers::Measured)
+    per_ = std::max(1, static_cast<int>(std::lround(o.n_layers / 3.0)));
+  const int NL = per_ > 0 ? 3 * per_ : o.n_layers;
+  // Uniform: layer interfaces as fractions of the depth, layer k grading^k times the first.
+  fractions_.assign(static_cast<std::size_t>(NL) + 1, 0.0);
+  for (int k = 0; k < NL; ++k) fractions_[k + 1] = fractions_[k] + std::pow(o.grading, k);
+  for (double& f : fractions_) f /= fractions_[NL];
+}
+
+void LayerStack::depths(double theta, double z, double T, std::vector<double>& D,
+                        bool* no_fat) const {
+  const int NL = n_layers();
+  D.resize(static_cast<std::size_t>(NL) + 1);
+  if (no_fat) *no_fat = false;
+  if (!measured()) {
+    for (int k = 0; k <= NL; ++k) D[k] = fractions_[k] * T;
+    return;
+  }
+  const PatientModel& model = *model_;
+  std::array<double, 3> t{std::max(0.0, model.thickness_skin(theta, z)),
+                          std::max(0.0, model.thickness_fat(theta, z)),
+                          std::max(0.0, model.thickness_deep(theta, z))};
+  const double sum = t[0] + t[1] + t[2];
+  // The layers in proportion to T (they sum to the model's thickness; a constant depth scales
+  // them); without any depth the column is skin (cannot happen on a model with layers).
+  if (sum > 0)
+    for (double& x : t) x *= T / sum;
+  else
+    t = {T, 0, 0};
+  const double thinnest = std::min(min_tissue_layer_mm_, T / 4);
+  if (no_fat) *no_fat = t[kFatLayer] < thinnest;
+  for (int l = 0; l < 3; ++l)
+    if (t[l] < thinnest) {
+      const int thickest = static_cast<int>(std::max_element(t.begin(), t.end()) - t.begin());
+      t[thickest] -= thinnest - t[l];
+      t[l] = thinnest;
+    }
+  const int per = per_;
+  D[0] = 0;
+  for (int l = 0; l < 3; ++l)
+    for (int i = 1; i <= per; ++i) D[l * per + i] = D[l * per] + i * t[l] / per;
+  D[NL] = T;  // exactly, whatever the round-off of the sums
+}
+
+namespace {
+
 // A continuum mesh, or why the surface mesh reaches where the model has no valid tissue (the
 // message of an OffModelError): a caller with room to mesh less can try a smaller extent.
 struct ContinuumAttempt {
@@ -133,10 +184,11 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   if (!(o.min_tissue_layer_mm > 0) || !std::isfinite(o.min_tissue_layer_mm))
     throw InvalidInput(cat("continuum mesher: the thinnest tissue layer ", o.min_tissue_layer_mm,
                            " mm must be positive"));
-  const bool measured = resolve_tissue(surface, model, o.tissue) == TissueLayers::Measured;
+  const LayerStack stack(surface, model, o);
+  const bool measured = stack.measured();
   // Measured: `per` element layers in each tissue layer (dermis, fat, deep).
-  const int per = measured ? std::max(1, static_cast<int>(std::lround(o.n_layers / 3.0))) : 0;
-  const int NL = measured ? 3 * per : o.n_layers;  // element layers
+  const int per = stack.per_tissue_layer();
+  const int NL = stack.n_layers();  // element layers
   ContinuumAttempt attempt;
   ContinuumMesh& out = attempt.mesh.emplace();
   out.n_layers = NL;
@@ -146,11 +198,6 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
     out.fat_bottom_level = 2 * per;
   }
   Mesh& mesh = out.mesh;
-
-  // Uniform: layer interfaces as fractions of the depth, layer k grading^k times the first.
-  std::vector<double> F(NL + 1, 0.0);
-  for (int k = 0; k < NL; ++k) F[k + 1] = F[k] + std::pow(o.grading, k);
-  for (double& f : F) f /= F[NL];
 
   // Surface edges.
   std::map<std::pair<int, int>, int> edge_id;
@@ -180,36 +227,9 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   out.max_thickness_mm = 0;
 
   // The nodes of one column; returns why the site cannot be meshed (empty if it can).
-  // The depths (mm) of the NL + 1 element-layer interfaces of a column of thickness T at
-  // (theta, z); *no_fat: measured, and the fat there was thinner than the thinnest layer.
   std::vector<double> D(static_cast<std::size_t>(NL) + 1);
   auto interfaces = [&](double theta, double z, double T, bool* no_fat) {
-    if (!measured) {
-      for (int k = 0; k <= NL; ++k) D[k] = F[k] * T;
-      return;
-    }
-    std::array<double, 3> t{std::max(0.0, model.thickness_skin(theta, z)),
-                            std::max(0.0, model.thickness_fat(theta, z)),
-                            std::max(0.0, model.thickness_deep(theta, z))};
-    const double sum = t[0] + t[1] + t[2];
-    // The layers in proportion to T (they sum to the model's thickness; a constant depth scales
-    // them); without any depth the column is skin (cannot happen on a model with layers).
-    if (sum > 0)
-      for (double& x : t) x *= T / sum;
-    else
-      t = {T, 0, 0};
-    const double thinnest = std::min(o.min_tissue_layer_mm, T / 4);
-    *no_fat = t[kFatLayer] < thinnest;
-    for (int l = 0; l < 3; ++l)
-      if (t[l] < thinnest) {
-        const int thickest = static_cast<int>(std::max_element(t.begin(), t.end()) - t.begin());
-        t[thickest] -= thinnest - t[l];
-        t[l] = thinnest;
-      }
-    D[0] = 0;
-    for (int l = 0; l < 3; ++l)
-      for (int i = 1; i <= per; ++i) D[l * per + i] = D[l * per] + i * t[l] / per;
-    D[NL] = T;  // exactly, whatever the round-off of the sums
+    stack.depths(theta, z, T, D, no_fat);
   };
   auto column = [&](const Eigen::Vector2d& tz, auto&& node_of, int n_half_levels,
                     int step, bool* no_fat) -> std::string {

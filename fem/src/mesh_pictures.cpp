@@ -1,5 +1,7 @@
 #include "caps/fem/mesh_pictures.hpp"
 
+#include "caps/fem/continuum_mesher.hpp"
+
 #include "caps/core/error.hpp"
 #include "caps/image/canvas.hpp"
 #include "caps/surface/patient_model.hpp"
@@ -92,10 +94,10 @@ void write_cross_section_png(const fs::path& path, const SurfaceMesh& s, const P
                              const ContinuumMeshOptions& o, const std::string& title,
                              double depth_scale) {
   if (s.n_vertices() == 0) throw InvalidInput("cross-section picture: the surface mesh is empty");
-  const int NL = std::max(1, o.n_layers);
-  std::vector<double> F(NL + 1, 0.0);
-  for (int k = 0; k < NL; ++k) F[k + 1] = F[k] + std::pow(o.grading, k);
-  for (double& f : F) f /= F[NL];
+  // The element layers as the mesher lays them (uniform fractions, or the measured dermis, fat
+  // and deep tissue).
+  const LayerStack stack(s, model, o);
+  const int NL = stack.n_layers();
   // Where the line y = 0 crosses polygon edges (element walls), and which x are covered.
   double xmin = 1e300, xmax = -1e300;
   std::vector<double> walls;
@@ -134,28 +136,46 @@ void write_cross_section_png(const fs::path& path, const SurfaceMesh& s, const P
   Canvas cv(static_cast<int>(W), static_cast<int>(top + plot_h + 80));
   auto X = [&](double x) { return left + (x - xmin) * sx; };
   // Depth below the skin (the skin drawn flat): the head's curvature would otherwise hide the
-  // layers, which are what the picture is for.
-  auto Y = [&](double x, double f) { return top + 10 + f * depth_mm(x) * sy; };
+  // layers, which are what the picture is for. Y(x, k): interface k (0 skin .. NL bone).
+  std::vector<double> D;
+  auto Y = [&](double x, int k) {
+    stack.depths(theta_of(x), s.z_c_mm, depth_mm(x), D);
+    return top + 10 + D[k] * sy;
+  };
   const int n = 1200;
-  for (int k = 0; k <= NL; ++k) {
-    const Pen pen{.colour = {k == 0 ? 0.1 : (k == NL ? 0.55 : 0.35), k == 0 ? 0.1 : 0.35,
-                             k == 0 ? 0.1 : (k == NL ? 0.1 : 0.35)},
-                  .width_px = k == 0 ? 3.0 : (k == NL ? 2.5 : 1.0)};
-    std::vector<V2> run;  // a stretch of the interface over covered x
-    for (int i = 0; i <= n; ++i) {
-      const double x = xmin + (xmax - xmin) * i / n;
-      if (covered(x)) {
-        run.emplace_back(X(x), Y(x, F[k]));
-        if (i < n) continue;
-      }
-      cv.polyline(run, pen);
-      run.clear();
+  const int per = stack.per_tissue_layer();
+  const Eigen::Vector3d fat_fill(1.0, 0.9, 0.55), tissue_line(0.75, 0.45, 0.0);
+  // Runs of covered x: the stretches where the section crosses the mesh.
+  std::vector<std::vector<double>> runs(1);
+  for (int i = 0; i <= n; ++i) {
+    const double x = xmin + (xmax - xmin) * i / n;
+    if (covered(x)) runs.back().push_back(x);
+    else if (!runs.back().empty()) runs.emplace_back();
+  }
+  for (const auto& run : runs) {
+    if (run.size() < 2) continue;
+    if (stack.measured()) {
+      // The subcutaneous fat, between its two interfaces, filled.
+      std::vector<V2> band;
+      for (double x : run) band.emplace_back(X(x), Y(x, per));
+      for (auto it = run.rbegin(); it != run.rend(); ++it) band.emplace_back(X(*it), Y(*it, 2 * per));
+      cv.fill_polygon(band, fat_fill);
+    }
+    for (int k = 0; k <= NL; ++k) {
+      const bool tissue = stack.measured() && (k == per || k == 2 * per);
+      const Pen pen{.colour = k == 0 ? Eigen::Vector3d(0.1, 0.1, 0.1)
+                              : k == NL ? Eigen::Vector3d(0.55, 0.35, 0.1)
+                              : tissue ? tissue_line : Eigen::Vector3d(0.35, 0.35, 0.35),
+                    .width_px = k == 0 ? 3.0 : (k == NL ? 2.5 : (tissue ? 1.8 : 1.0))};
+      std::vector<V2> line;
+      for (double x : run) line.emplace_back(X(x), Y(x, k));
+      cv.polyline(line, pen);
     }
   }
   const Eigen::Vector3d wall(0.35, 0.35, 0.35);
   for (double x : walls) {
-    cv.line(V2(X(x), Y(x, 0)), V2(X(x), Y(x, 1)), {.colour = wall});
-    for (int k = 0; k <= NL; ++k) cv.fill_circle(V2(X(x), Y(x, F[k])), 2.0, wall);
+    cv.line(V2(X(x), Y(x, 0)), V2(X(x), Y(x, NL)), {.colour = wall});
+    for (int k = 0; k <= NL; ++k) cv.fill_circle(V2(X(x), Y(x, k)), 2.0, wall);
   }
   text(cv, left, 28, title, 16);
   text(cv, left, 50,
@@ -164,7 +184,13 @@ void write_cross_section_png(const fs::path& path, const SurfaceMesh& s, const P
               o.constant_thickness_mm > 0 ? cat(o.constant_thickness_mm, " mm (constant)")
                                           : std::string("from the model")),
           12);
-  text(cv, left, 68, "bold: skin (top) and bone (bottom); dots: where the section meets element edges", 12);
+  text(cv, left, 68,
+       stack.measured()
+           ? "bold: skin (top) and bone (bottom); measured layers: dermis, subcutaneous fat "
+             "(yellow, orange lines), deep tissue; dots: where the section meets element edges"
+           : "bold: skin (top) and bone (bottom); uniform layers; dots: where the section meets "
+             "element edges",
+       12);
   text(cv, left, top + plot_h + 40,
           cat("arc length (mm) from ", std::round(xmin), " to ", std::round(xmax),
               " at the reference radius ", std::round(s.ref_radius_mm), " mm"),

@@ -120,6 +120,38 @@ struct ContinuumMesh {
   double min_jacobian = 0;  ///< smallest det J over all Gauss points (mm^3 per unit volume)
 };
 
+/// How a continuum mesh of `surface` on `model` divides the soft tissue in depth: its element
+/// layers and the depths of their interfaces in each column. The mesher builds its columns with
+/// it, and the cross-section picture draws the same interfaces.
+class LayerStack {
+ public:
+  /// Resolves options.tissue (Auto: measured where at least a quarter of the surface's vertices
+  /// lie on cells whose layers were measured); throws InvalidParameter for Measured on a model
+  /// without layer maps.
+  LayerStack(const SurfaceMesh& surface, const PatientModel& model,
+             const ContinuumMeshOptions& options);
+
+  bool measured() const { return per_ > 0; }
+  int n_layers() const { return static_cast<int>(fractions_.size()) - 1; }
+  /// Measured: element layers in each tissue layer (dermis, fat, deep); 0 when uniform.
+  int per_tissue_layer() const { return per_; }
+
+  /// The depths (mm below the skin, 0 .. T) of the n_layers() + 1 element-layer interfaces of a
+  /// column of soft-tissue thickness T (mm) at (theta deg, z mm), written to `depths`. Uniform:
+  /// fixed fractions of T, each layer `grading` times the one above. Measured: the model's
+  /// dermis, fat and deep thicknesses scaled to T, a layer thinner than min_tissue_layer_mm
+  /// (at most T/4) widened at the thickest one's expense; *no_fat (if given) tells that the fat
+  /// was that thin.
+  void depths(double theta_deg, double z_mm, double T_mm, std::vector<double>& depths,
+              bool* no_fat = nullptr) const;
+
+ private:
+  const PatientModel* model_;
+  double min_tissue_layer_mm_;
+  int per_ = 0;
+  std::vector<double> fractions_;  // uniform: interface depth / T
+};
+
 /// Extrudes `surface` through the patient model. Throws InvalidInput naming theta and z where a
 /// site lies outside the model's z range, on an invalid cell (!flags_valid(flags_at)), where the
 /// thickness is below `min_thickness_mm`, or where an element's Jacobian is not positive at a
