@@ -245,6 +245,16 @@ TEST_F(AppWithModel, WarningsReachResultJsonSummaryJsonAndTheReport) {
   EXPECT_NE(html.find(limited), std::string::npos);
   EXPECT_EQ(json::parse(slurp(kTmp / "top_compare" / "comparison.json"))["warnings"],
             json(cmp.warnings));
+  // Three columns: the third, the measured tissue layers (or one material where the model has
+  // none), has its own folder with the same files and its own pictures.
+  const std::string third = cmp.layers_tissue == "measured" ? "measured layers"
+                                                            : "one material (no layers)";
+  EXPECT_NE(html.find("<th>" + third + "</th>"), std::string::npos);
+  EXPECT_NE(html.find("src=\"layers/post_plan.png\""), std::string::npos);
+  EXPECT_TRUE(fs::exists(kTmp / "top_compare" / "layers" / "section.png"));
+  EXPECT_NEAR(json::parse(slurp(kTmp / "top_compare" / "layers" / "result.json"))
+                  ["max_displacement_mm"].get<double>(),
+              cmp.layers_max_displacement_mm, 1e-9);
 }
 
 TEST_F(AppWithModel, APlanFindsItsCopiedModelAndRefusesAnother) {

@@ -83,10 +83,16 @@ void write_comparison_report(const fem::Comparison& c, const PatientModel& model
                              Reporter* reporter, const SimulationPictures& pictures) {
   fs::create_directories(dir / "measured");
   fs::create_directories(dir / "constant");
+  fs::create_directories(dir / "layers");
   fem::SimulateOptions constant = options;
   constant.continuum.constant_thickness_mm = c.constant_thickness_mm;
+  fem::SimulateOptions layered = options;
+  layered.continuum.tissue = c.layered.wound.continuum.tissue;
+  const bool has_layers = c.layered.wound.continuum.tissue == fem::TissueLayers::Measured;
+  const std::string layers_label = has_layers ? "measured layers" : "one material (no layers)";
   fem::write_simulation(c.measured, model, options, dir / "measured", plan_name + ", measured thickness");
   fem::write_simulation(c.constant, model, constant, dir / "constant", plan_name + ", constant thickness");
+  fem::write_simulation(c.layered, model, layered, dir / "layers", plan_name + ", " + layers_label);
   const std::vector<View> views{View::Plan, View::Oblique};
   SimulationPictures plain = pictures;
   plain.tension_map = false;
@@ -97,6 +103,8 @@ void write_comparison_report(const fem::Comparison& c, const PatientModel& model
                              dir / "measured", reporter);
   render_views_with_overlays(model, constant_skin, views, render_options, overlays,
                              dir / "constant", reporter);
+  render_views_with_overlays(model, simulated_skin(model, c.layered, pictures.drawn), views,
+                             render_options, overlays, dir / "layers", reporter);
   // The difference: both simulations mesh the same surface, so their skins have the same
   // vertices; each vertex of the measured skin is coloured by how far the constant-thickness
   // closure put it from the measured one.
@@ -128,15 +136,22 @@ void write_comparison_report(const fem::Comparison& c, const PatientModel& model
 
   const auto& a = c.measured_summary;
   const auto& b = c.constant_summary;
-  auto row = [&](const std::string& what, const std::string& unit, double x, double y, int d = 2) {
+  const auto& l = c.layered_summary;
+  auto row = [&](const std::string& what, const std::string& unit, double x, double y, double z,
+                 int d = 2) {
     const std::string diff = y != 0 ? fmt(100.0 * (x - y) / std::abs(y), 1) + " %" : "";
     return "<tr><td>" + what + "</td><td>" + unit + "</td><td>" + fmt(x, d) + "</td><td>" +
-           fmt(y, d) + "</td><td>" + diff + "</td></tr>\n";
+           fmt(y, d) + "</td><td>" + fmt(z, d) + "</td><td>" + diff + "</td></tr>\n";
   };
-  auto pair = [](const std::string& title, const std::string& image) {
-    return "<h2>" + title + "</h2>\n<div class=\"pair\"><div><p>measured thickness</p><img src=\"measured/" +
-           image + "\" alt=\"" + title + ", measured\"></div><div><p>constant thickness</p><img "
-           "src=\"constant/" + image + "\" alt=\"" + title + ", constant\"></div></div>\n";
+  // One picture per column: measured thickness, constant thickness, measured layers.
+  auto pair = [&](const std::string& title, const std::string& image) {
+    std::string out = "<h2>" + title + "</h2>\n<div class=\"pair\">";
+    for (const auto& [folder, label] : {std::pair<std::string, std::string>{"measured", "measured thickness"},
+                                        {"constant", "constant thickness"},
+                                        {"layers", layers_label}})
+      out += "<div><p>" + label + "</p><img src=\"" + folder + "/" + image + "\" alt=\"" + title +
+             ", " + label + "\"></div>";
+    return out + "</div>\n";
   };
   const std::string html =
       "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>caps compare: " +
@@ -146,31 +161,43 @@ void write_comparison_report(const fem::Comparison& c, const PatientModel& model
       "10px;text-align:right}td:first-child,th:first-child{text-align:left}img{max-width:100%;"
       "border:1px solid #ddd}.pair{display:flex;gap:12px}.pair div{flex:1}.warnings{background:#fff4d6;border:1px solid #e0b000;padding:4px "
       "12px;margin:1em 0}</style></head><body>\n"
-      "<h1>Measured versus constant soft-tissue thickness</h1>\n<p>The plan <b>" + plan_name +
+      "<h1>Measured thickness, constant thickness and measured tissue layers</h1>\n<p>The plan <b>" + plan_name +
       "</b> simulated on the same skin twice: with the thickness measured in the patient's volume, "
       "and with a constant " + fmt(c.constant_thickness_mm, 1) +
       " mm (the median measured under the wound, unless given), the assumption the 1992 CAPS system "
-      "made for surface scans. Both use the same surface mesh, so the results differ only in depth. "
-      "Linear elasticity; the wound closed by suture constraints (docs/fem.md).</p>\n" +
+      "made for surface scans; and a third time with the measured thickness divided into the "
+      "measured dermis, subcutaneous fat and deep tissue, each with its own material (" +
+      (has_layers ? std::string("measured layers")
+                  : std::string("this model has no measured layers under the wound: one material")) +
+      "). All use the same surface mesh, so the results differ only in depth and tissue. The "
+      "material model and the wound closed by suture constraints: docs/fem.md.</p>\n" +
       warnings_html(c.warnings) +
-      "<table><tr><th>quantity</th><th>unit</th><th>measured</th><th>constant</th>"
-      "<th>measured vs constant</th></tr>\n" +
-      row("thickness under the wound, mean", "mm", a.thickness_mean_mm, b.thickness_mean_mm) +
-      row("thickness under the wound, min", "mm", a.thickness_min_mm, b.thickness_min_mm) +
-      row("thickness under the wound, max", "mm", a.thickness_max_mm, b.thickness_max_mm) +
-      row("largest skin displacement", "mm", a.max_displacement_mm, b.max_displacement_mm) +
-      row("mean skin displacement near the wound", "mm", a.mean_displacement_mm, b.mean_displacement_mm) +
-      row("closing force across the wound", "N", a.closing_force_n, b.closing_force_n) +
-      row("largest force on one suture pair", "N", a.max_suture_force_n, b.max_suture_force_n) +
+      "<table><tr><th>quantity</th><th>unit</th><th>measured</th><th>constant</th><th>" +
+      layers_label + "</th><th>measured vs constant</th></tr>\n" +
+      row("thickness under the wound, mean", "mm", a.thickness_mean_mm, b.thickness_mean_mm,
+          l.thickness_mean_mm) +
+      row("thickness under the wound, min", "mm", a.thickness_min_mm, b.thickness_min_mm,
+          l.thickness_min_mm) +
+      row("thickness under the wound, max", "mm", a.thickness_max_mm, b.thickness_max_mm,
+          l.thickness_max_mm) +
+      row("largest skin displacement", "mm", a.max_displacement_mm, b.max_displacement_mm,
+          l.max_displacement_mm) +
+      row("mean skin displacement near the wound", "mm", a.mean_displacement_mm,
+          b.mean_displacement_mm, l.mean_displacement_mm) +
+      row("closing force across the wound", "N", a.closing_force_n, b.closing_force_n,
+          l.closing_force_n) +
+      row("largest force on one suture pair", "N", a.max_suture_force_n, b.max_suture_force_n,
+          l.max_suture_force_n) +
       row("largest skin tension (max principal stress)", "kPa", a.max_skin_tension_kpa,
-          b.max_skin_tension_kpa, 1) +
-      row("strain energy", "mJ", a.strain_energy_mj, b.strain_energy_mj) + "</table>\n" +
+          b.max_skin_tension_kpa, l.max_skin_tension_kpa, 1) +
+      row("strain energy", "mJ", a.strain_energy_mj, b.strain_energy_mj, l.strain_energy_mj) +
+      "</table>\n" +
       pair("After the closure, looking at the wound", "post_plan.png") +
       pair("After the closure, oblique", "post_oblique.png") + difference_html +
-      "<h2>Before (the same for both)</h2>\n<img src=\"measured/pre_plan.png\" alt=\"before\" "
+      "<h2>Before (the same for all)</h2>\n<img src=\"measured/pre_plan.png\" alt=\"before\" "
       "style=\"max-width:49%\">\n" + pair("Cross-sections", "section.png") +
-      "<h2>Surface mesh (the same for both)</h2>\n<img src=\"measured/surface.png\" alt=\"surface "
-      "mesh\">\n<p>Files: measured/ and constant/ hold mesh.vtu, result.vtu (ParaView), mesh.inp "
+      "<h2>Surface mesh (the same for all)</h2>\n<img src=\"measured/surface.png\" alt=\"surface "
+      "mesh\">\n<p>Files: measured/, constant/ and layers/ hold mesh.vtu, result.vtu (ParaView), mesh.inp "
       "(CalculiX), result.json and the pictures; comparison.json holds this table.</p>\n"
       "</body></html>\n";
   write_text_atomic(dir / "report.html", html);
