@@ -231,6 +231,14 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   auto interfaces = [&](double theta, double z, double T, bool* no_fat) {
     stack.depths(theta, z, T, D, no_fat);
   };
+  // Measured: each vertex column's interface depths. A mid-edge column takes the mean of its two
+  // vertices' depths (scaled to its own thickness) instead of the maps' own value at the
+  // midpoint: where the fat's depth jumps between neighbouring columns (noise in the maps, the
+  // edge of a muscle) a mid-edge node sampled there lies far off the line between the corners'
+  // nodes, and the quadratic element turns inside out (seen at the Cranium temple). Where the
+  // depths vary linearly both are the same.
+  std::vector<std::vector<double>> vertex_depths(measured ? static_cast<std::size_t>(NV) : 0);
+  const std::vector<double>* fractions = nullptr;  // set for a mid-edge column: depth / T
   auto column = [&](const Eigen::Vector2d& tz, auto&& node_of, int n_half_levels,
                     int step, bool* no_fat) -> std::string {
     const double theta = tz.x(), z = tz.y();
@@ -258,7 +266,10 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
     out.min_thickness_mm = std::min(out.min_thickness_mm, T);
     out.max_thickness_mm = std::max(out.max_thickness_mm, T);
     bool thin_fat = false;
-    interfaces(theta, z, T, &thin_fat);
+    if (fractions != nullptr)
+      for (int k = 0; k <= NL; ++k) D[k] = (*fractions)[k] * T;
+    else
+      interfaces(theta, z, T, &thin_fat);
     if (thin_fat) ++out.widened_fat_columns;
     if (no_fat) *no_fat = thin_fat;
     for (int h = 0; h <= n_half_levels; h += step) {
@@ -281,14 +292,22 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
         !why.empty())
       return off_model(std::move(why));
     fatless[v] = no_fat;
+    if (measured) vertex_depths[v] = D;
   }
+  std::vector<double> edge_fractions(static_cast<std::size_t>(NL) + 1);
   for (int e = 0; e < NE; ++e) {
     // The mid-edge node of the top face: the midpoint in (theta, z), snapped to the skin.
     const Eigen::Vector2d tz =
         0.5 * (surface.theta_z.row(edges[e].first) + surface.theta_z.row(edges[e].second)).transpose();
-    if (std::string why = column(tz, [&](int h) { return enode(e, h / 2); }, 2 * NL, 2, nullptr);
-        !why.empty())
-      return off_model(std::move(why));
+    if (measured) {
+      const auto& a = vertex_depths[edges[e].first];
+      const auto& b = vertex_depths[edges[e].second];
+      for (int k = 0; k <= NL; ++k) edge_fractions[k] = (a[k] + b[k]) / (a[NL] + b[NL]);
+      fractions = &edge_fractions;
+    }
+    std::string why = column(tz, [&](int h) { return enode(e, h / 2); }, 2 * NL, 2, nullptr);
+    fractions = nullptr;
+    if (!why.empty()) return off_model(std::move(why));
   }
 
   // Elements: polygons run counter-clockwise in (theta, z), i.e. seen from outside the skin;

@@ -114,7 +114,7 @@ struct ContinuumMesh {
   TissueLayers tissue = TissueLayers::Uniform;
   /// Measured: the node levels of the skin/fat and the fat/deep interfaces (-1 when uniform).
   int fat_top_level = -1, fat_bottom_level = -1;
-  /// Measured: columns (vertex and edge sites) whose fat was widened to min_tissue_layer_mm.
+  /// Measured: vertex columns whose fat was widened to min_tissue_layer_mm.
   int widened_fat_columns = 0;
   double min_thickness_mm = 0, max_thickness_mm = 0;  ///< over the mesh's sites
   double min_jacobian = 0;  ///< smallest det J over all Gauss points (mm^3 per unit volume)
