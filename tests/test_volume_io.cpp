@@ -182,6 +182,8 @@ struct SliceSpec {
   int instance = 1;
   int frames = 1;             // NumberOfFrames written when above 1
   bool rle = false;           // RLE Lossless (encapsulated) instead of native pixel data
+  std::string syntax;         // with `fragment`: this encapsulated transfer syntax ...
+  std::string fragment;       // ... and this one fragment per frame instead of the pixels
   bool geometry = true;       // ImagePositionPatient / ImageOrientationPatient / PixelSpacing
   std::string group_0018;     // elements of group 0018 (tag order), e.g. SpacingBetweenSlices
   std::string before_pixels;  // elements between group 0028 and PixelData, e.g. functional groups
@@ -222,7 +224,9 @@ void write_dicom_image(const fs::path& p, const SliceSpec& s, F stored) {
   element(meta, 0x0002, 0x0001, "OB", std::string("\0\1", 2));
   element(meta, 0x0002, 0x0002, "UI", sop_class);
   element(meta, 0x0002, 0x0003, "UI", sop_inst);
-  element(meta, 0x0002, 0x0010, "UI", s.rle ? "1.2.840.10008.1.2.5" : "1.2.840.10008.1.2.1");
+  const bool encapsulated = s.rle || !s.fragment.empty();
+  element(meta, 0x0002, 0x0010, "UI",
+          s.rle ? "1.2.840.10008.1.2.5" : (encapsulated ? s.syntax : "1.2.840.10008.1.2.1"));
   std::string out(128, '\0');
   out += "DICM";
   std::string len;
@@ -267,7 +271,7 @@ void write_dicom_image(const fs::path& p, const SliceSpec& s, F stored) {
     for (int y = 0; y < s.rows; ++y)
       for (int x = 0; x < s.cols; ++x)
         frames[k].push_back(static_cast<std::int16_t>(stored(x, y, k)));
-  if (!s.rle) {
+  if (!encapsulated) {
     std::vector<std::int16_t> px;
     for (const auto& f : frames) px.insert(px.end(), f.begin(), f.end());
     element(out, 0x7fe0, 0x0010, "OW", raw_bytes(px));
@@ -282,7 +286,7 @@ void write_dicom_image(const fs::path& p, const SliceSpec& s, F stored) {
       out += body;
     };
     item("");
-    for (const auto& f : frames) item(rle_frame(f));
+    for (const auto& f : frames) item(s.fragment.empty() ? rle_frame(f) : s.fragment);
     put_u16(out, 0xfffe);
     put_u16(out, 0xe0dd);
     put_le32(out, 0);
@@ -572,6 +576,44 @@ TEST(VolumeIo, DicomRleSeriesDecodesToTheSameValues) {
     for (int y = 0; y < 6; ++y)
       for (int x = 0; x < 8; ++x)
         ASSERT_FLOAT_EQ(v.at(x, y, k), 100 * k + 10 * y + x - 60 * (x % 3) - 1024.0f);
+}
+
+TEST(VolumeIo, DicomCompressedFramesDisagreeingWithTheHeaderAreRefused) {
+  // Found by fuzz_dicom: GDCM's JPEG codec dereferences a null pointer on a frame whose
+  // precision (18 bits) exceeds BitsAllocated (16). Each frame's own header is checked first.
+  TempDir tmp;
+  auto sof3 = [](int precision, int rows, int cols) {
+    std::string f("\xff\xd8\xff\xc3\x00\x0b", 6);
+    f += static_cast<char>(precision);
+    f += static_cast<char>(rows >> 8);
+    f += static_cast<char>(rows & 0xff);
+    f += static_cast<char>(cols >> 8);
+    f += static_cast<char>(cols & 0xff);
+    f += std::string("\x01\x01\x11\x00\xff\xd9", 6);
+    return f;
+  };
+  for (const char* d : {"deep", "size", "rle3", "mpeg"}) fs::create_directories(tmp / d);
+  SliceSpec s;
+  s.syntax = "1.2.840.10008.1.2.4.70";
+  s.fragment = sof3(18, 6, 8);
+  write_dicom_slice(tmp / "deep" / "deep.dcm", s, [](int, int) { return 0; });
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "deep" / "deep.dcm"); }, "deep.dcm",
+                              "precision of 18 bits");
+  s.fragment = sof3(16, 7, 8);
+  write_dicom_slice(tmp / "size" / "size.dcm", s, [](int, int) { return 0; });
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "size" / "size.dcm"); }, "size.dcm",
+                              "8x7 pixels");
+  // An RLE frame with three segments for 16-bit pixels.
+  s.syntax = "1.2.840.10008.1.2.5";
+  s.fragment = std::string("\x03\0\0\0\x40\0\0\0", 8) + std::string(60, '\0');
+  write_dicom_slice(tmp / "rle3" / "rle3.dcm", s, [](int, int) { return 0; });
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "rle3" / "rle3.dcm"); }, "rle3.dcm",
+                              "3 segments");
+  // A compression caps does not read (MPEG-2) is named, with what to do.
+  s.syntax = "1.2.840.10008.1.2.4.100";
+  write_dicom_slice(tmp / "mpeg" / "mpeg.dcm", s, [](int, int) { return 0; });
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "mpeg" / "mpeg.dcm"); }, "mpeg.dcm",
+                                   "gdcmconv --raw");
 }
 
 TEST(VolumeIo, DicomRescaleSlopeOfZeroIsRefused) {

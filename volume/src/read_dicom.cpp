@@ -30,6 +30,7 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "dicom_codestream.hpp"
 #include "dicom_structure.hpp"
 #include "volume_io_detail.hpp"
 
@@ -37,6 +38,7 @@
 #include <gdcmImage.h>
 #include <gdcmPixelFormat.h>
 #include <gdcmReader.h>
+#include <gdcmSequenceOfFragments.h>
 #include <gdcmSequenceOfItems.h>
 #include <gdcmStringFilter.h>
 #include <gdcmTrace.h>
@@ -289,6 +291,28 @@ std::vector<float> read_pixels(const SliceHeader& h, int expected_frames) {
                         bytes, " expected; the file is truncated"));
     buf.assign(bv->GetPointer(), bv->GetPointer() + bytes);
   } else {
+    // GDCM's codecs trust the frames' own headers (its JPEG codec crashed on a precision above
+    // BitsAllocated): each frame's header is checked against the DICOM header first.
+    const Codestream kind = codestream_of(h.transfer_syntax);
+    if (kind == Codestream::Unsupported)
+      throw InvalidInput(cat(name, ": pixel data compressed with transfer syntax ",
+                             h.transfer_syntax, ", which caps does not read (RLE, JPEG, JPEG-LS "
+                             "and JPEG 2000 it does); decompress the series first, e.g. "
+                             "gdcmconv --raw in.dcm out.dcm"));
+    const gdcm::SequenceOfFragments* sf = de.GetSequenceOfFragments();
+    if (sf == nullptr)
+      throw IoError(cat(name, ": the transfer syntax says compressed but the pixel data are not "
+                              "in fragments; the file is damaged"));
+    std::vector<std::string> fragments;
+    for (unsigned i = 0; i < sf->GetNumberOfFragments(); ++i) {
+      const gdcm::ByteValue* fb = sf->GetFragment(i).GetByteValue();
+      fragments.emplace_back(fb && fb->GetPointer() ? std::string(fb->GetPointer(), fb->GetLength())
+                                                    : std::string());
+    }
+    const FrameFormat format{h.rows, h.cols, h.bits_allocated, static_cast<int>(stored)};
+    if (std::string why = check_codestream(kind, fragments, format, expected_frames);
+        !why.empty())
+      throw IoError(cat(name, ": ", why, "; the file is damaged or not what its header says"));
     gdcm::Image img;
     img.SetNumberOfDimensions(expected_frames > 1 ? 3 : 2);
     img.SetDimension(0, static_cast<unsigned>(h.cols));
