@@ -879,6 +879,36 @@ TEST(VolumeIo, DicomStructureIsCheckedBeforeGdcmReadsIt) {
   expect_error<caps::IoError>([&] { caps::read_volume(tmp / "implicit.dcm"); }, "implicit.dcm",
                               "pixel data of undefined length");
 
+  // RLE (compressed) transfer syntax over pixel data of defined length (found by fuzz_dicom:
+  // GDCM took fragment lengths from the pixel bytes and allocated 808 MB for a 1 KB file).
+  fs::create_directories(tmp / "defined");
+  write_dicom_slice(tmp / "defined/rle.dcm", SliceSpec{}, [](int, int) { return 0x3030; });
+  {
+    std::string d = read_bytes(tmp / "defined/rle.dcm");
+    const std::string native("1.2.840.10008.1.2.1\0", 20), rle("1.2.840.10008.1.2.5\0", 20);
+    const auto at = d.find(native);
+    ASSERT_NE(at, std::string::npos);
+    d.replace(at, native.size(), rle);
+    write_bytes(tmp / "defined/rle.dcm", d);
+  }
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "defined/rle.dcm"); }, "rle.dcm",
+                              "pixel data of defined length in a compressed transfer syntax");
+  // Two transfer syntaxes in the meta group (found by fuzz_dicom: GDCM read the data set in
+  // another syntax than the walk and allocated 808 MB): refused.
+  fs::create_directories(tmp / "twice");
+  write_dicom_slice(tmp / "twice/ts.dcm", SliceSpec{}, [](int, int) { return 0; });
+  {
+    std::string d = read_bytes(tmp / "twice/ts.dcm");
+    const std::string ts = std::string("\x02\x00\x10\x00UI\x14\x00", 8) + "1.2.840.10008.1.2.1" +
+                           std::string(1, '\0');
+    const auto at = d.find(ts);
+    ASSERT_NE(at, std::string::npos);
+    d.insert(at + ts.size(), ts);
+    write_bytes(tmp / "twice/ts.dcm", d);
+  }
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "twice/ts.dcm"); }, "ts.dcm",
+                              "meta group elements repeated or out of order");
+
   // Deflated Explicit VR Little Endian: refused with what to do (GDCM would inflate it without
   // a bound).
   std::string deflated = part10_preamble("1.2.840.10008.1.2.1.99");

@@ -42,12 +42,18 @@ class DicomWalk {
   /// The meta group (0002) from `at`, explicit VR little endian; returns its transfer syntax
   /// UID (empty if there is no meta group) and leaves `at` after it.
   bool meta_group(std::uint64_t& at, std::string& syntax) {
+    long previous = -1;
     while (at + 8 <= size_) {
       unsigned char b[8];
       if (!read(at, b, 2)) return false;
       if (u16(b, false) != 0x0002) return true;
       Element e;
       if (!element(at, size_, true, false, e)) return false;
+      // A repeated or out-of-order element (two transfer syntaxes, found by fuzz_dicom) leaves
+      // the syntax GDCM reads the data set in uncertain.
+      if (static_cast<long>(e.number) <= previous)
+        return fail(at, "meta group elements repeated or out of order");
+      previous = static_cast<long>(e.number);
       if (e.length == kUndefinedLength || e.length > size_ - at - e.header)
         return fail(at, "a meta group element declares more bytes than the file holds");
       if (e.number == 0x0010 && e.length < 256) {
@@ -169,6 +175,12 @@ class DicomWalk {
         continue;
       }
       if (e.length > end - at) return fail(here, "an element declares more bytes than it has");
+      // PS3.5 A.4: compressed pixel data are fragments of undefined length. GDCM reads a
+      // defined length there through its workarounds for broken writers, taking item lengths
+      // from the pixel bytes (fuzz_dicom: an 808 MB allocation from a 1 KB file).
+      if (depth == 0 && encapsulated_ && e.group == 0x7fe0 && e.number == 0x0010)
+        return fail(here, "pixel data of defined length in a compressed transfer syntax "
+                          "(compressed pixel data are fragments of undefined length)");
       if (ex && e.vr == "SQ") {
         std::uint64_t inner = at;
         if (!sequence(inner, at + e.length, false, true, be, depth + 1)) return false;
