@@ -115,6 +115,8 @@ const std::vector<std::pair<std::string, std::map<std::string, double>>>& cases(
       {"rotation-flap", {}},
       {"rotation-flap", {{"back_cut", 5}, {"arc_side", -1}}},
       {"v-y-advancement", {}},
+      {"bilobed", {}},
+      {"bilobed", {{"radius", 5}, {"lobe_angle", 50}, {"second_lobe", 0.6}, {"lobe_side", -1}}},
   };
   return c;
 }

@@ -445,12 +445,13 @@ const std::vector<Template>& templates() {
 
 // Where the excised nodes go on the skin (loop index -> theta deg, z mm), given the points laid
 // with their carried frames `at`. Each is walked from its point by its offset, in the frame
-// carried there. A node moved away from both its loop neighbours, which stay on their points,
-// and not in line with them (the rhomboid's corner A) is then put at its distances from both
-// (the two sides of the rhombus keep their length). The ellipse: the widest points 1 and 5 are
-// walked W/2 to either side of the centre, and 2 and 4 are walked from the apex 3 in the apex's
-// directions, so that the length, the width and the apex angle at 3 hold on the skin; the apex
-// angle at 0 follows from length and width (docs/plan.md).
+// carried there, or from the point its point is laid from when that is another point (the
+// bilobed flap's fan about its pivot). A node moved away from both its loop neighbours, which
+// stay on their points, and not in line with them (the rhomboid's corner A) is then put at its
+// distances from both (the two sides of the rhombus keep their length). The ellipse: the widest
+// points 1 and 5 are walked W/2 to either side of the centre, and 2 and 4 are walked from the
+// apex 3 in the apex's directions, so that the length, the width and the apex angle at 3 hold
+// on the skin; the apex angle at 0 follows from length and width (docs/plan.md).
 std::map<int, V2> lay_excisions(const LocalProcedure& proc, const PatientModel& model,
                                 const std::vector<int>& loop, const std::vector<SkinFrame>& at) {
   std::map<int, V2> to;
@@ -467,7 +468,16 @@ std::map<int, V2> lay_excisions(const LocalProcedure& proc, const PatientModel& 
     moved[e.loop_index] = 1;
     offset[e.loop_index] = e.offset_mm;
   }
-  for (const auto& [i, off] : offset) to[i] = walk_on_skin(model, at[loop[i]], off).theta_z;
+  for (const auto& [i, off] : offset) {
+    // Laid from the point its point is laid from: its distance from there and the angle there
+    // hold like the points' (the bilobed flap's defect outline, from the pivot).
+    const int p = loop[i];
+    const int from = p < static_cast<int>(proc.laid_from.size()) ? proc.laid_from[p] : -1;
+    if (from >= 0 && from < static_cast<int>(at.size()))
+      to[i] = walk_on_skin(model, at[from], xy[i] - proc.points_mm[from]).theta_z;
+    else
+      to[i] = walk_on_skin(model, at[p], off).theta_z;
+  }
   auto flat_angle = [&](int v, int a, int b) {
     const V2 u = xy[a] - xy[v], w = xy[b] - xy[v];
     return std::atan2(std::abs(u.x() * w.y() - u.y() * w.x()), u.dot(w));
