@@ -220,7 +220,8 @@ inline TemplateAxes template_axes(const caps::plan::LocalProcedure& proc) {
     for (const auto& e : proc.excisions) moved[static_cast<std::size_t>(e.loop_index)] = 1;
     for (int q = 1; q <= 15; ++q) t.across.push_back({p0, node_of_point(q)});
     for (const auto& e : proc.excisions) t.across.push_back({p0, e.loop_index});
-    t.angles = {{p0, node_of_point(5), node_of_point(7)}, {p0, node_of_point(7), node_of_point(12)}};
+    t.angles = {{p0, node_of_point(5), node_of_point(7)},
+                {p0, node_of_point(7), node_of_point(12)}};
     t.axis = {{p0, node_of_point(7)}};
     t.axis_closure = true;  // P-T1 passes the centre only at a distance
     for (int i = 0; i < n; ++i) {

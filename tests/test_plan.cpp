@@ -262,6 +262,17 @@ void expect_refused(const std::function<void()>& f, const std::vector<std::strin
   }
 }
 
+// arc_side / lobe_side -1 lays the mirror image: the path reversed (so the flap stays on its
+// left), the loop the same loop run backwards, every node mirrored across the axis.
+void expect_mirror_image(const BorderLoop& a, const BorderLoop& b, int n_path, double tol) {
+  ASSERT_EQ(a.size(), b.size());
+  const int n = a.size();
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector2d p = a.local_mm[i], q = b.local_mm[(n + n_path - 1 - i) % n];
+    EXPECT_LT((p - Eigen::Vector2d(q.x(), -q.y())).norm(), tol) << i;
+  }
+}
+
 const std::vector<Eigen::Vector2d> kLine = {{0, 0}, {10, 0}, {20, 0}, {30, 0}};
 
 }  // namespace
@@ -443,10 +454,7 @@ TEST(PlanLibrary, RotationFlapTurnsIntoTheDefect) {
   const BorderLoop lm = border_loop(mir);
   EXPECT_EQ(lm.point, (std::vector<int>{8, 7, 6, 5, 4, 3, 2, 1, 0, 1, 2, 3, 4, 5, 6, 7}));
   EXPECT_EQ(mir.excisions[0].loop_index, 9);
-  for (int i = 0; i < 16; ++i) {
-    const Eigen::Vector2d a = loop.local_mm[i], b = lm.local_mm[(16 + 8 - i) % 16];
-    EXPECT_LT((a - Eigen::Vector2d(b.x(), -b.y())).norm(), 1e-9) << i;
-  }
+  expect_mirror_image(loop, lm, 9, 1e-9);
   expect_closed(mir);
   const PlanReport rm = check_plan(mir, cylinder());
   EXPECT_TRUE(rm.warnings.empty());
@@ -487,11 +495,11 @@ TEST(PlanLibrary, BilobedFlapTurnsItsLobesBackIntoARoundDefect) {
                               run({0, 1, 2, 3, 4, 5}, {29, 0}),  // corner P: Burow's triangle
                               run({5, 6}, {28, 29}), run({6, 7}, {27, 28}),  // first lobe to
                               run({7, 8}, {26, 27}), run({8, 9}, {25, 26}),  // the defect
-                              run({9, 10, 11, 12}, {23, 24, 25}),    // second lobe to the
-                              run({12, 13, 14}, {20, 21, 22, 23}),   // first's donor site
-                              run({17, 18}, {18, 19}),               // corner T2'
-                              run({16, 17}, {19, 20}),               // its donor site closed
-                              run({14, 15}, {15, 16})}));            // corner Q
+                              run({9, 10, 11, 12}, {23, 24, 25}),            // second lobe to the
+                              run({12, 13, 14}, {20, 21, 22, 23}),           // first's donor site
+                              run({17, 18}, {18, 19}),                       // corner T2'
+                              run({16, 17}, {19, 20}),     // its donor site closed
+                              run({14, 15}, {15, 16})}));  // corner Q
   expect_closed(plan);
   const WoundBorder w = wound_border(plan);
   EXPECT_EQ(w.sutures[2], (std::array<int, 4>{6, 7, 28, 27}));  // a1 meets c1, T1 meets F
@@ -529,18 +537,15 @@ TEST(PlanLibrary, BilobedFlapTurnsItsLobesBackIntoARoundDefect) {
   // lobe_side -1 is the mirror image, the path reversed so that the flap stays on its left.
   const Plan mir = placed("bilobed", {{"radius", r}, {"lobe_side", -1}});
   const BorderLoop lm = border_loop(mir);
-  ASSERT_EQ(lm.size(), 30);
-  for (int i = 0; i < 30; ++i) {
-    const Eigen::Vector2d a = loop.local_mm[i], b = lm.local_mm[(30 + 15 - i) % 30];
-    EXPECT_LT((a - Eigen::Vector2d(b.x(), -b.y())).norm(), 1e-6) << i;
-  }
+  expect_mirror_image(loop, lm, 16, 1e-6);
   expect_closed(mir);
   const PlanReport rm = check_plan(mir, cylinder());
   EXPECT_TRUE(rm.warnings.empty());
   ASSERT_EQ(rm.suture_lengths.size(), rep.suture_lengths.size());
   for (std::size_t i = 0; i < rm.suture_lengths.size(); ++i)
     EXPECT_NEAR(rm.suture_lengths[i].first_mm + rm.suture_lengths[i].second_mm,
-                rep.suture_lengths[i].first_mm + rep.suture_lengths[i].second_mm, 0.05) << i;
+                rep.suture_lengths[i].first_mm + rep.suture_lengths[i].second_mm, 0.05)
+        << i;
 
   // Across the parameters' ranges: closed, checkable plans. A second lobe of half the first's
   // width is sewn to the first's donor site at a ratio of 1.94 (suture 6: 7.1 against 13.7 mm at
@@ -548,8 +553,8 @@ TEST(PlanLibrary, BilobedFlapTurnsItsLobesBackIntoARoundDefect) {
   for (double angle : {40.0, 45.0, 55.0})
     for (double k : {0.5, 0.67, 0.9})
       for (double radius : {3.0, 15.0}) {
-        const Plan q = placed("bilobed", {{"radius", radius}, {"lobe_angle", angle},
-                                          {"second_lobe", k}});
+        const Plan q =
+            placed("bilobed", {{"radius", radius}, {"lobe_angle", angle}, {"second_lobe", k}});
         expect_closed(q);
         const PlanReport rq = check_plan(q, cylinder());
         if (k < 0.6) {
@@ -559,10 +564,16 @@ TEST(PlanLibrary, BilobedFlapTurnsItsLobesBackIntoARoundDefect) {
           EXPECT_TRUE(rq.warnings.empty()) << angle << " " << k << " " << radius;
         }
       }
-  expect_refused([] { layout_procedure("bilobed", {{"lobe_angle", 90}}); },
-                 {"lobe_angle = 90", "[40, 55]"});
-  expect_refused([] { layout_procedure("bilobed", {{"second_lobe", 1}}); },
-                 {"second_lobe = 1", "[0.5, 0.9]"});
+  expect_refused(
+      [] {
+        layout_procedure("bilobed", {{"lobe_angle", 90}});
+      },
+      {"lobe_angle = 90", "[40, 55]"});
+  expect_refused(
+      [] {
+        layout_procedure("bilobed", {{"second_lobe", 1}});
+      },
+      {"second_lobe = 1", "[0.5, 0.9]"});
   expect_refused([] { layout_procedure("bilobed", {{"lobe_side", 0}}); }, {"lobe_side = 0"});
 }
 

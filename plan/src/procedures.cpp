@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <numeric>
 #include <nlohmann/json.hpp>
+#include <numeric>
 
 #include "caps/core/error.hpp"
 #include "caps/core/json_limits.hpp"
@@ -294,15 +294,18 @@ LocalProcedure bilobed(std::map<std::string, double>& p) {
   const double r = p["radius"], beta = deg_to_rad(p["lobe_angle"]), k = p["second_lobe"];
   const double side = p["lobe_side"];
   if (side != 1 && side != -1)
-    throw InvalidInput(cat("bilobed: lobe_side = ", side, "; give 1 (the lobes to the left of the "
-                           "orientation) or -1 (to the right)"));
+    throw InvalidInput(cat("bilobed: lobe_side = ", side,
+                           "; give 1 (the lobes to the left of the orientation) or -1 (right)"));
   const bool mirror = side < 0;
   const double d = r / std::sin(beta / 2), r2 = k * r;
   const V2 P(-d, 0);
-  auto polar = [&](double rho, double phi) { return V2(P + rho * V2(std::cos(phi), std::sin(phi))); };
+  auto polar = [&](double rho, double phi) {
+    return V2(P + rho * V2(std::cos(phi), std::sin(phi)));
+  };
   auto turn = [&](const V2& x, double a) {
     const V2 u = x - P;
-    return V2(P + V2(std::cos(a) * u.x() - std::sin(a) * u.y(), std::sin(a) * u.x() + std::cos(a) * u.y()));
+    return V2(P + V2(std::cos(a) * u.x() - std::sin(a) * u.y(),
+                     std::sin(a) * u.x() + std::cos(a) * u.y()));
   };
   // The defect's cap from t- round the far side to t+: 180 deg + beta of the circle in 4 chords,
   // F on the axis. The end chords span 70 deg, so that the first lobe's border turns by 35 deg
@@ -324,17 +327,17 @@ LocalProcedure bilobed(std::map<std::string, double>& p) {
   const double tangent = kPi / 2 + h2, widest = tangent / 2;
   std::vector<V2> pts = {P};
   for (int i = 1; i <= 4; ++i) pts.push_back(P + (t_plus - P) * (i / 5.0));
-  pts.push_back(t_plus);                                                    // 5 t+
-  for (int i = 1; i <= 4; ++i) pts.push_back(turn(cap[i], beta));           // 6 a1, 7 T1, 8 a2, 9 u+
-  pts.push_back(on2(-tangent));                                            // 10 v-
-  pts.push_back(on2(-widest));                                             // 11 b1
-  pts.push_back(c2 + 2 * r2 * ax);                                         // 12 T2
-  pts.push_back(on2(widest));                                              // 13 b2
-  pts.push_back(on2(tangent));                                             // 14 w+
-  pts.push_back(polar(d - r, 2 * beta + h2));                              // 15 Q
+  pts.push_back(t_plus);                                           // 5 t+
+  for (int i = 1; i <= 4; ++i) pts.push_back(turn(cap[i], beta));  // 6 a1, 7 T1, 8 a2, 9 u+
+  pts.push_back(on2(-tangent));                                    // 10 v-
+  pts.push_back(on2(-widest));                                     // 11 b1
+  pts.push_back(c2 + 2 * r2 * ax);                                 // 12 T2
+  pts.push_back(on2(widest));                                      // 13 b2
+  pts.push_back(on2(tangent));                                     // 14 w+
+  pts.push_back(polar(d - r, 2 * beta + h2));                      // 15 Q
   if ((pts[10] - pts[9]).norm() < 0.05 * r)
-    throw InvalidInput(cat("bilobed: second_lobe = ", k, " leaves no notch between the lobes; keep "
-                           "it below 0.9"));
+    throw InvalidInput(
+        cat("bilobed: second_lobe = ", k, " leaves no notch between the lobes; keep it below 0.9"));
   p["pivot_distance"] = d;
   p["total_angle"] = rad_to_deg(2 * beta);
   LocalProcedure out;
@@ -370,20 +373,26 @@ LocalProcedure bilobed(std::map<std::string, double>& p) {
     const V2 to = mirror ? V2(cap[i - 1].x(), -cap[i - 1].y()) : cap[i - 1];
     out.excisions.push_back({mirror ? e[0] : e[1], to - out.points_mm[i]});
   }
-  out.sutures = {{R({0, 1, 2, 3, 4, 5}), R({1, 0})},  // the flap's border to t'-P: corner P
-                 {R({5, 6}), R({2, 1})},  {R({6, 7}), R({3, 2})},  // the first lobe's cap to
-                 {R({7, 8}), R({4, 3})},  {R({8, 9}), R({5, 4})},  // the defect's: T1 meets F
-                 {R({9, 10, 11, 12}), R({7, 6, 5})},       // the second lobe to the first's
-                 {R({12, 13, 14}), R({10, 9, 8, 7})},      // donor site: T2 meets T1'
-                 {R({13, 12}), R({12, 11})},               // corner T2'
-                 {R({14, 13}), R({11, 10})},               // the donor site closed primarily
-                 {R({14, 15}), R({15, 14})}};              // corner Q
-  out.notes = cat("Bilobed flap (Zitelli): defect of radius ", r, " mm with its Burow's triangle to "
-                  "the pivot P at ", d, " mm from its centre; first lobe at ", p["lobe_angle"],
-                  " deg, second (", k, " of the first) at ", 2 * p["lobe_angle"], " deg. The flap "
-                  "turns back by the lobe angle: the first lobe into the defect (T1 meets F), the "
-                  "second into the first's donor site (T2 meets T1'); the second's donor site and "
-                  "the Burow's triangle close primarily.");
+  // The flap's side P..t+ to t-..P (corner P: the Burow's triangle closed); the first lobe's cap
+  // to the defect's (t+ meets t-, T1 meets F); the second lobe by arc length to the first's
+  // donor site (T2 meets T1'); the second's donor site closed primarily (corners T2' and Q).
+  out.sutures = {{R({0, 1, 2, 3, 4, 5}), R({1, 0})},
+                 {R({5, 6}), R({2, 1})},
+                 {R({6, 7}), R({3, 2})},
+                 {R({7, 8}), R({4, 3})},
+                 {R({8, 9}), R({5, 4})},
+                 {R({9, 10, 11, 12}), R({7, 6, 5})},
+                 {R({12, 13, 14}), R({10, 9, 8, 7})},
+                 {R({13, 12}), R({12, 11})},
+                 {R({14, 13}), R({11, 10})},
+                 {R({14, 15}), R({15, 14})}};
+  out.notes =
+      cat("Bilobed flap (Zitelli): defect of radius ", r, " mm with its Burow's triangle ",
+          "to the pivot P at ", d, " mm from its centre; first lobe at ", p["lobe_angle"],
+          " deg, second (", k, " of the first) at ", 2 * p["lobe_angle"], " deg. The ",
+          "flap turns back by the lobe angle: the first lobe into the defect (T1 meets F), ",
+          "the second into the first's donor site (T2 meets T1'); the second's donor site ",
+          "and the Burow's triangle close primarily.");
   return out;
 }
 
@@ -394,54 +403,66 @@ struct Template {
 
 const std::vector<Template>& templates() {
   static const std::vector<Template> t = {
-      {{"ellipse", "elliptical (fusiform) excision, the paper's Figure 1",
+      {{"ellipse",
+        "elliptical (fusiform) excision, the paper's Figure 1",
         {{"length", "mm", 30, 5, 150, "apex to apex"},
          {"width", "mm", 10, 1, 60, "widest point (or give apex_angle)"},
          {"apex_angle", "deg", 36.87, 15, 90, "angle at each apex; sets the width", "width"}}},
        ellipse},
-      {{"z-plasty", "Z-plasty (transposition of two triangular flaps), the paper's Figure 2",
+      {{"z-plasty",
+        "Z-plasty (transposition of two triangular flaps), the paper's Figure 2",
         {{"length", "mm", 20, 5, 80, "central limb (and each lateral limb)"},
          {"angle", "deg", 60, 30, 90, "between each lateral limb and the central limb"}}},
        z_plasty},
-      {{"multiple-z-plasty", "serial Z-plasties along one central line",
+      {{"multiple-z-plasty",
+        "serial Z-plasties along one central line",
         {{"length", "mm", 45, 10, 200, "the whole central line"},
          {"angle", "deg", 60, 30, 90, "between lateral and central limbs"},
          {"segments", "count", 3, 2, 8, "number of Z-plasties"}}},
        multiple_z},
-      {{"w-plasty", "W-plasty: zigzag excision of a scar with interdigitating closure",
+      {{"w-plasty",
+        "W-plasty: zigzag excision of a scar with interdigitating closure",
         {{"length", "mm", 30, 10, 150, "along the scar"},
          {"width", "mm", 3, 1, 15, "how far the two zigzags are moved apart"},
          {"limb", "mm", 6, 3, 10, "each zigzag limb"},
          {"angle", "deg", 60, 50, 120, "at each tooth"}}},
        w_plasty},
-      {{"rhomboid", "rhomboid (Limberg) transposition flap closing a rhombic defect",
+      {{"rhomboid",
+        "rhomboid (Limberg) transposition flap closing a rhombic defect",
         {{"side", "mm", 15, 5, 50, "side of the 60/120 deg rhombus (and of the flap)"}}},
        rhomboid},
-      {{"rotation-flap", "rotation flap: a curved flap turned about its pivot into a triangular defect",
+      {{"rotation-flap",
+        "rotation flap: a curved flap turned about its pivot into a triangular defect",
         {{"radius", "mm", 15, 5, 40, "legs of the triangular defect = radius of the arc"},
          {"defect_angle", "deg", 40, 20, 60, "at the defect's apex (the arc's centre)"},
          {"arc_angle", "deg", 120, 60, 180, "sweep of the curved incision from the defect"},
-         {"back_cut", "mm", 0, 0, 20, "cut from the pivot towards the centre (0: none; at most "
-                                      "half the radius)"},
-         {"arc_side", "sign", 1, -1, 1, "1: the arc sweeps to the left of the orientation, -1: right"}}},
+         {"back_cut", "mm", 0, 0, 20,
+          "cut from the pivot towards the centre (0: none; at most "
+          "half the radius)"},
+         {"arc_side", "sign", 1, -1, 1,
+          "1: the arc sweeps to the left of the orientation, -1: right"}}},
        rotation_flap},
-      {{"v-y-advancement", "V-Y advancement: a V-shaped flap pushed along its axis, closed as a Y",
+      {{"v-y-advancement",
+        "V-Y advancement: a V-shaped flap pushed along its axis, closed as a Y",
         {{"length", "mm", 20, 5, 60, "each arm of the V, from the apex"},
          {"angle", "deg", 50, 20, 90, "at the V's apex"},
-         {"advance", "mm", 6, 1, 30, "how far the flap moves = the stem of the Y (at most half "
-                                     "the arm)"}}},
+         {"advance", "mm", 6, 1, 30,
+          "how far the flap moves = the stem of the Y (at most half "
+          "the arm)"}}},
        v_y},
-      {{"bilobed", "bilobed flap (Zitelli): two lobes transposed about one pivot into a round defect",
+      {{"bilobed",
+        "bilobed flap (Zitelli): two lobes transposed about one pivot into a round defect",
         {{"radius", "mm", 6, 3, 15, "radius of the round defect (the first lobe's too)"},
-         {"lobe_angle", "deg", 45, 40, 55, "from the defect's axis to the first lobe's, and from "
-                                            "the first to the second (Zitelli: 45-50)"},
+         {"lobe_angle", "deg", 45, 40, 55,
+          "from the defect's axis to the first lobe's, and from "
+          "the first to the second (Zitelli: 45-50)"},
          {"second_lobe", "ratio", 0.75, 0.5, 0.9, "the second lobe's width over the first's"},
-         {"lobe_side", "sign", 1, -1, 1, "1: the lobes to the left of the orientation, -1: right"}}},
+         {"lobe_side", "sign", 1, -1, 1,
+          "1: the lobes to the left of the orientation, -1: right"}}},
        bilobed},
   };
   return t;
 }
-
 
 // Where the excised nodes go on the skin (loop index -> theta deg, z mm), given the points laid
 // with their carried frames `at`. Each is walked from its point by its offset, in the frame
