@@ -209,6 +209,28 @@ inline TemplateAxes template_axes(const caps::plan::LocalProcedure& proc) {
       if (loop[i] != 1 || (xy[i] - proc.points_mm[1]).norm() > 1e-9)  // O, not its moved twin
         t.derived_angles.push_back(i);
     }
+  } else if (proc.name == "bilobed") {
+    // Every point is laid from the pivot P (point 0), and so is the defect's outline (the twins
+    // of k1..k4): their distances from P and the angles at P are asked (t+ at half the lobe
+    // angle from the first lobe's tip T1, T1 at the lobe angle from the second's tip T2, the
+    // defect's apex at P), and so are the straight sides P..t+, t-..P and w+-Q. The lobes' and
+    // the defect's chords and turns follow.
+    const int p0 = node_of_point(0);
+    std::vector<char> moved(static_cast<std::size_t>(n), 0);
+    for (const auto& e : proc.excisions) moved[static_cast<std::size_t>(e.loop_index)] = 1;
+    for (int q = 1; q <= 15; ++q) t.across.push_back({p0, node_of_point(q)});
+    for (const auto& e : proc.excisions) t.across.push_back({p0, e.loop_index});
+    t.angles = {{p0, node_of_point(5), node_of_point(7)},
+                {p0, node_of_point(7), node_of_point(12)}};
+    t.axis = {{p0, node_of_point(7)}};
+    t.axis_closure = true;  // P-T1 passes the centre only at a distance
+    for (int i = 0; i < n; ++i) {
+      const int j = (i + 1) % n, a = loop[i], b = loop[j];
+      const bool lip = a <= 5 && b <= 5 && !moved[i] && !moved[j];
+      if (!lip && a != 0 && b != 0 && !(std::min(a, b) == 14 && std::max(a, b) == 15))
+        t.derived_edges.push_back(i);
+      if (a > 4 || moved[i]) t.derived_angles.push_back(i);  // P and the straight side's k1..k4
+    }
   } else if (proc.name == "v-y-advancement") {
     t.axis = {{2, 0}, {2, 4}};  // the arms from the apex: their bisector is the axis
     t.across = {{0, 4}};        // the V's mouth follows from the arms and the apex angle

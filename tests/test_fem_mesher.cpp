@@ -707,6 +707,59 @@ TEST(Simulate, ZPlastyTransposesItsFlapsAndLengthensTheCentralLimb) {
   }
 }
 
+namespace {
+
+// Finite-strain simulation options: mesh size and extent (mm), load steps.
+SimulateOptions finite_strain(double size_mm, double extent_mm, int n_steps) {
+  SimulateOptions o;
+  o.surface.size_mm = size_mm;
+  o.surface.extent_mm = extent_mm;
+  o.solve.kinematics = Kinematics::Finite;
+  o.solve.newton.n_steps = n_steps;
+  return o;
+}
+
+}  // namespace
+
+// The bilobed flap (the template's defaults: a defect of radius 6 mm, lobes at 45 deg, second
+// lobe 0.75) on the cylinder with 5 mm of tissue, closed at finite strain: meshed, every suture
+// closed, no element inverted, and the lobes turned back about the pivot into the defect: the
+// first lobe's tip T1 (loop point 7) ends where the defect's far edge F (27) does, having turned
+// about the pivot P (0) towards the defect's axis.
+TEST(Simulate, BilobedFlapTurnsItsLobesIntoTheDefectWithoutInvertingAnElement) {
+  const PatientModel model = constant_cylinder();
+  const plan::Plan p =
+      plan::place_procedure(plan::layout_procedure("bilobed", {}), model, 0.0, 40.0, 90.0);
+  const Simulation sim = simulate(model, p, finite_strain(3.0, 12.0, 5));
+  const SurfaceMesh& S = sim.wound.surface;
+  const ContinuumMesh& C = sim.wound.continuum;
+  auto node = [&](int loop_point) { return C.skin_node[S.loop_vertex[loop_point]]; };
+  auto x0 = [&](int lp) -> Eigen::Vector3d { return C.mesh.nodes.row(node(lp)).transpose(); };
+  auto x1 = [&](int lp) -> Eigen::Vector3d {
+    return x0(lp) + sim.result.displacement_mm.row(node(lp)).transpose();
+  };
+  EXPECT_LT(sim.max_suture_gap_mm, 1e-6);
+  EXPECT_EQ(sim.inverted_elements, 0);
+  EXPECT_LT((x1(7) - x1(27)).norm(), 1e-6);   // T1 meets F
+  EXPECT_LT((x1(12) - x1(23)).norm(), 1e-6);  // T2 meets the first lobe's donor tip T1'
+  // The turn of the first lobe's axis P -> T1, seen from the pivot's final place, in the skin's
+  // tangent plane at the pivot (about the radial direction of the cylinder).
+  const Eigen::Vector3d n = Eigen::Vector3d(x0(0).x(), x0(0).y(), 0).normalized();
+  auto flat = [&](Eigen::Vector3d v) { return Eigen::Vector3d(v - v.dot(n) * n); };
+  const Eigen::Vector3d before = flat(x0(7) - x0(0)), after = flat(x1(7) - x1(0));
+  const double turn = std::atan2(before.cross(after).dot(n), before.dot(after)) * 180 / kPi;
+  std::printf(
+      "bilobed: %d elements, closing force %.2f N, max displacement %.2f mm, the first "
+      "lobe turned %.1f deg about the pivot (the lobe angle: 45), the pivot moved %.2f mm\n",
+      static_cast<int>(C.mesh.n_elements()), sim.result.total_suture_force_n,
+      sim.result.displacement_mm.rowwise().norm().maxCoeff(), turn, (x1(0) - x0(0)).norm());
+  // Measured: 600 elements, 3.76 N, the first lobe turned -41.5 deg (towards the defect:
+  // clockwise about the outward normal), the pivot moved 0.98 mm.
+  EXPECT_LT(turn, -35.0);
+  EXPECT_GT(turn, -47.0);
+  EXPECT_GT(sim.result.total_suture_force_n, 0.0);
+}
+
 TEST(Simulate, PrestretchedSkinGapesWhenCutAndPullsHarderOnTheSutures) {
   // In-vivo skin is under tension (prestretch about 1.1-1.2, docs/fem.md): cut, the wound
   // gapes; sutured, the closure carries that tension as well as the excision's own gap. The
@@ -714,11 +767,7 @@ TEST(Simulate, PrestretchedSkinGapesWhenCutAndPullsHarderOnTheSutures) {
   const PatientModel model = constant_cylinder();
   const plan::Plan p = plan::place_procedure(
       plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0.0, 40.0, 90.0);
-  SimulateOptions o;
-  o.surface.size_mm = 3.5;
-  o.surface.extent_mm = 20.0;
-  o.solve.kinematics = Kinematics::Finite;
-  o.solve.newton.n_steps = 4;
+  SimulateOptions o = finite_strain(3.5, 20.0, 4);
   const Simulation plain = simulate(model, p, o);
   o.solve.prestretch = 1.15;
   const Simulation tense = simulate(model, p, o);

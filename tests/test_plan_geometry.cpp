@@ -115,6 +115,8 @@ const std::vector<std::pair<std::string, std::map<std::string, double>>>& cases(
       {"rotation-flap", {}},
       {"rotation-flap", {{"back_cut", 5}, {"arc_side", -1}}},
       {"v-y-advancement", {}},
+      {"bilobed", {}},
+      {"bilobed", {{"radius", 5}, {"lobe_angle", 50}, {"second_lobe", 0.6}, {"lobe_side", -1}}},
   };
   return c;
 }
@@ -245,4 +247,30 @@ TEST(PlanGeometry, LaidFromInProcedureFiles) {
   std::string text = procedure_to_json(rot);
   text.replace(text.find("\"laid_from\""), 11, "\"laid_from\": [0], \"x\"");
   EXPECT_THROW(parse_procedure_json(text, "bad.json"), InvalidInput);
+}
+
+// The plan simulated on Cranium's nasal sidewall (docs/fem.md: `caps plan new bilobed --at 4,57
+// --orientation 270 --radius 5`), where the skin is steep to the model's rays: what it asks is
+// laid within 2 % / 1 deg there too. (Not every template is: the Z-plasty's angles come out
+// 1.9 deg wide at this site, docs/plan.md.)
+TEST(PlanGeometry, BilobedOnCraniumsNasalSidewall) {
+  const PatientModel* m = cranium();
+  if (!m) GTEST_SKIP() << kCranium << " not installed";
+  const LocalProcedure proc = layout_procedure("bilobed", {{"radius", 5}});
+  const Plan plan = place_procedure(proc, *m, 4, 57, 270);
+  const std::vector<Measured> v = caps_test::measure_plan(proc, plan, *m);
+  int n = 0;
+  for (const Measured& x : v) {
+    if (!x.requested || x.closure) continue;
+    ++n;
+    if (x.kind == 'L') EXPECT_LE(x.error(), kLengthTol) << x.what << ": " << x.measured << " mm";
+    if (x.kind == 'A') EXPECT_LE(x.error(), kAngleTolDeg) << x.what << ": " << x.measured << " deg";
+  }
+  EXPECT_GT(n, 20);
+  const caps_test::WorstError w = caps_test::worst(v, caps_test::Kind::kByConstruction),
+                              d = caps_test::worst(v, caps_test::Kind::kDerived);
+  std::printf("bilobed radius 5 at Cranium 4,57 o270: %d quantities asked, worst %.2f %% (%s), "
+              "%.2f deg (%s); derived worst %.2f %% (%s), %.2f deg (%s)\n",
+              n, 100 * w.length_rel, w.length_what.c_str(), w.angle_deg, w.angle_what.c_str(),
+              100 * d.length_rel, d.length_what.c_str(), d.angle_deg, d.angle_what.c_str());
 }

@@ -1,8 +1,10 @@
 #include "caps/plan/procedures.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <nlohmann/json.hpp>
+#include <numeric>
 
 #include "caps/core/error.hpp"
 #include "caps/core/json_limits.hpp"
@@ -272,6 +274,128 @@ LocalProcedure v_y(std::map<std::string, double>& p) {
   return out;
 }
 
+// Bilobed flap (Zitelli 1989), laid out as three teardrops fanned about the pivot P: the defect
+// (a circle of radius r and the Burow's triangle from it to P), the first lobe (the same teardrop
+// turned by the lobe angle beta) and the second lobe (a circle of radius k r whose centre is on
+// the same arc, turned by 2 beta, drawn out to a tip). P is at d = r / sin(beta / 2) from the
+// defect's centre, so that the defect's teardrop spans exactly beta at P: the first lobe turned
+// back by beta lies on the defect (Esser's and Zitelli's geometry made exact; d = 2 r at 60 deg
+// is Zitelli's "one radius from the defect's edge", 2.61 r at 45 deg the 2024 ePlasty design's
+// 2.6 r). Local frame: the defect's centre at the origin, x from P through it.
+// Path P, k1..k4 (on the defect's side towards the lobes, P-t+), t+ (where the defect and the
+// first lobe touch), the first lobe's cap a1, T1, a2 to u+ (its other tangent point), v- (the
+// second lobe's tangent point), b1, T2 (its tip), b2, w+, then Q down the second lobe's outer side
+// (the pedicle is Q-P, uncut). The twins of k1..k4 are moved onto the defect's outline t-, c1,
+// F, c2 (the far edge F on the axis), opening the teardrop. Sutures: the flap's border P..t+ to
+// the defect's other side t-..P (corner P: the Burow's triangle closed), the first lobe's cap to
+// the defect's cap (T1 meets F), the second lobe by arc length to the first lobe's donor site
+// (T2 meets T1'), and the second lobe's donor closed primarily (corners T2' and Q).
+LocalProcedure bilobed(std::map<std::string, double>& p) {
+  const double r = p["radius"], beta = deg_to_rad(p["lobe_angle"]), k = p["second_lobe"];
+  const double side = p["lobe_side"];
+  if (side != 1 && side != -1)
+    throw InvalidInput(cat("bilobed: lobe_side = ", side,
+                           "; give 1 (the lobes to the left of the orientation) or -1 (right)"));
+  const bool mirror = side < 0;
+  const double d = r / std::sin(beta / 2), r2 = k * r;
+  const V2 P(-d, 0);
+  auto polar = [&](double rho, double phi) {
+    return V2(P + rho * V2(std::cos(phi), std::sin(phi)));
+  };
+  auto turn = [&](const V2& x, double a) {
+    const V2 u = x - P;
+    return V2(P + V2(std::cos(a) * u.x() - std::sin(a) * u.y(),
+                     std::sin(a) * u.x() + std::cos(a) * u.y()));
+  };
+  // The defect's cap from t- round the far side to t+: 180 deg + beta of the circle in 4 chords,
+  // F on the axis. The end chords span 70 deg, so that the first lobe's border turns by 35 deg
+  // at t+ (from the straight side P-t+): the surface mesher's stage 1 fills the flap only from
+  // corners sharper than its t1 = 30 deg (docs/mesher.md), and at 4 equal chords (28 deg) the
+  // flap was left to stage 2's layers, which overlapped inside it.
+  const double end_step = deg_to_rad(70.0), mid_step = (kPi + beta) / 2 - end_step;
+  const std::array<double, 5> cap_angle = {-(kPi / 2 + beta / 2), -mid_step, 0.0, mid_step,
+                                           kPi / 2 + beta / 2};
+  std::vector<V2> cap(5);
+  for (int i = 0; i <= 4; ++i) cap[i] = r * V2(std::cos(cap_angle[i]), std::sin(cap_angle[i]));
+  const V2 t_plus = cap[4];
+  // The second lobe: centre on the arc of radius d at 2 beta, tangent half-angle h2 at P; its
+  // cap from v- (the tangent point towards the first lobe) through b1, the tip T2 (drawn out to
+  // 2 r2 from its centre: a 60 deg tip, so that its donor site closes primarily), b2 to w+.
+  const double h2 = std::asin(r2 / d);
+  const V2 c2 = polar(d, 2 * beta), ax(std::cos(2 * beta), std::sin(2 * beta)), nx(-ax.y(), ax.x());
+  auto on2 = [&](double a) { return V2(c2 + r2 * (std::cos(a) * ax + std::sin(a) * nx)); };
+  const double tangent = kPi / 2 + h2, widest = tangent / 2;
+  std::vector<V2> pts = {P};
+  for (int i = 1; i <= 4; ++i) pts.push_back(P + (t_plus - P) * (i / 5.0));
+  pts.push_back(t_plus);                                           // 5 t+
+  for (int i = 1; i <= 4; ++i) pts.push_back(turn(cap[i], beta));  // 6 a1, 7 T1, 8 a2, 9 u+
+  pts.push_back(on2(-tangent));                                    // 10 v-
+  pts.push_back(on2(-widest));                                     // 11 b1
+  pts.push_back(c2 + 2 * r2 * ax);                                 // 12 T2
+  pts.push_back(on2(widest));                                      // 13 b2
+  pts.push_back(on2(tangent));                                     // 14 w+
+  pts.push_back(polar(d - r, 2 * beta + h2));                      // 15 Q
+  if ((pts[10] - pts[9]).norm() < 0.05 * r)
+    throw InvalidInput(
+        cat("bilobed: second_lobe = ", k, " leaves no notch between the lobes; keep it below 0.9"));
+  p["pivot_distance"] = d;
+  p["total_angle"] = rad_to_deg(2 * beta);
+  LocalProcedure out;
+  for (V2& x : pts) out.points_mm.push_back(mirror ? V2(x.x(), -x.y()) : x);
+  std::vector<int> path(pts.size());
+  std::iota(path.begin(), path.end(), 0);
+  if (mirror) std::reverse(path.begin(), path.end());
+  out.paths = {path};
+  // The fan about P: every point laid from P (the angles at P and the distances from it hold).
+  out.laid_from.assign(pts.size(), 0);
+  out.laid_from[0] = -1;
+  out.flaps = {{0, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15}};
+  const std::vector<int> loop = walk_around_cut(out.points_mm, out.paths);
+  const int nl = static_cast<int>(loop.size());
+  // A run of the loop through the given points in that order (mirrored: the loop runs the other
+  // way, so the same stretch of border is the reversed run).
+  auto R = [&](std::vector<int> q) {
+    if (mirror) std::reverse(q.begin(), q.end());
+    for (int i = 0; i < nl; ++i) {
+      bool match = true;
+      for (std::size_t j = 0; j < q.size() && match; ++j) match = loop[(i + j) % nl] == q[j];
+      if (match) {
+        BorderRun run;
+        for (std::size_t j = 0; j < q.size(); ++j) run.push_back(static_cast<int>((i + j) % nl));
+        return run;
+      }
+    }
+    throw Error("bilobed: internal error, a run missing from the loop");
+  };
+  // The skin-side copies of k1..k4 (k_i: point i) moved onto t-, c1, F, c2.
+  for (int i = 1; i <= 4; ++i) {
+    const BorderRun e = R({i + 1, i});
+    const V2 to = mirror ? V2(cap[i - 1].x(), -cap[i - 1].y()) : cap[i - 1];
+    out.excisions.push_back({mirror ? e[0] : e[1], to - out.points_mm[i]});
+  }
+  // The flap's side P..t+ to t-..P (corner P: the Burow's triangle closed); the first lobe's cap
+  // to the defect's (t+ meets t-, T1 meets F); the second lobe by arc length to the first's
+  // donor site (T2 meets T1'); the second's donor site closed primarily (corners T2' and Q).
+  out.sutures = {{R({0, 1, 2, 3, 4, 5}), R({1, 0})},
+                 {R({5, 6}), R({2, 1})},
+                 {R({6, 7}), R({3, 2})},
+                 {R({7, 8}), R({4, 3})},
+                 {R({8, 9}), R({5, 4})},
+                 {R({9, 10, 11, 12}), R({7, 6, 5})},
+                 {R({12, 13, 14}), R({10, 9, 8, 7})},
+                 {R({13, 12}), R({12, 11})},
+                 {R({14, 13}), R({11, 10})},
+                 {R({14, 15}), R({15, 14})}};
+  out.notes =
+      cat("Bilobed flap (Zitelli): defect of radius ", r, " mm with its Burow's triangle ",
+          "to the pivot P at ", d, " mm from its centre; first lobe at ", p["lobe_angle"],
+          " deg, second (", k, " of the first) at ", 2 * p["lobe_angle"], " deg. The ",
+          "flap turns back by the lobe angle: the first lobe into the defect (T1 meets F), ",
+          "the second into the first's donor site (T2 meets T1'); the second's donor site ",
+          "and the Burow's triangle close primarily.");
+  return out;
+}
+
 struct Template {
   ProcedureInfo info;
   LocalProcedure (*layout)(std::map<std::string, double>&);
@@ -279,56 +403,76 @@ struct Template {
 
 const std::vector<Template>& templates() {
   static const std::vector<Template> t = {
-      {{"ellipse", "elliptical (fusiform) excision, the paper's Figure 1",
+      {{"ellipse",
+        "elliptical (fusiform) excision, the paper's Figure 1",
         {{"length", "mm", 30, 5, 150, "apex to apex"},
          {"width", "mm", 10, 1, 60, "widest point (or give apex_angle)"},
          {"apex_angle", "deg", 36.87, 15, 90, "angle at each apex; sets the width", "width"}}},
        ellipse},
-      {{"z-plasty", "Z-plasty (transposition of two triangular flaps), the paper's Figure 2",
+      {{"z-plasty",
+        "Z-plasty (transposition of two triangular flaps), the paper's Figure 2",
         {{"length", "mm", 20, 5, 80, "central limb (and each lateral limb)"},
          {"angle", "deg", 60, 30, 90, "between each lateral limb and the central limb"}}},
        z_plasty},
-      {{"multiple-z-plasty", "serial Z-plasties along one central line",
+      {{"multiple-z-plasty",
+        "serial Z-plasties along one central line",
         {{"length", "mm", 45, 10, 200, "the whole central line"},
          {"angle", "deg", 60, 30, 90, "between lateral and central limbs"},
          {"segments", "count", 3, 2, 8, "number of Z-plasties"}}},
        multiple_z},
-      {{"w-plasty", "W-plasty: zigzag excision of a scar with interdigitating closure",
+      {{"w-plasty",
+        "W-plasty: zigzag excision of a scar with interdigitating closure",
         {{"length", "mm", 30, 10, 150, "along the scar"},
          {"width", "mm", 3, 1, 15, "how far the two zigzags are moved apart"},
          {"limb", "mm", 6, 3, 10, "each zigzag limb"},
          {"angle", "deg", 60, 50, 120, "at each tooth"}}},
        w_plasty},
-      {{"rhomboid", "rhomboid (Limberg) transposition flap closing a rhombic defect",
+      {{"rhomboid",
+        "rhomboid (Limberg) transposition flap closing a rhombic defect",
         {{"side", "mm", 15, 5, 50, "side of the 60/120 deg rhombus (and of the flap)"}}},
        rhomboid},
-      {{"rotation-flap", "rotation flap: a curved flap turned about its pivot into a triangular defect",
+      {{"rotation-flap",
+        "rotation flap: a curved flap turned about its pivot into a triangular defect",
         {{"radius", "mm", 15, 5, 40, "legs of the triangular defect = radius of the arc"},
          {"defect_angle", "deg", 40, 20, 60, "at the defect's apex (the arc's centre)"},
          {"arc_angle", "deg", 120, 60, 180, "sweep of the curved incision from the defect"},
-         {"back_cut", "mm", 0, 0, 20, "cut from the pivot towards the centre (0: none; at most "
-                                      "half the radius)"},
-         {"arc_side", "sign", 1, -1, 1, "1: the arc sweeps to the left of the orientation, -1: right"}}},
+         {"back_cut", "mm", 0, 0, 20,
+          "cut from the pivot towards the centre (0: none; at most "
+          "half the radius)"},
+         {"arc_side", "sign", 1, -1, 1,
+          "1: the arc sweeps to the left of the orientation, -1: right"}}},
        rotation_flap},
-      {{"v-y-advancement", "V-Y advancement: a V-shaped flap pushed along its axis, closed as a Y",
+      {{"v-y-advancement",
+        "V-Y advancement: a V-shaped flap pushed along its axis, closed as a Y",
         {{"length", "mm", 20, 5, 60, "each arm of the V, from the apex"},
          {"angle", "deg", 50, 20, 90, "at the V's apex"},
-         {"advance", "mm", 6, 1, 30, "how far the flap moves = the stem of the Y (at most half "
-                                     "the arm)"}}},
+         {"advance", "mm", 6, 1, 30,
+          "how far the flap moves = the stem of the Y (at most half "
+          "the arm)"}}},
        v_y},
+      {{"bilobed",
+        "bilobed flap (Zitelli): two lobes transposed about one pivot into a round defect",
+        {{"radius", "mm", 6, 3, 15, "radius of the round defect (the first lobe's too)"},
+         {"lobe_angle", "deg", 45, 40, 55,
+          "from the defect's axis to the first lobe's, and from "
+          "the first to the second (Zitelli: 45-50)"},
+         {"second_lobe", "ratio", 0.75, 0.5, 0.9, "the second lobe's width over the first's"},
+         {"lobe_side", "sign", 1, -1, 1,
+          "1: the lobes to the left of the orientation, -1: right"}}},
+       bilobed},
   };
   return t;
 }
 
-
 // Where the excised nodes go on the skin (loop index -> theta deg, z mm), given the points laid
 // with their carried frames `at`. Each is walked from its point by its offset, in the frame
-// carried there. A node moved away from both its loop neighbours, which stay on their points,
-// and not in line with them (the rhomboid's corner A) is then put at its distances from both
-// (the two sides of the rhombus keep their length). The ellipse: the widest points 1 and 5 are
-// walked W/2 to either side of the centre, and 2 and 4 are walked from the apex 3 in the apex's
-// directions, so that the length, the width and the apex angle at 3 hold on the skin; the apex
-// angle at 0 follows from length and width (docs/plan.md).
+// carried there, or from the point its point is laid from when that is another point (the
+// bilobed flap's fan about its pivot). A node moved away from both its loop neighbours, which
+// stay on their points, and not in line with them (the rhomboid's corner A) is then put at its
+// distances from both (the two sides of the rhombus keep their length). The ellipse: the widest
+// points 1 and 5 are walked W/2 to either side of the centre, and 2 and 4 are walked from the
+// apex 3 in the apex's directions, so that the length, the width and the apex angle at 3 hold
+// on the skin; the apex angle at 0 follows from length and width (docs/plan.md).
 std::map<int, V2> lay_excisions(const LocalProcedure& proc, const PatientModel& model,
                                 const std::vector<int>& loop, const std::vector<SkinFrame>& at) {
   std::map<int, V2> to;
@@ -345,7 +489,16 @@ std::map<int, V2> lay_excisions(const LocalProcedure& proc, const PatientModel& 
     moved[e.loop_index] = 1;
     offset[e.loop_index] = e.offset_mm;
   }
-  for (const auto& [i, off] : offset) to[i] = walk_on_skin(model, at[loop[i]], off).theta_z;
+  for (const auto& [i, off] : offset) {
+    // Laid from the point its point is laid from: its distance from there and the angle there
+    // hold like the points' (the bilobed flap's defect outline, from the pivot).
+    const int p = loop[i];
+    const int from = p < static_cast<int>(proc.laid_from.size()) ? proc.laid_from[p] : -1;
+    if (from >= 0 && from < static_cast<int>(at.size()))
+      to[i] = walk_on_skin(model, at[from], xy[i] - proc.points_mm[from]).theta_z;
+    else
+      to[i] = walk_on_skin(model, at[p], off).theta_z;
+  }
   auto flat_angle = [&](int v, int a, int b) {
     const V2 u = xy[a] - xy[v], w = xy[b] - xy[v];
     return std::atan2(std::abs(u.x() * w.y() - u.y() * w.x()), u.dot(w));

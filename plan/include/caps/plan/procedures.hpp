@@ -49,7 +49,8 @@ struct LocalProcedure {
   /// How place_procedure() lays each point on the skin: the index of the point it is walked
   /// from (-1: from the centre). Empty: every point is walked from its neighbour on the cut,
   /// from the point nearest the centre (segments keep their lengths and turns). A template that
-  /// names distances from one point (the rotation flap's radius) walks them from it.
+  /// names distances from one point (the rotation flap's radius, the bilobed flap's pivot) walks
+  /// them from it; excised nodes of a point laid from another point are laid from that one too.
   std::vector<int> laid_from;
   std::string notes;
 };
@@ -63,7 +64,8 @@ LocalProcedure layout_procedure(const std::string& name,
 /// towards +theta): the frame, the points' (theta, z) and LPS. Lengths and angles of the local
 /// layout become lengths on the skin and angles in its tangent planes: each point is walked on
 /// the skin (walk_on_skin()) from the point it is laid from (LocalProcedure::laid_from), and each
-/// excised node from its point by its offset; the plan's excision offsets are then rewritten in
+/// excised node from its point by its offset (from the point its point is laid from, when that is
+/// another point); the plan's excision offsets are then rewritten in
 /// the plan's linear frame so that border_loop() puts each moved node where the walk ended
 /// (docs/plan.md, "Frame"). Does not check the plan; see check_plan().
 Plan place_procedure(const LocalProcedure& procedure, const PatientModel& model, double theta_deg,
