@@ -603,6 +603,13 @@ TEST(VolumeIo, DicomCompressedFramesDisagreeingWithTheHeaderAreRefused) {
   write_dicom_slice(tmp / "size" / "size.dcm", s, [](int, int) { return 0; });
   expect_error<caps::IoError>([&] { caps::read_volume(tmp / "size" / "size.dcm"); }, "size.dcm",
                               "8x7 pixels");
+  // A frame whose header agrees but which holds no scan: GDCM's JPEG codec asserts on what
+  // libjpeg reports (found by fuzz_dicom); decoded in a child process, it is a damaged file.
+  fs::create_directories(tmp / "noscan");
+  s.fragment = sof3(16, 6, 8);
+  write_dicom_slice(tmp / "noscan" / "noscan.dcm", s, [](int, int) { return 0; });
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "noscan" / "noscan.dcm"); },
+                              "noscan.dcm", "could not be decoded");
   // An RLE frame with three segments for 16-bit pixels.
   s.syntax = "1.2.840.10008.1.2.5";
   s.fragment = std::string("\x03\0\0\0\x40\0\0\0", 8) + std::string(60, '\0');

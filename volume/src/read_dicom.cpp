@@ -19,14 +19,23 @@
 // ReadOptions::allow_missing_slices is set, which interpolates across them and adds a note.
 
 #include <algorithm>
+#include <chrono>
+#include <csignal>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <map>
 #include <set>
 #include <sstream>
+#include <thread>
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
@@ -243,6 +252,68 @@ gdcm::File read_data_set(const fs::path& file) {
   return reader.GetFile();
 }
 
+}  // namespace
+}  // namespace detail
+}  // namespace caps
+
+// Defined only when a sanitizer runtime is linked (scripts/sanitize.sh, fuzz/).
+extern "C" void __sanitizer_set_death_callback(void (*callback)(void)) __attribute__((weak));
+
+namespace caps {
+namespace detail {
+namespace {
+
+/// Runs `decode`, which writes `n` bytes to the buffer it is given, in a child process and
+/// copies its result to `out`; returns why it failed (empty on success). GDCM's codecs, as Debian
+/// builds them, abort the process on assertions and crash on some damaged streams (fuzz_dicom
+/// found a null dereference and an `assert(0)` on a libjpeg warning in the JPEG codec), which no
+/// check before them can rule out: a child process contains them. The child writes into shared
+/// memory and leaves with _exit; a child running longer than a minute is killed.
+std::string decode_contained(std::size_t n, char* out, const std::function<bool(char*)>& decode) {
+  void* shared = mmap(nullptr, std::max<std::size_t>(n, 1), PROT_READ | PROT_WRITE,
+                      MAP_SHARED | MAP_ANONYMOUS, -1, 0);
+  if (shared == MAP_FAILED) return cat("no memory for ", n, " decoded bytes");
+  const pid_t pid = fork();
+  if (pid < 0) {
+    munmap(shared, std::max<std::size_t>(n, 1));
+    return "cannot start the decoding process";
+  }
+  if (pid == 0) {
+    // The child's end is the parent's to report: GDCM's assertion text, a sanitizer's report or
+    // a fuzzer's crash handler (which would save the input as a finding) stay quiet here.
+    for (const int sig : {SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGILL}) std::signal(sig, SIG_DFL);
+    if (__sanitizer_set_death_callback != nullptr) __sanitizer_set_death_callback(nullptr);
+    if (const int devnull = open("/dev/null", O_WRONLY); devnull >= 0) dup2(devnull, 2);
+    bool ok = false;
+    try {
+      ok = decode(static_cast<char*>(shared));
+    } catch (...) {
+    }
+    _exit(ok ? 0 : 3);
+  }
+  int status = 0;
+  pid_t done = 0;
+  const auto start = std::chrono::steady_clock::now();
+  auto pause = std::chrono::microseconds(50);
+  while ((done = waitpid(pid, &status, WNOHANG)) == 0) {
+    if (std::chrono::steady_clock::now() - start > std::chrono::seconds(60)) {
+      kill(pid, SIGKILL);
+      waitpid(pid, &status, 0);
+      munmap(shared, std::max<std::size_t>(n, 1));
+      return "the decoder ran for over a minute";
+    }
+    std::this_thread::sleep_for(pause);
+    pause = std::min(pause * 2, std::chrono::microseconds(20000));
+  }
+  std::string why;
+  if (done < 0) why = "lost the decoding process";
+  else if (WIFSIGNALED(status)) why = cat("the decoder crashed (signal ", WTERMSIG(status), ")");
+  else if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) why = "the decoder refused the data";
+  else std::memcpy(out, shared, n);
+  munmap(shared, std::max<std::size_t>(n, 1));
+  return why;
+}
+
 /// Decoded pixels of one file as floats (rescale applied), rows*cols*frames values. The pixel
 /// format is the one read_header took from the header and checked here; native pixel data are
 /// copied from the file as they are, encapsulated (compressed) ones go through GDCM's codec for
@@ -329,9 +400,12 @@ std::vector<float> read_pixels(const SliceHeader& h, int expected_frames) {
       throw InvalidInput(cat(name, ": the pixel data decode to ", img.GetBufferLength(),
                              " bytes, ", bytes, " expected; the file is damaged"));
     buf.resize(bytes);
-    if (!img.GetBuffer(buf.data()))
+    const std::string failed = decode_contained(bytes, buf.data(), [&](char* out) {
+      return img.GetBuffer(out);
+    });
+    if (!failed.empty())
       throw IoError(cat(name, ": the pixel data could not be decoded (transfer syntax ",
-                        h.transfer_syntax, "); the file is truncated or corrupt"));
+                        h.transfer_syntax, ": ", failed, "); the file is truncated or corrupt"));
   }
 
   std::vector<float> out(n);
