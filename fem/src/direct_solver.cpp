@@ -4,6 +4,7 @@
 #include <dmumps_c.h>
 #include <smumps_c.h>
 
+#include <algorithm>
 #include <cmath>
 #include <optional>
 #include <string>
@@ -237,10 +238,11 @@ class MixedMumpsSolver final : public DirectSolver {
   }
   std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
                                                       const Eigen::VectorXd& b,
-                                                      int max_iterations) override {
+                                                      int max_iterations,
+                                                      double tolerance) override {
     if (double_ || !K_) return std::nullopt;
     K_ = &K;
-    return conjugate_gradients(b, max_iterations);
+    return conjugate_gradients(b, max_iterations, std::max(tolerance, kTolerance));
   }
   Eigen::VectorXd solve(const Eigen::VectorXd& b) override {
     if (!double_) {
@@ -269,14 +271,16 @@ class MixedMumpsSolver final : public DirectSolver {
     single_.solve(z.data(), iteration);
     return z.cast<double>();
   }
-  // Preconditioned CG (Saad 2003, alg. 9.1) until the recursive residual is below 1e-12 ||b||
-  // and then the true one, b - K x, below 1e-11 ||b|| (the recursive residual of an
-  // ill-conditioned system can drop below what is achievable); empty if that does not happen
-  // in max_iterations: the single-precision factor (possibly of an earlier K) is then too poor a
-  // preconditioner.
+  // Preconditioned CG (Saad 2003, alg. 9.1) until the recursive residual is below
+  // tolerance ||b|| (1e-12 for a solve as accurate as a direct one) and then the true one,
+  // b - K x, below 10 tolerance ||b|| (the recursive residual of an ill-conditioned system can
+  // drop below what is achievable); empty if that does not happen in max_iterations: the
+  // single-precision factor (possibly of an earlier K) is then too poor a preconditioner.
   static constexpr int kMaxIterations = 40;
-  std::optional<Eigen::VectorXd> conjugate_gradients(const Eigen::VectorXd& b, int max_iterations) {
-    constexpr double kTolerance = 1e-12, kTrueTolerance = 1e-11;
+  static constexpr double kTolerance = 1e-12;
+  std::optional<Eigen::VectorXd> conjugate_gradients(const Eigen::VectorXd& b, int max_iterations,
+                                                     double tolerance = kTolerance) {
+    const double true_tolerance = 10 * tolerance;
     const auto K = K_->selfadjointView<Eigen::Upper>();
     const double bn = b.norm();
     Eigen::VectorXd x = Eigen::VectorXd::Zero(b.size());
@@ -290,9 +294,9 @@ class MixedMumpsSolver final : public DirectSolver {
       const double alpha = rz / pKp;
       x += alpha * p;
       r -= alpha * Kp;
-      if (r.norm() <= kTolerance * bn) {
+      if (r.norm() <= tolerance * bn) {
         Kp.noalias() = K * x;
-        if ((b - Kp).norm() <= kTrueTolerance * bn) return x;
+        if ((b - Kp).norm() <= true_tolerance * bn) return x;
         return std::nullopt;
       }
       z = precondition(r, iterations_);
