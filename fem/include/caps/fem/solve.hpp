@@ -67,9 +67,11 @@ struct NewtonOptions {
   double displacement_tolerance = 1e-8;
   /// Both tolerances for the steps before lambda = 1 (never tighter than the two above).
   double intermediate_tolerance = 1e-5;
-  /// Mixed-precision MUMPS: a new tangent is first solved by conjugate gradients preconditioned
-  /// with the last factorization, which is kept if that converges (to the accuracy of a direct
-  /// solve) within this many iterations; otherwise it is factorized. 0 = factorize every tangent.
+  /// A new tangent is first solved by conjugate gradients preconditioned with the last
+  /// factorization (of an earlier tangent; any solver and precision), which is kept if that
+  /// converges within this many iterations (to the accuracy an inexact Newton step needs, a
+  /// relative residual of 1e-2 ||r|| / ||r_0||, at most 1e-3); otherwise the tangent is
+  /// factorized. 0 = factorize every tangent.
   int reuse_iterations = 8;
 };
 
@@ -88,6 +90,12 @@ struct SolveOptions {
   bool mixed_precision = true;
   /// Threads for assembly and stress recovery (0 = all).
   int threads = 0;
+  /// Threads of the BLAS inside the sparse factorization and solves (OpenBLAS; another BLAS is
+  /// left alone) during the solve, restored afterwards; 0 = as the BLAS is configured
+  /// (OPENBLAS_NUM_THREADS). One by default: OpenBLAS's idle threads spin next to the parallel
+  /// assembly, and the finite-strain solve's many factorizations and triangular solves are
+  /// faster without them (docs/benchmarks.md).
+  int blas_threads = 1;
   /// In-vivo prestretch of the skin (layer 0, the element layer under the surface), in its
   /// plane, 1 = none, valid 1..1.5 (skin in vivo: about 1.1-1.2; docs/fem.md). The stress-free
   /// skin is its reference shrunk by this factor in the plane and thickened along the normal
