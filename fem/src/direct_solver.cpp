@@ -218,6 +218,15 @@ std::optional<Eigen::VectorXd> conjugate_gradients(const Eigen::SparseMatrix<dou
   return std::nullopt;
 }
 
+// CG on K preconditioned with the last factor of a double-precision `solver` (its solve()).
+std::optional<Eigen::VectorXd> reuse_factor(DirectSolver& solver, const Eigen::SparseMatrix<double>& K,
+                                            const Eigen::VectorXd& b, int max_iterations,
+                                            double tolerance) {
+  int iterations = 0;
+  return conjugate_gradients(K, b, max_iterations, std::max(tolerance, kCgTolerance),
+                             [&](const Eigen::VectorXd& r, int) { return solver.solve(r); }, iterations);
+}
+
 // The assembled upper triangle as MUMPS coordinates, and the block starts, both 1-based.
 struct MumpsInput {
   std::vector<MUMPS_INT> irn, jcn, blkptr;
@@ -252,10 +261,7 @@ class MumpsSolver final : public DirectSolver {
   std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
                                                       const Eigen::VectorXd& b, int max_iterations,
                                                       double tolerance) override {
-    if (!factored_) return std::nullopt;
-    int iterations = 0;
-    return conjugate_gradients(K, b, max_iterations, std::max(tolerance, kCgTolerance),
-                               [&](const Eigen::VectorXd& r, int) { return solve(r); }, iterations);
+    return factored_ ? reuse_factor(*this, K, b, max_iterations, tolerance) : std::nullopt;
   }
   long factor_nonzeros() const override { return mumps_.factor_nonzeros(); }
 
@@ -393,10 +399,7 @@ class CholmodSolver final : public DirectSolver {
   std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
                                                       const Eigen::VectorXd& b, int max_iterations,
                                                       double tolerance) override {
-    if (!factored_) return std::nullopt;
-    int iterations = 0;
-    return conjugate_gradients(K, b, max_iterations, std::max(tolerance, kCgTolerance),
-                               [&](const Eigen::VectorXd& r, int) { return solve(r); }, iterations);
+    return factored_ ? reuse_factor(*this, K, b, max_iterations, tolerance) : std::nullopt;
   }
   Eigen::VectorXd solve(const Eigen::VectorXd& b) override {
     cholmod_dense B{};
