@@ -5,7 +5,11 @@
 // bottom fixed, a sutured slot); "cube" = a cube of Hex20 (the CalculiX comparison case).
 #include <benchmark/benchmark.h>
 
+#include <cmath>
+
 #include "caps/fem/box.hpp"
+#include "caps/fem/elements.hpp"
+#include "caps/fem/material.hpp"
 #include "caps/fem/solve.hpp"
 
 namespace {
@@ -66,6 +70,30 @@ void SlabFinite(benchmark::State& state) {
   run(state, slab(static_cast<int>(state.range(0))), caps::fem::Kinematics::Finite);
 }
 
+// One finite-strain Hex20 (27 Gauss points, neo-Hookean): internal force and consistent
+// tangent (range(0) = 1) or the force alone (0), at a distorted element stretched 10-20 %: the
+// kernel of every Newton assembly.
+void ElementFinite(benchmark::State& state) {
+  const caps::fem::Mesh cell = caps::fem::make_box_mesh([] {
+    BoxOptions o;
+    o.size_mm = {4, 4, 3};
+    o.cells = {1, 1, 1};
+    return o;
+  }());
+  Eigen::MatrixX3d X = caps::fem::element_coordinates(cell, 0);
+  Eigen::VectorXd u(3 * X.rows());
+  for (Eigen::Index a = 0; a < X.rows(); ++a) {
+    X.row(a) += 0.2 * Eigen::RowVector3d(std::sin(a), std::cos(2.0 * a), std::sin(3.0 * a));
+    u.segment<3>(3 * a) = Eigen::Vector3d(0.1 * X(a, 0) + 0.05 * X(a, 1), 0.2 * X(a, 1), -0.1 * X(a, 2));
+  }
+  const caps::fem::NeoHookean material(0.1, 0.45);
+  const bool tangent = state.range(0) == 1;
+  for (auto _ : state) {
+    const auto r = caps::fem::element_finite_response(caps::fem::ElementType::Hex20, X, material, u, 0, tangent);
+    benchmark::DoNotOptimize(r.f.data());
+  }
+}
+
 void Cube(benchmark::State& state) {
   BoxOptions o;
   const int n = static_cast<int>(state.range(0));
@@ -84,6 +112,8 @@ BENCHMARK(Slab)->ArgsProduct({{38}, {0}, {0, 3, 5, 7}})->Unit(benchmark::kMillis
 BENCHMARK(Slab)->ArgsProduct({{51}, {0}, {0, 2, 3, 5, 7}})->Unit(benchmark::kMillisecond)->Iterations(1);
 // Cube 8 -> ~10k dofs, 13 -> ~30k, 16 -> ~56k (the CalculiX 54k-dof case).
 BENCHMARK(SlabFinite)->ArgsProduct({{23, 38}, {0, 1}, {4}})->Unit(benchmark::kMillisecond)->Iterations(1);
+
+BENCHMARK(ElementFinite)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
 BENCHMARK(Cube)->ArgsProduct({{8, 13, 16}, {0, 1, 2}, {4}})->Unit(benchmark::kMillisecond)->Iterations(1);
 

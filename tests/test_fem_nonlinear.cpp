@@ -275,7 +275,9 @@ TEST(FiniteStrain, UniaxialStretchMatchesTheClosedForm) {
         if (std::abs(m.nodes(i, c)) < 1e-9) m.fixed_dofs.push_back({i, c, 0.0});
     for (int i = 0; i < m.n_nodes(); ++i)
       if (std::abs(m.nodes(i, 0) - L) < 1e-9) m.fixed_dofs.push_back({i, 0, (l1 - 1) * L});
-    const SolveResult r = solve(m, finite());
+    SolveOptions o = finite();
+    o.newton.grow_iterations = 0;  // ten fixed steps, each checked to converge
+    const SolveResult r = solve(m, o);
     print_history(r, wedges ? "uniaxial wedge15" : "uniaxial hex20");
     const NeoHookean nh(kE, kNu);
     const double l2 = lateral_stretch(l1, nh.mu_mpa(), nh.bulk_mpa());
@@ -526,6 +528,36 @@ TEST(FiniteStrain, SlotClosedBySuturesInLoadSteps) {
     if (slot < 0.1)
       EXPECT_NEAR(fin.total_suture_force_n, lin.total_suture_force_n, 0.03 * lin.total_suture_force_n);
   }
+}
+
+TEST(FiniteStrain, EasyStepsGrowAndEndWhereFixedStepsEnd) {
+  // The 6 mm slot: a step converged in at most grow_iterations (3) Newton solves doubles the
+  // next, up to what remains; the closed state is the one ten fixed steps reach. Steps before
+  // lambda = 1 stop at the intermediate tolerance (1e-5), the last at 1e-8.
+  const Mesh m = slotted_box(6.0);
+  SolveOptions fixed_steps = finite();
+  fixed_steps.newton.grow_iterations = 0;
+  const SolveResult grown = solve(m, finite()), fixed = solve(m, fixed_steps);
+  print_history(grown, "grown steps");
+  std::cout << "grown: " << grown.newton_steps.size() << " steps, " << grown.newton_iterations
+            << " solves, " << grown.factorizations << " factorizations; fixed: "
+            << fixed.newton_steps.size() << " steps, " << fixed.newton_iterations << " solves, "
+            << fixed.factorizations << " factorizations\n";
+  ASSERT_EQ(fixed.newton_steps.size(), 10u);
+  EXPECT_LT(grown.newton_steps.size(), 6u);
+  EXPECT_LT(grown.newton_iterations, fixed.newton_iterations / 2);
+  double lambda = 0, dl = 0.1;
+  for (const NewtonStep& s : grown.newton_steps) {
+    EXPECT_EQ(s.cutbacks, 0);
+    EXPECT_NEAR(s.lambda, std::min(1.0, lambda + dl), 1e-12) << "step " << s.step;
+    EXPECT_LE(s.residual_norms.back(), s.lambda < 1 ? 1e-5 : 1e-8) << "step " << s.step;
+    if (s.iterations <= 3) dl *= 2;
+    lambda = s.lambda;
+  }
+  EXPECT_EQ(lambda, 1.0);
+  const double scale = fixed.displacement_mm.cwiseAbs().maxCoeff();
+  EXPECT_LT((grown.displacement_mm - fixed.displacement_mm).cwiseAbs().maxCoeff(), 1e-8 * scale);
+  EXPECT_NEAR(grown.total_suture_force_n, fixed.total_suture_force_n, 1e-8 * fixed.total_suture_force_n);
 }
 
 TEST(FiniteStrain, MumpsCholmodAndThreadsAgree) {

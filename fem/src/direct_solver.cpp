@@ -1,10 +1,13 @@
 #include "direct_solver.hpp"
 
 #include <cholmod.h>
+#include <dlfcn.h>
 #include <dmumps_c.h>
 #include <smumps_c.h>
 
+#include <algorithm>
 #include <cmath>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -174,6 +177,56 @@ class Mumps {
 using MumpsDouble = Mumps<DMUMPS_STRUC_C, double, dmumps_c>;
 using MumpsSingle = Mumps<SMUMPS_STRUC_C, float, smumps_c>;
 
+// Preconditioned CG (Saad 2003, alg. 9.1) on K (its upper triangle) until the recursive residual
+// is below tolerance ||b|| (1e-12 for a solve as accurate as a direct one) and then the true
+// one, b - K x, below 10 tolerance ||b|| (the recursive residual of an ill-conditioned system can
+// drop below what is achievable); empty if that does not happen in max_iterations (the
+// preconditioner, a factor of an earlier K or in single precision, is then too poor) or K is not
+// positive definite in working precision. `iterations` receives the count;
+// precondition(r, iteration) applies the factor.
+constexpr double kCgTolerance = 1e-12;
+template <class Precondition>
+std::optional<Eigen::VectorXd> conjugate_gradients(const Eigen::SparseMatrix<double>& Kupper,
+                                                   const Eigen::VectorXd& b, int max_iterations,
+                                                   double tolerance, Precondition&& precondition,
+                                                   int& iterations) {
+  const double true_tolerance = 10 * tolerance;
+  const auto K = Kupper.selfadjointView<Eigen::Upper>();
+  const double bn = b.norm();
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(b.size());
+  iterations = 0;
+  if (bn == 0) return x;
+  Eigen::VectorXd r = b, z = precondition(r, 0), p = z, Kp(b.size());
+  double rz = r.dot(z);
+  for (iterations = 1; iterations <= max_iterations; ++iterations) {
+    Kp.noalias() = K * p;
+    const double pKp = p.dot(Kp);
+    if (!(pKp > 0) || !(rz > 0)) return std::nullopt;  // not SPD in working precision
+    const double alpha = rz / pKp;
+    x += alpha * p;
+    r -= alpha * Kp;
+    if (r.norm() <= tolerance * bn) {
+      Kp.noalias() = K * x;
+      if ((b - Kp).norm() <= true_tolerance * bn) return x;
+      return std::nullopt;
+    }
+    z = precondition(r, iterations);
+    const double rz_next = r.dot(z);
+    p = z + (rz_next / rz) * p;
+    rz = rz_next;
+  }
+  return std::nullopt;
+}
+
+// CG on K preconditioned with the last factor of a double-precision `solver` (its solve()).
+std::optional<Eigen::VectorXd> reuse_factor(DirectSolver& solver, const Eigen::SparseMatrix<double>& K,
+                                            const Eigen::VectorXd& b, int max_iterations,
+                                            double tolerance) {
+  int iterations = 0;
+  return conjugate_gradients(K, b, max_iterations, std::max(tolerance, kCgTolerance),
+                             [&](const Eigen::VectorXd& r, int) { return solver.solve(r); }, iterations);
+}
+
 // The assembled upper triangle as MUMPS coordinates, and the block starts, both 1-based.
 struct MumpsInput {
   std::vector<MUMPS_INT> irn, jcn, blkptr;
@@ -196,18 +249,26 @@ class MumpsSolver final : public DirectSolver {
     mumps_.analyze(static_cast<int>(K.rows()), in_->irn, in_->jcn, in_->blkptr);
   }
   void factorize(const Eigen::SparseMatrix<double>& K) override {
+    factored_ = false;
     mumps_.located(mumps_.factorize(const_cast<double*>(K.valuePtr()))).throw_if_failed();
+    factored_ = true;
   }
   Eigen::VectorXd solve(const Eigen::VectorXd& b) override {
     Eigen::VectorXd x = b;
     mumps_.solve(x.data());
     return x;
   }
+  std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
+                                                      const Eigen::VectorXd& b, int max_iterations,
+                                                      double tolerance) override {
+    return factored_ ? reuse_factor(*this, K, b, max_iterations, tolerance) : std::nullopt;
+  }
   long factor_nonzeros() const override { return mumps_.factor_nonzeros(); }
 
  private:
   std::optional<MumpsInput> in_;
   MumpsDouble mumps_;
+  bool factored_ = false;
 };
 
 // Mixed precision: the factorization in single precision (SMUMPS, about 1.7× faster here: half
@@ -228,6 +289,7 @@ class MixedMumpsSolver final : public DirectSolver {
     K_ = &K;
     if (double_) {  // a later factorization (Newton) after a fall-back stays in double precision
       double_->factorize(const_cast<double*>(K.valuePtr()));
+      double_factored_ = true;
       return;
     }
     a_ = K.coeffs().cast<float>();
@@ -237,14 +299,15 @@ class MixedMumpsSolver final : public DirectSolver {
   }
   std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
                                                       const Eigen::VectorXd& b,
-                                                      int max_iterations) override {
-    if (double_ || !K_) return std::nullopt;
+                                                      int max_iterations,
+                                                      double tolerance) override {
+    if (!K_ || (double_ && !double_factored_)) return std::nullopt;
     K_ = &K;
-    return conjugate_gradients(b, max_iterations);
+    return cg(b, max_iterations, std::max(tolerance, kCgTolerance));
   }
   Eigen::VectorXd solve(const Eigen::VectorXd& b) override {
     if (!double_) {
-      if (std::optional<Eigen::VectorXd> x = conjugate_gradients(b, kMaxIterations)) return *x;
+      if (std::optional<Eigen::VectorXd> x = cg(b, kMaxIterations, kCgTolerance)) return *x;
       fall_back();
     }
     Eigen::VectorXd x = b;
@@ -261,52 +324,35 @@ class MixedMumpsSolver final : public DirectSolver {
  private:
   void fall_back() {
     double_.emplace(ordering_, 1e-12);
+    double_factored_ = false;
     double_->analyze(static_cast<int>(K_->rows()), in_->irn, in_->jcn, in_->blkptr);
     double_->located(double_->factorize(const_cast<double*>(K_->valuePtr()))).throw_if_failed();
+    double_factored_ = true;
   }
+  // The last factor applied to r: the single-precision one, or the double-precision one after a
+  // fall-back (then reused for later tangents as well).
   Eigen::VectorXd precondition(const Eigen::VectorXd& r, int iteration) {
+    if (double_) {
+      Eigen::VectorXd z = r;
+      double_->solve(z.data(), iteration);
+      return z;
+    }
     Eigen::VectorXf z = r.cast<float>();
     single_.solve(z.data(), iteration);
     return z.cast<double>();
   }
-  // Preconditioned CG (Saad 2003, alg. 9.1) until the recursive residual is below 1e-12 ||b||
-  // and then the true one, b - K x, below 1e-11 ||b|| (the recursive residual of an
-  // ill-conditioned system can drop below what is achievable); empty if that does not happen
-  // in max_iterations: the single-precision factor (possibly of an earlier K) is then too poor a
-  // preconditioner.
-  static constexpr int kMaxIterations = 40;
-  std::optional<Eigen::VectorXd> conjugate_gradients(const Eigen::VectorXd& b, int max_iterations) {
-    constexpr double kTolerance = 1e-12, kTrueTolerance = 1e-11;
-    const auto K = K_->selfadjointView<Eigen::Upper>();
-    const double bn = b.norm();
-    Eigen::VectorXd x = Eigen::VectorXd::Zero(b.size());
-    if (bn == 0) return x;
-    Eigen::VectorXd r = b, z = precondition(r, 0), p = z, Kp(b.size());
-    double rz = r.dot(z);
-    for (iterations_ = 1; iterations_ <= max_iterations; ++iterations_) {
-      Kp.noalias() = K * p;
-      const double pKp = p.dot(Kp);
-      if (!(pKp > 0) || !(rz > 0)) return std::nullopt;  // not SPD in working precision
-      const double alpha = rz / pKp;
-      x += alpha * p;
-      r -= alpha * Kp;
-      if (r.norm() <= kTolerance * bn) {
-        Kp.noalias() = K * x;
-        if ((b - Kp).norm() <= kTrueTolerance * bn) return x;
-        return std::nullopt;
-      }
-      z = precondition(r, iterations_);
-      const double rz_next = r.dot(z);
-      p = z + (rz_next / rz) * p;
-      rz = rz_next;
-    }
-    return std::nullopt;
+  std::optional<Eigen::VectorXd> cg(const Eigen::VectorXd& b, int max_iterations, double tolerance) {
+    return conjugate_gradients(
+        *K_, b, max_iterations, tolerance,
+        [&](const Eigen::VectorXd& r, int iteration) { return precondition(r, iteration); }, iterations_);
   }
+  static constexpr int kMaxIterations = 40;
 
   int ordering_;
   std::optional<MumpsInput> in_;
   MumpsSingle single_;
   std::optional<MumpsDouble> double_;
+  bool double_factored_ = false;  // the double-precision factor exists (after a fall-back)
   const Eigen::SparseMatrix<double>* K_ = nullptr;
   Eigen::VectorXf a_;
   int iterations_ = 0;
@@ -332,6 +378,7 @@ class CholmodSolver final : public DirectSolver {
       throw SolverError(cat("CHOLMOD analysis failed, status ", c_.status));
   }
   void factorize(const Eigen::SparseMatrix<double>& K) override {
+    factored_ = false;
     cholmod_sparse A = view(K);
     cholmod_factorize(&A, L_, &c_);
     if (c_.status == CHOLMOD_NOT_POSDEF) {
@@ -347,6 +394,12 @@ class CholmodSolver final : public DirectSolver {
       throw SingularMatrix(
           cat("CHOLMOD: reciprocal condition estimate ", rc),
           dominant_equation(K.rows(), [&](const Eigen::VectorXd& b) { return solve(b); }));
+    factored_ = true;
+  }
+  std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
+                                                      const Eigen::VectorXd& b, int max_iterations,
+                                                      double tolerance) override {
+    return factored_ ? reuse_factor(*this, K, b, max_iterations, tolerance) : std::nullopt;
   }
   Eigen::VectorXd solve(const Eigen::VectorXd& b) override {
     cholmod_dense B{};
@@ -382,9 +435,49 @@ class CholmodSolver final : public DirectSolver {
   }
   cholmod_common c_{};
   cholmod_factor* L_ = nullptr;
+  bool factored_ = false;
 };
 
+// OpenBLAS's thread controls, looked up in the process (MUMPS and CHOLMOD link the system's
+// libblas.so.3, which Debian's alternatives may point at OpenBLAS or at the reference BLAS).
+struct OpenBlas {
+  void (*set)(int) = nullptr;
+  int (*get)() = nullptr;
+};
+
+const OpenBlas& openblas() {
+  static const OpenBlas blas = [] {
+    OpenBlas b;
+    b.set = reinterpret_cast<void (*)(int)>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
+    b.get = reinterpret_cast<int (*)()>(dlsym(RTLD_DEFAULT, "openblas_get_num_threads"));
+    if (!b.set || !b.get) b = {};
+    return b;
+  }();
+  return blas;
+}
+
+std::mutex blas_mutex;
+int blas_guards = 0;        // BlasThreads alive that changed the count
+int blas_kept_threads = 0;  // the count before the first of them
+
 }  // namespace
+
+BlasThreads::BlasThreads(int threads) {
+  const OpenBlas& blas = openblas();
+  if (threads <= 0 || !blas.set) return;
+  const std::lock_guard lock(blas_mutex);
+  if (blas_guards++ == 0) {
+    blas_kept_threads = blas.get();
+    if (blas_kept_threads != threads) blas.set(threads);
+  }
+  active_ = true;
+}
+
+BlasThreads::~BlasThreads() {
+  if (!active_) return;
+  const std::lock_guard lock(blas_mutex);
+  if (--blas_guards == 0 && openblas().get() != blas_kept_threads) openblas().set(blas_kept_threads);
+}
 
 std::unique_ptr<DirectSolver> make_direct_solver(SolverKind kind, int mumps_ordering,
                                                  bool mixed_precision) {

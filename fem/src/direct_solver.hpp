@@ -42,14 +42,16 @@ class DirectSolver {
   virtual void factorize(const Eigen::SparseMatrix<double>& K) = 0;
   virtual Eigen::VectorXd solve(const Eigen::VectorXd& b) = 0;
   /// Solves K x = b for K's current values by conjugate gradients preconditioned with the last
-  /// factorization (of earlier values of the same structure: a previous Newton tangent), to the
-  /// accuracy of solve(). Empty when there is no factorization to reuse, or CG needs more than
-  /// `max_iterations` (then factorize() the new values). Only the mixed-precision MUMPS solver
-  /// reuses; the others always return empty.
+  /// factorization (of earlier values of the same structure: a previous Newton tangent), to a
+  /// relative residual ||b - K x|| <= tolerance ||b|| (1e-12 and below: the accuracy of solve();
+  /// an inexact Newton iteration asks for less). Empty when there is no factorization to reuse,
+  /// or CG needs more than `max_iterations` (then factorize() the new values). The base class
+  /// never reuses (always empty).
   virtual std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
                                                               const Eigen::VectorXd& b,
-                                                              int max_iterations) {
-    (void)K, (void)b, (void)max_iterations;
+                                                              int max_iterations,
+                                                              double tolerance = 1e-12) {
+    (void)K, (void)b, (void)max_iterations, (void)tolerance;
     return std::nullopt;
   }
   virtual long factor_nonzeros() const = 0;
@@ -58,5 +60,22 @@ class DirectSolver {
 
 std::unique_ptr<DirectSolver> make_direct_solver(SolverKind kind, int mumps_ordering,
                                                  bool mixed_precision);
+
+/// While alive, the BLAS under the direct solvers runs on `threads` threads (OpenBLAS, when it
+/// is the BLAS loaded; any other BLAS is left alone; 0 leaves it as configured). The count it
+/// had is restored when the last of the guards alive in the process ends; guards of concurrent
+/// solves share the first one's count. OpenBLAS's worker threads spin (sched_yield) after each
+/// call and take a core from TBB's assembly; a sparse factorization of skin meshes gains little
+/// from them (docs/benchmarks.md).
+class BlasThreads {
+ public:
+  explicit BlasThreads(int threads);
+  ~BlasThreads();
+  BlasThreads(const BlasThreads&) = delete;
+  BlasThreads& operator=(const BlasThreads&) = delete;
+
+ private:
+  bool active_ = false;
+};
 
 }  // namespace caps::fem::detail

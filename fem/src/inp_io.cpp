@@ -150,9 +150,10 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
     os << "\n";
   }
   if (options.finite_strain) {
+    // *STATIC: initial increment, step time, smallest and largest increment.
     const double inc = 1.0 / options.increments;
     os << "*STEP, NLGEOM, INC=" << 100 * options.increments << "\n*STATIC\n" << num(inc) << ", 1., "
-       << num(inc * 1e-6) << ", " << num(inc) << "\n*BOUNDARY\n";
+       << num(inc * 1e-6) << ", " << num(options.grow_increments ? 1.0 : inc) << "\n*BOUNDARY\n";
   } else {
     os << "*STEP\n*STATIC\n*BOUNDARY\n";
   }

@@ -88,6 +88,7 @@ void write_simulation(const Simulation& sim, const PatientModel& model,
   InpOptions inp;
   inp.finite_strain = options.solve.kinematics == Kinematics::Finite;
   inp.increments = options.solve.newton.n_steps;
+  inp.grow_increments = options.solve.newton.grow_iterations > 0;
   if (exports_to_calculix(options)) write_inp(mesh, dir / "mesh.inp", inp);
   write_result_dir(mesh, sim.result, dir, &sim.sutures);
   write_surface_mesh_png(dir / "surface.png", sim.wound.surface, cat("surface mesh of ", name));

@@ -97,6 +97,9 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   std::optional<tbb::global_control> threads;
   if (options.threads > 0)
     threads.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
+  if (options.blas_threads < 0)
+    throw InvalidInput(cat("blas_threads ", options.blas_threads, " must be >= 0 (0 = as configured)"));
+  const detail::BlasThreads blas(options.blas_threads);
   validate(mesh);
   if (!(options.prestretch >= 1.0 && options.prestretch <= 1.5))
     throw InvalidInput(cat("prestretch ", options.prestretch, " must be in 1..1.5 (skin in vivo: "

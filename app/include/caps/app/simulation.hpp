@@ -69,8 +69,9 @@ struct SolverFields {
                                "strain, sutures closed in load steps by Newton-Raphson) or goh "
                                "(finite strain, skin with collagen fibres along the patient's "
                                "left-right, the forehead's Langer lines; docs/fem.md)"});
-    v(r.steps, {"steps", "neo-hookean: load steps that close the sutures (cut back by itself "
-                         "when a step does not converge)"});
+    v(r.steps, {"steps", "neo-hookean: the first load step closes 1/steps of the sutures' gap; "
+                         "a step that converges easily doubles the next, one that does not "
+                         "converge is cut back (without cut-backs at most this many steps)"});
     v(r.prestretch, {"prestretch", "neo-hookean: the skin's in-vivo prestretch in its plane (1 = "
                                    "none; about 1.1-1.2 in vivo): the wound gapes, and the "
                                    "closure and its forces carry the skin's tension"});

@@ -14,8 +14,8 @@
 /// equations; its other members are prescribed to meet it, as solve() does. One *STATIC linear
 /// step (or, with InpOptions::finite_strain, one *STEP, NLGEOM with *HYPERELASTIC, NEO HOOKE
 /// materials, C10 = mu/2 and D1 = 2/K of each layer's finite-strain material, and the prescribed
-/// values and suture gaps ramped over the step in `increments` increments, as caps's load
-/// steps do); *NODE PRINT writes U to the .dat file and *NODE FILE U to the .frd file. Units: mm, N,
+/// values and suture gaps ramped over the step from an initial increment 1/increments, as
+/// caps's load steps do); *NODE PRINT writes U to the .dat file and *NODE FILE U to the .frd file. Units: mm, N,
 /// MPa (consistent).
 ///
 /// CalculiX integrates C3D20 like caps (27 points) but C3D15 with 9 points where caps uses 21, so
@@ -34,7 +34,11 @@ struct InpOptions {
   /// Mesh::finite_materials entry must be a NeoHookean; a layer without one uses
   /// NeoHookean(materials[layer])) and *STEP, NLGEOM.
   bool finite_strain = false;
-  int increments = 10;  ///< initial (and largest) increment 1/increments of the NLGEOM step
+  int increments = 10;  ///< initial increment 1/increments of the NLGEOM step
+  /// true: CalculiX may grow its increments up to the whole step (its automatic incrementation,
+  /// as caps's load steps grow: NewtonOptions::grow_iterations); false: the largest increment
+  /// is the initial one (fixed increments).
+  bool grow_increments = true;
 };
 
 /// Writes `mesh` as an .inp deck to `path` (atomically). Throws IoError if it cannot be written,

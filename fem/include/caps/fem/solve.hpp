@@ -42,15 +42,36 @@ Kinematics parse_kinematics(const std::string& name);
 /// Load stepping and Newton-Raphson controls of the finite-strain solve. The load factor
 /// lambda goes 0 -> 1; at lambda the prescribed displacements are lambda × their value, the
 /// suture gaps lambda × x_b - x_a closed, the nodal loads lambda × f.
+///
+/// Steps: the first is 1/n_steps (the nominal step). A step that converged in at most
+/// `grow_iterations` Newton solves doubles the next one (up to what remains of lambda), so an
+/// easy closure takes fewer than n_steps steps; a step that fails is retried with half its size
+/// (cut-back), and after the first cut-back of a solve the steps grow back only up to the nominal
+/// size (after a step of at most 4 solves). Without cut-backs a solve takes at most n_steps steps.
+///
+/// Convergence of a step (Abaqus's and CalculiX's estimate of the next correction): the residual
+/// ||r|| <= residual_tolerance ||r_0||, and the correction ||dq|| or, after a full Newton step,
+/// the correction it predicts for the next iteration, ||dq|| ||r|| / ||r_prev||, at most
+/// displacement_tolerance ||q - q_step_start||; r_0 and the step's increment are scaled to the
+/// nominal step. Steps before the last (lambda < 1) only start the next one and stop at
+/// intermediate_tolerance for both (docs/fem.md, "Finite strain").
 struct NewtonOptions {
-  int n_steps = 10;                     ///< nominal equal load steps
+  int n_steps = 10;                     ///< nominal load steps: the first step is 1/n_steps
+  /// A step converged in at most this many Newton solves doubles the next (beyond the nominal
+  /// size until the first cut-back); 0 = steps never grow beyond 1/n_steps.
+  int grow_iterations = 3;
   int max_iterations = 25;              ///< per step, before the step is cut back
   int max_cutbacks = 10;                ///< halvings of a step before giving up (SolverError)
-  double residual_tolerance = 1e-10;    ///< ||r|| / ||r_0|| of the step (r_0: predictor load)
-  double displacement_tolerance = 1e-8; ///< ||dq|| / ||q - q_step_start||
-  /// Mixed-precision MUMPS: a new tangent is first solved by conjugate gradients preconditioned
-  /// with the last factorization, which is kept if that converges (to the accuracy of a direct
-  /// solve) within this many iterations; otherwise it is factorized. 0 = factorize every tangent.
+  double residual_tolerance = 1e-8;     ///< ||r|| / ||r_0|| of the step (r_0: predictor load)
+  /// ||dq|| (or the next correction it predicts) / ||q - q_step_start||
+  double displacement_tolerance = 1e-8;
+  /// Both tolerances for the steps before lambda = 1 (never tighter than the two above).
+  double intermediate_tolerance = 1e-5;
+  /// A new tangent is first solved by conjugate gradients preconditioned with the last
+  /// factorization (of an earlier tangent; any solver and precision), which is kept if that
+  /// converges within this many iterations (to the accuracy an inexact Newton step needs, a
+  /// relative residual of 1e-2 ||r|| / ||r_0||, at most 1e-3); otherwise the tangent is
+  /// factorized. 0 = factorize every tangent.
   int reuse_iterations = 8;
 };
 
@@ -69,6 +90,12 @@ struct SolveOptions {
   bool mixed_precision = true;
   /// Threads for assembly and stress recovery (0 = all).
   int threads = 0;
+  /// Threads of the BLAS inside the sparse factorization and solves (OpenBLAS; another BLAS is
+  /// left alone) during the solve, restored afterwards; 0 = as the BLAS is configured
+  /// (OPENBLAS_NUM_THREADS). One by default: OpenBLAS's idle threads spin next to the parallel
+  /// assembly, and the finite-strain solve's many factorizations and triangular solves are
+  /// faster without them (docs/benchmarks.md).
+  int blas_threads = 1;
   /// In-vivo prestretch of the skin (layer 0, the element layer under the surface), in its
   /// plane, 1 = none, valid 1..1.5 (skin in vivo: about 1.1-1.2; docs/fem.md). The stress-free
   /// skin is its reference shrunk by this factor in the plane and thickened along the normal
