@@ -835,6 +835,15 @@ std::string dicom_variant(const fs::path& p, const std::string& insert) {
   return d;
 }
 
+/// Rewrites the file `p` with the first occurrence of `from` replaced by `to`.
+void replace_bytes(const fs::path& p, const std::string& from, const std::string& to) {
+  std::string d = read_bytes(p);
+  const auto at = d.find(from);
+  ASSERT_NE(at, std::string::npos) << p;
+  d.replace(at, from.size(), to);
+  write_bytes(p, d);
+}
+
 std::string tag_len(std::uint16_t g, std::uint16_t e, std::uint32_t length) {
   std::string s;
   put_u16(s, g);
@@ -890,29 +899,17 @@ TEST(VolumeIo, DicomStructureIsCheckedBeforeGdcmReadsIt) {
   // GDCM took fragment lengths from the pixel bytes and allocated 808 MB for a 1 KB file).
   fs::create_directories(tmp / "defined");
   write_dicom_slice(tmp / "defined/rle.dcm", SliceSpec{}, [](int, int) { return 0x3030; });
-  {
-    std::string d = read_bytes(tmp / "defined/rle.dcm");
-    const std::string native("1.2.840.10008.1.2.1\0", 20), rle("1.2.840.10008.1.2.5\0", 20);
-    const auto at = d.find(native);
-    ASSERT_NE(at, std::string::npos);
-    d.replace(at, native.size(), rle);
-    write_bytes(tmp / "defined/rle.dcm", d);
-  }
+  replace_bytes(tmp / "defined/rle.dcm", std::string("1.2.840.10008.1.2.1\0", 20),
+                std::string("1.2.840.10008.1.2.5\0", 20));
   expect_error<caps::IoError>([&] { caps::read_volume(tmp / "defined/rle.dcm"); }, "rle.dcm",
                               "pixel data of defined length in a compressed transfer syntax");
   // Two transfer syntaxes in the meta group (found by fuzz_dicom: GDCM read the data set in
   // another syntax than the walk and allocated 808 MB): refused.
   fs::create_directories(tmp / "twice");
   write_dicom_slice(tmp / "twice/ts.dcm", SliceSpec{}, [](int, int) { return 0; });
-  {
-    std::string d = read_bytes(tmp / "twice/ts.dcm");
-    const std::string ts = std::string("\x02\x00\x10\x00UI\x14\x00", 8) + "1.2.840.10008.1.2.1" +
-                           std::string(1, '\0');
-    const auto at = d.find(ts);
-    ASSERT_NE(at, std::string::npos);
-    d.insert(at + ts.size(), ts);
-    write_bytes(tmp / "twice/ts.dcm", d);
-  }
+  const std::string ts = std::string("\x02\x00\x10\x00UI\x14\x00", 8) + "1.2.840.10008.1.2.1" +
+                         std::string(1, '\0');
+  replace_bytes(tmp / "twice/ts.dcm", ts, ts + ts);
   expect_error<caps::IoError>([&] { caps::read_volume(tmp / "twice/ts.dcm"); }, "ts.dcm",
                               "meta group elements repeated or out of order");
 

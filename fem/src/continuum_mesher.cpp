@@ -228,9 +228,6 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
 
   // The nodes of one column; returns why the site cannot be meshed (empty if it can).
   std::vector<double> D(static_cast<std::size_t>(NL) + 1);
-  auto interfaces = [&](double theta, double z, double T, bool* no_fat) {
-    stack.depths(theta, z, T, D, no_fat);
-  };
   // Measured: each vertex column's interface depths. A mid-edge column takes the mean of its two
   // vertices' depths (scaled to its own thickness) instead of the maps' own value at the
   // midpoint: where the fat's depth jumps between neighbouring columns (noise in the maps, the
@@ -269,7 +266,7 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
     if (fractions != nullptr)
       for (int k = 0; k <= NL; ++k) D[k] = (*fractions)[k] * T;
     else
-      interfaces(theta, z, T, &thin_fat);
+      stack.depths(theta, z, T, D, &thin_fat);
     if (thin_fat) ++out.widened_fat_columns;
     if (no_fat) *no_fat = thin_fat;
     for (int h = 0; h <= n_half_levels; h += step) {

@@ -136,12 +136,9 @@ void write_cross_section_png(const fs::path& path, const SurfaceMesh& s, const P
   Canvas cv(static_cast<int>(W), static_cast<int>(top + plot_h + 80));
   auto X = [&](double x) { return left + (x - xmin) * sx; };
   // Depth below the skin (the skin drawn flat): the head's curvature would otherwise hide the
-  // layers, which are what the picture is for. Y(x, k): interface k (0 skin .. NL bone).
-  std::vector<double> D;
-  auto Y = [&](double x, int k) {
-    stack.depths(theta_of(x), s.z_c_mm, depth_mm(x), D);
-    return top + 10 + D[k] * sy;
-  };
+  // layers, which are what the picture is for. Y(depth): the pixel row of a depth (mm) below it.
+  std::vector<double> D;  // the interface depths of one column (LayerStack::depths)
+  auto Y = [&](double depth) { return top + 10 + depth * sy; };
   const int n = 1200;
   const int per = stack.per_tissue_layer();
   const Eigen::Vector3d fat_fill(1.0, 0.9, 0.55), tissue_line(0.75, 0.45, 0.0);
@@ -154,11 +151,17 @@ void write_cross_section_png(const fs::path& path, const SurfaceMesh& s, const P
   }
   for (const auto& run : runs) {
     if (run.size() < 2) continue;
+    // Each sample's interfaces once: point i of interface k is at[i][k].
+    std::vector<std::vector<V2>> at(run.size(), std::vector<V2>(NL + 1));
+    for (std::size_t i = 0; i < run.size(); ++i) {
+      stack.depths(theta_of(run[i]), s.z_c_mm, depth_mm(run[i]), D);
+      for (int k = 0; k <= NL; ++k) at[i][k] = V2(X(run[i]), Y(D[k]));
+    }
     if (stack.measured()) {
       // The subcutaneous fat, between its two interfaces, filled.
       std::vector<V2> band;
-      for (double x : run) band.emplace_back(X(x), Y(x, per));
-      for (auto it = run.rbegin(); it != run.rend(); ++it) band.emplace_back(X(*it), Y(*it, 2 * per));
+      for (std::size_t i = 0; i < run.size(); ++i) band.push_back(at[i][per]);
+      for (std::size_t i = run.size(); i-- > 0;) band.push_back(at[i][2 * per]);
       cv.fill_polygon(band, fat_fill);
     }
     for (int k = 0; k <= NL; ++k) {
@@ -168,14 +171,15 @@ void write_cross_section_png(const fs::path& path, const SurfaceMesh& s, const P
                               : tissue ? tissue_line : Eigen::Vector3d(0.35, 0.35, 0.35),
                     .width_px = k == 0 ? 3.0 : (k == NL ? 2.5 : (tissue ? 1.8 : 1.0))};
       std::vector<V2> line;
-      for (double x : run) line.emplace_back(X(x), Y(x, k));
+      for (const auto& p : at) line.push_back(p[k]);
       cv.polyline(line, pen);
     }
   }
   const Eigen::Vector3d wall(0.35, 0.35, 0.35);
   for (double x : walls) {
-    cv.line(V2(X(x), Y(x, 0)), V2(X(x), Y(x, NL)), {.colour = wall});
-    for (int k = 0; k <= NL; ++k) cv.fill_circle(V2(X(x), Y(x, k)), 2.0, wall);
+    stack.depths(theta_of(x), s.z_c_mm, depth_mm(x), D);
+    cv.line(V2(X(x), Y(D[0])), V2(X(x), Y(D[NL])), {.colour = wall});
+    for (int k = 0; k <= NL; ++k) cv.fill_circle(V2(X(x), Y(D[k])), 2.0, wall);
   }
   text(cv, left, 28, title, 16);
   text(cv, left, 50,

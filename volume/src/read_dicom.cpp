@@ -55,6 +55,9 @@
 
 namespace fs = std::filesystem;
 
+// Defined only when a sanitizer runtime is linked (scripts/sanitize.sh, fuzz/).
+extern "C" void __sanitizer_set_death_callback(void (*callback)(void)) __attribute__((weak));
+
 namespace caps {
 namespace detail {
 namespace {
@@ -251,17 +254,6 @@ gdcm::File read_data_set(const fs::path& file) {
                                      "re-export or re-copy it"));
   return reader.GetFile();
 }
-
-}  // namespace
-}  // namespace detail
-}  // namespace caps
-
-// Defined only when a sanitizer runtime is linked (scripts/sanitize.sh, fuzz/).
-extern "C" void __sanitizer_set_death_callback(void (*callback)(void)) __attribute__((weak));
-
-namespace caps {
-namespace detail {
-namespace {
 
 /// Runs `decode`, which writes `n` bytes to the buffer it is given, in a child process and
 /// copies its result to `out`; returns why it failed (empty on success). GDCM's codecs, as Debian
