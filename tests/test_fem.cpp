@@ -17,6 +17,7 @@
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/fem/solve.hpp"
+#include "../fem/src/direct_solver.hpp"  // the mixed-precision solver's fall-back, tested directly
 
 using namespace caps;
 using namespace caps::fem;
@@ -470,6 +471,32 @@ TEST(FemSolvers, MixedPrecisionFallsBackToDoubleWhenSinglePrecisionIsNotEnough) 
   EXPECT_EQ(rm.precision, "double");
   const double scale = rc.displacement_mm.cwiseAbs().maxCoeff();
   EXPECT_LT((rm.displacement_mm - rc.displacement_mm).cwiseAbs().maxCoeff(), 1e-6 * scale);
+}
+
+// After a fall-back to double precision, the mixed solver factors every later tangent (Newton)
+// in double precision: a singular one must be refused as the double-precision solver refuses
+// it, not solved with the factor of the previous one. K = diag(1e40, 1, 1) is beyond single
+// precision's range (the fall-back); then diag(1e40, 1, 0) is singular in its third equation.
+TEST(FemSolvers, MixedPrecisionAfterItsFallBackRefusesASingularTangent) {
+  auto diagonal = [](double a, double b, double c) {
+    Eigen::SparseMatrix<double> K(3, 3);
+    K.insert(0, 0) = a;
+    K.insert(1, 1) = b;
+    K.insert(2, 2) = c;
+    K.makeCompressed();
+    return K;
+  };
+  const Eigen::SparseMatrix<double> K0 = diagonal(1e40, 1, 1), K1 = diagonal(1e40, 1, 0);
+  auto solver = fem::detail::make_direct_solver(SolverKind::Mumps, SolveOptions{}.mumps_ordering,
+                                           /*mixed_precision=*/true);
+  solver->analyze(K0, {0, 1, 2, 3});
+  solver->factorize(K0);
+  const Eigen::VectorXd x = solver->solve(Eigen::Vector3d(1e40, 2, 3));
+  EXPECT_TRUE(solver->report().fell_back_to_double);
+  EXPECT_NEAR(x[0], 1, 1e-12);
+  EXPECT_NEAR(x[1], 2, 1e-12);
+  EXPECT_NEAR(x[2], 3, 1e-12);
+  EXPECT_THROW(solver->factorize(K1), SolverError);
 }
 
 // Colour-by-colour assembly adds every entry in the same order whatever the thread count.
