@@ -71,8 +71,10 @@ struct NewtonOptions {
   /// factorization (of an earlier tangent; any solver and precision), which is kept if that
   /// converges within this many iterations (to the accuracy an inexact Newton step needs, a
   /// relative residual of 1e-2 ||r|| / ||r_0||, at most 1e-3); otherwise the tangent is
-  /// factorized. 0 = factorize every tangent.
-  int reuse_iterations = 8;
+  /// factorized. 0 = factorize every tangent. 16 rather than 8: on the Cranium 60 deg Z-plasty
+  /// (26.5k DOF) 8 -> 13 factorizations, 16 -> 8, 10.2 -> 7.4 s; on the 50.6k-DOF slab 4 -> 2
+  /// factorizations, about 0.5 s less (docs/benchmarks.md).
+  int reuse_iterations = 16;
 };
 
 struct SolveOptions {
