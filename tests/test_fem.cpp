@@ -488,7 +488,7 @@ TEST(FemSolvers, MixedPrecisionAfterItsFallBackRefusesASingularTangent) {
   };
   const Eigen::SparseMatrix<double> K0 = diagonal(1e40, 1, 1), K1 = diagonal(1e40, 1, 0);
   auto solver = fem::detail::make_direct_solver(SolverKind::Mumps, SolveOptions{}.mumps_ordering,
-                                           /*mixed_precision=*/true);
+                                                /*mixed_precision=*/true);
   solver->analyze(K0, {0, 1, 2, 3});
   solver->factorize(K0);
   const Eigen::VectorXd x = solver->solve(Eigen::Vector3d(1e40, 2, 3));

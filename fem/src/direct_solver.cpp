@@ -288,7 +288,7 @@ class MixedMumpsSolver final : public DirectSolver {
   void factorize(const Eigen::SparseMatrix<double>& K) override {
     K_ = &K;
     if (double_) {  // a later factorization (Newton) after a fall-back stays in double precision
-      // checked as MumpsSolver checks it: a singular tangent is reported, never solved with a stale factor
+      // and checked as MumpsSolver checks it: a singular tangent is reported, never solved
       double_->located(double_->factorize(const_cast<double*>(K.valuePtr()))).throw_if_failed();
       double_factored_ = true;
       return;
