@@ -419,6 +419,19 @@ TEST(Ply, BadFilesThrowTheRightErrorNamingTheFile) {
                    "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n",
                caps::InvalidInput(""));
   expect_error("not_ply.ply", "solid stl\n", caps::InvalidInput(""));
+  // An element of another name claiming far more items than bytes follow (it was read item by
+  // item until the data ran out) and one without properties claiming 4e17 items (fuzz_ply: it
+  // looped for ever over nothing; it holds no data, so the mesh around it reads).
+  expect_error("lying_other.ply",
+               head + "element extra 433333333333333330\nproperty uchar flag\n"
+                      "element face 1\nproperty list uchar int vertex_indices\n"
+                      "end_header\n0 0 0\n1 0 0\n0 1 0\n1\n3 0 1 2\n",
+               caps::IoError(""));
+  write_text(dir / "empty_element.ply",
+             head + "element nothing 433333333333333330\nelement face 1\n"
+                    "property list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n"
+                    "3 0 1 2\n");
+  EXPECT_EQ(caps::read_ply(dir / "empty_element.ply").n_faces(), 1);
 
   // A binary file cut in the middle of the face list.
   const caps::TriMesh m = caps::extract_isosurface(sphere_volume(4.0, 1.0), 0.0f);

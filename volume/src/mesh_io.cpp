@@ -328,6 +328,12 @@ PlyMesh read_ply_with_attributes(const std::filesystem::path& path) {
       tris.reserve(tris.size() + std::size_t(el.count));
       have_faces = true;
     }
+    // An element without properties holds no data whatever its count (fuzz_ply: a count of
+    // 4e17 looped for ever over nothing); any other needs one byte an item at the least.
+    if (el.props.empty()) continue;
+    if (std::size_t(el.count) > body.remaining())
+      throw IoError(cat(name, ": PLY declares ", el.count, " '", el.name, "' elements but only ",
+                        body.remaining(), " bytes follow; the file is truncated"));
     for (std::int64_t n = 0; n < el.count; ++n) {
       for (int q = 0; q < int(el.props.size()); ++q) {
         const Property& p = el.props[q];
