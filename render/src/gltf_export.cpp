@@ -26,9 +26,9 @@ double srgb_to_linear(double c) {
 
 // One buffer, one view per accessor, tightly packed (every component is 4 bytes, so every view
 // starts 4-aligned as glTF requires).
-class Builder {
+class GltfBuilder {
  public:
-  explicit Builder(tinygltf::Model& m) : m_(m) { m_.buffers.resize(1); }
+  explicit GltfBuilder(tinygltf::Model& m) : m_(m) { m_.buffers.resize(1); }
 
   // A float accessor of `rows` × `cols` values (cols 1 = SCALAR, 3 = VEC3), with min/max of
   // the float values as stored (the validator compares them exactly).
@@ -134,7 +134,7 @@ void write_gltf(const SkinSurfaces& s, const std::filesystem::path& path) {
   tinygltf::Model model;
   model.asset.version = "2.0";
   model.asset.generator = "caps (caps::render::write_gltf)";
-  Builder b(model);
+  GltfBuilder b(model);
 
   const Eigen::MatrixX3d n_pre = gltf_normals(shading_normals(s, 0.0), nullptr);
   const Eigen::MatrixX3d n_post = gltf_normals(shading_normals(s, 1.0), &n_pre);

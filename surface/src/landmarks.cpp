@@ -9,13 +9,12 @@
 #include <sstream>
 
 #include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
 
 namespace caps {
 namespace {
 
 using nlohmann::json;
-
-constexpr double kPi = 3.14159265358979323846;
 
 double wrap_deg(double t) {
   t = std::fmod(t + 180.0, 360.0);

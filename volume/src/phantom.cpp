@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
 
 namespace caps {
 namespace {
@@ -16,8 +17,6 @@ constexpr double kTopMm = 105.0;    // vertex height above z = 0
 constexpr double kBottomMm = 160.0; // the ellipsoid's lower semi-axis (cut by the field of view)
 
 double gauss(double x) { return std::exp(-x * x); }
-
-constexpr double kPi = 3.14159265358979323846;
 
 // Wrapped angular difference in (-pi, pi].
 double dtheta(double a, double b) {
