@@ -308,32 +308,28 @@ PlyMesh read_ply_with_attributes(const std::filesystem::path& path) {
       if (role[q] == 3) have_colors = true;
       if (role[q] == 6) have_uv = true;
     }
+    if (is_vertex && (ix < 0 || iy < 0 || iz < 0))
+      throw InvalidInput(cat(name, ": PLY vertex element lacks x, y or z"));
+    if (is_face && ifl < 0)
+      throw InvalidInput(cat(name, ": PLY face element lacks a vertex_indices list"));
+    // An element without properties holds no data whatever its count (fuzz_ply: a count of
+    // 4e17 looped for ever over nothing). Any other needs one byte an item at the least (the
+    // least any encoding takes): a count beyond the bytes left is a lie, refused before the
+    // vertices or faces are allocated.
+    if (el.props.empty()) continue;
+    if (std::size_t(el.count) > body.remaining())
+      throw IoError(cat(name, ": PLY declares ", el.count, " '", el.name, "' elements but only ",
+                        body.remaining(), " bytes follow; the file is truncated"));
     if (is_vertex) {
-      if (ix < 0 || iy < 0 || iz < 0)
-        throw InvalidInput(cat(name, ": PLY vertex element lacks x, y or z"));
-      // One byte per value is the least any encoding needs; a count beyond that is a lie.
-      if (std::size_t(el.count) > body.remaining())
-        throw IoError(cat(name, ": PLY declares ", el.count, " vertices but only ",
-                          body.remaining(), " bytes follow; the file is truncated"));
       mesh.V.resize(el.count, 3);
       if (have_colors) out.colors.setZero(el.count, 3);
       if (have_uv) out.uv.setZero(el.count, 2);
       have_vertices = true;
     }
     if (is_face) {
-      if (ifl < 0) throw InvalidInput(cat(name, ": PLY face element lacks a vertex_indices list"));
-      if (std::size_t(el.count) > body.remaining())
-        throw IoError(cat(name, ": PLY declares ", el.count, " faces but only ", body.remaining(),
-                          " bytes follow; the file is truncated"));
       tris.reserve(tris.size() + std::size_t(el.count));
       have_faces = true;
     }
-    // An element without properties holds no data whatever its count (fuzz_ply: a count of
-    // 4e17 looped for ever over nothing); any other needs one byte an item at the least.
-    if (el.props.empty()) continue;
-    if (std::size_t(el.count) > body.remaining())
-      throw IoError(cat(name, ": PLY declares ", el.count, " '", el.name, "' elements but only ",
-                        body.remaining(), " bytes follow; the file is truncated"));
     for (std::int64_t n = 0; n < el.count; ++n) {
       for (int q = 0; q < int(el.props.size()); ++q) {
         const Property& p = el.props[q];
