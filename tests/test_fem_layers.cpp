@@ -404,3 +404,53 @@ TEST(MeasuredLayers, CompareHasAThirdColumnWithTheMeasuredLayers) {
   EXPECT_NE(j.find("\"layers\""), std::string::npos);
   EXPECT_NE(j.find("\"tissue\": \"measured\""), std::string::npos);
 }
+
+TEST(MeasuredLayers, CompareStopsShortOfABonyRimInsteadOfMeshingAcrossIt) {
+  // Over z > 20 the bone lies 30 mm deeper than below it (rays that pass under a bony rim into
+  // the orbit read 20-30 mm of "skin", fat and deep tissue on Cranium): a cliff that an element
+  // cannot span. The demo's compare failed there with an inverted dermis element. The automatic
+  // extent now stops short of the cliff in all three columns, and a given extent that reaches
+  // it is refused naming the drop.
+  const auto above = [](double z) { return z > 20.0; };
+  const PatientModel model = layered_cylinder(
+      [&](double, double z) { return above(z) ? 22.0 : 2.0; },
+      [&](double, double z) { return above(z) ? 8.0 : 3.0; },
+      [&](double, double z) { return above(z) ? 4.0 : 4.0; }, measured);
+  SimulateOptions o;
+  o.surface.size_mm = 2.0;
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0, 0, 90);
+  const Comparison c = compare_thickness(model, p, 0, o);
+  EXPECT_EQ(c.layered_summary.tissue, "measured");
+  for (const Simulation* s : {&c.measured, &c.constant, &c.layered}) {
+    const ContinuumMesh& m = s->wound.continuum;
+    EXPECT_GT(m.min_jacobian, 0.0);
+    EXPECT_LE(m.node_theta_z.col(1).maxCoeff(), 20.0);  // every column below the cliff
+    EXPECT_LT(s->max_suture_gap_mm, 1e-6);
+  }
+  EXPECT_NEAR(c.measured_summary.thickness_max_mm, 9.0, 1e-6);
+  EXPECT_LT(c.measured.wound.surface.extent_mm, 3.0 * c.measured.wound.surface.wound_size_mm);
+  EXPECT_GT(c.layered_summary.closing_force_n, 0.0);
+  // A given extent across the cliff is refused, naming where and how far the bone drops.
+  o.surface.extent_mm = 30.0;
+  try {
+    simulate(model, p, o);
+    FAIL() << "expected OffModelError";
+  } catch (const OffModelError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("drops from 9 to"), std::string::npos) << what;
+    EXPECT_TRUE(what.find("z 19") != std::string::npos || what.find("z 20") != std::string::npos)
+        << what;
+  }
+  // A slope the bone really has (9 to 39 mm over 30 mm of skin) is meshed.
+  const PatientModel ramp = layered_cylinder(
+      [](double, double z) { return 2.0 + std::clamp(z - 10.0, 0.0, 30.0) * 20.0 / 30.0; },
+      [](double, double z) { return 3.0 + std::clamp(z - 10.0, 0.0, 30.0) * 5.0 / 30.0; },
+      [](double, double) { return 4.0; }, measured);
+  o.surface.extent_mm = 30.0;
+  const plan::Plan on_ramp = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), ramp, 0, 0, 90);
+  const Simulation s = simulate(ramp, on_ramp, o);
+  EXPECT_GT(s.wound.continuum.node_theta_z.col(1).maxCoeff(), 20.0);
+  EXPECT_GT(s.wound.continuum.min_jacobian, 0.0);
+}

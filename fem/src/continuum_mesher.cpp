@@ -235,6 +235,7 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   // nodes, and the quadratic element turns inside out (seen at the Cranium temple). Where the
   // depths vary linearly both are the same.
   std::vector<std::vector<double>> vertex_depths(measured ? static_cast<std::size_t>(NV) : 0);
+  std::vector<double> vertex_depth(static_cast<std::size_t>(NV));  // each vertex column's depth
   const std::vector<double>* fractions = nullptr;  // set for a mid-edge column: depth / T
   auto column = [&](const Eigen::Vector2d& tz, auto&& node_of, int n_half_levels,
                     int step, bool* no_fat) -> std::string {
@@ -290,6 +291,27 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
       return off_model(std::move(why));
     fatless[v] = no_fat;
     if (measured) vertex_depths[v] = D;
+    vertex_depth[v] = D[NL];
+  }
+  // A cliff in the bone under the mesh: the depth of two neighbouring columns differs by more
+  // than kMaxDepthSlope times the distance between them on the skin. Rays that pass just below
+  // a bony rim (the supraorbital rim into the orbit, the edge of a sinus) meet bone 20-30 mm
+  // deeper than their neighbours; an element spanning that step is sheared so far that a thin
+  // layer turns inside out, and the tissue it models is not the soft tissue over one bone. The
+  // cliff counts as off the model, so the automatic extent stops short of it.
+  for (const auto& [a, b] : edges) {
+    const double step = std::abs(vertex_depth[a] - vertex_depth[b]);
+    const double apart = (mesh.nodes.row(vnode(a, 0)) - mesh.nodes.row(vnode(b, 0))).norm();
+    if (step > kMaxDepthSlope * apart) {
+      const Eigen::Vector2d tz = 0.5 * (surface.theta_z.row(a) + surface.theta_z.row(b)).transpose();
+      return off_model(cat("mesh: the bone under the skin at theta ", std::round(tz.x() * 10) / 10,
+                           " deg, z ", std::round(tz.y() * 10) / 10, " mm drops from ",
+                           std::round(std::min(vertex_depth[a], vertex_depth[b]) * 10) / 10, " to ",
+                           std::round(std::max(vertex_depth[a], vertex_depth[b]) * 10) / 10,
+                           " mm deep within ", std::round(apart * 10) / 10,
+                           " mm (a bony rim, such as the orbit's); move the wound or use a "
+                           "smaller {extent}"));
+    }
   }
   std::vector<double> edge_fractions(static_cast<std::size_t>(NL) + 1);
   for (int e = 0; e < NE; ++e) {

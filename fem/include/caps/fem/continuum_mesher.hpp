@@ -179,6 +179,12 @@ class OffModelError : public InvalidParameter {
 /// skin_surface.cpp), so a mesh closer to the ends could be solved but not drawn.
 inline constexpr int kEndRowsKeptFree = 4;
 
+/// The steepest step of the tissue depth between neighbouring columns of a continuum mesh: depth
+/// difference over their distance on the skin (2: the bone surface under the skin slopes up to
+/// about 63 deg from the skin's). A steeper step is a bony rim (the orbit's, a sinus's), which
+/// the mesher treats as off the model (continuum_mesher.cpp).
+inline constexpr double kMaxDepthSlope = 2.0;
+
 /// Both stages. With surface_options.extent_mm == 0 (automatic: 3 x the wound's size) the extent
 /// shrinks, in steps of 0.75, down to 1 x the mesh size, while the outer layers would leave the
 /// model's valid cells, and a warning gives the extent reached; a given extent is never changed.
