@@ -23,13 +23,15 @@ inline std::string slurp(const std::filesystem::path& p) {
 
 /// Writes the phantom CT into `folder`/ct.nii.gz and its patient model into `model`, on an
 /// n_theta x n_z grid (256 x 128: cells of about 2 mm on the face, what the registration tests
-/// cut their face scans from).
+/// cut their face scans from). `face`: the phantom with a face of analytic landmarks (`caps
+/// phantom --face`: glabella, nasion, nose, chin, ...) instead of the plain nose that has none.
 inline void make_phantom_model(const std::filesystem::path& folder, const std::string& model,
-                               int n_theta = 128, int n_z = 64) {
+                               int n_theta = 128, int n_z = 64, bool face = false) {
   caps::app::PhantomRequest ph;
   ph.output = (folder / "ct.nii.gz").string();
   ph.voxels = "96,96,90";
   ph.spacing = "2.5,2.5,2.5";
+  ph.face = face;
   caps::app::run_phantom(ph);
   caps::app::FromVolumeRequest fv;
   fv.input = ph.output;

@@ -2,7 +2,8 @@
 // client: a plan made and simulated through the API equals app::'s and the caps program's result
 // for the same inputs; bad requests (path traversal, an oversized body, malformed JSON, a wrong
 // field type) each get their 4xx with the CLI's message and the server keeps serving; a newer
-// simulation cancels an older one (409).
+// simulation cancels an older one (409); the landmarks are the CLI's and a plan placed at one is
+// the CLI's plan.
 #include <gtest/gtest.h>
 
 #include "caps/app/loaded_model.hpp"
@@ -721,6 +722,97 @@ TEST_F(ServerTest, ASimulationsSkinAndTensionAreServedAsGlb) {
   const auto after = get("/api/progress");
   ASSERT_TRUE(after);
   EXPECT_EQ(json::parse(after->body).at("running"), false);
+  expect_still_serving();
+}
+
+// GET /api/landmarks is `caps model landmarks --no-write --json` of the served model and leaves
+// model.json alone; POST /api/plan/new at "glabella+15,20" places as `caps plan new --at` does
+// and the plan records the landmark and its offsets. On the face phantom (landmarks found) with a
+// server of its own; on the plain phantom (none found) a landmark placement is refused with the
+// app's message naming why.
+TEST_F(ServerTest, LandmarksAreTheCliAnswerAndAPlanIsPlacedAtOneAsTheCliPlacesIt) {
+  const fs::path dir = kTmp / "face";
+  fs::create_directories(dir);
+  const std::string face = (dir / "model").string();
+  caps_test::make_phantom_model(dir, face, 128, 64, /*face=*/true);
+  const std::string model_json = slurp(fs::path(face) / "model.json");
+  const auto written = fs::last_write_time(fs::path(face) / "model.json");
+  server::ServerOptions o;
+  o.model_dir = face;
+  o.port = 0;
+  o.web_root = (kTmp / "web").string();
+  server::PlannerServer s(o);
+  s.bind();
+  std::thread t([&s] { s.listen(); });
+  struct Join {
+    server::PlannerServer& s;
+    std::thread& t;
+    ~Join() {
+      s.stop();
+      t.join();
+    }
+  } join{s, t};
+  httplib::Client c("127.0.0.1", s.port());
+  c.set_read_timeout(120, 0);
+
+  const auto marks = c.Get("/api/landmarks");
+  ASSERT_TRUE(marks);
+  ASSERT_EQ(marks->status, 200) << marks->body;
+  const json got = json::parse(marks->body);
+  const auto cli = caps_test::caps("model landmarks " + face + " --no-write --json -q");
+  ASSERT_EQ(cli.code, 0) << cli.out;
+  EXPECT_EQ(got, json::parse(cli.out));
+  const json glabella = got.at("items").at("glabella");
+  ASSERT_EQ(glabella.at("found"), true) << glabella.dump();
+  EXPECT_GT(glabella.at("thickness_mm").get<double>(), 0);
+  EXPECT_EQ(slurp(fs::path(face) / "model.json"), model_json);
+  EXPECT_EQ(fs::last_write_time(fs::path(face) / "model.json"), written);
+
+  // 15 mm to the patient's left and 20 mm up from the glabella: the CLI's plan, recorded so.
+  const json request = {{"procedure", "z-plasty"},
+                        {"at", "glabella+15,20"},
+                        {"parameters", {{"length", 12}}}};
+  const auto planned = c.Post("/api/plan/new", request.dump(), "application/json");
+  ASSERT_TRUE(planned);
+  ASSERT_EQ(planned->status, 200) << planned->body;
+  const json plan = json::parse(planned->body);
+  const fs::path cli_plan = dir / "cli-plan.json";
+  const auto typed = caps_test::caps("plan new z-plasty --model " + face +
+                                     " --at glabella+15,20 --length 12 -o " + cli_plan.string() +
+                                     " --force -q");
+  ASSERT_EQ(typed.code, 0) << typed.out;
+  const json file = json::parse(slurp(cli_plan));
+  EXPECT_EQ(plan.at("at"), file.at("at"));
+  EXPECT_EQ(plan.at("frame"), file.at("frame"));
+  EXPECT_EQ(plan.at("points"), file.at("points"));
+  EXPECT_EQ(plan.at("at").at("landmark"), "glabella");
+  EXPECT_EQ(plan.at("at").at("left_mm"), 15);
+  EXPECT_EQ(plan.at("at").at("up_mm"), 20);
+  // Left is +theta (the patient's left), up is +z, from the glabella.
+  EXPECT_GT(plan.at("frame").at("theta_deg").get<double>(),
+            glabella.at("theta_deg").get<double>() + 5);
+  EXPECT_GT(plan.at("frame").at("z_mm").get<double>(), glabella.at("z_mm").get<double>() + 15);
+
+  // The plain phantom has no landmarks: each absent with its reason, and a placement at one is
+  // refused with the app's (the CLI's) message.
+  const auto none = get("/api/landmarks");
+  ASSERT_TRUE(none);
+  ASSERT_EQ(none->status, 200);
+  for (const auto& [name, l] : json::parse(none->body).at("items").items()) {
+    EXPECT_EQ(l.at("found"), false) << name;
+    EXPECT_FALSE(l.at("note").get<std::string>().empty()) << name;
+  }
+  app::PlanNewRequest pn;
+  pn.procedure = "z-plasty";
+  pn.model = kModel;
+  pn.at = "glabella+15,20";
+  pn.output = (kTmp / "at-glabella.json").string();
+  const std::string app_message = message_of([&] { app::run_plan_new(pn); });
+  ASSERT_NE(app_message.find("glabella"), std::string::npos) << app_message;
+  const auto refused = post("/api/plan/new", json{{"procedure", "z-plasty"}, {"at", "glabella+15,20"}}.dump());
+  ASSERT_TRUE(refused);
+  EXPECT_EQ(refused->status, 400);
+  EXPECT_EQ(error_of(refused), app_message);
   expect_still_serving();
 }
 

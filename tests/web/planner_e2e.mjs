@@ -11,67 +11,16 @@
 //
 // node planner_e2e.mjs CAPS_EXE MODEL_DIR WEB_ROOT OUT_DIR    (run by run_planner_e2e.sh)
 import assert from 'node:assert/strict';
-import { spawn, spawnSync } from 'node:child_process';
-import { mkdirSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
-import { createRequire } from 'node:module';
-import { tmpdir } from 'node:os';
-import { dirname, join } from 'node:path';
-import { fileURLToPath } from 'node:url';
-
-const here = dirname(fileURLToPath(import.meta.url));
-const require = createRequire(join(here, '..', '..', 'web', 'package.json'));
-const { chromium } = require('playwright-core');
+import { spawnSync } from 'node:child_process';
+import { mkdirSync, readFileSync } from 'node:fs';
+import { join } from 'node:path';
+import { downloadOf, logger, screenOf as screenOfOn, withPlanner } from './e2e_common.mjs';
 
 const [caps, model, webRoot, out] = process.argv.slice(2);
-const chromiumPath = process.env.CAPS_CHROMIUM ?? '/usr/bin/chromium';
 mkdirSync(out, { recursive: true });
-const t0 = Date.now();
-const log = (m) => console.log(`[${((Date.now() - t0) / 1000).toFixed(1)} s] ${m}`);
+const log = logger();
 
-// Starts caps serve on a free port; resolves with its URL (from the line it prints).
-function serve() {
-  const server = spawn(caps, ['serve', model, '--port', '0', '--web-root', webRoot],
-    { stdio: ['ignore', 'pipe', 'pipe'] });
-  return new Promise((resolve, reject) => {
-    let text = '';
-    const timer = setTimeout(() => reject(new Error(`caps serve printed no URL:\n${text}`)), 20000);
-    const read = (chunk) => {
-      text += chunk;
-      const m = text.match(/http:\/\/127\.0\.0\.1:\d+\//);
-      if (m) {
-        clearTimeout(timer);
-        resolve({ server, url: m[0] });
-      }
-    };
-    server.stdout.on('data', read);
-    server.stderr.on('data', read);
-    server.on('exit', (code) => reject(new Error(`caps serve exited (${code}):\n${text}`)));
-  });
-}
-
-const { server, url } = await serve();
-log(`caps serve at ${url}`);
-const profile = mkdtempSync(join(tmpdir(), 'caps-chromium-'));
-const browser = await chromium.launchPersistentContext(profile, {
-  executablePath: chromiumPath,
-  headless: true,
-  args: ['--headless', '--no-sandbox', '--disable-gpu', '--use-angle=swiftshader',
-    '--enable-unsafe-swiftshader', '--disable-quic', '--no-first-run',
-    '--disable-background-networking', '--disable-component-update', '--disable-sync'],
-  viewport: { width: 1400, height: 850 },
-  acceptDownloads: true,
-});
-const errors = [];
-try {
-  const page = browser.pages()[0] ?? (await browser.newPage());
-  page.on('pageerror', (e) => errors.push(`page error: ${e.message}`));
-  page.on('console', (m) => m.type() === 'error' && errors.push(`console: ${m.text()}`));
-  // Nothing is fetched from anywhere but the server.
-  const foreign = [];
-  page.on('request', (r) => !r.url().startsWith(url) && !r.url().startsWith('blob:') &&
-    !r.url().startsWith('data:') && foreign.push(r.url()));
-
-  await page.goto(url);
+await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   await page.waitForSelector('body[data-ready="true"]', { timeout: 30000 });
   log('page ready, skin shown');
   await page.screenshot({ path: join(out, '1-loaded.png') });
@@ -226,9 +175,7 @@ try {
   await page.uncheck('#show-tension');
 
   // Save the plan and check it with the command line.
-  const [download] = await Promise.all([page.waitForEvent('download'), page.click('#save')]);
-  const saved = join(out, 'planner-plan.json');
-  await download.saveAs(saved);
+  const saved = await downloadOf(page, '#save', join(out, 'planner-plan.json'));
   const cli = spawnSync(caps, ['plan', 'check', saved, '--json', '-q'], { encoding: 'utf8' });
   assert.equal(cli.status, 0, `caps plan check ${saved}: ${cli.stdout}${cli.stderr}`);
   const checked = JSON.parse(cli.stdout);
@@ -252,13 +199,7 @@ try {
   await page.waitForFunction(() => window.caps.planner.state?.procedure === 'incision');
   assert.match(await page.locator('#check').innerText(), /Click on the skin to draw the cut/);
   await page.click('[data-view="front"]');
-  // The screen position of an LPS point (mm) in view A.
-  const screenOf = (lps) => page.evaluate((p) => {
-    const { viewA } = window.caps;
-    const v = viewA.camera.position.clone().set(p[0] / 1000, p[2] / 1000, -p[1] / 1000).project(viewA.camera);
-    const r = viewA.renderer.domElement.getBoundingClientRect();
-    return { x: r.left + ((v.x + 1) / 2) * r.width, y: r.top + ((1 - v.y) / 2) * r.height };
-  }, lps);
+  const screenOf = (lps) => screenOfOn(page, lps);
   for (const [i, p] of template.points.entries()) {
     const at = await screenOf(p.lps);
     await page.mouse.click(at.x, at.y);
@@ -332,9 +273,7 @@ try {
 
   // Export: result.json, the report, caps render's pictures and .glb.
   assert.equal(await page.locator('#export').isVisible(), true);
-  const [resultDownload] = await Promise.all([page.waitForEvent('download'), page.click('#export-result')]);
-  const resultFile = join(out, 'exported-result.json');
-  await resultDownload.saveAs(resultFile);
+  const resultFile = await downloadOf(page, '#export-result', join(out, 'exported-result.json'));
   const exported = JSON.parse(readFileSync(resultFile, 'utf8'));
   assert.ok(Math.abs(exported.total_suture_force_n - closing3) < 1e-9 * Math.max(1, closing3));
   await page.click('#export-render');
@@ -348,9 +287,7 @@ try {
     return String.fromCharCode(...b.slice(0, 4));
   }, files.find((f) => f.endsWith('/skin.glb')));
   assert.equal(glb, 'glTF');
-  const [reportDownload] = await Promise.all([page.waitForEvent('download'), page.click('#export-report')]);
-  const reportFile = join(out, 'exported-report.html');
-  await reportDownload.saveAs(reportFile);
+  const reportFile = await downloadOf(page, '#export-report', join(out, 'exported-report.html'));
   const report = readFileSync(reportFile, 'utf8');
   assert.match(report, /Closing force/);
   assert.match(report, /data:image\/png;base64,/);
@@ -358,9 +295,7 @@ try {
   await page.screenshot({ path: join(out, '8-export.png') });
 
   // The drawn plan with its sutures, saved: caps simulate reads it and gives the page's force.
-  const [drawnDownload] = await Promise.all([page.waitForEvent('download'), page.click('#save')]);
-  const drawnFile = join(out, 'drawn-plan.json');
-  await drawnDownload.saveAs(drawnFile);
+  const drawnFile = await downloadOf(page, '#save', join(out, 'drawn-plan.json'));
   const sim = spawnSync(caps, ['simulate', '--model', model, '--plan', drawnFile, '--mesh-size', '2.5',
     '-o', join(out, 'drawn-sim'), '--force', '--json', '-q'], { encoding: 'utf8' });
   assert.equal(sim.status, 0, `caps simulate ${drawnFile}: ${sim.stdout}${sim.stderr}`);
@@ -369,11 +304,5 @@ try {
     `caps simulate on the saved plan: ${cliForce} N, the page: ${closing3} N`);
   log(`caps simulate on the saved drawn plan: ${cliForce.toFixed(4)} N, as on the page`);
 
-  assert.deepEqual(foreign, [], 'requests outside the server');
-  assert.deepEqual(errors.filter((e) => !/WebGL|GPU|GL_/i.test(e)), [], 'errors on the page');
-} finally {
-  await browser.close();
-  server.kill('SIGTERM');
-  rmSync(profile, { recursive: true, force: true });
-}
+});
 log('passed');

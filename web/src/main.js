@@ -50,6 +50,14 @@ function buildParameters(template, values, onInput) {
   }
 }
 
+// ", 15 mm left and 20 mm up from the glabella" for a plan placed at a landmark ('' if not).
+function atLandmark(at) {
+  if (!at?.landmark) return '';
+  const mm = (v, pos, neg) => `${+Math.abs(v).toFixed(1)} mm ${v < 0 ? neg : pos}`;
+  return `, ${mm(at.left_mm, 'left', 'right')} and ${mm(at.up_mm, 'up', 'down')} from the ` +
+    escapeHtml(at.landmark.replace('_', ' '));
+}
+
 function showCheck(plan, message, state) {
   const el = $('check');
   if (!plan && !message) {
@@ -70,7 +78,7 @@ function showCheck(plan, message, state) {
   el.className = warnings.length ? 'check warn' : 'check ok';
   el.innerHTML = `<b>Can be operated.</b> Cut ${(c.cut_length_mm ?? 0).toFixed(1)} mm on the skin,
     ${pairs} suture pair${pairs === 1 ? '' : 's'}, centre at theta ${plan.frame.theta_deg.toFixed(1)}°,
-    z ${plan.frame.z_mm.toFixed(1)} mm.` +
+    z ${plan.frame.z_mm.toFixed(1)} mm${atLandmark(plan.at)}.` +
     (pairs ? '' : ' <b>No sutures yet</b>: nothing closes this cut; add pairs below.') +
     (warnings.length ? `<ul>${warnings.map((w) => `<li>${escapeHtml(w)}</li>`).join('')}</ul>` : '');
 }

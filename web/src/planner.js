@@ -1,8 +1,10 @@
 // The plan being edited, laid on the model by the server (POST /api/plan/new, the same as
 // `caps plan new`) whenever it changes, its check shown in plain words, its lines drawn on the
 // skin; undo and redo. Three kinds of state:
-//   a template: {procedure, parameters, orientation, at | at_xyz, sutures} placed by clicking,
-//     moved by dragging the yellow handle or with the arrow keys, turned by dragging the cyan
+//   a template: {procedure, parameters, orientation, at | at_xyz, sutures} placed by clicking
+//     (at_xyz) or at a landmark (at "glabella+15,20", the command line's --at; the arrow keys then
+//     change its offsets, so the plan stays recorded at the landmark), moved by dragging the
+//     yellow handle or with the arrow keys, turned by dragging the cyan
 //     handle (or R), scaled by dragging the magenta one (every parameter in mm, in proportion);
 //   a free incision: {procedure: 'incision', points: [[x, y, z] LPS mm], sutures}, drawn by
 //     clicking along the skin (`caps plan new incision --points-xyz`), points dragged to move;
@@ -12,6 +14,7 @@
 import { api } from './api.js';
 import { sceneToLps } from './frames.js';
 import { History } from './history.js';
+import { landmarkAt, parseLandmarkAt } from './landmarks.js';
 import { axisHandleObjects, handleObject, planObjects, pointHandles } from './overlays.js';
 import { edgePair, pickEdge, remapIncisionSutures, sutureMarks } from './sutures.js';
 
@@ -319,12 +322,15 @@ export class Planner {
       path.length === plan.points.length && !plan.excisions?.length && !plan.flaps?.length;
     if (this.templates.has(name)) {
       // The template's own sutures are kept as the state's only when they were changed.
+      // A plan placed at a landmark stays placed there (its file records the landmark).
+      const a = plan.at;
+      const at = a?.landmark ? landmarkAt(a.landmark, a.left_mm ?? 0, a.up_mm ?? 0)
+        : `${plan.frame.theta_deg},${plan.frame.z_mm}`;
       const own = await api.planNew({ procedure: name, parameters: { ...plan.procedure.parameters },
-        orientation: plan.frame.orientation_deg, at: `${plan.frame.theta_deg},${plan.frame.z_mm}` });
+        orientation: plan.frame.orientation_deg, at });
       const changed = JSON.stringify(own.sutures) !== JSON.stringify(plan.sutures);
       this.state = { procedure: name, parameters: { ...plan.procedure.parameters },
-        orientation: plan.frame.orientation_deg,
-        at: `${plan.frame.theta_deg},${plan.frame.z_mm}`, at_xyz: '',
+        orientation: plan.frame.orientation_deg, at, at_xyz: '',
         sutures: changed ? plan.sutures : null };
       this.procedure = name;
     } else if (oneCut) {
@@ -340,11 +346,20 @@ export class Planner {
     document.body.dataset.check = 'ok';
   }
 
-  /** Moves the centre by (dtheta deg, dz mm). */
-  moveBy(dtheta, dz) {
+  /** Moves the centre by `leftMm` to the patient's left and `upMm` up: a landmark placement's
+   * offsets change by as much; a (theta, z) centre moves by (leftMm in degrees here, upMm). */
+  moveBy(leftMm, upMm) {
     if (!this.state?.at) return;
+    const mark = parseLandmarkAt(this.state.at);
+    const round = (v) => +v.toFixed(3);
+    if (mark) {
+      this.change({ ...this.state,
+        at: landmarkAt(mark.name, round(mark.leftMm + leftMm), round(mark.upMm + upMm)) });
+      return;
+    }
     const [theta, z] = this.state.at.split(',').map(Number);
-    this.change({ ...this.state, at: `${(theta + dtheta).toFixed(3)},${(z + dz).toFixed(3)}` });
+    const dtheta = leftMm * this.thetaDegPerMm();
+    this.change({ ...this.state, at: `${(theta + dtheta).toFixed(3)},${(z + upMm).toFixed(3)}` });
   }
 
   /** Degrees of theta for `mm` of arc along theta at the plan's centre (from its frame). */
@@ -369,8 +384,8 @@ export class Planner {
     } else if (this.state.procedure === 'loaded') return false;
     else if (k === 'ArrowUp') this.moveBy(0, step);
     else if (k === 'ArrowDown') this.moveBy(0, -step);
-    else if (k === 'ArrowRight') this.moveBy(step * this.thetaDegPerMm(), 0);
-    else if (k === 'ArrowLeft') this.moveBy(-step * this.thetaDegPerMm(), 0);
+    else if (k === 'ArrowRight') this.moveBy(step, 0);
+    else if (k === 'ArrowLeft') this.moveBy(-step, 0);
     else if (k === 'r' || k === 'R')
       this.setOrientation(this.state.orientation + (e.shiftKey ? -kRotateStepDeg : kRotateStepDeg));
     else return false;
