@@ -435,6 +435,29 @@ TEST(VolumeIo, NrrdGzipEncoding) {
   EXPECT_FALSE(v.notes.empty());  // "no space directions" is recorded
 }
 
+// A field line too long for teem is refused before teem reads it, also when a ":=" late in the
+// line (after NUL bytes, as fuzz_nrrd wrote it) makes it look like a key:=value line, which
+// teem keeps whole; a real long key:=value line is read.
+TEST(VolumeIo, NrrdLongFieldLineIsRefusedEvenWithAKeyValueMarkLaterInIt) {
+  TempDir tmp;
+  std::string sizes = "sizes: 2 2 2";
+  for (int i = 0; i < 400; ++i) sizes += " 35";  // 1200 characters: teem overflowed
+  sizes += std::string(4, '\0') + " k:=v";
+  const std::string tail = "\nendian: little\nencoding: raw\n\n" + std::string(16, '\0');
+  write_bytes(tmp / "long.nrrd", "NRRD0004\ntype: short\ndimension: 3\n" + sizes + tail);
+  try {
+    caps::read_volume(tmp / "long.nrrd");
+    FAIL() << "expected InvalidInput";
+  } catch (const caps::InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("header line 4"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("characters long"), std::string::npos) << e.what();
+  }
+  const std::string note = "note:=" + std::string(2000, 'x');
+  write_bytes(tmp / "note.nrrd",
+              "NRRD0004\ntype: short\ndimension: 3\nsizes: 2 2 2\n" + note + tail);
+  EXPECT_EQ(caps::read_volume(tmp / "note.nrrd").geom.dims, Eigen::Vector3i(2, 2, 2));
+}
+
 TEST(VolumeIo, HeadsqQuarterNhdr) {
   const fs::path p = kData / "ct/vtk-headsq/quarter.nhdr";
   if (!fs::exists(p)) GTEST_SKIP() << p;
