@@ -116,6 +116,7 @@ class Mumps {
   FactorStatus factorize(Real* a) {
     id_.a = a;
     for (int attempt = 0;; ++attempt) {
+      provide_workspace();
       id_.job = 2;
       Call(&id_);
       // -8/-9: workspace too small for the numerical pivots; grow and retry (users' guide 8).
@@ -172,7 +173,25 @@ class Mumps {
   void check(const char* phase, int iteration = -1) const {
     if (id_.infog[0] < 0) throw SolverError(failure(phase), -1, -1, iteration);
   }
+  // The factorization's main workspace S (fronts, then the factors) as WK_USER, kept from one
+  // factorization to the next (MUMPS 5.5 users' guide, LWK_USER): MUMPS would allocate and free
+  // it each time, and the kernel's zeroing of its fresh pages took about a tenth of a Newton
+  // solve's time (perf, Cranium Z-plasty). INFO(8), after the analysis, is its size in core
+  // (entries; negative: millions), to which ICNTL(14)'s margin is added.
+  void provide_workspace() {
+    const long long estimate = id_.info[7] >= 0 ? id_.info[7] : -1000000LL * id_.info[7];
+    const long long wanted = estimate + estimate * std::max(0, id_.icntl[13]) / 100;
+    if (wanted <= 0) return;
+    if (static_cast<long long>(workspace_.size()) < wanted)
+      workspace_.resize(static_cast<std::size_t>(wanted));
+    id_.wk_user = workspace_.data();
+    const long long n = static_cast<long long>(workspace_.size());
+    // LWK_USER > 0: entries; < 0: millions of entries (a MUMPS_INT holds up to 2^31 - 1).
+    id_.lwk_user = n < 2000000000LL ? static_cast<MUMPS_INT>(n)
+                                    : -static_cast<MUMPS_INT>(n / 1000000LL);
+  }
   Struc id_{};
+  std::vector<Real> workspace_;
 };
 using MumpsDouble = Mumps<DMUMPS_STRUC_C, double, dmumps_c>;
 using MumpsSingle = Mumps<SMUMPS_STRUC_C, float, smumps_c>;
