@@ -76,9 +76,9 @@ with concurrent.futures.ThreadPoolExecutor(2) as pool:
         assert abs(gain - float(r["lengthening_mm"])) <= 1e-9 * max(1.0, abs(gain)), \
             (where, gain, r["lengthening_mm"])
         assert abs(summary["lengthening"]["percent"] - float(r["lengthening_percent"])) <= 1e-3, where
-# The Z-plasty lengthens its central limb (length 15) by more than a tenth and by less than the
-# rigid flaps' geometric sqrt(5 - 4 cos 60) - 1 = 73 % (tests/test_app.cpp); its length along
-# the axis before closure is the limb's.
+# The Z-plasty lengthens its central limb by more than a tenth and by less than the rigid flaps'
+# geometric sqrt(5 - 4 cos angle) - 1 (73 % at 60 deg, 47 % at 45; tests/test_app.cpp); its
+# length along the axis before closure is the limb's.
 zs = [r for r in ok if r["template"] == "z-plasty"]
 for r in zs:
     gain, percent = float(r["lengthening_mm"]), float(r["lengthening_percent"])
