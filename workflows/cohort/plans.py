@@ -60,6 +60,8 @@ def sweep_values(text, where="sweep"):
             raise ValueError(f"{where}: '{text}' has an empty value; write 30,45,60")
         if len(set(values)) != len(values):
             raise ValueError(f"{where}: '{text}' repeats a value")
+        for v in values:  # every template parameter is a number; a value is part of a file name
+            _number(v, where)
         return values
     return [text]
 

@@ -41,6 +41,7 @@ def test_a_list_keeps_its_values_and_order():
     ("30:nan:15", "finite"),
     ("30,,45", "empty value"),
     ("30,45,30", "repeats"),
+    ("30,a/b", "'a/b' is not a number"),
     ("0:100:0.5", "201 values"),
 ])
 def test_a_malformed_sweep_is_refused_with_what_to_write(text, says):
