@@ -494,15 +494,20 @@ Landmarks find_landmarks(const SkinRangeView& view) {
             wz += e * z;
             w += e;
           }
-      if (area < 80.0) {
+      // A real ear stands out over several hundred mm^2 (Cranium: 850-910); the small face
+      // phantom's (caps phantom --face --scale 0.9) over 70-80.
+      if (area < 50.0) {
         tra.push_back(absent("tragion" + suffix,
                              cat("no ear 70..135 deg off the midline (", mm(area),
                                  "^2 stand out 4 mm): the scan may not cover it")));
       } else {
         const double zc = wz / w;
         double prev = a, e_prev = excess(a, zc);
+        // The ear goes on behind its front edge: a ray or two crossing the skin twice in
+        // front of it (grazing the ear's base through the voxels' staircase) are not its edge.
+        const double behind = 2.0 * deg_per_mm;
         for (double dt = a; dt <= b; dt += 0.25 * view.dtheta_deg) {
-          if (is_ear(dt, zc)) {
+          if (is_ear(dt, zc) && is_ear(dt + behind, zc)) {
             const double e = excess(dt, zc);
             double f = dt;
             if (!(view.undercut && view.undercut(theta_of(dt), zc)) && e > e_prev && dt > a)
@@ -564,9 +569,11 @@ Landmarks find_landmarks(const SkinRangeView& view) {
     }
     // Exocanthion: the lateral end of the eye's depression (its depth against the skin 12 mm to
     // either side falls to half) on the row of its deepest point, 8..55 deg off the midline
-    // from 20 mm below to 8 mm above the nasion's height (lower, the flank of the nose is the
-    // deepest concavity beside the midline).
+    // from 20 mm below to 8 mm above the nasion's height, and no lower than halfway from the
+    // nasion down to the nose tip (lower, the flank of the nose is the deepest concavity beside
+    // the midline; on a short nose, such as a small head's, it is within 20 mm of the nasion).
     {
+      const double z_eye_lo = std::max({zp, z_hi - 20.0, 0.5 * (z_hi + zp)});
       const double half = 12.0 * deg_per_mm;
       auto depth = [&](double dt, double z) {
         return 0.5 * (view.r_mm(theta_of(dt - half), z) + view.r_mm(theta_of(dt + half), z)) -
@@ -574,7 +581,7 @@ Landmarks find_landmarks(const SkinRangeView& view) {
       };
       double best = 0;
       Eigen::Vector2d tz(0, 0);
-      for (double z = std::max(zp, z_hi - 20.0); z <= z_hi + 8.0; z += view.dz_mm)
+      for (double z = z_eye_lo; z <= z_hi + 8.0; z += view.dz_mm)
         for (double dt = 8.0; dt <= 55.0; dt += view.dtheta_deg)
           if (view.measured(theta_of(dt), z) && depth(dt, z) > best) {
             best = depth(dt, z);

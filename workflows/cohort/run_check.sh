@@ -5,7 +5,8 @@
 #     plans.tsv placed relative to the glabella, on 2 cores;
 #   * results.tsv has one row per patient x plan; the broken patient's rows are "failed" with
 #     the error and every other row is "ok" (it failed alone), and report.html lists it;
-#   * the closing forces in the table equal `caps simulate` run by hand on the same model and plan;
+#   * every ok row's closing force and lengthening equal `caps simulate` run by hand on the
+#     workflow's model and plan, and the Z-plasty's lengthening is within its known bounds;
 #   * a rerun has nothing to do.
 #   workflows/cohort/run_check.sh build/tools/caps /tmp/cohort [CONFIG]
 # CONFIG defaults to config.yaml.
@@ -31,8 +32,12 @@ args=(-s "$here/Snakefile" --configfile "$config" --config "caps=$caps" "patient
 start=$(date +%s.%N)
 snakemake "${args[@]}" -q > "$work/snakemake.log" 2>&1 || { cat "$work/snakemake.log"; exit 1; }
 end=$(date +%s.%N)
+# The rerun's dry run goes on beside the checks (it reads the workflow's files, the checks write
+# only under direct/, which no rule makes).
+snakemake "${args[@]}" -n > "$work/rerun.log" 2>&1 &
+rerun=$!
 "$python" - "$work" "$caps" <<'EOF'
-import csv, json, os, subprocess, sys
+import concurrent.futures, csv, json, math, os, subprocess, sys
 work, caps = sys.argv[1], sys.argv[2]
 patients = [r["patient"] for r in csv.DictReader(open(f"{work}/patients.tsv"), delimiter="\t")]
 rows = list(csv.DictReader(open(f"{work}/results.tsv"), delimiter="\t"))
@@ -47,19 +52,45 @@ for r in rows:
         assert float(r["closing_force_n"]) > 0 and float(r["thickness_mm"]) > 0, r
 report = open(f"{work}/report.html").read()
 assert "broken" in report and "failed" in report
-# The table's closing forces are caps simulate's on the same model and plan (one per plan).
-for r in [next(r for r in rows if r["status"] == "ok" and r["plan"] == p) for p in plans]:
-    out = f"{work}/direct_{r['patient']}_{r['plan']}"
-    plan_rows = {p["plan"]: p for p in csv.DictReader(open(os.environ["CAPS_PLANS"]), delimiter="\t")}
-    subprocess.run([caps, "simulate", "--model", f"{work}/models/{r['patient']}",
-                    "--plan", f"{work}/plans/{r['patient']}/{r['plan']}.json", "-o", out,
-                    "--mesh-size", plan_rows[r["plan"]]["mesh_size"] or "2.0", "-q"], check=True)
-    direct = json.load(open(f"{out}/result.json"))["total_suture_force_n"]
-    assert abs(direct - float(r["closing_force_n"])) <= 1e-9 * max(1.0, abs(direct)), \
-        (r["patient"], r["plan"], direct, r["closing_force_n"])
-print(f"cohort: {len(rows)} rows ({sum(r['status'] == 'ok' for r in rows)} ok, broken failed alone); "
-      "closing forces equal caps simulate's")
+# Every ok row equals caps simulate run by hand on the workflow's own model and plan (the models
+# are not rebuilt): the closing force of its result.json and the lengthening of its --json
+# (two at a time, as the workflow runs).
+plan_rows = {p["plan"]: p for p in csv.DictReader(
+    (l for l in open(os.environ["CAPS_PLANS"]) if not l.startswith("#")), delimiter="\t")}
+def simulate(r):
+    out = f"{work}/direct/{r['patient']}/{r['plan']}"
+    os.makedirs(os.path.dirname(out), exist_ok=True)
+    run = subprocess.run([caps, "simulate", "--model", f"{work}/models/{r['patient']}",
+                          "--plan", f"{work}/plans/{r['patient']}/{r['plan']}.json", "-o", out,
+                          "--mesh-size", plan_rows[r["plan"]]["mesh_size"] or "2.0", "-q", "--json"],
+                         check=True, capture_output=True, text=True)
+    return r, json.load(open(f"{out}/result.json")), json.loads(run.stdout)
+ok = [r for r in rows if r["status"] == "ok"]
+with concurrent.futures.ThreadPoolExecutor(2) as pool:
+    for r, result, summary in pool.map(simulate, ok):
+        where = (r["patient"], r["plan"])
+        direct = result["total_suture_force_n"]
+        assert abs(direct - float(r["closing_force_n"])) <= 1e-9 * max(1.0, abs(direct)), \
+            (where, direct, r["closing_force_n"])
+        gain = summary["lengthening"]["mm"]
+        assert abs(gain - float(r["lengthening_mm"])) <= 1e-9 * max(1.0, abs(gain)), \
+            (where, gain, r["lengthening_mm"])
+        assert abs(summary["lengthening"]["percent"] - float(r["lengthening_percent"])) <= 1e-3, where
+# The Z-plasty lengthens its central limb by more than a tenth and by less than the rigid flaps'
+# geometric sqrt(5 - 4 cos angle) - 1 (73 % at 60 deg, 47 % at 45; tests/test_app.cpp); its
+# length along the axis before closure is the limb's.
+zs = [r for r in ok if r["template"] == "z-plasty"]
+for r in zs:
+    gain, percent = float(r["lengthening_mm"]), float(r["lengthening_percent"])
+    values = dict(p.split("=") for p in r["parameters"].split(";"))
+    limb, angle = float(values["length"]), math.radians(float(values.get("angle", 60)))
+    assert 0.1 * limb < gain and percent < 100 * (math.sqrt(5 - 4 * math.cos(angle)) - 1), r
+    assert abs(100 * gain / percent - limb) < 0.5, (r["patient"], 100 * gain / percent, limb)
+assert all(r["lengthening_mm"] == "" for r in rows if r["status"] != "ok")
+print(f"cohort: {len(rows)} rows ({len(ok)} ok, broken failed alone); every ok row's closing "
+      f"force and lengthening equal caps simulate's; {len(zs)} Z-plasties lengthen "
+      + ", ".join(f"{float(r['lengthening_percent']):.1f} %" for r in zs))
 EOF
-snakemake "${args[@]}" -n > "$work/rerun.log" 2>&1
+wait "$rerun" || true
 grep -q "Nothing to be done" "$work/rerun.log" || { cat "$work/rerun.log"; echo "a rerun would do work"; exit 1; }
 echo "cohort: wall time $(python3 -c "print(round($end - $start, 1))") s on 2 cores; a rerun has nothing to do"
