@@ -134,6 +134,27 @@ TEST(ScanRegistration, ScanInMetresIsFoundWithItsScale) {
   EXPECT_NEAR(det / std::pow(rs.scale, 3), 1.0, 1e-6);
 }
 
+// The scale estimate may move the scale from its start by at most max_scale_change: the scan in
+// metres started 1.3 times off is found within 2 % of its scale (1.01 times) and accepted under
+// the default 1.5, and refused naming the move under a limit of 1.2.
+TEST(ScanRegistration, AScaleEstimateThatMovesTooFarIsRefused) {
+  const Scan scan = make_scan(false, 0.15, 1000.0);
+  RegistrationOptions o;
+  o.estimate_scale = true;
+  o.mm_per_unit = 1300.0;
+  const ScanRegistration r = register_scan(scan.mesh, skin(), o);
+  EXPECT_NEAR(r.scale, 1000.0, 20.0);
+  EXPECT_TRUE(r.same_head) << r.verdict;
+  o.max_scale_change = 1.2;
+  const ScanRegistration refused = register_scan(scan.mesh, skin(), o);
+  EXPECT_NEAR(refused.scale, 1000.0, 20.0);
+  EXPECT_FALSE(refused.same_head);
+  EXPECT_NE(refused.verdict.find("scale estimate moved from 1300 to"), std::string::npos)
+      << refused.verdict;
+  o.max_scale_change = 0.9;
+  EXPECT_THROW(register_scan(scan.mesh, skin(), o), InvalidInput);
+}
+
 TEST(ScanRegistration, FaceOfAnotherHeadIsFlagged) {
   const Scan scan = make_scan(true, 0.15, 1.0);
   RegistrationOptions o;

@@ -45,6 +45,7 @@ RegistrationOptions registration_options(const ScanRegistrationFields& r) {
   o.max_rms_mm = r.max_rms;
   o.max_median_mm = r.max_median;
   o.min_overlap = r.min_overlap;
+  o.max_scale_change = r.max_scale_change;
   o.max_orientation_deg = r.max_orientation;
   if (r.up.empty() != r.front.empty())
     throw InvalidParameter("give both {up} and {front} (the scan file's axes), or neither");

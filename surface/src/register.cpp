@@ -99,6 +99,9 @@ void check_options(const RegistrationOptions& o) {
                            " mm must be positive"));
   if (!(o.min_overlap >= 0 && o.min_overlap <= 1))
     throw InvalidParameter(cat("{min_overlap} ", o.min_overlap, " must be in [0, 1]"));
+  if (!(o.max_scale_change >= 1) || !std::isfinite(o.max_scale_change))
+    throw InvalidParameter(cat("{max_scale_change} ", o.max_scale_change,
+                               " must be a finite factor of at least 1"));
   if (o.orientation && !(std::abs(o.orientation->determinant() - 1) < 1e-6))
     throw InvalidInput("registration: the orientation prior must be a rotation");
   if (!(o.max_orientation_deg > 0 && o.max_orientation_deg <= 180))
@@ -327,7 +330,18 @@ ScanRegistration register_scan(const TriMesh& scan, const TriMesh& skin,
   const auto& r = out.residual;
   out.same_head = r.rms_mm <= o.max_rms_mm && r.median_mm <= o.max_median_mm &&
                   r.overlap_fraction >= o.min_overlap;
-  if (out.same_head)
+  // A scale estimate that moved far from its start fits the scan onto a part of the skin at an
+  // absurd size (Lee Perry-Smith's head, in cm by its size, shrunk 3 times onto Cranium's skin
+  // passed every residual test): refused whatever the residual says.
+  const double scale_change = std::max(s_icp, 1.0 / s_icp);
+  if (o.estimate_scale && !(scale_change <= o.max_scale_change)) {
+    out.same_head = false;
+    out.verdict = cat("the scale estimate moved from ", r2(out.scale / s_icp), " to ",
+                      r2(out.scale), " mm per scan unit (", r2(scale_change),
+                      " times; at most ", o.max_scale_change, " expected): the scan fits the "
+                      "skin only at a size no head has, probably a scan of another head or "
+                      "units far off; give --scan-scale near the truth");
+  } else if (out.same_head)
     out.verdict = cat("the scan fits the skin: ", std::lround(100 * r.overlap_fraction),
                       " % of it within ", o.overlap_mm, " mm, RMS ", r2(r.rms_mm),
                       " mm there, median distance ", r2(r.median_mm), " mm");

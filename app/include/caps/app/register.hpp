@@ -27,6 +27,7 @@ struct ScanRegistrationFields : ScanTextureFields {
   double max_rms = RegistrationOptions{}.max_rms_mm;
   double max_median = RegistrationOptions{}.max_median_mm;
   double min_overlap = RegistrationOptions{}.min_overlap;
+  double max_scale_change = RegistrationOptions{}.max_scale_change;
   bool accept_other_head = false;
 
   template <class Self, class V>
@@ -49,6 +50,8 @@ struct ScanRegistrationFields : ScanTextureFields {
     v(r.max_median, {"max_median", "refuse above this median distance over the scan, mm"});
     v(r.min_overlap, {"min_overlap", "refuse below this fraction of the scan overlapping the "
                                      "skin"});
+    v(r.max_scale_change, {"max_scale_change", "with --estimate-scale: refuse when the estimate "
+                                               "moves the scale by more than this factor"});
     v(r.accept_other_head, {"accept_other_head", "write the results even when the residual says "
                                                  "the scan is of another head", FieldKind::Flag});
   }

@@ -42,6 +42,10 @@ struct RegistrationOptions {
   double max_rms_mm = 1.5;      ///< above this RMS over the overlap: another head, mm
   double max_median_mm = 1.0;   ///< above this median |distance| over the scan: another head, mm
   double min_overlap = 0.7;     ///< below this fraction of the scan overlapping: another head
+  /// With estimate_scale: the estimate may move the scale from its start (given or guessed by
+  /// size) by at most this factor either way; beyond it the scan is shrunk onto, or spread over,
+  /// a part of the skin, which says another head or units far off (refused as another head).
+  double max_scale_change = 1.5;
   int ransac_iterations = 200000;  ///< RANSAC trials of the coarse alignment
   int seed = 1;                 ///< random seed (the result is reproducible for one seed)
 };
