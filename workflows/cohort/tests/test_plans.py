@@ -15,9 +15,25 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 COHORT = os.path.dirname(HERE)
 sys.path.insert(0, COHORT)
 
-from plans import expand_plans, plan_options, sweep_values  # noqa: E402
+from plans import (check_simulate_values, expand_plans, parse_simulate_help,  # noqa: E402
+                   plan_options, simulate_arguments, simulate_options, simulate_settings,
+                   sweep_values)
 
 CRANIUM = "/usr/share/doc/invesalius-examples/examples/Cranium.inv3"
+# The build's caps program (ctest passes it); the simulate options are checked against its own.
+CAPS = os.environ.get("CAPS")
+
+
+@pytest.fixture(scope="module")
+def caps():
+    if not CAPS or not os.access(CAPS, os.X_OK):
+        pytest.skip("no caps program: set CAPS (ctest sets it to the build's)")
+    return CAPS
+
+
+@pytest.fixture(scope="module")
+def options(caps):
+    return simulate_options(caps)
 
 
 def test_a_range_includes_its_stop_and_does_not_drift():
@@ -73,6 +89,108 @@ def test_an_id_used_twice_is_refused():
         expand_plans({"z": {"parameters": "angle=30,45"}, "z_angle30": {"parameters": "angle=30"}})
     with pytest.raises(ValueError, match="not name=value"):
         expand_plans({"z": {"parameters": "angle30"}})
+
+
+def test_the_simulate_options_are_read_from_caps_help():
+    text = ("Usage: caps simulate [OPTIONS]\n\nOptions:\n"
+            "  -h,--help                   Print this help message and exit\n"
+            "  -o,--output TEXT REQUIRED   result directory to create\n"
+            "  --undermine FLOAT=10        free the tissue from the bone within this distance\n"
+            "                              --not-an-option, a description's next line\n"
+            "  --constant-thickness FLOAT=0\n"
+            "                              mesh a constant depth (mm)\n"
+            "  --steps INT=10              neo-hookean: load steps\n"
+            "  --render                    also render\n")
+    assert parse_simulate_help(text) == {
+        "help": (None, ""), "output": ("TEXT", ""), "undermine": ("FLOAT", "10"),
+        "constant_thickness": ("FLOAT", "0"), "steps": ("INT", "10"), "render": (None, "")}
+
+
+def test_the_build_caps_simulate_has_the_options_the_sweep_table_sets(options):
+    for key, kind in [("undermine", "FLOAT"), ("prestretch", "FLOAT"), ("material", "TEXT"),
+                      ("steps", "INT"), ("suture_spacing", "FLOAT"), ("render", None)]:
+        assert options[key][0] == kind, (key, options[key])
+    assert options["material"][1] == "linear" and options["prestretch"][1] == "1"
+
+
+def test_simulate_options_orientation_and_mesh_size_sweep_with_readable_ids(options):
+    rows = {
+        "z": {"template": "z-plasty", "at": "glabella+0,25", "orientation": "90",
+              "parameters": "length=15;angle=45,60", "mesh_size": "2.5",
+              "simulate": "undermine=5,10;material=neo-hookean;prestretch=1.1"},
+        "e": {"template": "ellipse", "at": "40,20", "orientation": "0:90:45",
+              "parameters": "length=12", "mesh_size": "2,3",
+              "simulate": "material=linear,neo-hookean"},
+        "v": {"template": "v-y-advancement", "at": "0,20", "orientation": "", "parameters": "",
+              "mesh_size": "", "simulate": "suture-spacing=4"},
+    }
+    plans = expand_plans(rows, options)
+    assert list(plans) == [
+        "z_angle45_undermine5", "z_angle45_undermine10", "z_angle60_undermine5",
+        "z_angle60_undermine10",
+        *(f"e_orientation{o}_mesh_size{m}_material{t}" for o in (0, 45, 90) for m in (2, 3)
+          for t in ("linear", "neo-hookean")),
+        "v"]
+    z = plans["z_angle60_undermine10"]
+    assert z["parameters"] == "length=15;angle=60" and z["orientation"] == "90"
+    assert z["simulate"] == "undermine=10;material=neo-hookean;prestretch=1.1"
+    assert z["sweep_of"] == "z" and z["swept"] == ["angle", "undermine"]
+    assert simulate_arguments(z) == "--undermine 10 --material neo-hookean --prestretch 1.1"
+    e = plans["e_orientation45_mesh_size3_materialneo-hookean"]
+    assert (e["orientation"], e["mesh_size"], e["simulate"]) == ("45", "3", "material=neo-hookean")
+    assert plan_options(e) == "--length 12"
+    # A name with dashes is caps's option, spelled as its JSON key in the plan and the table.
+    assert plans["v"]["simulate"] == "suture_spacing=4" and plans["v"]["swept"] == []
+    assert simulate_arguments(plans["v"]) == "--suture-spacing 4"
+    assert (plans["v"]["orientation"], plans["v"]["mesh_size"]) == ("", "")
+    # The results table's columns: each option any plan sets, caps's default where one does not.
+    assert simulate_settings(plans, options) == {
+        "undermine": "10", "material": "linear", "prestretch": "1", "suture_spacing": "5"}
+    check_simulate_values(CAPS, plans)  # caps takes every value
+
+
+@pytest.mark.parametrize("simulate, says", [
+    ("undermin=5", "simulate option 'undermin': caps simulate has no option --undermin "
+                   "(its options with a value: layers, extent, undermine,"),
+    ("undermine", "simulate: 'undermine' is not name=value (e.g. undermine=5)"),
+    ("undermine=5;undermine=6", "simulate: 'undermine' is given twice"),
+    ("undermine=10:0:5", "simulate option 'undermine': '10:0:5' needs start <= stop"),
+    ("undermine=five", "simulate option 'undermine': 'five' is not a number"),
+    ("steps=2.5", "simulate option 'steps': '2.5' is not a whole number"),
+    ("material=neo hookean", "simulate option 'material': 'neo hookean' is not a word"),
+    ("material=linear,a/b", "simulate option 'material': 'a/b' is not a word"),
+    ("render=1", "simulate option 'render': --render is a flag"),
+    ("mesh_size=2", "simulate option 'mesh_size': --mesh-size is set by the mesh_size column"),
+    ("output=x", "simulate option 'output': --output is set by the workflow"),
+])
+def test_a_malformed_simulate_option_is_refused_naming_plan_and_option(options, simulate, says):
+    with pytest.raises(ValueError, match=re.escape(f"plans table, plan 'z', {says}")):
+        expand_plans({"z": {"parameters": "angle=45", "simulate": simulate}}, options)
+
+
+def test_an_orientation_or_mesh_size_sweep_is_checked_like_a_parameter():
+    with pytest.raises(ValueError, match=re.escape("plan 'z', orientation: '0:90:0' needs")):
+        expand_plans({"z": {"orientation": "0:90:0"}})
+    with pytest.raises(ValueError, match=re.escape("plan 'z', mesh_size: '2,,3' has an empty")):
+        expand_plans({"z": {"mesh_size": "2,,3"}})
+    with pytest.raises(ValueError, match="no list of caps simulate's options"):
+        expand_plans({"z": {"simulate": "undermine=5"}})
+
+
+def test_a_value_caps_refuses_is_refused_before_any_job_with_caps_message(options, caps):
+    plans = expand_plans({"z": {"simulate": "undermine=0,5;material=linear,neo-hookan"},
+                          "e": {"simulate": "rim=clamp;steps=0"}}, options)
+    with pytest.raises(ValueError) as refused:
+        check_simulate_values(caps, plans)
+    lines = str(refused.value).splitlines()
+    assert len(lines) == 3, lines
+    assert any(l.startswith("plans table, plan 'z', simulate option 'material': caps simulate "
+                            "refuses material=neo-hookan: caps: error: --material 'neo-hookan' "
+                            "is unknown") for l in lines), lines
+    assert any(l.startswith("plans table, plan 'e', simulate option 'rim': caps simulate "
+                            "refuses rim=clamp: caps: error:") for l in lines), lines
+    assert any("'steps': caps simulate refuses steps=0: caps: error: --steps 0" in l
+               for l in lines), lines
 
 
 def snakemake(*args):
