@@ -3,6 +3,8 @@ and parameters it expands to, its refusals, and the workflow's dry run over plan
 (one plan and one simulation per patient and value)."""
 
 import collections
+import csv
+import json
 import os
 import re
 import shutil
@@ -193,32 +195,49 @@ def test_a_value_caps_refuses_is_refused_before_any_job_with_caps_message(option
                for l in lines), lines
 
 
-def snakemake(*args):
+def snakemake(*args, dry=True):
     exe = shutil.which("snakemake")
     if exe is None:
         pytest.skip("snakemake is not installed")
-    if not os.path.exists(CRANIUM):
+    if dry and not os.path.exists(CRANIUM):
         pytest.skip(f"{CRANIUM} is not installed (the cohort's third patient)")
-    return subprocess.run([exe, "-n", "-s", os.path.join(COHORT, "Snakefile"),
+    return subprocess.run([exe, *(["-n"] if dry else []), "-s", os.path.join(COHORT, "Snakefile"),
                            "--configfile", os.path.join(COHORT, "config.yaml"), *args],
                           capture_output=True, text=True)
 
 
-def test_the_dry_run_of_the_sweep_table_has_one_simulation_per_patient_and_value(tmp_path):
+def test_the_dry_run_of_the_sweep_table_has_one_simulation_per_patient_and_value(tmp_path, caps):
     run = snakemake("--config", f"plans={os.path.join(COHORT, 'plans_sweep.tsv')}",
-                    "--directory", str(tmp_path), "--cores", "2", "-p")
+                    f"caps={caps}", "--directory", str(tmp_path), "--cores", "2", "-p")
     assert run.returncode == 0, run.stdout + run.stderr
     counts = dict(re.findall(r"^(\w+) +(\d+) +\d+ +\d+$", run.stdout, re.M))
-    # 3 patients (patients.tsv) x (5 angles + 2 lengths) plans.
-    assert counts["plan"] == "21" and counts["simulate"] == "21", counts
+    # 3 patients (patients.tsv) x (5 angles + 2 lengths + 3 undermining + 3 prestretch) plans.
+    assert counts["plan"] == "39" and counts["simulate"] == "39", counts
     assert counts["model"] == "3" and counts["table"] == "1", counts
     simulated = collections.Counter(
         re.findall(r"rule simulate:.*?wildcards: patient=\w+, plan=(\S+)", run.stdout, re.S))
-    assert simulated == {p: 3 for p in ["z_angle30", "z_angle45", "z_angle60", "z_angle75",
-                                        "z_angle90", "ellipse_length12", "ellipse_length15"]}
-    # Each plan is made with its own value (-p prints the commands).
+    assert simulated == {p: 3 for p in [
+        "z_angle30", "z_angle45", "z_angle60", "z_angle75", "z_angle90", "ellipse_length12",
+        "ellipse_length15", "zu_undermine0", "zu_undermine5", "zu_undermine10", "ep_prestretch1",
+        "ep_prestretch1.1", "ep_prestretch1.2"]}
+    # Each plan is made and simulated with its own values (-p prints the commands).
     assert len(re.findall(r"plan new z-plasty .*--length 15 --angle 45 -o plans/\w+/z_angle45.json",
                           run.stdout)) == 3
+    for plan, options in [("z_angle45", ""), ("zu_undermine5", " --undermine 5"),
+                          ("ep_prestretch1.1", " --material neo-hookean --prestretch 1.1")]:
+        assert len(re.findall(rf"simulate --model \S+ --plan plans/\w+/{re.escape(plan)}.json "
+                              rf"-o \S+ --mesh-size 2.5{options} +-q --json", run.stdout)) == 3, plan
+
+
+def test_a_simulate_option_caps_does_not_have_stops_the_workflow_before_any_job(tmp_path, caps):
+    plans = tmp_path / "plans.tsv"
+    plans.write_text("plan\ttemplate\tat\torientation\tparameters\tmesh_size\tsimulate\n"
+                     "z\tz-plasty\t0,20\t90\tangle=45\t2.5\tundermining=0,5\n")
+    run = snakemake("--config", f"plans={plans}", f"caps={caps}",
+                    "--directory", str(tmp_path / "w"), "--cores", "1")
+    assert run.returncode != 0
+    assert ("plans table, plan 'z', simulate option 'undermining': caps simulate has no option "
+            "--undermining (its options with a value: ") in run.stdout + run.stderr
 
 
 def test_a_malformed_sweep_stops_the_workflow_before_any_job(tmp_path):
@@ -228,3 +247,37 @@ def test_a_malformed_sweep_stops_the_workflow_before_any_job(tmp_path):
     run = snakemake("--config", f"plans={plans}", "--directory", str(tmp_path / "w"), "--cores", "1")
     assert run.returncode != 0
     assert "plan 'z', parameter 'angle': '90:30:15' needs start <= stop" in run.stdout + run.stderr
+
+
+def test_two_undermining_values_give_two_forces_each_that_of_caps_simulate(tmp_path, caps):
+    """A real run (about 15 s on 2 cores): the small face phantom, a Z-plasty undermined 5 and
+    15 mm. results.tsv has the undermine column and two closing forces, different, each equal
+    to `caps simulate --undermine X` run by hand on the workflow's model and plan."""
+    (tmp_path / "patients.tsv").write_text(
+        "patient\tsource\tinput\toptions\n"
+        "phantom\tphantom\t\t--face --scale 0.9 --voxels 88,88,84 --spacing 2.5,2.5,2.5\n")
+    (tmp_path / "plans.tsv").write_text(
+        "plan\ttemplate\tat\torientation\tparameters\tmesh_size\tsimulate\n"
+        "zu\tz-plasty\tglabella+0,25\t90\tlength=15;angle=45\t2.5\tundermine=5,15\n")
+    work = tmp_path / "work"
+    run = snakemake("--config", f"caps={caps}", f"patients={tmp_path / 'patients.tsv'}",
+                    f"plans={tmp_path / 'plans.tsv'}", "--directory", str(work), "--cores", "2",
+                    "results.tsv", dry=False)
+    assert run.returncode == 0, run.stdout + run.stderr
+    with open(work / "results.tsv") as f:
+        rows = {r["plan"]: r for r in csv.DictReader(f, delimiter="\t")}
+    assert list(rows) == ["zu_undermine5", "zu_undermine15"]
+    direct = {}
+    (tmp_path / "direct").mkdir()
+    for plan, row in rows.items():
+        assert row["status"] == "ok", row
+        assert (row["undermine"], row["simulate"]) == (plan[len("zu_undermine"):],
+                                                       f"undermine={row['undermine']}")
+        out = tmp_path / "direct" / plan
+        subprocess.run([caps, "simulate", "--model", str(work / "models" / "phantom"),
+                        "--plan", str(work / "plans" / "phantom" / f"{plan}.json"), "-o", str(out),
+                        "--mesh-size", "2.5", "--undermine", row["undermine"], "-q"], check=True)
+        with open(out / "result.json") as f:
+            direct[plan] = json.load(f)["total_suture_force_n"]
+        assert float(row["closing_force_n"]) == pytest.approx(direct[plan], rel=1e-9), plan
+    assert abs(direct["zu_undermine5"] - direct["zu_undermine15"]) > 1e-3 * direct["zu_undermine5"]
