@@ -12,7 +12,7 @@ the row's id, `_`, the name and the value: `z` with `angle=30:90:15` gives z_ang
 z_angle90. Several swept values of one row give every combination, in the order parameters,
 orientation, mesh_size, simulate (z_angle45_undermine5, ...). The expanded rows keep every column
 of the table, with `parameters`, `orientation`, `mesh_size` and `simulate` holding the plan's own
-values and `sweep_of` the row it came from.
+values, `sweep_of` the row it came from and `swept` the names of the row's swept values.
 
 The simulate options are checked against `caps simulate --help` of the caps program the workflow
 runs (simulate_options()): the program's own list, not one kept here.
@@ -230,7 +230,9 @@ def check_simulate_values(caps, plans):
     material=foo, rim=clamp, steps=0) before any job: `caps simulate` with the options and paths
     that do not exist refuses a bad value with its own message before it looks for the files.
     One call per value of the option with the most values (each call gives every option one of
-    its values); a refused call is asked again option by option, to name the option. Raises
+    its values); a refused call is asked again option by option, to name the option, and where
+    no option alone is refused, with each plan's own options (a mix of two rows' values that
+    caps refuses is no plan's). Raises
     ValueError naming the plan table's row, the option and caps's message. (Values that caps can
     only judge on the model or the mesh are refused by the simulation's job.)"""
     values, rows = {}, {}  # key -> [values]; (key, value) -> the first row that sets it
@@ -245,9 +247,15 @@ def check_simulate_values(caps, plans):
     errors = [f"plans table, plan '{rows[key, value]}', simulate option '{key}': caps simulate "
               f"refuses {key}={value}: {message}"
               for [(key, value)], message in _refusals(caps, [[p] for p in sorted(refused)])]
-    if refused and not errors:  # refused together only: caps's message for the whole call
-        errors = [f"plans table: caps simulate refuses {' '.join(f'{k}={v}' for k, v in call)}: "
-                  f"{message}" for call, message in _refusals(caps, calls)]
+    if refused and not errors:  # refused together only: ask each plan's own options
+        sets = {}  # the plans' distinct option sets that hold a refused pair -> the first plan
+        for plan, row in plans.items():
+            pairs = tuple(parse_parameters(row.get("simulate", ""), "plans table"))
+            if refused & set(pairs):
+                sets.setdefault(pairs, plan)
+        errors = [f"plans table, plan '{sets[tuple(call)]}': caps simulate refuses "
+                  f"{';'.join(f'{k}={v}' for k, v in call)}: {message}"
+                  for call, message in _refusals(caps, [list(s) for s in sets])]
     if errors:
         raise ValueError("\n".join(errors))
 

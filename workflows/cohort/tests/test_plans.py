@@ -281,3 +281,26 @@ def test_two_undermining_values_give_two_forces_each_that_of_caps_simulate(tmp_p
             direct[plan] = json.load(f)["total_suture_force_n"]
         assert float(row["closing_force_n"]) == pytest.approx(direct[plan], rel=1e-9), plan
     assert abs(direct["zu_undermine5"] - direct["zu_undermine15"]) > 1e-3 * direct["zu_undermine5"]
+
+
+def test_values_refused_only_together_are_asked_again_with_each_plans_own_options(tmp_path,
+                                                                                   options):
+    """A caps that refuses prestretch with the linear material (before the files): the check's
+    first call mixes row a's material and row b's prestretch, which no plan has; only plan b2,
+    which has both, is refused, with caps's message."""
+    fake = tmp_path / "caps"
+    fake.write_text('#!/bin/sh\ncase "$*" in *"--material linear"*"--prestretch 1.1"*)\n'
+                    '  echo "caps: error: prestretch needs neo-hookean" >&2; exit 2;;\nesac\n'
+                    'echo "caps: error: $3: no such file or folder" >&2; exit 2\n')
+    fake.chmod(0o755)
+    plans = expand_plans({"a": {"simulate": "material=linear"},
+                          "b": {"simulate": "material=neo-hookean;prestretch=1.1"}}, options)
+    check_simulate_values(str(fake), plans)
+    plans = expand_plans({"a": {"simulate": "material=linear"},
+                          "b": {"simulate": "material=neo-hookean,linear;prestretch=1.1"}},
+                         options)
+    with pytest.raises(ValueError) as refused:
+        check_simulate_values(str(fake), plans)
+    assert str(refused.value) == ("plans table, plan 'b_materiallinear': caps simulate refuses "
+                                  "material=linear;prestretch=1.1: caps: error: prestretch "
+                                  "needs neo-hookean")
