@@ -36,9 +36,11 @@ end=$(date +%s.%N)
 # only under direct/, which no rule makes).
 snakemake "${args[@]}" -n > "$work/rerun.log" 2>&1 &
 rerun=$!
-"$python" - "$work" "$caps" <<'EOF'
+"$python" - "$work" "$caps" "$here" <<'EOF'
 import concurrent.futures, csv, json, math, os, subprocess, sys
 work, caps = sys.argv[1], sys.argv[2]
+sys.path.insert(0, sys.argv[3])
+from plans import expand_plans, simulate_arguments, simulate_options
 patients = [r["patient"] for r in csv.DictReader(open(f"{work}/patients.tsv"), delimiter="\t")]
 rows = list(csv.DictReader(open(f"{work}/results.tsv"), delimiter="\t"))
 plans = sorted({r["plan"] for r in rows})
@@ -53,16 +55,19 @@ for r in rows:
 report = open(f"{work}/report.html").read()
 assert "broken" in report and "failed" in report
 # Every ok row equals caps simulate run by hand on the workflow's own model and plan (the models
-# are not rebuilt): the closing force of its result.json and the lengthening of its --json
-# (two at a time, as the workflow runs).
+# are not rebuilt) with the plan's mesh size and simulate options: the closing force of its
+# result.json and the lengthening of its --json (two at a time, as the workflow runs).
 plan_rows = {p["plan"]: p for p in csv.DictReader(
     (l for l in open(os.environ["CAPS_PLANS"]) if not l.startswith("#")), delimiter="\t")}
+plan_rows = expand_plans(plan_rows, simulate_options(caps)
+                         if any(p.get("simulate") for p in plan_rows.values()) else None)
 def simulate(r):
     out = f"{work}/direct/{r['patient']}/{r['plan']}"
     os.makedirs(os.path.dirname(out), exist_ok=True)
     run = subprocess.run([caps, "simulate", "--model", f"{work}/models/{r['patient']}",
                           "--plan", f"{work}/plans/{r['patient']}/{r['plan']}.json", "-o", out,
-                          "--mesh-size", plan_rows[r["plan"]]["mesh_size"] or "2.0", "-q", "--json"],
+                          "--mesh-size", plan_rows[r["plan"]]["mesh_size"] or "2.0",
+                          *simulate_arguments(plan_rows[r["plan"]]).split(), "-q", "--json"],
                          check=True, capture_output=True, text=True)
     return r, json.load(open(f"{out}/result.json")), json.loads(run.stdout)
 ok = [r for r in rows if r["status"] == "ok"]
