@@ -175,7 +175,7 @@ class Mumps {
   }
   // The factorization's main workspace S (fronts, then the factors) as WK_USER, kept from one
   // factorization to the next (MUMPS 5.5 users' guide, LWK_USER): MUMPS would allocate and free
-  // it each time, and the kernel's zeroing of its fresh pages took about a tenth of a Newton
+  // it each time, and zeroing it and faulting in its fresh pages took about a fifth of a Newton
   // solve's time (perf, Cranium Z-plasty). INFO(8), after the analysis, is its size in core
   // (entries; negative: millions), to which ICNTL(14)'s margin is added.
   void provide_workspace() {
