@@ -128,6 +128,9 @@ void check_options(const NewtonOptions& o) {
     throw InvalidInput(cat("newton: tolerances (", o.residual_tolerance, ", ",
                            o.displacement_tolerance, ", ", o.intermediate_tolerance,
                            ") must be in (0, 1)"));
+  if (!(o.stagnation_tolerance >= o.residual_tolerance && o.stagnation_tolerance < 1))
+    throw InvalidInput(cat("newton: stagnation_tolerance = ", o.stagnation_tolerance,
+                           " must be in [residual_tolerance, 1)"));
 }
 
 }  // namespace
@@ -347,6 +350,12 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
           last ? no.displacement_tolerance : std::max(no.displacement_tolerance, no.intermediate_tolerance);
       if ((rn <= r_tol * r_ref && du_next <= d_tol * step_norm) ||
           (rn <= 1e2 * r_tol * r_ref && du <= 1e-3 * d_tol * step_norm)) {
+        converged = true;
+        break;
+      }
+      if (it == no.max_iterations && rn <= no.stagnation_tolerance * r_ref &&
+          du <= no.stagnation_tolerance * step_norm) {
+        record.stagnated = true;
         converged = true;
         break;
       }

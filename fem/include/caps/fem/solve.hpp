@@ -67,6 +67,13 @@ struct NewtonOptions {
   double displacement_tolerance = 1e-8;
   /// Both tolerances for the steps before lambda = 1 (never tighter than the two above).
   double intermediate_tolerance = 1e-5;
+  /// A step still short of the tolerances after max_iterations is accepted (marked `stagnated`)
+  /// when both its residual and its last correction are below this, in the same relative terms:
+  /// near a buckling point Newton slows to linear convergence (5 % a solve at 1e-6 of the load
+  /// on the forehead 45 deg Z-plasty), and cutting the step back there only repeats that.
+  /// 1e-6 of the load is a micronewton on a closure of newtons. Set it to residual_tolerance to
+  /// never accept less.
+  double stagnation_tolerance = 1e-6;
   /// A new tangent is first solved by conjugate gradients preconditioned with the last
   /// factorization (of an earlier tangent; any solver and precision), which is kept if that
   /// converges within this many iterations (to the accuracy an inexact Newton step needs, a
@@ -128,6 +135,8 @@ struct NewtonStep {
   /// Per iteration, the shift mu that made the tangent positive definite (K + mu diag(K)), 0
   /// where the tangent itself was: non-zero past a buckling point (the tissue puckers).
   std::vector<double> shifts;
+  /// Accepted at NewtonOptions::stagnation_tolerance after max_iterations, not at the tolerances.
+  bool stagnated = false;
 };
 
 /// The force one suture carries.
