@@ -12,6 +12,7 @@
 #include "caps/core/units.hpp"
 #include "caps/volume/isosurface.hpp"
 #include "caps/volume/model_dir.hpp"
+#include "json_vectors.hpp"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -59,9 +60,6 @@ double percentile(std::vector<double> xs, double p) {
   std::nth_element(xs.begin(), xs.begin() + k, xs.end());
   return xs[k];
 }
-
-json vec(const Eigen::Vector3d& v) { return json::array({v[0], v[1], v[2]}); }
-json vec(const Eigen::Vector3i& v) { return json::array({v[0], v[1], v[2]}); }
 
 // model.json's thickness.layers: how the tissue layers were measured, or why they were not.
 json layers_json(const VolumeModel& m) {
@@ -280,8 +278,8 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter
                        {"path", m.source},
                        {"format", m.source_format},
                        {"modality", to_string(m.modality)},
-                       {"dims", vec(m.source_dims)},
-                       {"spacing_mm", vec(m.source_spacing_mm)},
+                       {"dims", detail::vec_json(m.source_dims)},
+                       {"spacing_mm", detail::vec_json(m.source_spacing_mm)},
                        {"notes", m.notes}}
                       .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   c.segmentation_json = json{{"skin_method", seg.skin_method},
@@ -290,7 +288,8 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter
                              {"bone_threshold", std::isfinite(seg.bone_threshold)
                                                     ? json(seg.bone_threshold) : json(nullptr)},
                              {"bone_is_approximate", seg.bone_is_approximate},
-                             {"working_spacing_mm", vec(seg.working.geom.spacing_mm)},
+                             {"working_spacing_mm",
+                              detail::vec_json(seg.working.geom.spacing_mm)},
                              {"head_volume_ml", seg.head_volume_ml},
                              {"bone_volume_ml", seg.bone_volume_ml},
                              {"detached_pieces", seg.detached_pieces},

@@ -19,14 +19,13 @@
 #include "caps/volume/map_nrrd.hpp"
 #include "caps/volume/mesh_io.hpp"
 #include "caps/volume/model_figures.hpp"
+#include "json_vectors.hpp"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
 
 namespace caps {
 namespace {
-
-json vec_json(const Eigen::Vector3d& v) { return json::array({v[0], v[1], v[2]}); }
 
 Eigen::Vector3d vec3(const json& v) {
   return {v.at(0).get<double>(), v.at(1).get<double>(), v.at(2).get<double>()};
@@ -166,10 +165,10 @@ json to_json(const ModelInfo& info) {
   j["units"] = {{"length", "mm"}, {"angle", "deg"}};
   j["frame"] = "LPS";
   j["source"] = parse_object(info.source_json, "source");
-  j["axis"] = {{"origin_lps", vec_json(a.origin_lps)},
-               {"direction", vec_json(a.direction)},
-               {"front", vec_json(a.front)},
-               {"left", vec_json(a.left())},
+  j["axis"] = {{"origin_lps", detail::vec_json(a.origin_lps)},
+               {"direction", detail::vec_json(a.direction)},
+               {"front", detail::vec_json(a.front)},
+               {"left", detail::vec_json(a.left())},
                {"convention", "theta = 0 at front, increasing towards the patient's left; "
                               "z along direction from origin_lps; r from the axis"}};
   j["grid"] = {{"n_theta", g.n_theta}, {"n_z", g.n_z},       {"theta0_deg", g.theta0_deg},
