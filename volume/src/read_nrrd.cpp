@@ -85,7 +85,8 @@ void check_field_lengths(const fs::path& file) {
   const std::vector<std::string> lines = header_lines(file);
   for (std::size_t i = 0; i < lines.size(); ++i) {
     const std::string& line = lines[i];
-    const bool key_value = line.find(":=") != std::string::npos && line.find(":=") == line.find(':');
+    const std::size_t mark = line.find(":=");
+    const bool key_value = mark != std::string::npos && mark == line.find(':');
     if (line.size() <= kMaxNrrdFieldChars || line[0] == '#' || key_value)
       continue;
     throw InvalidInput(cat(file.string(), ": header line ", i + 1, " ('", line.substr(0, 40),
