@@ -180,12 +180,16 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
 
   // One solve of K dq = f. Past a buckling point (the free flaps pucker under the closure's
   // compression) the tangent is indefinite and its Newton direction need not lower the energy:
-  // the tangent is then shifted, K + mu |diag(K)| with mu = 1e-4, 1e-3, ... until it is positive
+  // the tangent is then shifted, K + mu |diag(K)| with mu = 1e-6, 1e-5, ... until it is positive
   // definite (Levenberg-Marquardt; Nocedal & Wright 2006, sec. 3.4 and 6.3), which gives a
   // descent direction and leads to a stable (minimum-energy) equilibrium rather than the
   // unstable one. `shift` returns the mu used, 0 for the tangent itself. The shift takes the
   // diagonal's magnitude: strongly compressed elements give negative diagonal entries (the
   // geometric stiffness), which a multiple of diag(K) itself would make more negative still.
+  // The smallest shift first: near a buckling point a larger one shortens the correction along
+  // the soft mode so much that Newton creeps away from the unstable state micrometres a solve
+  // (docs/fem.md, the forehead 75 deg Z-plasty with measured layers: over 15 minutes at 1e-4,
+  // 188 s at 1e-6).
   auto solve_system = [&](Eigen::VectorXd& dq, double& shift, double tolerance) -> std::optional<Failure> {
     shift = 0;
     if (no.reuse_iterations > 0) {
@@ -205,7 +209,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
       double* values = sys.K.valuePtr();
       for (Eigen::Index j = 0; j < sys.K.cols(); ++j) kept_diagonal[j] = values[diagonal[j]];
       bool solved = false;
-      for (double mu = 1e-4; mu <= 1.01e2 && !solved; mu *= 10) {
+      for (double mu = 1e-6; mu <= 1.01e2 && !solved; mu *= 10) {
         for (Eigen::Index j = 0; j < sys.K.cols(); ++j)
           values[diagonal[j]] = kept_diagonal[j] + mu * std::abs(kept_diagonal[j]);
         try {
