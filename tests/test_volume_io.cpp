@@ -458,6 +458,51 @@ TEST(VolumeIo, NrrdLongFieldLineIsRefusedEvenWithAKeyValueMarkLaterInIt) {
   EXPECT_EQ(caps::read_volume(tmp / "note.nrrd").geom.dims, Eigen::Vector3i(2, 2, 2));
 }
 
+// Without the NRRD magic teem would pick another of its formats by the content (a table of
+// numbers is its plain-text image format, whose reader leaks on the files it refuses): caps
+// refuses the file before teem reads it, the same answer for a table and for noise.
+TEST(VolumeIo, NrrdWithoutTheMagicIsRefusedBeforeTeemReadsIt) {
+  TempDir tmp;
+  for (const std::string& body : {std::string("1 2 3\n4 5 6\n"),
+                                   std::string("00typeeendiann: 3\n\xd2\xd2\x01") +
+                                       std::string(1, '\0') + "V>",
+                                   std::string("NRRD\ntype: short\n"), std::string()}) {
+    write_bytes(tmp / "a.nrrd", body);
+    try {
+      caps::read_volume(tmp / "a.nrrd");
+      FAIL() << "expected InvalidInput for '" << body << "'";
+    } catch (const caps::InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find("not a NRRD file"), std::string::npos) << e.what();
+    }
+  }
+}
+
+// teem leaves a data file it cannot read open: a header whose data file is a folder (here its
+// own, named by an empty name cut short by a NUL byte, or by ".") cost a file descriptor on
+// every read. It is refused before teem opens it, and reading it many times opens nothing.
+TEST(VolumeIo, NrrdDataFileThatIsAFolderIsRefusedWithoutLeakingADescriptor) {
+  TempDir tmp;
+  const std::string head = "NRRD0004\ntype: short\ndimension: 3\nsizes: 2 2 2\nendian: little\n"
+                           "encoding: raw\ndata file: ";
+  write_bytes(tmp / "nul.nhdr", head + std::string(3, '\0') + "data.raw\n\n");
+  write_bytes(tmp / "dot.nhdr", head + ".\n\n");
+  write_bytes(tmp / "data.raw", std::string(16, '\0'));
+  const auto open_descriptors = [] {
+    return std::distance(fs::directory_iterator("/proc/self/fd"), fs::directory_iterator());
+  };
+  const auto before = open_descriptors();
+  for (const char* name : {"nul.nhdr", "dot.nhdr"})
+    for (int i = 0; i < 20; ++i) {
+      try {
+        caps::read_volume(tmp / name);
+        FAIL() << "expected InvalidInput for " << name;
+      } catch (const caps::InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find("data file 1"), std::string::npos) << e.what();
+      }
+    }
+  EXPECT_EQ(open_descriptors(), before);
+}
+
 TEST(VolumeIo, HeadsqQuarterNhdr) {
   const fs::path p = kData / "ct/vtk-headsq/quarter.nhdr";
   if (!fs::exists(p)) GTEST_SKIP() << p;
