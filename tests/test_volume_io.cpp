@@ -478,8 +478,9 @@ TEST(VolumeIo, NrrdWithoutTheMagicIsRefusedBeforeTeemReadsIt) {
 }
 
 // teem leaves a data file it cannot read open: a header whose data file is a folder (here its
-// own, named by an empty name cut short by a NUL byte, or by ".") cost a file descriptor on
-// every read. It is refused before teem opens it, and reading it many times opens nothing.
+// own, named by an empty name cut short by a NUL byte, or by ".") or is truncated cost a file
+// descriptor on every read. Both are refused before teem opens the data; reading them many
+// times leaves nothing open.
 TEST(VolumeIo, NrrdDataFileThatIsAFolderIsRefusedWithoutLeakingADescriptor) {
   TempDir tmp;
   const std::string head = "NRRD0004\ntype: short\ndimension: 3\nsizes: 2 2 2\nendian: little\n"
@@ -500,6 +501,17 @@ TEST(VolumeIo, NrrdDataFileThatIsAFolderIsRefusedWithoutLeakingADescriptor) {
         EXPECT_NE(std::string(e.what()).find("data file 1"), std::string::npos) << e.what();
       }
     }
+  // The same for a truncated data file (10 of the 16 bytes): teem left it open as well.
+  write_bytes(tmp / "short.nhdr", head + "short.raw\n\n");
+  write_bytes(tmp / "short.raw", std::string(10, '\0'));
+  for (int i = 0; i < 20; ++i) {
+    try {
+      caps::read_volume(tmp / "short.nhdr");
+      FAIL() << "expected IoError for short.nhdr";
+    } catch (const caps::IoError& e) {
+      EXPECT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
+    }
+  }
   EXPECT_EQ(open_descriptors(), before);
 }
 

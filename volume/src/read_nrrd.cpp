@@ -131,7 +131,9 @@ void check_no_nan_spacing(const fs::path& file) {
 }
 
 // A detached raw data file must hold exactly the bytes the header describes: a larger one means
-// that the header's sizes or type do not describe the file (teem would read its first bytes).
+// that the header's sizes or type do not describe the file (teem would read its first bytes); a
+// smaller one is truncated, and teem, failing to read it, would leave it open (a FILE and a file
+// descriptor lost on every read; found by fuzz/fuzz_nrrd.cpp, valgrind --track-fds).
 void check_detached_size(const fs::path& file, const NrrdIoState& nio, double n_bytes) {
   if (!nio.encoding || std::string(nio.encoding->name) != "raw" || nio.dataFNFormat ||
       !nio.dataFNArr || nio.dataFNArr->len != 1 || nio.byteSkip != 0 || nio.lineSkip != 0 ||
@@ -144,6 +146,12 @@ void check_detached_size(const fs::path& file, const NrrdIoState& nio, double n_
   std::error_code ec;
   const auto size = fs::file_size(data, ec);
   if (ec) return;  // missing: the data pass reports it
+  if (static_cast<double>(size) < n_bytes)
+    throw IoError(cat(file.string(), ": the data file ", data.string(), " holds ", size,
+                      " bytes but the header's sizes and type describe ",
+                      static_cast<std::uintmax_t>(n_bytes),
+                      "; the data file is truncated (copy it again) or the header's sizes are "
+                      "wrong"));
   if (static_cast<double>(size) > n_bytes)
     throw InvalidInput(cat(file.string(), ": the data file ", data.string(), " holds ", size,
                            " bytes but the header's sizes and type describe ",
