@@ -99,7 +99,6 @@ constexpr std::size_t kMaxNrrdFieldChars = 512;
 
 void check_field_lengths(const fs::path& file) {
   const std::vector<std::string> lines = header_lines(file);
-  check_magic(file, lines);
   for (std::size_t i = 0; i < lines.size(); ++i) {
     const std::string& line = lines[i];
     const std::size_t mark = line.find(":=");
@@ -221,6 +220,7 @@ Volume read_nrrd(const fs::path& file, const ReadOptions& options) {
   file_size_or_throw(file);
   const std::string name = file.string();
 
+  check_magic(file, header_lines(file));
   check_field_lengths(file);
   std::unique_ptr<Nrrd, NrrdFree> header(nrrdNew());
   std::unique_ptr<NrrdIoState, IoStateFree> nio(nrrdIoStateNew());
