@@ -466,7 +466,8 @@ TEST(VolumeIo, NrrdWithoutTheMagicIsRefusedBeforeTeemReadsIt) {
   for (const std::string& body : {std::string("1 2 3\n4 5 6\n"),
                                    std::string("00typeeendiann: 3\n\xd2\xd2\x01") +
                                        std::string(1, '\0') + "V>",
-                                   std::string("NRRD\ntype: short\n"), std::string()}) {
+                                   std::string("NRRD\ntype: short\n"),
+                                   std::string("NRRD0003og003og\ni:=x\n"), std::string()}) {
     write_bytes(tmp / "a.nrrd", body);
     try {
       caps::read_volume(tmp / "a.nrrd");
