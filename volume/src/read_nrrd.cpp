@@ -72,6 +72,12 @@ std::vector<std::string> header_lines(const fs::path& file) {
   return lines;
 }
 
+// A detached data file's path: as the header names it, relative to the header's folder.
+fs::path data_file_path(const fs::path& header, const std::string& name) {
+  const fs::path data = name;
+  return data.is_relative() ? header.parent_path() / data : data;
+}
+
 // teem's nrrdLoad reads several formats and picks one by the file's first bytes: a file without
 // the NRRD magic goes to its plain-text, PNM, PNG, VTK or EPS readers, and the plain-text reader
 // loses its value array (8 KB) on every file it refuses (found by fuzz/fuzz_nrrd.cpp: the process
@@ -98,8 +104,7 @@ void check_magic(const fs::path& file, const std::vector<std::string>& lines) {
 // (fuzz_nrrd; an abort in the release build too). So the ":=" must hold the line's first colon.
 constexpr std::size_t kMaxNrrdFieldChars = 512;
 
-void check_field_lengths(const fs::path& file) {
-  const std::vector<std::string> lines = header_lines(file);
+void check_field_lengths(const fs::path& file, const std::vector<std::string>& lines) {
   for (std::size_t i = 0; i < lines.size(); ++i) {
     const std::string& line = lines[i];
     const std::size_t mark = line.find(":=");
@@ -114,8 +119,8 @@ void check_field_lengths(const fs::path& file) {
 
 // Refuses a spacing or space direction written as NaN (teem reads "nan" as "unknown" and caps
 // would take 1 mm): the voxel size must be known to measure a patient.
-void check_no_nan_spacing(const fs::path& file) {
-  for (const std::string& line : header_lines(file)) {
+void check_no_nan_spacing(const fs::path& file, const std::vector<std::string>& lines) {
+  for (const std::string& line : lines) {
     const auto colon = line.find(':');
     if (colon == std::string::npos) continue;
     const std::string field = to_lower(line.substr(0, colon));
@@ -141,8 +146,7 @@ void check_detached_size(const fs::path& file, const NrrdIoState& nio, double n_
     return;
   const std::string data_name = nio.dataFN[0];
   if (data_name == "LIST") return;
-  fs::path data = data_name;
-  if (data.is_relative()) data = file.parent_path() / data;
+  const fs::path data = data_file_path(file, data_name);
   std::error_code ec;
   const auto size = fs::file_size(data, ec);
   if (ec) return;  // missing: the data pass reports it
@@ -170,10 +174,8 @@ void check_data_files_are_files(const fs::path& file, const NrrdIoState& nio) {
   for (unsigned i = 0; i < nio.dataFNArr->len; ++i) {
     const std::string name = nio.dataFN[i] ? nio.dataFN[i] : "";
     if (name == "LIST") continue;
-    fs::path data = name;
-    if (data.is_relative()) data = file.parent_path() / data;
     std::error_code ec;
-    if (name.empty() || fs::is_directory(data, ec))
+    if (name.empty() || fs::is_directory(data_file_path(file, name), ec))
       throw InvalidInput(cat(file.string(), ": data file ", i + 1, " ('", name, "') is ",
                              name.empty() ? "empty" : "a folder",
                              "; the header's 'data file' must name the file of its voxels"));
@@ -210,8 +212,7 @@ void check_gzip_whole(const fs::path& file, const NrrdIoState& nio, double n_byt
   if (nio.dataFNArr->len != 1 || nio.dataFSkip) return;
   const std::string data_name = nio.dataFN[0];
   if (data_name == "LIST") return;
-  fs::path data = data_name;
-  if (data.is_relative()) data = file.parent_path() / data;
+  const fs::path data = data_file_path(file, data_name);
   require_whole_gzip(file, data, 0, needed);
 }
 
@@ -221,8 +222,9 @@ Volume read_nrrd(const fs::path& file, const ReadOptions& options) {
   file_size_or_throw(file);
   const std::string name = file.string();
 
-  check_magic(file, header_lines(file));
-  check_field_lengths(file);
+  const std::vector<std::string> lines = header_lines(file);
+  check_magic(file, lines);
+  check_field_lengths(file, lines);
   std::unique_ptr<Nrrd, NrrdFree> header(nrrdNew());
   std::unique_ptr<NrrdIoState, IoStateFree> nio(nrrdIoStateNew());
   nio->skipData = AIR_TRUE;
@@ -243,7 +245,7 @@ Volume read_nrrd(const fs::path& file, const ReadOptions& options) {
   double n_vox = 1;
   for (long long s : sizes) n_vox *= static_cast<double>(s);
   check_dims(file, "sizes", sizes, options, n_vox * static_cast<double>(type_size(type)));
-  check_no_nan_spacing(file);
+  check_no_nan_spacing(file, lines);
   // teem expands a "data file" pattern with sprintf: only a plain %d pattern may reach it.
   if (nio->dataFNFormat)
     (void)slice_file_name(file, "data file", nio->dataFNFormat, nio->dataFNMin);
