@@ -30,6 +30,11 @@ constexpr double kSlopeRatio = 0.8;
 constexpr double kArmijo = 1e-4;
 constexpr int kMaxLineSearch = 12;
 constexpr double kShiftedStepMm = 1.0;
+// The first shift of an indefinite tangent, in units of |diag K| (see solve_system).
+constexpr double kFirstShift = 1e-6;
+// Levenberg-Marquardt memory: a line search that had to cut the step below kPoorStep of its
+// start raises the next solve's shift tenfold; a full step lowers it tenfold.
+constexpr double kPoorStep = 0.25;
 // The forcing term of the inexact Newton iteration: each correction is solved to a relative
 // residual eta = kForcing r_k (r_k: the Newton residual relative to the step's load), at most
 // kMaxForcing. Full Newton takes r_k to about c r_k^2 (measured on the slab: 1, 0.02, 2e-5,
@@ -118,6 +123,9 @@ class FiniteProblem {
 void check_options(const NewtonOptions& o) {
   if (o.n_steps < 1 || o.n_steps > 100000)
     throw InvalidInput(cat("newton: n_steps = ", o.n_steps, " must be in 1..100000"));
+  if (o.snap_iterations < o.max_iterations)
+    throw InvalidInput(cat("newton: snap_iterations = ", o.snap_iterations,
+                           " must be at least max_iterations = ", o.max_iterations));
   if (o.max_iterations < 1 || o.max_cutbacks < 0 || o.reuse_iterations < 0 || o.grow_iterations < 0)
     throw InvalidInput(cat("newton: max_iterations = ", o.max_iterations, " must be >= 1 and max_cutbacks = ",
                            o.max_cutbacks, ", reuse_iterations = ", o.reuse_iterations,
@@ -189,41 +197,50 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
   // The smallest shift first: near a buckling point a larger one shortens the correction along
   // the soft mode so much that Newton creeps away from the unstable state micrometres a solve
   // (docs/fem.md, the forehead 75 deg Z-plasty with measured layers: over 15 minutes at 1e-4,
-  // 188 s at 1e-6).
-  auto solve_system = [&](Eigen::VectorXd& dq, double& shift, double tolerance) -> std::optional<Failure> {
+  // 188 s at 1e-6). `damping` > 0 starts at that shift without trying the tangent itself (the
+  // Newton loop's Levenberg-Marquardt memory, below).
+  auto solve_system = [&](Eigen::VectorXd& dq, double& shift, double tolerance,
+                          double damping) -> std::optional<Failure> {
     shift = 0;
-    if (no.reuse_iterations > 0) {
-      const auto t0 = Clock::now();
-      std::optional<Eigen::VectorXd> x =
-          solver->solve_reusing_factor(sys.K, sys.f, no.reuse_iterations, tolerance);
-      res.timings.solve_s += seconds_since(t0);
-      if (x) {
-        dq = std::move(*x);
-        return dq.allFinite() ? std::nullopt
-                              : std::optional<Failure>(Failure{"the Newton correction is not finite"});
-      }
-    }
-    try {
-      factorize_and_solve(dq);
-    } catch (const SingularMatrix& first) {
-      double* values = sys.K.valuePtr();
-      for (Eigen::Index j = 0; j < sys.K.cols(); ++j) kept_diagonal[j] = values[diagonal[j]];
-      bool solved = false;
-      for (double mu = 1e-6; mu <= 1.01e2 && !solved; mu *= 10) {
-        for (Eigen::Index j = 0; j < sys.K.cols(); ++j)
-          values[diagonal[j]] = kept_diagonal[j] + mu * std::abs(kept_diagonal[j]);
-        try {
-          factorize_and_solve(dq);
-          solved = true;
-          shift = mu;
-        } catch (const SingularMatrix&) {
+    std::string unshifted;  // why the tangent itself could not be factorized
+    if (damping == 0) {
+      if (no.reuse_iterations > 0) {
+        const auto t0 = Clock::now();
+        std::optional<Eigen::VectorXd> x =
+            solver->solve_reusing_factor(sys.K, sys.f, no.reuse_iterations, tolerance);
+        res.timings.solve_s += seconds_since(t0);
+        if (x) {
+          dq = std::move(*x);
+          return dq.allFinite() ? std::nullopt
+                                : std::optional<Failure>(Failure{"the Newton correction is not finite"});
         }
       }
-      for (Eigen::Index j = 0; j < sys.K.cols(); ++j) values[diagonal[j]] = kept_diagonal[j];
-      if (!solved)
-        return Failure{cat("the tangent stiffness is not positive definite even shifted by 100 times "
-                           "its diagonal (", first.what(), ")")};
+      try {
+        factorize_and_solve(dq);
+        return dq.allFinite() ? std::nullopt
+                              : std::optional<Failure>(Failure{"the Newton correction is not finite"});
+      } catch (const SingularMatrix& e) {
+        unshifted = e.what();
+      }
     }
+    double* values = sys.K.valuePtr();
+    for (Eigen::Index j = 0; j < sys.K.cols(); ++j) kept_diagonal[j] = values[diagonal[j]];
+    bool solved = false;
+    for (double mu = std::max(damping, kFirstShift); mu <= 1.01e2 && !solved; mu *= 10) {
+      for (Eigen::Index j = 0; j < sys.K.cols(); ++j)
+        values[diagonal[j]] = kept_diagonal[j] + mu * std::abs(kept_diagonal[j]);
+      try {
+        factorize_and_solve(dq);
+        solved = true;
+        shift = mu;
+      } catch (const SingularMatrix& e) {
+        if (unshifted.empty()) unshifted = e.what();
+      }
+    }
+    for (Eigen::Index j = 0; j < sys.K.cols(); ++j) values[diagonal[j]] = kept_diagonal[j];
+    if (!solved)
+      return Failure{cat("the tangent stiffness is not positive definite even shifted by 100 times "
+                         "its diagonal (", unshifted, ")")};
     if (!dq.allFinite()) return Failure{"the Newton correction is not finite"};
     return std::nullopt;
   };
@@ -260,8 +277,22 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
     // whose direction also moves the prescribed values (its step is judged by the slope alone).
     double energy = NAN;
     double r_prev = r0;  // the residual before the current correction
+    // The shift the next solve starts from (Levenberg-Marquardt with memory: Nocedal & Wright
+    // 2006, sec. 10.3; Nielsen 1999). Where the tangent is positive definite but its Newton step
+    // is far too long (near a limit point the soft mode's stiffness tends to zero: measured on
+    // the forehead 90 deg Z-plasty with measured layers, corrections of 44 mm cut by the line
+    // search to 0.3 %, and 25 solves that did not lower the residual) a shifted tangent gives a
+    // shorter step in a better direction, which the line search then accepts whole; each full
+    // step lowers the shift again, so the last solves are plain Newton and converge
+    // quadratically.
+    double damping = 0;
     bool converged = false;
-    for (int it = 1; !failure && it <= no.max_iterations; ++it) {
+    // The potential after each solve and whether its tangent was shifted: a step still falling
+    // through unstable states after max_iterations is a snap, given more solves.
+    std::vector<double> potentials;
+    std::vector<bool> unstable;
+    int limit = no.max_iterations;
+    for (int it = 1; !failure && it <= limit; ++it) {
       ++res.newton_iterations;
       record.iterations = it;
       if (r0 == 0) {  // nothing to do in this step
@@ -274,7 +305,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
       // residual eta_k = kForcing ||r_k|| / ||r_ref|| (at most kMaxForcing) converges as fast as
       // an exact one (quadratically), and a reused factor gets there in fewer CG iterations.
       const double eta = std::min(kMaxForcing, kForcing * r_prev / r_ref);
-      if ((failure = solve_system(dq, shift, eta))) {
+      if ((failure = solve_system(dq, shift, eta, damping))) {
         failure->iteration = it;
         break;
       }
@@ -284,7 +315,8 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
       // A shifted direction is long along the soft (buckling) mode: it is first cut to move no
       // dof by more than kShiftedStepMm.
       const double dq_max = dq.lpNorm<Eigen::Infinity>();
-      double alpha = shift > 0 && dq_max > kShiftedStepMm ? kShiftedStepMm / dq_max : 1.0;
+      const double alpha_start = shift > 0 && dq_max > kShiftedStepMm ? kShiftedStepMm / dq_max : 1.0;
+      double alpha = alpha_start;
       std::optional<Failure> inverted, first_inverted;
       bool accepted = false;
       double energy_at = 0;
@@ -324,6 +356,12 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
       }
       energy = energy_at;
       q += alpha * dq;
+      if (alpha < kPoorStep * alpha_start)
+        damping = std::max(kFirstShift, 10 * shift);
+      else if (alpha == alpha_start)
+        damping = shift >= 10 * kFirstShift ? 0.1 * shift : 0.0;
+      else
+        damping = shift;
       record.line_search.push_back(alpha);
       record.shifts.push_back(shift);
       const double rn = sys.f.norm();
@@ -357,11 +395,24 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
         converged = true;
         break;
       }
-      if (it == no.max_iterations && rn <= no.stagnation_tolerance * r_ref &&
+      if (it == limit && rn <= no.stagnation_tolerance * r_ref &&
           du <= no.stagnation_tolerance * step_norm) {
         record.stagnated = true;
         converged = true;
         break;
+      }
+      potentials.push_back(energy - lambda_new * f_ext.dot(q));
+      unstable.push_back(shift > 0);
+      if (it == limit && limit < no.snap_iterations) {
+        // Snapping: the tangent was shifted (indefinite, or its Newton steps far too long) in
+        // the last max_iterations solves and the potential fell over them by more than
+        // round-off.
+        const std::size_t from = potentials.size() - static_cast<std::size_t>(no.max_iterations);
+        const double fall = potentials[from] - potentials.back();
+        const bool indefinite = std::find(unstable.begin() + static_cast<std::ptrdiff_t>(from),
+                                          unstable.end(), true) != unstable.end();
+        if (indefinite && fall > 1e-9 * std::abs(potentials.back()))
+          limit = std::min(no.snap_iterations, limit + no.max_iterations);
       }
     }
     if (converged) {
@@ -385,7 +436,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
       continue;
     }
     if (!failure)
-      failure = Failure{cat("Newton did not converge in ", no.max_iterations,
+      failure = Failure{cat("Newton did not converge in ", record.iterations,
                             " iterations (last relative residual ",
                             record.residual_norms.empty() ? NAN : record.residual_norms.back(), ")"),
                         -1, -1, record.iterations};

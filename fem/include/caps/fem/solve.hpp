@@ -61,6 +61,12 @@ struct NewtonOptions {
   /// size until the first cut-back); 0 = steps never grow beyond 1/n_steps.
   int grow_iterations = 3;
   int max_iterations = 25;              ///< per step, before the step is cut back
+  /// A step that has not converged after max_iterations but is snapping through (its tangent
+  /// was indefinite in those solves, so the state it started from is unstable, and the energy
+  /// still falls) goes on, max_iterations more at a time, up to this many solves: a cut-back
+  /// cannot help there (the stable branch ends; a smaller step only meets the end again), the
+  /// iteration has to reach the state the skin snaps to.
+  int snap_iterations = 200;
   int max_cutbacks = 10;                ///< halvings of a step before giving up (SolverError)
   double residual_tolerance = 1e-8;     ///< ||r|| / ||r_0|| of the step (r_0: predictor load)
   /// ||dq|| (or the next correction it predicts) / ||q - q_step_start||
