@@ -19,6 +19,7 @@
 #include "caps/app/compare_models.hpp"
 #include "caps/app/model.hpp"
 #include "caps/app/register.hpp"
+#include "caps/app/simulation.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
 #include "caps/fem/compare_models.hpp"
@@ -74,6 +75,14 @@ fem::SimulateOptions small_mesh() {
   o.surface.size_mm = 2.0;
   o.surface.extent_mm = 16.0;
   return o;
+}
+
+// The options `caps compare-models` uses by default (the neo-Hookean closure), on that mesh.
+fem::SimulateOptions small_mesh_app_defaults() {
+  app::MeshingFields meshing;
+  meshing.mesh_size = 2.0;
+  meshing.extent = 16.0;
+  return app::simulate_options(meshing, app::SolverFields{});
 }
 
 // The face of the model's skin.ply (within 60 degrees of the front and 70 mm of the nose's
@@ -166,7 +175,7 @@ TEST(CompareModels, ScanCtAndFusedModelsOfOnePhantom) {
 
   // Measured thickness under the wound on the CT model, then scan-built models with twice and
   // half of it.
-  const fem::Simulation measured = fem::simulate(ct, plan, small_mesh());
+  const fem::Simulation measured = fem::simulate(ct, plan, small_mesh_app_defaults());
   const double t_ct = fem::summarize(measured, ct, "ct").thickness_mean_mm;
   ASSERT_GT(t_ct, 2.0);
   std::map<double, app::CompareModelsResult> results;

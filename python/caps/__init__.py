@@ -154,9 +154,9 @@ def mesh(model, output, **fields):
 
 def simulate(model, plan, output, *, progress=None, **fields):
     """Meshes the plan on the model and solves the closure (caps simulate); fields: mesh_size
-    (mm), undermine (mm), material ("linear" or "neo-hookean"), steps, suture_spacing (mm),
-    render, force, ... Returns closing_force_n (N), max_displacement_mm, max_suture_force_n,
-    warnings, ..."""
+    (mm), undermine (mm), material ("neo-hookean", the default, "linear" or "goh"), steps,
+    suture_spacing (mm), render, force, ... Returns closing_force_n (N), max_displacement_mm,
+    max_suture_force_n, warnings, ..."""
     return run("simulate", model=model, plan=plan, output=output, progress=progress, **fields)
 
 

@@ -112,7 +112,7 @@ def test_the_build_caps_simulate_has_the_options_the_sweep_table_sets(options):
     for key, kind in [("undermine", "FLOAT"), ("prestretch", "FLOAT"), ("material", "TEXT"),
                       ("steps", "INT"), ("suture_spacing", "FLOAT"), ("render", None)]:
         assert options[key][0] == kind, (key, options[key])
-    assert options["material"][1] == "linear" and options["prestretch"][1] == "1"
+    assert options["material"][1] == "neo-hookean" and options["prestretch"][1] == "1"
 
 
 def test_simulate_options_orientation_and_mesh_size_sweep_with_readable_ids(options):
@@ -147,7 +147,7 @@ def test_simulate_options_orientation_and_mesh_size_sweep_with_readable_ids(opti
     assert (plans["v"]["orientation"], plans["v"]["mesh_size"]) == ("", "")
     # The results table's columns: each option any plan sets, caps's default where one does not.
     assert simulate_settings(plans, options) == {
-        "undermine": "10", "material": "linear", "prestretch": "1", "suture_spacing": "5"}
+        "undermine": "10", "material": "neo-hookean", "prestretch": "1", "suture_spacing": "5"}
     check_simulate_values(CAPS, plans)  # caps takes every value
 
 
