@@ -410,7 +410,7 @@ TEST(MeasuredLayers, CompareStopsShortOfABonyRimInsteadOfMeshingAcrossIt) {
   // the orbit read 20-30 mm of "skin", fat and deep tissue on Cranium): a cliff that an element
   // cannot span. The demo's compare failed there with an inverted dermis element. The automatic
   // extent now stops short of the cliff in all three columns, and a given extent that reaches
-  // it is refused naming the drop.
+  // it is refused naming the drop; a wound on the rim itself is meshed across it, with a warning.
   const auto above = [](double z) { return z > 20.0; };
   const PatientModel model = layered_cylinder(
       [&](double, double z) { return above(z) ? 22.0 : 2.0; },
@@ -442,6 +442,23 @@ TEST(MeasuredLayers, CompareStopsShortOfABonyRimInsteadOfMeshingAcrossIt) {
     EXPECT_TRUE(what.find("z 19") != std::string::npos || what.find("z 20") != std::string::npos)
         << what;
   }
+  // A wound that lies on the rim itself leaves no extent short of it (the cheek over the
+  // maxilla, where the bone's depth steps wherever the mesh reaches): the automatic extent then
+  // meshes across the rim at the largest extent that is otherwise valid, and says so.
+  const PatientModel step = layered_cylinder(
+      [](double, double) { return 2.0; }, [](double, double) { return 3.0; },
+      [](double, double z) { return z > 4.0 ? 14.0 : 4.0; }, measured);
+  const plan::Plan on_step = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), step, 0, 0, 90);
+  o.surface.extent_mm = 0;
+  const Simulation across = simulate(step, on_step, o);
+  EXPECT_GT(across.wound.continuum.min_jacobian, 0.0);
+  EXPECT_GT(across.wound.continuum.node_theta_z.col(1).maxCoeff(), 10.0);  // beyond the wound
+  EXPECT_LT(across.max_suture_gap_mm, 1e-6);
+  const auto& warnings = across.wound.continuum.mesh.warnings;
+  EXPECT_TRUE(std::any_of(warnings.begin(), warnings.end(), [](const std::string& w) {
+    return w.find("drops from 9 to") != std::string::npos && w.find("meshed across") != std::string::npos;
+  })) << (warnings.empty() ? std::string("no warning") : warnings.front());
   // A slope the bone really has (9 to 39 mm over 30 mm of skin) is meshed.
   const PatientModel ramp = layered_cylinder(
       [](double, double z) { return 2.0 + std::clamp(z - 10.0, 0.0, 30.0) * 20.0 / 30.0; },

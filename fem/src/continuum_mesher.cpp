@@ -169,10 +169,15 @@ namespace {
 struct ContinuumAttempt {
   std::optional<ContinuumMesh> mesh;
   std::string off_model;
+  /// The mesh crosses a bony rim (and was refused for that alone, or, when cliffs are allowed,
+  /// meshed across it): the message naming the place and the drop.
+  std::string cliff;
 };
 
+// `allow_cliffs`: a bony rim under the mesh is meshed across (its message kept in `cliff`)
+// instead of counting as off the model.
 ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
-                                    const ContinuumMeshOptions& o) {
+                                    const ContinuumMeshOptions& o, bool allow_cliffs = false) {
   if (o.n_layers < 1 || o.n_layers > 50 || !(o.grading > 0) || !std::isfinite(o.grading))
     throw InvalidInput(cat("continuum mesher: layers ", o.n_layers, " must be in 1..50 and grading ",
                            o.grading, " positive"));
@@ -304,13 +309,18 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
     const double apart = (mesh.nodes.row(vnode(a, 0)) - mesh.nodes.row(vnode(b, 0))).norm();
     if (step > kMaxDepthSlope * apart) {
       const Eigen::Vector2d tz = 0.5 * (surface.theta_z.row(a) + surface.theta_z.row(b)).transpose();
-      return off_model(cat("mesh: the bone under the skin at theta ", std::round(tz.x() * 10) / 10,
-                           " deg, z ", std::round(tz.y() * 10) / 10, " mm drops from ",
-                           std::round(std::min(vertex_depth[a], vertex_depth[b]) * 10) / 10, " to ",
-                           std::round(std::max(vertex_depth[a], vertex_depth[b]) * 10) / 10,
-                           " mm deep within ", std::round(apart * 10) / 10,
-                           " mm (a bony rim, such as the orbit's); move the wound or use a "
-                           "smaller {extent}"));
+      std::string drop = cat("the bone under the skin at theta ", std::round(tz.x() * 10) / 10,
+                             " deg, z ", std::round(tz.y() * 10) / 10, " mm drops from ",
+                             std::round(std::min(vertex_depth[a], vertex_depth[b]) * 10) / 10, " to ",
+                             std::round(std::max(vertex_depth[a], vertex_depth[b]) * 10) / 10,
+                             " mm deep within ", std::round(apart * 10) / 10, " mm");
+      if (!allow_cliffs) {
+        ContinuumAttempt refused = off_model(cat("mesh: ", drop, " (a bony rim, such as the orbit's); "
+                                                 "move the wound or use a smaller {extent}"));
+        refused.cliff = std::move(drop);
+        return refused;
+      }
+      if (attempt.cliff.empty()) attempt.cliff = std::move(drop);
     }
   }
   std::vector<double> edge_fractions(static_cast<std::size_t>(NL) + 1);
@@ -531,6 +541,29 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
   }
   const double full = w.surface.extent_mm;
   SurfaceMeshOptions o = surface_options;
+  const auto finish = [&](WoundMesh& done, double extent, std::string cliff) {
+    std::vector<std::string> messages;
+    if (extent != full)
+      messages.push_back(cat("mesh: the extent was limited to ", std::round(extent * 10) / 10, " mm (",
+                             std::round(extent / done.surface.wound_size_mm * 100) / 100,
+                             "x the wound's size) to stay on valid cells of the model; the result "
+                             "depends more on the rim condition (docs/mesher.md)"));
+    if (!cliff.empty())
+      messages.push_back(cat("mesh: a bony rim lies under the mesh at every extent down to the "
+                             "mesh size (", cliff, "); it is meshed across: the elements there are "
+                             "sheared and model the tissue over both bone levels as one column "
+                             "(docs/mesher.md)"));
+    for (const std::string& m : messages) {
+      done.continuum.mesh.warnings.push_back(m);
+      warn(reporter, m);
+    }
+  };
+  // The largest extent whose mesh is valid but for a bony rim under it, meshed across the rim:
+  // used when no smaller extent stays short of the rim (the cheek over the maxilla, where the
+  // bone's depth steps wherever the mesh reaches).
+  std::optional<WoundMesh> across;
+  double across_extent = 0;
+  std::string across_cliff;
   for (double extent = full;; extent *= 0.75) {
     if (extent != full) {
       o.extent_mm = extent;
@@ -539,18 +572,26 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
     ContinuumAttempt attempt = try_mesh_continuum(w.surface, model, continuum_options);
     if (attempt.mesh) {
       w.continuum = std::move(*attempt.mesh);
-      if (extent != full) {
-        const std::string message =
-            cat("mesh: the extent was limited to ", std::round(extent * 10) / 10, " mm (",
-                std::round(extent / w.surface.wound_size_mm * 100) / 100,
-                "x the wound's size) to stay on valid cells of the model; the result depends more "
-                "on the rim condition (docs/mesher.md)");
-        w.continuum.mesh.warnings.push_back(message);
-        warn(reporter, message);
-      }
+      finish(w, extent, {});
       return w;
     }
-    if (extent * 0.75 < surface_options.size_mm) throw OffModelError(attempt.off_model);
+    if (!across && !attempt.cliff.empty()) {
+      try {
+        ContinuumAttempt crossed = try_mesh_continuum(w.surface, model, continuum_options, true);
+        if (crossed.mesh) {
+          across = WoundMesh{w.surface, std::move(*crossed.mesh)};
+          across_extent = extent;
+          across_cliff = std::move(crossed.cliff);
+        }
+      } catch (const InvalidParameter&) {
+        // An element across the rim is inverted or degenerate: no mesh across it here.
+      }
+    }
+    if (extent * 0.75 < surface_options.size_mm) {
+      if (!across) throw OffModelError(attempt.off_model);
+      finish(*across, across_extent, across_cliff);
+      return std::move(*across);
+    }
   }
 }
 
