@@ -168,6 +168,9 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
   const double nominal = 1.0 / no.n_steps;
   double lambda = 0, dlambda = nominal;
   int step = 0, cutbacks = 0;
+  // The solves snapping steps may take beyond max_iterations, over the whole solve: a closure
+  // whose snaps fail and are cut back does not repeat them without end.
+  int snap_solves_left = no.snap_iterations;
   bool cut_back = false;  // a step of this solve was cut back: steps grow only to the nominal size
   std::optional<Failure> inverted_in_step;  // the first inversion among the attempts of a step
 
@@ -403,16 +406,19 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
       }
       potentials.push_back(energy - lambda_new * f_ext.dot(q));
       unstable.push_back(shift > 0);
-      if (it == limit && limit < no.snap_iterations) {
+      if (it == limit && limit < no.snap_iterations && snap_solves_left > 0) {
         // Snapping: the tangent was shifted (indefinite, or its Newton steps far too long) in
         // the last max_iterations solves and the potential fell over them by more than
         // round-off.
         const std::size_t from = potentials.size() - static_cast<std::size_t>(no.max_iterations);
         const double fall = potentials[from] - potentials.back();
-        const bool indefinite = std::find(unstable.begin() + static_cast<std::ptrdiff_t>(from),
-                                          unstable.end(), true) != unstable.end();
-        if (indefinite && fall > 1e-9 * std::abs(potentials.back()))
-          limit = std::min(no.snap_iterations, limit + no.max_iterations);
+        const bool shifted = std::find(unstable.begin() + static_cast<std::ptrdiff_t>(from),
+                                       unstable.end(), true) != unstable.end();
+        if (shifted && fall > 1e-9 * std::abs(potentials.back())) {
+          const int more = std::min({no.max_iterations, no.snap_iterations - limit, snap_solves_left});
+          limit += more;
+          snap_solves_left -= more;
+        }
       }
     }
     if (converged) {

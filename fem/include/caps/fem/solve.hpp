@@ -65,7 +65,9 @@ struct NewtonOptions {
   /// was indefinite in those solves, so the state it started from is unstable, and the energy
   /// still falls) goes on, max_iterations more at a time, up to this many solves: a cut-back
   /// cannot help there (the stable branch ends; a smaller step only meets the end again), the
-  /// iteration has to reach the state the skin snaps to.
+  /// iteration has to reach the state the skin snaps to. The solves beyond max_iterations are
+  /// limited to this many over the whole solve as well, so snaps that fail and are cut back
+  /// are not repeated without end.
   int snap_iterations = 200;
   int max_cutbacks = 10;                ///< halvings of a step before giving up (SolverError)
   double residual_tolerance = 1e-8;     ///< ||r|| / ||r_0|| of the step (r_0: predictor load)
