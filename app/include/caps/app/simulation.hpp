@@ -60,9 +60,10 @@ struct SolverFields {
   std::string solver = fem::solver_name(fem::SolveOptions{}.solver);
   std::string precision = fem::SolveOptions{}.mixed_precision ? "mixed" : "double";
   /// The closure's model: finite strain (neo-Hookean) by default, the linear (small-strain)
-  /// model of 1992 on request. The small-strain model turns elements inside out and shortens
-  /// the skin a Z-plasty lengthens (issue 12; docs/fem.md, "The default: neo-Hookean"); the
-  /// fem library's own SolveOptions stay linear, the model its verification tests name.
+  /// model of 1992 on request. The small-strain model turns elements inside out under a
+  /// Z-plasty's rotations and crushes thin fat (issue 12; docs/fem.md, "The default:
+  /// neo-Hookean"); the fem library's own SolveOptions stay linear, the model its verification
+  /// tests name.
   std::string material = fem::kinematics_name(fem::Kinematics::Finite);
   int steps = fem::NewtonOptions{}.n_steps;
   double prestretch = fem::SolveOptions{}.prestretch;
