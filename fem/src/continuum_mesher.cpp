@@ -169,13 +169,13 @@ namespace {
 struct ContinuumAttempt {
   std::optional<ContinuumMesh> mesh;
   std::string off_model;
-  /// The mesh crosses a bony rim (and was refused for that alone, or, when cliffs are allowed,
-  /// meshed across it): the message naming the place and the drop.
+  /// With `allow_cliffs`: the mesh crosses a bony rim, the message naming the place and the
+  /// drop (empty when it crosses none).
   std::string cliff;
 };
 
 // `allow_cliffs`: a bony rim under the mesh is meshed across (its message kept in `cliff`)
-// instead of counting as off the model.
+// instead of counting as off the model, unless an element across it is inverted.
 ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
                                     const ContinuumMeshOptions& o, bool allow_cliffs = false) {
   if (o.n_layers < 1 || o.n_layers > 50 || !(o.grading > 0) || !std::isfinite(o.grading))
@@ -288,6 +288,10 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   const auto off_model = [](std::string why) {
     return ContinuumAttempt{std::nullopt, std::move(why)};
   };
+  const auto rim_refusal = [](const std::string& drop) {
+    return cat("mesh: ", drop, " (a bony rim, such as the orbit's); move the wound or use a "
+               "smaller {extent}");
+  };
   for (int v = 0; v < NV; ++v) {
     bool no_fat = false;
     if (std::string why = column(surface.theta_z.row(v).transpose(),
@@ -314,12 +318,7 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
                              std::round(std::min(vertex_depth[a], vertex_depth[b]) * 10) / 10, " to ",
                              std::round(std::max(vertex_depth[a], vertex_depth[b]) * 10) / 10,
                              " mm deep within ", std::round(apart * 10) / 10, " mm");
-      if (!allow_cliffs) {
-        ContinuumAttempt refused = off_model(cat("mesh: ", drop, " (a bony rim, such as the orbit's); "
-                                                 "move the wound or use a smaller {extent}"));
-        refused.cliff = std::move(drop);
-        return refused;
-      }
+      if (!allow_cliffs) return off_model(rim_refusal(drop));
       if (attempt.cliff.empty()) attempt.cliff = std::move(drop);
     }
   }
@@ -507,6 +506,8 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   out.min_jacobian = jac.size() ? jac.minCoeff() : 0;
   for (Eigen::Index e = 0; e < jac.size(); ++e)
     if (!(jac[e] > 0)) {
+      // Across a bony rim the rim is the cause: off the model, as without `allow_cliffs`.
+      if (!attempt.cliff.empty()) return off_model(rim_refusal(attempt.cliff));
       const auto& poly = surface.polygons[out.element_polygon[e]];
       Eigen::Vector2d c = Eigen::Vector2d::Zero();
       for (int id : poly) c += surface.theta_z.row(id).transpose();
@@ -569,23 +570,18 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
       o.extent_mm = extent;
       w.surface = mesh_surface(border, model, o);
     }
-    ContinuumAttempt attempt = try_mesh_continuum(w.surface, model, continuum_options);
-    if (attempt.mesh) {
+    // Until a mesh across a rim is kept, a rim is meshed across (and the mesh kept if no
+    // smaller extent avoids it); after that a rim counts as off the model.
+    ContinuumAttempt attempt = try_mesh_continuum(w.surface, model, continuum_options, !across);
+    if (attempt.mesh && attempt.cliff.empty()) {
       w.continuum = std::move(*attempt.mesh);
       finish(w, extent, {});
       return w;
     }
-    if (!across && !attempt.cliff.empty()) {
-      try {
-        ContinuumAttempt crossed = try_mesh_continuum(w.surface, model, continuum_options, true);
-        if (crossed.mesh) {
-          across = WoundMesh{w.surface, std::move(*crossed.mesh)};
-          across_extent = extent;
-          across_cliff = std::move(crossed.cliff);
-        }
-      } catch (const InvalidParameter&) {
-        // An element across the rim is inverted or degenerate: no mesh across it here.
-      }
+    if (attempt.mesh) {
+      across = WoundMesh{w.surface, std::move(*attempt.mesh)};
+      across_extent = extent;
+      across_cliff = std::move(attempt.cliff);
     }
     if (extent * 0.75 < surface_options.size_mm) {
       if (!across) throw OffModelError(attempt.off_model);

@@ -205,6 +205,10 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
   auto solve_system = [&](Eigen::VectorXd& dq, double& shift, double tolerance,
                           double damping) -> std::optional<Failure> {
     shift = 0;
+    const auto finite = [&]() -> std::optional<Failure> {
+      if (dq.allFinite()) return std::nullopt;
+      return Failure{"the Newton correction is not finite"};
+    };
     std::string unshifted;  // why the tangent itself could not be factorized
     if (damping == 0) {
       if (no.reuse_iterations > 0) {
@@ -214,14 +218,12 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
         res.timings.solve_s += seconds_since(t0);
         if (x) {
           dq = std::move(*x);
-          return dq.allFinite() ? std::nullopt
-                                : std::optional<Failure>(Failure{"the Newton correction is not finite"});
+          return finite();
         }
       }
       try {
         factorize_and_solve(dq);
-        return dq.allFinite() ? std::nullopt
-                              : std::optional<Failure>(Failure{"the Newton correction is not finite"});
+        return finite();
       } catch (const SingularMatrix& e) {
         unshifted = e.what();
       }
@@ -244,8 +246,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
     if (!solved)
       return Failure{cat("the tangent stiffness is not positive definite even shifted by 100 times "
                          "its diagonal (", unshifted, ")")};
-    if (!dq.allFinite()) return Failure{"the Newton correction is not finite"};
-    return std::nullopt;
+    return finite();
   };
 
   while (lambda < 1.0) {
@@ -293,7 +294,7 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
     // The potential after each solve and whether its tangent was shifted: a step still falling
     // through unstable states after max_iterations is a snap, given more solves.
     std::vector<double> potentials;
-    std::vector<bool> unstable;
+    std::vector<bool> shifted_solve;
     int limit = no.max_iterations;
     for (int it = 1; !failure && it <= limit; ++it) {
       ++res.newton_iterations;
@@ -405,15 +406,16 @@ void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& m
         break;
       }
       potentials.push_back(energy - lambda_new * f_ext.dot(q));
-      unstable.push_back(shift > 0);
+      shifted_solve.push_back(shift > 0);
       if (it == limit && limit < no.snap_iterations && snap_solves_left > 0) {
         // Snapping: the tangent was shifted (indefinite, or its Newton steps far too long) in
         // the last max_iterations solves and the potential fell over them by more than
         // round-off.
         const std::size_t from = potentials.size() - static_cast<std::size_t>(no.max_iterations);
         const double fall = potentials[from] - potentials.back();
-        const bool shifted = std::find(unstable.begin() + static_cast<std::ptrdiff_t>(from),
-                                       unstable.end(), true) != unstable.end();
+        const bool shifted =
+            std::find(shifted_solve.begin() + static_cast<std::ptrdiff_t>(from), shifted_solve.end(),
+                      true) != shifted_solve.end();
         if (shifted && fall > 1e-9 * std::abs(potentials.back())) {
           const int more = std::min({no.max_iterations, no.snap_iterations - limit, snap_solves_left});
           limit += more;
