@@ -60,9 +60,9 @@ fem::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields
   } else if (s.material == "linear" || s.material == "neo-hookean") {
     o.solve.kinematics = fem::parse_kinematics(s.material);
   } else {
-    throw InvalidParameter(cat("{material} '", s.material, "' is unknown: use linear (small "
-                               "strain, the 1992 model), neo-hookean (finite strain) or goh "
-                               "(finite strain, skin with collagen fibres)"));
+    throw InvalidParameter(cat("{material} '", s.material, "' is unknown: use neo-hookean (finite "
+                               "strain, the default), linear (small strain, the 1992 model) or "
+                               "goh (finite strain, skin with collagen fibres)"));
   }
   o.solve.prestretch = s.prestretch;
   if (s.steps < 1 || s.steps > 1000)
