@@ -219,3 +219,83 @@ TEST(CavityBase, AdviceSaysWhetherThePlaceIsNotOperableOrNotRepresented) {
   EXPECT_EQ(std::string(bone_method_name(BoneMethod::Threshold)), "threshold");
   EXPECT_THROW(parse_bone_method("otsu"), InvalidInput);
 }
+
+namespace {
+
+// A hand-made CT for undercuts: a soft-tissue cylinder (radius 70 mm, +40 HU) about the LPS z
+// axis on a 4 mm skull (r 56..60) with brain inside, and in front (|theta| < 20 deg) a shell of
+// tissue 4 mm thick (r 76..80) held off the head by an air gap (r 70..76) for z in -12..8 mm and
+// joined to it above (z 8..14): a lip or an ear's rim, whose gap is open to the outside air below
+// and at the sides.
+Volume overhang_ct() {
+  Volume v;
+  v.geom.dims = {180, 180, 50};
+  v.geom.spacing_mm = {1.0, 1.0, 1.0};
+  v.geom.direction.setIdentity();
+  v.geom.origin_lps = {-89.5, -89.5, -24.5};
+  v.modality = Modality::CT;
+  v.source = "overhang";
+  v.format = "test";
+  v.data.resize(v.geom.n_voxels());
+  for (int k = 0; k < v.geom.dims[2]; ++k)
+    for (int j = 0; j < v.geom.dims[1]; ++j)
+      for (int i = 0; i < v.geom.dims[0]; ++i) {
+        const Eigen::Vector3d p = v.index_to_lps(Eigen::Vector3d(i, j, k));
+        const double r = std::hypot(p.x(), p.y());
+        const double th = std::atan2(p.x(), -p.y());
+        auto in = [&](double R) { return std::clamp(0.5 + (R - r), 0.0, 1.0); };
+        auto band = [](double x, double lo, double hi) {
+          return std::clamp(0.5 + (x - lo), 0.0, 1.0) * std::clamp(0.5 + (hi - x), 0.0, 1.0);
+        };
+        double tissue = in(70.0);
+        const double front = band(th * 180.0 / 3.14159265358979323846, -20.0, 20.0);
+        // The shell (r 76..80, z -12..14) and its join to the head (r 70..76, z 8..14).
+        tissue = std::max(tissue, front * band(p.z(), -12.0, 14.0) * (in(80.0) - in(76.0)));
+        tissue = std::max(tissue, front * band(p.z(), 8.0, 14.0) * (in(76.0) - in(70.0)));
+        double hu = -1000.0 + tissue * 1040.0;
+        hu += in(60.0) * (1200.0 - 40.0) + in(56.0) * (35.0 - 1200.0);
+        v.data[v.geom.linear(i, j, k)] = static_cast<float>(hu);
+      }
+  return v;
+}
+
+}  // namespace
+
+TEST(Undercut, ReentryBelowTheBaseIsNotAnUndercut) {
+  const Volume v = overhang_ct();
+  ModelOptions o;
+  o.maps.n_theta = 360;
+  o.maps.n_z = 48;
+  o.maps.layers.measure = false;
+  o.axis = CylinderAxis{};
+  o.axis->origin_lps = {0, 0, 0};
+  const VolumeModel m = build_volume_model(v, o);
+  const auto& g = m.maps.grid;
+  int shell = 0;
+  for (int k = 0; k < g.n_z; ++k)
+    for (int j = 0; j < g.n_theta; ++j) {
+      const double th = g.theta_deg(j), z = g.z_mm(k);
+      const std::size_t c = g.index(j, k);
+      if (std::abs(th) < 15 && z > -9 && z < 5) {
+        // The ray crosses the shell, the gap's air and the head: the shell's column ends on the
+        // gap (a free base), and the head's skin behind it is below that base.
+        ++shell;
+        EXPECT_EQ(m.maps.flags[c], kBaseCavity) << "theta " << th << " z " << z;
+        EXPECT_NEAR(m.maps.r_skin[c], 80.0, 0.2);
+        EXPECT_NEAR(m.maps.r_bone[c], 76.0, 0.2) << "theta " << th << " z " << z;
+      } else if (std::abs(th) > 30 && std::abs(z) < 18) {
+        EXPECT_EQ(m.maps.flags[c], 0) << "theta " << th << " z " << z;
+        EXPECT_NEAR(m.maps.r_bone[c], 60.0, 0.2);
+      }
+    }
+  ASSERT_GT(shell, 400);
+  // Without the cavity base the shell's rays reach the skull beyond the gap: the column would
+  // span the air, so the re-entry is above the base and the cells stay undercut.
+  o.maps.bone.cavity_base = false;
+  const VolumeModel without = build_volume_model(v, o);
+  const int j0 = g.n_theta / 2;  // theta 0
+  int k0 = 0;
+  while (g.z_mm(k0) < -2) ++k0;
+  EXPECT_TRUE((without.maps.flags[g.index(j0, k0)] & kUndercut) != 0)
+      << describe_flags(without.maps.flags[g.index(j0, k0)]);
+}

@@ -3,6 +3,7 @@
 //   caps volume info ../shared/data/ct/ge-head-tilt --json
 //   caps model from-volume /usr/share/doc/invesalius-examples/examples/Cranium.inv3 -o /tmp/cranium
 //   caps model from-scan ../shared/data/scan/leeperrysmith/LeePerrySmith.glb --texture ../shared/data/scan/leeperrysmith/Map-COL.jpg --flip-v --head-height-mm 230 --thickness 6 -o /tmp/lps
+//   caps model chart /tmp/cranium --at -6,50 -o /tmp/cranium_nose
 //   caps model info /tmp/cranium --json
 //   caps model pick /tmp/lps --ray 0,-400,0,0,1,0 --json
 //   caps model export-range /tmp/lps -o /tmp/lps_range
@@ -42,6 +43,13 @@ void add_model(CLI::App& app, Common& common, Action& action) {
            "Example: caps model from-volume Cranium.inv3 -o cranium\n"
            "INPUT is a DICOM folder, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd or an InVesalius .inv3.",
            &app::run_from_volume, common, action);
+  add_verb(model, "chart",
+           "Measure a volume-built model's CT again on a local chart: a cylinder whose axis faces "
+           "the skin\nat one point, for plans where the head's cylinder meets the skin edge-on "
+           "(the side of the nose)\nor behind other skin. The point becomes --at 0,0 of the "
+           "chart.\n"
+           "Example: caps model chart cranium --at -6,50 -o cranium_nose",
+           &app::run_chart, common, action);
   add_verb(model, "from-scan",
            "Build a patient model from a textured surface scan, with a constant soft-tissue "
            "thickness\n(the 1992 CAPS assumption). INPUT is .glb/.gltf, .ply (vertex colours), "

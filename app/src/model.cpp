@@ -7,11 +7,13 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/surface/chart.hpp"
 #include "caps/surface/color_picture.hpp"
 #include "caps/surface/cylindrical_scan.hpp"
 #include "caps/plan/placement.hpp"
 #include "caps/surface/landmarks.hpp"
 #include "caps/surface/picking.hpp"
+#include "caps/volume/mesh_io.hpp"
 #include "caps/volume/read_volume.hpp"
 #include "json_fields.hpp"
 #include "numbers.hpp"
@@ -20,6 +22,7 @@
 
 CAPS_APP_REQUEST_JSON(caps::app::FromVolumeRequest)
 CAPS_APP_REQUEST_JSON(caps::app::FromScanRequest)
+CAPS_APP_REQUEST_JSON(caps::app::ChartRequest)
 CAPS_APP_REQUEST_JSON(caps::app::ModelInfoRequest)
 CAPS_APP_REQUEST_JSON(caps::app::PickRequest)
 CAPS_APP_REQUEST_JSON(caps::app::ExportRangeRequest)
@@ -135,6 +138,105 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   const VolumeModel m = build_volume_model(v, o, reporter);
   write_model(m, r.output, r.force, reporter);
   add_landmarks(r.output, reporter);
+  return detail::model_result(r.output, r.output);
+}
+
+// ---- chart --------------------------------------------------------------------------------
+
+namespace {
+
+// The place `at` names on `model` (THETA,Z or a landmark placement), as (theta deg, z mm).
+Eigen::Vector2d resolve_at(const std::string& model_dir, const PatientModel& model,
+                           const std::string& at) {
+  if (const auto placement = plan::parse_landmark_placement(at))
+    return plan::resolve_placement(model, plan::model_landmarks(model_dir, model), *placement);
+  const auto tz = parse_numbers<2>(at, "--at", "THETA,Z in degrees and mm, e.g. --at -8,50");
+  return {tz[0], tz[1]};
+}
+
+}  // namespace
+
+ModelResult run_chart(const ChartRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
+  { OutputDirectory probe(r.output, r.force); }
+  if (!(r.half_height > 0 && r.half_height <= 200))
+    throw InvalidInput(cat("--half-height ", r.half_height, " mm: give a length in (0, 200] mm"));
+  if (!(r.radius > 0 && r.radius <= 500))
+    throw InvalidInput(cat("--radius ", r.radius, " mm: give a distance in (0, 500] mm"));
+  const PatientModel parent = PatientModel::load(r.model);
+  const json info = json::parse(read_model_json(r.model));
+  const json& source = info.at("source");
+  if (source.value("kind", "volume") != "volume")
+    throw InvalidInput(cat(r.model, ": a chart measures the CT or MR again, and this model was "
+                           "built from a surface scan; build the chart from a volume model"));
+  if (source.contains("chart"))
+    throw InvalidInput(cat(r.model, " is itself a chart; make the chart from the whole-head "
+                           "model it came from"));
+  const std::string volume_path = source.value("path", "");
+  const json& seg = info.at("segmentation");
+  if (seg.value("bone_method", "").rfind("mask ", 0) == 0)
+    throw InvalidInput(cat(r.model, ": its bone came from a separate mask (--bone-mask), which a "
+                           "chart cannot reuse yet; build the chart's model with caps model "
+                           "from-volume --axis-origin/--axis-dir and the mask"));
+  const Eigen::Vector2d tz = resolve_at(r.model, parent, r.at);
+  if (!parent.has_z(tz[1]))
+    throw InvalidInput(cat("--at ", r.at, ": z ", tz[1], " mm lies outside the model (",
+                           parent.grid().z0_mm, " .. ", parent.grid().z_mm(parent.grid().n_z - 1),
+                           " mm)"));
+  const TriMesh skin = read_ply(fs::path(r.model) / model_file::kSkinMesh);
+  const ChartFrame frame =
+      chart_frame(parent, skin, tz[0], tz[1], r.radius, r.normal_radius);
+
+  ModelOptions o;
+  if (seg.contains("skin_threshold") && seg.at("skin_threshold").is_number())
+    o.segment.skin_threshold = seg.at("skin_threshold").get<double>();
+  if (seg.contains("bone_threshold") && seg.at("bone_threshold").is_number())
+    o.segment.bone_threshold = seg.at("bone_threshold").get<double>();
+  const json& thickness = info.at("thickness");
+  if (thickness.contains("base")) {
+    const json& b = thickness.at("base");
+    o.maps.bone.method = parse_bone_method(b.value("bone_method", "edge"));
+    o.maps.bone.floor_hu = b.value("floor_hu", o.maps.bone.floor_hu);
+    o.maps.bone.cavity_base = b.value("cavity_base", o.maps.bone.cavity_base);
+    o.maps.bone_cap_mm = b.value("bone_cap_mm", o.maps.bone_cap_mm);
+  }
+  if (thickness.contains("layers")) {
+    const json& l = thickness.at("layers");
+    o.maps.layers.measure = l.value("measured", true);
+    o.maps.layers.fat_level_hu = l.value("fat_level_hu", o.maps.layers.fat_level_hu);
+    o.maps.layers.merge_gap_mm = l.value("merge_gap_mm", o.maps.layers.merge_gap_mm);
+    o.maps.layers.min_band_mm = l.value("min_band_mm", o.maps.layers.min_band_mm);
+  }
+  o.maps.n_theta = r.n_theta;
+  o.maps.n_z = r.n_z;
+  o.maps.z_min_mm = -r.half_height;
+  o.maps.z_max_mm = r.half_height;
+  o.axis = frame.axis;
+
+  ReadOptions ro;
+  ro.series_uid = r.series;
+  if (volume_path.empty() || !fs::exists(volume_path))
+    throw IoError(cat(r.model, ": the volume it was built from (", volume_path, ") is not there; "
+                      "a chart measures that volume again: put it back or rebuild the model"));
+  Volume v = read_volume(volume_path, ro);
+  const std::string modality = source.value("modality", "");
+  if (modality == "CT") v.modality = Modality::CT;
+  if (modality == "MR") v.modality = Modality::MR;
+  VolumeModel m = build_volume_model(v, o, reporter);
+  const auto vec = [](const Eigen::Vector3d& x) { return json::array({x[0], x[1], x[2]}); };
+  m.chart_json =
+      json{{"parent", r.model},
+           {"parent_content_hash", parent.content_hash()},
+           {"at", r.at},
+           {"parent_theta_deg", tz[0]},
+           {"parent_z_mm", tz[1]},
+           {"point_lps", vec(frame.point)},
+           {"normal_lps", vec(frame.normal)},
+           {"radius_mm", frame.radius_mm},
+           {"normal_radius_mm", r.normal_radius},
+           {"centre", "the point is at theta 0, z 0 of this chart, its ray along the skin's normal"}}
+          .dump();
+  write_model(m, r.output, r.force, reporter);
   return detail::model_result(r.output, r.output);
 }
 

@@ -9,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <memory>
+#include <exception>
 #include <map>
 #include <optional>
 #include <set>
@@ -535,19 +536,36 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
                      const SurfaceMeshOptions& surface_options,
                      const ContinuumMeshOptions& continuum_options, Reporter* reporter) {
   WoundMesh w;
-  w.surface = mesh_surface(border, model, surface_options);
   if (surface_options.extent_mm > 0) {
+    w.surface = mesh_surface(border, model, surface_options);
     w.continuum = mesh_continuum(w.surface, model, continuum_options);
     return w;
   }
-  const double full = w.surface.extent_mm;
+  // The automatic extent: the largest of full, 0.75 full, ... whose surface and continuum meshes
+  // are valid. An outer layer of the surface mesh that folds (a complex border such as a
+  // bilobed flap's, grown far out) shrinks the extent like skin off the model; a failure of the
+  // wound's own first layer does not.
   SurfaceMeshOptions o = surface_options;
+  std::exception_ptr failure;  // why the last extent tried could not be meshed
+  bool surface_ok = true;
+  try {
+    w.surface = mesh_surface(border, model, surface_options);
+  } catch (const InvalidParameter&) {
+    failure = std::current_exception();
+    surface_ok = false;
+    SurfaceMeshOptions one = surface_options;
+    one.extent_mm = surface_options.size_mm;
+    w.surface = mesh_surface(border, model, one);  // throws if the wound itself cannot be meshed
+    w.surface.extent_mm = 3.0 * w.surface.wound_size_mm;
+  }
+  const double full = w.surface.extent_mm;
   const auto finish = [&](WoundMesh& done, double extent, std::string cliff) {
     std::vector<std::string> messages;
     if (extent != full)
       messages.push_back(cat("mesh: the extent was limited to ", std::round(extent * 10) / 10, " mm (",
                              std::round(extent / done.surface.wound_size_mm * 100) / 100,
-                             "x the wound's size) to stay on valid cells of the model; the result "
+                             "x the wound's size) to stay on valid cells of the model (and keep the "
+                             "surface mesh's outer layers from folding); the result "
                              "depends more on the rim condition (docs/mesher.md)"));
     if (!cliff.empty())
       messages.push_back(cat("mesh: a bony rim lies under the mesh at every extent down to the "
@@ -568,23 +586,33 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
   for (double extent = full;; extent *= 0.75) {
     if (extent != full) {
       o.extent_mm = extent;
-      w.surface = mesh_surface(border, model, o);
+      try {
+        w.surface = mesh_surface(border, model, o);
+        surface_ok = true;
+      } catch (const InvalidParameter&) {
+        failure = std::current_exception();
+        surface_ok = false;
+      }
     }
-    // Until a mesh across a rim is kept, a rim is meshed across (and the mesh kept if no
-    // smaller extent avoids it); after that a rim counts as off the model.
-    ContinuumAttempt attempt = try_mesh_continuum(w.surface, model, continuum_options, !across);
-    if (attempt.mesh && attempt.cliff.empty()) {
-      w.continuum = std::move(*attempt.mesh);
-      finish(w, extent, {});
-      return w;
-    }
-    if (attempt.mesh) {
-      across = WoundMesh{w.surface, std::move(*attempt.mesh)};
-      across_extent = extent;
-      across_cliff = std::move(attempt.cliff);
+    if (surface_ok) {
+      // Until a mesh across a rim is kept, a rim is meshed across (and the mesh kept if no
+      // smaller extent avoids it); after that a rim counts as off the model.
+      ContinuumAttempt attempt = try_mesh_continuum(w.surface, model, continuum_options, !across);
+      if (attempt.mesh && attempt.cliff.empty()) {
+        w.continuum = std::move(*attempt.mesh);
+        finish(w, extent, {});
+        return w;
+      }
+      if (attempt.mesh) {
+        across = WoundMesh{w.surface, std::move(*attempt.mesh)};
+        across_extent = extent;
+        across_cliff = std::move(attempt.cliff);
+      } else {
+        failure = std::make_exception_ptr(OffModelError(attempt.off_model));
+      }
     }
     if (extent * 0.75 < surface_options.size_mm) {
-      if (!across) throw OffModelError(attempt.off_model);
+      if (!across) std::rethrow_exception(failure);
       finish(*across, across_extent, across_cliff);
       return std::move(*across);
     }

@@ -131,6 +131,7 @@ const std::map<std::string, VerbEntry>& verbs() {
       {"volume_info", entry(&app::run_volume_info)},
       {"model_from_volume", entry(&app::run_from_volume)},
       {"model_from_scan", entry(&app::run_from_scan)},
+      {"model_chart", entry(&app::run_chart)},
       {"model_info", entry(&app::run_model_info)},
       {"model_landmarks", entry(&app::run_model_landmarks)},
       {"model_site", entry(&app::run_model_site)},

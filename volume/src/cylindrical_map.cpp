@@ -134,8 +134,9 @@ std::string invalid_flags_advice(std::uint8_t flags) {
     return cat("lies where the model cannot represent the skin yet (", names, "): the ray from "
                "the head's axis crosses the skin twice (undercut: nostrils, under the nose and "
                "the chin, ears) or meets it edge-on (grazing), so its cylindrical image does not "
-               "hold this skin; move the plan onto skin that faces the axis, or rebuild the "
-               "model with an axis that sees this region face-on (--axis-origin, --axis-dir)");
+               "hold this skin; move the plan onto skin that faces the axis, or make a local "
+               "chart that faces this skin (caps model chart MODEL --at THETA,Z) and plan on it "
+               "at --at 0,0 (docs/mesher.md, \"Local charts\")");
   return cat("has no base under the skin (", names, "): neither bone nor an air cavity was found "
              "within the bone cap; move the plan, or rebuild the model with a deeper --bone-cap "
              "or --bone-method edge (finds thin bone)");
@@ -545,7 +546,8 @@ class RayCaster {
       return;
     }
     t1 = std::min(t1, std::max(t0, row_r_max_[k]));
-    const double r_entry = envelope_entry(ray, c, t0, t1);
+    double r_first_exit = 0;
+    const double r_entry = envelope_entry(ray, c, t0, t1, r_first_exit);
     if (!std::isfinite(r_entry)) {
       maps_.flags[c] = kNoSkin;
       return;
@@ -584,6 +586,11 @@ class RayCaster {
       r_b = base.r_cavity;
       maps_.flags[c] |= kBaseCavity;
     }
+    // A re-entry below the base does not concern this cell: its column, skin to base, lies in
+    // the tissue the ray meets first (the nasal wall over the nasal cavity's air, a lip or an
+    // ear's rim over the air behind it). Only skin hidden above the base is an undercut.
+    if ((maps_.flags[c] & kUndercut) && r_b >= r_first_exit - (w_ + coarse_))
+      maps_.flags[c] &= static_cast<std::uint8_t>(~kUndercut);
     maps_.r_bone[c] = static_cast<float>(r_b);
     maps_.thickness[c] = static_cast<float>(r_s - r_b);
     maps_.measured_bone[c] = 1;
@@ -615,8 +622,10 @@ class RayCaster {
   }
 
   // 1. Walk the envelope mask inward from t1: the outermost entry (NaN if none), and any
-  // re-entry (undercut, flagged in cell c).
-  double envelope_entry(const Ray& ray, std::size_t c, double t0, double t1) const {
+  // re-entry (undercut, flagged in cell c). `r_first_exit`: where the ray first leaves the mask
+  // below that entry (t0 if it does not within the bone cap).
+  double envelope_entry(const Ray& ray, std::size_t c, double t0, double t1,
+                        double& r_first_exit) const {
     double r_entry = std::numeric_limits<double>::quiet_NaN();
     // A re-entry counts as an undercut only after a real air gap (kMinGapMm): a ledge in the
     // mask between thick slices is not an ear.
@@ -628,6 +637,8 @@ class RayCaster {
     double r_left = t1;  // where the ray last left the mask
     // Below the outermost skin, only the bone cap's depth matters for undercuts.
     double r_stop = t0;
+    r_first_exit = t0;
+    bool exited = false;
     for (double r = t1 - coarse_; r >= r_stop; r -= coarse_) {
       const bool now = skin_at_(ray.at(r));
       if (now && !inside) {
@@ -639,7 +650,11 @@ class RayCaster {
           ++entries;
         }
       }
-      if (!now && inside) r_left = r;
+      if (!now && inside) {
+        r_left = r;
+        if (entries == 1 && !exited) r_first_exit = r + 0.5 * coarse_;
+        exited = true;
+      }
       inside = now;
     }
     if (entries == 0) return std::numeric_limits<double>::quiet_NaN();

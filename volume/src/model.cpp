@@ -90,7 +90,8 @@ json base_json(const VolumeModel& m) {
   const bool edge = ct && std::isfinite(seg.bone_threshold) && o.method == BoneMethod::Edge;
   json j = {{"bone_method", edge ? "edge" : "threshold"},
             {"mask", seg.bone_method},
-            {"cavity_base", ct && o.cavity_base}};
+            {"cavity_base", ct && o.cavity_base},
+            {"bone_cap_mm", m.bone_cap_mm}};
   if (edge) {
     j["floor_hu"] = o.floor_hu;
     j["method"] = "bone: the first peak of the CT profile inward from the skin at least floor_hu "
@@ -253,6 +254,7 @@ VolumeModel build_volume_model(const Volume& input, const ModelOptions& o, Repor
   m.maps = cylindrical_maps(v, m.segmentation, axis, o.maps, reporter);
   m.layer_options = o.maps.layers;
   m.bone_options = o.maps.bone;
+  m.bone_cap_mm = o.maps.bone_cap_mm;
   m.stats = model_statistics(m.maps);
   {
     Progress progress(reporter, "extracting skin and bone surfaces", 2);
@@ -274,14 +276,15 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter
   const auto& seg = m.segmentation;
   ModelProvenance c;
   c.name = fs::path(m.source).filename().string();
-  c.source_json = json{{"kind", "volume"},
-                       {"path", m.source},
-                       {"format", m.source_format},
-                       {"modality", to_string(m.modality)},
-                       {"dims", detail::vec_json(m.source_dims)},
-                       {"spacing_mm", detail::vec_json(m.source_spacing_mm)},
-                       {"notes", m.notes}}
-                      .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+  json source = {{"kind", "volume"},
+                 {"path", m.source},
+                 {"format", m.source_format},
+                 {"modality", to_string(m.modality)},
+                 {"dims", detail::vec_json(m.source_dims)},
+                 {"spacing_mm", detail::vec_json(m.source_spacing_mm)},
+                 {"notes", m.notes}};
+  if (!m.chart_json.empty()) source["chart"] = json::parse(m.chart_json);
+  c.source_json = source.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   c.segmentation_json = json{{"skin_method", seg.skin_method},
                              {"skin_threshold", seg.skin_threshold},
                              {"bone_method", seg.bone_method},

@@ -85,6 +85,48 @@ struct FromVolumeRequest {
 
 ModelResult run_from_volume(const FromVolumeRequest& request, Reporter* reporter = nullptr);
 
+// ---- caps model chart ----------------------------------------------------------------------
+
+/// A local chart of a volume-built model (surface/chart.hpp): the same CT measured again on a
+/// cylinder whose axis faces the skin at one point, for plans where the head's cylinder meets the
+/// skin edge-on (the side of the nose) or behind other skin. The point becomes theta 0, z 0 of
+/// the chart.
+struct ChartRequest {
+  std::string model, at, output, series;
+  double radius = 60.0;         ///< mm from the chart's axis to the point
+  double half_height = 30.0;    ///< mm of the chart's axis on either side of the point
+  double normal_radius = 5.0;   ///< mm: the skin's normal is averaged over this radius
+  int n_theta = 720, n_z = 200;
+  bool force = false;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "a model directory built by caps model from-volume",
+                FieldKind::Positional, "MODEL_DIR"});
+    v(r.at, {"at", "the point the chart faces: THETA,Z (deg, mm) of the model or a landmark and "
+                   "mm to the patient's left and up along the skin: pronasale-8,5",
+             FieldKind::Required});
+    v(r.output, {"output", "the chart's model directory to create", FieldKind::Required,
+                 "-o,--output"});
+    v(r.series, {"series", "DICOM: the SeriesInstanceUID the model was built from, if it was not "
+                           "the largest"});
+    v(r.radius, {"radius", "distance (mm) from the chart's axis to the point: larger sees a "
+                           "flatter region more nearly face-on, smaller wraps around a rounder one"});
+    v(r.half_height, {"half_height", "the chart spans this far (mm) above and below the point"});
+    v(r.normal_radius, {"normal_radius", "the skin's normal at the point is averaged over the "
+                                         "skin surface within this distance (mm)"});
+    v(r.n_theta, {"n_theta", "the chart's grid: samples around its axis"});
+    v(r.n_z, {"n_z", "the chart's grid: samples along its axis"});
+    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+  }
+};
+
+/// Builds the chart from the volume the model names (model.json source.path), with the options
+/// the model records (thresholds, bone method and cap, cavity base, layers); model.json's
+/// source.chart says where it looks. Throws InvalidInput for a scan-built model or one whose
+/// bone came from a separate mask, IoError when the volume is no longer where it was.
+ModelResult run_chart(const ChartRequest& request, Reporter* reporter = nullptr);
+
 // ---- caps model from-scan -----------------------------------------------------------------
 
 /// A scan file's colour options (from-scan, register, fuse).

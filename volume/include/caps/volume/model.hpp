@@ -34,6 +34,10 @@ struct VolumeModel : ModelContent {
   std::vector<std::string> notes;
   LayerOptions layer_options;  ///< how the tissue layers were measured (model.json)
   BoneOptions bone_options;    ///< how the base (bone, cavity) was found (model.json)
+  double bone_cap_mm = MapOptions{}.bone_cap_mm;  ///< the bone cap used (model.json)
+  /// For a local chart (a model whose axis faces one region of the skin, surface/chart.hpp):
+  /// model.json's source.chart object as JSON text; empty for a whole-head model.
+  std::string chart_json;
 };
 
 /// Segments the volume, fits the axis, measures the maps, extracts the surfaces.

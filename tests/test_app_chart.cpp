@@ -1,0 +1,173 @@
+// Local charts (caps model chart, surface/chart.hpp): the CT measured again on a cylinder whose
+// axis faces the skin at one point. Checked on the analytic face phantom, on the flank of its
+// nose, where the head's own rays meet the skin obliquely: the chart's centre is the same skin
+// point, its ray runs along the skin's normal, and its tissue depth there is the phantom's own
+// depth along that normal; a plan at the chart's centre meshes and closes.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "caps/app/model.hpp"
+#include "caps/app/plan.hpp"
+#include "caps/app/simulation.hpp"
+#include "caps/core/error.hpp"
+#include "caps/surface/chart.hpp"
+#include "caps/surface/patient_model.hpp"
+#include "caps/volume/phantom.hpp"
+#include "phantom_model.hpp"
+
+namespace fs = std::filesystem;
+using namespace caps;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// The face phantom at 1.5 mm voxels and its whole-head model (256 x 128 grid), made once.
+struct Fixture {
+  fs::path dir;
+  std::string ct, model;
+};
+const Fixture& fixture() {
+  static const Fixture f = [] {
+    Fixture x;
+    x.dir = caps_test::program_folder("caps_test_chart");
+    app::PhantomRequest ph;
+    ph.output = (x.dir / "ct.nii.gz").string();
+    ph.voxels = "171,171,160";
+    ph.spacing = "1.5,1.5,1.5";
+    ph.face = true;
+    app::run_phantom(ph);
+    app::FromVolumeRequest fv;
+    fv.input = ph.output;
+    fv.output = (x.dir / "model").string();
+    fv.n_theta = 256;
+    fv.n_z = 128;
+    app::run_from_volume(fv);
+    x.ct = ph.output;
+    x.model = fv.output;
+    return x;
+  }();
+  return f;
+}
+
+// The angle (deg) between the model's ray at (theta, z) and its skin normal there.
+double ray_to_normal_deg(const PatientModel& m, double theta_deg, double z_mm) {
+  const Eigen::Vector3d ray = m.axis().ray(theta_deg * kPi / 180.0);
+  return std::acos(std::clamp(ray.dot(m.skin_normal(theta_deg, z_mm)), -1.0, 1.0)) * 180.0 / kPi;
+}
+
+// The phantom's soft-tissue depth from the skin point p inward along -n: the first point whose
+// distance from the phantom's axis is within its analytic bone radius.
+double analytic_depth(const HeadPhantom& ph, const Eigen::Vector3d& p, const Eigen::Vector3d& n) {
+  for (double s = 0; s < 80; s += 0.01) {
+    const Eigen::Vector3d q = p - s * n - ph.axis_point();
+    const double theta = std::atan2(q.x(), -q.y());
+    if (std::hypot(q.x(), q.y()) <= ph.bone_radius(theta, q.z())) return s;
+  }
+  return -1;
+}
+
+}  // namespace
+
+TEST(Chart, FacesTheFlankOfTheNoseAndMeasuresTheTissueAlongItsNormal) {
+  const Fixture& f = fixture();
+  const PatientModel parent = PatientModel::load(f.model);
+  // The nose's flank at the phantom's nose height (z -12 mm of the phantom, whose axis point is
+  // at LPS z 0): the cell beside the midline where the head's ray meets the skin most obliquely.
+  const double z = -12.0 - parent.axis().origin_lps.z();
+  double theta = 0, worst = 0;
+  for (double t = 2; t <= 30; t += 0.5)
+    if (const double a = ray_to_normal_deg(parent, t, z); a > worst) {
+      worst = a;
+      theta = t;
+    }
+  ASSERT_GT(worst, 35.0) << "the nose's flank should face away from the head's axis";
+
+  app::ChartRequest r;
+  r.model = f.model;
+  r.at = std::to_string(theta) + "," + std::to_string(z);
+  r.output = (f.dir / "chart").string();
+  const app::ModelResult res = app::run_chart(r);
+  const PatientModel chart = PatientModel::load(r.output);
+  const auto j = nlohmann::json::parse(res.model_json);
+  ASSERT_TRUE(j.at("source").contains("chart"));
+  EXPECT_EQ(j.at("source").at("chart").at("parent_content_hash"), parent.content_hash());
+
+  // The centre is the parent's skin point, seen along the skin's normal.
+  const Eigen::Vector3d p = parent.skin_point(theta, z);
+  EXPECT_LT((chart.skin_point(0, 0) - p).norm(), 0.4);
+  EXPECT_NEAR(chart.r_skin(0, 0), r.radius, 0.4);
+  EXPECT_TRUE(flags_valid(chart.flags_at(0, 0))) << describe_flags(chart.flags_at(0, 0));
+  EXPECT_LT(ray_to_normal_deg(chart, 0, 0), 8.0);
+  const Eigen::Vector3d n = chart.axis().front;
+  EXPECT_GT(n.dot(parent.skin_normal(theta, z)), std::cos(12.0 * kPi / 180.0));
+
+  // The tissue under the centre along the chart's ray is the phantom's depth along the normal
+  // (to a voxel's partial volume; the parent's oblique radial column there is another length).
+  const HeadPhantom ph(false, false, true);
+  const double depth = analytic_depth(ph, chart.skin_point(0, 0), n);
+  ASSERT_GT(depth, 0);
+  EXPECT_NEAR(chart.thickness(0, 0), depth, 1.0);
+  EXPECT_GT(std::abs(parent.thickness(theta, z) - depth), 2.0);
+
+  // A plan at the chart's centre meshes and closes.
+  app::PlanNewRequest pn;
+  pn.procedure = "ellipse";
+  pn.model = r.output;
+  pn.at = "0,0";
+  pn.parameters = {{"length", 12.0}, {"width", 4.0}};
+  pn.output = (f.dir / "ellipse.json").string();
+  app::run_plan_new(pn);
+  app::SimulateRequest sr;
+  sr.model = r.output;
+  sr.plan = pn.output;
+  sr.output = (f.dir / "sim").string();
+  const app::SimulateResult s = app::run_simulate(sr);
+  EXPECT_EQ(s.inverted_elements, 0);
+  EXPECT_GT(s.closing_force_n, 0.0);
+}
+
+TEST(Chart, RefusesAChartOfAChartAndBadOptions) {
+  const Fixture& f = fixture();
+  app::ChartRequest r;
+  r.model = f.model;
+  r.at = "10,0";
+  r.output = (f.dir / "chart2").string();
+  r.radius = -5;
+  EXPECT_THROW(app::run_chart(r), InvalidInput);
+  r.radius = 60;
+  r.at = "10,900";  // beyond the model's rows
+  EXPECT_THROW(app::run_chart(r), InvalidInput);
+  r.at = "10,0";
+  app::run_chart(r);
+  app::ChartRequest again = r;
+  again.model = r.output;
+  again.output = (f.dir / "chart3").string();
+  try {
+    app::run_chart(again);
+    FAIL() << "a chart of a chart was accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("itself a chart"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(again.output));
+}
+
+TEST(Chart, FrameGeometry) {
+  // A point on the +x side, normal +x, model axis +z: the chart's axis is +z through the point
+  // moved 40 mm along -x, theta 0 along +x.
+  const ChartFrame c =
+      chart_frame({50, 0, 10}, {2, 0, 0}, {0, 0, 1}, {0, -1, 0}, 40.0);
+  EXPECT_LT((c.axis.origin_lps - Eigen::Vector3d(10, 0, 10)).norm(), 1e-12);
+  EXPECT_LT((c.axis.direction - Eigen::Vector3d(0, 0, 1)).norm(), 1e-12);
+  EXPECT_LT((c.axis.to_lps(0, 0, 40) - Eigen::Vector3d(50, 0, 10)).norm(), 1e-12);
+  // At the vertex (normal along the model's axis) the fallback keeps the axis defined.
+  const ChartFrame top = chart_frame({0, 0, 90}, {0, 0, 1}, {0, 0, 1}, {0, -1, 0}, 40.0);
+  EXPECT_NEAR(top.axis.direction.dot(Eigen::Vector3d(0, 0, 1)), 0.0, 1e-12);
+  EXPECT_NEAR(std::abs(top.axis.direction.y()), 1.0, 1e-12);
+  EXPECT_THROW(chart_frame({0, 0, 0}, {0, 0, 0}, {0, 0, 1}, {0, -1, 0}, 40.0), InvalidInput);
+  EXPECT_THROW(chart_frame({0, 0, 0}, {1, 0, 0}, {0, 0, 1}, {0, -1, 0}, 0.0), InvalidInput);
+}
