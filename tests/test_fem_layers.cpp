@@ -471,3 +471,34 @@ TEST(MeasuredLayers, CompareStopsShortOfABonyRimInsteadOfMeshingAcrossIt) {
   EXPECT_GT(s.wound.continuum.node_theta_z.col(1).maxCoeff(), 20.0);
   EXPECT_GT(s.wound.continuum.min_jacobian, 0.0);
 }
+
+TEST(AutomaticExtent, ShrinksPastOuterSurfaceLayersThatFold) {
+  // A C-shaped incision (300 deg of a 10 mm circle, no sutures): the surface mesh's layers grow
+  // into the C from both of its arms and collide some 8 mm in, so the full extent (3 x the
+  // wound's 20 mm) cannot be meshed, while the wound itself and a smaller extent can.
+  const PatientModel model = layered_cylinder([](double, double) { return 2.0; },
+                                              [](double, double) { return 3.0; },
+                                              [](double, double) { return 4.0; }, measured);
+  WoundBorder b;
+  const int n = 21;
+  std::vector<Eigen::Vector2d> path;
+  for (int i = 0; i < n; ++i) {
+    const double a = (30.0 + 300.0 * i / (n - 1)) * kPi / 180.0;
+    path.push_back(tz(10.0 * std::cos(a), 10.0 * std::sin(a)));
+  }
+  for (int i = 0; i < n; ++i) b.loop_theta_z.push_back(path[i]);
+  for (int i = n - 2; i >= 1; --i) b.loop_theta_z.push_back(path[i]);
+  SurfaceMeshOptions s;
+  s.size_mm = 2.0;
+  ContinuumMeshOptions o;
+  o.tissue = TissueLayers::Uniform;
+  const WoundMesh w = mesh_wound(b, model, s, o);
+  const double full = 3.0 * w.surface.wound_size_mm;
+  EXPECT_LT(w.surface.extent_mm, 0.75 * full + 1e-9);
+  ASSERT_FALSE(w.continuum.mesh.warnings.empty());
+  EXPECT_NE(w.continuum.mesh.warnings[0].find("folding"), std::string::npos)
+      << w.continuum.mesh.warnings[0];
+  // The full extent, given, is refused: the layers do fold there.
+  s.extent_mm = full;
+  EXPECT_THROW(mesh_wound(b, model, s, o), InvalidParameter);
+}
