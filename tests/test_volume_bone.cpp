@@ -299,3 +299,79 @@ TEST(Undercut, ReentryBelowTheBaseIsNotAnUndercut) {
   EXPECT_TRUE((without.maps.flags[g.index(j0, k0)] & kUndercut) != 0)
       << describe_flags(without.maps.flags[g.index(j0, k0)]);
 }
+
+namespace {
+
+// A hand-made CT for the eye: the cylinder head of overhang_ct() without its shell (tissue to
+// r 70 mm on a skull r 56..60), and in front (|theta| < 30 deg, |z| < 20 mm) an orbit: no skull,
+// fat (-100 HU) from r 40 to r 68 under 2 mm of lid, holding a globe of water (+10 HU, radius
+// 12 mm) whose front touches the lid at r 68; and at theta 90 deg a soft-tissue "muscle" (the
+// same +10 HU, 20 mm deep) straight on the skull, with no fat behind it: not an eye.
+Volume eye_ct() {
+  Volume v;
+  v.geom.dims = {180, 180, 60};
+  v.geom.spacing_mm = {1.0, 1.0, 1.0};
+  v.geom.direction.setIdentity();
+  v.geom.origin_lps = {-89.5, -89.5, -29.5};
+  v.modality = Modality::CT;
+  v.source = "eye";
+  v.format = "test";
+  v.data.resize(v.geom.n_voxels());
+  const Eigen::Vector3d globe(0, -56.0, 0);  // r 56 in front (theta 0 is -y)
+  for (int k = 0; k < v.geom.dims[2]; ++k)
+    for (int j = 0; j < v.geom.dims[1]; ++j)
+      for (int i = 0; i < v.geom.dims[0]; ++i) {
+        const Eigen::Vector3d p = v.index_to_lps(Eigen::Vector3d(i, j, k));
+        const double r = std::hypot(p.x(), p.y());
+        const double th = std::atan2(p.x(), -p.y()) * 180.0 / 3.14159265358979323846;
+        auto in = [&](double R) { return std::clamp(0.5 + (R - r), 0.0, 1.0); };
+        const bool orbit = std::abs(th) < 30 && std::abs(p.z()) < 20;
+        const bool muscle = std::abs(th - 90) < 15 && std::abs(p.z()) < 20;
+        double hu = -1000.0 + in(muscle ? 80.0 : 70.0) * (muscle ? 1010.0 : 1040.0);
+        if (orbit) {
+          hu += (in(68.0) - in(40.0)) * (-100.0 - 40.0);
+          const double g = std::clamp(0.5 + (12.0 - (p - globe).norm()), 0.0, 1.0);
+          hu = (1 - g) * hu + g * 10.0;
+        } else {
+          hu += in(60.0) * (1200.0 - 40.0) + in(56.0) * (35.0 - 1200.0);
+        }
+        v.data[v.geom.linear(i, j, k)] = static_cast<float>(hu);
+      }
+  return v;
+}
+
+}  // namespace
+
+TEST(Eye, TheGlobeUnderTheLidsIsNotOperable) {
+  const Volume v = eye_ct();
+  ModelOptions o;
+  o.maps.n_theta = 360;
+  o.maps.n_z = 60;
+  o.axis = CylinderAxis{};
+  o.axis->origin_lps = {0, 0, 0};
+  const VolumeModel m = build_volume_model(v, o);
+  const auto& g = m.maps.grid;
+  int eye = 0;
+  for (int k = 0; k < g.n_z; ++k)
+    for (int j = 0; j < g.n_theta; ++j) {
+      const double th = g.theta_deg(j), z = g.z_mm(k);
+      const std::size_t c = g.index(j, k);
+      // Rays within 7 mm of the globe's centre line cross at least 15 mm of it.
+      const double x = 70.0 * th * 3.14159265358979323846 / 180.0;
+      if (std::hypot(x, z) < 7.0) {
+        ++eye;
+        EXPECT_TRUE(m.maps.flags[c] & kEye) << "theta " << th << " z " << z;
+      }
+      // Away from the orbit (its fat without the globe, the muscle, the rest): no eye.
+      if (std::hypot(x, z) > 12.0 + kEyeMarginMm + 1.5) {
+        EXPECT_FALSE(m.maps.flags[c] & kEye) << "theta " << th << " z " << z;
+      }
+    }
+  ASSERT_GT(eye, 100);
+  EXPECT_EQ(m.stats.eye, static_cast<std::size_t>(std::count_if(
+                             m.maps.flags.begin(), m.maps.flags.end(),
+                             [](std::uint8_t f) { return (f & kEye) != 0; })));
+  EXPECT_FALSE(flags_valid(kEye));
+  EXPECT_EQ(describe_flags(kEye), "eye");
+  EXPECT_NE(invalid_flags_advice(kEye | kNoBone).find("not operable"), std::string::npos);
+}

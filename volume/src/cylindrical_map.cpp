@@ -116,7 +116,8 @@ std::string describe_flags(std::uint8_t flags) {
   if (flags == 0) return "valid";
   static const std::pair<std::uint8_t, const char*> kNames[] = {
       {kNoSkin, "no_skin"}, {kNoBone, "no_bone"}, {kUndercut, "undercut"},
-      {kGrazing, "grazing"}, {kTruncated, "truncated"}, {kBaseCavity, "base_cavity"}};
+      {kGrazing, "grazing"}, {kTruncated, "truncated"}, {kBaseCavity, "base_cavity"},
+      {kEye, "eye"}};
   std::string s;
   for (const auto& [bit, name] : kNames)
     if (flags & bit) s += (s.empty() ? "" : "|") + std::string(name);
@@ -126,6 +127,9 @@ std::string describe_flags(std::uint8_t flags) {
 std::string invalid_flags_advice(std::uint8_t flags) {
   if (flags_valid(flags)) return {};
   const std::string names = describe_flags(flags & kInvalidFlags);
+  if (flags & kEye)
+    return cat("is not operable here: it lies on the eye (", names, "; the lids over the globe, "
+               "which is no tissue to close a wound on); move the plan off the eye");
   if (flags & (kNoSkin | kTruncated))
     return cat("is not operable here: the scan does not cover the skin there (", names,
                "; the scan's field of view ends or cuts the head); move the plan onto scanned "
@@ -577,6 +581,7 @@ class RayCaster {
     const Eigen::Vector3d p = ray.at(r_s);
     // The skin point sits on the edge of the acquired data: a cut face, not skin.
     if (near_data_edge(v_, p, 1.5)) maps_.flags[c] |= kTruncated;
+    if (is_ct_ && over_globe(ray, r_s)) maps_.flags[c] |= kEye;  // confirmed by confirm_eyes()
     const bool on_cavity = !std::isfinite(r_b) && std::isfinite(base.r_cavity);
     if (!std::isfinite(r_b) && !on_cavity) {
       maps_.flags[c] |= kNoBone;
@@ -611,6 +616,28 @@ class RayCaster {
   }
 
  private:
+  // The globe under the lids (kEye): from past the skin's ramp, a run of soft tissue at least
+  // kGlobeRunMm deep (nothing below the fat level, no bone above +200 HU, no air) that ends on a
+  // band of fat at least kOrbitFatMm thick (the orbit's fat behind the globe).
+  bool over_globe(const Ray& ray, double r_s) const {
+    // The search reaches past the deepest globe (27 mm) and the thickest lids (3 mm).
+    constexpr double kStepMm = 0.5, kBoneHu = 200.0, kSearchMm = 40.0;
+    const double fat_level = o_.layers.fat_level_hu;
+    double first_fat = -1, fat_run = 0;
+    for (double s = ramp_; s <= kSearchMm && r_s - s >= 0; s += kStepMm) {
+      const double x = intensity_(ray.at(r_s - s));
+      if (x > kBoneHu || x < skin_thr_) return false;
+      if (x < fat_level) {
+        if (fat_run == 0) first_fat = s;
+        fat_run += kStepMm;
+        if (fat_run >= kOrbitFatMm) return first_fat >= kGlobeRunMm;
+      } else {
+        fat_run = 0;
+      }
+    }
+    return false;
+  }
+
   double bone_value(const Eigen::Vector3d& p) const {
     return bone_by_threshold_ ? intensity_(p) : bone_mask_field_(p);
   }
@@ -924,6 +951,63 @@ class RayCaster {
 
 }  // namespace
 
+namespace {
+
+// Keeps the cells the ray caster flagged kEye only where they form a patch of at least
+// kEyeMinAreaMm2 of skin (4-neighbours, periodic in theta), and widens those patches by
+// kEyeMarginMm on the skin.
+void confirm_eyes(CylindricalMaps& maps) {
+  const CylinderGrid& g = maps.grid;
+  const double dtheta = g.dtheta_deg() * kPi / 180.0;
+  const auto area = [&](std::size_t c) { return std::max(0.0f, maps.r_skin[c]) * dtheta * g.dz_mm; };
+  std::vector<char> seen(g.size(), 0), keep(g.size(), 0);
+  std::vector<std::size_t> patch, stack;
+  for (std::size_t c0 = 0; c0 < g.size(); ++c0) {
+    if (!(maps.flags[c0] & kEye) || seen[c0]) continue;
+    patch.clear();
+    stack.assign(1, c0);
+    seen[c0] = 1;
+    double a = 0;
+    while (!stack.empty()) {
+      const std::size_t c = stack.back();
+      stack.pop_back();
+      patch.push_back(c);
+      a += area(c);
+      const int j = static_cast<int>(c % g.n_theta), k = static_cast<int>(c / g.n_theta);
+      const int nb[4][2] = {{(j + 1) % g.n_theta, k}, {(j + g.n_theta - 1) % g.n_theta, k},
+                            {j, k + 1}, {j, k - 1}};
+      for (const auto& q : nb) {
+        if (q[1] < 0 || q[1] >= g.n_z) continue;
+        const std::size_t d = g.index(q[0], q[1]);
+        if ((maps.flags[d] & kEye) && !seen[d]) {
+          seen[d] = 1;
+          stack.push_back(d);
+        }
+      }
+    }
+    for (std::size_t c : patch) {
+      if (a >= kEyeMinAreaMm2) keep[c] = 1;
+      else maps.flags[c] &= static_cast<std::uint8_t>(~kEye);
+    }
+  }
+  for (int k = 0; k < g.n_z; ++k)
+    for (int j = 0; j < g.n_theta; ++j) {
+      if (!keep[g.index(j, k)]) continue;
+      const double r = std::max(1.0f, maps.r_skin[g.index(j, k)]);
+      const int dj = static_cast<int>(std::ceil(kEyeMarginMm / (r * dtheta)));
+      const int dk = static_cast<int>(std::ceil(kEyeMarginMm / g.dz_mm));
+      for (int b = std::max(0, k - dk); b <= std::min(g.n_z - 1, k + dk); ++b)
+        for (int a = -dj; a <= dj; ++a) {
+          const double x = a * r * dtheta, y = (b - k) * g.dz_mm;
+          const std::size_t d = g.index((j + a + g.n_theta) % g.n_theta, b);
+          if (x * x + y * y <= kEyeMarginMm * kEyeMarginMm && maps.measured_skin[d])
+            maps.flags[d] |= kEye;
+        }
+    }
+}
+
+}  // namespace
+
 CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const CylinderAxis& axis,
                                  const MapOptions& o, Reporter* reporter) {
   check_map_options(o);
@@ -948,6 +1032,7 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
   progress.update(0.8);
 
   flag_grazing(maps, o.grazing_deg);
+  confirm_eyes(maps);
   std::size_t n_measured = 0;
   for (auto m : maps.measured_skin) n_measured += m;
   if (n_measured == 0)

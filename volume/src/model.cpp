@@ -121,6 +121,7 @@ ModelStatistics model_statistics(const CylindricalMaps& maps) {
     s.undercut += (f & kUndercut) != 0;
     s.grazing += (f & kGrazing) != 0;
     s.truncated += (f & kTruncated) != 0;
+    s.eye += (f & kEye) != 0;
     if (maps.measured_skin[i]) rs.push_back(maps.r_skin[i]);
     if (!flags_valid(f)) continue;
     s.base_cavity += (f & kBaseCavity) != 0;

@@ -72,7 +72,7 @@ json statistics_json(const ModelStatistics& s) {
           {"valid_fraction", s.cells ? double(s.valid_cells) / s.cells : 0.0},
           {"flagged_cells", {{"no_skin", s.no_skin}, {"no_bone", s.no_bone}, {"undercut", s.undercut},
                              {"grazing", s.grazing}, {"truncated", s.truncated},
-                             {"base_cavity", s.base_cavity}}},
+                             {"base_cavity", s.base_cavity}, {"eye", s.eye}}},
           {"thickness_mm", {{"mean", s.thickness_mean_mm}, {"median", s.thickness_median_mm},
                             {"p5", s.thickness_p5_mm}, {"p95", s.thickness_p95_mm}}},
           {"thickness_normal_median_mm", s.thickness_normal_median_mm},
@@ -117,6 +117,7 @@ ModelStatistics statistics_of(const json& j, const std::string& where) {
   s.grazing = count(flagged, "grazing");
   s.truncated = count(flagged, "truncated");
   s.base_cavity = count(flagged, "base_cavity");
+  s.eye = count(flagged, "eye");
   s.thickness_mean_mm = num(t, "mean");
   s.thickness_median_mm = num(t, "median");
   s.thickness_p5_mm = num(t, "p5");
@@ -457,7 +458,7 @@ void write_model_directory(const ModelContent& m, const ModelProvenance& c, cons
   std::vector<float> flags(maps.flags.begin(), maps.flags.end());
   write_map_nrrd(p / f::kValidity, flags, g,
                  "validity: 0 valid; bit flags 1 no_skin, 2 no_bone, 4 undercut, 8 grazing, "
-                 "16 truncated; 32 base_cavity (valid, its base an air cavity's edge)", "flags");
+                 "16 truncated; 32 base_cavity (valid, its base an air cavity's edge); 64 eye", "flags");
   progress.update(3);
   // Clinicians and the soft-tissue-depth literature read the thickness along the normal.
   const bool assumed_bone = parse_object(c.thickness_json, "thickness").value("kind", "") ==

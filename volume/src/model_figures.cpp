@@ -127,7 +127,7 @@ void write_thickness_png(const fs::path& path, const CylindricalMaps& maps,
   for (std::size_t c = 0; c < invalid.size(); ++c) invalid[c] = maps.flags[c] & kInvalidFlags;
   write_mm_map_png(path, maps, values, invalid, "soft-tissue thickness (mm)",
                    "no valid measurement (no bone or cavity within the cap, undercut, grazing "
-                   "ray; filled by interpolation)", title, credit);
+                   "ray, the eye; filled by interpolation)", title, credit);
 }
 
 void write_layer_png(const fs::path& path, const CylindricalMaps& maps,

@@ -62,10 +62,26 @@ enum CellFlag : std::uint8_t {
   /// Valid, with no bone under the skin: the base is the soft tissue's deep boundary on an air
   /// cavity (nasal cavity, mouth, sinus) and carries no support (free; docs/volume.md).
   kBaseCavity = 32,
+  /// The eye: the skin lies on the globe (the eyelids over it), seen in CT as a run of soft
+  /// tissue at least kGlobeRunMm deep under the skin that ends on the orbit's fat; not operable
+  /// (docs/volume.md).
+  kEye = 64,
 };
 
 /// The flags that make a cell invalid (every flag but kBaseCavity, which names a valid base).
-inline constexpr std::uint8_t kInvalidFlags = kNoSkin | kNoBone | kUndercut | kGrazing | kTruncated;
+inline constexpr std::uint8_t kInvalidFlags =
+    kNoSkin | kNoBone | kUndercut | kGrazing | kTruncated | kEye;
+
+/// The eye (kEye): a ray over the globe meets at least this much soft tissue (no fat, bone or
+/// air) under the skin before a band of the orbit's fat at least kOrbitFatMm thick. The globe is
+/// 22-26 mm across and the lids over it 1-3 mm; elsewhere on the head subcutaneous fat, bone or
+/// air comes within 12 mm of the skin.
+inline constexpr double kGlobeRunMm = 15.0;
+inline constexpr double kOrbitFatMm = 2.0;
+/// Cells flagged kEye form the eye only as a patch of at least this skin area (mm2); the patch is
+/// then widened by kEyeMarginMm on the skin (the lids' margins, rays tangent to the globe).
+inline constexpr double kEyeMinAreaMm2 = 60.0;
+inline constexpr double kEyeMarginMm = 3.0;
 
 /// True when `flags` (CellFlag, OR-ed) leave the cell valid: measured skin and thickness, over
 /// bone or (kBaseCavity) over an air cavity.
@@ -141,7 +157,10 @@ inline constexpr double kUndercutMinGapMm = 2.0;
 struct MapOptions {
   int n_theta = 512;
   int n_z = 256;
-  double bone_cap_mm = 40.0;     ///< no bone deeper than this under the skin -> kNoBone
+  /// No bone deeper than this under the skin, along the ray -> kNoBone. 50 mm: the ramus under
+  /// the masseter lies 41-44 mm along the head's oblique rays at the lateral cheek (14 mm along
+  /// the normal); the orbit, where a deeper cap would find the orbit's floor, is kEye.
+  double bone_cap_mm = 50.0;
   double grazing_deg = 70.0;     ///< ray-to-normal angle beyond which a cell is kGrazing
   BoneOptions bone;
   LayerOptions layers;
