@@ -616,9 +616,9 @@ class RayCaster {
   }
 
  private:
-  // The globe under the lids (kEye): from past the skin's ramp, a run of soft tissue at least
-  // kGlobeRunMm deep (nothing below the fat level, no bone above +200 HU, no air) that ends on a
-  // band of fat at least kOrbitFatMm thick (the orbit's fat behind the globe).
+  // The globe under the lids (kEye): from past the skin's ramp, a run of soft tissue
+  // kGlobeRunMm to kGlobeMaxRunMm deep (nothing below the fat level, no bone above +200 HU, no
+  // air) that ends on a band of fat at least kOrbitFatMm thick (the orbit's fat behind it).
   bool over_globe(const Ray& ray, double r_s) const {
     // The search reaches past the deepest globe (27 mm) and the thickest lids (3 mm).
     constexpr double kStepMm = 0.5, kBoneHu = 200.0, kSearchMm = 40.0;
@@ -630,7 +630,7 @@ class RayCaster {
       if (x < fat_level) {
         if (fat_run == 0) first_fat = s;
         fat_run += kStepMm;
-        if (fat_run >= kOrbitFatMm) return first_fat >= kGlobeRunMm;
+        if (fat_run >= kOrbitFatMm) return first_fat >= kGlobeRunMm && first_fat <= kGlobeMaxRunMm;
       } else {
         fat_run = 0;
       }

@@ -72,15 +72,17 @@ enum CellFlag : std::uint8_t {
 inline constexpr std::uint8_t kInvalidFlags =
     kNoSkin | kNoBone | kUndercut | kGrazing | kTruncated | kEye;
 
-/// The eye (kEye): a ray over the globe meets at least this much soft tissue (no fat, bone or
-/// air) under the skin before a band of the orbit's fat at least kOrbitFatMm thick. The globe is
-/// 22-26 mm across and the lids over it 1-3 mm; elsewhere on the head subcutaneous fat, bone or
-/// air comes within 12 mm of the skin.
+/// The eye (kEye): a ray over the globe meets kGlobeRunMm to kGlobeMaxRunMm of soft tissue (no
+/// fat, bone or air) under the skin before a band of the orbit's fat at least kOrbitFatMm thick.
+/// The globe is 22-26 mm across and the lids over it 1-3 mm; elsewhere on the face subcutaneous
+/// fat, bone or air comes within 12 mm of the skin, and the muscles of the neck that reach fat
+/// only deeper than the globe (30-33 mm on Cranium) are not taken for it.
 inline constexpr double kGlobeRunMm = 15.0;
+inline constexpr double kGlobeMaxRunMm = 29.0;
 inline constexpr double kOrbitFatMm = 2.0;
 /// Cells flagged kEye form the eye only as a patch of at least this skin area (mm2); the patch is
 /// then widened by kEyeMarginMm on the skin (the lids' margins, rays tangent to the globe).
-inline constexpr double kEyeMinAreaMm2 = 60.0;
+inline constexpr double kEyeMinAreaMm2 = 100.0;
 inline constexpr double kEyeMarginMm = 3.0;
 
 /// True when `flags` (CellFlag, OR-ed) leave the cell valid: measured skin and thickness, over
