@@ -5,7 +5,7 @@ Runs the caps program (plan new, then simulate) on a patient model at the 18 che
 nasal-dorsum points (theta -60/-45/45/60 deg at z 25/35/45 mm, theta -5/0/5 at z 45/55) and over
 a 10 deg x 10 mm grid (theta -60..60, z over the model's rows), with --charts again on a local
 chart where the model cannot represent the skin (as the refusal advises), and prints the counts and the
-reasons for failure as a markdown table; --json writes every outcome. Every count comes from the
+reasons for failure as a markdown table; --json writes every outcome, --svg draws them. Every count comes from the
 caps program's exit code and message: nothing is computed here.
 
   scripts/face_bar.py build/tools/caps out/cranium /tmp/bar --json /tmp/bar/cranium.json
@@ -28,7 +28,7 @@ def run(cmd):
 
 def reason(msg):
     """A short class of a refusal, from the caps message."""
-    for key in ("not operable", "cannot represent", "no base under", "no_bone", "undercut",
+    for key in ("not operable", "cannot represent", "no base under", "eye)", "no_bone", "undercut",
                 "grazing", "truncated", "no_skin", "outside the model", "top or bottom",
                 "overlaps itself", "inverted",
                 "under-constrained", "thickness"):
@@ -74,6 +74,63 @@ def attempt(caps, model, work, theta, z, length, width, charts):
     return r
 
 
+COLOURS = [("simulated", "#2e9d4a"), ("simulated on a chart", "#2f6fd0"),
+           ("planned, not simulated", "#f0a030"), ("not operable (the eye)", "#9a9a9a"),
+           ("refused", "#d03a2f")]
+
+
+def outcome(r):
+    if r["simulated"]:
+        return "simulated on a chart" if r.get("chart") else "simulated"
+    if r["planned"]:
+        return "planned, not simulated"
+    return "not operable (the eye)" if "not operable" in r["message"] else "refused"
+
+
+def write_svg(path, out, title):
+    """The outcomes over (theta, z): grid points as squares, the 18 points as circles."""
+    rows = out["grid"] + out["points"]
+    zs = [r["z"] for r in rows]
+    z_lo, z_hi = min(zs) - 10, max(zs) + 10
+    sx, sz, left, top = 5.0, 5.0, 60, 40  # px per deg, px per mm, margins
+    w = int(left + 140 * sx + 20)
+    h = int(top + (z_hi - z_lo) * sz + 130)
+    X = lambda t: left + (t + 70) * sx
+    Y = lambda z: top + (z_hi - z) * sz
+    colour = dict(COLOURS)
+    e = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" '
+         f'font-family="sans-serif" font-size="12">',
+         f'<rect width="{w}" height="{h}" fill="white"/>',
+         f'<text x="{left}" y="20" font-size="14">{title}</text>']
+    for t in range(-60, 61, 30):
+        e.append(f'<line x1="{X(t)}" y1="{Y(z_hi)}" x2="{X(t)}" y2="{Y(z_lo)}" stroke="#ddd"/>')
+        e.append(f'<text x="{X(t)}" y="{Y(z_lo) + 16}" text-anchor="middle">{t}</text>')
+    for z in range(10 * int(z_lo // 10 + 1), int(z_hi) + 1, 20):
+        e.append(f'<line x1="{X(-70)}" y1="{Y(z)}" x2="{X(70)}" y2="{Y(z)}" stroke="#ddd"/>')
+        e.append(f'<text x="{left - 6}" y="{Y(z) + 4}" text-anchor="end">{z}</text>')
+    e.append(f'<text x="{X(0)}" y="{Y(z_lo) + 32}" text-anchor="middle">theta (deg): 0 = the '
+             f'face, + = the patient\'s left</text>')
+    e.append(f'<text x="14" y="{Y((z_lo + z_hi) / 2)}" transform="rotate(-90 14 '
+             f'{Y((z_lo + z_hi) / 2)})" text-anchor="middle">z (mm)</text>')
+    for r in out["grid"]:
+        e.append(f'<rect x="{X(r["theta"]) - 20}" y="{Y(r["z"]) - 20}" width="40" height="40" '
+                 f'fill="{colour[outcome(r)]}" stroke="white" stroke-width="2"/>')
+    for r in out["points"]:
+        e.append(f'<circle cx="{X(r["theta"])}" cy="{Y(r["z"])}" r="9" '
+                 f'fill="{colour[outcome(r)]}" stroke="black" stroke-width="1.5"/>')
+    y = Y(z_lo) + 52
+    for i, (name, c) in enumerate(COLOURS):
+        x = left + (i % 3) * 230
+        yy = y + (i // 3) * 18
+        e.append(f'<rect x="{x}" y="{yy - 10}" width="12" height="12" fill="{c}"/>')
+        e.append(f'<text x="{x + 16}" y="{yy}">{name}</text>')
+    e.append(f'<text x="{left}" y="{y + 40}">squares: the 10 deg x 10 mm grid; circles: the 18 '
+             f'cheek and nasal-dorsum points</text>')
+    e.append("</svg>")
+    with open(path, "w") as f:
+        f.write("\n".join(e) + "\n")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("caps")
@@ -88,6 +145,7 @@ def main():
     ap.add_argument("--charts", action="store_true", help="where the model cannot represent the "
                     "skin (grazing, undercut), try again on a local chart (caps model chart)")
     ap.add_argument("--json", default="")
+    ap.add_argument("--svg", default="", help="write the outcomes as a picture (SVG)")
     a = ap.parse_args()
     os.makedirs(a.work, exist_ok=True)
     info = json.load(open(os.path.join(a.model, "model.json")))
@@ -125,6 +183,9 @@ def main():
     if a.json:
         with open(a.json, "w") as f:
             json.dump(out, f, indent=1)
+    if a.svg:
+        write_svg(a.svg, out, f"Where a {a.length:g} x {a.width:g} mm ellipse can be planned and "
+                  f"simulated: {os.path.basename(os.path.normpath(a.model))}")
 
 
 if __name__ == "__main__":
