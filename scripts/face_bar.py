@@ -16,6 +16,8 @@ import os
 import subprocess
 import sys
 
+# Cranium's face landmark (model.json statistics.face, the nose), where the points were chosen.
+CRANIUM_FACE = (-1.40625, 41.15)
 POINTS = [(t, z) for t in (-60, -45, 45, 60) for z in (25, 35, 45)] + \
          [(t, z) for t in (-5, 0, 5) for z in (45, 55)]
 
@@ -142,6 +144,9 @@ def main():
                     "from 10 mm above the model's bottom (the mesher keeps its end rows free) "
                     "to 70 mm above the face landmark (the nose)")
     ap.add_argument("--no-grid", action="store_true")
+    ap.add_argument("--from-face", action="store_true", help="place the 18 points and the grid "
+                    "relative to this model's face landmark (statistics.face), as they lie "
+                    "relative to Cranium's (theta -1.4 deg, z 41.2 mm): for other scans")
     ap.add_argument("--charts", action="store_true", help="where the model cannot represent the "
                     "skin (grazing, undercut), try again on a local chart (caps model chart)")
     ap.add_argument("--json", default="")
@@ -156,14 +161,19 @@ def main():
         lo, hi = (float(x) for x in a.grid_z.split(","))
     else:
         lo, hi = g["z0_mm"] + 10, min(z_top - 10, face_z + 70)
-    out = {"model": a.model, "ellipse_mm": [a.length, a.width], "points": [], "grid": []}
-    for t, z in POINTS:
+    dt = dz = 0.0
+    if a.from_face:
+        dt = round(info["statistics"]["face"]["theta_deg"] - CRANIUM_FACE[0], 1)
+        dz = round(face_z - CRANIUM_FACE[1], 1)
+    out = {"model": a.model, "ellipse_mm": [a.length, a.width], "points": [], "grid": [],
+           "offset_from_cranium": [dt, dz]}
+    for t, z in ((t + dt, z + dz) for t, z in POINTS):
         out["points"].append(attempt(a.caps, a.model, a.work, t, z, a.length, a.width, a.charts))
         print(f"point {t},{z}: {out['points'][-1]}", file=sys.stderr, flush=True)
     if not a.no_grid:
         z0 = 10 * int(-(-lo // 10))
         for z in range(z0, int(hi) + 1, 10):
-            for t in range(-60, 61, 10):
+            for t in (t + dt for t in range(-60, 61, 10)):
                 out["grid"].append(attempt(a.caps, a.model, a.work, t, z, a.length, a.width, a.charts))
                 print(f"grid {t},{z}: {out['grid'][-1]}", file=sys.stderr, flush=True)
     for key in ("points", "grid"):

@@ -135,35 +135,46 @@ TEST(ThinBone, EdgeMethodMatchesTheThresholdOnThickBone) {
 
 namespace {
 
+// A hand-made CT of 1 mm voxels centred on the LPS z axis (`n` x `n` x `nz`), its value at each
+// voxel centre hu(p, r, theta deg, in) with r the distance from the axis, theta as the cylindrical
+// maps count it and in(R) the fraction of the voxel inside radius R (a linear ramp one voxel wide,
+// as in the phantom).
+template <class Hu>
+Volume axial_ct(int n, int nz, const char* name, Hu&& hu) {
+  Volume v;
+  v.geom.dims = {n, n, nz};
+  v.geom.spacing_mm = {1.0, 1.0, 1.0};
+  v.geom.direction.setIdentity();
+  v.geom.origin_lps = {-0.5 * (n - 1), -0.5 * (n - 1), -0.5 * (nz - 1)};
+  v.modality = Modality::CT;
+  v.source = name;
+  v.format = "test";
+  v.data.resize(v.geom.n_voxels());
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        const Eigen::Vector3d p = v.index_to_lps(Eigen::Vector3d(i, j, k));
+        const double r = std::hypot(p.x(), p.y());
+        const double th = std::atan2(p.x(), -p.y()) * 180.0 / 3.14159265358979323846;
+        const auto in = [r](double R) { return std::clamp(0.5 + (R - r), 0.0, 1.0); };
+        v.data[v.geom.linear(i, j, k)] = static_cast<float>(hu(p, th, in));
+      }
+  return v;
+}
+
 // A hand-made CT: a soft-tissue cylinder (radius 80 mm, +40 HU) about the LPS z axis with a
 // 4 mm skull (r 66..70, +1200 HU) and brain inside, except in front (|theta| < 25 deg,
 // |z| < 15 mm) where there is no bone and the tissue ends on air at r = 68 mm (a "nasal
 // cavity"). Edges are linear ramps one voxel wide, as in the phantom.
 Volume cavity_ct() {
-  Volume v;
-  v.geom.dims = {200, 200, 70};
-  v.geom.spacing_mm = {1.0, 1.0, 1.0};
-  v.geom.direction.setIdentity();
-  v.geom.origin_lps = {-99.5, -99.5, -34.5};
-  v.modality = Modality::CT;
-  v.source = "cavity";
-  v.format = "test";
-  v.data.resize(v.geom.n_voxels());
-  for (int k = 0; k < v.geom.dims[2]; ++k)
-    for (int j = 0; j < v.geom.dims[1]; ++j)
-      for (int i = 0; i < v.geom.dims[0]; ++i) {
-        const Eigen::Vector3d p = v.index_to_lps(Eigen::Vector3d(i, j, k));
-        const double r = std::hypot(p.x(), p.y());
-        const double th = std::atan2(p.x(), -p.y());
-        auto in = [&](double R) { return std::clamp(0.5 + (R - r), 0.0, 1.0); };
-        double hu = -1000.0 + in(80.0) * 1040.0;
-        if (std::abs(th) < deg_to_rad(25.0) && std::abs(p.z()) < 15.0)
-          hu += in(68.0) * (-1000.0 - 40.0);
-        else
-          hu += in(70.0) * (1200.0 - 40.0) + in(66.0) * (35.0 - 1200.0);
-        v.data[v.geom.linear(i, j, k)] = static_cast<float>(hu);
-      }
-  return v;
+  return axial_ct(200, 70, "cavity", [](const Eigen::Vector3d& p, double th, auto in) {
+    double hu = -1000.0 + in(80.0) * 1040.0;
+    if (std::abs(th) < 25.0 && std::abs(p.z()) < 15.0)
+      hu += in(68.0) * (-1000.0 - 40.0);
+    else
+      hu += in(70.0) * (1200.0 - 40.0) + in(66.0) * (35.0 - 1200.0);
+    return hu;
+  });
 }
 
 }  // namespace
@@ -228,35 +239,17 @@ namespace {
 // joined to it above (z 8..14): a lip or an ear's rim, whose gap is open to the outside air below
 // and at the sides.
 Volume overhang_ct() {
-  Volume v;
-  v.geom.dims = {180, 180, 50};
-  v.geom.spacing_mm = {1.0, 1.0, 1.0};
-  v.geom.direction.setIdentity();
-  v.geom.origin_lps = {-89.5, -89.5, -24.5};
-  v.modality = Modality::CT;
-  v.source = "overhang";
-  v.format = "test";
-  v.data.resize(v.geom.n_voxels());
-  for (int k = 0; k < v.geom.dims[2]; ++k)
-    for (int j = 0; j < v.geom.dims[1]; ++j)
-      for (int i = 0; i < v.geom.dims[0]; ++i) {
-        const Eigen::Vector3d p = v.index_to_lps(Eigen::Vector3d(i, j, k));
-        const double r = std::hypot(p.x(), p.y());
-        const double th = std::atan2(p.x(), -p.y());
-        auto in = [&](double R) { return std::clamp(0.5 + (R - r), 0.0, 1.0); };
-        auto band = [](double x, double lo, double hi) {
-          return std::clamp(0.5 + (x - lo), 0.0, 1.0) * std::clamp(0.5 + (hi - x), 0.0, 1.0);
-        };
-        double tissue = in(70.0);
-        const double front = band(th * 180.0 / 3.14159265358979323846, -20.0, 20.0);
-        // The shell (r 76..80, z -12..14) and its join to the head (r 70..76, z 8..14).
-        tissue = std::max(tissue, front * band(p.z(), -12.0, 14.0) * (in(80.0) - in(76.0)));
-        tissue = std::max(tissue, front * band(p.z(), 8.0, 14.0) * (in(76.0) - in(70.0)));
-        double hu = -1000.0 + tissue * 1040.0;
-        hu += in(60.0) * (1200.0 - 40.0) + in(56.0) * (35.0 - 1200.0);
-        v.data[v.geom.linear(i, j, k)] = static_cast<float>(hu);
-      }
-  return v;
+  const auto band = [](double x, double lo, double hi) {
+    return std::clamp(0.5 + (x - lo), 0.0, 1.0) * std::clamp(0.5 + (hi - x), 0.0, 1.0);
+  };
+  return axial_ct(180, 50, "overhang", [&](const Eigen::Vector3d& p, double th, auto in) {
+    const double front = band(th, -20.0, 20.0);
+    // The shell (r 76..80, z -12..14) and its join to the head (r 70..76, z 8..14).
+    double tissue = in(70.0);
+    tissue = std::max(tissue, front * band(p.z(), -12.0, 14.0) * (in(80.0) - in(76.0)));
+    tissue = std::max(tissue, front * band(p.z(), 8.0, 14.0) * (in(76.0) - in(70.0)));
+    return -1000.0 + tissue * 1040.0 + in(60.0) * (1200.0 - 40.0) + in(56.0) * (35.0 - 1200.0);
+  });
 }
 
 }  // namespace
@@ -308,36 +301,16 @@ namespace {
 // 12 mm) whose front touches the lid at r 68; and at theta 90 deg a soft-tissue "muscle" (the
 // same +10 HU, 20 mm deep) straight on the skull, with no fat behind it: not an eye.
 Volume eye_ct() {
-  Volume v;
-  v.geom.dims = {180, 180, 60};
-  v.geom.spacing_mm = {1.0, 1.0, 1.0};
-  v.geom.direction.setIdentity();
-  v.geom.origin_lps = {-89.5, -89.5, -29.5};
-  v.modality = Modality::CT;
-  v.source = "eye";
-  v.format = "test";
-  v.data.resize(v.geom.n_voxels());
   const Eigen::Vector3d globe(0, -56.0, 0);  // r 56 in front (theta 0 is -y)
-  for (int k = 0; k < v.geom.dims[2]; ++k)
-    for (int j = 0; j < v.geom.dims[1]; ++j)
-      for (int i = 0; i < v.geom.dims[0]; ++i) {
-        const Eigen::Vector3d p = v.index_to_lps(Eigen::Vector3d(i, j, k));
-        const double r = std::hypot(p.x(), p.y());
-        const double th = std::atan2(p.x(), -p.y()) * 180.0 / 3.14159265358979323846;
-        auto in = [&](double R) { return std::clamp(0.5 + (R - r), 0.0, 1.0); };
-        const bool orbit = std::abs(th) < 30 && std::abs(p.z()) < 20;
-        const bool muscle = std::abs(th - 90) < 15 && std::abs(p.z()) < 20;
-        double hu = -1000.0 + in(muscle ? 80.0 : 70.0) * (muscle ? 1010.0 : 1040.0);
-        if (orbit) {
-          hu += (in(68.0) - in(40.0)) * (-100.0 - 40.0);
-          const double g = std::clamp(0.5 + (12.0 - (p - globe).norm()), 0.0, 1.0);
-          hu = (1 - g) * hu + g * 10.0;
-        } else {
-          hu += in(60.0) * (1200.0 - 40.0) + in(56.0) * (35.0 - 1200.0);
-        }
-        v.data[v.geom.linear(i, j, k)] = static_cast<float>(hu);
-      }
-  return v;
+  return axial_ct(180, 60, "eye", [&](const Eigen::Vector3d& p, double th, auto in) {
+    const bool orbit = std::abs(th) < 30 && std::abs(p.z()) < 20;
+    const bool muscle = std::abs(th - 90) < 15 && std::abs(p.z()) < 20;
+    double hu = -1000.0 + in(muscle ? 80.0 : 70.0) * (muscle ? 1010.0 : 1040.0);
+    if (!orbit) return hu + in(60.0) * (1200.0 - 40.0) + in(56.0) * (35.0 - 1200.0);
+    hu += (in(68.0) - in(40.0)) * (-100.0 - 40.0);
+    const double g = std::clamp(0.5 + (12.0 - (p - globe).norm()), 0.0, 1.0);
+    return (1 - g) * hu + g * 10.0;
+  });
 }
 
 }  // namespace
