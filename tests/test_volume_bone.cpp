@@ -162,6 +162,18 @@ Volume axial_ct(int n, int nz, const char* name, Hu&& hu) {
   return v;
 }
 
+// The options of the hand-made CTs' models: the cylinder's axis on the LPS z axis, 1 deg around,
+// `n_z` rows, no tissue layers.
+ModelOptions axial_options(int n_z) {
+  ModelOptions o;
+  o.maps.n_theta = 360;
+  o.maps.n_z = n_z;
+  o.maps.layers.measure = false;
+  o.axis = CylinderAxis{};
+  o.axis->origin_lps = {0, 0, 0};
+  return o;
+}
+
 // A hand-made CT: a soft-tissue cylinder (radius 80 mm, +40 HU) about the LPS z axis with a
 // 4 mm skull (r 66..70, +1200 HU) and brain inside, except in front (|theta| < 25 deg,
 // |z| < 15 mm) where there is no bone and the tissue ends on air at r = 68 mm (a "nasal
@@ -181,12 +193,7 @@ Volume cavity_ct() {
 
 TEST(CavityBase, NoBoneOverAnAirCavityIsBasedOnItsEdge) {
   const Volume v = cavity_ct();
-  ModelOptions o;
-  o.maps.n_theta = 360;
-  o.maps.n_z = 64;
-  o.maps.layers.measure = false;
-  o.axis = CylinderAxis{};
-  o.axis->origin_lps = {0, 0, 0};
+  ModelOptions o = axial_options(64);
   const VolumeModel m = build_volume_model(v, o);
   const auto& g = m.maps.grid;
   int cavity = 0, inner = 0;
@@ -256,12 +263,7 @@ Volume overhang_ct() {
 
 TEST(Undercut, ReentryBelowTheBaseIsNotAnUndercut) {
   const Volume v = overhang_ct();
-  ModelOptions o;
-  o.maps.n_theta = 360;
-  o.maps.n_z = 48;
-  o.maps.layers.measure = false;
-  o.axis = CylinderAxis{};
-  o.axis->origin_lps = {0, 0, 0};
+  ModelOptions o = axial_options(48);
   const VolumeModel m = build_volume_model(v, o);
   const auto& g = m.maps.grid;
   int shell = 0;
@@ -317,11 +319,8 @@ Volume eye_ct() {
 
 TEST(Eye, TheGlobeUnderTheLidsIsNotOperable) {
   const Volume v = eye_ct();
-  ModelOptions o;
-  o.maps.n_theta = 360;
-  o.maps.n_z = 60;
-  o.axis = CylinderAxis{};
-  o.axis->origin_lps = {0, 0, 0};
+  ModelOptions o = axial_options(60);
+  o.maps.layers.measure = true;
   const VolumeModel m = build_volume_model(v, o);
   const auto& g = m.maps.grid;
   int eye = 0;
