@@ -5,7 +5,9 @@
 // runs, the result, the forces in the table and per suture, slide pre to post and play it, save
 // the plan and check it with `caps plan check`; then place it 15 mm left and 20 mm up from the
 // glabella with the landmark list, which must be `caps plan new --at glabella+15,20`'s plan and
-// be saved with the landmark recorded as the command line records it. Screenshots go to OUT_DIR.
+// be saved with the landmark recorded as the command line records it. Then the side of the nose:
+// refused on the head's model, planned by a click and closed on a local chart (caps model chart).
+// Screenshots go to OUT_DIR.
 //
 // node planner_e2e_cranium.mjs CAPS_EXE MODEL_DIR WEB_ROOT OUT_DIR  (run by run_planner_e2e.sh)
 import assert from 'node:assert/strict';
@@ -210,5 +212,61 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   assert.deepEqual((await plan()).at, cli.at);
   log(`placed at glabella+15,20 from the landmark list: theta ${cli.at.theta_deg.toFixed(2)}, ` +
     `z ${cli.at.z_mm.toFixed(2)} mm, as caps plan new; saved with the landmark, loaded back`);
+});
+
+// The side of the nose (issue 16), where the head's model meets the skin edge-on: the plan is
+// refused there with the advice to make a local chart, `caps model chart` makes one facing it,
+// and the planner serves the chart like any model: an ellipse placed by clicking on the nose
+// closes.
+const refused = spawnSync(caps, ['plan', 'new', 'ellipse', '--model', model, '--at', '-5,55',
+  '--length', '12', '--width', '4', '-o', join(out, 'refused.json'), '--force', '-q'],
+{ encoding: 'utf8' });
+assert.equal(refused.status, 2, refused.stderr);
+assert.match(refused.stderr, /cannot represent[\s\S]*caps model chart/);
+const chart = join(out, '..', 'nose-chart');
+capsJson(['model', 'chart', model, '--at', '-5,55', '-o', chart, '--force']);
+const centre = capsJson(['model', 'site', chart, '--at', '0,0']);
+await withPlanner({ caps, model: chart, webRoot, log }, async ({ page }) => {
+  await page.waitForSelector('body[data-ready="true"]', { timeout: 120000 });
+  const plan = () => page.evaluate(() => window.caps.planner.plan);
+  const checked = () => page.waitForSelector('body[data-check="ok"]', { timeout: 30000 });
+  assert.match(await page.locator('#model-name').innerText(), /local chart at -5,55/);
+  // The ellipse's size first (its default, 30 mm long, does not fit on the nose), the click, then
+  // along the nose (across it, the mesh reaches cells without a base).
+  await page.selectOption('#procedure', 'ellipse');
+  for (const [name, value] of [['width', 4], ['length', 12]]) {
+    const input = page.locator(`#param-${name}`);
+    await input.fill(String(value));
+    await input.dispatchEvent('change');
+  }
+  await page.click('[data-view="front"]');
+  const at = await screenOf(page, centre.lps);
+  await page.mouse.click(at.x, at.y);
+  await page.waitForSelector('body[data-check="ok"], body[data-check="refused"]', { timeout: 30000 });
+  await page.screenshot({ path: join(out, '6-nose-chart-placed.png') });
+  await checked();
+  const orientation = page.locator('#param-orientation');
+  await orientation.fill('0');
+  await orientation.dispatchEvent('change');
+  await page.waitForFunction(() => window.caps.planner.plan?.frame.orientation_deg === 0);
+  await checked();
+  const p = await plan();
+  assert.equal(p.procedure.parameters.length, 12);
+  assert.equal(p.procedure.parameters.width, 4);
+  assert.ok(Math.abs(p.frame.theta_deg) < 2 && Math.abs(p.frame.z_mm) < 2,
+    `placed on the nose where clicked: chart theta ${p.frame.theta_deg}, z ${p.frame.z_mm}`);
+  assert.match(await page.locator('#check').innerText(), /Can be operated/);
+  await page.click('#simulate');
+  await page.waitForSelector('body[data-simulation="done"], body[data-simulation="failed"]',
+    { timeout: 120000 });
+  assert.equal(await page.evaluate(() => document.body.dataset.simulation), 'done',
+    await page.locator('#result-summary').innerText());
+  const closing = await page.evaluate(() => window.caps.results.rows[0].result.closing_force_n);
+  assert.ok(closing > 0, `the ellipse on the nose closes: ${closing} N`);
+  await page.click('[data-view="plan"]');
+  await page.screenshot({ path: join(out, '7-nose-chart-simulated.png') });
+  log(`on a chart of the side of the nose (caps model chart --at -5,55): an ellipse 12 x 4 mm ` +
+    `clicked at chart theta ${p.frame.theta_deg.toFixed(2)}, z ${p.frame.z_mm.toFixed(2)} closes ` +
+    `with ${closing.toFixed(2)} N`);
 });
 log('passed');

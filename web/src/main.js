@@ -130,8 +130,10 @@ async function main() {
     });
 
   const [model, templates, skinInfo] = await Promise.all([api.model(), api.templates(), api.skin()]);
+  // A local chart (caps model chart) says where it faces: plans on it are at its --at 0,0.
+  const chart = model.source?.chart ? ` · local chart at ${model.source.chart.at}` : '';
   $('model-name').textContent = `${model.source?.path?.split('/').pop() ?? 'model'} · ` +
-    `${model.source?.modality ?? model.source?.kind ?? ''}`;
+    `${model.source?.modality ?? model.source?.kind ?? ''}${chart}`;
   const { skin, thicknessMax } = await loadModelSkin(skinInfo);
   viewA.setSkin(skin.mesh, { pickable: true });
 
