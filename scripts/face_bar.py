@@ -58,7 +58,7 @@ def attempt(caps, model, work, theta, z, length, width, charts):
     tag = f"t{theta}_z{z}".replace("-", "m")
     r = {"theta": theta, "z": z, "chart": False}
     r.update(attempt_on(caps, model, work, tag, f"{theta},{z}", length, width))
-    if r["simulated"] or not charts or not any(
+    if r["simulated"] or not charts or "not operable" in r["message"] or not any(
             k in r["message"] for k in ("cannot represent", "grazing", "undercut")):
         return r
     chart = os.path.join(work, "chart_" + tag)
@@ -77,8 +77,8 @@ def attempt(caps, model, work, theta, z, length, width, charts):
 
 
 COLOURS = [("simulated", "#2e9d4a"), ("simulated on a chart", "#2f6fd0"),
-           ("planned, not simulated", "#f0a030"), ("not operable (the eye)", "#9a9a9a"),
-           ("refused", "#d03a2f")]
+           ("planned, not simulated", "#f0a030"), ("not operable: the eye", "#9a9a9a"),
+           ("not operable: outside the scan", "#d8d8d8"), ("refused", "#d03a2f")]
 
 
 def outcome(r):
@@ -86,31 +86,35 @@ def outcome(r):
         return "simulated on a chart" if r.get("chart") else "simulated"
     if r["planned"]:
         return "planned, not simulated"
-    return "not operable (the eye)" if "not operable" in r["message"] else "refused"
+    if "lies on the eye" in r["message"]:
+        return "not operable: the eye"
+    return "not operable: outside the scan" if "not operable" in r["message"] else "refused"
 
 
 def write_svg(path, out, title):
     """The outcomes over (theta, z): grid points as squares, the 18 points as circles."""
     rows = out["grid"] + out["points"]
     zs = [r["z"] for r in rows]
+    ts = [r["theta"] for r in rows]
     z_lo, z_hi = min(zs) - 10, max(zs) + 10
+    t_lo, t_hi = min(ts) - 10, max(ts) + 10
     sx, sz, left, top = 5.0, 5.0, 60, 40  # px per deg, px per mm, margins
-    w = int(left + 140 * sx + 20)
+    w = int(left + max(140, t_hi - t_lo) * sx + 20)
     h = int(top + (z_hi - z_lo) * sz + 130)
-    X = lambda t: left + (t + 70) * sx
+    X = lambda t: left + (t - t_lo) * sx
     Y = lambda z: top + (z_hi - z) * sz
     colour = dict(COLOURS)
     e = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" '
          f'font-family="sans-serif" font-size="12">',
          f'<rect width="{w}" height="{h}" fill="white"/>',
          f'<text x="{left}" y="20" font-size="14">{title}</text>']
-    for t in range(-60, 61, 30):
+    for t in range(30 * int(t_lo // 30 + 1), int(t_hi) + 1, 30):
         e.append(f'<line x1="{X(t)}" y1="{Y(z_hi)}" x2="{X(t)}" y2="{Y(z_lo)}" stroke="#ddd"/>')
         e.append(f'<text x="{X(t)}" y="{Y(z_lo) + 16}" text-anchor="middle">{t}</text>')
     for z in range(10 * int(z_lo // 10 + 1), int(z_hi) + 1, 20):
-        e.append(f'<line x1="{X(-70)}" y1="{Y(z)}" x2="{X(70)}" y2="{Y(z)}" stroke="#ddd"/>')
+        e.append(f'<line x1="{X(t_lo)}" y1="{Y(z)}" x2="{X(t_hi)}" y2="{Y(z)}" stroke="#ddd"/>')
         e.append(f'<text x="{left - 6}" y="{Y(z) + 4}" text-anchor="end">{z}</text>')
-    e.append(f'<text x="{X(0)}" y="{Y(z_lo) + 32}" text-anchor="middle">theta (deg): 0 = the '
+    e.append(f'<text x="{X(0.5 * (t_lo + t_hi))}" y="{Y(z_lo) + 32}" text-anchor="middle">theta (deg): 0 = the '
              f'face, + = the patient\'s left</text>')
     e.append(f'<text x="14" y="{Y((z_lo + z_hi) / 2)}" transform="rotate(-90 14 '
              f'{Y((z_lo + z_hi) / 2)})" text-anchor="middle">z (mm)</text>')
