@@ -496,7 +496,7 @@ TEST(AutomaticExtent, ShrinksPastOuterSurfaceLayersThatFold) {
   const double full = 3.0 * w.surface.wound_size_mm;
   EXPECT_LT(w.surface.extent_mm, 0.75 * full + 1e-9);
   ASSERT_FALSE(w.continuum.mesh.warnings.empty());
-  EXPECT_NE(w.continuum.mesh.warnings[0].find("folding"), std::string::npos)
+  EXPECT_NE(w.continuum.mesh.warnings[0].find("outer layers from folding"), std::string::npos)
       << w.continuum.mesh.warnings[0];
   // The full extent, given, is refused: the layers do fold there.
   s.extent_mm = full;

@@ -547,12 +547,13 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
   // wound's own first layer does not.
   SurfaceMeshOptions o = surface_options;
   std::exception_ptr failure;  // why the last extent tried could not be meshed
-  bool surface_ok = true;
+  bool surface_ok = true, folded = false;  // folded: a larger extent's surface mesh folded
   try {
     w.surface = mesh_surface(border, model, surface_options);
   } catch (const InvalidParameter&) {
     failure = std::current_exception();
     surface_ok = false;
+    folded = true;
     SurfaceMeshOptions one = surface_options;
     one.extent_mm = surface_options.size_mm;
     w.surface = mesh_surface(border, model, one);  // throws if the wound itself cannot be meshed
@@ -564,8 +565,9 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
     if (extent != full)
       messages.push_back(cat("mesh: the extent was limited to ", std::round(extent * 10) / 10, " mm (",
                              std::round(extent / done.surface.wound_size_mm * 100) / 100,
-                             "x the wound's size) to stay on valid cells of the model (and keep the "
-                             "surface mesh's outer layers from folding); the result "
+                             "x the wound's size) to stay on valid cells of the model",
+                             folded ? " and keep the surface mesh's outer layers from folding" : "",
+                             "; the result "
                              "depends more on the rim condition (docs/mesher.md)"));
     if (!cliff.empty())
       messages.push_back(cat("mesh: a bony rim lies under the mesh at every extent down to the "
@@ -592,6 +594,7 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
       } catch (const InvalidParameter&) {
         failure = std::current_exception();
         surface_ok = false;
+        folded = true;
       }
     }
     if (surface_ok) {
