@@ -25,7 +25,7 @@ __all__ = [
     "Error", "InvalidInput", "InvalidParameter", "IoError", "SolverError", "Cancelled",
     "CapsWarning", "run", "defaults", "verbs", "phantom", "model_from_volume", "model_from_scan",
     "model_info", "plan_new", "plan_check", "plan_templates", "mesh", "simulate", "render",
-    "load_model", "read_result", "model_landmarks", "model_site",
+    "load_model", "read_result", "model_landmarks", "model_site", "model_chart",
 ]
 
 
@@ -189,6 +189,15 @@ def model_site(model, at):
     """The skin point and soft tissue at ``at`` ("THETA,Z" or "glabella+15,20"): theta_deg,
     z_mm, lps, thickness_mm, layers_mm (where measured), flags (``caps model site``)."""
     return run("model site", {"model": _os.fspath(model), "at": at})
+
+
+def model_chart(model, at, output, **fields):
+    """A local chart of a volume-built model (``caps model chart``): the CT measured again on a
+    cylinder whose axis faces the skin at ``at`` ("THETA,Z" or a landmark placement), for plans
+    where the head's cylinder meets the skin edge-on; the point is theta 0, z 0 of the chart.
+    Fields: radius, half_height, normal_radius, n_theta, n_z, series, force."""
+    return run("model chart", {"model": _os.fspath(model), "at": at,
+                               "output": _os.fspath(output)}, **fields)
 
 
 def read_result(result):

@@ -158,3 +158,17 @@ def test_a_solver_error_carries_where_it_failed(work, cli):
     assert "Jacobian determinant" in str(e.value)
     c = cli("solve", box, "-o", work / "inverted_cli")
     assert c.returncode == 1 and str(e.value) in c.stdout + c.stderr
+
+
+def test_a_local_chart_faces_the_skin_at_its_point(model, work):
+    # The chart's centre (theta 0, z 0) is the parent's skin point at "20,60", its axis behind it.
+    chart = work / "chart"
+    r = caps.model_chart(model, "20,60", chart, radius=50, force=True)
+    source = r["source"]["chart"]
+    assert source["at"] == "20,60" and source["radius_mm"] == 50
+    parent = caps.model_site(model, "20,60")
+    centre = caps.model_site(chart, "0,0")
+    gap = sum((a - b) ** 2 for a, b in zip(parent["lps"], centre["lps"])) ** 0.5
+    assert gap < 1.5, gap  # the phantom's 2.5 mm voxels
+    with pytest.raises(caps.InvalidInput, match="itself a chart"):
+        caps.model_chart(chart, "0,0", work / "chart2")
