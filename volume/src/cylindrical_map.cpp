@@ -994,12 +994,13 @@ void confirm_eyes(CylindricalMaps& maps) {
     for (int j = 0; j < g.n_theta; ++j) {
       if (!keep[g.index(j, k)]) continue;
       const double r = std::max(1.0f, maps.r_skin[g.index(j, k)]);
-      const int dj = static_cast<int>(std::ceil(kEyeMarginMm / (r * dtheta)));
+      const int dj =
+          std::min(g.n_theta / 2, static_cast<int>(std::ceil(kEyeMarginMm / (r * dtheta))));
       const int dk = static_cast<int>(std::ceil(kEyeMarginMm / g.dz_mm));
       for (int b = std::max(0, k - dk); b <= std::min(g.n_z - 1, k + dk); ++b)
         for (int a = -dj; a <= dj; ++a) {
           const double x = a * r * dtheta, y = (b - k) * g.dz_mm;
-          const std::size_t d = g.index((j + a + g.n_theta) % g.n_theta, b);
+          const std::size_t d = g.index(((j + a) % g.n_theta + g.n_theta) % g.n_theta, b);
           if (x * x + y * y <= kEyeMarginMm * kEyeMarginMm && maps.measured_skin[d])
             maps.flags[d] |= kEye;
         }
