@@ -280,7 +280,21 @@ struct PlannerServer::Impl {
   std::atomic<int> next_id{0};
   std::atomic<std::uint64_t> latest_simulation{0};
   std::mutex simulation_mutex;  // kMaxConcurrentSimulations = 1
-  std::shared_ptr<const PatientModel> model;  // loaded once (app::loaded_model)
+  // The model the requests work on: the one the server was started with, or a local chart of it
+  // made through POST /api/chart (docs/planner.md). Requests take a copy of the pointer, so a
+  // switch does not change a request already running.
+  struct Served {
+    std::string dir;                            // absolute
+    std::shared_ptr<const PatientModel> model;  // loaded once (app::loaded_model)
+    int generation = 0;                         // its skin files: work/skin/<generation>/
+  };
+  std::shared_ptr<const Served> served, head;   // head: the model the server was started with
+  std::mutex served_mutex;
+  std::map<int, std::shared_ptr<const Served>> result_models;  // by result id (served_mutex)
+  std::shared_ptr<const Served> current() {
+    std::lock_guard<std::mutex> lock(served_mutex);
+    return served;
+  }
   std::unique_ptr<ProgressBoard> progress;
   std::mutex views_mutex;   // writing the skin's .glb files (once each)
   std::mutex export_mutex;  // rendering a result's export (once each)
@@ -339,7 +353,7 @@ struct PlannerServer::Impl {
                                ": give a template name "
                                "(GET /api/templates); the server opens no procedure files"));
     }
-    j["model"] = options.model_dir;
+    j["model"] = current()->dir;
     j["output"] = (request_folder() / "plan.json").string();
     j["force"] = true;
     const auto request = app::read_request<app::PlanNewRequest>(j.dump(), source);
@@ -353,7 +367,7 @@ struct PlannerServer::Impl {
     write_text_atomic(plan, body);
     app::PlanCheckRequest request;
     request.plan = plan.string();
-    request.model = options.model_dir;
+    request.model = current()->dir;
     return app::to_json(app::run_plan_check(request));
   }
 
@@ -372,7 +386,12 @@ struct PlannerServer::Impl {
     refuse_server_keys(options_json, {"model", "plan", "output", "force"}, source);
     const fs::path plan = request_folder() / "plan.json";
     const int id = ++next_id;
-    options_json["model"] = options.model_dir;
+    const std::shared_ptr<const Served> on = current();
+    {
+      std::lock_guard<std::mutex> lock(served_mutex);
+      result_models[id] = on;
+    }
+    options_json["model"] = on->dir;
     options_json["plan"] = plan.string();
     options_json["output"] = (work / "results" / std::to_string(id)).string();
     const auto request = app::read_request<app::SimulateRequest>(options_json.dump(), source);
@@ -417,15 +436,77 @@ struct PlannerServer::Impl {
   // The model's skin as a .glb (written once into the work folder) and its JSON description.
   json model_skin(detail::SkinColouring colouring) {
     const std::string name = colouring == detail::SkinColouring::Skin ? "skin" : "thickness";
-    const fs::path glb = work / "skin" / (name + ".glb"), info = work / "skin" / (name + ".json");
+    const std::shared_ptr<const Served> on = current();
+    const fs::path folder = skin_folder(*on);
+    const fs::path glb = folder / (name + ".glb"), info = folder / (name + ".json");
     std::lock_guard<std::mutex> lock(views_mutex);
     if (!fs::is_regular_file(info)) {
-      fs::create_directories(work / "skin");
-      write_text_atomic(info, detail::write_model_skin_glb(*model, colouring, glb));
+      fs::create_directories(folder);
+      write_text_atomic(info, detail::write_model_skin_glb(*on->model, colouring, glb));
     }
     json j = json::parse(read_file(info));
     j["url"] = cat("/api/skin/", name, ".glb");
     return j;
+  }
+
+  fs::path skin_folder(const Served& on) const {
+    return work / "skin" / std::to_string(on.generation);
+  }
+
+  // The model a result was simulated on (the current one for a result the server did not make).
+  std::shared_ptr<const Served> model_of(const std::string& id) {
+    std::lock_guard<std::mutex> lock(served_mutex);
+    const auto it = result_models.find(std::atoi(id.c_str()));
+    return it != result_models.end() ? it->second : served;
+  }
+
+  // POST /api/chart {"at": "THETA,Z"} or {"at_xyz": "X,Y,Z"} on the started model: makes a local
+  // chart of it there (caps model chart) and serves the chart from then on; {"head": true} goes
+  // back to the started model. Answers the served model's model.json.
+  std::string chart(const std::string& body) {
+    const std::string source = "chart request";
+    const json j = parse_object(body, source);
+    for (const auto& [key, value] : j.items())
+      if (key != "at" && key != "at_xyz" && key != "head")
+        throw InvalidInput(cat(source, ": unknown key \"", key, "\" (give \"at\", \"at_xyz\" "
+                               "or \"head\")"));
+    std::shared_ptr<Served> next;
+    if (j.value("head", false)) {
+      std::lock_guard<std::mutex> lock(served_mutex);
+      served = head;
+      return read_file(fs::path(head->dir) / "model.json");
+    }
+    app::ChartRequest r;
+    r.model = head->dir;
+    if (j.contains("at") && j["at"].is_string()) {
+      r.at = j["at"];
+    } else if (j.contains("at_xyz") && j["at_xyz"].is_string()) {
+      const std::string text = j["at_xyz"];
+      Eigen::Vector3d p;
+      char c1 = 0, c2 = 0;
+      std::istringstream in(text);
+      if (!(in >> p[0] >> c1 >> p[1] >> c2 >> p[2]) || c1 != ',' || c2 != ',' || !p.allFinite() ||
+          (in >> std::ws, !in.eof()))
+        throw InvalidInput(cat(source, ": \"at_xyz\" \"", text, "\": give X,Y,Z in LPS mm"));
+      const CylindricalPoint c = head->model->to_cylindrical(p);
+      r.at = cat(c.theta_deg, ",", c.z_mm);
+    } else {
+      throw InvalidInput(cat(source, ": give \"at\" (\"THETA,Z\" on the started model) or "
+                             "\"at_xyz\" (\"X,Y,Z\", LPS mm)"));
+    }
+    const int n = ++next_id;
+    r.output = (work / "charts" / std::to_string(n)).string();
+    fs::create_directories(work / "charts");
+    app::run_chart(r, reporter);
+    next = std::make_shared<Served>();
+    next->dir = fs::absolute(r.output).lexically_normal().string();
+    next->model = app::loaded_model(next->dir);
+    next->generation = n;
+    {
+      std::lock_guard<std::mutex> lock(served_mutex);
+      served = next;
+    }
+    return read_file(fs::path(next->dir) / "model.json");
   }
 
   // A simulation's skin before and after as .glb files (written once) and their description.
@@ -436,7 +517,7 @@ struct PlannerServer::Impl {
     const fs::path info = dir / "view.json";
     std::lock_guard<std::mutex> lock(views_mutex);
     if (!fs::is_regular_file(info)) {
-      detail::ResultView view = detail::write_result_skin_glbs(*model, dir);
+      detail::ResultView view = detail::write_result_skin_glbs(*model_of(id)->model, dir);
       write_text_atomic(info, view.json);
       // tension.glb after the answer: the page draws the skin first (GET .../tension.glb waits).
       tension_files[id] = std::async(std::launch::async, std::move(view.write_tension)).share();
@@ -458,7 +539,7 @@ struct PlannerServer::Impl {
     if (!fs::is_regular_file(info)) {
       app::RenderRequest r;
       r.result = dir.string();
-      r.model = options.model_dir;
+      r.model = model_of(id)->dir;
       r.output = (dir / "export").string();
       r.plan = (dir / "plan.json").string();
       r.gltf = true;
@@ -510,21 +591,23 @@ struct PlannerServer::Impl {
           return httplib::Server::HandlerResponse::Handled;
         }));
 
-    const fs::path model_dir(options.model_dir);
-    http.Get("/api/model", guarded([model_dir](const httplib::Request&, httplib::Response& res) {
-               send_file(res, file_under(model_dir, "model.json"));
+    http.Get("/api/model", guarded([this](const httplib::Request&, httplib::Response& res) {
+               send_file(res, file_under(current()->dir, "model.json"));
              }));
+    http.Post("/api/chart", guarded([this](const httplib::Request& req, httplib::Response& res) {
+                send_json(res, chart(req.body));
+              }));
     // The model's anatomical landmarks (docs/landmarks.md), found without writing model.json.
     http.Get("/api/landmarks",
-             guarded([model_dir](const httplib::Request&, httplib::Response& res) {
+             guarded([this](const httplib::Request&, httplib::Response& res) {
                app::LandmarksRequest r;
-               r.model = model_dir.string();
+               r.model = current()->dir;
                r.no_write = true;
                send_json(res, app::to_json(app::run_model_landmarks(r)));
              }));
     http.Get(R"(/api/model/(.+))",
-             guarded([model_dir](const httplib::Request& req, httplib::Response& res) {
-               send_file(res, file_under(model_dir, req.matches[1]));
+             guarded([this](const httplib::Request& req, httplib::Response& res) {
+               send_file(res, file_under(current()->dir, req.matches[1]));
              }));
     http.Get("/api/skin", guarded([this](const httplib::Request&, httplib::Response& res) {
                send_json(res, json{{"skin", model_skin(detail::SkinColouring::Skin)},
@@ -535,7 +618,7 @@ struct PlannerServer::Impl {
              guarded([this](const httplib::Request& req, httplib::Response& res) {
                const bool skin = req.matches[1] == "skin";
                model_skin(skin ? detail::SkinColouring::Skin : detail::SkinColouring::Thickness);
-               send_file(res, work / "skin" / (skin ? "skin.glb" : "thickness.glb"));
+               send_file(res, skin_folder(*current()) / (skin ? "skin.glb" : "thickness.glb"));
              }));
     http.Get("/api/progress", guarded([this](const httplib::Request&, httplib::Response& res) {
                send_json(res, progress->snapshot().dump());
@@ -543,7 +626,7 @@ struct PlannerServer::Impl {
     http.Post("/api/plan/lines",
               guarded([this](const httplib::Request& req, httplib::Response& res) {
                 send_json(res, detail::plan_lines_json(plan_of(req.body, "plan lines request"),
-                                                       *model));
+                                                       *current()->model));
               }));
     http.Get(R"(/api/results/([0-9]+)/view)",
              guarded([this](const httplib::Request& req, httplib::Response& res) {
@@ -597,10 +680,13 @@ PlannerServer::PlannerServer(ServerOptions options, Reporter* reporter)
     throw InvalidInput(cat("--port ", s.options.port, ": give 1..65535 (0: any free port)"));
   // Loaded once and kept (the CLI's message for a missing or broken model); every request on
   // this model reuses it while its files are unchanged.
-  s.model = app::loaded_model(s.options.model_dir);
+  auto head = std::make_shared<Impl::Served>();
+  head->model = app::loaded_model(s.options.model_dir);
   s.progress = std::make_unique<ProgressBoard>(s.reporter);
   // Plans name their model: absolute, so that a plan saved from the page works from any folder.
   s.options.model_dir = fs::absolute(s.options.model_dir).lexically_normal().string();
+  head->dir = s.options.model_dir;
+  s.head = s.served = head;
   if (s.options.web_root.empty()) {
     s.web = default_web_root();
     s.placeholder = s.web == fs::path(CAPS_WEB_DIR);

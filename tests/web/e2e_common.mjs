@@ -39,9 +39,10 @@ function serve(caps, model, webRoot) {
 }
 
 /**
- * Serves `model` and runs `body({page, url, errors, foreign})` in chromium on the opened page
- * (not yet ready); then checks that nothing was fetched from elsewhere and the page had no error,
- * and stops the browser and the server.
+ * Serves `model` and runs `body({page, url, allow})` in chromium on the opened page (not yet
+ * ready); then checks that nothing was fetched from elsewhere and the page had no error but those
+ * the body expects (`allow(regexp)`: e.g. the browser's log line for a refusal the test asks
+ * for), and stops the browser and the server.
  */
 export async function withPlanner({ caps, model, webRoot, log }, body) {
   const { server, url } = await serve(caps, model, webRoot);
@@ -66,9 +67,10 @@ export async function withPlanner({ caps, model, webRoot, log }, body) {
     page.on('request', (r) => !r.url().startsWith(url) && !r.url().startsWith('blob:') &&
       !r.url().startsWith('data:') && foreign.push(r.url()));
     await page.goto(url);
-    await body({ page, url });
+    const allowed = [];
+    await body({ page, url, allow: (re) => allowed.push(re) });
     if (foreign.length) throw new Error(`requests outside the server: ${foreign.join(', ')}`);
-    const real = errors.filter((e) => !/WebGL|GPU|GL_/i.test(e));
+    const real = errors.filter((e) => !/WebGL|GPU|GL_/i.test(e) && !allowed.some((re) => re.test(e)));
     if (real.length) throw new Error(`errors on the page: ${real.join('; ')}`);
   } finally {
     await browser.close();

@@ -61,6 +61,9 @@ export const api = {
   resultView: (id) => getJson(`/api/results/${id}/view`),
   resultFile: (id, file) => getJson(`/api/results/${id}/${file}`),
   progress: () => getJson('/api/progress'),
+  /** caps model chart on the started model at {at} or {at_xyz}, served from then on; {head: true}
+   * serves the started model again. Answers the served model's model.json. */
+  chart: (request) => postJson('/api/chart', request),
   /** caps render of a result (pictures, tension map, skin.glb): {files: [{name, url}], render}. */
   resultExport: (id) => postJson(`/api/results/${id}/export`, {}),
 };

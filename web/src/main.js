@@ -134,6 +134,12 @@ async function main() {
   const chart = model.source?.chart ? ` · local chart at ${model.source.chart.at}` : '';
   $('model-name').textContent = `${model.source?.path?.split('/').pop() ?? 'model'} · ` +
     `${model.source?.modality ?? model.source?.kind ?? ''}${chart}`;
+  // On a chart the server made (POST /api/chart), the way back to the whole head.
+  $('chart-back').hidden = !model.source?.chart;
+  $('chart-back').addEventListener('click', async () => {
+    await api.chart({ head: true });
+    location.reload();
+  });
   const { skin, thicknessMax } = await loadModelSkin(skinInfo);
   viewA.setSkin(skin.mesh, { pickable: true });
 
@@ -171,6 +177,9 @@ async function main() {
     },
     onCheck: (plan, message, state) => {
       showCheck(plan, message, state);
+      // Refused where the head's model cannot represent the skin: offer a local chart there.
+      $('chart-offer').hidden = plan !== null || !/cannot represent/.test(message ?? '') ||
+        Boolean(model.source?.chart);
       showSutures(planner);
       $('simulate').disabled = !plan;
       $('save').disabled = !plan;
@@ -192,6 +201,21 @@ async function main() {
     onPlanChanged: () => results.showPlanning(),
   });
   showLandmarks(planner);
+  $('chart-here').addEventListener('click', async () => {
+    const s = planner.state;
+    const request = s?.at ? { at: s.at } : { at_xyz: s?.at_xyz };
+    $('chart-here').disabled = true;
+    document.body.dataset.chart = 'making';
+    status('Measuring the CT again on a local chart that faces the skin here...');
+    try {
+      await api.chart(request);
+      location.reload();
+    } catch (e) {
+      $('chart-here').disabled = false;
+      document.body.dataset.chart = 'failed';
+      status(e.message);
+    }
+  });
   const onParameter = (name, value) =>
     name === 'orientation' ? planner.setOrientation(value) : planner.setParameter(name, value);
   // The panel for the procedure `name` (a template, the free incision, or null: a loaded plan).
