@@ -837,3 +837,39 @@ TEST(LoadedModel, IsReadOnceAndAgainWhenItsFilesChange) {
   ASSERT_FALSE(load_message.empty());
   EXPECT_EQ(message_of([&] { app::loaded_model(model); }), load_message);
 }
+
+TEST_F(ServerTest, ALocalChartIsMadeServedAndLeft) {
+  // Bad requests: 400 with the reason, and the model served is still the started one.
+  const auto unknown = post("/api/chart", R"({"where": "here"})");
+  ASSERT_TRUE(unknown);
+  EXPECT_EQ(unknown->status, 400);
+  EXPECT_NE(error_of(unknown).find("unknown key"), std::string::npos) << error_of(unknown);
+  const auto none = post("/api/chart", "{}");
+  EXPECT_EQ(none->status, 400);
+  const auto garbled = post("/api/chart", R"({"at_xyz": "1,2"})");
+  EXPECT_EQ(garbled->status, 400);
+  EXPECT_NE(error_of(garbled).find("X,Y,Z"), std::string::npos) << error_of(garbled);
+  EXPECT_FALSE(json::parse(get("/api/model")->body).at("source").contains("chart"));
+
+  // A chart at (20, 60) of the started model: made, answered and served from then on; plans are
+  // made on it (theta 0, z 0 is that skin point); the head again with {"head": true}.
+  const auto made = post("/api/chart", R"({"at": "20,60"})");
+  ASSERT_TRUE(made);
+  ASSERT_EQ(made->status, 200) << made->body;
+  EXPECT_EQ(json::parse(made->body).at("source").at("chart").at("at"), "20,60");
+  EXPECT_EQ(json::parse(get("/api/model")->body).at("source").at("chart").at("at"), "20,60");
+  const auto skin = get("/api/skin");
+  ASSERT_EQ(skin->status, 200);
+  const auto planned = post("/api/plan/new",
+                            R"({"procedure": "ellipse", "at": "0,0", "parameters": {"length": 12, "width": 4}})");
+  ASSERT_EQ(planned->status, 200) << planned->body;
+  const json plan = json::parse(planned->body);
+  EXPECT_NEAR(plan.at("frame").at("theta_deg").get<double>(), 0.0, 1e-6);
+  EXPECT_NE(plan.at("model").get<std::string>().find("charts"), std::string::npos);
+  const auto back = post("/api/chart", R"({"head": true})");
+  ASSERT_EQ(back->status, 200);
+  EXPECT_FALSE(json::parse(get("/api/model")->body).at("source").contains("chart"));
+  EXPECT_EQ(json::parse(get("/api/model")->body).at("content_hash"),
+            json::parse(slurp(fs::path(kModel) / "model.json")).at("content_hash"));
+  expect_still_serving();
+}
