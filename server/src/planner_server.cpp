@@ -19,6 +19,7 @@
 #include <atomic>
 #include <cctype>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <fstream>
 #include <functional>
@@ -489,7 +490,8 @@ struct PlannerServer::Impl {
           (in >> std::ws, !in.eof()))
         throw InvalidInput(cat(source, ": \"at_xyz\" \"", text, "\": give X,Y,Z in LPS mm"));
       const CylindricalPoint c = head->model->to_cylindrical(p);
-      r.at = cat(c.theta_deg, ",", c.z_mm);
+      // To 0.01 deg and 0.01 mm (a few micrometres on the skin), for a readable "at".
+      r.at = cat(std::round(c.theta_deg * 100) / 100, ",", std::round(c.z_mm * 100) / 100);
     } else {
       throw InvalidInput(cat(source, ": give \"at\" (\"THETA,Z\" on the started model) or "
                              "\"at_xyz\" (\"X,Y,Z\", LPS mm)"));
