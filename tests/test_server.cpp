@@ -857,7 +857,9 @@ TEST_F(ServerTest, ALocalChartIsMadeServedAndLeft) {
   ASSERT_TRUE(made);
   ASSERT_EQ(made->status, 200) << made->body;
   EXPECT_EQ(json::parse(made->body).at("source").at("chart").at("at"), "20,60");
-  EXPECT_EQ(json::parse(get("/api/model")->body).at("source").at("chart").at("at"), "20,60");
+  const json served = json::parse(get("/api/model")->body);
+  EXPECT_EQ(served.at("source").at("chart").at("at"), "20,60");
+  EXPECT_EQ(served.value("made_here", false), true);
   const auto skin = get("/api/skin");
   ASSERT_EQ(skin->status, 200);
   const auto planned = post("/api/plan/new",
@@ -869,6 +871,7 @@ TEST_F(ServerTest, ALocalChartIsMadeServedAndLeft) {
   const auto back = post("/api/chart", R"({"head": true})");
   ASSERT_EQ(back->status, 200);
   EXPECT_FALSE(json::parse(get("/api/model")->body).at("source").contains("chart"));
+  EXPECT_FALSE(json::parse(get("/api/model")->body).contains("made_here"));
   EXPECT_EQ(json::parse(get("/api/model")->body).at("content_hash"),
             json::parse(slurp(fs::path(kModel) / "model.json")).at("content_hash"));
   expect_still_serving();

@@ -593,8 +593,14 @@ struct PlannerServer::Impl {
           return httplib::Server::HandlerResponse::Handled;
         }));
 
+    // model.json of the served model; a chart made through POST /api/chart also says so
+    // ("made_here": the page offers the way back to the started model).
     http.Get("/api/model", guarded([this](const httplib::Request&, httplib::Response& res) {
-               send_file(res, file_under(current()->dir, "model.json"));
+               const std::shared_ptr<const Served> on = current();
+               if (on == head) return send_file(res, file_under(on->dir, "model.json"));
+               json j = json::parse(read_file(file_under(on->dir, "model.json")));
+               j["made_here"] = true;
+               send_json(res, j.dump(2));
              }));
     http.Post("/api/chart", guarded([this](const httplib::Request& req, httplib::Response& res) {
                 send_json(res, chart(req.body));

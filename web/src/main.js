@@ -135,7 +135,7 @@ async function main() {
   $('model-name').textContent = `${model.source?.path?.split('/').pop() ?? 'model'} · ` +
     `${model.source?.modality ?? model.source?.kind ?? ''}${chart}`;
   // On a chart the server made (POST /api/chart), the way back to the whole head.
-  $('chart-back').hidden = !model.source?.chart;
+  $('chart-back').hidden = !model.made_here;
   $('chart-back').addEventListener('click', async () => {
     await api.chart({ head: true });
     location.reload();
