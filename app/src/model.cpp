@@ -19,6 +19,7 @@
 #include "numbers.hpp"
 #include "model_result.hpp"
 #include "output_check.hpp"
+#include "skin_place.hpp"
 
 CAPS_APP_REQUEST_JSON(caps::app::FromVolumeRequest)
 CAPS_APP_REQUEST_JSON(caps::app::FromScanRequest)
@@ -143,19 +144,6 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
 
 // ---- chart --------------------------------------------------------------------------------
 
-namespace {
-
-// The place `at` names on `model` (THETA,Z or a landmark placement), as (theta deg, z mm).
-Eigen::Vector2d resolve_at(const std::string& model_dir, const PatientModel& model,
-                           const std::string& at) {
-  if (const auto placement = plan::parse_landmark_placement(at))
-    return plan::resolve_placement(model, plan::model_landmarks(model_dir, model), *placement);
-  const auto tz = parse_numbers<2>(at, "--at", "THETA,Z in degrees and mm, e.g. --at -8,50");
-  return {tz[0], tz[1]};
-}
-
-}  // namespace
-
 ModelResult run_chart(const ChartRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   { OutputDirectory probe(r.output, r.force); }
@@ -178,9 +166,15 @@ ModelResult run_chart(const ChartRequest& r, Reporter* reporter) {
     throw InvalidInput(cat(r.model, ": its bone came from a separate mask (--bone-mask), which a "
                            "chart cannot reuse yet; build the chart's model with caps model "
                            "from-volume --axis-origin/--axis-dir and the mask"));
-  const Eigen::Vector2d tz = resolve_at(r.model, parent, r.at);
+  if (r.at.empty() == r.at_xyz.empty())
+    throw InvalidInput("give the point with --at THETA,Z, --at LANDMARK+LEFT,UP or --at-xyz X,Y,Z");
+  Eigen::Vector2d tz = resolve_at(r.model, parent, r.at, r.at_xyz);
+  // An LPS point is taken to 0.01 deg and 0.01 mm (a few micrometres on the skin), so that the
+  // chart is named readably ("-5,55") and made again from that name alike.
+  if (r.at.empty()) tz = {round_to(tz[0], 2), round_to(tz[1], 2)};
+  const std::string at = !r.at.empty() ? r.at : cat(tz[0], ",", tz[1]);
   if (!parent.has_z(tz[1]))
-    throw InvalidInput(cat("--at ", r.at, ": z ", tz[1], " mm lies outside the model (",
+    throw InvalidInput(cat("--at ", at, ": z ", tz[1], " mm lies outside the model (",
                            parent.grid().z0_mm, " .. ", parent.grid().z_mm(parent.grid().n_z - 1),
                            " mm)"));
   const TriMesh skin = read_ply(fs::path(r.model) / model_file::kSkinMesh);
@@ -227,7 +221,7 @@ ModelResult run_chart(const ChartRequest& r, Reporter* reporter) {
   m.chart_json =
       json{{"parent", r.model},
            {"parent_content_hash", parent.content_hash()},
-           {"at", r.at},
+           {"at", at},
            {"parent_theta_deg", tz[0]},
            {"parent_z_mm", tz[1]},
            {"point_lps", vec(frame.point)},
@@ -337,16 +331,9 @@ SiteResult run_model_site(const SiteRequest& r, Reporter*) {
   SiteResult out;
   out.model = r.model;
   out.at = r.at;
-  if (const auto placement = plan::parse_landmark_placement(r.at)) {
-    const Eigen::Vector2d tz =
-        plan::resolve_placement(model, plan::model_landmarks(r.model, model), *placement);
-    out.theta_deg = tz[0];
-    out.z_mm = tz[1];
-  } else {
-    const auto tz = parse_numbers<2>(r.at, "--at", "THETA,Z in degrees and mm, e.g. --at 0,95");
-    out.theta_deg = tz[0];
-    out.z_mm = tz[1];
-  }
+  const Eigen::Vector2d tz = resolve_at(r.model, model, r.at);
+  out.theta_deg = tz[0];
+  out.z_mm = tz[1];
   const auto& maps = model.maps();
   out.lps = model.skin_point(out.theta_deg, out.z_mm);
   out.thickness_mm = model.thickness_normal(out.theta_deg, out.z_mm);

@@ -23,6 +23,7 @@
 #include "json_fields.hpp"
 #include "numbers.hpp"
 #include "output_check.hpp"
+#include "skin_place.hpp"
 
 CAPS_APP_REQUEST_JSON(caps::app::PlanNewRequest)
 CAPS_APP_REQUEST_JSON(caps::app::PlanCheckRequest)
@@ -178,25 +179,9 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
                                         : plan::layout_procedure(r.procedure, r.parameters);
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
-  double theta = 0, z = 0;
   std::optional<plan::LandmarkPlacement> placement;
-  if (!r.at.empty()) placement = plan::parse_landmark_placement(r.at);
-  if (placement) {
-    const Eigen::Vector2d tz =
-        plan::resolve_placement(model, plan::model_landmarks(r.model, model), *placement);
-    theta = tz[0];
-    z = tz[1];
-  } else if (!r.at.empty()) {
-    const auto tz = parse_numbers<2>(r.at, "--at", "THETA,Z in degrees and mm, e.g. --at 0,95");
-    theta = tz[0];
-    z = tz[1];
-  } else {
-    const auto t = parse_numbers<3>(r.at_xyz, "--at-xyz", "an LPS point X,Y,Z in mm");
-    const CylindricalPoint cp = model.to_cylindrical({t[0], t[1], t[2]});
-    theta = cp.theta_deg;
-    z = cp.z_mm;
-  }
-  plan::Plan p = plan::place_procedure(proc, model, theta, z, r.orientation);
+  const Eigen::Vector2d tz = resolve_at(r.model, model, r.at, r.at_xyz, &placement);
+  plan::Plan p = plan::place_procedure(proc, model, tz[0], tz[1], r.orientation);
   p.placement = placement;
   p.model = r.model;
   p.model_hash = model.content_hash();

@@ -471,36 +471,20 @@ struct PlannerServer::Impl {
       if (key != "at" && key != "at_xyz" && key != "head")
         throw InvalidInput(cat(source, ": unknown key \"", key, "\" (give \"at\", \"at_xyz\" "
                                "or \"head\")"));
-    std::shared_ptr<Served> next;
-    if (j.value("head", false)) {
+    if (j.contains("head") && j["head"] == true) {
       std::lock_guard<std::mutex> lock(served_mutex);
       served = head;
       return read_file(fs::path(head->dir) / "model.json");
     }
-    app::ChartRequest r;
-    r.model = head->dir;
-    if (j.contains("at") && j["at"].is_string()) {
-      r.at = j["at"];
-    } else if (j.contains("at_xyz") && j["at_xyz"].is_string()) {
-      const std::string text = j["at_xyz"];
-      Eigen::Vector3d p;
-      char c1 = 0, c2 = 0;
-      std::istringstream in(text);
-      if (!(in >> p[0] >> c1 >> p[1] >> c2 >> p[2]) || c1 != ',' || c2 != ',' || !p.allFinite() ||
-          (in >> std::ws, !in.eof()))
-        throw InvalidInput(cat(source, ": \"at_xyz\" \"", text, "\": give X,Y,Z in LPS mm"));
-      const CylindricalPoint c = head->model->to_cylindrical(p);
-      // To 0.01 deg and 0.01 mm (a few micrometres on the skin), for a readable "at".
-      r.at = cat(std::round(c.theta_deg * 100) / 100, ",", std::round(c.z_mm * 100) / 100);
-    } else {
-      throw InvalidInput(cat(source, ": give \"at\" (\"THETA,Z\" on the started model) or "
-                             "\"at_xyz\" (\"X,Y,Z\", LPS mm)"));
-    }
     const int n = ++next_id;
-    r.output = (work / "charts" / std::to_string(n)).string();
+    json request = j;
+    request.erase("head");
+    request["model"] = head->dir;
+    request["output"] = (work / "charts" / std::to_string(n)).string();
+    const auto r = app::read_request<app::ChartRequest>(request.dump(), source);
     fs::create_directories(work / "charts");
     app::run_chart(r, reporter);
-    next = std::make_shared<Served>();
+    auto next = std::make_shared<Served>();
     next->dir = fs::absolute(r.output).lexically_normal().string();
     next->model = app::loaded_model(next->dir);
     next->generation = n;

@@ -92,7 +92,7 @@ ModelResult run_from_volume(const FromVolumeRequest& request, Reporter* reporter
 /// skin edge-on (the side of the nose) or behind other skin. The point becomes theta 0, z 0 of
 /// the chart.
 struct ChartRequest {
-  std::string model, at, output, series;
+  std::string model, at, at_xyz, output, series;
   double radius = 60.0;         ///< mm from the chart's axis to the point
   double half_height = 30.0;    ///< mm of the chart's axis on either side of the point
   double normal_radius = 5.0;   ///< mm: the skin's normal is averaged over this radius
@@ -104,8 +104,9 @@ struct ChartRequest {
     v(r.model, {"model", "a model directory built by caps model from-volume",
                 FieldKind::Positional, "MODEL_DIR"});
     v(r.at, {"at", "the point the chart faces: THETA,Z (deg, mm) of the model or a landmark and "
-                   "mm to the patient's left and up along the skin: pronasale-8,5",
-             FieldKind::Required});
+                   "mm to the patient's left and up along the skin: pronasale-8,5"});
+    v(r.at_xyz, {"at_xyz", "instead of --at: the point as an LPS point X,Y,Z (mm), taken to the "
+                           "skin along the model's ray through it"});
     v(r.output, {"output", "the chart's model directory to create", FieldKind::Required,
                  "-o,--output"});
     v(r.series, {"series", "DICOM: the SeriesInstanceUID the model was built from, if it was not "

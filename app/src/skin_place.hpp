@@ -1,0 +1,36 @@
+#pragma once
+// Where a request's "at" (or "at_xyz") puts a point on a model, for app/src only: "THETA,Z", a
+// landmark placement ("glabella+15,20") or an LPS point, as caps plan new, caps model site and
+// caps model chart read them.
+
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+
+#include "caps/plan/placement.hpp"
+#include "caps/surface/patient_model.hpp"
+#include "numbers.hpp"
+
+namespace caps::app {
+
+/// (theta deg, z mm) of `at` on `model` (read from `model_dir`, whose landmarks a placement
+/// uses), or with `at` empty of the LPS point `at_xyz` ("X,Y,Z" mm); `placement` receives the
+/// landmark placement when `at` is one. Throws InvalidInput for text that is none of these, or a
+/// landmark the model does not have.
+inline Eigen::Vector2d resolve_at(const std::string& model_dir, const PatientModel& model,
+                                  const std::string& at, const std::string& at_xyz = "",
+                                  std::optional<plan::LandmarkPlacement>* placement = nullptr) {
+  if (at.empty()) {
+    const auto t = parse_numbers<3>(at_xyz, "--at-xyz", "an LPS point X,Y,Z in mm");
+    const CylindricalPoint c = model.to_cylindrical({t[0], t[1], t[2]});
+    return {c.theta_deg, c.z_mm};
+  }
+  if (const auto p = plan::parse_landmark_placement(at)) {
+    if (placement) *placement = p;
+    return plan::resolve_placement(model, plan::model_landmarks(model_dir, model), *p);
+  }
+  const auto tz = parse_numbers<2>(at, "--at", "THETA,Z in degrees and mm, e.g. --at 0,95");
+  return {tz[0], tz[1]};
+}
+
+}  // namespace caps::app
