@@ -546,6 +546,55 @@ TEST(ContinuumMesher, UnderminingFreesTheBaseNearTheWoundAndMakesTheForceMeshInd
   EXPECT_THROW(run(2.0, -1.0), InvalidInput);
 }
 
+TEST(ContinuumMesher, TheWoundsFloorSlidesAlongASlopedBaseAndTheForceSettles) {
+  // A 20 x 6 mm ellipse across a base that slopes along z: the tissue thickens 0.2 mm per mm
+  // upwards, so the bone under it is a cone r = 64 - 0.2 (z - 40) inside the 70 mm skin, and the
+  // columns (along the cylinder's rays) are not normal to it. The freed base slides along the
+  // cone's normal (e_r + 0.2 e_z) / |.|. The wound's floor closes over the base: its two lips lie
+  // 1.2 mm apart in depth, and before the floor slid (its sutured nodes were free, their
+  // neighbours slid across the rays) the lips met through a kink that stiffened without bound
+  // as the mesh was refined (linear force 1.84 / 1.90 / 1.91 N at 2 / 1.25 / 0.8 mm; now
+  // 1.78 / 1.81 / 1.79 N).
+  const PatientModel model = cylinder([](double, double z) { return 6.0 + 0.2 * (z - 40.0); });
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0.0, 40.0, 90.0);
+  auto run = [&](double size) {
+    SimulateOptions o;
+    o.surface.size_mm = size;
+    o.surface.extent_mm = 20.0;
+    o.continuum.undermine_mm = 8.0;
+    return simulate(model, p, o);
+  };
+  const Simulation coarse = run(2.0);
+  const Mesh& m = coarse.wound.continuum.mesh;
+  const double nz = 0.2 / std::sqrt(1.04);
+  ASSERT_GT(m.sliding.size(), 50u);
+  for (const auto& s : m.sliding) {
+    const Eigen::Vector3d x = m.nodes.row(s.node).transpose();
+    const Eigen::Vector3d radial = Eigen::Vector3d(x.x(), x.y(), 0).normalized();
+    EXPECT_NEAR(s.normal.z(), nz, 0.01) << "node " << s.node;
+    EXPECT_NEAR(s.normal.dot(radial), 1 / std::sqrt(1.04), 0.01) << "node " << s.node;
+  }
+  // The sutured floor slides too: one spring for each pair of its lips.
+  std::set<int> sutured, sliding;
+  for (const auto& q : m.sutures) sutured.insert({q.a, q.b});
+  for (const auto& s : m.sliding) sliding.insert(s.node);
+  int floor_pairs = 0, floor_springs = 0;
+  for (const auto& q : m.sutures)
+    if (coarse.wound.continuum.node_level[q.a] == coarse.wound.continuum.n_layers) {
+      ++floor_pairs;
+      floor_springs += sliding.count(q.a) + sliding.count(q.b);
+    }
+  EXPECT_GT(floor_pairs, 5);
+  EXPECT_EQ(floor_springs, floor_pairs);
+  const double f2 = coarse.result.total_suture_force_n, f125 = run(1.25).result.total_suture_force_n,
+               f08 = run(0.8).result.total_suture_force_n;
+  std::printf("ellipse on a sloped base, closing force at 2 / 1.25 / 0.8 mm: %.3f / %.3f / %.3f N\n",
+              f2, f125, f08);
+  EXPECT_LT(std::abs(f125 - f2), 0.02 * f2);
+  EXPECT_LT(std::abs(f08 - f2), 0.02 * f2);
+}
+
 // The flaps a plan raises are freed from the bone over their whole area, whatever the
 // undermining around the wound: the Z-plasty's two triangles (0, 1, 2) and (3, 2, 1).
 TEST(ContinuumMesher, FlapsAreRaisedOverTheirWholeArea) {

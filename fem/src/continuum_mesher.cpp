@@ -10,6 +10,7 @@
 #include <cmath>
 #include <memory>
 #include <exception>
+#include <functional>
 #include <map>
 #include <optional>
 #include <set>
@@ -483,23 +484,81 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   }
   for (int id : fixed)
     if (!sutured.count(id)) mesh.fixed_nodes.push_back(id);
-  // The freed base slides on the deep tissue: held along its column (from the bottom node up to
-  // its skin node) by a spring kSlidingStiffness x E x column height, stiff enough that the
-  // support gives way by about 1e-6 mm under the closing forces; sutured base nodes stay free
-  // (their twins across the wound lie on other normals).
+  // The freed base slides on the deep tissue: held along the base's normal (the normal of the
+  // mesh's bottom surface, which lies on the bone or the cavity's base) by a spring
+  // kSlidingStiffness x E x column height, stiff enough that the support gives way by about
+  // 1e-6 mm under the closing forces, and free along the base. The nodes a suture ties together
+  // become one point at the wound's floor: they slide as one, with one spring along their mean
+  // normal (a spring on each would ask the closed point to lie on several planes at once, and
+  // leaving them free makes the floor kink against its sliding neighbours, a kink that stiffens
+  // without bound as the mesh is refined: docs/fem.md, "The freed base slides").
   if (o.base == BaseCondition::Slide) {
     constexpr double kSlidingStiffness = 1e5;
     const double E_sliding = measured ? std::max({o.dermis.E_mpa(), o.fat.E_mpa(), o.deep.E_mpa()})
                                       : o.material.E_mpa();
-    auto slide = [&](int bottom, int top) {
-      if (fixed.count(bottom) || sutured.count(bottom) || free_base.count(bottom)) return;
-      const Eigen::Vector3d up = (mesh.nodes.row(top) - mesh.nodes.row(bottom)).transpose();
-      const double height = up.norm();
-      if (!(height > 0)) return;
-      mesh.sliding.push_back({bottom, up / height, kSlidingStiffness * E_sliding * height});
+    // The bottom surface's normal at each vertex (Newell's area-weighted polygon normals, turned
+    // to point up the columns) and at each edge (the mean of its ends').
+    std::vector<Eigen::Vector3d> vertex_normal(NV, Eigen::Vector3d::Zero());
+    for (const auto& poly : surface.polygons) {
+      Eigen::Vector3d n = Eigen::Vector3d::Zero();
+      for (std::size_t i = 0; i < poly.size(); ++i) {
+        const Eigen::Vector3d a = mesh.nodes.row(vnode(poly[i], 2 * NL)).transpose();
+        const Eigen::Vector3d b = mesh.nodes.row(vnode(poly[(i + 1) % poly.size()], 2 * NL)).transpose();
+        n += a.cross(b);
+      }
+      for (int v : poly) vertex_normal[v] += n;
+    }
+    auto column = [&](int bottom, int top) -> Eigen::Vector3d {
+      return (mesh.nodes.row(top) - mesh.nodes.row(bottom)).transpose();
     };
-    for (int v = 0; v < NV; ++v) slide(vnode(v, 2 * NL), vnode(v, 0));
-    for (int e = 0; e < NE; ++e) slide(enode(e, NL), enode(e, 0));
+    std::map<int, std::pair<Eigen::Vector3d, Eigen::Vector3d>> base;  // bottom -> (normal, column)
+    auto add_base = [&](int bottom, int top, Eigen::Vector3d n) {
+      const Eigen::Vector3d up = column(bottom, top);
+      if (n.dot(up) < 0) n = -n;
+      if (!(n.norm() > 0)) n = up;
+      base[bottom] = {n.normalized(), up};
+    };
+    for (int v = 0; v < NV; ++v) add_base(vnode(v, 2 * NL), vnode(v, 0), vertex_normal[v]);
+    for (int e = 0; e < NE; ++e) {
+      const auto [v0, v1] = edges[e];
+      Eigen::Vector3d n0 = vertex_normal[v0], n1 = vertex_normal[v1];
+      const Eigen::Vector3d up = column(enode(e, NL), enode(e, 0));
+      if (n0.dot(up) < 0) n0 = -n0;
+      if (n1.dot(up) < 0) n1 = -n1;
+      add_base(enode(e, NL), enode(e, 0), n0.normalized() + n1.normalized());
+    }
+    // Suture groups among the bottom nodes (union-find, each group named by its smallest node).
+    std::map<int, int> group;
+    std::function<int(int)> root = [&](int n) {
+      const auto it = group.find(n);
+      if (it == group.end() || it->second == n) return n;
+      return it->second = root(it->second);
+    };
+    for (const auto& [a, b] : pairs)
+      if (base.count(a) && base.count(b)) {
+        group.emplace(a, a);
+        group.emplace(b, b);
+        const int ra = root(a), rb = root(b);
+        if (ra != rb) group[std::max(ra, rb)] = std::min(ra, rb);
+      }
+    std::map<int, std::array<double, 5>> merged;  // root -> normal sum, height sum, count
+    std::set<int> unsupported;
+    for (const auto& [bottom, nu] : base) {
+      if (fixed.count(bottom)) continue;
+      const int r = group.count(bottom) ? root(bottom) : bottom;
+      if (free_base.count(bottom)) unsupported.insert(r);
+      auto& m = merged.try_emplace(r, std::array<double, 5>{0, 0, 0, 0, 0}).first->second;
+      for (int c = 0; c < 3; ++c) m[c] += nu.first[c];
+      m[3] += nu.second.norm();
+      m[4] += 1;
+    }
+    for (const auto& [r, m] : merged) {
+      if (unsupported.count(r)) continue;
+      const Eigen::Vector3d n(m[0], m[1], m[2]);
+      const double height = m[3] / m[4];
+      if (n.norm() > 0 && height > 0)
+        mesh.sliding.push_back({r, n.normalized(), kSlidingStiffness * E_sliding * height});
+    }
   }
 
   // Every element must have a positive Jacobian at every Gauss point.

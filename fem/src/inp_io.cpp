@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <numeric>
 #include <set>
 #include <sstream>
@@ -136,7 +137,11 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
     }
   }
   // Sliding supports: n . u = 0 as an exact equation (caps holds it by a stiff spring, which
-  // gives way by about 1e-6 mm); the dependent dof is the normal's largest component.
+  // gives way by about 1e-6 mm); the dependent dof is the normal's largest component. A sutured
+  // node's displacement is its group root's plus its helper's (the equations above), so its
+  // support is written on those two: n . (u_root + u_helper) = 0.
+  std::map<int, int> helper_of;
+  for (std::size_t k = 0; k < members.size(); ++k) helper_of[members[k]] = N + static_cast<int>(k);
   for (const SlidingNode& s : mesh.sliding) {
     int first = 0;
     for (int c = 1; c < 3; ++c)
@@ -144,9 +149,15 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
     std::vector<int> comps{first};
     for (int c = 0; c < 3; ++c)
       if (c != first && std::abs(s.normal[c]) > 1e-12) comps.push_back(c);
-    os << "*EQUATION\n" << comps.size() << "\n";
-    for (std::size_t k = 0; k < comps.size(); ++k)
-      os << (k ? ", " : "") << s.node + 1 << ", " << comps[k] + 1 << ", " << num(s.normal[comps[k]]);
+    const auto helper = helper_of.find(s.node);
+    std::vector<int> nodes{helper == helper_of.end() ? s.node : find_root(parent, s.node)};
+    if (helper != helper_of.end()) nodes.push_back(helper->second);
+    os << "*EQUATION\n" << comps.size() * nodes.size() << "\n";
+    int written = 0;
+    for (int node : nodes)
+      for (int c : comps)
+        os << (written == 0 ? "" : written % 4 == 0 ? ",\n" : ", ") << node + 1 << ", " << c + 1
+           << ", " << num(s.normal[c]), ++written;  // at most four terms a line
     os << "\n";
   }
   if (options.finite_strain) {
