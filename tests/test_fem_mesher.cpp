@@ -595,6 +595,36 @@ TEST(ContinuumMesher, TheWoundsFloorSlidesAlongASlopedBaseAndTheForceSettles) {
   EXPECT_LT(std::abs(f08 - f2), 0.02 * f2);
 }
 
+TEST(ContinuumMesher, TheSlidingNormalFollowsTheBoneNotItsVoxelBumps) {
+  // Bone with a 0.3 mm ripple of 2 mm wavelength along z (a CT's staircase) under a cylinder:
+  // the tissue slides along the bone's mean surface, the cylinder. The bottom faces themselves
+  // tilt by up to 17 deg (the ripple's slope, 0.3 mm per 1 mm between the model's samples); the
+  // sliding normals, each the bottom faces' vector area within 3 mm, stay within a few degrees of
+  // the radial direction (the most where the 3 mm disc is cut by the wound or the rim).
+  const PatientModel model = cylinder([](double, double z) {
+    return 5.0 + 0.3 * std::sin(kPi * (z - 0.5));
+  });
+  SurfaceMeshOptions so;
+  so.size_mm = 0.75;
+  so.extent_mm = 10;
+  const WoundMesh w = mesh_wound(lens(8, 2), model, so);
+  const Mesh& m = w.continuum.mesh;
+  ASSERT_GT(m.sliding.size(), 100u);
+  std::vector<double> angle;
+  for (const auto& s : m.sliding) {
+    const Eigen::Vector3d x = m.nodes.row(s.node).transpose();
+    const Eigen::Vector3d radial = Eigen::Vector3d(x.x(), x.y(), 0).normalized();
+    angle.push_back(std::acos(std::min(1.0, s.normal.dot(radial))) * 180 / kPi);
+  }
+  std::sort(angle.begin(), angle.end());
+  const double median = angle[angle.size() / 2], p90 = angle[angle.size() * 9 / 10];
+  std::printf("sliding normals against the cylinder's: median %.2f, 90th percentile %.2f, largest %.2f deg\n",
+              median, p90, angle.back());
+  EXPECT_LT(median, 2.0);
+  EXPECT_LT(p90, 5.0);
+  EXPECT_LT(angle.back(), 12.0);
+}
+
 // The flaps a plan raises are freed from the bone over their whole area, whatever the
 // undermining around the wound: the Z-plasty's two triangles (0, 1, 2) and (3, 2, 1).
 TEST(ContinuumMesher, FlapsAreRaisedOverTheirWholeArea) {
