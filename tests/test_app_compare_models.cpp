@@ -226,8 +226,8 @@ TEST(CompareModels, ScanCtAndFusedModelsOfOnePhantom) {
   // CT's maps and closes exactly like it. With the scan's skin it has the skin of the CT
   // model's skin.ply, the smoothed isosurface, which lies a median 0.39 mm inside the CT's range
   // map: the thickness under the wound is 7 % less, the closing force a few % less, the
-  // displacement within 2 % and the largest tension within 3 % (2.2 %: a peak, at the wound's
-  // floor, which slides on the base).
+  // displacement within 2 % and the largest tension, a peak, within 3 % (2.2 % since the
+  // wound's floor slides on the base; 2 % before).
   EXPECT_NEAR(twice[0].closing_force_n, half[0].closing_force_n, 1e-9 * twice[0].closing_force_n);
   EXPECT_NEAR(twice[0].closing_force_n, fem::summarize(measured, ct, "ct").closing_force_n, 1e-6 * twice[0].closing_force_n);
   ASSERT_EQ(half[2].key, "fused");

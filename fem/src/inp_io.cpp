@@ -153,11 +153,13 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
     std::vector<int> nodes{helper == helper_of.end() ? s.node : find_root(parent, s.node)};
     if (helper != helper_of.end()) nodes.push_back(helper->second);
     os << "*EQUATION\n" << comps.size() * nodes.size() << "\n";
-    int written = 0;
+    int written = 0;  // terms so far: at most four a line
     for (int node : nodes)
-      for (int c : comps)
-        os << (written == 0 ? "" : written % 4 == 0 ? ",\n" : ", ") << node + 1 << ", " << c + 1
-           << ", " << num(s.normal[c]), ++written;  // at most four terms a line
+      for (int c : comps) {
+        if (written > 0) os << (written % 4 == 0 ? ",\n" : ", ");
+        os << node + 1 << ", " << c + 1 << ", " << num(s.normal[c]);
+        ++written;
+      }
     os << "\n";
   }
   if (options.finite_strain) {

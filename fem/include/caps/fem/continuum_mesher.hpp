@@ -41,9 +41,10 @@ namespace caps::fem {
 enum class RimCondition { Fixed, Free };
 
 /// What holds the base of undermined tissue and raised flaps (the freed bottom nodes).
-/// Slide: it rests on the deep tissue and slides over it (held along the extrusion direction
-/// only, Mesh::sliding); Free: it is free in all directions (the 1992 model), so it may lift off
-/// or sink into the bone when the closure compresses it.
+/// Slide: it rests on the deep tissue and slides over it (held along the base's normal only,
+/// averaged over 3 mm of the mesh's bottom surface; the nodes a suture ties at the wound's floor
+/// slide as one; Mesh::sliding); Free: it is free in all directions (the 1992 model), so it may
+/// lift off or sink into the bone when the closure compresses it.
 enum class BaseCondition { Slide, Free };
 
 /// "slide" / "free".
