@@ -225,6 +225,75 @@ TEST(CavityBase, NoBoneOverAnAirCavityIsBasedOnItsEdge) {
   EXPECT_EQ(without.maps.flags[g.index(g.n_theta / 2, g.n_z / 2)], kNoBone);
 }
 
+TEST(CavityBase, AirAtPartialVolumeIsACavityAndFatIsNot) {
+  // The cavity CT with its "air" at -300 HU over 2 mm and then tissue again (a closed mouth's
+  // gap, a nostril's slit: air thinner than a voxel reads between fat and air): a cavity, its
+  // edge at half maximum between the tissue and the gap (r = 68 mm). At -150 HU (fat) the same
+  // gap is tissue: no base.
+  for (const double gap_hu : {-300.0, -150.0}) {
+    const Volume v = axial_ct(200, 70, "gap", [&](const Eigen::Vector3d& p, double th, auto in) {
+      double hu = -1000.0 + in(80.0) * 1040.0;
+      if (std::abs(th) < 25.0 && std::abs(p.z()) < 15.0)
+        hu += (in(68.0) - in(66.0)) * (gap_hu - 40.0);
+      else
+        hu += in(70.0) * (1200.0 - 40.0) + in(66.0) * (35.0 - 1200.0);
+      return hu;
+    });
+    const VolumeModel m = build_volume_model(v, axial_options(64));
+    const auto& g = m.maps.grid;
+    int inner = 0;
+    for (int k = 0; k < g.n_z; ++k)
+      for (int j = 0; j < g.n_theta; ++j) {
+        const double th = g.theta_deg(j), z = g.z_mm(k);
+        if (std::abs(th) >= 20 || std::abs(z) >= 10) continue;
+        ++inner;
+        const std::size_t c = g.index(j, k);
+        if (gap_hu < -200) {
+          EXPECT_EQ(m.maps.flags[c], kBaseCavity) << "theta " << th << " z " << z;
+          EXPECT_NEAR(m.maps.r_bone[c], 68.0, 0.2) << "theta " << th << " z " << z;
+        } else {
+          EXPECT_EQ(m.maps.flags[c], kNoBone) << "theta " << th << " z " << z;
+        }
+      }
+    ASSERT_GT(inner, 300);
+  }
+}
+
+TEST(CavityBase, ASeptumBetweenTwoCavitiesIsBasedOnThemToo) {
+  // The cavity CT with a septum: at |theta| < 1 deg the tissue runs on past r = 68 mm with no air
+  // and no bone within the cap (the nasal septum or the philtrum between two cavities). Its
+  // cells (two or three columns of the 1 deg grid) are based on the cavity like their
+  // neighbours, their depth filled from them; a strip wider than three cells is left no_bone.
+  for (const double half_width : {1.0, 3.0}) {
+    const Volume v = axial_ct(200, 70, "septum", [&](const Eigen::Vector3d& p, double th, auto in) {
+      double hu = -1000.0 + in(80.0) * 1040.0;
+      if (std::abs(th) < 25.0 && std::abs(p.z()) < 15.0) {
+        if (std::abs(th) >= half_width) hu += in(68.0) * (-1000.0 - 40.0);
+      } else {
+        hu += in(70.0) * (1200.0 - 40.0) + in(66.0) * (35.0 - 1200.0);
+      }
+      return hu;
+    });
+    const VolumeModel m = build_volume_model(v, axial_options(64));
+    const auto& g = m.maps.grid;
+    int septum = 0;
+    for (int k = 0; k < g.n_z; ++k)
+      for (int j = 0; j < g.n_theta; ++j) {
+        const double th = g.theta_deg(j), z = g.z_mm(k);
+        if (std::abs(th) > half_width - 0.5 || std::abs(z) > 10) continue;
+        ++septum;
+        const std::size_t c = g.index(j, k);
+        if (half_width < 2) {
+          EXPECT_EQ(m.maps.flags[c], kBaseCavity) << "theta " << th << " z " << z;
+          EXPECT_NEAR(m.maps.thickness[c], 12.0, 0.3) << "theta " << th << " z " << z;
+        } else {
+          EXPECT_EQ(m.maps.flags[c], kNoBone) << "theta " << th << " z " << z;
+        }
+      }
+    EXPECT_GT(septum, 10) << half_width;
+  }
+}
+
 TEST(CavityBase, AdviceSaysWhetherThePlaceIsNotOperableOrNotRepresented) {
   EXPECT_EQ(invalid_flags_advice(0), "");
   EXPECT_EQ(invalid_flags_advice(kBaseCavity), "");

@@ -732,7 +732,11 @@ class RayCaster {
     constexpr double kSoftHu[2] = {0.0, 100.0};
     constexpr double kFatBelowHu = -30.0;  // samples below this are fat, not the reference
     constexpr double kTissueAboveHu = -200.0;  // fat and denser: tissue, not the skin's ramp
-    double tissue_mm = 0;
+    // Air in a gap thinner than a voxel (a closed mouth, a nostril's slit) reads between fat and
+    // air: a run of at least kPartialAirRunMm below kTissueAboveHu, after 2 mm of tissue, is a
+    // cavity's air too (fat does not reach -200 HU).
+    constexpr double kPartialAirRunMm = 1.0;
+    double tissue_mm = 0, low_run_mm = 0, r_low = 0;
     const auto I = [&](double r) { return static_cast<double>(intensity_(ray.at(r))); };
     Base out;
     out.min_peak = bone_level_default_;
@@ -756,16 +760,28 @@ class RayCaster {
       }
       // Air counts as a cavity only past the skin's ramp and after half a millimetre of tissue
       // (a ray oblique to the skin stretches the ramp beyond one voxel).
-      if (cavity_base_ && s >= ramp_ && tissue_mm >= 0.5 && x < skin_thr_) {
+      // The cavity's edge: half maximum between the soft tissue and the air's lowest value.
+      // The search starts at `from` (tissue) and runs inward past r_air.
+      const auto cavity_at = [&](double r_air, double from) {
         const double soft = soft_level();
-        double air = x;
-        for (double t = 0; t <= 2.0 && r - t >= 0; t += fine_) air = std::min(air, I(r - t));
+        double air = I(r_air);
+        for (double t = 0; t <= 2.0 && r_air - t >= 0; t += fine_) air = std::min(air, I(r_air - t));
         const double level = 0.5 * (soft + std::max(air, -1024.0));
         const auto minus_I = [&](double q) { return -I(q); };
-        const double rc = crossing_inward(minus_I, r + fine_, std::max(0.0, r - edge_span_), 0.25 * fine_,
-                                          -level);
-        out.r_cavity = std::isfinite(rc) ? rc : r;
+        const double rc = crossing_inward(minus_I, from, std::max(0.0, r_air - edge_span_),
+                                          0.25 * fine_, -level);
+        out.r_cavity = std::isfinite(rc) ? rc : r_air;
         return out;
+      };
+      if (cavity_base_ && s >= ramp_ && tissue_mm >= 0.5 && x < skin_thr_) return cavity_at(r, r + fine_);
+      if (cavity_base_ && s >= ramp_ && tissue_mm >= 2.0 && x < kTissueAboveHu) {
+        if (low_run_mm == 0) r_low = r;
+        low_run_mm += fine_;
+        // Its first sample below -200 HU already lies past the half maximum of a shallow dip:
+        // the edge is searched from a voxel further out.
+        if (low_run_mm >= kPartialAirRunMm - 1e-9) return cavity_at(r_low, r_low + w_);
+      } else {
+        low_run_mm = 0;
       }
       if (x >= kFatBelowHu && x < kSoftHu[1] + 50.0) samples.push_back(x);
       if (x >= kTissueAboveHu) tissue_mm += fine_;
@@ -1007,6 +1023,27 @@ void confirm_eyes(CylindricalMaps& maps) {
     }
 }
 
+// A ray down the nasal septum or the philtrum between two cavities' rays meets tissue all the
+// way to the bone cap: a strip of no_bone at most kBridgeCells wide in theta between valid cells,
+// at least one of them based on a cavity. Such a strip is based on the cavity as well (its
+// thickness is then filled from its neighbours' like every cell without a measured base), so a
+// plan across the midline of the nose or the lip is not refused for one column of cells.
+void bridge_cavity_gaps(CylindricalMaps& maps) {
+  constexpr int kBridgeCells = 3;
+  const CylinderGrid& g = maps.grid;
+  const auto at = [&](int j, int k) { return g.index(((j % g.n_theta) + g.n_theta) % g.n_theta, k); };
+  for (int k = 0; k < g.n_z; ++k)
+    for (int j = 0; j < g.n_theta; ++j) {
+      if (maps.flags[at(j, k)] != kNoBone || maps.flags[at(j - 1, k)] == kNoBone) continue;
+      int w = 1;
+      while (w <= kBridgeCells && maps.flags[at(j + w, k)] == kNoBone) ++w;
+      if (w > kBridgeCells) continue;
+      const std::uint8_t left = maps.flags[at(j - 1, k)], right = maps.flags[at(j + w, k)];
+      if (!flags_valid(left) || !flags_valid(right) || !((left | right) & kBaseCavity)) continue;
+      for (int a = 0; a < w; ++a) maps.flags[at(j + a, k)] = kBaseCavity;
+    }
+}
+
 }  // namespace
 
 CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const CylinderAxis& axis,
@@ -1034,6 +1071,7 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
 
   flag_grazing(maps, o.grazing_deg);
   confirm_eyes(maps);
+  bridge_cavity_gaps(maps);
   std::size_t n_measured = 0;
   for (auto m : maps.measured_skin) n_measured += m;
   if (n_measured == 0)
@@ -1049,7 +1087,7 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
   if (maps.has_layers()) {
     // Layers of cells whose thickness is not valid are filled like the thickness itself.
     for (std::size_t i = 0; i < n; ++i)
-      if (!flags_valid(maps.flags[i])) {
+      if (!flags_valid(maps.flags[i]) || !maps.measured_bone[i]) {
         maps.layer_flags[i] |= kLayerNoThickness;
         maps.layer_flags_normal[i] |= kLayerNoThickness;
       }
