@@ -102,8 +102,10 @@ json base_json(const VolumeModel& m) {
     j["method"] = "bone: the first voxel of the mask inward from the skin, its edge at half maximum";
   }
   if (ct && o.cavity_base)
-    j["cavity"] = "no bone within the cap but an air cavity under the tissue: the base is the "
-                  "cavity's edge (half maximum), free (no support); validity flag 32 base_cavity";
+    j["cavity"] = "no bone within the cap but an air cavity under the tissue (air, or 1 mm below "
+                  "-200 HU: air at partial volume): the base is the cavity's edge (half maximum), "
+                  "free (no support); a no_bone strip up to 3 cells wide between such cells (a "
+                  "septum) too, its depth filled from them; validity flag 32 base_cavity";
   return j;
 }
 
