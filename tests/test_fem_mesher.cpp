@@ -321,15 +321,24 @@ TEST(InpExport, CalculixSolvesTheSameProblem) {
   }
 }
 
-TEST(InpExport, SuturedNodesThatAreAlsoFixedExportAsCalculixCanSolve) {
-  // A slotted Hex20 box with one suture member fixed and another given one prescribed component:
-  // solve() moves their whole groups there; the deck must not put a dependent dof of an
-  // *EQUATION into *BOUNDARY (ccx: "*ERROR in cascade").
+namespace {
+
+// A 30 x 20 x 6 mm Hex20 box whose slot is sutured shut: the export's suture groups in small.
+Mesh slotted_box() {
   BoxOptions o;
   o.size_mm = {30, 20, 6};
   o.cells = {3, 4, 2};
   o.slot = true;
-  Mesh m = make_box_mesh(o);
+  return make_box_mesh(o);
+}
+
+}  // namespace
+
+TEST(InpExport, SuturedNodesThatAreAlsoFixedExportAsCalculixCanSolve) {
+  // A slotted Hex20 box with one suture member fixed and another given one prescribed component:
+  // solve() moves their whole groups there; the deck must not put a dependent dof of an
+  // *EQUATION into *BOUNDARY (ccx: "*ERROR in cascade").
+  Mesh m = slotted_box();
   ASSERT_GE(m.sutures.size(), 2u);
   const SuturePair s0 = m.sutures[0], s1 = m.sutures[1];
   m.fixed_nodes.push_back(std::max(s0.a, s0.b));  // a non-root member (the export's root is the min)
@@ -350,11 +359,7 @@ TEST(InpExport, SlidingSupportOfASuturedNodeIsWrittenOnItsGroup) {
   // root in the deck, whose displacement is the root's plus its helper's. The deck writes
   // n . (u_root + u_helper) = 0 (a dependent dof in two equations is an error for ccx), and
   // CalculiX's exact equation and caps's stiff spring give the same field.
-  BoxOptions o;
-  o.size_mm = {30, 20, 6};
-  o.cells = {3, 4, 2};
-  o.slot = true;
-  Mesh m = make_box_mesh(o);
+  Mesh m = slotted_box();
   ASSERT_GE(m.sutures.size(), 2u);
   const SuturePair s0 = m.sutures[0];
   const int member = std::max(s0.a, s0.b);  // the export's root is the group's smallest node
