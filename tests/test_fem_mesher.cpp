@@ -629,6 +629,48 @@ TEST(ContinuumMesher, TheWoundsFloorSlidesAlongASlopedBaseAndTheForceSettles) {
   EXPECT_LT(std::abs(f08 - f2), 0.02 * f2);
 }
 
+TEST(ContinuumMesher, TheWallIsNotSewnWhereItsDepthStepsAcrossTheWound) {
+  // A horizontal 20 x 6 mm ellipse across a depth step: 5 mm of tissue below z = 38.5, 15 mm
+  // above z = 41.5 (a bony rim under the wound). Each lip's column is sewn to its twin level by
+  // level, except where the twins lie farther apart than at the skin by more than 2 mm (and half
+  // the skin's gap): there the wall is left open, and the closure moves no node much farther than
+  // the wound is wide (5.1 mm; sewn at every level, the deepest twins 11.7 mm apart, 10.1 mm).
+  // On the constant cylinder every level is sewn.
+  const auto steps = [](double, double z) {
+    const double t = std::clamp((z - 38.5) / 3.0, 0.0, 1.0);
+    return 5.0 + 10.0 * t * t * (3 - 2 * t);
+  };
+  const PatientModel step_model = cylinder(steps);
+  const plan::Plan p_step = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), step_model, 0.0, 40.0, 90.0);
+  SimulateOptions o;
+  o.surface.size_mm = 2.0;
+  o.surface.extent_mm = 0;  // automatic: it meshes across the step, as on the face
+  const Simulation stepped = simulate(step_model, p_step, o);
+  const Simulation flat = simulate(constant_cylinder(), p_step, o);
+  const auto levels_sewn = [](const Simulation& sim) {
+    const ContinuumMesh& c = sim.wound.continuum;
+    std::set<std::pair<int, int>> skin, deep;
+    double largest_gap = 0;
+    for (const auto& q : c.mesh.sutures) {
+      largest_gap = std::max(largest_gap, (c.mesh.nodes.row(q.a) - c.mesh.nodes.row(q.b)).norm());
+      (c.node_level[q.a] == 0 ? skin : deep).insert({q.a, q.b});
+    }
+    return std::make_tuple(skin.size(), c.mesh.sutures.size(), largest_gap);
+  };
+  const auto [flat_skin, flat_all, flat_gap] = levels_sewn(flat);
+  const auto [step_skin, step_all, step_gap] = levels_sewn(stepped);
+  std::printf("sewn pairs: flat %zu (%zu at the skin, largest gap %.1f mm), step %zu (%zu, %.1f mm); "
+              "largest displacement %.1f mm\n", flat_all, flat_skin, flat_gap, step_all, step_skin, step_gap,
+              stepped.result.displacement_mm.rowwise().norm().maxCoeff());
+  EXPECT_EQ(step_skin, flat_skin);
+  EXPECT_LT(step_all, flat_all);
+  EXPECT_LE(flat_gap, 6.0 + 1e-6);
+  EXPECT_LE(step_gap, 6.0 + std::max(2.0, 3.0) + 1e-6);
+  EXPECT_LT(stepped.result.displacement_mm.rowwise().norm().maxCoeff(), 6.0);
+  EXPECT_LT(stepped.max_suture_gap_mm, 1e-6);
+}
+
 TEST(ContinuumMesher, TheSlidingNormalFollowsTheBoneNotItsVoxelBumps) {
   // Bone with a 0.3 mm ripple of 2 mm wavelength along z (a CT's staircase) under a cylinder:
   // the tissue slides along the bone's mean surface, the cylinder. The bottom faces themselves

@@ -18,6 +18,12 @@
 
 namespace caps::fem {
 
+namespace {
+// How much farther apart than at the skin a deep suture pair's nodes may lie (mm; and half the
+// skin's gap): beyond it the wall there is not sewn (try_mesh_continuum).
+constexpr double kDeepGapSlackMm = 2.0;
+}  // namespace
+
 const char* rim_condition_name(RimCondition rim) {
   return rim == RimCondition::Fixed ? "fixed" : "free";
 }
@@ -398,6 +404,16 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   auto add_pair = [&](int a, int b) {
     if (a != b && !pairs.count({b, a})) pairs.insert({a, b});
   };
+  // The wall below the skin is sewn level to level while its twins lie about as far apart as the
+  // skin's: over a depth step across the wound (a bony rim under it) the deep levels of the two
+  // columns lie far apart (up to 24 mm for a 4 mm wide ellipse on Cranium's cheek), and tying
+  // them would drag the deep tissue that far. There the wall is left open below (dead space under
+  // the closure, as over a step the surgeon closes the layers that meet).
+  auto add_deep_pair = [&](int a, int b, int skin_a, int skin_b) {
+    const double skin_gap = (mesh.nodes.row(skin_a) - mesh.nodes.row(skin_b)).norm();
+    const double gap = (mesh.nodes.row(a) - mesh.nodes.row(b)).norm();
+    if (gap <= skin_gap + std::max(kDeepGapSlackMm, 0.5 * skin_gap)) add_pair(a, b);
+  };
   const int nloop = static_cast<int>(surface.loop_vertex.size());
   // The vertices along the loop from a forward to b (the edges' chains joined).
   auto chain = [&](int a, int b) {
@@ -418,13 +434,14 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
                              ") joins edges with different node counts"));
     for (std::size_t i = 0; i < c1.size(); ++i) {
       if (c1[i] == c2[i]) continue;  // a closed corner
-      for (int h = 0; h <= 2 * NL; ++h) add_pair(vnode(c1[i], h), vnode(c2[i], h));
+      for (int h = 0; h <= 2 * NL; ++h)
+        add_deep_pair(vnode(c1[i], h), vnode(c2[i], h), vnode(c1[i], 0), vnode(c2[i], 0));
     }
     for (std::size_t i = 0; i + 1 < c1.size(); ++i) {
       const int e1 = edge_id.at(std::minmax(c1[i], c1[i + 1]));
       const int e2 = edge_id.at(std::minmax(c2[i], c2[i + 1]));
       if (e1 == e2) continue;
-      for (int k = 0; k <= NL; ++k) add_pair(enode(e1, k), enode(e2, k));
+      for (int k = 0; k <= NL; ++k) add_deep_pair(enode(e1, k), enode(e2, k), enode(e1, 0), enode(e2, 0));
     }
   }
   std::set<int> sutured;
