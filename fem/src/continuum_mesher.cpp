@@ -409,10 +409,13 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   // columns lie far apart (up to 24 mm for a 4 mm wide ellipse on Cranium's cheek), and tying
   // them would drag the deep tissue that far. There the wall is left open below (dead space under
   // the closure, as over a step the surgeon closes the layers that meet).
+  // Returns whether the pair was sewn; the levels below one that is not are not sewn either.
   auto add_deep_pair = [&](int a, int b, int skin_a, int skin_b) {
     const double skin_gap = (mesh.nodes.row(skin_a) - mesh.nodes.row(skin_b)).norm();
     const double gap = (mesh.nodes.row(a) - mesh.nodes.row(b)).norm();
-    if (gap <= skin_gap + std::max(kDeepGapSlackMm, 0.5 * skin_gap)) add_pair(a, b);
+    if (gap > skin_gap + std::max(kDeepGapSlackMm, 0.5 * skin_gap)) return false;
+    add_pair(a, b);
+    return true;
   };
   const int nloop = static_cast<int>(surface.loop_vertex.size());
   // The vertices along the loop from a forward to b (the edges' chains joined).
@@ -435,13 +438,14 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
     for (std::size_t i = 0; i < c1.size(); ++i) {
       if (c1[i] == c2[i]) continue;  // a closed corner
       for (int h = 0; h <= 2 * NL; ++h)
-        add_deep_pair(vnode(c1[i], h), vnode(c2[i], h), vnode(c1[i], 0), vnode(c2[i], 0));
+        if (!add_deep_pair(vnode(c1[i], h), vnode(c2[i], h), vnode(c1[i], 0), vnode(c2[i], 0))) break;
     }
     for (std::size_t i = 0; i + 1 < c1.size(); ++i) {
       const int e1 = edge_id.at(std::minmax(c1[i], c1[i + 1]));
       const int e2 = edge_id.at(std::minmax(c2[i], c2[i + 1]));
       if (e1 == e2) continue;
-      for (int k = 0; k <= NL; ++k) add_deep_pair(enode(e1, k), enode(e2, k), enode(e1, 0), enode(e2, 0));
+      for (int k = 0; k <= NL; ++k)
+        if (!add_deep_pair(enode(e1, k), enode(e2, k), enode(e1, 0), enode(e2, 0))) break;
     }
   }
   std::set<int> sutured;
