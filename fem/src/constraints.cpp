@@ -10,20 +10,6 @@
 namespace caps::fem::detail {
 namespace {
 
-struct UnionFind {
-  std::vector<int> p;
-  explicit UnionFind(int n) : p(static_cast<std::size_t>(n)) { std::iota(p.begin(), p.end(), 0); }
-  int find(int x) {
-    while (p[x] != x) x = p[x] = p[p[x]];
-    return x;
-  }
-  void unite(int a, int b) {
-    a = find(a);
-    b = find(b);
-    if (a != b) p[std::max(a, b)] = std::min(a, b);
-  }
-};
-
 const char* kAxis[3] = {"x", "y", "z"};
 
 // Every part must also be held against rigid rotation: the six rigid motions u = t + w × x of

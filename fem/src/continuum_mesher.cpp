@@ -4,13 +4,13 @@
 #include "caps/core/reporter.hpp"
 #include "caps/fem/elements.hpp"
 #include "caps/surface/patient_model.hpp"
+#include "constraints.hpp"
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <memory>
 #include <exception>
-#include <functional>
 #include <map>
 #include <optional>
 #include <set>
@@ -570,37 +570,29 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
     };
     for (int v = 0; v < NV; ++v) add_base(vnode(v, 2 * NL), vnode(v, 0));
     for (int e = 0; e < NE; ++e) add_base(enode(e, NL), enode(e, 0));
-    // Suture groups among the bottom nodes (union-find, each group named by its smallest node).
-    std::map<int, int> group;
-    std::function<int(int)> root = [&](int n) {
-      const auto it = group.find(n);
-      if (it == group.end() || it->second == n) return n;
-      return it->second = root(it->second);
-    };
+    // Suture groups among the bottom nodes, each named by its smallest node.
+    detail::UnionFind group(static_cast<int>(mesh.n_nodes()));
     for (const auto& [a, b] : pairs)
-      if (base.count(a) && base.count(b)) {
-        group.emplace(a, a);
-        group.emplace(b, b);
-        const int ra = root(a), rb = root(b);
-        if (ra != rb) group[std::max(ra, rb)] = std::min(ra, rb);
-      }
-    std::map<int, std::array<double, 5>> merged;  // root -> normal sum, height sum, count
-    std::set<int> unsupported;
+      if (base.count(a) && base.count(b)) group.unite(a, b);
+    struct Merged {
+      Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+      double height = 0;
+      int count = 0;
+      bool unsupported = false;  // a member lies over a cavity
+    };
+    std::map<int, Merged> merged;  // group root -> its members' normals and column heights
     for (const auto& [bottom, nu] : base) {
       if (fixed.count(bottom)) continue;
-      const int r = group.count(bottom) ? root(bottom) : bottom;
-      if (free_base.count(bottom)) unsupported.insert(r);
-      auto& m = merged.try_emplace(r, std::array<double, 5>{0, 0, 0, 0, 0}).first->second;
-      for (int c = 0; c < 3; ++c) m[c] += nu.first[c];
-      m[3] += nu.second.norm();
-      m[4] += 1;
+      Merged& m = merged[group.find(bottom)];
+      m.normal += nu.first;
+      m.height += nu.second.norm();
+      m.count += 1;
+      m.unsupported |= free_base.count(bottom) > 0;
     }
     for (const auto& [r, m] : merged) {
-      if (unsupported.count(r)) continue;
-      const Eigen::Vector3d n(m[0], m[1], m[2]);
-      const double height = m[3] / m[4];
-      if (n.norm() > 0 && height > 0)
-        mesh.sliding.push_back({r, n.normalized(), kSlidingStiffness * E_sliding * height});
+      const double height = m.height / m.count;
+      if (!m.unsupported && m.normal.norm() > 0 && height > 0)
+        mesh.sliding.push_back({r, m.normal.normalized(), kSlidingStiffness * E_sliding * height});
     }
   }
 

@@ -746,6 +746,19 @@ class RayCaster {
       std::vector<double> xs = samples;
       return std::clamp(median(xs), kSoftHu[0], kSoftHu[1]);
     };
+    // The cavity's edge: half maximum between the soft tissue and the air's lowest value.
+    // The search starts at `from` (tissue) and runs inward past r_air.
+    const auto cavity_at = [&](double r_air, double from) {
+      const double soft = soft_level();
+      double air = I(r_air);
+      for (double t = 0; t <= 2.0 && r_air - t >= 0; t += fine_) air = std::min(air, I(r_air - t));
+      const double level = 0.5 * (soft + std::max(air, -1024.0));
+      const auto minus_I = [&](double q) { return -I(q); };
+      const double rc = crossing_inward(minus_I, from, std::max(0.0, r_air - edge_span_),
+                                        0.25 * fine_, -level);
+      out.r_cavity = std::isfinite(rc) ? rc : r_air;
+      return out;
+    };
     const double r_end = std::max(0.0, r_s - o_.bone_cap_mm);
     for (double s = 0.5 * ramp_; r_s - s >= r_end; s += fine_) {
       const double r = r_s - s;
@@ -760,20 +773,8 @@ class RayCaster {
       }
       // Air counts as a cavity only past the skin's ramp and after half a millimetre of tissue
       // (a ray oblique to the skin stretches the ramp beyond one voxel).
-      // The cavity's edge: half maximum between the soft tissue and the air's lowest value.
-      // The search starts at `from` (tissue) and runs inward past r_air.
-      const auto cavity_at = [&](double r_air, double from) {
-        const double soft = soft_level();
-        double air = I(r_air);
-        for (double t = 0; t <= 2.0 && r_air - t >= 0; t += fine_) air = std::min(air, I(r_air - t));
-        const double level = 0.5 * (soft + std::max(air, -1024.0));
-        const auto minus_I = [&](double q) { return -I(q); };
-        const double rc = crossing_inward(minus_I, from, std::max(0.0, r_air - edge_span_),
-                                          0.25 * fine_, -level);
-        out.r_cavity = std::isfinite(rc) ? rc : r_air;
-        return out;
-      };
-      if (cavity_base_ && s >= ramp_ && tissue_mm >= 0.5 && x < skin_thr_) return cavity_at(r, r + fine_);
+      if (cavity_base_ && s >= ramp_ && tissue_mm >= 0.5 && x < skin_thr_)
+        return cavity_at(r, r + fine_);
       if (cavity_base_ && s >= ramp_ && tissue_mm >= 2.0 && x < kTissueAboveHu) {
         if (low_run_mm == 0) r_low = r;
         low_run_mm += fine_;
