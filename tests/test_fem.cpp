@@ -4,6 +4,7 @@
 
 #include <Eigen/Dense>
 #include <Eigen/Eigenvalues>
+#include <dlfcn.h>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -497,6 +498,58 @@ TEST(FemSolvers, MixedPrecisionAfterItsFallBackRefusesASingularTangent) {
   EXPECT_NEAR(x[1], 2, 1e-12);
   EXPECT_NEAR(x[2], 3, 1e-12);
   EXPECT_THROW(solver->factorize(K1), SolverError);
+}
+
+// fem/src/blas_gemv_forward.cpp: xGEMM with one column (MUMPS's solve phase) goes to xGEMV,
+// every other call to the BLAS's own xGEMM; both give the product of the reference definition
+// C = alpha op(A) op(B) + beta C, for each transposition and with leading dimensions larger
+// than the matrices. And the definitions are the ones the process resolves (MUMPS calls them).
+extern "C" void dgemm_(const char*, const char*, const int*, const int*, const int*, const double*,
+                       const double*, const int*, const double*, const int*, const double*, double*,
+                       const int*);
+extern "C" void sgemm_(const char*, const char*, const int*, const int*, const int*, const float*,
+                       const float*, const int*, const float*, const int*, const float*, float*,
+                       const int*);
+
+TEST(FemSolvers, GemmWithOneColumnIsTheReferenceProduct) {
+  EXPECT_EQ(dlsym(RTLD_DEFAULT, "dgemm_"), reinterpret_cast<void*>(&dgemm_));
+  EXPECT_EQ(dlsym(RTLD_DEFAULT, "sgemm_"), reinterpret_cast<void*>(&sgemm_));
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> d(-1, 1);
+  auto random = [&](int rows, int cols) {
+    return Eigen::MatrixXd(Eigen::MatrixXd::NullaryExpr(rows, cols, [&] { return d(rng); }));
+  };
+  const int m = 7, k = 5, pad = 3;
+  for (int n : {1, 2})
+    for (const char* ta : {"N", "T"})
+      for (const char* tb : {"N", "t"}) {
+        const bool at = *ta == 'T', bt = *tb == 't';
+        // Stored with `pad` extra rows: A is m x k (or k x m), B k x n (or n x k), C m x n.
+        const Eigen::MatrixXd A = random((at ? k : m) + pad, at ? m : k),
+                              B = random((bt ? n : k) + pad, bt ? k : n);
+        const Eigen::MatrixXd C0 = random(m + pad, n);
+        const double alpha = 0.7, beta = -1.3;
+        const Eigen::MatrixXd opA = at ? Eigen::MatrixXd(A.topRows(k).transpose()) : A.topRows(m);
+        const Eigen::MatrixXd opB = bt ? Eigen::MatrixXd(B.topRows(n).transpose()) : B.topRows(k);
+        Eigen::MatrixXd expected = C0;
+        expected.topRows(m) = alpha * opA * opB + beta * C0.topRows(m);
+        const int lda = static_cast<int>(A.rows()), ldb = static_cast<int>(B.rows()),
+                  ldc = static_cast<int>(C0.rows());
+        Eigen::MatrixXd C = C0;
+        dgemm_(ta, tb, &m, &n, &k, &alpha, A.data(), &lda, B.data(), &ldb, &beta, C.data(), &ldc);
+        EXPECT_LT((C - expected).cwiseAbs().maxCoeff(), 1e-14) << ta << tb << " n = " << n;
+        const Eigen::MatrixXf Af = A.cast<float>(), Bf = B.cast<float>();
+        Eigen::MatrixXf Cf = C0.cast<float>();
+        const float alpha_f = 0.7f, beta_f = -1.3f;
+        sgemm_(ta, tb, &m, &n, &k, &alpha_f, Af.data(), &lda, Bf.data(), &ldb, &beta_f, Cf.data(), &ldc);
+        EXPECT_LT((Cf.cast<double>() - expected).cwiseAbs().maxCoeff(), 1e-5) << ta << tb << " n = " << n;
+      }
+  // k = 0: C = beta C (xGEMV's quick return would leave C as it is).
+  const int m1 = 3, n1 = 1, k0 = 0, one = 1;
+  const double alpha = 2, beta = 0.5, a = 0, b = 0;
+  Eigen::Vector3d c(2, 4, 6);
+  dgemm_("N", "N", &m1, &n1, &k0, &alpha, &a, &m1, &b, &one, &beta, c.data(), &m1);
+  EXPECT_EQ(c, Eigen::Vector3d(1, 2, 3));
 }
 
 // Colour-by-colour assembly adds every entry in the same order whatever the thread count.

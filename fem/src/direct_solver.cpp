@@ -499,8 +499,11 @@ BlasThreads::~BlasThreads() {
   if (--blas_guards == 0 && openblas().get() != blas_kept_threads) openblas().set(blas_kept_threads);
 }
 
+bool gemv_forwarding_linked();  // blas_gemv_forward.cpp
+
 std::unique_ptr<DirectSolver> make_direct_solver(SolverKind kind, int mumps_ordering,
                                                  bool mixed_precision) {
+  [[maybe_unused]] static const bool gemv_forwarding = gemv_forwarding_linked();
   if (kind == SolverKind::Cholmod) return std::make_unique<CholmodSolver>();
   if (mixed_precision) return std::make_unique<MixedMumpsSolver>(mumps_ordering);
   return std::make_unique<MumpsSolver>(mumps_ordering);
