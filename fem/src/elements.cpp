@@ -8,16 +8,6 @@
 #include "caps/core/error.hpp"
 #include "elements_impl.hpp"
 
-// The finite-strain kernel (most of an assembly's time) is also compiled for x86-64-v3 (AVX2,
-// FMA), chosen at load time where the processor has it: the pair loops below vectorize four
-// doubles wide instead of two, and an assembly of the Cranium Z-plasty takes 26 ms instead of
-// 37 (docs/benchmarks.md). Results differ from the baseline build in the last bits (FMA).
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-#define CAPS_VECTOR_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
-#else
-#define CAPS_VECTOR_CLONES
-#endif
-
 namespace caps::fem {
 namespace {
 
@@ -289,7 +279,6 @@ Vector6d finite_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X, const
   return cauchy_from_pk2(H + Eigen::Matrix3d::Identity(), S);
 }
 
-CAPS_VECTOR_CLONES
 FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
                                  const Material& material, const Eigen::VectorXd& u_e,
                                  int element, Eigen::VectorXd& f, Eigen::MatrixXd* K,
