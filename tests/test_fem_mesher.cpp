@@ -939,17 +939,19 @@ TEST(Simulate, PrestretchedSkinGapesWhenCutAndPullsHarderOnTheSutures) {
 }
 
 TEST(Simulate, BaseOverAnAirCavityIsFreeAndTheSurroundingTissueHoldsTheSolve) {
-  // The band z 60..70 has its base on an air cavity (kBaseCavity: valid, no support). An ellipse
-  // on it meshes and closes with a free rim: the bottom nodes over the band are neither fixed nor
-  // sliding, and the base on bone around the band (fixed outside the undermined zone) alone holds
-  // the solve.
-  const PatientModel model = cylinder([](double, double) { return 5.0; }, kBaseCavity);
-  const plan::Plan p = plan::place_procedure(
-      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0.0, 65.0, 90.0);
+  // The band z 60..70 has its base on an air cavity (kBaseCavity: valid, no support), or on
+  // deeper tissue (kBaseTissue: the same condition). An ellipse on it meshes and closes with a
+  // free rim: the bottom nodes over the band are neither fixed nor sliding, and the base on bone
+  // around the band (fixed outside the undermined zone) alone holds the solve.
   SimulateOptions o;
   o.surface.size_mm = 2.0;
   o.surface.extent_mm = 20.0;
   o.continuum.rim = RimCondition::Free;
+  for (const CellFlag base : {kBaseCavity, kBaseTissue}) {
+  SCOPED_TRACE(describe_flags(base));
+  const PatientModel model = cylinder([](double, double) { return 5.0; }, base);
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0.0, 65.0, 90.0);
   const Simulation sim = simulate(model, p, o);
   const auto& c = sim.wound.continuum;
   std::set<int> fixed(c.mesh.fixed_nodes.begin(), c.mesh.fixed_nodes.end()), sliding;
@@ -970,6 +972,7 @@ TEST(Simulate, BaseOverAnAirCavityIsFreeAndTheSurroundingTissueHoldsTheSolve) {
   EXPECT_GT(outside_fixed, 10);
   EXPECT_LT(sim.max_suture_gap_mm, 1e-6);
   EXPECT_GT(sim.result.total_suture_force_n, 0.0);
+  }
   // With no support anywhere (the free rim and the whole base over the cavity) the solve refuses.
   const PatientModel all_cavity = [] {
     CylindricalMaps m = caps_test::synthetic_maps(caps_test::grid(360, 401, -200, 1),

@@ -92,7 +92,7 @@ TEST(ThinBone, EdgeMethodFindsThePlateThatTheThresholdMisses) {
       ++cells;
       if (t < 0.55) {
         ++thin;
-        thin_missed += (gt.flags[c] & kNoBone) != 0;
+        thin_missed += !gt.measured_bone[c];  // no_bone, or based on tissue near the thick bone
       }
       if (ge.flags[c] != 0) continue;
       ++found;
@@ -163,12 +163,14 @@ Volume axial_ct(int n, int nz, const char* name, Hu&& hu) {
 }
 
 // The options of the hand-made CTs' models: the cylinder's axis on the LPS z axis, 1 deg around,
-// `n_z` rows, no tissue layers.
+// `n_z` rows, no tissue layers, and no base on deeper tissue (base_on_tissue, tested on its own
+// below, would base the no_bone cells these tests look at on the bone around them).
 ModelOptions axial_options(int n_z) {
   ModelOptions o;
   o.maps.n_theta = 360;
   o.maps.n_z = n_z;
   o.maps.layers.measure = false;
+  o.maps.bone.tissue_reach_mm = 0;
   o.axis = CylinderAxis{};
   o.axis->origin_lps = {0, 0, 0};
   return o;
@@ -223,6 +225,58 @@ TEST(CavityBase, NoBoneOverAnAirCavityIsBasedOnItsEdge) {
   const VolumeModel without = build_volume_model(v, o);
   EXPECT_EQ(without.stats.base_cavity, 0u);
   EXPECT_EQ(without.maps.flags[g.index(g.n_theta / 2, g.n_z / 2)], kNoBone);
+}
+
+// The cavity CT with soft tissue instead of air in its window (|theta| < 25 deg, |z| < 40 mm):
+// neither bone nor a cavity within the cap. Cells at most tissue_reach_mm over the skin from the
+// bone around are based on the tissue (kBaseTissue: valid, their depth interpolated, here the
+// bone's 10 mm, within 0.3 mm where the window's edge blurs the bone beside it); the window's middle, farther, stays no_bone; with a reach of 0 all of
+// it does.
+TEST(TissueBase, NoBoneNearAMeasuredBaseIsBasedOnTheTissueAtTheInterpolatedDepth) {
+  const Volume v = axial_ct(200, 100, "no bone", [](const Eigen::Vector3d& p, double th, auto in) {
+    double hu = -1000.0 + in(80.0) * 1040.0;
+    if (!(std::abs(th) < 25.0 && std::abs(p.z()) < 40.0))
+      hu += in(70.0) * (1200.0 - 40.0) + in(66.0) * (35.0 - 1200.0);
+    return hu;
+  });
+  ModelOptions o = axial_options(96);
+  o.maps.bone.tissue_reach_mm = 15.0;
+  const VolumeModel m = build_volume_model(v, o);
+  const auto& g = m.maps.grid;
+  const double around = 80.0 * deg_to_rad(1.0);  // mm per degree on the skin
+  int based = 0, kept = 0;
+  for (int k = 0; k < g.n_z; ++k)
+    for (int j = 0; j < g.n_theta; ++j) {
+      const double th = g.theta_deg(j), z = g.z_mm(k);
+      if (!(std::abs(th) < 24.0 && std::abs(z) < 39.0)) continue;  // inside the window
+      // the distance over the skin to the window's edge, where the bone is
+      const double edge = std::min((25.0 - std::abs(th)) * around, 40.0 - std::abs(z));
+      const std::size_t c = g.index(j, k);
+      if (edge < 13.0) {
+        ++based;
+        EXPECT_EQ(m.maps.flags[c], kBaseTissue) << "theta " << th << " z " << z;
+        EXPECT_TRUE(m.maps.is_valid(j, k));
+        EXPECT_FALSE(m.maps.measured_bone[c]);
+        EXPECT_NEAR(m.maps.thickness[c], 10.0, 0.35) << "theta " << th << " z " << z;
+      } else if (edge > 17.0) {
+        ++kept;
+        EXPECT_EQ(m.maps.flags[c], kNoBone) << "theta " << th << " z " << z;
+      }
+    }
+  ASSERT_GT(based, 500);
+  ASSERT_GT(kept, 50);
+  std::size_t tissue = 0;
+  for (auto f : m.maps.flags) tissue += (f & kBaseTissue) != 0;
+  EXPECT_EQ(m.stats.base_tissue, tissue);
+  EXPECT_EQ(describe_flags(kBaseTissue), "base_tissue");
+  EXPECT_TRUE(flags_valid(kBaseTissue));
+  EXPECT_EQ(invalid_flags_advice(kBaseTissue), "");
+  o.maps.bone.tissue_reach_mm = 0;
+  const VolumeModel without = build_volume_model(v, o);
+  EXPECT_EQ(without.stats.base_tissue, 0u);
+  EXPECT_EQ(without.maps.flags[g.index(g.n_theta / 2 + 20, g.n_z / 2 + 30)], kNoBone);
+  o.maps.bone.tissue_reach_mm = -1;
+  EXPECT_THROW(build_volume_model(v, o), InvalidInput);
 }
 
 TEST(CavityBase, AirAtPartialVolumeIsACavityAndFatIsNot) {

@@ -100,6 +100,7 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   o.maps.bone.method = parse_bone_method(r.bone_method);
   o.maps.bone.floor_hu = r.bone_floor;
   o.maps.bone.cavity_base = !r.no_cavity_base;
+  o.maps.bone.tissue_reach_mm = r.tissue_reach;
   o.maps.layers.measure = !r.no_layers;
   o.maps.layers.fat_level_hu = r.fat_level;
   o.maps.layers.merge_gap_mm = r.fat_merge_gap;
@@ -192,6 +193,8 @@ ModelResult run_chart(const ChartRequest& r, Reporter* reporter) {
     o.maps.bone.method = parse_bone_method(b.value("bone_method", "edge"));
     o.maps.bone.floor_hu = b.value("floor_hu", o.maps.bone.floor_hu);
     o.maps.bone.cavity_base = b.value("cavity_base", o.maps.bone.cavity_base);
+    // A model made before base_tissue existed had none.
+    o.maps.bone.tissue_reach_mm = b.value("tissue_reach_mm", 0.0);
     o.maps.bone_cap_mm = b.value("bone_cap_mm", o.maps.bone_cap_mm);
   }
   if (thickness.contains("layers")) {

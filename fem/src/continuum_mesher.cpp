@@ -481,10 +481,12 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
     return near_border(xy) || in_flap(tz);
   };
   // Over an air cavity (kBaseCavity: nasal cavity, mouth) the base has no support at all: it is
-  // neither fixed nor sliding (docs/fem.md); the tissue around it holds the column.
+  // neither fixed nor sliding (docs/fem.md); the tissue around it holds the column. So where the
+  // tissue goes on below the model's base (kBaseTissue: the buccal fat, a skull defect's cover):
+  // what lies deeper is not in the model, and a free base is the soft bound of its support.
   auto over_cavity = [&](int v0, int v1) {
     const Eigen::Vector2d tz = 0.5 * (surface.theta_z.row(v0) + surface.theta_z.row(v1)).transpose();
-    return (model.flags_at(tz.x(), tz.y()) & kBaseCavity) != 0;
+    return (model.flags_at(tz.x(), tz.y()) & (kBaseCavity | kBaseTissue)) != 0;
   };
   std::set<int> fixed, free_base;
   for (int v = 0; v < NV; ++v) {

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <queue>
 
 #include "caps/core/error.hpp"
 #include "caps/core/reporter.hpp"
@@ -117,7 +118,7 @@ std::string describe_flags(std::uint8_t flags) {
   static const std::pair<std::uint8_t, const char*> kNames[] = {
       {kNoSkin, "no_skin"}, {kNoBone, "no_bone"}, {kUndercut, "undercut"},
       {kGrazing, "grazing"}, {kTruncated, "truncated"}, {kBaseCavity, "base_cavity"},
-      {kEye, "eye"}};
+      {kEye, "eye"}, {kBaseTissue, "base_tissue"}};
   std::string s;
   for (const auto& [bit, name] : kNames)
     if (flags & bit) s += (s.empty() ? "" : "|") + std::string(name);
@@ -142,8 +143,9 @@ std::string invalid_flags_advice(std::uint8_t flags) {
                "chart that faces this skin (caps model chart MODEL --at THETA,Z) and plan on it "
                "at --at 0,0 (docs/mesher.md, \"Local charts\")");
   return cat("has no base under the skin (", names, "): neither bone nor an air cavity was found "
-             "within the bone cap; move the plan, or rebuild the model with a deeper --bone-cap "
-             "or --bone-method edge (finds thin bone)");
+             "within the bone cap, and no measured base lies within the tissue reach around it; "
+             "move the plan, or rebuild the model with a deeper --bone-cap, a longer "
+             "--tissue-reach or --bone-method edge (finds thin bone)");
 }
 
 const char* bone_method_name(BoneMethod method) {
@@ -425,6 +427,10 @@ void check_map_options(const MapOptions& o) {
                            " is out of range (theta 8..8192, z 4..8192)"));
   if (!(o.bone_cap_mm > 0 && o.bone_cap_mm <= 200))
     throw InvalidInput(cat("bone cap ", o.bone_cap_mm, " mm must be in (0, 200]"));
+  if (!(o.bone.tissue_reach_mm >= 0 && o.bone.tissue_reach_mm <= 100))
+    throw InvalidInput(cat("tissue reach ", o.bone.tissue_reach_mm, " mm must be in [0, 100] (how "
+                           "far from a measured base a cell without bone takes an interpolated "
+                           "one; 0: never)"));
   if (!(o.bone.floor_hu >= 50 && o.bone.floor_hu <= 1000))
     throw InvalidInput(cat("bone floor ", o.bone.floor_hu, " HU must be in [50, 1000] (a peak this "
                            "far above the soft tissue is bone; 150 by default)"));
@@ -1045,6 +1051,48 @@ void bridge_cavity_gaps(CylindricalMaps& maps) {
     }
 }
 
+// A cell with neither bone nor an air cavity within the cap (exactly kNoBone: skin measured,
+// nothing else wrong) whose tissue goes on deeper is based on that tissue (kBaseTissue) when it
+// lies at most `reach_mm` over the skin from a cell with a measured base (bone or cavity): its
+// depth is then interpolated from the measured ones (the harmonic fill below, as for every cell
+// without a measured base) and its base carries no support. Distances: Dijkstra over the grid's
+// eight neighbours (r_skin dtheta around, dz along), through such cells only, so the reach does
+// not cross the eye or a grazing strip.
+void base_on_tissue(CylindricalMaps& maps, double reach_mm) {
+  if (!(reach_mm > 0)) return;
+  const CylinderGrid& g = maps.grid;
+  const double dth = deg_to_rad(g.dtheta_deg());
+  constexpr float kFar = std::numeric_limits<float>::infinity();
+  std::vector<float> dist(g.size(), kFar);
+  using Item = std::pair<float, std::size_t>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<>> queue;
+  for (std::size_t i = 0; i < g.size(); ++i)
+    if (maps.measured_bone[i] && flags_valid(maps.flags[i])) {
+      dist[i] = 0;
+      queue.push({0.0f, i});
+    }
+  while (!queue.empty()) {
+    const auto [d, i] = queue.top();
+    queue.pop();
+    if (d > dist[i]) continue;
+    const int j = static_cast<int>(i % g.n_theta), k = static_cast<int>(i / g.n_theta);
+    const double around = maps.r_skin[i] * dth;
+    for (int dk = -1; dk <= 1; ++dk)
+      for (int dj = -1; dj <= 1; ++dj) {
+        if ((dj == 0 && dk == 0) || k + dk < 0 || k + dk >= g.n_z) continue;
+        const std::size_t n = g.index((j + dj + g.n_theta) % g.n_theta, k + dk);
+        if (maps.flags[n] != kNoBone) continue;
+        const float next = d + static_cast<float>(std::hypot(dj * around, dk * g.dz_mm));
+        if (next < dist[n] && next <= reach_mm) {
+          dist[n] = next;
+          queue.push({next, n});
+        }
+      }
+  }
+  for (std::size_t i = 0; i < g.size(); ++i)
+    if (maps.flags[i] == kNoBone && dist[i] <= reach_mm) maps.flags[i] = kBaseTissue;
+}
+
 }  // namespace
 
 CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const CylinderAxis& axis,
@@ -1073,6 +1121,7 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
   flag_grazing(maps, o.grazing_deg);
   confirm_eyes(maps);
   bridge_cavity_gaps(maps);
+  if (v.modality == Modality::CT) base_on_tissue(maps, o.bone.tissue_reach_mm);
   std::size_t n_measured = 0;
   for (auto m : maps.measured_skin) n_measured += m;
   if (n_measured == 0)

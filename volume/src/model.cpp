@@ -91,6 +91,7 @@ json base_json(const VolumeModel& m) {
   json j = {{"bone_method", edge ? "edge" : "threshold"},
             {"mask", seg.bone_method},
             {"cavity_base", ct && o.cavity_base},
+            {"tissue_reach_mm", ct ? o.tissue_reach_mm : 0.0},
             {"bone_cap_mm", m.bone_cap_mm}};
   if (edge) {
     j["floor_hu"] = o.floor_hu;
@@ -106,6 +107,11 @@ json base_json(const VolumeModel& m) {
                   "-200 HU: air at partial volume): the base is the cavity's edge (half maximum), "
                   "free (no support); a no_bone strip up to 3 cells wide between such cells (a "
                   "septum) too, its depth filled from them; validity flag 32 base_cavity";
+  if (ct && o.tissue_reach_mm > 0)
+    j["tissue"] = cat("neither bone nor an air cavity within the cap, the tissue going on deeper, "
+                      "at most tissue_reach_mm over the skin from a measured base: the base lies at "
+                      "the depth interpolated from the measured ones, free (no support); validity "
+                      "flag 128 base_tissue");
   return j;
 }
 
@@ -127,7 +133,9 @@ ModelStatistics model_statistics(const CylindricalMaps& maps) {
     if (maps.measured_skin[i]) rs.push_back(maps.r_skin[i]);
     if (!flags_valid(f)) continue;
     s.base_cavity += (f & kBaseCavity) != 0;
+    s.base_tissue += (f & kBaseTissue) != 0;
     ++s.valid_cells;
+    if (!maps.measured_bone[i]) continue;  // an interpolated depth is no measurement
     t.push_back(maps.thickness[i]);
     tn.push_back(maps.thickness_normal[i]);
   }

@@ -72,7 +72,8 @@ json statistics_json(const ModelStatistics& s) {
           {"valid_fraction", s.cells ? double(s.valid_cells) / s.cells : 0.0},
           {"flagged_cells", {{"no_skin", s.no_skin}, {"no_bone", s.no_bone}, {"undercut", s.undercut},
                              {"grazing", s.grazing}, {"truncated", s.truncated},
-                             {"base_cavity", s.base_cavity}, {"eye", s.eye}}},
+                             {"base_cavity", s.base_cavity}, {"eye", s.eye},
+                             {"base_tissue", s.base_tissue}}},
           {"thickness_mm", {{"mean", s.thickness_mean_mm}, {"median", s.thickness_median_mm},
                             {"p5", s.thickness_p5_mm}, {"p95", s.thickness_p95_mm}}},
           {"thickness_normal_median_mm", s.thickness_normal_median_mm},
@@ -117,6 +118,7 @@ ModelStatistics statistics_of(const json& j, const std::string& where) {
   s.grazing = count(flagged, "grazing");
   s.truncated = count(flagged, "truncated");
   s.base_cavity = count(flagged, "base_cavity");
+  s.base_tissue = count(flagged, "base_tissue");
   s.eye = count(flagged, "eye");
   s.thickness_mean_mm = num(t, "mean");
   s.thickness_median_mm = num(t, "median");
@@ -458,7 +460,9 @@ void write_model_directory(const ModelContent& m, const ModelProvenance& c, cons
   std::vector<float> flags(maps.flags.begin(), maps.flags.end());
   write_map_nrrd(p / f::kValidity, flags, g,
                  "validity: 0 valid; bit flags 1 no_skin, 2 no_bone, 4 undercut, 8 grazing, "
-                 "16 truncated; 32 base_cavity (valid, its base an air cavity's edge); 64 eye", "flags");
+                 "16 truncated; 32 base_cavity (valid, its base an air cavity's edge); 64 eye; "
+                 "128 base_tissue (valid, its base on deeper tissue at an interpolated depth)",
+                 "flags");
   progress.update(3);
   // Clinicians and the soft-tissue-depth literature read the thickness along the normal.
   const bool assumed_bone = parse_object(c.thickness_json, "thickness").value("kind", "") ==
@@ -513,7 +517,11 @@ std::string model_summary(const fs::path& dir) {
      << "bone       " << seg.at("bone_method").get<std::string>() << bone_along_rays(info)
      << "\n"
      << "valid      " << 100.0 * (s.cells ? double(s.valid_cells) / s.cells : 0.0)
-     << " % of cells" << (s.base_cavity ? cat(" (", s.base_cavity, " based on an air cavity)") : "")
+     << " % of cells"
+     << (s.base_cavity || s.base_tissue
+             ? cat(" (", s.base_cavity, " based on an air cavity, ", s.base_tissue,
+                   " on deeper tissue)")
+             : "")
      << "\n"
      << "thickness  median " << s.thickness_median_mm << " mm (5-95%: " << s.thickness_p5_mm
      << " - " << s.thickness_p95_mm << " mm), forehead " << s.forehead_thickness_mm << " mm\n"

@@ -35,6 +35,7 @@ struct FromVolumeRequest {
   double bone_cap = MapOptions{}.bone_cap_mm;
   std::string bone_method = bone_method_name(BoneOptions{}.method);
   double bone_floor = BoneOptions{}.floor_hu;
+  double tissue_reach = BoneOptions{}.tissue_reach_mm;
   double decimate = ModelOptions{}.decimate_fraction;
   double mr_scalp = SegmentOptions{}.mr_scalp_mm;
   double fat_level = LayerOptions{}.fat_level_hu;
@@ -70,6 +71,10 @@ struct FromVolumeRequest {
     v(r.no_cavity_base, {"no_cavity_base", "CT: where no bone lies under the skin, leave the "
                                            "cell no_bone instead of basing it on the air cavity "
                                            "under the tissue", FieldKind::Flag});
+    v(r.tissue_reach, {"tissue_reach", "CT: where neither bone nor an air cavity lies under the "
+                                       "skin within the cap, base the cell on the deeper tissue "
+                                       "(free, its depth interpolated) up to this far (mm) from a "
+                                       "measured base; 0: leave it no_bone"});
     v(r.decimate, {"decimate", "fraction of mesh faces to keep (0..1]"});
     v(r.fat_level, {"fat_level", "tissue layers (CT): HU level halfway between fat and soft "
                                  "tissue; fat lies below it"});

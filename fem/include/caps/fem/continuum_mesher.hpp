@@ -156,7 +156,8 @@ class LayerStack {
 /// Extrudes `surface` through the patient model. Throws InvalidInput naming theta and z where a
 /// site lies outside the model's z range, on an invalid cell (!flags_valid(flags_at)), where the
 /// thickness is below `min_thickness_mm`, or where an element's Jacobian is not positive at a
-/// Gauss point. Bottom nodes over an air cavity (kBaseCavity) get no support.
+/// Gauss point. Bottom nodes over an air cavity (kBaseCavity) or deeper tissue (kBaseTissue) get
+/// no support.
 ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
                              const ContinuumMeshOptions& options = {});
 

@@ -66,9 +66,15 @@ enum CellFlag : std::uint8_t {
   /// tissue at least kGlobeRunMm deep under the skin that ends on the orbit's fat; not operable
   /// (docs/volume.md).
   kEye = 64,
+  /// Valid, with neither bone nor an air cavity within MapOptions::bone_cap_mm: the soft tissue
+  /// goes on deeper (the cheek over the buccal fat, a skull defect's cover). Its base lies at the
+  /// depth interpolated from the measured bases around (at most BoneOptions::tissue_reach_mm
+  /// away) and carries no support (free; docs/volume.md).
+  kBaseTissue = 128,
 };
 
-/// The flags that make a cell invalid (every flag but kBaseCavity, which names a valid base).
+/// The flags that make a cell invalid (every flag but kBaseCavity and kBaseTissue, which name
+/// valid bases).
 inline constexpr std::uint8_t kInvalidFlags =
     kNoSkin | kNoBone | kUndercut | kGrazing | kTruncated | kEye;
 
@@ -86,7 +92,7 @@ inline constexpr double kEyeMinAreaMm2 = 100.0;
 inline constexpr double kEyeMarginMm = 3.0;
 
 /// True when `flags` (CellFlag, OR-ed) leave the cell valid: measured skin and thickness, over
-/// bone or (kBaseCavity) over an air cavity.
+/// bone, (kBaseCavity) over an air cavity or (kBaseTissue) on deeper tissue.
 constexpr bool flags_valid(std::uint8_t flags) { return (flags & kInvalidFlags) == 0; }
 
 /// Short names of the flags, e.g. "no_bone|undercut", "base_cavity"; "valid" for 0.
@@ -151,6 +157,12 @@ struct BoneOptions {
   /// (nasal cavity, mouth, a sinus without a visible wall), the base is that boundary
   /// (kBaseCavity); otherwise such cells are kNoBone.
   bool cavity_base = true;
+  /// CT: a cell with neither bone nor a cavity within the cap (kNoBone and nothing else) at most
+  /// this far (mm, over the skin) from a cell with a measured base is kBaseTissue, its depth
+  /// interpolated from the measured ones; 0 leaves every such cell kNoBone. 15 mm: the buccal
+  /// region and the skull defect of Cranium lie within 10 mm of measured bone; the interpolation
+  /// is not trusted farther from any measurement.
+  double tissue_reach_mm = 15.0;
 };
 
 /// A ray that re-enters the skin after an air gap of at least this length (mm) is kUndercut.
@@ -172,7 +184,8 @@ struct MapOptions {
 
 /// The maps. Images hold grid.size() values, theta fastest. Lengths in mm.
 /// r_skin: outermost skin crossing (sub-voxel, half-maximum edge); r_bone: first bone crossing
-/// inward from the skin (kBaseCavity cells: the tissue/air edge of the cavity under it);
+/// inward from the skin (kBaseCavity cells: the tissue/air edge of the cavity under it;
+/// kBaseTissue cells: interpolated from the measured bases around);
 /// thickness = r_skin - r_bone (radial, what the extruder uses);
 /// thickness_normal: distance from the skin point to the nearest bone (how clinicians measure).
 /// Invalid cells are filled (see docs/model-format.md): r_skin and thickness by harmonic

@@ -50,6 +50,7 @@ struct ModelStatistics {
   std::size_t cells = 0, valid_cells = 0;
   std::size_t no_skin = 0, no_bone = 0, undercut = 0, grazing = 0, truncated = 0;
   std::size_t base_cavity = 0;  ///< valid cells whose base is an air cavity's edge (kBaseCavity)
+  std::size_t base_tissue = 0;  ///< valid cells based on deeper tissue, depth interpolated (kBaseTissue)
   std::size_t eye = 0;          ///< cells on the eye (kEye, not operable)
   double thickness_mean_mm = 0, thickness_median_mm = 0, thickness_p5_mm = 0, thickness_p95_mm = 0;
   double thickness_normal_median_mm = 0;
