@@ -972,6 +972,12 @@ TEST(Simulate, BaseOverAnAirCavityIsFreeAndTheSurroundingTissueHoldsTheSolve) {
   EXPECT_GT(outside_fixed, 10);
   EXPECT_LT(sim.max_suture_gap_mm, 1e-6);
   EXPECT_GT(sim.result.total_suture_force_n, 0.0);
+  // A base on tissue rests on an interpolated depth: the mesh says so (a cavity's is measured).
+  const auto& warnings = c.mesh.warnings;
+  const bool noted = std::any_of(warnings.begin(), warnings.end(), [](const std::string& w) {
+    return w.find("(base_tissue)") != std::string::npos;
+  });
+  EXPECT_EQ(noted, base == kBaseTissue);
   }
   // With no support anywhere (the free rim and the whole base over the cavity) the solve refuses.
   const PatientModel all_cavity = [] {

@@ -628,6 +628,24 @@ ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& mod
   return std::move(*attempt.mesh);
 }
 
+namespace {
+
+// For a mesh with columns on tissue without bone or a cavity within the cap (base_tissue): the
+// result rests on an interpolated depth and a free base; "" for none.
+std::string tissue_base_note(const WoundMesh& w, const PatientModel& model) {
+  const auto& tz = w.surface.theta_z;
+  int on_tissue = 0;
+  for (Eigen::Index v = 0; v < tz.rows(); ++v)
+    on_tissue += (model.flags_at(tz(v, 0), tz(v, 1)) & kBaseTissue) != 0;
+  if (on_tissue == 0) return {};
+  return cat("mesh: ", on_tissue, " of ", tz.rows(), " columns stand on tissue with neither bone "
+             "nor an air cavity within the bone cap (base_tissue): their depth is interpolated "
+             "from the bone around and their base is free, so the closure is softer than deeper "
+             "support would make it (docs/volume.md)");
+}
+
+}  // namespace
+
 WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
                      const SurfaceMeshOptions& surface_options,
                      const ContinuumMeshOptions& continuum_options, Reporter* reporter) {
@@ -635,6 +653,10 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
   if (surface_options.extent_mm > 0) {
     w.surface = mesh_surface(border, model, surface_options);
     w.continuum = mesh_continuum(w.surface, model, continuum_options);
+    if (std::string m = tissue_base_note(w, model); !m.empty()) {
+      warn(reporter, m);
+      w.continuum.mesh.warnings.push_back(std::move(m));
+    }
     return w;
   }
   // The automatic extent: the largest of full, 0.75 full, ... whose surface and continuum meshes
@@ -665,6 +687,7 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
                              folded ? " and keep the surface mesh's outer layers from folding" : "",
                              "; the result "
                              "depends more on the rim condition (docs/mesher.md)"));
+    if (std::string m = tissue_base_note(done, model); !m.empty()) messages.push_back(std::move(m));
     if (!cliff.empty())
       messages.push_back(cat("mesh: a bony rim lies under the mesh at every extent down to the "
                              "mesh size (", cliff, "); it is meshed across: the elements there are "
