@@ -2,22 +2,17 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "constraints.hpp"
 
 #include <cmath>
 #include <cstdio>
 #include <map>
-#include <numeric>
 #include <set>
 #include <sstream>
 #include <vector>
 
 namespace caps::fem {
 namespace {
-
-int find_root(std::vector<int>& parent, int a) {
-  while (parent[a] != a) a = parent[a] = parent[parent[a]];
-  return a;
-}
 
 std::string num(double v) {
   char buf[32];
@@ -58,15 +53,11 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
        << num(mesh.nodes(i, 2)) << "\n";
 
   // Suture groups: a spanning forest of the pairs, so that no equation is redundant.
-  std::vector<int> parent(N);
-  std::iota(parent.begin(), parent.end(), 0);
-  for (const auto& s : mesh.sutures) {
-    const int ra = find_root(parent, s.a), rb = find_root(parent, s.b);
-    if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
-  }
+  detail::UnionFind groups(N);  // each group's root is its smallest node
+  for (const auto& s : mesh.sutures) groups.unite(s.a, s.b);
   std::vector<int> members;
   for (int i = 0; i < N; ++i)
-    if (find_root(parent, i) != i) members.push_back(i);
+    if (groups.find(i) != i) members.push_back(i);
   const std::set<int> fixed(mesh.fixed_nodes.begin(), mesh.fixed_nodes.end());
   // Prescribed values per dof (NaN = free), and per group root and component the common final
   // position when a member's value is prescribed (as solve() does). Such a component gets no
@@ -79,10 +70,10 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
   std::vector<double> group_pos(3 * static_cast<std::size_t>(N), NAN);
   for (int i = 0; i < N; ++i)
     for (int c = 0; c < 3; ++c)
-      if (!std::isnan(prescribed[3 * i + c]) && std::isnan(group_pos[3 * find_root(parent, i) + c]))
-        group_pos[3 * find_root(parent, i) + c] = mesh.nodes(i, c) + prescribed[3 * i + c];
+      if (!std::isnan(prescribed[3 * i + c]) && std::isnan(group_pos[3 * groups.find(i) + c]))
+        group_pos[3 * groups.find(i) + c] = mesh.nodes(i, c) + prescribed[3 * i + c];
   auto meets_prescribed = [&](int n, int c) {
-    return !std::isnan(group_pos[3 * find_root(parent, n) + c]);
+    return !std::isnan(group_pos[3 * groups.find(n) + c]);
   };
   if (!members.empty()) {
     os << "*NODE, NSET=SUTURE_HELPERS\n";
@@ -126,7 +117,7 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
     id_lines(os, std::vector<int>(fixed.begin(), fixed.end()));
   }
   for (std::size_t k = 0; k < members.size(); ++k) {
-    const int n = members[k], m = find_root(parent, n), h = N + static_cast<int>(k);
+    const int n = members[k], m = groups.find(n), h = N + static_cast<int>(k);
     bool header = false;
     for (int c = 1; c <= 3; ++c) {
       if (meets_prescribed(n, c - 1)) continue;
@@ -150,7 +141,7 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
     for (int c = 0; c < 3; ++c)
       if (c != first && std::abs(s.normal[c]) > 1e-12) comps.push_back(c);
     const auto helper = helper_of.find(s.node);
-    std::vector<int> nodes{helper == helper_of.end() ? s.node : find_root(parent, s.node)};
+    std::vector<int> nodes{helper == helper_of.end() ? s.node : groups.find(s.node)};
     if (helper != helper_of.end()) nodes.push_back(helper->second);
     os << "*EQUATION\n" << comps.size() * nodes.size() << "\n";
     int written = 0;  // terms so far: at most four a line
@@ -175,7 +166,7 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
     os << d.node + 1 << ", " << d.component + 1 << ", " << d.component + 1 << ", "
        << num(d.value_mm) << "\n";
   for (std::size_t k = 0; k < members.size(); ++k) {
-    const int n = members[k], m = find_root(parent, n), h = N + static_cast<int>(k);
+    const int n = members[k], m = groups.find(n), h = N + static_cast<int>(k);
     // u_n - u_m = x_m - x_n: the group meets at the root's final position.
     for (int c = 0; c < 3; ++c)
       if (!meets_prescribed(n, c))
@@ -188,7 +179,7 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
     for (int c = 0; c < 3; ++c)
       if (meets_prescribed(i, c) && std::isnan(prescribed[3 * i + c]))
         os << i + 1 << ", " << c + 1 << ", " << c + 1 << ", "
-           << num(group_pos[3 * find_root(parent, i) + c] - mesh.nodes(i, c)) << "\n";
+           << num(group_pos[3 * groups.find(i) + c] - mesh.nodes(i, c)) << "\n";
   if (!mesh.loads.empty()) {
     os << "*CLOAD\n";
     for (const auto& l : mesh.loads)
