@@ -484,17 +484,17 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   // neither fixed nor sliding (docs/fem.md); the tissue around it holds the column. So where the
   // tissue goes on below the model's base (kBaseTissue: the buccal fat, a skull defect's cover):
   // what lies deeper is not in the model, and a free base is the soft bound of its support.
-  auto over_cavity = [&](int v0, int v1) {
+  auto free_base_at = [&](int v0, int v1) {
     const Eigen::Vector2d tz = 0.5 * (surface.theta_z.row(v0) + surface.theta_z.row(v1)).transpose();
     return (model.flags_at(tz.x(), tz.y()) & (kBaseCavity | kBaseTissue)) != 0;
   };
   std::set<int> fixed, free_base;
   for (int v = 0; v < NV; ++v) {
-    if (over_cavity(v, v)) free_base.insert(vnode(v, 2 * NL));
+    if (free_base_at(v, v)) free_base.insert(vnode(v, 2 * NL));
     else if (!undermined(v, v)) fixed.insert(vnode(v, 2 * NL));
   }
   for (int e = 0; e < NE; ++e) {
-    if (over_cavity(edges[e].first, edges[e].second)) free_base.insert(enode(e, NL));
+    if (free_base_at(edges[e].first, edges[e].second)) free_base.insert(enode(e, NL));
     else if (!undermined(edges[e].first, edges[e].second)) fixed.insert(enode(e, NL));
   }
   if (o.rim == RimCondition::Fixed) {
@@ -580,7 +580,7 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
       Eigen::Vector3d normal = Eigen::Vector3d::Zero();
       double height = 0;
       int count = 0;
-      bool unsupported = false;  // a member lies over a cavity
+      bool unsupported = false;  // a member has a free base (a cavity or deeper tissue under it)
     };
     std::map<int, Merged> merged;  // group root -> its members' normals and column heights
     for (const auto& [bottom, nu] : base) {
