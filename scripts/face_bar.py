@@ -198,8 +198,10 @@ def main():
         with open(a.json, "w") as f:
             json.dump(out, f, indent=1)
     if a.svg:
+        # named by the scan the model was made from, not by the model's directory
+        scan = os.path.basename(os.path.normpath(info.get("source", {}).get("path", a.model)))
         write_svg(a.svg, out, f"Where a {a.length:g} x {a.width:g} mm ellipse can be planned and "
-                  f"simulated: {os.path.basename(os.path.normpath(a.model))}")
+                  f"simulated: {scan}")
 
 
 if __name__ == "__main__":
