@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "caps/app/model.hpp"
@@ -154,6 +155,27 @@ TEST(Chart, RefusesAChartOfAChartAndBadOptions) {
     EXPECT_NE(std::string(e.what()).find("itself a chart"), std::string::npos) << e.what();
   }
   EXPECT_FALSE(fs::exists(again.output));
+  // A parent whose model.json records an option of the wrong type (hand-edited) is bad input
+  // naming the field, not an internal error.
+  const fs::path edited = f.dir / "edited_model";
+  fs::remove_all(edited);
+  fs::copy(f.model, edited, fs::copy_options::recursive);
+  {
+    nlohmann::json j = nlohmann::json::parse(std::ifstream(edited / "model.json"));
+    j["thickness"]["base"]["bone_cap_mm"] = "deep";
+    std::ofstream(edited / "model.json") << j.dump();
+  }
+  app::ChartRequest bad = r;
+  bad.model = edited.string();
+  bad.output = (f.dir / "chart4").string();
+  try {
+    app::run_chart(bad);
+    FAIL() << "a string bone cap was accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("/thickness/base/bone_cap_mm = \"deep\" is not a number"),
+              std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(bad.output));
 }
 
 TEST(Chart, FrameGeometry) {

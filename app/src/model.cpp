@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <type_traits>
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
@@ -54,6 +55,22 @@ Landmarks add_landmarks(const std::string& dir, Reporter* reporter) {
   for (const auto& item : l.items)
     if (!item.found) note(reporter, cat("landmark ", item.name, " absent: ", item.note));
   return l;
+}
+
+// An option the parent model recorded in its model.json (`where`: its JSON path), `fallback`
+// when absent. A value of another type (a hand-edited file) is bad input naming the field, not
+// an internal error.
+template <class T>
+T recorded(const json& o, const char* key, T fallback, const std::string& where) {
+  if (!o.contains(key)) return fallback;
+  try {
+    return o.at(key).get<T>();
+  } catch (const json::exception&) {
+    throw InvalidInput(cat(where, "/", key, " = ", o.at(key).dump(), " is not a ",
+                           std::is_same_v<T, bool> ? "true/false" :
+                           std::is_arithmetic_v<T> ? "number" : "string",
+                           "; rebuild the model"));
+  }
 }
 
 }  // namespace
@@ -190,19 +207,21 @@ ModelResult run_chart(const ChartRequest& r, Reporter* reporter) {
   const json& thickness = info.at("thickness");
   if (thickness.contains("base")) {
     const json& b = thickness.at("base");
-    o.maps.bone.method = parse_bone_method(b.value("bone_method", "edge"));
-    o.maps.bone.floor_hu = b.value("floor_hu", o.maps.bone.floor_hu);
-    o.maps.bone.cavity_base = b.value("cavity_base", o.maps.bone.cavity_base);
+    const std::string at_b = cat(r.model, "/model.json: /thickness/base");
+    o.maps.bone.method = parse_bone_method(recorded<std::string>(b, "bone_method", "edge", at_b));
+    o.maps.bone.floor_hu = recorded(b, "floor_hu", o.maps.bone.floor_hu, at_b);
+    o.maps.bone.cavity_base = recorded(b, "cavity_base", o.maps.bone.cavity_base, at_b);
     // A model made before base_tissue existed had none.
-    o.maps.bone.tissue_reach_mm = b.value("tissue_reach_mm", 0.0);
-    o.maps.bone_cap_mm = b.value("bone_cap_mm", o.maps.bone_cap_mm);
+    o.maps.bone.tissue_reach_mm = recorded(b, "tissue_reach_mm", 0.0, at_b);
+    o.maps.bone_cap_mm = recorded(b, "bone_cap_mm", o.maps.bone_cap_mm, at_b);
   }
   if (thickness.contains("layers")) {
     const json& l = thickness.at("layers");
-    o.maps.layers.measure = l.value("measured", true);
-    o.maps.layers.fat_level_hu = l.value("fat_level_hu", o.maps.layers.fat_level_hu);
-    o.maps.layers.merge_gap_mm = l.value("merge_gap_mm", o.maps.layers.merge_gap_mm);
-    o.maps.layers.min_band_mm = l.value("min_band_mm", o.maps.layers.min_band_mm);
+    const std::string at_l = cat(r.model, "/model.json: /thickness/layers");
+    o.maps.layers.measure = recorded(l, "measured", true, at_l);
+    o.maps.layers.fat_level_hu = recorded(l, "fat_level_hu", o.maps.layers.fat_level_hu, at_l);
+    o.maps.layers.merge_gap_mm = recorded(l, "merge_gap_mm", o.maps.layers.merge_gap_mm, at_l);
+    o.maps.layers.min_band_mm = recorded(l, "min_band_mm", o.maps.layers.min_band_mm, at_l);
   }
   o.maps.n_theta = r.n_theta;
   o.maps.n_z = r.n_z;
