@@ -991,3 +991,79 @@ TEST(Simulate, BaseOverAnAirCavityIsFreeAndTheSurroundingTissueHoldsTheSolve) {
                    plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}),
                    all_cavity, 0.0, 0.0, 90.0), o), InvalidInput);
 }
+
+TEST(Simulate, AMeshThatCannotAvoidTheEyeIsTrimmedToTheModelAndStillCloses) {
+  // An eye-like patch (flag kEye, radius 3 mm) 2 mm beside a 12 x 4 mm ellipse: the first layer
+  // of the skin mesh (2 mm) reaches its cells (1 deg = 1.22 mm wide: from x = 3.66 mm) at every
+  // extent, so no whole mesh fits. The mesher trims
+  // the mesh to the model: the first layer's outer vertices there are pulled back onto valid skin,
+  // the outer layers that reach the patch are left out, and elsewhere the mesh keeps its full
+  // extent (3 x the wound). The trimmed rim is held, so the closure pulls harder than with no
+  // patch at all (the same plan on the same cylinder).
+  const auto model_with_patch = [](bool patch) {
+    CylindricalMaps m = caps_test::synthetic_maps(caps_test::grid(360, 401, -200, 1),
+                                                  [](double, double) { return kR; },
+                                                  [](double, double) { return 5.0; });
+    if (patch)
+      for (int k = 0; k < m.grid.n_z; ++k)
+        for (int j = 0; j < m.grid.n_theta; ++j) {
+          const double x = m.grid.theta_deg(j) * kPi / 180 * kR, z = m.grid.z_mm(k);
+          if (std::hypot(x - 7.0, z) < 3.0) m.flags[m.grid.index(j, k)] = kEye;
+        }
+    return PatientModel(std::move(m));
+  };
+  const PatientModel model = model_with_patch(true), plain = model_with_patch(false);
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 12.0}, {"width", 4.0}}), model, 0.0, 0.0, 0.0);
+  double x_max = -1e9, z_max = -1e9;  // the ellipse's side facing the patch, its tip
+  for (const Eigen::Vector2d& q : plan::wound_border(p).loop_theta_z) {
+    x_max = std::max(x_max, q.x() * kPi / 180 * kR);
+    z_max = std::max(z_max, q.y());
+  }
+  ASSERT_NEAR(x_max, 2.0, 0.1);
+  ASSERT_NEAR(z_max, 6.0, 0.1);
+  SimulateOptions o;
+  o.surface.size_mm = 2.0;
+  const Simulation sim = simulate(model, p, o);
+  const SurfaceMesh& s = sim.wound.surface;
+  EXPECT_GT(s.trimmed_polygons, 0);
+  const auto& warnings = sim.wound.continuum.mesh.warnings;
+  ASSERT_FALSE(warnings.empty());
+  EXPECT_NE(warnings[0].find("trimmed to the model"), std::string::npos) << warnings[0];
+  EXPECT_NE(warnings[0].find("(eye)"), std::string::npos) << warnings[0];
+  // Every column stands on valid skin: vertices and mid-edges.
+  std::set<std::pair<int, int>> edges;
+  for (const auto& poly : s.polygons)
+    for (std::size_t i = 0; i < poly.size(); ++i) edges.insert(std::minmax(poly[i], poly[(i + 1) % poly.size()]));
+  for (int v = 0; v < s.n_vertices(); ++v)
+    EXPECT_EQ(model.flags_at(s.theta_z(v, 0), s.theta_z(v, 1)), 0) << "vertex " << v;
+  for (const auto& [a, b] : edges) {
+    const Eigen::Vector2d mid = 0.5 * (s.theta_z.row(a) + s.theta_z.row(b)).transpose();
+    EXPECT_EQ(model.flags_at(mid.x(), mid.y()), 0) << "edge " << a << "-" << b;
+  }
+  // The full extent on the side away from the patch, and a first layer beside it.
+  double x_min = 1e9, x_near = 1e9;
+  for (int v = 0; v < s.n_vertices(); ++v) {
+    const double x = s.theta_z(v, 0) * kPi / 180 * kR, z = s.theta_z(v, 1);
+    x_min = std::min(x_min, x);
+    if (std::abs(z) < 1.0 && x > 2.5) x_near = std::min(x_near, x);
+  }
+  EXPECT_NEAR(s.extent_mm, 3 * s.wound_size_mm, 1e-9);
+  EXPECT_LT(x_min, -2.0 - 0.9 * s.extent_mm);
+  EXPECT_GT(x_near, 2.8);  // pulled back from 4 mm, but at least 40 % of the 2 mm layer kept
+  EXPECT_LT(x_near, 3.66);
+  // The rim is one loop of polygon edges, none of them the wound's.
+  ASSERT_GT(s.outer_border.size(), 3u);
+  std::set<int> wound;
+  for (const auto& chain : s.edge_chain) wound.insert(chain.begin(), chain.end());
+  for (std::size_t i = 0; i < s.outer_border.size(); ++i) {
+    const int a = s.outer_border[i], b = s.outer_border[(i + 1) % s.outer_border.size()];
+    EXPECT_TRUE(edges.count(std::minmax(a, b))) << "rim " << a << "-" << b;
+  }
+  // It closes, and the rim held near the wound pulls harder than the whole mesh on plain skin.
+  EXPECT_LT(sim.max_suture_gap_mm, 1e-6);
+  const Simulation free_of_it = simulate(plain, p, o);
+  EXPECT_EQ(free_of_it.wound.surface.trimmed_polygons, 0);
+  EXPECT_GT(sim.result.total_suture_force_n, 1.02 * free_of_it.result.total_suture_force_n);
+  EXPECT_LT(sim.result.total_suture_force_n, 3.0 * free_of_it.result.total_suture_force_n);
+}

@@ -117,6 +117,7 @@ MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
   m.quads = s.quality.n_quads;
   m.triangles = s.quality.n_triangles;
   m.surface_layers = s.n_layers;
+  m.trimmed_polygons = s.trimmed_polygons;
   m.extent_mm = s.extent_mm;
   m.wound_size_mm = s.wound_size_mm;
   m.min_angle_deg = s.quality.min_angle_deg;
@@ -146,6 +147,7 @@ std::string to_json(const MeshResult& m) {
          {"surface", {{"vertices", m.surface_vertices}, {"quads", m.quads},
                       {"triangles", m.triangles}, {"layers", m.surface_layers},
                       {"extent_mm", m.extent_mm}, {"wound_size_mm", m.wound_size_mm},
+                      {"trimmed_polygons", m.trimmed_polygons},
                       {"min_angle_deg", m.min_angle_deg}, {"max_angle_deg", m.max_angle_deg},
                       {"max_aspect_ratio", m.max_aspect_ratio},
                       {"mean_aspect_ratio", m.mean_aspect_ratio}}},

@@ -172,6 +172,34 @@ void LayerStack::depths(double theta, double z, double T, std::vector<double>& D
 
 namespace {
 
+// Why a column of the continuum mesh cannot stand at (theta, z) (empty if it can); `T` gets the
+// soft-tissue thickness there.
+std::string site_refusal(const PatientModel& model, const ContinuumMeshOptions& o, double theta,
+                         double z, double* T) {
+  const auto& g = model.grid();
+  const double margin_mm = kEndRowsKeptFree * g.dz_mm;
+  if (!model.has_z(z))
+    return cat("mesh: the site at theta ", std::round(theta * 10) / 10, " deg, z ",
+               std::round(z * 10) / 10, " mm lies outside the model's z range; use a smaller "
+               "{extent} or a wound further from the model's ends");
+  if (z < g.z0_mm + margin_mm || z > g.z_mm(g.n_z - 1) - margin_mm)
+    return cat("mesh: the site at theta ", std::round(theta * 10) / 10, " deg, z ",
+               std::round(z * 10) / 10, " mm lies within ", kEndRowsKeptFree,
+               " rows of the model's top or bottom, too close to draw the skin around it; use "
+               "a smaller {extent} or a wound further from the model's ends");
+  if (const auto f = model.flags_at(theta, z); !flags_valid(f))
+    return cat("mesh: the site at theta ", std::round(theta * 10) / 10, " deg, z ",
+               std::round(z * 10) / 10, " mm lies on cells of the model that are not valid (",
+               describe_flags(f), "); move the wound or use a smaller {extent}");
+  const double r_top = model.r_skin(theta, z);
+  *T = o.constant_thickness_mm > 0 ? o.constant_thickness_mm : model.thickness(theta, z);
+  if (!(*T >= o.min_thickness_mm) || !(*T < r_top))
+    return cat("mesh: the soft-tissue thickness at theta ", theta, " deg, z ", z, " mm is ", *T,
+               " mm (minimum ", o.min_thickness_mm, " mm, skin radius ", r_top,
+               " mm); there is no valid tissue layer to mesh there");
+  return {};
+}
+
 // A continuum mesh, or why the surface mesh reaches where the model has no valid tissue (the
 // message of an OffModelError): a caller with room to mesh less can try a smaller extent.
 struct ContinuumAttempt {
@@ -253,27 +281,9 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   auto column = [&](const Eigen::Vector2d& tz, auto&& node_of, int n_half_levels,
                     int step, bool* no_fat) -> std::string {
     const double theta = tz.x(), z = tz.y();
-    const auto& g = model.grid();
-    const double margin_mm = kEndRowsKeptFree * g.dz_mm;
-    if (!model.has_z(z))
-      return cat("mesh: the site at theta ", std::round(theta * 10) / 10, " deg, z ",
-                 std::round(z * 10) / 10, " mm lies outside the model's z range; use a smaller "
-                 "{extent} or a wound further from the model's ends");
-    if (z < g.z0_mm + margin_mm || z > g.z_mm(g.n_z - 1) - margin_mm)
-      return cat("mesh: the site at theta ", std::round(theta * 10) / 10, " deg, z ",
-                 std::round(z * 10) / 10, " mm lies within ", kEndRowsKeptFree,
-                 " rows of the model's top or bottom, too close to draw the skin around it; use "
-                 "a smaller {extent} or a wound further from the model's ends");
-    if (const auto f = model.flags_at(theta, z); !flags_valid(f))
-      return cat("mesh: the site at theta ", std::round(theta * 10) / 10, " deg, z ",
-                 std::round(z * 10) / 10, " mm lies on cells of the model that are not valid (",
-                 describe_flags(f), "); move the wound or use a smaller {extent}");
+    double T = 0;
+    if (std::string why = site_refusal(model, o, theta, z, &T); !why.empty()) return why;
     const double r_top = model.r_skin(theta, z);
-    const double T = o.constant_thickness_mm > 0 ? o.constant_thickness_mm : model.thickness(theta, z);
-    if (!(T >= o.min_thickness_mm) || !(T < r_top))
-      return cat("mesh: the soft-tissue thickness at theta ", theta, " deg, z ", z, " mm is ", T,
-                 " mm (minimum ", o.min_thickness_mm, " mm, skin radius ", r_top,
-                 " mm); there is no valid tissue layer to mesh there");
     out.min_thickness_mm = std::min(out.min_thickness_mm, T);
     out.max_thickness_mm = std::max(out.max_thickness_mm, T);
     bool thin_fat = false;
@@ -630,6 +640,215 @@ ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& mod
 
 namespace {
 
+// The surface mesh trimmed to the model: its layer polygons that reach a site where no column
+// can stand (site_refusal(): the eye, the CT's end rows, cells the cylindrical image cannot hold)
+// or that span a bony rim (a depth step steeper than kMaxDepthSlope) are left out, and so is
+// whatever they cut off from the wound. The rest keeps its vertices, polygons and wound border;
+// the trimmed border becomes part of the rim. Returns nothing when the wound itself or its stage-1
+// fill reaches such a site, or when the polygons left do not form one ring around the wound (one
+// rim loop, apart from the wound's, that touches no wound border vertex). `why` gets the first
+// refusal met.
+struct Trimmed {
+  SurfaceMesh surface;
+  int dropped = 0;  // polygons left out
+  std::string why;
+};
+std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model,
+                                        const ContinuumMeshOptions& o, bool trim_rims) {
+  const int NV = s.n_vertices();
+  const int NP = static_cast<int>(s.polygons.size());
+  Trimmed t;
+  std::vector<double> T(static_cast<std::size_t>(NV), 0);
+  std::vector<char> wound_vertex(static_cast<std::size_t>(NV), 0);
+  std::set<std::pair<int, int>> wound_edges;
+  for (const auto& chain : s.edge_chain)
+    for (std::size_t i = 0; i < chain.size(); ++i) {
+      wound_vertex[chain[i]] = 1;
+      if (i + 1 < chain.size()) wound_edges.insert(std::minmax(chain[i], chain[i + 1]));
+    }
+  std::vector<char> bad_vertex(static_cast<std::size_t>(NV), 0);
+  for (int v = 0; v < NV; ++v) {
+    std::string why = site_refusal(model, o, s.theta_z(v, 0), s.theta_z(v, 1), &T[v]);
+    if (why.empty()) continue;
+    bad_vertex[v] = 1;
+    if (t.why.empty()) t.why = std::move(why);
+  }
+  // The first layer's outer vertices off the model are pulled towards the wound until they stand
+  // on it, if that leaves the layer at least kKeptLayerFraction of its thickness there: without
+  // them the wound's border would have no skin around it (a wound's tip 2 mm from the CT's end).
+  constexpr double kKeptLayerFraction = 0.4;
+  for (int p = 0; p < static_cast<int>(s.polygons.size()); ++p) {
+    const auto& poly = s.polygons[p];
+    Eigen::Vector2d w_tz = Eigen::Vector2d::Zero(), w_xy = Eigen::Vector2d::Zero();
+    int n_w = 0;
+    for (int v : poly)
+      if (wound_vertex[v]) {
+        w_tz += s.theta_z.row(v).transpose();
+        w_xy += s.xy_mm.row(v).transpose();
+        ++n_w;
+      }
+    if (n_w == 0) continue;
+    w_tz /= n_w;
+    w_xy /= n_w;
+    for (int v : poly) {
+      if (!bad_vertex[v] || wound_vertex[v]) continue;
+      const Eigen::Vector2d tz = s.theta_z.row(v).transpose(), xy = s.xy_mm.row(v).transpose();
+      for (double f = 0.05; f <= 1 - kKeptLayerFraction + 1e-9; f += 0.05) {
+        const Eigen::Vector2d at = tz + f * (w_tz - tz);
+        if (!site_refusal(model, o, at.x(), at.y(), &T[v]).empty()) continue;
+        s.theta_z.row(v) = at.transpose();
+        s.xy_mm.row(v) = (xy + f * (w_xy - xy)).transpose();
+        bad_vertex[v] = 0;
+        break;
+      }
+    }
+  }
+  const auto skin_point = [&](int v) {
+    return model.to_lps(s.theta_z(v, 0), s.theta_z(v, 1), model.r_skin(s.theta_z(v, 0), s.theta_z(v, 1)));
+  };
+  // An edge is off the model if its mid-edge column is, or if it spans a bony rim.
+  std::map<std::pair<int, int>, char> bad_edge;
+  for (const auto& poly : s.polygons)
+    for (std::size_t i = 0; i < poly.size(); ++i) {
+      const auto key = std::minmax(poly[i], poly[(i + 1) % poly.size()]);
+      if (bad_edge.count(key) || bad_vertex[key.first] || bad_vertex[key.second]) continue;
+      double T_mid = 0;
+      std::string why = site_refusal(model, o, 0.5 * (s.theta_z(key.first, 0) + s.theta_z(key.second, 0)),
+                                     0.5 * (s.theta_z(key.first, 1) + s.theta_z(key.second, 1)), &T_mid);
+      if (why.empty() && trim_rims && std::abs(T[key.first] - T[key.second]) >
+                             kMaxDepthSlope * (skin_point(key.first) - skin_point(key.second)).norm())
+        why = "mesh: the skin mesh crosses a bony rim";
+      bad_edge[key] = !why.empty();
+      if (!why.empty() && t.why.empty()) t.why = std::move(why);
+    }
+  // The polygons kept: those on valid sites, reached from the wound's across shared edges.
+  std::vector<char> ok(static_cast<std::size_t>(NP), 1);
+  std::map<std::pair<int, int>, std::vector<int>> edge_polygons;
+  for (int p = 0; p < NP; ++p) {
+    const auto& poly = s.polygons[p];
+    for (std::size_t i = 0; i < poly.size(); ++i) {
+      const auto key = std::minmax(poly[i], poly[(i + 1) % poly.size()]);
+      if (bad_vertex[poly[i]] || bad_edge[key]) ok[p] = 0;
+      edge_polygons[key].push_back(p);
+    }
+    if (!ok[p] && s.polygon_layer[p] == 0) return std::nullopt;  // the stage-1 fill
+  }
+  for (int v = 0; v < NV; ++v)
+    if (wound_vertex[v] && bad_vertex[v]) return std::nullopt;
+  // A layer's polygon stands on the layer below (its inner vertices, those the layer below uses):
+  // where that is left out, so is it, so that what lies behind a patch off the model (seen from
+  // the wound) goes too and the rim stays one loop, open around the patch.
+  int max_layer = 0;
+  for (int p = 0; p < NP; ++p) max_layer = std::max(max_layer, s.polygon_layer[p]);
+  std::vector<std::vector<int>> by_layer(static_cast<std::size_t>(max_layer) + 1);
+  for (int p = 0; p < NP; ++p) by_layer[s.polygon_layer[p]].push_back(p);
+  std::vector<char> used_below(static_cast<std::size_t>(NV)), kept_below(static_cast<std::size_t>(NV));
+  for (int k = 1; k <= max_layer; ++k) {
+    std::fill(used_below.begin(), used_below.end(), 0);
+    std::fill(kept_below.begin(), kept_below.end(), 0);
+    for (int p : by_layer[k - 1])
+      for (int v : s.polygons[p]) {
+        used_below[v] = 1;
+        if (ok[p]) kept_below[v] = 1;
+      }
+    for (int p : by_layer[k])
+      for (int v : s.polygons[p])
+        if (used_below[v] && !kept_below[v]) ok[p] = 0;
+  }
+  std::vector<char> kept(static_cast<std::size_t>(NP), 0);
+  std::vector<int> stack;
+  for (int p = 0; p < NP; ++p)
+    for (int v : s.polygons[p])
+      if (ok[p] && wound_vertex[v] && !kept[p]) {
+        kept[p] = 1;
+        stack.push_back(p);
+      }
+  while (!stack.empty()) {
+    const int p = stack.back();
+    stack.pop_back();
+    const auto& poly = s.polygons[p];
+    for (std::size_t i = 0; i < poly.size(); ++i)
+      for (int q : edge_polygons[std::minmax(poly[i], poly[(i + 1) % poly.size()])])
+        if (ok[q] && !kept[q]) {
+          kept[q] = 1;
+          stack.push_back(q);
+        }
+  }
+  // Renumber the vertices the kept polygons use, in their old order (the wound's come first).
+  std::vector<int> new_id(static_cast<std::size_t>(NV), -1);
+  for (int p = 0; p < NP; ++p)
+    if (kept[p])
+      for (int v : s.polygons[p]) new_id[v] = 0;
+  int n = 0;
+  for (int v = 0; v < NV; ++v)
+    if (new_id[v] == 0) new_id[v] = n++;
+  for (int v = 0; v < NV; ++v)
+    if (wound_vertex[v] && new_id[v] < 0) return std::nullopt;
+  // The rim: the kept polygons' border edges other than the wound's, as one loop.
+  std::map<int, int> next;
+  int n_rim = 0;
+  for (int p = 0; p < NP; ++p) {
+    if (!kept[p]) continue;
+    const auto& poly = s.polygons[p];
+    for (std::size_t i = 0; i < poly.size(); ++i) {
+      const int a = poly[i], b = poly[(i + 1) % poly.size()];
+      const auto key = std::minmax(a, b);
+      int users = 0;
+      for (int q : edge_polygons[key]) users += kept[q];
+      if (users != 1 || wound_edges.count(key)) continue;
+      if (!next.emplace(a, b).second) return std::nullopt;
+      ++n_rim;
+    }
+  }
+  if (n_rim == 0) return std::nullopt;
+  SurfaceMesh& out = t.surface;
+  const int start = next.begin()->first;
+  for (int v = start;;) {
+    out.outer_border.push_back(new_id[v]);
+    const auto it = next.find(v);
+    if (it == next.end()) return std::nullopt;
+    v = it->second;
+    if (v == start) break;
+    if (static_cast<int>(out.outer_border.size()) > n_rim) return std::nullopt;
+  }
+  if (static_cast<int>(out.outer_border.size()) != n_rim) return std::nullopt;  // several loops
+  out.xy_mm.resize(n, 2);
+  out.theta_z.resize(n, 2);
+  for (int v = 0; v < NV; ++v)
+    if (new_id[v] >= 0) {
+      out.xy_mm.row(new_id[v]) = s.xy_mm.row(v);
+      out.theta_z.row(new_id[v]) = s.theta_z.row(v);
+    }
+  for (int p = 0; p < NP; ++p) {
+    if (!kept[p]) {
+      ++t.dropped;
+      continue;
+    }
+    out.polygons.emplace_back();
+    for (int v : s.polygons[p]) out.polygons.back().push_back(new_id[v]);
+    out.polygon_stage.push_back(s.polygon_stage[p]);
+    out.polygon_layer.push_back(s.polygon_layer[p]);
+    out.polygon_expanded.push_back(s.polygon_expanded[p]);
+    out.n_layers = std::max(out.n_layers, s.polygon_layer[p]);
+  }
+  if (t.dropped == 0) return std::nullopt;  // nothing to trim: the failure lies elsewhere
+  for (const auto& chain : s.edge_chain) {
+    out.edge_chain.emplace_back();
+    for (int v : chain) out.edge_chain.back().push_back(new_id[v]);
+  }
+  for (int v : s.loop_vertex) out.loop_vertex.push_back(new_id[v]);
+  out.sutures = s.sutures;
+  out.flaps_theta_z = s.flaps_theta_z;
+  out.theta_c_deg = s.theta_c_deg;
+  out.z_c_mm = s.z_c_mm;
+  out.ref_radius_mm = s.ref_radius_mm;
+  out.extent_mm = s.extent_mm;
+  out.wound_size_mm = s.wound_size_mm;
+  out.trimmed_polygons = t.dropped;
+  out.quality = surface_quality(out.xy_mm, out.polygons);
+  return t;
+}
+
 // For a mesh with columns on tissue without bone or a cavity within the cap (base_tissue): the
 // result rests on an interpolated depth and a free base; "" for none.
 std::string tissue_base_note(const WoundMesh& w, const PatientModel& model) {
@@ -698,6 +917,43 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
       warn(reporter, m);
     }
   };
+  // No extent keeps the whole mesh on the model (a wound beside the eye, near the CT's end, by
+  // the nose): the largest extent whose mesh, trimmed to the model, still rings the wound.
+  const auto trim_to_model = [&](double from) {
+    // First with the bony rims trimmed too; then, as for a whole mesh, meshed across.
+    for (const bool trim_rims : {true, false})
+      for (double extent = from; extent >= surface_options.size_mm; extent *= 0.75) {
+        o.extent_mm = extent;
+        SurfaceMesh surface;
+        try {
+          surface = mesh_surface(border, model, o);
+        } catch (const InvalidParameter&) {
+          continue;  // folded: a smaller extent may not
+        }
+        std::optional<Trimmed> t = trimmed_to_model(surface, model, continuum_options, trim_rims);
+        if (!t) continue;
+        try {
+          ContinuumAttempt attempt =
+              try_mesh_continuum(t->surface, model, continuum_options, !trim_rims);
+          if (!attempt.mesh) continue;
+          w.surface = std::move(t->surface);
+          w.continuum = std::move(*attempt.mesh);
+          const std::string m = cat(
+              "mesh: the skin mesh (extent ", std::round(extent * 10) / 10, " mm) was trimmed to "
+              "the model: ", t->dropped, " of its polygons reached cells it cannot carry (first: ",
+              t->why.substr(0, t->why.find(';')), ") and were left out; the rim follows the valid "
+              "cells there and is held like the rest of the rim, so the result depends more on "
+              "the rim condition (docs/mesher.md, \"Trimmed to the model\")");
+          w.continuum.mesh.warnings.push_back(m);
+          warn(reporter, m);
+          finish(w, full, std::move(attempt.cliff));  // the message above gives the extent
+          return true;
+        } catch (const InvalidParameter&) {
+          continue;  // an inverted element at the trimmed border
+        }
+      }
+    return false;
+  };
   // The largest extent whose mesh is valid but for a bony rim under it, meshed across the rim:
   // used when no smaller extent stays short of the rim (the cheek over the maxilla, where the
   // bone's depth steps wherever the mesh reaches).
@@ -734,6 +990,7 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
       }
     }
     if (extent * 0.75 < surface_options.size_mm) {
+      if (!across && trim_to_model(full)) return w;
       if (!across) std::rethrow_exception(failure);
       finish(*across, across_extent, across_cliff);
       return std::move(*across);

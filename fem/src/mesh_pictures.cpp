@@ -71,7 +71,10 @@ void write_surface_mesh_png(const fs::path& path, const SurfaceMesh& s, const st
   for (int v = 0; v < s.n_vertices(); ++v)
     half = std::max(half, s.xy_mm.row(v).cwiseAbs().maxCoeff());
   draw_panel(cv, s, {margin, top, panel, 0, 0, half * 1.02},
-             cat("whole mesh: ", s.n_layers, " layers, extent ", std::round(s.extent_mm), " mm"));
+             cat("whole mesh: ", s.n_layers, " layers, extent ", std::round(s.extent_mm), " mm",
+                 s.trimmed_polygons > 0
+                     ? cat(", trimmed to the model (", s.trimmed_polygons, " polygons left out)")
+                     : std::string()));
   draw_panel(cv, s, {2 * margin + panel, top, panel, 0, 0, std::max(0.9 * s.wound_size_mm, 1.0)},
              "around the wound");
   text(cv, margin, 28, title, 16);

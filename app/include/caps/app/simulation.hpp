@@ -116,6 +116,9 @@ struct MeshRequest {
 struct MeshResult {
   std::string output;
   int surface_vertices = 0, quads = 0, triangles = 0, surface_layers = 0;
+  /// Surface polygons left out where they reached cells the model cannot carry (0: a whole mesh;
+  /// fem::SurfaceMesh::trimmed_polygons).
+  int trimmed_polygons = 0;
   double extent_mm = 0, wound_size_mm = 0, min_angle_deg = 0, max_angle_deg = 0;
   double max_aspect_ratio = 0, mean_aspect_ratio = 0;
   int nodes = 0, elements = 0, hex20 = 0, wedge15 = 0, layers = 0, fixed_nodes = 0,

@@ -79,6 +79,10 @@ struct SurfaceMesh {
   double extent_mm = 0;      ///< the extent actually used
   double wound_size_mm = 0;  ///< largest extent of the loop
   int n_layers = 0;
+  /// Polygons of the grown layers left out where they reached cells the model cannot carry (the
+  /// eye, the CT's end rows, skin its cylindrical image does not hold): the rim follows the
+  /// valid cells there (mesh_wound(), docs/mesher.md "Trimmed to the model"); 0 for a whole mesh.
+  int trimmed_polygons = 0;
   SurfaceQuality quality;
 
   int n_vertices() const { return static_cast<int>(xy_mm.rows()); }
