@@ -1027,6 +1027,7 @@ TEST(Simulate, AMeshThatCannotAvoidTheEyeIsTrimmedToTheModelAndStillCloses) {
   const Simulation sim = simulate(model, p, o);
   const SurfaceMesh& s = sim.wound.surface;
   EXPECT_GT(s.trimmed_polygons, 0);
+  EXPECT_GT(s.pulled_vertices, 0);
   const auto& warnings = sim.wound.continuum.mesh.warnings;
   ASSERT_FALSE(warnings.empty());
   EXPECT_NE(warnings[0].find("trimmed to the model"), std::string::npos) << warnings[0];

@@ -651,6 +651,7 @@ namespace {
 struct Trimmed {
   SurfaceMesh surface;
   int dropped = 0;  // polygons left out
+  int pulled = 0;   // first-layer vertices pulled back onto the model
   std::string why;
 };
 std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model,
@@ -699,6 +700,7 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
         s.theta_z.row(v) = at.transpose();
         s.xy_mm.row(v) = (xy + f * (w_xy - xy)).transpose();
         bad_vertex[v] = 0;
+        ++t.pulled;
         break;
       }
     }
@@ -831,7 +833,7 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
     out.polygon_expanded.push_back(s.polygon_expanded[p]);
     out.n_layers = std::max(out.n_layers, s.polygon_layer[p]);
   }
-  if (t.dropped == 0) return std::nullopt;  // nothing to trim: the failure lies elsewhere
+  if (t.dropped == 0 && t.pulled == 0) return std::nullopt;  // the failure lies elsewhere
   for (const auto& chain : s.edge_chain) {
     out.edge_chain.emplace_back();
     for (int v : chain) out.edge_chain.back().push_back(new_id[v]);
@@ -845,6 +847,7 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
   out.extent_mm = s.extent_mm;
   out.wound_size_mm = s.wound_size_mm;
   out.trimmed_polygons = t.dropped;
+  out.pulled_vertices = t.pulled;
   out.quality = surface_quality(out.xy_mm, out.polygons);
   return t;
 }
@@ -938,12 +941,18 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
           if (!attempt.mesh) continue;
           w.surface = std::move(t->surface);
           w.continuum = std::move(*attempt.mesh);
+          std::string first = t->why.substr(0, t->why.find(';'));
+          if (first.rfind("mesh: ", 0) == 0) first.erase(0, 6);
           const std::string m = cat(
               "mesh: the skin mesh (extent ", std::round(extent * 10) / 10, " mm) was trimmed to "
-              "the model: ", t->dropped, " of its polygons reached cells it cannot carry (first: ",
-              t->why.substr(0, t->why.find(';')), ") and were left out; the rim follows the valid "
-              "cells there and is held like the rest of the rim, so the result depends more on "
-              "the rim condition (docs/mesher.md, \"Trimmed to the model\")");
+              "the model where it reached cells it cannot carry (first: ", first, "): ",
+              t->dropped, " polygons left out",
+              t->pulled > 0 ? cat(", ", t->pulled, " first-layer vertices pulled back towards "
+                                  "the wound")
+                            : std::string(),
+              "; the rim follows the valid cells there and is held like the rest of the rim, so "
+              "the result depends more on the rim condition (docs/mesher.md, \"Trimmed to the "
+              "model\")");
           w.continuum.mesh.warnings.push_back(m);
           warn(reporter, m);
           finish(w, full, std::move(attempt.cliff));  // the message above gives the extent

@@ -72,9 +72,7 @@ void write_surface_mesh_png(const fs::path& path, const SurfaceMesh& s, const st
     half = std::max(half, s.xy_mm.row(v).cwiseAbs().maxCoeff());
   draw_panel(cv, s, {margin, top, panel, 0, 0, half * 1.02},
              cat("whole mesh: ", s.n_layers, " layers, extent ", std::round(s.extent_mm), " mm",
-                 s.trimmed_polygons > 0
-                     ? cat(", trimmed to the model (", s.trimmed_polygons, " polygons left out)")
-                     : std::string()));
+                 s.trimmed_polygons + s.pulled_vertices > 0 ? ", trimmed to the model" : ""));
   draw_panel(cv, s, {2 * margin + panel, top, panel, 0, 0, std::max(0.9 * s.wound_size_mm, 1.0)},
              "around the wound");
   text(cv, margin, 28, title, 16);
@@ -88,8 +86,13 @@ void write_surface_mesh_png(const fs::path& path, const SurfaceMesh& s, const st
               "grey: split triangles"),
           12);
   text(cv, margin, top + panel + 44,
-          "x: arc length (mm) at the wound's reference radius, increasing with theta (patient's "
-          "left); y: z (mm, superior up)", 12);
+          cat("x: arc length (mm) at the wound's reference radius, increasing with theta (patient's "
+              "left); y: z (mm, superior up)",
+              s.trimmed_polygons + s.pulled_vertices > 0
+                  ? cat(".  Trimmed to the model: ", s.trimmed_polygons, " polygons left out, ",
+                        s.pulled_vertices, " first-layer vertices pulled back")
+                  : std::string()),
+          12);
   cv.write_png(path);
 }
 

@@ -83,6 +83,7 @@ struct SurfaceMesh {
   /// eye, the CT's end rows, skin its cylindrical image does not hold): the rim follows the
   /// valid cells there (mesh_wound(), docs/mesher.md "Trimmed to the model"); 0 for a whole mesh.
   int trimmed_polygons = 0;
+  int pulled_vertices = 0;  ///< first-layer vertices pulled back towards the wound onto the model
   SurfaceQuality quality;
 
   int n_vertices() const { return static_cast<int>(xy_mm.rows()); }
