@@ -16,6 +16,7 @@
 #include "caps/fem/simulate.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/render/render.hpp"
+#include "caps/render/simulation_report.hpp"
 #include "caps/render/skin_surface.hpp"
 #include "caps/surface/patient_model.hpp"
 
@@ -307,6 +308,39 @@ TEST(SkinSurface, WoundFillCollapsesWhenTheWoundCloses) {
   // the ellipse is 20 x 6 mm: about 80 mm2 of skin to excise, nothing left after the closure
   EXPECT_GT(pre, 50.0);
   EXPECT_LT(post, 1e-3 * pre);
+}
+
+// A bilobed flap closes its defect round the first lobe, not along a line: no triangulation of
+// its border collapses after the closure, and a fill that followed the border would lie across
+// the lobes as a fan of flat triangles cutting through the skin (seen on Cranium's nasal
+// sidewall). The closed wound's fill has vertices of its own, gathered at one point afterwards.
+TEST(SkinSurface, AClosedTranspositionFlapsFillVanishesInsteadOfFanningAcrossTheLobes) {
+  fem::SimulateOptions o;
+  o.surface.size_mm = 3.0;
+  o.surface.extent_mm = 12.0;
+  o.solve.kinematics = fem::Kinematics::Finite;
+  o.solve.newton.n_steps = 5;
+  const plan::Plan p = plan::place_procedure(plan::layout_procedure("bilobed", {}),
+                                             round_cylinder(), 10.0, 5.0, 90.0);
+  const fem::Simulation sim = fem::simulate(round_cylinder(), p, o);
+  ASSERT_LT(sim.max_suture_gap_mm, 1e-6);
+  const SkinSurfaces s = displaced_skin(round_cylinder(), sim.wound.continuum.mesh, &sim.result, 2);
+  const auto [pre, post] = wound_fill_area_mm2(s);
+  EXPECT_GT(pre, 0.8 * kPi * 6 * 6);  // the defect, radius 6 mm, and the lobes' slits
+  EXPECT_LT(post, 1e-9 * pre);
+  // Its vertices are its own: no micropolygon uses them, and before the closure they lie where
+  // the border's do (the pre-operative skin is whole).
+  std::set<int> micro, fill;
+  for (Eigen::Index f = 0; f < s.pre.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k)
+      (s.face_part[f] == SkinPart::WoundFill ? fill : micro).insert(s.pre.F(f, k));
+  ASSERT_FALSE(fill.empty());
+  for (int v : fill) {
+    EXPECT_FALSE(micro.count(v));
+    double nearest = 1e9;
+    for (int w : micro) nearest = std::min(nearest, (s.pre.V.row(v) - s.pre.V.row(w)).norm());
+    EXPECT_LT(nearest, 1e-9);
+  }
 }
 
 // A V-Y flap is an incision without excision: no hole opens, so there is nothing to fill (a fill
