@@ -947,8 +947,8 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
               "mesh: the skin mesh (extent ", std::round(extent * 10) / 10, " mm) was trimmed to "
               "the model where it reached cells it cannot carry (first: ", first, "): ",
               t->dropped, " polygons left out",
-              t->pulled > 0 ? cat(", ", t->pulled, " first-layer vertices pulled back towards "
-                                  "the wound")
+              t->pulled > 0 ? cat(", ", t->pulled, t->pulled == 1 ? " first-layer vertex" :
+                                  " first-layer vertices", " pulled back towards the wound")
                             : std::string(),
               "; the rim follows the valid cells there and is held like the rest of the rim, so "
               "the result depends more on the rim condition (docs/mesher.md, \"Trimmed to the "
