@@ -172,6 +172,12 @@ void LayerStack::depths(double theta, double z, double T, std::vector<double>& D
 
 namespace {
 
+// Two neighbouring columns `apart` mm apart on the skin, `depth_a` and `depth_b` deep, stand on
+// either side of a bony rim (kMaxDepthSlope).
+bool across_bony_rim(double depth_a, double depth_b, double apart) {
+  return std::abs(depth_a - depth_b) > kMaxDepthSlope * apart;
+}
+
 // Why a column of the continuum mesh cannot stand at (theta, z) (empty if it can); `T` gets the
 // soft-tissue thickness there.
 std::string site_refusal(const PatientModel& model, const ContinuumMeshOptions& o, double theta,
@@ -327,9 +333,8 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   // layer turns inside out, and the tissue it models is not the soft tissue over one bone. The
   // cliff counts as off the model, so the automatic extent stops short of it.
   for (const auto& [a, b] : edges) {
-    const double step = std::abs(vertex_depth[a] - vertex_depth[b]);
     const double apart = (mesh.nodes.row(vnode(a, 0)) - mesh.nodes.row(vnode(b, 0))).norm();
-    if (step > kMaxDepthSlope * apart) {
+    if (across_bony_rim(vertex_depth[a], vertex_depth[b], apart)) {
       const Eigen::Vector2d tz = 0.5 * (surface.theta_z.row(a) + surface.theta_z.row(b)).transpose();
       std::string drop = cat("the bone under the skin at theta ", std::round(tz.x() * 10) / 10,
                              " deg, z ", std::round(tz.y() * 10) / 10, " mm drops from ",
@@ -678,7 +683,7 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
   // on it, if that leaves the layer at least kKeptLayerFraction of its thickness there: without
   // them the wound's border would have no skin around it (a wound's tip 2 mm from the CT's end).
   constexpr double kKeptLayerFraction = 0.4;
-  for (int p = 0; p < static_cast<int>(s.polygons.size()); ++p) {
+  for (int p = 0; p < NP; ++p) {
     const auto& poly = s.polygons[p];
     Eigen::Vector2d w_tz = Eigen::Vector2d::Zero(), w_xy = Eigen::Vector2d::Zero();
     int n_w = 0;
@@ -717,8 +722,9 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
       double T_mid = 0;
       std::string why = site_refusal(model, o, 0.5 * (s.theta_z(key.first, 0) + s.theta_z(key.second, 0)),
                                      0.5 * (s.theta_z(key.first, 1) + s.theta_z(key.second, 1)), &T_mid);
-      if (why.empty() && trim_rims && std::abs(T[key.first] - T[key.second]) >
-                             kMaxDepthSlope * (skin_point(key.first) - skin_point(key.second)).norm())
+      if (why.empty() && trim_rims &&
+          across_bony_rim(T[key.first], T[key.second],
+                          (skin_point(key.first) - skin_point(key.second)).norm()))
         why = "mesh: the skin mesh crosses a bony rim";
       bad_edge[key] = !why.empty();
       if (!why.empty() && t.why.empty()) t.why = std::move(why);

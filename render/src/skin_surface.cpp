@@ -492,18 +492,20 @@ void add_wound_fills(Builder& b, const std::vector<std::vector<int>>& loops, int
       pre_fill += (b.pre[loop[t[1]]] - b.pre[loop[t[0]]]).cross(b.pre[loop[t[2]]] - b.pre[loop[t[0]]]).norm();
       post_fill += post_area(t[0], t[1], t[2]);
     }
-    bool closed = true;  // the border's vertices have met after the closure
-    int met = 0;
-    for (std::size_t i = 0; i < loop.size() && closed; ++i) {
-      double nearest = 1e300;
-      for (std::size_t k = 0; k < loop.size(); ++k)
-        if (k != i) nearest = std::min(nearest, (b.post[loop[k]] - b.post[loop[i]]).norm());
-      met += nearest < kMetMm;
-      closed = nearest < kOpenMm;
-    }
-    closed = closed && met >= kMetFraction * static_cast<double>(loop.size());
+    // Only a fill that would not collapse needs the (quadratic) check of the closure.
+    const auto closed = [&] {
+      int met = 0;
+      for (std::size_t i = 0; i < loop.size(); ++i) {
+        double nearest = 1e300;
+        for (std::size_t k = 0; k < loop.size(); ++k)
+          if (k != i) nearest = std::min(nearest, (b.post[loop[k]] - b.post[loop[i]]).norm());
+        if (!(nearest < kOpenMm)) return false;
+        met += nearest < kMetMm;
+      }
+      return met >= kMetFraction * static_cast<double>(loop.size());
+    };
     std::vector<int> fill = loop;
-    if (closed && post_fill > 1e-3 * pre_fill) {
+    if (post_fill > 1e-3 * pre_fill && closed()) {
       Eigen::Vector3d gathered = Eigen::Vector3d::Zero();
       for (int v : loop) gathered += b.post[v];
       gathered /= static_cast<double>(loop.size());
