@@ -310,7 +310,7 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
     return {};
   };
   const auto off_model = [](std::string why) {
-    return ContinuumAttempt{std::nullopt, std::move(why)};
+    return ContinuumAttempt{std::nullopt, std::move(why), {}};
   };
   const auto rim_refusal = [](const std::string& drop) {
     return cat("mesh: ", drop, " (a bony rim, such as the orbit's); move the wound or use a "
