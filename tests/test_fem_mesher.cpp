@@ -1070,3 +1070,48 @@ TEST(Simulate, AMeshThatCannotAvoidTheEyeIsTrimmedToTheModelAndStillCloses) {
   EXPECT_GT(sim.result.total_suture_force_n, 1.02 * free_of_it.result.total_suture_force_n);
   EXPECT_LT(sim.result.total_suture_force_n, 3.0 * free_of_it.result.total_suture_force_n);
 }
+
+// The meshers' outcomes: a refusal names its kind, place and message, and the throwing meshers
+// throw exactly that message (mesh_wound() tries smaller extents by these outcomes).
+TEST(MeshOutcome, RefusalsNameTheKindThePlaceAndTheMessageTheThrowingMesherThrows) {
+  // Layers that cannot reach the extent: Unreached.
+  SurfaceMeshOptions few = no_growth(2.0, 30.0);
+  few.max_layers = 2;
+  const MeshOutcome<SurfaceMesh> unreached = try_mesh_surface(lens(), kR, few);
+  ASSERT_FALSE(unreached);
+  EXPECT_EQ(unreached.refusal.kind, MeshRefusal::Kind::Unreached);
+  EXPECT_NE(unreached.refusal.message.find("2 layers reach only"), std::string::npos)
+      << unreached.refusal.message;
+  try {
+    mesh_surface(lens(), kR, few);
+    FAIL() << "expected InvalidParameter";
+  } catch (const InvalidParameter& e) {
+    EXPECT_EQ(e.spelled([](const std::string& name) { return "{" + name + "}"; }),
+              unreached.refusal.message);
+  }
+  const MeshOutcome<SurfaceMesh> ok = try_mesh_surface(lens(), kR, no_growth(2.0, 10.0));
+  ASSERT_TRUE(ok);
+  EXPECT_EQ(ok.mesh->polygons.size(), mesh_surface(lens(), kR, no_growth(2.0, 10.0)).polygons.size());
+
+  // A surface mesh reaching the invalid band at z 60..70: OffModel, at a site in the band.
+  const PatientModel bad = cylinder([](double, double) { return 5.0; }, kNoBone);
+  WoundBorder b = lens();
+  for (auto& p : b.loop_theta_z) p.y() += 50;
+  const SurfaceMesh surface = mesh_surface(b, bad, no_growth(2.0, 15.0));
+  const MeshOutcome<ContinuumMesh> off = try_mesh_continuum(surface, bad);
+  ASSERT_FALSE(off);
+  EXPECT_EQ(off.refusal.kind, MeshRefusal::Kind::OffModel);
+  ASSERT_TRUE(std::isfinite(off.refusal.theta_deg) && std::isfinite(off.refusal.z_mm));
+  EXPECT_FALSE(flags_valid(bad.flags_at(off.refusal.theta_deg, off.refusal.z_mm)));
+  EXPECT_NEAR(off.refusal.z_mm, 65, 6);
+  EXPECT_NE(off.refusal.message.find("no_bone"), std::string::npos) << off.refusal.message;
+  try {
+    mesh_continuum(surface, bad);
+    FAIL() << "expected OffModelError";
+  } catch (const OffModelError& e) {
+    EXPECT_EQ(e.spelled([](const std::string& name) { return "{" + name + "}"; }),
+              off.refusal.message);
+  }
+  // The same surface on a model without the band meshes.
+  EXPECT_TRUE(try_mesh_continuum(surface, constant_cylinder()));
+}

@@ -846,3 +846,56 @@ TEST(FiniteStrain, ArchSnapsThroughUnderALoadBeyondItsLimit) {
   EXPECT_NEAR(w_cut, w, 1e-6 * std::abs(w));
   EXPECT_LT(10 * r.newton_iterations, cut.newton_iterations);
 }
+
+// A warm start (SolveOptions::initial_displacement_mm): from the converged closure the whole
+// closure is one step that converges in one solve to the same state; from a state part of the
+// way there it converges to the same state in fewer solves than the load steps take; from a
+// state that inverts elements it starts afresh in load steps and ends where they end.
+TEST(FiniteStrain, AWarmStartFromTheConvergedStateTakesOneSolveAndKeepsTheAnswer) {
+  const Mesh m = slotted_box(6.0);
+  const SolveResult cold = solve(m, finite());
+  const double scale = cold.displacement_mm.cwiseAbs().maxCoeff();
+  ASSERT_GT(scale, 1.0);
+
+  SolveOptions o = finite();
+  o.initial_displacement_mm = cold.displacement_mm;
+  const SolveResult warm = solve(m, o);
+  print_history(warm, "warm start from the converged state");
+  ASSERT_EQ(warm.newton_steps.size(), 1u);
+  EXPECT_EQ(warm.newton_steps[0].lambda, 1.0);
+  EXPECT_EQ(warm.newton_steps[0].iterations, 1);
+  EXPECT_EQ(warm.newton_iterations, 1);
+  EXPECT_LE(warm.relative_residual, 1e-8);
+  EXPECT_LT((warm.displacement_mm - cold.displacement_mm).cwiseAbs().maxCoeff(), 1e-8 * scale);
+  EXPECT_NEAR(warm.total_suture_force_n, cold.total_suture_force_n, 1e-8 * cold.total_suture_force_n);
+
+  // Part of the way: the converged state's displacement scaled by 0.9 (the sutures' prescribed
+  // closure stays the problem's).
+  o.initial_displacement_mm = 0.9 * cold.displacement_mm;
+  const SolveResult near = solve(m, o);
+  print_history(near, "warm start from 0.9 of the converged state");
+  ASSERT_EQ(near.newton_steps.size(), 1u);
+  EXPECT_LT(near.newton_iterations, cold.newton_iterations);
+  EXPECT_LT((near.displacement_mm - cold.displacement_mm).cwiseAbs().maxCoeff(), 1e-7 * scale);
+  EXPECT_NEAR(near.total_suture_force_n, cold.total_suture_force_n, 1e-7 * cold.total_suture_force_n);
+
+  // A state that turns every element inside out (mirrored in x): afresh in load steps, to the
+  // same state.
+  o.initial_displacement_mm = Eigen::MatrixX3d::Zero(m.n_nodes(), 3);
+  o.initial_displacement_mm.col(0) = -2.0 * m.nodes.col(0);
+  const SolveResult afresh = solve(m, o);
+  print_history(afresh, "warm start from an inverted state");
+  EXPECT_EQ(afresh.newton_steps.size(), cold.newton_steps.size());
+  EXPECT_LT((afresh.displacement_mm - cold.displacement_mm).cwiseAbs().maxCoeff(), 1e-12 * scale);
+  EXPECT_NEAR(afresh.total_suture_force_n, cold.total_suture_force_n, 1e-12 * cold.total_suture_force_n);
+}
+
+TEST(FiniteStrain, AWarmStartNeedsTheFiniteStrainSolveAndOneDisplacementPerNode) {
+  const Mesh m = slotted_box(6.0);
+  SolveOptions linear;
+  linear.initial_displacement_mm = Eigen::MatrixX3d::Zero(m.n_nodes(), 3);
+  EXPECT_THROW(solve(m, linear), InvalidInput);
+  SolveOptions short_rows = finite();
+  short_rows.initial_displacement_mm = Eigen::MatrixX3d::Zero(m.n_nodes() - 1, 3);
+  EXPECT_THROW(solve(m, short_rows), InvalidInput);
+}

@@ -10,7 +10,6 @@
 #include <array>
 #include <cmath>
 #include <memory>
-#include <exception>
 #include <map>
 #include <optional>
 #include <set>
@@ -206,20 +205,18 @@ std::string site_refusal(const PatientModel& model, const ContinuumMeshOptions& 
   return {};
 }
 
-// A continuum mesh, or why the surface mesh reaches where the model has no valid tissue (the
-// message of an OffModelError): a caller with room to mesh less can try a smaller extent.
+// A continuum mesh, or why there is none: the surface mesh reaches where the model has no valid
+// tissue (OffModel, the message of an OffModelError) or an element is inverted (Inverted): a
+// caller with room to mesh less can try a smaller extent.
 struct ContinuumAttempt {
   std::optional<ContinuumMesh> mesh;
-  std::string off_model;
+  MeshRefusal refusal;  // when !mesh
   /// With `allow_cliffs`: the mesh crosses a bony rim, the message naming the place and the
   /// drop (empty when it crosses none).
   std::string cliff;
 };
 
-// `allow_cliffs`: a bony rim under the mesh is meshed across (its message kept in `cliff`)
-// instead of counting as off the model, unless an element across it is inverted.
-ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
-                                    const ContinuumMeshOptions& o, bool allow_cliffs = false) {
+void check_continuum_options(const SurfaceMesh& surface, const ContinuumMeshOptions& o) {
   if (o.n_layers < 1 || o.n_layers > 50 || !(o.grading > 0) || !std::isfinite(o.grading))
     throw InvalidInput(cat("continuum mesher: layers ", o.n_layers, " must be in 1..50 and grading ",
                            o.grading, " positive"));
@@ -231,24 +228,108 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   if (!(o.min_tissue_layer_mm > 0) || !std::isfinite(o.min_tissue_layer_mm))
     throw InvalidInput(cat("continuum mesher: the thinnest tissue layer ", o.min_tissue_layer_mm,
                            " mm must be positive"));
-  const LayerStack stack(surface, model, o);
-  const bool measured = stack.measured();
+}
+
+ContinuumAttempt refused(MeshRefusal::Kind kind, const Eigen::Vector2d& tz, std::string why) {
+  return ContinuumAttempt{std::nullopt, MeshRefusal{kind, tz.x(), tz.y(), std::move(why)}, {}};
+}
+
+std::string rim_refusal(const std::string& drop) {
+  return cat("mesh: ", drop, " (a bony rim, such as the orbit's); move the wound or use a "
+             "smaller {extent}");
+}
+
+// One continuum mesh in the making: the surface mesh's edges, the node columns of its vertices
+// and edges, the elements, suture pairs, fixed nodes and the sliding base, one step each
+// (build()). The fields are the steps' shared state.
+struct ContinuumBuild {
+  ContinuumBuild(const SurfaceMesh& surface, const PatientModel& model,
+                 const ContinuumMeshOptions& o, bool allow_cliffs);
+  ContinuumAttempt build();
+
+  void collect_edges();
+  void allocate_nodes();
+  // The nodes of one column; returns why the site cannot be meshed (empty if it can).
+  template <class NodeOf>
+  std::string column(const Eigen::Vector2d& tz, NodeOf&& node_of, int n_half_levels, int step,
+                     bool* no_fat);
+  std::optional<ContinuumAttempt> place_vertex_columns();
+  std::optional<ContinuumAttempt> find_bony_rims();
+  std::optional<ContinuumAttempt> place_edge_columns();
+  void assign_materials();
+  void add_elements();
+  void add_sutures();
+  void fix_nodes();
+  void add_sliding_base();
+  std::optional<ContinuumAttempt> check_jacobians();
+
+  int vnode(int v, int half_level) const { return v * per_vertex + half_level; }
+  int enode(int e, int level) const { return NV * per_vertex + e * per_edge + level; }
+
+  const SurfaceMesh& surface;
+  const PatientModel& model;
+  const ContinuumMeshOptions& o;
+  const bool allow_cliffs;
+  const LayerStack stack;
+  const bool measured;
   // Measured: `per` element layers in each tissue layer (dermis, fat, deep).
-  const int per = stack.per_tissue_layer();
-  const int NL = stack.n_layers();  // element layers
+  const int per;
+  const int NL;  // element layers
   ContinuumAttempt attempt;
-  ContinuumMesh& out = attempt.mesh.emplace();
+  ContinuumMesh& out;
+  Mesh& mesh;
+  Eigen::Vector2d cliff_at = Eigen::Vector2d::Zero();  // where attempt.cliff lies
+  // Surface edges.
+  std::map<std::pair<int, int>, int> edge_id;
+  std::vector<std::pair<int, int>> edges;
+  int NV = 0, NE = 0, per_vertex = 0, per_edge = 0;
+  std::vector<char> fatless;  // measured: a vertex without fat
+  std::vector<double> D;
+  // Measured: each vertex column's interface depths. A mid-edge column takes the mean of its two
+  // vertices' depths (scaled to its own thickness) instead of the maps' own value at the
+  // midpoint: where the fat's depth jumps between neighbouring columns (noise in the maps, the
+  // edge of a muscle) a mid-edge node sampled there lies far off the line between the corners'
+  // nodes, and the quadratic element turns inside out (seen at the Cranium temple). Where the
+  // depths vary linearly both are the same.
+  std::vector<std::vector<double>> vertex_depths;
+  std::vector<double> vertex_depth;  // each vertex column's depth
+  const std::vector<double>* fractions = nullptr;  // set for a mid-edge column: depth / T
+  std::set<std::pair<int, int>> pairs;  // suture pairs
+  std::set<int> sutured, fixed, free_base;
+};
+
+ContinuumBuild::ContinuumBuild(const SurfaceMesh& surface, const PatientModel& model,
+                               const ContinuumMeshOptions& o, bool allow_cliffs)
+    : surface(surface), model(model), o(o), allow_cliffs(allow_cliffs), stack(surface, model, o),
+      measured(stack.measured()), per(stack.per_tissue_layer()), NL(stack.n_layers()),
+      out(attempt.mesh.emplace()), mesh(out.mesh) {
   out.n_layers = NL;
   out.tissue = measured ? TissueLayers::Measured : TissueLayers::Uniform;
   if (measured) {
     out.fat_top_level = per;
     out.fat_bottom_level = 2 * per;
   }
-  Mesh& mesh = out.mesh;
+  collect_edges();
+  allocate_nodes();
+}
 
-  // Surface edges.
-  std::map<std::pair<int, int>, int> edge_id;
-  std::vector<std::pair<int, int>> edges;
+// `allow_cliffs`: a bony rim under the mesh is meshed across (its message kept in `cliff`)
+// instead of counting as off the model, unless an element across it is inverted.
+ContinuumAttempt ContinuumBuild::build() {
+  if (auto refusal = place_vertex_columns()) return std::move(*refusal);
+  if (auto refusal = find_bony_rims()) return std::move(*refusal);
+  if (auto refusal = place_edge_columns()) return std::move(*refusal);
+  assign_materials();
+  add_elements();
+  add_sutures();
+  fix_nodes();
+  if (o.base == BaseCondition::Slide) add_sliding_base();
+  if (auto refusal = check_jacobians()) return std::move(*refusal);
+  validate(mesh, "continuum mesh");
+  return std::move(attempt);
+}
+
+void ContinuumBuild::collect_edges() {
   auto edge_of = [&](int a, int b) {
     const auto key = std::minmax(a, b);
     auto [it, inserted] = edge_id.try_emplace({key.first, key.second}, static_cast<int>(edges.size()));
@@ -257,13 +338,14 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   };
   for (const auto& poly : surface.polygons)
     for (std::size_t i = 0; i < poly.size(); ++i) edge_of(poly[i], poly[(i + 1) % poly.size()]);
+}
 
-  const int NV = surface.n_vertices();
-  const int NE = static_cast<int>(edges.size());
-  std::vector<char> fatless(static_cast<std::size_t>(NV), 0);  // measured: a vertex without fat
-  const int per_vertex = 2 * NL + 1, per_edge = NL + 1;
-  auto vnode = [&](int v, int half_level) { return v * per_vertex + half_level; };
-  auto enode = [&](int e, int level) { return NV * per_vertex + e * per_edge + level; };
+void ContinuumBuild::allocate_nodes() {
+  NV = surface.n_vertices();
+  NE = static_cast<int>(edges.size());
+  fatless.assign(static_cast<std::size_t>(NV), 0);
+  per_vertex = 2 * NL + 1;
+  per_edge = NL + 1;
   const int n_nodes = NV * per_vertex + NE * per_edge;
   mesh.nodes.resize(n_nodes, 3);
   out.node_theta_z.resize(n_nodes, 2);
@@ -272,60 +354,53 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   out.node_level.resize(n_nodes);
   out.min_thickness_mm = 1e300;
   out.max_thickness_mm = 0;
+  D.resize(static_cast<std::size_t>(NL) + 1);
+  vertex_depths.resize(measured ? static_cast<std::size_t>(NV) : 0);
+  vertex_depth.resize(static_cast<std::size_t>(NV));
+}
 
-  // The nodes of one column; returns why the site cannot be meshed (empty if it can).
-  std::vector<double> D(static_cast<std::size_t>(NL) + 1);
-  // Measured: each vertex column's interface depths. A mid-edge column takes the mean of its two
-  // vertices' depths (scaled to its own thickness) instead of the maps' own value at the
-  // midpoint: where the fat's depth jumps between neighbouring columns (noise in the maps, the
-  // edge of a muscle) a mid-edge node sampled there lies far off the line between the corners'
-  // nodes, and the quadratic element turns inside out (seen at the Cranium temple). Where the
-  // depths vary linearly both are the same.
-  std::vector<std::vector<double>> vertex_depths(measured ? static_cast<std::size_t>(NV) : 0);
-  std::vector<double> vertex_depth(static_cast<std::size_t>(NV));  // each vertex column's depth
-  const std::vector<double>* fractions = nullptr;  // set for a mid-edge column: depth / T
-  auto column = [&](const Eigen::Vector2d& tz, auto&& node_of, int n_half_levels,
-                    int step, bool* no_fat) -> std::string {
-    const double theta = tz.x(), z = tz.y();
-    double T = 0;
-    if (std::string why = site_refusal(model, o, theta, z, &T); !why.empty()) return why;
-    const double r_top = model.r_skin(theta, z);
-    out.min_thickness_mm = std::min(out.min_thickness_mm, T);
-    out.max_thickness_mm = std::max(out.max_thickness_mm, T);
-    bool thin_fat = false;
-    if (fractions != nullptr)
-      for (int k = 0; k <= NL; ++k) D[k] = (*fractions)[k] * T;
-    else
-      stack.depths(theta, z, T, D, &thin_fat);
-    if (thin_fat) ++out.widened_fat_columns;
-    if (no_fat) *no_fat = thin_fat;
-    for (int h = 0; h <= n_half_levels; h += step) {
-      const int id = node_of(h);
-      const double depth = h % 2 == 0 ? D[h / 2] : 0.5 * (D[h / 2] + D[h / 2 + 1]);
-      // Nodes lie on the line from the skin point to the axis (paper section 6).
-      mesh.nodes.row(id) = model.to_lps(theta, z, r_top - depth).transpose();
-      out.node_theta_z.row(id) = tz.transpose();
-      out.node_level[id] = 0.5 * h;
-    }
-    return {};
-  };
-  const auto off_model = [](std::string why) {
-    return ContinuumAttempt{std::nullopt, std::move(why), {}};
-  };
-  const auto rim_refusal = [](const std::string& drop) {
-    return cat("mesh: ", drop, " (a bony rim, such as the orbit's); move the wound or use a "
-               "smaller {extent}");
-  };
+template <class NodeOf>
+std::string ContinuumBuild::column(const Eigen::Vector2d& tz, NodeOf&& node_of, int n_half_levels,
+                                   int step, bool* no_fat) {
+  const double theta = tz.x(), z = tz.y();
+  double T = 0;
+  if (std::string why = site_refusal(model, o, theta, z, &T); !why.empty()) return why;
+  const double r_top = model.r_skin(theta, z);
+  out.min_thickness_mm = std::min(out.min_thickness_mm, T);
+  out.max_thickness_mm = std::max(out.max_thickness_mm, T);
+  bool thin_fat = false;
+  if (fractions != nullptr)
+    for (int k = 0; k <= NL; ++k) D[k] = (*fractions)[k] * T;
+  else
+    stack.depths(theta, z, T, D, &thin_fat);
+  if (thin_fat) ++out.widened_fat_columns;
+  if (no_fat) *no_fat = thin_fat;
+  for (int h = 0; h <= n_half_levels; h += step) {
+    const int id = node_of(h);
+    const double depth = h % 2 == 0 ? D[h / 2] : 0.5 * (D[h / 2] + D[h / 2 + 1]);
+    // Nodes lie on the line from the skin point to the axis (paper section 6).
+    mesh.nodes.row(id) = model.to_lps(theta, z, r_top - depth).transpose();
+    out.node_theta_z.row(id) = tz.transpose();
+    out.node_level[id] = 0.5 * h;
+  }
+  return {};
+}
+
+std::optional<ContinuumAttempt> ContinuumBuild::place_vertex_columns() {
   for (int v = 0; v < NV; ++v) {
     bool no_fat = false;
     if (std::string why = column(surface.theta_z.row(v).transpose(),
                                  [&](int h) { return vnode(v, h); }, 2 * NL, 1, &no_fat);
         !why.empty())
-      return off_model(std::move(why));
+      return refused(MeshRefusal::Kind::OffModel, surface.theta_z.row(v).transpose(), std::move(why));
     fatless[v] = no_fat;
     if (measured) vertex_depths[v] = D;
     vertex_depth[v] = D[NL];
   }
+  return std::nullopt;
+}
+
+std::optional<ContinuumAttempt> ContinuumBuild::find_bony_rims() {
   // A cliff in the bone under the mesh: the depth of two neighbouring columns differs by more
   // than kMaxDepthSlope times the distance between them on the skin. Rays that pass just below
   // a bony rim (the supraorbital rim into the orbit, the edge of a sinus) meet bone 20-30 mm
@@ -341,10 +416,17 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
                              std::round(std::min(vertex_depth[a], vertex_depth[b]) * 10) / 10, " to ",
                              std::round(std::max(vertex_depth[a], vertex_depth[b]) * 10) / 10,
                              " mm deep within ", std::round(apart * 10) / 10, " mm");
-      if (!allow_cliffs) return off_model(rim_refusal(drop));
-      if (attempt.cliff.empty()) attempt.cliff = std::move(drop);
+      if (!allow_cliffs) return refused(MeshRefusal::Kind::OffModel, tz, rim_refusal(drop));
+      if (attempt.cliff.empty()) {
+        attempt.cliff = std::move(drop);
+        cliff_at = tz;
+      }
     }
   }
+  return std::nullopt;
+}
+
+std::optional<ContinuumAttempt> ContinuumBuild::place_edge_columns() {
   std::vector<double> edge_fractions(static_cast<std::size_t>(NL) + 1);
   for (int e = 0; e < NE; ++e) {
     // The mid-edge node of the top face: the midpoint in (theta, z), snapped to the skin.
@@ -358,11 +440,13 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
     }
     std::string why = column(tz, [&](int h) { return enode(e, h / 2); }, 2 * NL, 2, nullptr);
     fractions = nullptr;
-    if (!why.empty()) return off_model(std::move(why));
+    if (!why.empty()) return refused(MeshRefusal::Kind::OffModel, tz, std::move(why));
   }
+  return std::nullopt;
+}
 
-  // Elements: polygons run counter-clockwise in (theta, z), i.e. seen from outside the skin;
-  // reversed, their right-hand normal points into the tissue as the element numbering needs.
+// The layers' materials (Mesh::materials, Mesh::finite_materials).
+void ContinuumBuild::assign_materials() {
   if (measured) {
     // Element layer ids are the tissue layers; the finite-strain solve gets each one's
     // neo-Hookean solid (the same E and nu).
@@ -376,6 +460,11 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   } else {
     for (int k = 0; k < NL; ++k) mesh.materials.emplace(k, o.material);
   }
+}
+
+// Elements: polygons run counter-clockwise in (theta, z), i.e. seen from outside the skin;
+// reversed, their right-hand normal points into the tissue as the element numbering needs.
+void ContinuumBuild::add_elements() {
   mesh.flaps.assign(surface.flaps_theta_z.size(), {});
   for (std::size_t p = 0; p < surface.polygons.size(); ++p) {
     std::vector<int> v(surface.polygons[p].rbegin(), surface.polygons[p].rend());
@@ -413,9 +502,10 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
       out.element_polygon.push_back(static_cast<int>(p));
     }
   }
+}
 
-  // Suture pairs along every sutured border edge, through all layers.
-  std::set<std::pair<int, int>> pairs;
+// Suture pairs along every sutured border edge, through all layers.
+void ContinuumBuild::add_sutures() {
   auto add_pair = [&](int a, int b) {
     if (a != b && !pairs.count({b, a})) pairs.insert({a, b});
   };
@@ -463,17 +553,18 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
         if (!add_deep_pair(enode(e1, k), enode(e2, k), enode(e1, 0), enode(e2, 0))) break;
     }
   }
-  std::set<int> sutured;
   for (const auto& [a, b] : pairs) {
     mesh.sutures.push_back({a, b});
     sutured.insert(a);
     sutured.insert(b);
   }
+}
 
-  // Fixed nodes: the bottom (bone) except where undermined, and with a fixed rim the whole
-  // outer rim, unless sutured. Undermined: the site is within undermine_mm of the wound's border
-  // (the loop's chains) in the surface mesh's plane, or inside a flap the plan raises (its whole
-  // area is dissected off the deep tissue, on its outline included).
+// Fixed nodes: the bottom (bone) except where undermined, and with a fixed rim the whole
+// outer rim, unless sutured. Undermined: the site is within undermine_mm of the wound's border
+// (the loop's chains) in the surface mesh's plane, or inside a flap the plan raises (its whole
+// area is dissected off the deep tissue, on its outline included).
+void ContinuumBuild::fix_nodes() {
   auto near_border = [&](const Eigen::Vector2d& p) {
     if (!(o.undermine_mm > 0)) return false;
     for (const auto& chain : surface.edge_chain)
@@ -503,7 +594,6 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
     const Eigen::Vector2d tz = 0.5 * (surface.theta_z.row(v0) + surface.theta_z.row(v1)).transpose();
     return (model.flags_at(tz.x(), tz.y()) & (kBaseCavity | kBaseTissue)) != 0;
   };
-  std::set<int> fixed, free_base;
   for (int v = 0; v < NV; ++v) {
     if (free_base_at(v, v)) free_base.insert(vnode(v, 2 * NL));
     else if (!undermined(v, v)) fixed.insert(vnode(v, 2 * NL));
@@ -522,125 +612,146 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   }
   for (int id : fixed)
     if (!sutured.count(id)) mesh.fixed_nodes.push_back(id);
-  // The freed base slides on the deep tissue: held along the base's normal (the normal of the
-  // mesh's bottom surface, which lies on the bone or the cavity's base) by a spring
-  // kSlidingStiffness x E x column height, stiff enough that the support gives way by about
-  // 1e-6 mm under the closing forces, and free along the base. The nodes a suture ties together
-  // become one point at the wound's floor: they slide as one, with one spring along their mean
-  // normal (a spring on each would ask the closed point to lie on several planes at once, and
-  // leaving them free makes the floor kink against its sliding neighbours, a kink that stiffens
-  // without bound as the mesh is refined: docs/fem.md, "The freed base slides").
-  if (o.base == BaseCondition::Slide) {
-    constexpr double kSlidingStiffness = 1e5;
-    const double E_sliding = measured ? std::max({o.dermis.E_mpa(), o.fat.E_mpa(), o.deep.E_mpa()})
-                                      : o.material.E_mpa();
-    // The base's normal at a bottom node: the bottom faces' Newell vectors (area-weighted
-    // normals) summed over the faces whose centres lie within kNormalRadiusMm of it (at least
-    // the nearest face), turned to point up its column. A fixed radius rather than the node's
-    // own faces: the bone under a CT's skin is bumpy at the scale of its voxels, and normals
-    // from ever smaller faces would follow the bumps ever more closely (at 0.75 mm they strayed
-    // a median 3 and up to 14 deg from their 3 mm mean on Cranium's forehead).
-    constexpr double kNormalRadiusMm = 3.0;
-    std::vector<Eigen::Vector3d> face_vector, face_centre;
-    for (const auto& poly : surface.polygons) {
-      Eigen::Vector3d n = Eigen::Vector3d::Zero(), c = Eigen::Vector3d::Zero();
-      for (std::size_t i = 0; i < poly.size(); ++i) {
-        const Eigen::Vector3d a = mesh.nodes.row(vnode(poly[i], 2 * NL)).transpose();
-        const Eigen::Vector3d b = mesh.nodes.row(vnode(poly[(i + 1) % poly.size()], 2 * NL)).transpose();
-        n += a.cross(b);
-        c += a;
-      }
-      face_vector.push_back(n);
-      face_centre.push_back(c / static_cast<double>(poly.size()));
-    }
-    std::map<std::array<long, 3>, std::vector<int>> cells;  // faces by kNormalRadiusMm cube
-    auto cell_of = [&](const Eigen::Vector3d& x) {
-      return std::array<long, 3>{std::lround(std::floor(x.x() / kNormalRadiusMm)),
-                                 std::lround(std::floor(x.y() / kNormalRadiusMm)),
-                                 std::lround(std::floor(x.z() / kNormalRadiusMm))};
-    };
-    for (std::size_t f = 0; f < face_centre.size(); ++f) cells[cell_of(face_centre[f])].push_back(static_cast<int>(f));
-    auto base_normal = [&](const Eigen::Vector3d& x) {
-      Eigen::Vector3d n = Eigen::Vector3d::Zero();
-      const auto c = cell_of(x);
-      for (long i = -1; i <= 1; ++i)
-        for (long j = -1; j <= 1; ++j)
-          for (long k = -1; k <= 1; ++k) {
-            const auto it = cells.find({c[0] + i, c[1] + j, c[2] + k});
-            if (it == cells.end()) continue;
-            for (int f : it->second)
-              if ((face_centre[f] - x).norm() <= kNormalRadiusMm) n += face_vector[f];
-          }
-      if (n.norm() > 0) return n;
-      std::size_t nearest = 0;
-      for (std::size_t f = 1; f < face_centre.size(); ++f)
-        if ((face_centre[f] - x).norm() < (face_centre[nearest] - x).norm()) nearest = f;
-      return face_vector[nearest];
-    };
-    std::map<int, std::pair<Eigen::Vector3d, Eigen::Vector3d>> base;  // bottom -> (normal, column)
-    auto add_base = [&](int bottom, int top) {
-      const Eigen::Vector3d up = (mesh.nodes.row(top) - mesh.nodes.row(bottom)).transpose();
-      Eigen::Vector3d n = base_normal(mesh.nodes.row(bottom).transpose());
-      if (n.dot(up) < 0) n = -n;
-      if (!(n.norm() > 0)) n = up;
-      base[bottom] = {n.normalized(), up};
-    };
-    for (int v = 0; v < NV; ++v) add_base(vnode(v, 2 * NL), vnode(v, 0));
-    for (int e = 0; e < NE; ++e) add_base(enode(e, NL), enode(e, 0));
-    // Suture groups among the bottom nodes, each named by its smallest node.
-    detail::UnionFind group(static_cast<int>(mesh.n_nodes()));
-    for (const auto& [a, b] : pairs)
-      if (base.count(a) && base.count(b)) group.unite(a, b);
-    struct Merged {
-      Eigen::Vector3d normal = Eigen::Vector3d::Zero();
-      double height = 0;
-      int count = 0;
-      bool unsupported = false;  // a member has a free base (a cavity or deeper tissue under it)
-    };
-    std::map<int, Merged> merged;  // group root -> its members' normals and column heights
-    for (const auto& [bottom, nu] : base) {
-      if (fixed.count(bottom)) continue;
-      Merged& m = merged[group.find(bottom)];
-      m.normal += nu.first;
-      m.height += nu.second.norm();
-      m.count += 1;
-      m.unsupported |= free_base.count(bottom) > 0;
-    }
-    for (const auto& [r, m] : merged) {
-      const double height = m.height / m.count;
-      if (!m.unsupported && m.normal.norm() > 0 && height > 0)
-        mesh.sliding.push_back({r, m.normal.normalized(), kSlidingStiffness * E_sliding * height});
-    }
-  }
+}
 
-  // Every element must have a positive Jacobian at every Gauss point.
+// The freed base slides on the deep tissue: held along the base's normal (the normal of the
+// mesh's bottom surface, which lies on the bone or the cavity's base) by a spring
+// kSlidingStiffness x E x column height, stiff enough that the support gives way by about
+// 1e-6 mm under the closing forces, and free along the base. The nodes a suture ties together
+// become one point at the wound's floor: they slide as one, with one spring along their mean
+// normal (a spring on each would ask the closed point to lie on several planes at once, and
+// leaving them free makes the floor kink against its sliding neighbours, a kink that stiffens
+// without bound as the mesh is refined: docs/fem.md, "The freed base slides").
+void ContinuumBuild::add_sliding_base() {
+  constexpr double kSlidingStiffness = 1e5;
+  const double E_sliding = measured ? std::max({o.dermis.E_mpa(), o.fat.E_mpa(), o.deep.E_mpa()})
+                                    : o.material.E_mpa();
+  // The base's normal at a bottom node: the bottom faces' Newell vectors (area-weighted
+  // normals) summed over the faces whose centres lie within kNormalRadiusMm of it (at least
+  // the nearest face), turned to point up its column. A fixed radius rather than the node's
+  // own faces: the bone under a CT's skin is bumpy at the scale of its voxels, and normals
+  // from ever smaller faces would follow the bumps ever more closely (at 0.75 mm they strayed
+  // a median 3 and up to 14 deg from their 3 mm mean on Cranium's forehead).
+  constexpr double kNormalRadiusMm = 3.0;
+  std::vector<Eigen::Vector3d> face_vector, face_centre;
+  for (const auto& poly : surface.polygons) {
+    Eigen::Vector3d n = Eigen::Vector3d::Zero(), c = Eigen::Vector3d::Zero();
+    for (std::size_t i = 0; i < poly.size(); ++i) {
+      const Eigen::Vector3d a = mesh.nodes.row(vnode(poly[i], 2 * NL)).transpose();
+      const Eigen::Vector3d b = mesh.nodes.row(vnode(poly[(i + 1) % poly.size()], 2 * NL)).transpose();
+      n += a.cross(b);
+      c += a;
+    }
+    face_vector.push_back(n);
+    face_centre.push_back(c / static_cast<double>(poly.size()));
+  }
+  std::map<std::array<long, 3>, std::vector<int>> cells;  // faces by kNormalRadiusMm cube
+  auto cell_of = [&](const Eigen::Vector3d& x) {
+    return std::array<long, 3>{std::lround(std::floor(x.x() / kNormalRadiusMm)),
+                               std::lround(std::floor(x.y() / kNormalRadiusMm)),
+                               std::lround(std::floor(x.z() / kNormalRadiusMm))};
+  };
+  for (std::size_t f = 0; f < face_centre.size(); ++f) cells[cell_of(face_centre[f])].push_back(static_cast<int>(f));
+  auto base_normal = [&](const Eigen::Vector3d& x) {
+    Eigen::Vector3d n = Eigen::Vector3d::Zero();
+    const auto c = cell_of(x);
+    for (long i = -1; i <= 1; ++i)
+      for (long j = -1; j <= 1; ++j)
+        for (long k = -1; k <= 1; ++k) {
+          const auto it = cells.find({c[0] + i, c[1] + j, c[2] + k});
+          if (it == cells.end()) continue;
+          for (int f : it->second)
+            if ((face_centre[f] - x).norm() <= kNormalRadiusMm) n += face_vector[f];
+        }
+    if (n.norm() > 0) return n;
+    std::size_t nearest = 0;
+    for (std::size_t f = 1; f < face_centre.size(); ++f)
+      if ((face_centre[f] - x).norm() < (face_centre[nearest] - x).norm()) nearest = f;
+    return face_vector[nearest];
+  };
+  std::map<int, std::pair<Eigen::Vector3d, Eigen::Vector3d>> base;  // bottom -> (normal, column)
+  auto add_base = [&](int bottom, int top) {
+    const Eigen::Vector3d up = (mesh.nodes.row(top) - mesh.nodes.row(bottom)).transpose();
+    Eigen::Vector3d n = base_normal(mesh.nodes.row(bottom).transpose());
+    if (n.dot(up) < 0) n = -n;
+    if (!(n.norm() > 0)) n = up;
+    base[bottom] = {n.normalized(), up};
+  };
+  for (int v = 0; v < NV; ++v) add_base(vnode(v, 2 * NL), vnode(v, 0));
+  for (int e = 0; e < NE; ++e) add_base(enode(e, NL), enode(e, 0));
+  // Suture groups among the bottom nodes, each named by its smallest node.
+  detail::UnionFind group(static_cast<int>(mesh.n_nodes()));
+  for (const auto& [a, b] : pairs)
+    if (base.count(a) && base.count(b)) group.unite(a, b);
+  struct Merged {
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+    double height = 0;
+    int count = 0;
+    bool unsupported = false;  // a member has a free base (a cavity or deeper tissue under it)
+  };
+  std::map<int, Merged> merged;  // group root -> its members' normals and column heights
+  for (const auto& [bottom, nu] : base) {
+    if (fixed.count(bottom)) continue;
+    Merged& m = merged[group.find(bottom)];
+    m.normal += nu.first;
+    m.height += nu.second.norm();
+    m.count += 1;
+    m.unsupported |= free_base.count(bottom) > 0;
+  }
+  for (const auto& [r, m] : merged) {
+    const double height = m.height / m.count;
+    if (!m.unsupported && m.normal.norm() > 0 && height > 0)
+      mesh.sliding.push_back({r, m.normal.normalized(), kSlidingStiffness * E_sliding * height});
+  }
+}
+
+// Every element must have a positive Jacobian at every Gauss point.
+std::optional<ContinuumAttempt> ContinuumBuild::check_jacobians() {
   const Eigen::VectorXd jac = min_element_jacobians(mesh);
   out.min_jacobian = jac.size() ? jac.minCoeff() : 0;
   for (Eigen::Index e = 0; e < jac.size(); ++e)
     if (!(jac[e] > 0)) {
       // Across a bony rim the rim is the cause: off the model, as without `allow_cliffs`.
-      if (!attempt.cliff.empty()) return off_model(rim_refusal(attempt.cliff));
+      if (!attempt.cliff.empty())
+        return refused(MeshRefusal::Kind::OffModel, cliff_at, rim_refusal(attempt.cliff));
       const auto& poly = surface.polygons[out.element_polygon[e]];
       Eigen::Vector2d c = Eigen::Vector2d::Zero();
       for (int id : poly) c += surface.theta_z.row(id).transpose();
       c /= static_cast<double>(poly.size());
-      throw InvalidParameter(cat("mesh: element ", e, " (layer ", mesh.elements[e].layer,
-                                 ") near theta ", std::round(c.x() * 10) / 10, " deg, z ",
-                                 std::round(c.y() * 10) / 10, " mm is inverted or degenerate "
-                                 "(smallest Jacobian ", jac[e], "); use a smaller {mesh_size} or "
-                                 "fewer {layers} there"));
+      return refused(MeshRefusal::Kind::Inverted, c,
+                     cat("mesh: element ", e, " (layer ", mesh.elements[e].layer,
+                         ") near theta ", std::round(c.x() * 10) / 10, " deg, z ",
+                         std::round(c.y() * 10) / 10, " mm is inverted or degenerate "
+                         "(smallest Jacobian ", jac[e], "); use a smaller {mesh_size} or "
+                         "fewer {layers} there"));
     }
-  validate(mesh, "continuum mesh");
-  return attempt;
+  return std::nullopt;
+}
+
+ContinuumAttempt attempt_continuum(const SurfaceMesh& surface, const PatientModel& model,
+                                   const ContinuumMeshOptions& o, bool allow_cliffs = false) {
+  check_continuum_options(surface, o);
+  return ContinuumBuild(surface, model, o, allow_cliffs).build();
 }
 
 }  // namespace
 
+void throw_refusal(const MeshRefusal& refusal) {
+  if (refusal.kind == MeshRefusal::Kind::OffModel) throw OffModelError(refusal.message);
+  throw InvalidParameter(refusal.message);
+}
+
+MeshOutcome<ContinuumMesh> try_mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
+                                              const ContinuumMeshOptions& o) {
+  ContinuumAttempt attempt = attempt_continuum(surface, model, o);
+  return {std::move(attempt.mesh), std::move(attempt.refusal)};
+}
+
 ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
                              const ContinuumMeshOptions& o) {
-  ContinuumAttempt attempt = try_mesh_continuum(surface, model, o);
-  if (!attempt.mesh) throw OffModelError(attempt.off_model);
-  return std::move(*attempt.mesh);
+  MeshOutcome<ContinuumMesh> outcome = try_mesh_continuum(surface, model, o);
+  if (!outcome) throw_refusal(outcome.refusal);
+  return std::move(*outcome.mesh);
 }
 
 namespace {
@@ -659,20 +770,47 @@ struct Trimmed {
   int pulled = 0;   // first-layer vertices pulled back onto the model
   std::string why;
 };
-std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model,
-                                        const ContinuumMeshOptions& o, bool trim_rims) {
-  const int NV = s.n_vertices();
-  const int NP = static_cast<int>(s.polygons.size());
+// The state of trimmed_to_model(), one step each: the vertices and edges off the model, the
+// polygons kept, the trimmed surface written.
+struct Trimming {
+  Trimming(SurfaceMesh surface, const PatientModel& model, const ContinuumMeshOptions& o,
+           bool trim_rims);
+  void mark_off_model_vertices();
+  void mark_off_model_edges();
+  bool keep_polygons();  // false: the wound itself or its stage-1 fill is off the model
+  bool write_surface();  // false: not one ring around the wound, or nothing trimmed
+
+  SurfaceMesh s;
+  const PatientModel& model;
+  const ContinuumMeshOptions& o;
+  const bool trim_rims;
+  const int NV, NP;
   Trimmed t;
-  std::vector<double> T(static_cast<std::size_t>(NV), 0);
-  std::vector<char> wound_vertex(static_cast<std::size_t>(NV), 0);
+  std::vector<double> T;
+  std::vector<char> wound_vertex;
   std::set<std::pair<int, int>> wound_edges;
+  std::vector<char> bad_vertex;
+  std::map<std::pair<int, int>, char> bad_edge;
+  std::vector<char> ok;  // polygons on valid sites
+  std::map<std::pair<int, int>, std::vector<int>> edge_polygons;
+  std::vector<char> kept;  // polygons kept
+};
+
+Trimming::Trimming(SurfaceMesh surface, const PatientModel& model, const ContinuumMeshOptions& o,
+                   bool trim_rims)
+    : s(std::move(surface)), model(model), o(o), trim_rims(trim_rims), NV(s.n_vertices()),
+      NP(static_cast<int>(s.polygons.size())) {
+  T.assign(static_cast<std::size_t>(NV), 0);
+  wound_vertex.assign(static_cast<std::size_t>(NV), 0);
   for (const auto& chain : s.edge_chain)
     for (std::size_t i = 0; i < chain.size(); ++i) {
       wound_vertex[chain[i]] = 1;
       if (i + 1 < chain.size()) wound_edges.insert(std::minmax(chain[i], chain[i + 1]));
     }
-  std::vector<char> bad_vertex(static_cast<std::size_t>(NV), 0);
+  bad_vertex.assign(static_cast<std::size_t>(NV), 0);
+}
+
+void Trimming::mark_off_model_vertices() {
   for (int v = 0; v < NV; ++v) {
     std::string why = site_refusal(model, o, s.theta_z(v, 0), s.theta_z(v, 1), &T[v]);
     if (why.empty()) continue;
@@ -710,11 +848,13 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
       }
     }
   }
+}
+
+void Trimming::mark_off_model_edges() {
   const auto skin_point = [&](int v) {
     return model.to_lps(s.theta_z(v, 0), s.theta_z(v, 1), model.r_skin(s.theta_z(v, 0), s.theta_z(v, 1)));
   };
   // An edge is off the model if its mid-edge column is, or if it spans a bony rim.
-  std::map<std::pair<int, int>, char> bad_edge;
   for (const auto& poly : s.polygons)
     for (std::size_t i = 0; i < poly.size(); ++i) {
       const auto key = std::minmax(poly[i], poly[(i + 1) % poly.size()]);
@@ -729,9 +869,11 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
       bad_edge[key] = !why.empty();
       if (!why.empty() && t.why.empty()) t.why = std::move(why);
     }
-  // The polygons kept: those on valid sites, reached from the wound's across shared edges.
-  std::vector<char> ok(static_cast<std::size_t>(NP), 1);
-  std::map<std::pair<int, int>, std::vector<int>> edge_polygons;
+}
+
+// The polygons kept: those on valid sites, reached from the wound's across shared edges.
+bool Trimming::keep_polygons() {
+  ok.assign(static_cast<std::size_t>(NP), 1);
   for (int p = 0; p < NP; ++p) {
     const auto& poly = s.polygons[p];
     for (std::size_t i = 0; i < poly.size(); ++i) {
@@ -739,10 +881,10 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
       if (bad_vertex[poly[i]] || bad_edge[key]) ok[p] = 0;
       edge_polygons[key].push_back(p);
     }
-    if (!ok[p] && s.polygon_layer[p] == 0) return std::nullopt;  // the stage-1 fill
+    if (!ok[p] && s.polygon_layer[p] == 0) return false;  // the stage-1 fill
   }
   for (int v = 0; v < NV; ++v)
-    if (wound_vertex[v] && bad_vertex[v]) return std::nullopt;
+    if (wound_vertex[v] && bad_vertex[v]) return false;
   // A layer's polygon stands on the layer below (its inner vertices, those the layer below uses):
   // where that is left out, so is it, so that what lies behind a patch off the model (seen from
   // the wound) goes too and the rim stays one loop, open around the patch.
@@ -763,7 +905,7 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
       for (int v : s.polygons[p])
         if (used_below[v] && !kept_below[v]) ok[p] = 0;
   }
-  std::vector<char> kept(static_cast<std::size_t>(NP), 0);
+  kept.assign(static_cast<std::size_t>(NP), 0);
   std::vector<int> stack;
   for (int p = 0; p < NP; ++p)
     for (int v : s.polygons[p])
@@ -782,6 +924,10 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
           stack.push_back(q);
         }
   }
+  return true;
+}
+
+bool Trimming::write_surface() {
   // Renumber the vertices the kept polygons use, in their old order (the wound's come first).
   std::vector<int> new_id(static_cast<std::size_t>(NV), -1);
   for (int p = 0; p < NP; ++p)
@@ -791,7 +937,7 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
   for (int v = 0; v < NV; ++v)
     if (new_id[v] == 0) new_id[v] = n++;
   for (int v = 0; v < NV; ++v)
-    if (wound_vertex[v] && new_id[v] < 0) return std::nullopt;
+    if (wound_vertex[v] && new_id[v] < 0) return false;
   // The rim: the kept polygons' border edges other than the wound's, as one loop.
   std::map<int, int> next;
   int n_rim = 0;
@@ -804,22 +950,22 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
       int users = 0;
       for (int q : edge_polygons[key]) users += kept[q];
       if (users != 1 || wound_edges.count(key)) continue;
-      if (!next.emplace(a, b).second) return std::nullopt;
+      if (!next.emplace(a, b).second) return false;
       ++n_rim;
     }
   }
-  if (n_rim == 0) return std::nullopt;
+  if (n_rim == 0) return false;
   SurfaceMesh& out = t.surface;
   const int start = next.begin()->first;
   for (int v = start;;) {
     out.outer_border.push_back(new_id[v]);
     const auto it = next.find(v);
-    if (it == next.end()) return std::nullopt;
+    if (it == next.end()) return false;
     v = it->second;
     if (v == start) break;
-    if (static_cast<int>(out.outer_border.size()) > n_rim) return std::nullopt;
+    if (static_cast<int>(out.outer_border.size()) > n_rim) return false;
   }
-  if (static_cast<int>(out.outer_border.size()) != n_rim) return std::nullopt;  // several loops
+  if (static_cast<int>(out.outer_border.size()) != n_rim) return false;  // several loops
   out.xy_mm.resize(n, 2);
   out.theta_z.resize(n, 2);
   for (int v = 0; v < NV; ++v)
@@ -839,7 +985,7 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
     out.polygon_expanded.push_back(s.polygon_expanded[p]);
     out.n_layers = std::max(out.n_layers, s.polygon_layer[p]);
   }
-  if (t.dropped == 0 && t.pulled == 0) return std::nullopt;  // the failure lies elsewhere
+  if (t.dropped == 0 && t.pulled == 0) return false;  // the failure lies elsewhere
   for (const auto& chain : s.edge_chain) {
     out.edge_chain.emplace_back();
     for (int v : chain) out.edge_chain.back().push_back(new_id[v]);
@@ -855,7 +1001,16 @@ std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model
   out.trimmed_polygons = t.dropped;
   out.pulled_vertices = t.pulled;
   out.quality = surface_quality(out.xy_mm, out.polygons);
-  return t;
+  return true;
+}
+
+std::optional<Trimmed> trimmed_to_model(SurfaceMesh s, const PatientModel& model,
+                                        const ContinuumMeshOptions& o, bool trim_rims) {
+  Trimming trimming(std::move(s), model, o, trim_rims);
+  trimming.mark_off_model_vertices();
+  trimming.mark_off_model_edges();
+  if (!trimming.keep_polygons() || !trimming.write_surface()) return std::nullopt;
+  return std::move(trimming.t);
 }
 
 // For a mesh with columns on tissue without bone or a cavity within the cap (base_tissue): the
@@ -874,11 +1029,179 @@ std::string tissue_base_note(const WoundMesh& w, const PatientModel& model) {
 
 }  // namespace
 
+namespace {
+
+// The automatic extent (mesh_wound() with SurfaceMeshOptions::extent_mm 0): the largest of full,
+// 0.75 full, ... whose surface and continuum meshes are valid. An outer layer of the surface
+// mesh that folds (a complex border such as a bilobed flap's, grown far out) shrinks the extent
+// like skin off the model; a failure of the wound's own first layer does not. Each attempt's
+// outcome (a mesh, or the refusal saying why not) decides the next; when every extent fails the
+// last refusal is thrown.
+class ExtentSearch {
+ public:
+  ExtentSearch(const WoundBorder& border, const PatientModel& model,
+               const SurfaceMeshOptions& surface_options,
+               const ContinuumMeshOptions& continuum_options, Reporter* reporter)
+      : border_(border), model_(model), surface_options_(surface_options),
+        continuum_options_(continuum_options), reporter_(reporter), o_(surface_options) {}
+
+  WoundMesh run();
+
+ private:
+  void mesh_full_surface();
+  // The warnings of a mesh at `extent` (and across the bony rim `cliff`, if any).
+  void finish(WoundMesh& done, double extent, std::string cliff);
+  // No extent keeps the whole mesh on the model (a wound beside the eye, near the CT's end, by
+  // the nose): the largest extent whose mesh, trimmed to the model, still rings the wound.
+  bool trim_to_model(double from);
+  void keep_trimmed(Trimmed& t, ContinuumAttempt& attempt, double extent);
+
+  const WoundBorder& border_;
+  const PatientModel& model_;
+  const SurfaceMeshOptions& surface_options_;
+  const ContinuumMeshOptions& continuum_options_;
+  Reporter* reporter_;
+  WoundMesh w_;
+  SurfaceMeshOptions o_;
+  std::optional<MeshRefusal> failure_;  // why the last extent tried could not be meshed
+  bool surface_ok_ = true, folded_ = false;  // folded: a larger extent's surface mesh folded
+  double full_ = 0;
+};
+
+// The surface mesh at the full extent; if it folds, the wound's own first layer (which throws
+// if the wound itself cannot be meshed) stands in for it until a smaller extent meshes.
+void ExtentSearch::mesh_full_surface() {
+  MeshOutcome<SurfaceMesh> surface = try_mesh_surface(border_, model_, surface_options_);
+  if (surface) {
+    w_.surface = std::move(*surface.mesh);
+    return;
+  }
+  failure_ = std::move(surface.refusal);
+  surface_ok_ = false;
+  folded_ = true;
+  SurfaceMeshOptions one = surface_options_;
+  one.extent_mm = surface_options_.size_mm;
+  w_.surface = mesh_surface(border_, model_, one);  // throws if the wound itself cannot be meshed
+  w_.surface.extent_mm = 3.0 * w_.surface.wound_size_mm;
+}
+
+void ExtentSearch::finish(WoundMesh& done, double extent, std::string cliff) {
+  std::vector<std::string> messages;
+  if (extent != full_)
+    messages.push_back(cat("mesh: the extent was limited to ", std::round(extent * 10) / 10, " mm (",
+                           std::round(extent / done.surface.wound_size_mm * 100) / 100,
+                           "x the wound's size) to stay on valid cells of the model",
+                           folded_ ? " and keep the surface mesh's outer layers from folding" : "",
+                           "; the result "
+                           "depends more on the rim condition (docs/mesher.md)"));
+  if (std::string m = tissue_base_note(done, model_); !m.empty()) messages.push_back(std::move(m));
+  if (!cliff.empty())
+    messages.push_back(cat("mesh: a bony rim lies under the mesh at every extent down to the "
+                           "mesh size (", cliff, "); it is meshed across: the elements there are "
+                           "sheared and model the tissue over both bone levels as one column "
+                           "(docs/mesher.md)"));
+  for (const std::string& m : messages) {
+    done.continuum.mesh.warnings.push_back(m);
+    warn(reporter_, m);
+  }
+}
+
+bool ExtentSearch::trim_to_model(double from) {
+  // First with the bony rims trimmed too; then, as for a whole mesh, meshed across.
+  for (const bool trim_rims : {true, false})
+    for (double extent = from; extent >= surface_options_.size_mm; extent *= 0.75) {
+      o_.extent_mm = extent;
+      MeshOutcome<SurfaceMesh> surface = try_mesh_surface(border_, model_, o_);
+      if (!surface) continue;  // folded: a smaller extent may not
+      std::optional<Trimmed> t =
+          trimmed_to_model(std::move(*surface.mesh), model_, continuum_options_, trim_rims);
+      if (!t) continue;
+      ContinuumAttempt attempt =
+          attempt_continuum(t->surface, model_, continuum_options_, !trim_rims);
+      if (!attempt.mesh) continue;  // off the model, or an inverted element at the trimmed border
+      keep_trimmed(*t, attempt, extent);
+      return true;
+    }
+  return false;
+}
+
+void ExtentSearch::keep_trimmed(Trimmed& t, ContinuumAttempt& attempt, double extent) {
+  w_.surface = std::move(t.surface);
+  w_.continuum = std::move(*attempt.mesh);
+  std::string first = t.why.substr(0, t.why.find(';'));
+  if (first.rfind("mesh: ", 0) == 0) first.erase(0, 6);
+  const std::string m = cat(
+      "mesh: the skin mesh (extent ", std::round(extent * 10) / 10, " mm) was trimmed to "
+      "the model where it reached cells it cannot carry (first: ", first, "): ",
+      t.dropped, " polygons left out",
+      t.pulled > 0 ? cat(", ", t.pulled, t.pulled == 1 ? " first-layer vertex" :
+                         " first-layer vertices", " pulled back towards the wound")
+                   : std::string(),
+      "; the rim follows the valid cells there and is held like the rest of the rim, so "
+      "the result depends more on the rim condition (docs/mesher.md, \"Trimmed to the "
+      "model\")");
+  w_.continuum.mesh.warnings.push_back(m);
+  warn(reporter_, m);
+  finish(w_, full_, std::move(attempt.cliff));  // the message above gives the extent
+}
+
+WoundMesh ExtentSearch::run() {
+  mesh_full_surface();
+  full_ = w_.surface.extent_mm;
+  // The largest extent whose mesh is valid but for a bony rim under it, meshed across the rim:
+  // used when no smaller extent stays short of the rim (the cheek over the maxilla, where the
+  // bone's depth steps wherever the mesh reaches).
+  std::optional<WoundMesh> across;
+  double across_extent = 0;
+  std::string across_cliff;
+  for (double extent = full_;; extent *= 0.75) {
+    if (extent != full_) {
+      o_.extent_mm = extent;
+      MeshOutcome<SurfaceMesh> surface = try_mesh_surface(border_, model_, o_);
+      surface_ok_ = surface.mesh.has_value();
+      if (surface_ok_) {
+        w_.surface = std::move(*surface.mesh);
+      } else {
+        failure_ = std::move(surface.refusal);
+        folded_ = true;
+      }
+    }
+    if (surface_ok_) {
+      // Until a mesh across a rim is kept, a rim is meshed across (and the mesh kept if no
+      // smaller extent avoids it); after that a rim counts as off the model.
+      ContinuumAttempt attempt = attempt_continuum(w_.surface, model_, continuum_options_, !across);
+      // An inverted element of a whole mesh is not the extent's doing: the caller's to fix.
+      if (!attempt.mesh && attempt.refusal.kind == MeshRefusal::Kind::Inverted)
+        throw_refusal(attempt.refusal);
+      if (attempt.mesh && attempt.cliff.empty()) {
+        w_.continuum = std::move(*attempt.mesh);
+        finish(w_, extent, {});
+        return std::move(w_);
+      }
+      if (attempt.mesh) {
+        across = WoundMesh{w_.surface, std::move(*attempt.mesh)};
+        across_extent = extent;
+        across_cliff = std::move(attempt.cliff);
+      } else {
+        failure_ = std::move(attempt.refusal);
+      }
+    }
+    if (extent * 0.75 < surface_options_.size_mm) {
+      if (!across && trim_to_model(full_)) return std::move(w_);
+      if (!across) throw_refusal(*failure_);
+      finish(*across, across_extent, across_cliff);
+      return std::move(*across);
+    }
+  }
+}
+
+}  // namespace
+
 WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
                      const SurfaceMeshOptions& surface_options,
                      const ContinuumMeshOptions& continuum_options, Reporter* reporter) {
-  WoundMesh w;
   if (surface_options.extent_mm > 0) {
+    WoundMesh w;
     w.surface = mesh_surface(border, model, surface_options);
     w.continuum = mesh_continuum(w.surface, model, continuum_options);
     if (std::string m = tissue_base_note(w, model); !m.empty()) {
@@ -887,130 +1210,7 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
     }
     return w;
   }
-  // The automatic extent: the largest of full, 0.75 full, ... whose surface and continuum meshes
-  // are valid. An outer layer of the surface mesh that folds (a complex border such as a
-  // bilobed flap's, grown far out) shrinks the extent like skin off the model; a failure of the
-  // wound's own first layer does not.
-  SurfaceMeshOptions o = surface_options;
-  std::exception_ptr failure;  // why the last extent tried could not be meshed
-  bool surface_ok = true, folded = false;  // folded: a larger extent's surface mesh folded
-  try {
-    w.surface = mesh_surface(border, model, surface_options);
-  } catch (const InvalidParameter&) {
-    failure = std::current_exception();
-    surface_ok = false;
-    folded = true;
-    SurfaceMeshOptions one = surface_options;
-    one.extent_mm = surface_options.size_mm;
-    w.surface = mesh_surface(border, model, one);  // throws if the wound itself cannot be meshed
-    w.surface.extent_mm = 3.0 * w.surface.wound_size_mm;
-  }
-  const double full = w.surface.extent_mm;
-  const auto finish = [&](WoundMesh& done, double extent, std::string cliff) {
-    std::vector<std::string> messages;
-    if (extent != full)
-      messages.push_back(cat("mesh: the extent was limited to ", std::round(extent * 10) / 10, " mm (",
-                             std::round(extent / done.surface.wound_size_mm * 100) / 100,
-                             "x the wound's size) to stay on valid cells of the model",
-                             folded ? " and keep the surface mesh's outer layers from folding" : "",
-                             "; the result "
-                             "depends more on the rim condition (docs/mesher.md)"));
-    if (std::string m = tissue_base_note(done, model); !m.empty()) messages.push_back(std::move(m));
-    if (!cliff.empty())
-      messages.push_back(cat("mesh: a bony rim lies under the mesh at every extent down to the "
-                             "mesh size (", cliff, "); it is meshed across: the elements there are "
-                             "sheared and model the tissue over both bone levels as one column "
-                             "(docs/mesher.md)"));
-    for (const std::string& m : messages) {
-      done.continuum.mesh.warnings.push_back(m);
-      warn(reporter, m);
-    }
-  };
-  // No extent keeps the whole mesh on the model (a wound beside the eye, near the CT's end, by
-  // the nose): the largest extent whose mesh, trimmed to the model, still rings the wound.
-  const auto trim_to_model = [&](double from) {
-    // First with the bony rims trimmed too; then, as for a whole mesh, meshed across.
-    for (const bool trim_rims : {true, false})
-      for (double extent = from; extent >= surface_options.size_mm; extent *= 0.75) {
-        o.extent_mm = extent;
-        SurfaceMesh surface;
-        try {
-          surface = mesh_surface(border, model, o);
-        } catch (const InvalidParameter&) {
-          continue;  // folded: a smaller extent may not
-        }
-        std::optional<Trimmed> t = trimmed_to_model(surface, model, continuum_options, trim_rims);
-        if (!t) continue;
-        try {
-          ContinuumAttempt attempt =
-              try_mesh_continuum(t->surface, model, continuum_options, !trim_rims);
-          if (!attempt.mesh) continue;
-          w.surface = std::move(t->surface);
-          w.continuum = std::move(*attempt.mesh);
-          std::string first = t->why.substr(0, t->why.find(';'));
-          if (first.rfind("mesh: ", 0) == 0) first.erase(0, 6);
-          const std::string m = cat(
-              "mesh: the skin mesh (extent ", std::round(extent * 10) / 10, " mm) was trimmed to "
-              "the model where it reached cells it cannot carry (first: ", first, "): ",
-              t->dropped, " polygons left out",
-              t->pulled > 0 ? cat(", ", t->pulled, t->pulled == 1 ? " first-layer vertex" :
-                                  " first-layer vertices", " pulled back towards the wound")
-                            : std::string(),
-              "; the rim follows the valid cells there and is held like the rest of the rim, so "
-              "the result depends more on the rim condition (docs/mesher.md, \"Trimmed to the "
-              "model\")");
-          w.continuum.mesh.warnings.push_back(m);
-          warn(reporter, m);
-          finish(w, full, std::move(attempt.cliff));  // the message above gives the extent
-          return true;
-        } catch (const InvalidParameter&) {
-          continue;  // an inverted element at the trimmed border
-        }
-      }
-    return false;
-  };
-  // The largest extent whose mesh is valid but for a bony rim under it, meshed across the rim:
-  // used when no smaller extent stays short of the rim (the cheek over the maxilla, where the
-  // bone's depth steps wherever the mesh reaches).
-  std::optional<WoundMesh> across;
-  double across_extent = 0;
-  std::string across_cliff;
-  for (double extent = full;; extent *= 0.75) {
-    if (extent != full) {
-      o.extent_mm = extent;
-      try {
-        w.surface = mesh_surface(border, model, o);
-        surface_ok = true;
-      } catch (const InvalidParameter&) {
-        failure = std::current_exception();
-        surface_ok = false;
-        folded = true;
-      }
-    }
-    if (surface_ok) {
-      // Until a mesh across a rim is kept, a rim is meshed across (and the mesh kept if no
-      // smaller extent avoids it); after that a rim counts as off the model.
-      ContinuumAttempt attempt = try_mesh_continuum(w.surface, model, continuum_options, !across);
-      if (attempt.mesh && attempt.cliff.empty()) {
-        w.continuum = std::move(*attempt.mesh);
-        finish(w, extent, {});
-        return w;
-      }
-      if (attempt.mesh) {
-        across = WoundMesh{w.surface, std::move(*attempt.mesh)};
-        across_extent = extent;
-        across_cliff = std::move(attempt.cliff);
-      } else {
-        failure = std::make_exception_ptr(OffModelError(attempt.off_model));
-      }
-    }
-    if (extent * 0.75 < surface_options.size_mm) {
-      if (!across && trim_to_model(full)) return w;
-      if (!across) std::rethrow_exception(failure);
-      finish(*across, across_extent, across_cliff);
-      return std::move(*across);
-    }
-  }
+  return ExtentSearch(border, model, surface_options, continuum_options, reporter).run();
 }
 
 }  // namespace caps::fem

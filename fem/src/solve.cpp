@@ -107,6 +107,13 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   if (options.prestretch != 1.0 && options.kinematics != Kinematics::Finite)
     throw InvalidInput(cat("prestretch ", options.prestretch, " needs the large-deformation model: "
                            "use the neo-hookean material (the linear model has no prestress)"));
+  if (options.initial_displacement_mm.size() > 0 &&
+      (options.kinematics != Kinematics::Finite ||
+       options.initial_displacement_mm.rows() != mesh.n_nodes() ||
+       !options.initial_displacement_mm.allFinite()))
+    throw InvalidInput(cat("initial displacement (", options.initial_displacement_mm.rows(),
+                           " rows): a warm start needs the finite-strain solve and a finite "
+                           "displacement for each of the mesh's ", mesh.n_nodes(), " nodes"));
   SolveResult res;
   res.solver = solver_name(options.solver);
   auto t = Clock::now();

@@ -144,401 +144,597 @@ void check_options(const NewtonOptions& o) {
                            " must be in [residual_tolerance, 1)"));
 }
 
+const NewtonOptions& checked(const NewtonOptions& o) {
+  check_options(o);
+  return o;
+}
+
+// One attempt at a load step: its target, the state it started from and how far its Newton
+// iteration has come.
+struct StepAttempt {
+  double lambda_new = 0, dl = 0;
+  Eigen::VectorXd q_start;  // the state the step started from: a cut-back returns to it
+  NewtonStep record;
+  std::optional<Failure> failure;
+  double r0 = 0;     // the step's predictor load ||r_0||
+  double scale = 1;  // the tolerances' scale: the nominal step over this one, at least 1
+  double r_ref = 0;  // scale r0
+  // The potential energy of the current iterate at lambda_new; unknown for the predictor,
+  // whose direction also moves the prescribed values (its step is judged by the slope alone).
+  double energy = NAN;
+  double r_prev = 0;  // the residual before the current correction
+  // The shift the next solve starts from (Levenberg-Marquardt with memory: Nocedal & Wright
+  // 2006, sec. 10.3; Nielsen 1999). Where the tangent is positive definite but its Newton step
+  // is far too long (near a limit point the soft mode's stiffness tends to zero: measured on
+  // the forehead 90 deg Z-plasty with measured layers, corrections of 44 mm cut by the line
+  // search to 0.3 %, and 25 solves that did not lower the residual) a shifted tangent gives a
+  // shorter step in a better direction, which the line search then accepts whole; each full
+  // step lowers the shift again, so the last solves are plain Newton and converge
+  // quadratically.
+  double damping = 0;
+  bool converged = false;
+  // The potential after each solve and whether its tangent was shifted: a step still falling
+  // through unstable states after max_iterations is a snap, given more solves.
+  std::vector<double> potentials;
+  std::vector<bool> shifted_solve;
+  int limit = 0;  // the solves this attempt may take (max_iterations, more while it snaps)
+};
+
+// What one Newton iteration of a step came to.
+enum class IterationOutcome { Continue, Converged, Failed };
+
+// The load-stepping Newton-Raphson solve of one finite-strain problem (MFEM's NewtonSolver,
+// deal.II step-44's setup / assemble / solve in short named steps): construction sets up the
+// tangent's structure and its analysis, run() steps the load factor from 0 to 1 (or starts
+// from a given state, a warm start) and recovers the stresses and forces. Each step is a
+// predictor and Newton iterations (a shifted solve of the tangent, a line search, the
+// convergence test, snap-through handling); a step that fails is cut back, one that converged
+// easily lets the next grow.
+class FiniteStrainSolver {
+ public:
+  FiniteStrainSolver(const Mesh& mesh, const SolveOptions& options, const DofMap& map,
+                     SolveResult& res);
+
+  /// Solves, from SolveOptions::initial_displacement_mm when given (a warm start), and fills
+  /// the result.
+  void run();
+
+ private:
+  // Warm start: the whole closure as one step from the given state; false if it failed (the
+  // solve then starts afresh from the reference state).
+  bool warm_start();
+  // The next step's target and the tolerances' scale; the predictor in attempt.failure if the
+  // predictor state inverts an element.
+  StepAttempt begin_step();
+  void predictor(StepAttempt& s);
+  // Newton iterations until the step converges or fails (s.converged, s.failure).
+  void iterate(StepAttempt& s);
+  IterationOutcome newton_iteration(StepAttempt& s, int it);
+  // The step length along dq the line search accepts (its state assembled in sys_), or a failure.
+  std::optional<Failure> line_search(StepAttempt& s, const Eigen::VectorXd& dq, double& alpha,
+                                     double& energy_at);
+  // Convergence of the iteration that moved q by du (alpha dq) to residual rn.
+  bool converged(const StepAttempt& s, double rn, double du, double du_next,
+                 double step_norm) const;
+  // A step still falling through unstable states after `limit` solves is given more.
+  void extend_for_snap(StepAttempt& s);
+  void accept_step(const StepAttempt& s);
+  void grow_step(const NewtonStep& record);
+  void cut_back_step(StepAttempt& s);
+  // One solve of the tangent, shifted where it is not positive definite.
+  std::optional<Failure> solve_shifted(Eigen::VectorXd& dq, double& shift, double tolerance,
+                                       double damping);
+  void factorize_and_solve(Eigen::VectorXd& dq, double tolerance);
+  void finish_report();
+  void recover_result();
+  void recover_element(const Eigen::VectorXd& u, int e, ElementRecovery& out) const;
+
+  const Mesh& mesh_;
+  const SolveOptions& options_;
+  const NewtonOptions& no_;
+  const DofMap& map_;
+  SolveResult& res_;
+  FiniteProblem problem_;
+  Assembly sys_;
+  std::unique_ptr<DirectSolver> solver_;
+  const Eigen::VectorXd no_lift_;
+  Eigen::VectorXd f_ext_, unit_lift_;
+  // The diagonal of K's stored upper triangle (the last entry of each column), for the shift.
+  std::vector<Eigen::Index> diagonal_;
+  Eigen::VectorXd kept_diagonal_;
+
+  // sys_ holds the tangent and out-of-balance force of the last converged state, and unit_lift_
+  // its -T^T K g: the next predictor is then f + dl (f_ext + unit_lift), without an assembly.
+  bool at_converged_state_ = false;
+  Eigen::VectorXd q_;
+  double nominal_ = 1, lambda_ = 0, dlambda_ = 1;
+  int step_ = 0, cutbacks_ = 0;
+  // The solves snapping steps may take beyond max_iterations, over the whole solve: a closure
+  // whose snaps fail and are cut back does not repeat them without end.
+  int snap_solves_left_ = 0;
+  bool cut_back_ = false;  // a step of this solve was cut back: steps grow only to the nominal size
+  std::optional<Failure> inverted_in_step_;  // the first inversion among the attempts of a step
+};
+
+FiniteStrainSolver::FiniteStrainSolver(const Mesh& mesh, const SolveOptions& options,
+                                       const DofMap& map, SolveResult& res)
+    : mesh_(mesh), options_(options), no_(checked(options.newton)), map_(map), res_(res),
+      problem_(mesh, map, options.prestretch) {
+  res_.flap_rotations_deg = problem_.path().rotations_deg();
+  auto t = Clock::now();
+  sys_ = assemble_structure(mesh, map);
+  res_.n_nonzeros = sys_.K.nonZeros();
+  res_.timings.assembly_s += seconds_since(t);
+  solver_ = make_direct_solver(options.solver, options.mumps_ordering, options.mixed_precision);
+  t = Clock::now();
+  solver_->analyze(sys_.K, map.block_start);  // once: every tangent has this structure
+  res_.timings.analysis_s = seconds_since(t);
+
+  f_ext_ = Eigen::VectorXd::Zero(map.n_eq);
+  add_loads(mesh, map, 1.0, f_ext_);
+  q_ = Eigen::VectorXd::Zero(map.n_eq);
+  nominal_ = 1.0 / no_.n_steps;
+  dlambda_ = nominal_;
+  snap_solves_left_ = no_.snap_iterations;
+
+  diagonal_.resize(static_cast<std::size_t>(sys_.K.cols()));
+  for (Eigen::Index j = 0; j < sys_.K.cols(); ++j) diagonal_[j] = sys_.K.outerIndexPtr()[j + 1] - 1;
+  kept_diagonal_.resize(sys_.K.cols());
+}
+
+void FiniteStrainSolver::run() {
+  if (options_.initial_displacement_mm.size() == 0 || !warm_start()) {
+    while (lambda_ < 1.0) {
+      StepAttempt s = begin_step();
+      predictor(s);
+      iterate(s);
+      if (s.converged)
+        accept_step(s);
+      else
+        cut_back_step(s);
+    }
+  }
+  finish_report();
+  recover_result();
+}
+
+// A warm start (SolveOptions::initial_displacement_mm: a converged closure of a nearby problem,
+// or of this one): the whole closure is one step, lambda 0 -> 1, whose Newton iteration starts
+// at the given state instead of the predictor. Its tolerances are those of a one-step solve
+// from the reference state (the predictor load of the whole closure, the displacement from the
+// reference), so a given state that is already the solution converges in one solve. If the step
+// fails, the solve starts afresh from the reference state and steps the load as without it.
+bool FiniteStrainSolver::warm_start() {
+  const Eigen::MatrixX3d& u0 = options_.initial_displacement_mm;
+  StepAttempt s;
+  s.lambda_new = 1.0;
+  s.dl = 1.0;
+  s.q_start = Eigen::VectorXd::Zero(map_.n_eq);  // the reference state, for the tolerances
+  s.record.step = 1;
+  s.record.lambda = 1.0;
+  s.limit = no_.max_iterations;
+  // The reference load: the predictor load of the whole closure from the reference state.
+  const auto t = Clock::now();
+  s.failure = problem_.evaluate(s.q_start, 0.0, 1.0, problem_.path().at(1.0) - problem_.path().at(0.0),
+                                sys_);
+  s.r0 = s.failure ? 0.0 : sys_.f.norm();
+  // The given state's unknowns: u = T q + u_p(1).
+  const Eigen::VectorXd u_p = problem_.path().at(1.0);
+  Eigen::VectorXd q0 = Eigen::VectorXd::Zero(map_.n_eq);
+  for (std::size_t d = 0; d < map_.eq.size(); ++d)
+    if (map_.eq[d] >= 0)
+      q0[map_.eq[d]] = u0(static_cast<Eigen::Index>(d / 3), static_cast<Eigen::Index>(d % 3)) -
+                       u_p[static_cast<Eigen::Index>(d)];
+  if (s.r0 > 0) s.failure = problem_.evaluate(q0, 1.0, 1.0, no_lift_, sys_, &unit_lift_, &s.energy);
+  res_.timings.assembly_s += seconds_since(t);
+  if (s.r0 > 0 && !s.failure) {
+    s.scale = std::max(1.0, nominal_ / s.dl);
+    s.r_ref = s.scale * s.r0;
+    s.r_prev = sys_.f.norm();
+    q_ = q0;
+    iterate(s);
+    if (s.converged) {
+      accept_step(s);
+      return true;
+    }
+  }
+  // Afresh from the reference state, as without a warm start (the failed attempt's solves stay
+  // counted).
+  q_.setZero();
+  lambda_ = 0;
+  dlambda_ = nominal_;
+  step_ = cutbacks_ = 0;
+  snap_solves_left_ = no_.snap_iterations;
+  cut_back_ = false;
+  inverted_in_step_.reset();
+  at_converged_state_ = false;
+  return false;
+}
+
+StepAttempt FiniteStrainSolver::begin_step() {
+  StepAttempt s;
+  s.lambda_new = 1.0 - lambda_ <= 1.0001 * dlambda_ ? 1.0 : lambda_ + dlambda_;
+  s.dl = s.lambda_new - lambda_;
+  s.q_start = q_;
+  s.record.step = step_ + 1;
+  s.record.lambda = s.lambda_new;
+  s.record.cutbacks = cutbacks_;
+  s.limit = no_.max_iterations;
+  return s;
+}
+
+// Predictor: the tangent at the converged state with the increment of the prescribed values
+// lifted, K dq = lambda_new f_ext - f_int - K (dl g).
+void FiniteStrainSolver::predictor(StepAttempt& s) {
+  if (at_converged_state_ && problem_.path().straight() && !problem_.prestretched()) {
+    sys_.f += s.dl * (f_ext_ + unit_lift_);
+  } else {
+    const auto t = Clock::now();
+    s.failure = problem_.evaluate(q_, lambda_, s.lambda_new,
+                                  problem_.path().at(s.lambda_new) - problem_.path().at(lambda_), sys_);
+    res_.timings.assembly_s += seconds_since(t);
+  }
+  at_converged_state_ = false;
+  s.r0 = s.failure ? 0.0 : sys_.f.norm();
+  // The tolerances are relative to the nominal step: a step cut back k times has a first
+  // residual and an increment 2^k times smaller, while the round-off in the element forces
+  // that cancel in the residual does not shrink with it (measured on the Cranium Z-plasty:
+  // halved steps stalled at 1e-8 of their own first residual against 1e-10).
+  s.scale = std::max(1.0, nominal_ / s.dl);
+  s.r_ref = s.scale * s.r0;
+  s.r_prev = s.r0;
+}
+
+void FiniteStrainSolver::iterate(StepAttempt& s) {
+  for (int it = 1; !s.failure && it <= s.limit; ++it) {
+    const IterationOutcome outcome = newton_iteration(s, it);
+    if (outcome == IterationOutcome::Converged) s.converged = true;
+    if (outcome != IterationOutcome::Continue) break;
+  }
+}
+
+// One Newton iteration: a (shifted) solve of the tangent, a line search along its direction,
+// the convergence test and, after the step's last allowed solve, the snap-through test.
+IterationOutcome FiniteStrainSolver::newton_iteration(StepAttempt& s, int it) {
+  ++res_.newton_iterations;
+  NewtonStep& record = s.record;
+  record.iterations = it;
+  if (s.r0 == 0) return IterationOutcome::Converged;  // nothing to do in this step
+  Eigen::VectorXd dq;
+  double shift = 0;
+  // Inexact Newton (Dembo, Eisenstat & Steihaug 1982): a correction solved to a relative
+  // residual eta_k = kForcing ||r_k|| / ||r_ref|| (at most kMaxForcing) converges as fast as
+  // an exact one (quadratically), and a reused factor gets there in fewer CG iterations.
+  const double eta = std::min(kMaxForcing, kForcing * s.r_prev / s.r_ref);
+  if ((s.failure = solve_shifted(dq, shift, eta, s.damping))) {
+    s.failure->iteration = it;
+    return IterationOutcome::Failed;
+  }
+  // A shifted direction is long along the soft (buckling) mode: it is first cut to move no
+  // dof by more than kShiftedStepMm.
+  const double dq_max = dq.lpNorm<Eigen::Infinity>();
+  const double alpha_start = shift > 0 && dq_max > kShiftedStepMm ? kShiftedStepMm / dq_max : 1.0;
+  double alpha = alpha_start, energy_at = 0;
+  if ((s.failure = line_search(s, dq, alpha, energy_at))) {
+    s.failure->iteration = it;
+    return IterationOutcome::Failed;
+  }
+  s.energy = energy_at;
+  q_ += alpha * dq;
+  if (alpha < kPoorStep * alpha_start)
+    s.damping = std::max(kFirstShift, 10 * shift);
+  else if (alpha == alpha_start)
+    s.damping = shift >= 10 * kFirstShift ? 0.1 * shift : 0.0;
+  else
+    s.damping = shift;
+  record.line_search.push_back(alpha);
+  record.shifts.push_back(shift);
+  const double rn = sys_.f.norm();
+  record.residual_norms.push_back(rn / s.r0);
+  if (!std::isfinite(rn) || rn > kDivergence * s.r0) {
+    s.failure = Failure{cat("the Newton iteration diverges (residual ", rn / s.r0,
+                            " times the step's load)"), -1, -1, it};
+    return IterationOutcome::Failed;
+  }
+  const double du = alpha * dq.norm(),
+               step_norm = std::max(s.scale * (q_ - s.q_start).norm(), 1e-300);
+  // The correction the next iteration would make, estimated from this one and the residual's
+  // fall (Abaqus's and CalculiX's test: c_next = c rn / r_prev, an overestimate once Newton
+  // converges faster than linearly). Only after a full step along the tangent's own direction: a
+  // shortened or shifted step says nothing about the next one. This spares the solve that
+  // would take the residual from 1e-10 to round-off.
+  const double du_next = alpha == 1.0 && shift == 0 && rn < s.r_prev ? du * rn / s.r_prev : du;
+  s.r_prev = rn;
+  if (converged(s, rn, du, du_next, step_norm)) return IterationOutcome::Converged;
+  if (it == s.limit && rn <= no_.stagnation_tolerance * s.r_ref &&
+      du <= no_.stagnation_tolerance * step_norm) {
+    record.stagnated = true;
+    return IterationOutcome::Converged;
+  }
+  s.potentials.push_back(s.energy - s.lambda_new * f_ext_.dot(q_));
+  s.shifted_solve.push_back(shift > 0);
+  if (it == s.limit) extend_for_snap(s);
+  return IterationOutcome::Continue;
+}
+
+// Line search (see kSlopeRatio): from alpha (its start), the step along dq whose state lowers
+// the potential and the slope; its state's out-of-balance force and tangent are left in sys_.
+std::optional<Failure> FiniteStrainSolver::line_search(StepAttempt& s, const Eigen::VectorXd& dq,
+                                                       double& alpha, double& energy_at) {
+  const double s0 = dq.dot(sys_.f);  // slope of the energy along dq at alpha = 0 (negated)
+  // The potential at alpha = 0 (external loads do work lambda f_ext . q).
+  const double pi0 = s.energy - s.lambda_new * f_ext_.dot(q_);
+  std::optional<Failure> inverted, first_inverted;
+  for (int ls = 0; ls < kMaxLineSearch; ++ls) {
+    const auto t = Clock::now();
+    inverted = problem_.evaluate(q_ + alpha * dq, s.lambda_new, s.lambda_new, no_lift_, sys_,
+                                 &unit_lift_, &energy_at);
+    res_.timings.assembly_s += seconds_since(t);
+    if (inverted) {
+      if (!first_inverted) first_inverted = inverted;
+      alpha *= 0.5;
+      continue;
+    }
+    const double slope = dq.dot(sys_.f);
+    const double pi = energy_at - s.lambda_new * f_ext_.dot(q_ + alpha * dq);
+    const double drop = pi0 - pi;  // > 0: the energy fell
+    const bool energy_ok = std::isnan(pi0) || drop >= kArmijo * alpha * s0 ||
+                           std::abs(drop) <= 1e-12 * std::max(std::abs(pi0), std::abs(pi));
+    if (energy_ok && (std::abs(slope) <= kSlopeRatio * std::abs(s0) || s0 * slope > 0))
+      return std::nullopt;
+    if (energy_ok) {
+      // Past the minimum along dq (the slope changed sign): its root by linear interpolation.
+      alpha *= std::clamp(s0 / (s0 - slope), 0.1, 1.0);
+    } else {
+      // The energy rose: the minimum of the quadratic with pi(0), slope -s0 and pi(alpha).
+      const double a_min = s0 * alpha * alpha / (2 * (s0 * alpha - drop));
+      alpha = std::clamp(a_min, 0.1 * alpha, 0.5 * alpha);
+    }
+  }
+  return first_inverted ? *first_inverted
+                        : Failure{"the line search found no step that lowers the energy"};
+}
+
+// Converged; or at the round-off floor: a correction a thousand times below the tolerance
+// while the residual is within a hundred times of it (a residual cannot drop below the
+// rounding of the element forces that cancel in it). A step before the last only has to
+// be a good start for the next one (its left-over residual is carried into the next
+// predictor): it stops at intermediate_tolerance.
+bool FiniteStrainSolver::converged(const StepAttempt& s, double rn, double du, double du_next,
+                                   double step_norm) const {
+  const bool last = s.lambda_new == 1.0;
+  const double r_tol =
+      last ? no_.residual_tolerance : std::max(no_.residual_tolerance, no_.intermediate_tolerance);
+  const double d_tol =
+      last ? no_.displacement_tolerance : std::max(no_.displacement_tolerance, no_.intermediate_tolerance);
+  return (rn <= r_tol * s.r_ref && du_next <= d_tol * step_norm) ||
+         (rn <= 1e2 * r_tol * s.r_ref && du <= 1e-3 * d_tol * step_norm);
+}
+
+// Snapping: the tangent was shifted (indefinite, or its Newton steps far too long) in the last
+// max_iterations solves and the potential fell over them by more than round-off: the step
+// goes on, max_iterations more solves at a time.
+void FiniteStrainSolver::extend_for_snap(StepAttempt& s) {
+  if (!(s.limit < no_.snap_iterations && snap_solves_left_ > 0)) return;
+  const std::size_t from = s.potentials.size() - static_cast<std::size_t>(no_.max_iterations);
+  const double fall = s.potentials[from] - s.potentials.back();
+  const bool shifted =
+      std::find(s.shifted_solve.begin() + static_cast<std::ptrdiff_t>(from), s.shifted_solve.end(),
+                true) != s.shifted_solve.end();
+  if (shifted && fall > 1e-9 * std::abs(s.potentials.back())) {
+    const int more = std::min({no_.max_iterations, no_.snap_iterations - s.limit, snap_solves_left_});
+    s.limit += more;
+    snap_solves_left_ -= more;
+  }
+}
+
+void FiniteStrainSolver::accept_step(const StepAttempt& s) {
+  NewtonStep record = s.record;
+  record.residual_norms.insert(record.residual_norms.begin(), 1.0);
+  res_.newton_steps.push_back(record);
+  ++step_;
+  lambda_ = s.lambda_new;
+  cutbacks_ = 0;
+  inverted_in_step_.reset();
+  at_converged_state_ = record.iterations > 0 && s.r0 > 0;
+  if (options_.reporter) {
+    options_.reporter->progress("closing the wound", lambda_);
+    options_.reporter->check_cancelled();
+  }
+  grow_step(record);
+}
+
+// An easy step doubles the next: beyond the nominal size (up to what remains) until a step
+// of this solve has been cut back, then only back up to the nominal size.
+void FiniteStrainSolver::grow_step(const NewtonStep& record) {
+  if (!cut_back_ && record.iterations <= no_.grow_iterations)
+    dlambda_ = 2 * dlambda_;
+  else if (record.iterations <= 4)
+    dlambda_ = std::max(dlambda_, std::min(2 * dlambda_, nominal_));
+}
+
+// A failed attempt: back to the step's start with half the step; SolverError after
+// max_cutbacks halvings.
+void FiniteStrainSolver::cut_back_step(StepAttempt& s) {
+  std::optional<Failure>& failure = s.failure;
+  if (!failure)
+    failure = Failure{cat("Newton did not converge in ", s.record.iterations,
+                          " iterations (last relative residual ",
+                          s.record.residual_norms.empty() ? NAN : s.record.residual_norms.back(), ")"),
+                      -1, -1, s.record.iterations};
+  failure->lambda = s.lambda_new;
+  // An inverted element is the cause worth reporting: smaller steps after it often fail
+  // differently (a stiffening, ill-conditioned tangent near det F = 0).
+  if (failure->element >= 0 && !inverted_in_step_) inverted_in_step_ = failure;
+  if (inverted_in_step_) failure = inverted_in_step_;
+  q_ = s.q_start;
+  dlambda_ = 0.5 * s.dl;  // half the step that failed (it may have been clipped to what remained)
+  cut_back_ = true;
+  if (++cutbacks_ > no_.max_cutbacks) {
+    throw SolverError(
+        cat("finite-strain solve failed at load step ", step_ + 1, " (from lambda ", lambda_,
+            " towards ", failure->lambda, "; ", no_.max_cutbacks, " halvings), Newton iteration ",
+            failure->iteration, ": ", failure->what, "; the closure is too large for this mesh or material: refine the mesh, undermine "
+            "more, or close the wound in more steps (n_steps)"),
+        failure->element, failure->gauss_point, failure->iteration);
+  }
+}
+
+// A new factor of K solved to the inexact Newton step's tolerance: with the mixed-precision
+// solver, CG on K preconditioned by the new single-precision factor stops there instead of at
+// a direct solve's 1e-12 (half its iterations on the Cranium Z-plasty).
+void FiniteStrainSolver::factorize_and_solve(Eigen::VectorXd& dq, double tolerance) {
+  auto t0 = Clock::now();
+  ++res_.factorizations;
+  solver_->factorize(sys_.K);
+  res_.timings.factorization_s += seconds_since(t0);
+  t0 = Clock::now();
+  std::optional<Eigen::VectorXd> x =
+      solver_->solve_reusing_factor(sys_.K, sys_.f, kMaxFreshIterations, tolerance);
+  dq = x ? std::move(*x) : solver_->solve(sys_.f);
+  res_.timings.solve_s += seconds_since(t0);
+}
+
+// One solve of K dq = f. Past a buckling point (the free flaps pucker under the closure's
+// compression) the tangent is indefinite and its Newton direction need not lower the energy:
+// the tangent is then shifted, K + mu |diag(K)| with mu = 1e-6, 1e-5, ... until it is positive
+// definite (Levenberg-Marquardt; Nocedal & Wright 2006, sec. 3.4 and 6.3), which gives a
+// descent direction and leads to a stable (minimum-energy) equilibrium rather than the
+// unstable one. `shift` returns the mu used, 0 for the tangent itself. The shift takes the
+// diagonal's magnitude: strongly compressed elements give negative diagonal entries (the
+// geometric stiffness), which a multiple of diag(K) itself would make more negative still.
+// The smallest shift first: near a buckling point a larger one shortens the correction along
+// the soft mode so much that Newton creeps away from the unstable state micrometres a solve
+// (docs/fem.md, the forehead 75 deg Z-plasty with measured layers: over 15 minutes at 1e-4,
+// 188 s at 1e-6). `damping` > 0 starts at that shift without trying the tangent itself (the
+// Newton loop's Levenberg-Marquardt memory, StepAttempt::damping).
+std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, double& shift,
+                                                         double tolerance, double damping) {
+  shift = 0;
+  const auto finite = [&]() -> std::optional<Failure> {
+    if (dq.allFinite()) return std::nullopt;
+    return Failure{"the Newton correction is not finite"};
+  };
+  std::string unshifted;  // why the tangent itself could not be factorized
+  if (damping == 0) {
+    if (no_.reuse_iterations > 0) {
+      const auto t0 = Clock::now();
+      std::optional<Eigen::VectorXd> x =
+          solver_->solve_reusing_factor(sys_.K, sys_.f, no_.reuse_iterations, tolerance);
+      res_.timings.solve_s += seconds_since(t0);
+      if (x) {
+        dq = std::move(*x);
+        return finite();
+      }
+    }
+    try {
+      factorize_and_solve(dq, tolerance);
+      return finite();
+    } catch (const SingularMatrix& e) {
+      unshifted = e.what();
+    }
+  }
+  double* values = sys_.K.valuePtr();
+  for (Eigen::Index j = 0; j < sys_.K.cols(); ++j) kept_diagonal_[j] = values[diagonal_[j]];
+  bool solved = false;
+  for (double mu = std::max(damping, kFirstShift); mu <= 1.01e2 && !solved; mu *= 10) {
+    for (Eigen::Index j = 0; j < sys_.K.cols(); ++j)
+      values[diagonal_[j]] = kept_diagonal_[j] + mu * std::abs(kept_diagonal_[j]);
+    try {
+      factorize_and_solve(dq, tolerance);
+      solved = true;
+      shift = mu;
+    } catch (const SingularMatrix& e) {
+      if (unshifted.empty()) unshifted = e.what();
+    }
+  }
+  for (Eigen::Index j = 0; j < sys_.K.cols(); ++j) values[diagonal_[j]] = kept_diagonal_[j];
+  if (!solved)
+    return Failure{cat("the tangent stiffness is not positive definite even shifted by 100 times "
+                       "its diagonal (", unshifted, ")")};
+  return finite();
+}
+
+void FiniteStrainSolver::finish_report() {
+  res_.factor_nonzeros = solver_->factor_nonzeros();
+  const SolverReport report = solver_->report();
+  res_.precision = report.precision;
+  res_.refinement_iterations = report.iterations;
+  res_.fell_back_to_double = report.fell_back_to_double;
+  // The last step's final residual relative to its load (the linear solve's measure).
+  res_.relative_residual = res_.newton_steps.back().residual_norms.back();
+}
+
+// Recovery: the displacement of the converged state, and every element's stresses and forces.
+void FiniteStrainSolver::recover_result() {
+  const auto t = Clock::now();
+  const Eigen::VectorXd u = problem_.expand(q_, 1.0);
+  const Eigen::Index n_nodes = mesh_.n_nodes();
+  res_.displacement_mm.resize(n_nodes, 3);
+  for (Eigen::Index i = 0; i < n_nodes; ++i)
+    for (int c = 0; c < 3; ++c) res_.displacement_mm(i, c) = u[3 * i + c];
+  recover(mesh_, map_, [&](int e, ElementRecovery& out) { recover_element(u, e, out); }, res_);
+  res_.timings.recovery_s = seconds_since(t);
+}
+
+void FiniteStrainSolver::recover_element(const Eigen::VectorXd& u, int e,
+                                         ElementRecovery& out) const {
+  const FiniteMaterials& mats = problem_.materials();
+  const Element& el = mesh_.elements[e];
+  const int nn = el.n_nodes();
+  const Material& mat = *mats.at(el.layer);
+  const Eigen::MatrixX3d X = element_coordinates(mesh_, e);
+  Eigen::VectorXd ue(3 * nn);
+  for (int a = 0; a < nn; ++a) ue.segment<3>(3 * a) = u.segment<3>(3 * static_cast<Eigen::Index>(el.nodes[a]));
+  Eigen::VectorXd fe;
+  const double stretch = el.layer == kSkinLayer ? options_.prestretch : 1.0;
+  const FiniteKernelResult k = finite_kernel(el.type, X, mat, ue, e, fe, nullptr, stretch);
+  if (k.inverted_at >= 0)  // not after a converged step, which evaluated this very state
+    throw SolverError(inverted_message(e, k.inverted_at, k.det_F), e, k.inverted_at);
+  out.energy_mj = k.energy_mj;
+  out.f_int.resize(nn, 3);
+  for (int a = 0; a < nn; ++a) out.f_int.row(a) = fe.segment<3>(3 * a).transpose();
+  const auto& tab = shape_table(el.type);
+  Eigen::MatrixX3d G(nn, 3);
+  out.gauss_stress.resize(static_cast<Eigen::Index>(tab.w.size()), 6);
+  Vector6d S;
+  Matrix6d C;
+  double vm = 0, w_sum = 0;
+  for (std::size_t g = 0; g < tab.w.size(); ++g) {
+    const double w = tab.w[g] * gradients(tab.dN[g], X, G, e, static_cast<int>(g));
+    const Eigen::Matrix3d H = displacement_gradient(G, ue);
+    const Eigen::Vector3d n = layer_normal(tab.dN[g], X);
+    material_response(mat, H, &n, stretch, S, C);
+    const Vector6d sigma = cauchy_from_pk2(H + Eigen::Matrix3d::Identity(), S);
+    out.gauss_stress.row(static_cast<Eigen::Index>(g)) = sigma.transpose();
+    vm += w * von_mises(sigma);
+    w_sum += w;
+  }
+  out.von_mises_mean = vm / w_sum;
+  const Eigen::MatrixX3d P = natural_nodes(el.type);
+  out.nodal_stress.resize(nn, 6);
+  // At a node the quadratic element's deformation gradient may fold (det F <= 0 at a corner
+  // squeezed by the closure) while every Gauss point, where equilibrium is solved and checked,
+  // is sound: such a node takes the stress of its nearest Gauss point.
+  const auto& rule = quadrature(el.type);
+  for (int a = 0; a < nn; ++a) {
+    const Eigen::Vector3d xi = P.row(a).transpose();
+    try {
+      out.nodal_stress.row(a) = finite_cauchy_stress(el.type, X, mat, ue, xi, e, stretch).transpose();
+    } catch (const SolverError&) {
+      std::size_t nearest = 0;
+      for (std::size_t g = 1; g < rule.size(); ++g)
+        if ((rule[g].xi - xi).squaredNorm() < (rule[nearest].xi - xi).squaredNorm()) nearest = g;
+      out.nodal_stress.row(a) = out.gauss_stress.row(static_cast<Eigen::Index>(nearest));
+    }
+  }
+}
+
 }  // namespace
 
 void solve_finite(const Mesh& mesh, const SolveOptions& options, const DofMap& map,
                   SolveResult& res) {
-  const NewtonOptions& no = options.newton;
-  check_options(no);
-  const FiniteProblem problem(mesh, map, options.prestretch);
-  res.flap_rotations_deg = problem.path().rotations_deg();
-  auto t = Clock::now();
-  Assembly sys = assemble_structure(mesh, map);
-  res.n_nonzeros = sys.K.nonZeros();
-  res.timings.assembly_s += seconds_since(t);
-  auto solver = make_direct_solver(options.solver, options.mumps_ordering, options.mixed_precision);
-  t = Clock::now();
-  solver->analyze(sys.K, map.block_start);  // once: every tangent has this structure
-  res.timings.analysis_s = seconds_since(t);
-
-  const Eigen::VectorXd no_lift;
-  Eigen::VectorXd f_ext = Eigen::VectorXd::Zero(map.n_eq), unit_lift;
-  add_loads(mesh, map, 1.0, f_ext);
-  // sys holds the tangent and out-of-balance force of the last converged state, and unit_lift
-  // its -T^T K g: the next predictor is then f + dl (f_ext + unit_lift), without an assembly.
-  bool at_converged_state = false;
-  Eigen::VectorXd q = Eigen::VectorXd::Zero(map.n_eq);
-  const double nominal = 1.0 / no.n_steps;
-  double lambda = 0, dlambda = nominal;
-  int step = 0, cutbacks = 0;
-  // The solves snapping steps may take beyond max_iterations, over the whole solve: a closure
-  // whose snaps fail and are cut back does not repeat them without end.
-  int snap_solves_left = no.snap_iterations;
-  bool cut_back = false;  // a step of this solve was cut back: steps grow only to the nominal size
-  std::optional<Failure> inverted_in_step;  // the first inversion among the attempts of a step
-
-  // The diagonal of K's stored upper triangle (the last entry of each column), for the shift.
-  std::vector<Eigen::Index> diagonal(static_cast<std::size_t>(sys.K.cols()));
-  for (Eigen::Index j = 0; j < sys.K.cols(); ++j) diagonal[j] = sys.K.outerIndexPtr()[j + 1] - 1;
-  Eigen::VectorXd kept_diagonal(sys.K.cols());
-
-  // A new factor of K solved to the inexact Newton step's tolerance: with the mixed-precision
-  // solver, CG on K preconditioned by the new single-precision factor stops there instead of at
-  // a direct solve's 1e-12 (half its iterations on the Cranium Z-plasty).
-  auto factorize_and_solve = [&](Eigen::VectorXd& dq, double tolerance) {
-    auto t0 = Clock::now();
-    ++res.factorizations;
-    solver->factorize(sys.K);
-    res.timings.factorization_s += seconds_since(t0);
-    t0 = Clock::now();
-    std::optional<Eigen::VectorXd> x =
-        solver->solve_reusing_factor(sys.K, sys.f, kMaxFreshIterations, tolerance);
-    dq = x ? std::move(*x) : solver->solve(sys.f);
-    res.timings.solve_s += seconds_since(t0);
-  };
-
-  // One solve of K dq = f. Past a buckling point (the free flaps pucker under the closure's
-  // compression) the tangent is indefinite and its Newton direction need not lower the energy:
-  // the tangent is then shifted, K + mu |diag(K)| with mu = 1e-6, 1e-5, ... until it is positive
-  // definite (Levenberg-Marquardt; Nocedal & Wright 2006, sec. 3.4 and 6.3), which gives a
-  // descent direction and leads to a stable (minimum-energy) equilibrium rather than the
-  // unstable one. `shift` returns the mu used, 0 for the tangent itself. The shift takes the
-  // diagonal's magnitude: strongly compressed elements give negative diagonal entries (the
-  // geometric stiffness), which a multiple of diag(K) itself would make more negative still.
-  // The smallest shift first: near a buckling point a larger one shortens the correction along
-  // the soft mode so much that Newton creeps away from the unstable state micrometres a solve
-  // (docs/fem.md, the forehead 75 deg Z-plasty with measured layers: over 15 minutes at 1e-4,
-  // 188 s at 1e-6). `damping` > 0 starts at that shift without trying the tangent itself (the
-  // Newton loop's Levenberg-Marquardt memory, below).
-  auto solve_system = [&](Eigen::VectorXd& dq, double& shift, double tolerance,
-                          double damping) -> std::optional<Failure> {
-    shift = 0;
-    const auto finite = [&]() -> std::optional<Failure> {
-      if (dq.allFinite()) return std::nullopt;
-      return Failure{"the Newton correction is not finite"};
-    };
-    std::string unshifted;  // why the tangent itself could not be factorized
-    if (damping == 0) {
-      if (no.reuse_iterations > 0) {
-        const auto t0 = Clock::now();
-        std::optional<Eigen::VectorXd> x =
-            solver->solve_reusing_factor(sys.K, sys.f, no.reuse_iterations, tolerance);
-        res.timings.solve_s += seconds_since(t0);
-        if (x) {
-          dq = std::move(*x);
-          return finite();
-        }
-      }
-      try {
-        factorize_and_solve(dq, tolerance);
-        return finite();
-      } catch (const SingularMatrix& e) {
-        unshifted = e.what();
-      }
-    }
-    double* values = sys.K.valuePtr();
-    for (Eigen::Index j = 0; j < sys.K.cols(); ++j) kept_diagonal[j] = values[diagonal[j]];
-    bool solved = false;
-    for (double mu = std::max(damping, kFirstShift); mu <= 1.01e2 && !solved; mu *= 10) {
-      for (Eigen::Index j = 0; j < sys.K.cols(); ++j)
-        values[diagonal[j]] = kept_diagonal[j] + mu * std::abs(kept_diagonal[j]);
-      try {
-        factorize_and_solve(dq, tolerance);
-        solved = true;
-        shift = mu;
-      } catch (const SingularMatrix& e) {
-        if (unshifted.empty()) unshifted = e.what();
-      }
-    }
-    for (Eigen::Index j = 0; j < sys.K.cols(); ++j) values[diagonal[j]] = kept_diagonal[j];
-    if (!solved)
-      return Failure{cat("the tangent stiffness is not positive definite even shifted by 100 times "
-                         "its diagonal (", unshifted, ")")};
-    return finite();
-  };
-
-  while (lambda < 1.0) {
-    const double lambda_new = 1.0 - lambda <= 1.0001 * dlambda ? 1.0 : lambda + dlambda;
-    const double dl = lambda_new - lambda;
-    const Eigen::VectorXd q_start = q;
-    NewtonStep record;
-    record.step = step + 1;
-    record.lambda = lambda_new;
-    record.cutbacks = cutbacks;
-    std::optional<Failure> failure;
-
-    // Predictor: the tangent at the converged state with the increment of the prescribed values
-    // lifted, K dq = lambda_new f_ext - f_int - K (dl g).
-    if (at_converged_state && problem.path().straight() && !problem.prestretched()) {
-      sys.f += dl * (f_ext + unit_lift);
-    } else {
-      t = Clock::now();
-      failure = problem.evaluate(q, lambda, lambda_new,
-                                 problem.path().at(lambda_new) - problem.path().at(lambda), sys);
-      res.timings.assembly_s += seconds_since(t);
-    }
-    at_converged_state = false;
-    const double r0 = failure ? 0.0 : sys.f.norm();
-    // The tolerances are relative to the nominal step: a step cut back k times has a first
-    // residual and an increment 2^k times smaller, while the round-off in the element forces
-    // that cancel in the residual does not shrink with it (measured on the Cranium Z-plasty:
-    // halved steps stalled at 1e-8 of their own first residual against 1e-10).
-    const double scale = std::max(1.0, nominal / dl);
-    const double r_ref = scale * r0;
-    // The potential energy of the current iterate at lambda_new; unknown for the predictor,
-    // whose direction also moves the prescribed values (its step is judged by the slope alone).
-    double energy = NAN;
-    double r_prev = r0;  // the residual before the current correction
-    // The shift the next solve starts from (Levenberg-Marquardt with memory: Nocedal & Wright
-    // 2006, sec. 10.3; Nielsen 1999). Where the tangent is positive definite but its Newton step
-    // is far too long (near a limit point the soft mode's stiffness tends to zero: measured on
-    // the forehead 90 deg Z-plasty with measured layers, corrections of 44 mm cut by the line
-    // search to 0.3 %, and 25 solves that did not lower the residual) a shifted tangent gives a
-    // shorter step in a better direction, which the line search then accepts whole; each full
-    // step lowers the shift again, so the last solves are plain Newton and converge
-    // quadratically.
-    double damping = 0;
-    bool converged = false;
-    // The potential after each solve and whether its tangent was shifted: a step still falling
-    // through unstable states after max_iterations is a snap, given more solves.
-    std::vector<double> potentials;
-    std::vector<bool> shifted_solve;
-    int limit = no.max_iterations;
-    for (int it = 1; !failure && it <= limit; ++it) {
-      ++res.newton_iterations;
-      record.iterations = it;
-      if (r0 == 0) {  // nothing to do in this step
-        converged = true;
-        break;
-      }
-      Eigen::VectorXd dq;
-      double shift = 0;
-      // Inexact Newton (Dembo, Eisenstat & Steihaug 1982): a correction solved to a relative
-      // residual eta_k = kForcing ||r_k|| / ||r_ref|| (at most kMaxForcing) converges as fast as
-      // an exact one (quadratically), and a reused factor gets there in fewer CG iterations.
-      const double eta = std::min(kMaxForcing, kForcing * r_prev / r_ref);
-      if ((failure = solve_system(dq, shift, eta, damping))) {
-        failure->iteration = it;
-        break;
-      }
-      const double s0 = dq.dot(sys.f);  // slope of the energy along dq at alpha = 0 (negated)
-      // The potential at alpha = 0 (external loads do work lambda f_ext . q).
-      const double pi0 = energy - lambda_new * f_ext.dot(q);
-      // A shifted direction is long along the soft (buckling) mode: it is first cut to move no
-      // dof by more than kShiftedStepMm.
-      const double dq_max = dq.lpNorm<Eigen::Infinity>();
-      const double alpha_start = shift > 0 && dq_max > kShiftedStepMm ? kShiftedStepMm / dq_max : 1.0;
-      double alpha = alpha_start;
-      std::optional<Failure> inverted, first_inverted;
-      bool accepted = false;
-      double energy_at = 0;
-      for (int ls = 0; ls < kMaxLineSearch; ++ls) {
-        t = Clock::now();
-        inverted = problem.evaluate(q + alpha * dq, lambda_new, lambda_new, no_lift, sys, &unit_lift,
-                                    &energy_at);
-        res.timings.assembly_s += seconds_since(t);
-        if (inverted) {
-          if (!first_inverted) first_inverted = inverted;
-          alpha *= 0.5;
-          continue;
-        }
-        const double s = dq.dot(sys.f);
-        const double pi = energy_at - lambda_new * f_ext.dot(q + alpha * dq);
-        const double drop = pi0 - pi;  // > 0: the energy fell
-        const bool energy_ok = std::isnan(pi0) || drop >= kArmijo * alpha * s0 ||
-                               std::abs(drop) <= 1e-12 * std::max(std::abs(pi0), std::abs(pi));
-        if (energy_ok && (std::abs(s) <= kSlopeRatio * std::abs(s0) || s0 * s > 0)) {
-          accepted = true;
-          break;
-        }
-        if (energy_ok) {
-          // Past the minimum along dq (the slope changed sign): its root by linear interpolation.
-          alpha *= std::clamp(s0 / (s0 - s), 0.1, 1.0);
-        } else {
-          // The energy rose: the minimum of the quadratic with pi(0), slope -s0 and pi(alpha).
-          const double a_min = s0 * alpha * alpha / (2 * (s0 * alpha - drop));
-          alpha = std::clamp(a_min, 0.1 * alpha, 0.5 * alpha);
-        }
-      }
-      if (!accepted) {
-        failure = first_inverted ? *first_inverted
-                                 : Failure{"the line search found no step that lowers the energy"};
-        failure->iteration = it;
-        break;
-      }
-      energy = energy_at;
-      q += alpha * dq;
-      if (alpha < kPoorStep * alpha_start)
-        damping = std::max(kFirstShift, 10 * shift);
-      else if (alpha == alpha_start)
-        damping = shift >= 10 * kFirstShift ? 0.1 * shift : 0.0;
-      else
-        damping = shift;
-      record.line_search.push_back(alpha);
-      record.shifts.push_back(shift);
-      const double rn = sys.f.norm();
-      record.residual_norms.push_back(rn / r0);
-      if (!std::isfinite(rn) || rn > kDivergence * r0) {
-        failure = Failure{cat("the Newton iteration diverges (residual ", rn / r0,
-                              " times the step's load)"), -1, -1, it};
-        break;
-      }
-      const double du = alpha * dq.norm(),
-                   step_norm = std::max(scale * (q - q_start).norm(), 1e-300);
-      // The correction the next iteration would make, estimated from this one and the residual's
-      // fall (Abaqus's and CalculiX's test: c_next = c rn / r_prev, an overestimate once Newton
-      // converges faster than linearly). Only after a full step along the tangent's own direction: a
-      // shortened or shifted step says nothing about the next one. This spares the solve that
-      // would take the residual from 1e-10 to round-off.
-      const double du_next = alpha == 1.0 && shift == 0 && rn < r_prev ? du * rn / r_prev : du;
-      r_prev = rn;
-      // Converged; or at the round-off floor: a correction a thousand times below the tolerance
-      // while the residual is within a hundred times of it (a residual cannot drop below the
-      // rounding of the element forces that cancel in it). A step before the last only has to
-      // be a good start for the next one (its left-over residual is carried into the next
-      // predictor): it stops at intermediate_tolerance.
-      const bool last = lambda_new == 1.0;
-      const double r_tol =
-          last ? no.residual_tolerance : std::max(no.residual_tolerance, no.intermediate_tolerance);
-      const double d_tol =
-          last ? no.displacement_tolerance : std::max(no.displacement_tolerance, no.intermediate_tolerance);
-      if ((rn <= r_tol * r_ref && du_next <= d_tol * step_norm) ||
-          (rn <= 1e2 * r_tol * r_ref && du <= 1e-3 * d_tol * step_norm)) {
-        converged = true;
-        break;
-      }
-      if (it == limit && rn <= no.stagnation_tolerance * r_ref &&
-          du <= no.stagnation_tolerance * step_norm) {
-        record.stagnated = true;
-        converged = true;
-        break;
-      }
-      potentials.push_back(energy - lambda_new * f_ext.dot(q));
-      shifted_solve.push_back(shift > 0);
-      if (it == limit && limit < no.snap_iterations && snap_solves_left > 0) {
-        // Snapping: the tangent was shifted (indefinite, or its Newton steps far too long) in
-        // the last max_iterations solves and the potential fell over them by more than
-        // round-off.
-        const std::size_t from = potentials.size() - static_cast<std::size_t>(no.max_iterations);
-        const double fall = potentials[from] - potentials.back();
-        const bool shifted =
-            std::find(shifted_solve.begin() + static_cast<std::ptrdiff_t>(from), shifted_solve.end(),
-                      true) != shifted_solve.end();
-        if (shifted && fall > 1e-9 * std::abs(potentials.back())) {
-          const int more = std::min({no.max_iterations, no.snap_iterations - limit, snap_solves_left});
-          limit += more;
-          snap_solves_left -= more;
-        }
-      }
-    }
-    if (converged) {
-      record.residual_norms.insert(record.residual_norms.begin(), 1.0);
-      res.newton_steps.push_back(record);
-      ++step;
-      lambda = lambda_new;
-      cutbacks = 0;
-      inverted_in_step.reset();
-      at_converged_state = record.iterations > 0 && r0 > 0;
-      if (options.reporter) {
-        options.reporter->progress("closing the wound", lambda);
-        options.reporter->check_cancelled();
-      }
-      // An easy step doubles the next: beyond the nominal size (up to what remains) until a step
-      // of this solve has been cut back, then only back up to the nominal size.
-      if (!cut_back && record.iterations <= no.grow_iterations)
-        dlambda = 2 * dlambda;
-      else if (record.iterations <= 4)
-        dlambda = std::max(dlambda, std::min(2 * dlambda, nominal));
-      continue;
-    }
-    if (!failure)
-      failure = Failure{cat("Newton did not converge in ", record.iterations,
-                            " iterations (last relative residual ",
-                            record.residual_norms.empty() ? NAN : record.residual_norms.back(), ")"),
-                        -1, -1, record.iterations};
-    failure->lambda = lambda_new;
-    // An inverted element is the cause worth reporting: smaller steps after it often fail
-    // differently (a stiffening, ill-conditioned tangent near det F = 0).
-    if (failure->element >= 0 && !inverted_in_step) inverted_in_step = failure;
-    if (inverted_in_step) failure = inverted_in_step;
-    q = q_start;
-    dlambda = 0.5 * dl;  // half the step that failed (it may have been clipped to what remained)
-    cut_back = true;
-    if (++cutbacks > no.max_cutbacks) {
-      throw SolverError(
-          cat("finite-strain solve failed at load step ", step + 1, " (from lambda ", lambda,
-              " towards ", failure->lambda, "; ", no.max_cutbacks, " halvings), Newton iteration ",
-              failure->iteration, ": ", failure->what, "; the closure is too large for this mesh or material: refine the mesh, undermine "
-              "more, or close the wound in more steps (n_steps)"),
-          failure->element, failure->gauss_point, failure->iteration);
-    }
-  }
-  res.factor_nonzeros = solver->factor_nonzeros();
-  const SolverReport report = solver->report();
-  res.precision = report.precision;
-  res.refinement_iterations = report.iterations;
-  res.fell_back_to_double = report.fell_back_to_double;
-  // The last step's final residual relative to its load (the linear solve's measure).
-  res.relative_residual = res.newton_steps.back().residual_norms.back();
-
-  t = Clock::now();
-  const Eigen::VectorXd u = problem.expand(q, 1.0);
-  const Eigen::Index n_nodes = mesh.n_nodes();
-  res.displacement_mm.resize(n_nodes, 3);
-  for (Eigen::Index i = 0; i < n_nodes; ++i)
-    for (int c = 0; c < 3; ++c) res.displacement_mm(i, c) = u[3 * i + c];
-  const FiniteMaterials& mats = problem.materials();
-  recover(mesh, map, [&](int e, ElementRecovery& out) {
-    const Element& el = mesh.elements[e];
-    const int nn = el.n_nodes();
-    const Material& mat = *mats.at(el.layer);
-    const Eigen::MatrixX3d X = element_coordinates(mesh, e);
-    Eigen::VectorXd ue(3 * nn);
-    for (int a = 0; a < nn; ++a) ue.segment<3>(3 * a) = u.segment<3>(3 * static_cast<Eigen::Index>(el.nodes[a]));
-    Eigen::VectorXd fe;
-    const double stretch = el.layer == kSkinLayer ? options.prestretch : 1.0;
-    const FiniteKernelResult k = finite_kernel(el.type, X, mat, ue, e, fe, nullptr, stretch);
-    if (k.inverted_at >= 0)  // not after a converged step, which evaluated this very state
-      throw SolverError(inverted_message(e, k.inverted_at, k.det_F), e, k.inverted_at);
-    out.energy_mj = k.energy_mj;
-    out.f_int.resize(nn, 3);
-    for (int a = 0; a < nn; ++a) out.f_int.row(a) = fe.segment<3>(3 * a).transpose();
-    const auto& tab = shape_table(el.type);
-    Eigen::MatrixX3d G(nn, 3);
-    out.gauss_stress.resize(static_cast<Eigen::Index>(tab.w.size()), 6);
-    Vector6d S;
-    Matrix6d C;
-    double vm = 0, w_sum = 0;
-    for (std::size_t g = 0; g < tab.w.size(); ++g) {
-      const double w = tab.w[g] * gradients(tab.dN[g], X, G, e, static_cast<int>(g));
-      const Eigen::Matrix3d H = displacement_gradient(G, ue);
-      const Eigen::Vector3d n = layer_normal(tab.dN[g], X);
-      material_response(mat, H, &n, stretch, S, C);
-      const Vector6d sigma = cauchy_from_pk2(H + Eigen::Matrix3d::Identity(), S);
-      out.gauss_stress.row(static_cast<Eigen::Index>(g)) = sigma.transpose();
-      vm += w * von_mises(sigma);
-      w_sum += w;
-    }
-    out.von_mises_mean = vm / w_sum;
-    const Eigen::MatrixX3d P = natural_nodes(el.type);
-    out.nodal_stress.resize(nn, 6);
-    // At a node the quadratic element's deformation gradient may fold (det F <= 0 at a corner
-    // squeezed by the closure) while every Gauss point, where equilibrium is solved and checked,
-    // is sound: such a node takes the stress of its nearest Gauss point.
-    const auto& rule = quadrature(el.type);
-    for (int a = 0; a < nn; ++a) {
-      const Eigen::Vector3d xi = P.row(a).transpose();
-      try {
-        out.nodal_stress.row(a) = finite_cauchy_stress(el.type, X, mat, ue, xi, e, stretch).transpose();
-      } catch (const SolverError&) {
-        std::size_t nearest = 0;
-        for (std::size_t g = 1; g < rule.size(); ++g)
-          if ((rule[g].xi - xi).squaredNorm() < (rule[nearest].xi - xi).squaredNorm()) nearest = g;
-        out.nodal_stress.row(a) = out.gauss_stress.row(static_cast<Eigen::Index>(nearest));
-      }
-    }
-  }, res);
-  res.timings.recovery_s = seconds_since(t);
+  FiniteStrainSolver(mesh, options, map, res).run();
 }
 
 }  // namespace caps::fem::detail

@@ -72,23 +72,32 @@ struct Builder {
     const double x = mirrored ? -p.x() : p.x();
     return {out.theta_c_deg + x / out.ref_radius_mm / kDeg, out.z_c_mm + p.y()};
   }
+  // The first refusal met (a polygon that folds, a layer that overlaps itself): the stage that
+  // met it finishes and the mesher stops after it.
+  std::optional<MeshRefusal> refusal;
+  void refuse(MeshRefusal::Kind kind, const Eigen::Vector2d& tz, std::string message) {
+    if (!refusal) refusal = MeshRefusal{kind, tz.x(), tz.y(), std::move(message)};
+  }
+
   void add_polygon(std::vector<int> ids, int stage, int layer, int expanded) {
     if (!(polygon_area(P, ids) > 0)) {
       Vec2 c = Vec2::Zero();
       for (int id : ids) c += P[id];
       const Eigen::Vector2d tz = theta_z(c / ids.size());
-      throw InvalidParameter(cat("surface mesh: layer ", layer, " folds over near theta ",
-                                 std::round(tz.x() * 10) / 10, " deg, z ",
-                                 std::round(tz.y() * 10) / 10, " mm (an element has no positive "
-                                 "area); use a smaller {mesh_size} or check the wound border there"));
+      refuse(MeshRefusal::Kind::Folded, tz,
+             cat("surface mesh: layer ", layer, " folds over near theta ",
+                 std::round(tz.x() * 10) / 10, " deg, z ",
+                 std::round(tz.y() * 10) / 10, " mm (an element has no positive "
+                 "area); use a smaller {mesh_size} or check the wound border there"));
     }
     out.polygons.push_back(std::move(ids));
     out.polygon_stage.push_back(stage);
     out.polygon_layer.push_back(layer);
     out.polygon_expanded.push_back(expanded);
   }
-  /// Throws if the closed polygon `border` crosses itself.
-  void check_simple(const std::vector<int>& border, int layer) const {
+  /// Refuses the mesh (Folded) if the closed polygon `border` crosses itself.
+  void check_simple(const std::vector<int>& border, int layer) {
+    if (refusal) return;
     const std::size_t m = border.size();
     for (std::size_t i = 0; i < m; ++i)
       for (std::size_t j = i + 2; j < m; ++j) {
@@ -97,11 +106,13 @@ struct Builder {
         const Vec2 &q1 = P[border[j]], &q2 = P[border[(j + 1) % m]];
         if (segments_cross(p1, p2, q1, q2)) {
           const Eigen::Vector2d tz = theta_z(0.5 * (p1 + p2));
-          throw InvalidParameter(cat("surface mesh: layer ", layer, " overlaps itself near theta ",
-                                     std::round(tz.x() * 10) / 10, " deg, z ",
-                                     std::round(tz.y() * 10) / 10, " mm; use a smaller "
-                                     "{mesh_size}, a smaller {extent}, or a wound border without "
-                                     "tight folds"));
+          refuse(MeshRefusal::Kind::Folded, tz,
+                 cat("surface mesh: layer ", layer, " overlaps itself near theta ",
+                     std::round(tz.x() * 10) / 10, " deg, z ",
+                     std::round(tz.y() * 10) / 10, " mm; use a smaller "
+                     "{mesh_size}, a smaller {extent}, or a wound border without "
+                     "tight folds"));
+          return;
         }
       }
   }
@@ -247,8 +258,10 @@ SurfaceQuality surface_quality(const Eigen::MatrixX2d& xy,
   return q;
 }
 
-SurfaceMesh mesh_surface(const WoundBorder& border, const PatientModel& model,
-                         const SurfaceMeshOptions& options) {
+namespace {
+
+// The reference radius of a surface mesh: r_skin at the wound's centre.
+double reference_radius(const WoundBorder& border, const PatientModel& model) {
   if (border.loop_theta_z.empty())
     throw InvalidInput("wound border: the loop is empty; a wound needs at least 2 points");
   double t0 = border.loop_theta_z[0].x(), sx = 0, sz = 0;
@@ -257,8 +270,19 @@ SurfaceMesh mesh_surface(const WoundBorder& border, const PatientModel& model,
     sz += p.y();
   }
   const double n = static_cast<double>(border.loop_theta_z.size());
-  const double r = model.r_skin(t0 + sx / n, sz / n);
-  return mesh_surface(border, r, options);
+  return model.r_skin(t0 + sx / n, sz / n);
+}
+
+}  // namespace
+
+SurfaceMesh mesh_surface(const WoundBorder& border, const PatientModel& model,
+                         const SurfaceMeshOptions& options) {
+  return mesh_surface(border, reference_radius(border, model), options);
+}
+
+MeshOutcome<SurfaceMesh> try_mesh_surface(const WoundBorder& border, const PatientModel& model,
+                                          const SurfaceMeshOptions& options) {
+  return try_mesh_surface(border, reference_radius(border, model), options);
 }
 
 namespace {
@@ -514,7 +538,7 @@ void grow_layer(Builder& B, std::vector<int>& front, double l, int layer,
 }
 
 // Stage 2 and growth: layers of quadrilaterals until the extent is reached; returns the
-// number of layers.
+// number of layers (B.refusal set if a layer folds or the layers do not reach the extent).
 int grow_layers(Builder& B, std::vector<int>& front, const SurfaceMeshOptions& o) {
   const double extent_mm = B.out.extent_mm;
   double l = o.size_mm, reached = 0;
@@ -522,6 +546,7 @@ int grow_layers(Builder& B, std::vector<int>& front, const SurfaceMeshOptions& o
   while (reached < extent_mm - 1e-9 && layer < o.max_layers) {
     ++layer;
     grow_layer(B, front, l, layer, o);
+    if (B.refusal) return layer;
     reached += l;
     const double remaining = extent_mm - reached;
     double l_next = std::min(l * o.growth, std::max(l, median_edge(B.P, front)));
@@ -529,10 +554,11 @@ int grow_layers(Builder& B, std::vector<int>& front, const SurfaceMeshOptions& o
     l = l_next;
   }
   if (reached < extent_mm - 1e-9)
-    throw InvalidParameter(cat("surface mesher: ", o.max_layers, " layers reach only ",
-                               std::round(reached * 10) / 10, " of the ",
-                               std::round(extent_mm * 10) / 10,
-                               " mm extent; use a larger {mesh_size} or a smaller {extent}"));
+    B.refusal = MeshRefusal{MeshRefusal::Kind::Unreached, NAN, NAN,
+                            cat("surface mesher: ", o.max_layers, " layers reach only ",
+                                std::round(reached * 10) / 10, " of the ",
+                                std::round(extent_mm * 10) / 10,
+                                " mm extent; use a larger {mesh_size} or a smaller {extent}")};
   return layer;
 }
 
@@ -555,8 +581,8 @@ void finish_surface(Builder& B) {
 
 }  // namespace
 
-SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
-                         const SurfaceMeshOptions& o) {
+MeshOutcome<SurfaceMesh> try_mesh_surface(const WoundBorder& border, double ref_radius_mm,
+                                          const SurfaceMeshOptions& o) {
   check_mesher_inputs(static_cast<int>(border.loop_theta_z.size()), ref_radius_mm, o);
   Builder B;
   SurfaceMesh& out = B.out;
@@ -570,14 +596,25 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
           {out.theta_c_deg + std::remainder(p.x() - out.theta_c_deg, 360.0), p.y()});
   }
   out.extent_mm = o.extent_mm > 0 ? o.extent_mm : 3.0 * out.wound_size_mm;
+  const auto refused = [&B] { return MeshOutcome<SurfaceMesh>{std::nullopt, *B.refusal}; };
   std::vector<int> front = add_loop_nodes(B, L, subdivided_edges(L, border.sutures, o.size_mm));
   fill_concave_corners(B, front, o.t1_deg);
+  if (B.refusal) return refused();
   // A ladder of thin triangles across a large flap is rebuilt with interior points.
   if (o.stage1_min_angle_deg > 0) rebuild_stage1(B, front, o.stage1_min_angle_deg, o.size_mm);
+  if (B.refusal) return refused();
   out.n_layers = grow_layers(B, front, o);
+  if (B.refusal) return refused();
   out.outer_border = front;
   finish_surface(B);
-  return std::move(B.out);
+  return {std::move(B.out), {}};
+}
+
+SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
+                         const SurfaceMeshOptions& o) {
+  MeshOutcome<SurfaceMesh> outcome = try_mesh_surface(border, ref_radius_mm, o);
+  if (!outcome) throw InvalidParameter(outcome.refusal.message);  // never OffModel
+  return std::move(*outcome.mesh);
 }
 
 }  // namespace caps::fem

@@ -161,6 +161,13 @@ class LayerStack {
 ContinuumMesh mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
                              const ContinuumMeshOptions& options = {});
 
+/// mesh_continuum() returning a site off the model or a bony rim under the mesh (OffModel) and
+/// an inverted element (Inverted) as its refusal, with the place, instead of throwing; bad
+/// options and a suture between sides of different node counts still throw InvalidInput,
+/// measured layers on a model without layer maps InvalidParameter.
+MeshOutcome<ContinuumMesh> try_mesh_continuum(const SurfaceMesh& surface, const PatientModel& model,
+                                              const ContinuumMeshOptions& options = {});
+
 /// The smallest Jacobian determinant of each element over its Gauss points (#E).
 Eigen::VectorXd min_element_jacobians(const Mesh& mesh);
 
@@ -176,6 +183,10 @@ class OffModelError : public InvalidParameter {
   using InvalidParameter::InvalidParameter;
 };
 
+/// Throws a mesher's refusal as mesh_surface() and mesh_continuum() do: OffModel as
+/// OffModelError, the others as InvalidParameter, with its message.
+[[noreturn]] void throw_refusal(const MeshRefusal& refusal);
+
 /// Rows of the model's grid kept free at its top and bottom ends: the renderer stitches the
 /// displaced skin into the range image with a margin of 3 rows around the mesh (render/
 /// skin_surface.cpp), so a mesh closer to the ends could be solved but not drawn.
@@ -190,7 +201,9 @@ inline constexpr double kMaxDepthSlope = 2.0;
 /// Both stages. With surface_options.extent_mm == 0 (automatic: 3 x the wound's size) the extent
 /// shrinks, in steps of 0.75, down to 1 x the mesh size, while the outer layers would leave the
 /// model's valid cells, and a warning gives the extent reached; a given extent is never changed.
-/// A wound whose own site is not valid is refused (OffModelError naming the place).
+/// A wound whose own site is not valid is refused (OffModelError naming the place). The extents
+/// are tried by their outcomes (try_mesh_surface(), try_mesh_continuum()); when none gives a
+/// mesh the last refusal is thrown (throw_refusal()).
 WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
                      const SurfaceMeshOptions& surface_options = {},
                      const ContinuumMeshOptions& continuum_options = {},

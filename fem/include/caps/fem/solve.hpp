@@ -119,6 +119,15 @@ struct SolveOptions {
   /// (isochoric; FEBio's prestrain). Finite strain only; it grows with the load factor together
   /// with the closure, so the closed state and its forces include it.
   double prestretch = 1.0;
+  /// Finite strain only: a warm start. Empty (the default): the load steps start from the
+  /// reference state. Otherwise the #N×3 displacement (mm) of a state near the solution (a
+  /// converged closure of this problem, or of a nearby one mapped to this mesh's nodes): the
+  /// whole closure is then one load step whose Newton iteration starts at that state, with the
+  /// tolerances of a one-step solve from the reference state (docs/fem.md, "The Newton solver's
+  /// steps"), so a converged state converges in one solve. If that step fails, the solve starts
+  /// afresh from the reference state in load steps (the failed attempt's solves are counted).
+  /// Only the free and suture-group dofs are read: the prescribed values are the problem's.
+  Eigen::MatrixX3d initial_displacement_mm;
   /// Not owned, may be null: a finite-strain solve reports the load factor reached after every
   /// load step as progress of "closing the wound", and stops there (Cancelled) when asked to.
   Reporter* reporter = nullptr;

@@ -21,6 +21,9 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <cmath>
+#include <optional>
+#include <string>
 #include <vector>
 
 #include "caps/plan/plan.hpp"
@@ -89,6 +92,30 @@ struct SurfaceMesh {
   int n_vertices() const { return static_cast<int>(xy_mm.rows()); }
 };
 
+/// Why a mesher's attempt gave no mesh: what went wrong, where and the message (a template
+/// naming parameters in braces, as InvalidParameter's). A caller with room to mesh less (a
+/// smaller extent, a trimmed mesh) tries again; the throwing mesh_surface() and
+/// mesh_continuum() throw it as InvalidParameter (OffModel as OffModelError: throw_refusal()).
+struct MeshRefusal {
+  enum class Kind {
+    Folded,     ///< a layer of the surface mesh folds over or overlaps itself
+    Unreached,  ///< the surface mesh's layers (max_layers) do not reach the extent
+    OffModel,   ///< a column would stand where the model cannot carry it, or across a bony rim
+    Inverted    ///< an element of the continuum mesh is inverted or degenerate
+  };
+  Kind kind = Kind::Folded;
+  double theta_deg = NAN, z_mm = NAN;  ///< the place (NAN for Unreached)
+  std::string message;
+};
+
+/// A mesher's outcome: the mesh, or the refusal that says why there is none.
+template <class M>
+struct MeshOutcome {
+  std::optional<M> mesh;
+  MeshRefusal refusal;  ///< set when there is no mesh
+  explicit operator bool() const { return mesh.has_value(); }
+};
+
 /// Meshes the skin around the wound. `model` supplies the reference radius (r_skin at the
 /// wound's centre). Throws InvalidInput for a loop with fewer than 2 points, non-finite or
 /// repeated neighbouring points, suture edges that are not loop edges, or layers that overlap
@@ -99,6 +126,14 @@ SurfaceMesh mesh_surface(const WoundBorder& border, const PatientModel& model,
 /// The same with an explicit reference radius (mm), for tests and for flat (theta, z) planes.
 SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
                          const SurfaceMeshOptions& options = {});
+
+/// mesh_surface() returning a layer that folds over or overlaps itself (Folded) and layers that
+/// do not reach the extent (Unreached) as its refusal instead of throwing InvalidParameter; bad
+/// input still throws InvalidInput.
+MeshOutcome<SurfaceMesh> try_mesh_surface(const WoundBorder& border, const PatientModel& model,
+                                          const SurfaceMeshOptions& options = {});
+MeshOutcome<SurfaceMesh> try_mesh_surface(const WoundBorder& border, double ref_radius_mm,
+                                          const SurfaceMeshOptions& options = {});
 
 /// Shape statistics of a set of polygons in the plane.
 SurfaceQuality surface_quality(const Eigen::MatrixX2d& xy_mm,
