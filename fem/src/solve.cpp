@@ -64,6 +64,17 @@ int first_element_using(const Mesh& mesh, int node) {
   return -1;
 }
 
+// A warm start (SolveOptions::initial_displacement_mm) is for the finite-strain solve, with one
+// finite displacement per node.
+void check_initial_displacement(const Mesh& mesh, const SolveOptions& options) {
+  const Eigen::MatrixX3d& u0 = options.initial_displacement_mm;
+  if (u0.size() > 0 && (options.kinematics != Kinematics::Finite || u0.rows() != mesh.n_nodes() ||
+                        !u0.allFinite()))
+    throw InvalidInput(cat("initial displacement (", u0.rows(), " rows): a warm start needs the "
+                           "finite-strain solve and a finite displacement for each of the mesh's ",
+                           mesh.n_nodes(), " nodes"));
+}
+
 }  // namespace
 
 const char* solver_name(SolverKind kind) { return kind == SolverKind::Mumps ? "mumps" : "cholmod"; }
@@ -107,13 +118,7 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   if (options.prestretch != 1.0 && options.kinematics != Kinematics::Finite)
     throw InvalidInput(cat("prestretch ", options.prestretch, " needs the large-deformation model: "
                            "use the neo-hookean material (the linear model has no prestress)"));
-  if (options.initial_displacement_mm.size() > 0 &&
-      (options.kinematics != Kinematics::Finite ||
-       options.initial_displacement_mm.rows() != mesh.n_nodes() ||
-       !options.initial_displacement_mm.allFinite()))
-    throw InvalidInput(cat("initial displacement (", options.initial_displacement_mm.rows(),
-                           " rows): a warm start needs the finite-strain solve and a finite "
-                           "displacement for each of the mesh's ", mesh.n_nodes(), " nodes"));
+  check_initial_displacement(mesh, options);
   SolveResult res;
   res.solver = solver_name(options.solver);
   auto t = Clock::now();
