@@ -203,9 +203,10 @@ class FiniteStrainSolver {
   // Warm start: the whole closure as one step from the given state; false if it failed (the
   // solve then starts afresh from the reference state).
   bool warm_start();
-  // The next step's target and the tolerances' scale; the predictor in attempt.failure if the
-  // predictor state inverts an element.
+  // The next step's target (lambda_new, at most what remains) from the converged state.
   StepAttempt begin_step();
+  // The predictor's out-of-balance force in sys_, its norm r0 and the tolerances' scale;
+  // s.failure if the predictor state inverts an element.
   void predictor(StepAttempt& s);
   // Newton iterations until the step converges or fails (s.converged, s.failure).
   void iterate(StepAttempt& s);
