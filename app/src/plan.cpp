@@ -30,6 +30,8 @@ CAPS_APP_REQUEST_JSON(caps::app::PlanCheckRequest)
 CAPS_APP_REQUEST_JSON(caps::app::PlanShowRequest)
 CAPS_APP_REQUEST_JSON(caps::app::SaveProcedureRequest)
 CAPS_APP_REQUEST_JSON(caps::app::TemplatesRequest)
+CAPS_APP_RESULT_JSON(caps::app::PlanResult)
+CAPS_APP_RESULT_JSON(caps::app::TemplatesResult)
 
 namespace caps::app {
 
@@ -142,8 +144,6 @@ plan::Plan free_incision(const PlanNewRequest& r, const PatientModel& model) {
 
 }  // namespace
 
-std::string to_json(const PlanResult& r) { return r.plan_json; }
-
 std::string summary(const PlanResult& r) {
   return cat(r.output.empty() ? "plan" : r.output, ": ", r.procedure, ", ", r.points,
              " points, border loop of ", r.loop_nodes, " nodes, ", r.suture_pairs,
@@ -239,7 +239,6 @@ TemplatesResult run_templates(const TemplatesRequest&, Reporter*) {
   return {j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace), text.str()};
 }
 
-std::string to_json(const TemplatesResult& r) { return r.json; }
 std::string summary(const TemplatesResult& r) { return r.text; }
 
 std::vector<std::string> template_parameter_names() {

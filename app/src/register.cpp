@@ -23,6 +23,7 @@
 
 CAPS_APP_REQUEST_JSON(caps::app::RegisterRequest)
 CAPS_APP_REQUEST_JSON(caps::app::FuseRequest)
+CAPS_APP_RESULT_JSON(caps::app::RegisterResult)
 
 namespace caps::app {
 
@@ -189,13 +190,6 @@ RegisterResult run_register(const RegisterRequest& r, Reporter* reporter) {
   result.registration = reg;
   if (!reg.same_head) result.warnings.push_back(reg.verdict);
   return result;
-}
-
-std::string to_json(const RegisterResult& r) {
-  json j = json::parse(r.json);
-  j["output"] = r.output;
-  j["warnings"] = r.warnings;
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const RegisterResult& r) {
