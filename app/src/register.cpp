@@ -138,14 +138,6 @@ void write_distance_picture(const fs::path& path, const TriMesh& registered,
   canvas.write_png(path);
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  if (!in) throw IoError(cat(p.string(), ": cannot open"));
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 }  // namespace
 
 // ---- register -----------------------------------------------------------------------------
@@ -205,11 +197,9 @@ std::string summary(const RegisterResult& r) {
 // ---- fuse ---------------------------------------------------------------------------------
 
 Eigen::Matrix4d read_registration_matrix(const std::string& path) {
-  const std::string text = slurp(path);
-  check_json_depth(text, path);
+  const json j = read_json_file<json>(path, "give the registration.json of `caps model register`");
   Eigen::Matrix4d T;
   try {
-    const json j = json::parse(text);
     const auto& rows = j.at("scan_to_model");
     if (!rows.is_array() || rows.size() != 4) throw InvalidInput("not 4 rows");
     for (int i = 0; i < 4; ++i)

@@ -23,6 +23,9 @@ const std::vector<VerbEntry>& verbs() {
                    [run](const std::string& json, const std::string& source, Reporter* reporter) {
                      return to_json(run(read_request<Request>(json, source), reporter));
                    },
+                   [](const std::string& json, const std::string& source) {
+                     read_request<Request>(json, source);
+                   },
                    [] { return write_request(Request{}); }});
     });
     return v;

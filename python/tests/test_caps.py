@@ -18,6 +18,30 @@ def test_every_verb_has_its_defaults():
     assert caps.defaults("model from-volume") == caps.defaults("model_from_volume")
 
 
+def test_every_verb_of_the_program_is_callable_from_python(cli):
+    # The list is the program's own (app's list of verbs), not one kept here.
+    names = caps.verbs()
+    words = caps._caps.command_line_names()
+    assert len(names) == len(words) == len(set(names))
+    assert "compare_models" in names and "model_sensitivity" in names
+    for name, spelled in zip(names, words):
+        assert name == spelled.replace(" ", "_").replace("-", "_")
+        # The program has the verb, with the same help.
+        c = cli(*spelled.split(), "--help")
+        assert c.returncode == 0, (spelled, c.stderr)
+        assert c.stdout.startswith(caps.verb_help(name) + "\n"), spelled
+        # Python reaches the verb's request: its defaults, and an empty request is refused for
+        # the field it lacks (or, with none required, runs).
+        assert isinstance(caps.defaults(name), dict)
+        assert caps.defaults(spelled) == caps.defaults(name)
+        try:
+            caps.run(spelled, {})
+        except caps.InvalidInput as e:
+            assert "is required" in str(e), (name, str(e))
+        else:
+            assert not [k for k, v in caps.defaults(name).items() if v == ""], name
+
+
 def test_model_maps_are_numpy_arrays_on_the_grid(model):
     m = caps.load_model(model)
     assert m["info"]["grid"]["n_theta"] == 128 and m["info"]["grid"]["n_z"] == 64

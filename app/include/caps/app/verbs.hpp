@@ -197,6 +197,8 @@ struct VerbEntry {
   std::function<std::string(const std::string& request_json, const std::string& source,
                             Reporter* reporter)>
       run_json;
+  /// Reads the request only (the errors run_json would give for it, before any work).
+  std::function<void(const std::string& request_json, const std::string& source)> check_json;
   /// Every field of the request with its default, as JSON (write_request).
   std::function<std::string()> defaults_json;
 };
