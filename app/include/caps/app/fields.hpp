@@ -38,7 +38,7 @@ enum class FieldKind {
 /// One field of a request.
 struct Field {
   std::string_view key;             ///< JSON key, snake_case
-  std::string_view help;            ///< one line, with the unit
+  std::string_view help = {};       ///< one line, with the unit
   FieldKind kind = FieldKind::Option;
   std::string_view cli = {};        ///< command-line spelling when not "--" + dashed key
   std::string_view old_cli = {};    ///< a former spelling, still accepted with a note
