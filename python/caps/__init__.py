@@ -98,7 +98,7 @@ def defaults(verb):
 
 
 def verbs():
-    """The verb names run() accepts: every verb of the caps program, in its order."""
+    """The verb names run() accepts: every verb of the caps program but serve, in its order."""
     return list(_caps.verbs())
 
 
