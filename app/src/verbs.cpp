@@ -15,8 +15,7 @@ const std::vector<VerbEntry>& verbs() {
   static const std::vector<VerbEntry> list = [] {
     std::vector<VerbEntry> v;
     for_each_verb([&v](const auto& verb) {
-      using Verb = std::decay_t<decltype(verb)>;
-      using Request = typename Verb::request_type;
+      using Request = typename std::decay_t<decltype(verb)>::request_type;
       const auto run = verb.run;
       v.push_back({std::string(verb.name), verb_key(verb.name), std::string(verb.help),
                    verb.answer,
