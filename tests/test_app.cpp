@@ -5,8 +5,11 @@
 
 #include "caps/app/model.hpp"
 #include "caps/app/plan.hpp"
+#include "caps/app/render.hpp"
 #include "caps/app/simulation.hpp"
+#include "caps/app/verbs.hpp"
 #include "caps/core/error.hpp"
+#include "caps/surface/landmarks.hpp"
 #include "caps/core/units.hpp"
 #include "cli_run.hpp"
 #include "phantom_model.hpp"
@@ -112,6 +115,134 @@ TEST(Fields, BadRequestsNameTheKey) {
   refused(R"({"model": "m", "plan": "p", "output": "o", "render": 1})", "\"render\" must be true or false");
   refused(R"([1, 2])", "expected a JSON object");
   refused(R"({"model": )", "not valid JSON");
+}
+
+TEST(ResultFields, ASimulateResultRoundTripsThroughItsDeclaredFields) {
+  app::SimulateResult r;
+  r.output = "out";
+  r.elements = 11;
+  r.nodes = 12;
+  r.suture_pairs = 13;
+  r.max_displacement_mm = 1.25;
+  r.closing_force_n = 2.5;
+  r.max_suture_force_n = 0.375;
+  r.max_suture_gap_mm = 1e-7;
+  r.strain_energy_mj = 4.5;
+  r.material = "goh";
+  r.prestretch = 1.1;
+  r.gape_mm = 0.75;
+  r.load_steps = 3;
+  r.newton_iterations = 17;
+  r.inverted_elements = 2;
+  r.suture_spacing_mm = 5;
+  r.max_force_per_suture_n = 0.5;
+  r.force_per_mm_n = 0.0625;
+  r.wound_length_mm = 40;
+  r.sutures = 8;
+  r.axis_length_before_mm = 20;
+  r.axis_length_after_mm = 25;
+  r.images = {"pre_front.png", "post_front.png"};
+  r.warnings = {"a warning"};
+  r.solve_s = 9.5;
+  const std::string text = app::to_json(r);
+  // The nesting and the computed values as the result's readers know them.
+  const json j = json::parse(text);
+  EXPECT_EQ(j.at("sutures_at_spacing").at("max_force_per_suture_n"), 0.5);
+  EXPECT_EQ(j.at("lengthening").at("mm"), 5.0);
+  EXPECT_EQ(j.at("lengthening").at("percent"), 25.0);
+  EXPECT_EQ(j.at("timings_s").at("solve"), 9.5);
+  EXPECT_EQ(j.at("material"), "goh");
+  const auto back = app::result_from_json<app::SimulateResult>(text);
+  EXPECT_EQ(app::to_json(back), text);
+  EXPECT_EQ(back.axis_length_after_mm, 25);
+  EXPECT_EQ(back.sutures, 8);
+  EXPECT_EQ(back.images, r.images);
+  EXPECT_EQ(back.solve_s, 9.5);
+  // A key that is no field is refused, naming where it is.
+  json extra = j;
+  extra["lengthening"]["gain"] = 1;
+  try {
+    app::result_from_json<app::SimulateResult>(extra.dump(), "result.json");
+    ADD_FAILURE() << "accepted an unknown key";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("unknown key \"lengthening.gain\""), std::string::npos)
+        << e.what();
+  }
+}
+
+TEST(ResultFields, OptionalFieldsAndDocumentsRoundTrip) {
+  // Fields written only when they hold: the flag comes back from their presence.
+  app::RenderResult with;
+  with.output = "img";
+  with.has_tension = true;
+  with.max_skin_tension_kpa = 12.5;
+  with.gltf = true;
+  with.frames = 24;
+  with.animations = {"transition_plan.gif"};
+  const json wj = json::parse(app::to_json(with));
+  EXPECT_EQ(wj.at("gltf"), "skin.glb");
+  EXPECT_EQ(wj.at("frames"), 24);
+  EXPECT_EQ(wj.at("wound_area_mm2").at("pre"), 0.0);
+  const auto wback = app::result_from_json<app::RenderResult>(wj.dump());
+  EXPECT_TRUE(wback.has_tension && wback.gltf);
+  EXPECT_EQ(app::to_json(wback), app::to_json(with));
+  const app::RenderResult without;
+  const json oj = json::parse(app::to_json(without));
+  EXPECT_FALSE(oj.contains("gltf") || oj.contains("frames") || oj.contains("max_skin_tension_kpa"));
+  EXPECT_FALSE(app::result_from_json<app::RenderResult>(oj.dump()).has_tension);
+
+  app::SiteResult site;
+  site.lps = {1.5, -2, 3};
+  EXPECT_FALSE(json::parse(app::to_json(site)).contains("layers_mm"));
+  site.has_layers = true;
+  site.fat_mm = 2.25;
+  const auto sback = app::result_from_json<app::SiteResult>(app::to_json(site));
+  EXPECT_TRUE(sback.has_layers);
+  EXPECT_EQ(sback.fat_mm, 2.25);
+  EXPECT_EQ(sback.lps, site.lps);
+
+  // A document written elsewhere (model.json) sits beside the declared keys, which win.
+  app::ModelResult m;
+  m.model_json = R"({"format": "caps-model", "grid": {"n_theta": 8}, "output": "old"})";
+  m.output = "new";
+  const json mj = json::parse(app::to_json(m));
+  EXPECT_EQ(mj.at("output"), "new");
+  EXPECT_EQ(mj.at("grid").at("n_theta"), 8);
+  const auto mback = app::result_from_json<app::ModelResult>(mj.dump());
+  EXPECT_EQ(mback.output, "new");
+  EXPECT_EQ(json::parse(mback.model_json), json::parse(R"({"format": "caps-model", "grid": {"n_theta": 8}})"));
+  // A document alone may be any JSON value: the templates are an array.
+  app::TemplatesResult t;
+  t.json = R"([{"name": "ellipse"}])";
+  EXPECT_EQ(json::parse(app::to_json(t)), json::parse(t.json));
+}
+
+TEST(Verbs, EveryVerbIsACommandOfTheProgramWithItsHelp) {
+  ASSERT_FALSE(app::verbs().empty());
+  for (const app::VerbEntry& v : app::verbs()) {
+    const auto r = caps_test::caps(v.name + " --help");
+    EXPECT_EQ(r.code, 0) << v.name << ": " << r.out;
+    EXPECT_EQ(r.out.rfind(v.help + "\n", 0), 0u) << v.name << ": " << r.out;
+    EXPECT_EQ(&app::find_verb(v.key), &v);
+    EXPECT_EQ(&app::find_verb(v.name), &v);
+    EXPECT_TRUE(json::parse(v.defaults_json()).is_object()) << v.name;
+  }
+  EXPECT_NO_THROW(app::find_verb("compare-models"));
+  EXPECT_NO_THROW(app::find_verb("model sensitivity"));
+  EXPECT_THROW(app::find_verb("simulte"), InvalidInput);
+}
+
+TEST(JsonReaders, ALandmarksJsonNestedTooDeepIsRefusedNamingTheFile) {
+  const int deep = 100000;
+  const std::string text = R"({"items": {"glabella": )" + std::string(deep, '[') +
+                           std::string(deep, ']') + "}}";
+  try {
+    landmarks_from_json(text, "m/model.json");
+    ADD_FAILURE() << "accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("m/model.json"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("nested more than"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Fields, OptionNamesAreTheDashedKeys) {

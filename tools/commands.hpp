@@ -1,7 +1,8 @@
 #pragma once
-/// @brief The `caps` subcommands: each binds its options to an app:: request (the fields the
-/// request declares: names, help and defaults come from app/), calls one app:: function with the
-/// console reporter, and prints the result (--json: the result's JSON on stdout).
+/// @brief The `caps` subcommands: app's verbs (caps/app/verbs.hpp) and `serve`. Each binds its
+/// options to a request (the fields the request declares: names, help and defaults come from
+/// app/), calls its run function with the console reporter, and prints the result (--json: the
+/// result's JSON on stdout).
 
 #include <CLI/CLI.hpp>
 #include <functional>
@@ -100,17 +101,9 @@ CLI::App* add_verb(CLI::App* parent, const std::string& name, const std::string&
   return cmd;
 }
 
-void add_phantom(CLI::App& app, Common& common, Action& action);
-void add_model(CLI::App& app, Common& common, Action& action);
-void add_volume(CLI::App& app, Common& common, Action& action);
-void add_plan(CLI::App& app, Common& common, Action& action);
-void add_mesh(CLI::App& app, Common& common, Action& action);
-void add_simulate(CLI::App& app, Common& common, Action& action);
-void add_solve(CLI::App& app, Common& common, Action& action);
-void add_fem(CLI::App& app, Common& common, Action& action);
-void add_render(CLI::App& app, Common& common, Action& action);
-void add_compare(CLI::App& app, Common& common, Action& action);
-void add_compare_models(CLI::App& app, Common& common, Action& action);
+/// Every verb of app's list (caps/app/verbs.hpp), in its order, grouped by its first word
+/// ("model from-volume" under "model").
+void add_verbs(CLI::App& app, Common& common, Action& action);
 void add_serve(CLI::App& app, Common& common, Action& action);
 
 }  // namespace caps::cli

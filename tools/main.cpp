@@ -24,17 +24,7 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", "caps 0.1.0");
   cli::Common common;
   cli::Action action;
-  cli::add_phantom(app, common, action);
-  cli::add_model(app, common, action);
-  cli::add_volume(app, common, action);
-  cli::add_solve(app, common, action);
-  cli::add_fem(app, common, action);
-  cli::add_plan(app, common, action);
-  cli::add_mesh(app, common, action);
-  cli::add_simulate(app, common, action);
-  cli::add_render(app, common, action);
-  cli::add_compare(app, common, action);
-  cli::add_compare_models(app, common, action);
+  cli::add_verbs(app, common, action);
   cli::add_serve(app, common, action);
   try {
     app.parse(argc, argv);

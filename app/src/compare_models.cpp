@@ -20,8 +20,14 @@
 #include "caps/render/sensitivity_picture.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "caps/volume/model_dir.hpp"
+#include "json_fields.hpp"
 #include "numbers.hpp"
 #include "output_check.hpp"
+
+CAPS_APP_REQUEST_JSON(caps::app::CompareModelsRequest)
+CAPS_APP_REQUEST_JSON(caps::app::SensitivityRequest)
+CAPS_APP_RESULT_JSON(caps::app::CompareModelsResult)
+CAPS_APP_RESULT_JSON(caps::app::SensitivityResult)
 
 namespace caps::app {
 
@@ -119,12 +125,6 @@ CompareModelsResult run_compare_models(const CompareModelsRequest& r, Reporter* 
   return s;
 }
 
-std::string to_json(const CompareModelsResult& s) {
-  json j = json::parse(s.comparison_json);
-  j["output"] = s.output;
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
-}
-
 std::string summary(const CompareModelsResult& s) {
   std::string out = "caps compare-models: closing force";
   for (std::size_t i = 0; i < s.sides.size(); ++i)
@@ -208,20 +208,6 @@ SensitivityResult run_sensitivity(const SensitivityRequest& r, Reporter* reporte
   }
   s.seconds = map.seconds;
   return s;
-}
-
-std::string to_json(const SensitivityResult& s) {
-  return json{{"output", s.output},
-              {"points", s.points},
-              {"planned", s.planned},
-              {"constant_thickness_mm", s.constant_thickness_mm},
-              {"abs_force_change", {{"median", s.median_force_change}, {"max", s.max_force_change}}},
-              {"abs_displacement_change",
-               {{"median", s.median_displacement_change}, {"max", s.max_displacement_change}}},
-              {"within_10_percent", s.within_10_percent},
-              {"warnings", s.warnings},
-              {"timings_s", {{"total", s.seconds}}}}
-      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const SensitivityResult& s) {

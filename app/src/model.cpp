@@ -33,6 +33,13 @@ CAPS_APP_REQUEST_JSON(caps::app::VolumeInfoRequest)
 CAPS_APP_REQUEST_JSON(caps::app::PhantomRequest)
 CAPS_APP_REQUEST_JSON(caps::app::LandmarksRequest)
 CAPS_APP_REQUEST_JSON(caps::app::SiteRequest)
+CAPS_APP_RESULT_JSON(caps::app::ModelResult)
+CAPS_APP_RESULT_JSON(caps::app::LandmarksResult)
+CAPS_APP_RESULT_JSON(caps::app::SiteResult)
+CAPS_APP_RESULT_JSON(caps::app::PickResult)
+CAPS_APP_RESULT_JSON(caps::app::PathResult)
+CAPS_APP_RESULT_JSON(caps::app::VolumeInfoResult)
+CAPS_APP_RESULT_JSON(caps::app::PhantomResult)
 
 namespace caps::app {
 
@@ -83,12 +90,6 @@ ModelResult detail::model_result(const std::string& dir, const std::string& outp
   const json j = json::parse(m.model_json);
   if (j.contains("warnings")) m.warnings = j.at("warnings").get<std::vector<std::string>>();
   return m;
-}
-
-std::string to_json(const ModelResult& m) {
-  json j = json::parse(m.model_json);
-  if (!m.output.empty()) j["output"] = m.output;
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const ModelResult& m) {
@@ -334,14 +335,6 @@ LandmarksResult run_model_landmarks(const LandmarksRequest& r, Reporter* reporte
   return out;
 }
 
-std::string to_json(const LandmarksResult& r) {
-  json j = json::parse(r.landmarks_json);
-  j["model"] = r.model;
-  j["written"] = r.written;
-  j["warnings"] = r.warnings;
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
-}
-
 std::string summary(const LandmarksResult& r) {
   std::string s = r.table;
   while (!s.empty() && s.back() == '\n') s.pop_back();
@@ -368,21 +361,6 @@ SiteResult run_model_site(const SiteRequest& r, Reporter*) {
   }
   out.flags = describe_flags(model.flags_at(out.theta_deg, out.z_mm));
   return out;
-}
-
-std::string to_json(const SiteResult& r) {
-  json j = {{"model", r.model},
-            {"at", r.at},
-            {"theta_deg", r.theta_deg},
-            {"z_mm", r.z_mm},
-            {"lps", {r.lps[0], r.lps[1], r.lps[2]}},
-            {"thickness_mm", r.thickness_mm},
-            {"thickness_radial_mm", r.thickness_radial_mm},
-            {"flags", r.flags},
-            {"warnings", r.warnings}};
-  if (r.has_layers)
-    j["layers_mm"] = {{"skin", r.skin_mm}, {"fat", r.fat_mm}, {"deep", r.deep_mm}};
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const SiteResult& r) {
@@ -413,24 +391,11 @@ PickResult run_pick(const PickRequest& r, Reporter*) {
   return p;
 }
 
-std::string to_json(const PickResult& p) {
-  json j = {{"hit", p.hit}};
-  if (p.hit)
-    j.update({{"lps", {p.lps[0], p.lps[1], p.lps[2]}}, {"theta_deg", p.theta_deg},
-              {"z_mm", p.z_mm}, {"distance_mm", p.distance_mm}, {"flags", p.flags},
-              {"on_pole_cap", p.on_pole_cap}});
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
-}
-
 std::string summary(const PickResult& p) {
   if (!p.hit) return "miss";
   return cat("hit theta ", round_to(p.theta_deg, 2), " deg, z ", round_to(p.z_mm, 2), " mm, LPS (",
              round_to(p.lps.x(), 2), " ", round_to(p.lps.y(), 2), " ", round_to(p.lps.z(), 2),
              ") mm, ", p.flags);
-}
-
-std::string to_json(const PathResult& p) {
-  return json{{"output", p.output}, {"warnings", p.warnings}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const PathResult& p) { return cat("-> ", p.output); }
@@ -500,7 +465,6 @@ VolumeInfoResult run_volume_info(const VolumeInfoRequest& r, Reporter*) {
   return {j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace), text.str()};
 }
 
-std::string to_json(const VolumeInfoResult& r) { return r.json; }
 std::string summary(const VolumeInfoResult& r) { return r.text; }
 
 // ---- phantom ------------------------------------------------------------------------------
@@ -529,18 +493,6 @@ PhantomResult run_phantom(const PhantomRequest& r, Reporter*) {
   const Volume v = make_phantom(o);
   write_nifti(v, path);
   return {r.output, o.dims, o.spacing_mm, o.head_holder, o.layered, o.thin_bone, o.face, o.scale};
-}
-
-std::string to_json(const PhantomResult& p) {
-  return json{{"output", p.output},
-              {"dims", {p.dims[0], p.dims[1], p.dims[2]}},
-              {"spacing_mm", {p.spacing_mm[0], p.spacing_mm[1], p.spacing_mm[2]}},
-              {"head_holder", p.head_holder},
-              {"layered", p.layered},
-              {"thin_bone", p.thin_bone},
-              {"face", p.face},
-              {"scale", p.scale}}
-      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const PhantomResult& p) {

@@ -12,7 +12,7 @@
 #include "caps/app/loaded_model.hpp"
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
-#include "caps/core/json_limits.hpp"
+#include "caps/core/json_file.hpp"
 #include "caps/core/units.hpp"
 #include "caps/plan/check.hpp"
 #include "caps/plan/plan_figure.hpp"
@@ -30,6 +30,8 @@ CAPS_APP_REQUEST_JSON(caps::app::PlanCheckRequest)
 CAPS_APP_REQUEST_JSON(caps::app::PlanShowRequest)
 CAPS_APP_REQUEST_JSON(caps::app::SaveProcedureRequest)
 CAPS_APP_REQUEST_JSON(caps::app::TemplatesRequest)
+CAPS_APP_RESULT_JSON(caps::app::PlanResult)
+CAPS_APP_RESULT_JSON(caps::app::TemplatesResult)
 
 namespace caps::app {
 
@@ -41,14 +43,6 @@ namespace {
 void refuse_existing(const std::string& out, bool force) {
   if (out.empty()) throw InvalidInput("-o: give the output file");
   if (fs::exists(out) && !force) throw InvalidInput(cat(out, " exists; use --force to replace it"));
-}
-
-std::string read_text(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw IoError(cat(path, ": cannot read"));
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
 }
 
 PlanResult plan_result(const plan::Plan& p, const plan::PlanReport& r, const std::string& output,
@@ -142,8 +136,6 @@ plan::Plan free_incision(const PlanNewRequest& r, const PatientModel& model) {
 
 }  // namespace
 
-std::string to_json(const PlanResult& r) { return r.plan_json; }
-
 std::string summary(const PlanResult& r) {
   return cat(r.output.empty() ? "plan" : r.output, ": ", r.procedure, ", ", r.points,
              " points, border loop of ", r.loop_nodes, " nodes, ", r.suture_pairs,
@@ -175,8 +167,12 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
     throw InvalidInput("a procedure file has no parameters; drop --length/--width/--angle/...");
   if (!std::isfinite(r.orientation))
     throw InvalidInput("--orientation: give an angle in degrees");
-  plan::LocalProcedure proc = from_file ? plan::parse_procedure_json(read_text(r.procedure), r.procedure)
-                                        : plan::layout_procedure(r.procedure, r.parameters);
+  plan::LocalProcedure proc =
+      from_file ? plan::parse_procedure_json(
+                      read_json_text(r.procedure, "give a procedure file (caps plan "
+                                                  "save-procedure) or a template's name"),
+                      r.procedure)
+                : plan::layout_procedure(r.procedure, r.parameters);
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
   std::optional<plan::LandmarkPlacement> placement;
@@ -239,7 +235,6 @@ TemplatesResult run_templates(const TemplatesRequest&, Reporter*) {
   return {j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace), text.str()};
 }
 
-std::string to_json(const TemplatesResult& r) { return r.json; }
 std::string summary(const TemplatesResult& r) { return r.text; }
 
 std::vector<std::string> template_parameter_names() {

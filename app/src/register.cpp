@@ -23,6 +23,7 @@
 
 CAPS_APP_REQUEST_JSON(caps::app::RegisterRequest)
 CAPS_APP_REQUEST_JSON(caps::app::FuseRequest)
+CAPS_APP_RESULT_JSON(caps::app::RegisterResult)
 
 namespace caps::app {
 
@@ -137,14 +138,6 @@ void write_distance_picture(const fs::path& path, const TriMesh& registered,
   canvas.write_png(path);
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  if (!in) throw IoError(cat(p.string(), ": cannot open"));
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 }  // namespace
 
 // ---- register -----------------------------------------------------------------------------
@@ -191,13 +184,6 @@ RegisterResult run_register(const RegisterRequest& r, Reporter* reporter) {
   return result;
 }
 
-std::string to_json(const RegisterResult& r) {
-  json j = json::parse(r.json);
-  j["output"] = r.output;
-  j["warnings"] = r.warnings;
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
-}
-
 std::string summary(const RegisterResult& r) {
   const auto& g = r.registration;
   const auto& s = g.residual;
@@ -211,11 +197,9 @@ std::string summary(const RegisterResult& r) {
 // ---- fuse ---------------------------------------------------------------------------------
 
 Eigen::Matrix4d read_registration_matrix(const std::string& path) {
-  const std::string text = slurp(path);
-  check_json_depth(text, path);
+  const json j = read_json_file<json>(path, "give the registration.json of `caps model register`");
   Eigen::Matrix4d T;
   try {
-    const json j = json::parse(text);
     const auto& rows = j.at("scan_to_model");
     if (!rows.is_array() || rows.size() != 4) throw InvalidInput("not 4 rows");
     for (int i = 0; i < 4; ++i)

@@ -21,6 +21,7 @@
 #include "output_check.hpp"
 
 CAPS_APP_REQUEST_JSON(caps::app::RenderRequest)
+CAPS_APP_RESULT_JSON(caps::app::RenderResult)
 
 namespace caps::app {
 
@@ -111,29 +112,6 @@ RenderResult run_render(const RenderRequest& r, Reporter* reporter) {
   s.frames = r.animation ? r.frames : 0;
   s.warnings = mesh.warnings;
   return s;
-}
-
-std::string to_json(const RenderResult& s) {
-  json j{{"output", s.output},
-         {"skin_elements", s.skin_elements},
-         {"subdivisions", s.subdivisions},
-         {"micropolygon_vertices", s.micropolygon_vertices},
-         {"triangles", s.triangles},
-         {"max_displacement_mm", s.max_displacement_mm},
-         {"wound_area_mm2", {{"pre", s.wound_area_pre_mm2}, {"post", s.wound_area_post_mm2}}},
-         {"images", s.images},
-         {"warnings", s.warnings}};
-  if (s.has_tension) {
-    j["max_skin_tension_kpa"] = s.max_skin_tension_kpa;
-    j["min_skin_tension_kpa"] = s.min_skin_tension_kpa;
-    j["tension_scale_max_kpa"] = s.tension_scale_max_kpa;
-  }
-  if (s.gltf) j["gltf"] = "skin.glb";
-  if (!s.animations.empty() || s.frames) {
-    j["animations"] = s.animations;
-    j["frames"] = s.frames;
-  }
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const RenderResult& s) {

@@ -30,6 +30,11 @@ CAPS_APP_REQUEST_JSON(caps::app::SimulateRequest)
 CAPS_APP_REQUEST_JSON(caps::app::SolveRequest)
 CAPS_APP_REQUEST_JSON(caps::app::BoxRequest)
 CAPS_APP_REQUEST_JSON(caps::app::CompareRequest)
+CAPS_APP_RESULT_JSON(caps::app::MeshResult)
+CAPS_APP_RESULT_JSON(caps::app::SimulateResult)
+CAPS_APP_RESULT_JSON(caps::app::SolveResult)
+CAPS_APP_RESULT_JSON(caps::app::BoxResult)
+CAPS_APP_RESULT_JSON(caps::app::CompareResult)
 
 namespace caps::app {
 
@@ -142,25 +147,6 @@ MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
   return m;
 }
 
-std::string to_json(const MeshResult& m) {
-  json j{{"output", m.output},
-         {"surface", {{"vertices", m.surface_vertices}, {"quads", m.quads},
-                      {"triangles", m.triangles}, {"layers", m.surface_layers},
-                      {"extent_mm", m.extent_mm}, {"wound_size_mm", m.wound_size_mm},
-                      {"trimmed_polygons", m.trimmed_polygons},
-                      {"min_angle_deg", m.min_angle_deg}, {"max_angle_deg", m.max_angle_deg},
-                      {"max_aspect_ratio", m.max_aspect_ratio},
-                      {"mean_aspect_ratio", m.mean_aspect_ratio}}},
-         {"continuum", {{"nodes", m.nodes}, {"elements", m.elements}, {"hex20", m.hex20},
-                        {"wedge15", m.wedge15}, {"layers", m.layers},
-                        {"fixed_nodes", m.fixed_nodes}, {"suture_pairs", m.suture_pairs},
-                        {"rim", m.rim}, {"tissue", m.tissue},
-                        {"thickness_mm", {m.min_thickness_mm, m.max_thickness_mm}},
-                        {"min_jacobian", m.min_jacobian}}},
-         {"warnings", m.warnings}};
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
-}
-
 std::string summary(const MeshResult& m) {
   return cat("caps mesh: ", m.elements, " elements (", m.hex20, " Hex20), ", m.nodes, " nodes, ",
              m.suture_pairs, " suture pairs; corner angles ", round_to(m.min_angle_deg, 1), "-",
@@ -270,38 +256,6 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   return s;
 }
 
-std::string to_json(const SimulateResult& s) {
-  json j{{"output", s.output},
-         {"elements", s.elements},
-         {"nodes", s.nodes},
-         {"suture_pairs", s.suture_pairs},
-         {"max_displacement_mm", s.max_displacement_mm},
-         {"closing_force_n", s.closing_force_n},
-         {"max_suture_force_n", s.max_suture_force_n},
-         {"max_suture_gap_mm", s.max_suture_gap_mm},
-         {"sutures_at_spacing", {{"spacing_mm", s.suture_spacing_mm},
-                                 {"sutures", s.sutures},
-                                 {"max_force_per_suture_n", s.max_force_per_suture_n},
-                                 {"force_per_mm_n", s.force_per_mm_n},
-                                 {"wound_length_mm", s.wound_length_mm}}},
-         {"strain_energy_mj", s.strain_energy_mj},
-         {"lengthening", {{"axis_before_mm", s.axis_length_before_mm},
-                          {"axis_after_mm", s.axis_length_after_mm},
-                          {"mm", s.axis_length_after_mm - s.axis_length_before_mm},
-                          {"percent", AxisLengthening{s.axis_length_before_mm,
-                                                      s.axis_length_after_mm}.change_percent()}}},
-         {"material", s.material},
-         {"prestretch", s.prestretch},
-         {"gape_mm", s.gape_mm},
-         {"load_steps", s.load_steps},
-         {"newton_iterations", s.newton_iterations},
-         {"inverted_elements", s.inverted_elements},
-         {"images", s.images},
-         {"warnings", s.warnings},
-         {"timings_s", {{"solve", s.solve_s}}}};
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
-}
-
 std::string summary(const SimulateResult& s) {
   return cat("caps simulate: ", s.elements, " elements, closing force ",
              round_to(s.closing_force_n, 2), " N (", s.sutures, " sutures every ",
@@ -349,19 +303,6 @@ SolveResult run_solve(const SolveRequest& r, Reporter* reporter) {
   return s;
 }
 
-std::string to_json(const SolveResult& s) {
-  json j{{"output", s.output},
-         {"solver", s.solver},
-         {"equations", s.equations},
-         {"max_displacement_mm", s.max_displacement_mm},
-         {"max_von_mises_mpa", s.max_von_mises_mpa},
-         {"total_suture_force_n", s.total_suture_force_n},
-         {"strain_energy_mj", s.strain_energy_mj},
-         {"warnings", s.warnings},
-         {"timings_s", {{"total", s.total_s}}}};
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
-}
-
 std::string summary(const SolveResult& s) {
   return cat("caps solve: ", s.equations, " equations (", s.solver, ") in ", round_to(s.total_s, 2),
              " s; max displacement ", round_to(s.max_displacement_mm, 3), " mm, closing force ",
@@ -388,12 +329,6 @@ BoxResult run_box(const BoxRequest& r, Reporter*) {
   out.commit();
   return {r.output, static_cast<int>(m.n_nodes()), static_cast<int>(m.n_elements()),
           static_cast<int>(m.sutures.size())};
-}
-
-std::string to_json(const BoxResult& b) {
-  return json{{"output", b.output}, {"nodes", b.nodes}, {"elements", b.elements},
-              {"sutures", b.sutures}}
-      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const BoxResult& b) {
@@ -436,12 +371,6 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
   s.constant_thickness_mm = c.constant_thickness_mm;
   s.warnings = c.warnings;
   return s;
-}
-
-std::string to_json(const CompareResult& s) {
-  json j = json::parse(s.comparison_json);
-  j["output"] = s.output;
-  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 std::string summary(const CompareResult& s) {

@@ -9,7 +9,7 @@
 #include "caps/core/checked_numbers.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/file_access.hpp"
-#include "caps/core/json_limits.hpp"
+#include "caps/core/json_file.hpp"
 #include "vtu.hpp"
 
 namespace fs = std::filesystem;
@@ -188,18 +188,7 @@ void write_mesh_dir(const Mesh& mesh, const fs::path& dir) {
 Mesh read_mesh_dir(const fs::path& dir) {
   const fs::path jpath = dir / "mesh.json", vpath = dir / "mesh.vtu";
   require_readable(dir, true, "pass a mesh directory with mesh.json and mesh.vtu");
-  require_readable(jpath, false, "is this a caps mesh directory?");
-  std::ifstream jin(jpath);
-  if (!jin) throw IoError(cat(jpath.string(), ": cannot open; is this a caps mesh directory?"));
-  std::stringstream jtext;
-  jtext << jin.rdbuf();
-  check_json_depth(jtext.str(), jpath.string());
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(jtext.str());
-  } catch (const std::exception& e) {
-    throw InvalidInput(cat(jpath.string(), ": not valid JSON: ", e.what()));
-  }
+  const auto j = read_json_file<nlohmann::json>(jpath, "is this a caps mesh directory?");
   Mesh mesh;
   const std::string jw = jpath.string();
   try {

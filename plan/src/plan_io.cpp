@@ -7,7 +7,7 @@
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/file_access.hpp"
-#include "caps/core/json_limits.hpp"
+#include "caps/core/json_file.hpp"
 #include "suture_json.hpp"
 
 namespace caps::plan {
@@ -75,13 +75,7 @@ std::string plan_to_json(const Plan& plan, const PlanReport* report) {
 }
 
 Plan parse_plan_json(const std::string& text, const std::string& source) {
-  check_json_depth(text, source);
-  json j;
-  try {
-    j = json::parse(text);
-  } catch (const json::exception& e) {
-    throw InvalidInput(cat(source, ": not valid JSON (", e.what(), ")"));
-  }
+  const json j = parse_json<json>(text, source);
   // The header's fields are read by hand: json::value() throws on a field of another type.
   if (!j.is_object() || !j.contains("format") || j["format"] != "caps-plan")
     throw InvalidInput(cat(source, ": not a caps plan (\"format\" must be \"caps-plan\")"));
@@ -147,15 +141,11 @@ Plan parse_plan_json(const std::string& text, const std::string& source) {
 }
 
 Plan read_plan(const std::filesystem::path& path) {
-  require_readable(path, false, "check the plan file's path and permissions");
-  std::ifstream in(path);
-  if (!in) throw IoError(cat(path.string(), ": cannot read the plan file"));
-  std::stringstream ss;
-  ss << in.rdbuf();
-  Plan plan = parse_plan_json(ss.str(), path.string());
+  const std::string text = read_json_text(path, "check the plan file's path and permissions");
+  Plan plan = parse_plan_json(text, path.string());
   // "model_relative": the model's folder relative to the plan's, used when it is there (a plan
   // copied with its model); "model" as given otherwise.
-  const json j = json::parse(ss.str());
+  const json j = json::parse(text);
   if (j.contains("model_relative") && j["model_relative"].is_string()) {
     const auto beside = (path.parent_path() / j["model_relative"].get<std::string>()).lexically_normal();
     std::error_code ec;
@@ -179,17 +169,7 @@ void write_plan(const std::filesystem::path& path, const Plan& plan, const PlanR
 }
 
 WoundBorder read_wound_border(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) throw IoError(cat(path.string(), ": cannot open the wound border file"));
-  std::stringstream text;
-  text << in.rdbuf();
-  check_json_depth(text.str(), path.string());
-  json j;
-  try {
-    j = json::parse(text.str());
-  } catch (const std::exception& e) {
-    throw InvalidInput(cat(path.string(), ": not valid JSON (", e.what(), ")"));
-  }
+  const json j = read_json_file<json>(path, "give a wound border file: {\"loop_theta_z\": ...}");
   WoundBorder b;
   try {
     for (const auto& p : j.at("loop_theta_z"))

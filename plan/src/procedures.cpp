@@ -7,7 +7,7 @@
 #include <numeric>
 
 #include "caps/core/error.hpp"
-#include "caps/core/json_limits.hpp"
+#include "caps/core/json_file.hpp"
 #include "caps/core/units.hpp"
 #include "caps/plan/skin_walk.hpp"
 #include "suture_json.hpp"
@@ -703,13 +703,7 @@ std::string procedure_to_json(const LocalProcedure& p) {
 }
 
 LocalProcedure parse_procedure_json(const std::string& text, const std::string& source) {
-  check_json_depth(text, source);
-  json j;
-  try {
-    j = json::parse(text);
-  } catch (const json::exception& e) {
-    throw InvalidInput(cat(source, ": not valid JSON (", e.what(), ")"));
-  }
+  const json j = parse_json<json>(text, source);
   try {
     if (j.value("format", "") != "caps-procedure")
       throw InvalidInput(cat(source, ": \"format\" must be \"caps-procedure\""));

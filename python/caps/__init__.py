@@ -25,7 +25,8 @@ __all__ = [
     "Error", "InvalidInput", "InvalidParameter", "IoError", "SolverError", "Cancelled",
     "CapsWarning", "run", "defaults", "verbs", "phantom", "model_from_volume", "model_from_scan",
     "model_info", "plan_new", "plan_check", "plan_templates", "mesh", "simulate", "render",
-    "load_model", "read_result", "model_landmarks", "model_site", "model_chart",
+    "load_model", "read_result", "model_landmarks", "model_site", "model_chart", "verb_help",
+    "compare", "compare_models", "model_sensitivity",
 ]
 
 
@@ -97,8 +98,13 @@ def defaults(verb):
 
 
 def verbs():
-    """The verb names run() accepts."""
+    """The verb names run() accepts: every verb of the caps program but serve, in its order."""
     return list(_caps.verbs())
+
+
+def verb_help(verb):
+    """A verb's help, as ``caps <verb> --help`` prints it."""
+    return _caps.verb_help(verb)
 
 
 def phantom(output, **fields):
@@ -158,6 +164,28 @@ def simulate(model, plan, output, *, progress=None, **fields):
     suture_spacing (mm), render, force, ... Returns closing_force_n (N), max_displacement_mm,
     max_suture_force_n, warnings, ..."""
     return run("simulate", model=model, plan=plan, output=output, progress=progress, **fields)
+
+
+def compare(model, plan, output, *, progress=None, **fields):
+    """Simulates the plan with the measured and with a constant thickness (caps compare);
+    fields: thickness (mm, 0: the median measured under the wound), mesh_size, ..., force.
+    Returns comparison.json's table and warnings, and output."""
+    return run("compare", model=model, plan=plan, output=output, progress=progress, **fields)
+
+
+def compare_models(model, plan, output, *, progress=None, **fields):
+    """Simulates one plan on the CT model and on the scan-built (scan_model, with its
+    registration) and fused (fused_model) models (caps compare-models). Returns
+    model_comparison.json and output."""
+    return run("compare-models", model=model, plan=plan, output=output, progress=progress,
+               **fields)
+
+
+def model_sensitivity(model, output, *, progress=None, **fields):
+    """Maps where a constant thickness misleads (caps model sensitivity); fields: procedure,
+    length, width (mm), theta "first,last,step" (deg), z "first,last,step" (mm), thickness,
+    threads, ..., force. Returns the medians and maxima of the changes and output."""
+    return run("model sensitivity", model=model, output=output, progress=progress, **fields)
 
 
 def render(result, model, output, **fields):

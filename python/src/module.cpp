@@ -1,6 +1,6 @@
 // The Python module caps._caps: a binding over the app:: requests and results (docs/python.md).
-// Every verb is run from its request's JSON (app::read_request) and answers its result's JSON
-// (app::to_json), so Python takes the same keys, defaults and checks as the command line and the
+// Every verb of app's list (caps/app/verbs.hpp) is run from its request's JSON
+// (app::read_request) and answers its result's JSON (app::to_json), so Python takes the same keys, defaults and checks as the command line and the
 // planner's server. Besides the verbs, two readers hand a model's maps and a simulation's result
 // to numpy. The Python side (python/caps/__init__.py) wraps these in keyword functions.
 //
@@ -23,11 +23,7 @@
 #include <string>
 #include <vector>
 
-#include "caps/app/model.hpp"
-#include "caps/app/plan.hpp"
-#include "caps/app/register.hpp"
-#include "caps/app/render.hpp"
-#include "caps/app/simulation.hpp"
+#include "caps/app/verbs.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/reporter.hpp"
 #include "caps/fem/mesh_io.hpp"
@@ -103,75 +99,12 @@ class PythonReporter : public Reporter {
 
 // ---- the verbs ---------------------------------------------------------------------------
 
-using Verb = std::function<std::string(const std::string& json, const std::string& source,
-                                       Reporter* reporter)>;
-
-template <class Request, class Result>
-Verb verb(Result (*run)(const Request&, Reporter*)) {
-  return [run](const std::string& json, const std::string& source, Reporter* reporter) {
-    return app::to_json(run(app::read_request<Request>(json, source), reporter));
-  };
-}
-
-struct VerbEntry {
-  Verb run;
-  std::function<std::string()> defaults;  ///< write_request of a default request
-};
-
-template <class Request, class Result>
-VerbEntry entry(Result (*run)(const Request&, Reporter*)) {
-  return {verb(run), [] { return app::write_request(Request{}); }};
-}
-
-// Verb names are the command line's words joined by "_" ("model from-volume" ->
-// "model_from_volume"); callers may also write the command line's spelling.
-const std::map<std::string, VerbEntry>& verbs() {
-  static const std::map<std::string, VerbEntry> table = {
-      {"phantom", entry(&app::run_phantom)},
-      {"volume_info", entry(&app::run_volume_info)},
-      {"model_from_volume", entry(&app::run_from_volume)},
-      {"model_from_scan", entry(&app::run_from_scan)},
-      {"model_chart", entry(&app::run_chart)},
-      {"model_info", entry(&app::run_model_info)},
-      {"model_landmarks", entry(&app::run_model_landmarks)},
-      {"model_site", entry(&app::run_model_site)},
-      {"model_pick", entry(&app::run_pick)},
-      {"model_export_range", entry(&app::run_export_range)},
-      {"model_color_picture", entry(&app::run_color_picture)},
-      {"model_register", entry(&app::run_register)},
-      {"model_fuse", entry(&app::run_fuse)},
-      {"plan_new", entry(&app::run_plan_new)},
-      {"plan_check", entry(&app::run_plan_check)},
-      {"plan_show", entry(&app::run_plan_show)},
-      {"plan_save_procedure", entry(&app::run_save_procedure)},
-      {"plan_templates", entry(&app::run_templates)},
-      {"mesh", entry(&app::run_mesh)},
-      {"solve", entry(&app::run_solve)},
-      {"simulate", entry(&app::run_simulate)},
-      {"compare", entry(&app::run_compare)},
-      {"fem_box", entry(&app::run_box)},
-      {"render", entry(&app::run_render)},
-  };
-  return table;
-}
-
-const VerbEntry& find_verb(const std::string& name) {
-  std::string key = name;
-  for (char& c : key)
-    if (c == ' ' || c == '-') c = '_';
-  const auto& table = verbs();
-  const auto it = table.find(key);
-  if (it == table.end()) {
-    std::string known;
-    for (const auto& [k, v] : table) known += (known.empty() ? "" : ", ") + k;
-    throw InvalidInput(cat("no verb \"", name, "\"; the verbs are ", known));
-  }
-  return it->second;
-}
-
+// Every verb of app's list (caps/app/verbs.hpp). Python's names are the command line's words
+// joined by "_" ("model from-volume" -> "model_from_volume"); the command line's spelling is
+// accepted too.
 std::vector<std::string> verb_names() {
   std::vector<std::string> names;
-  for (const auto& [k, v] : verbs()) names.push_back(k);
+  for (const app::VerbEntry& v : app::verbs()) names.push_back(v.key);
   return names;
 }
 
@@ -219,12 +152,12 @@ void translate(std::exception_ptr p) {
 std::string run_verb(const std::string& name, const std::string& request_json,
                      const std::string& source, py::object warning_category,
                      py::object progress) {
-  const VerbEntry& v = find_verb(name);
+  const app::VerbEntry& v = app::find_verb(name);
   PythonReporter reporter(std::move(warning_category), std::move(progress));
   std::string result;
   try {
     py::gil_scoped_release release;
-    result = v.run(request_json, source, &reporter);
+    result = v.run_json(request_json, source, &reporter);
   } catch (const Cancelled&) {
     reporter.rethrow();
     throw;
@@ -322,10 +255,25 @@ PYBIND11_MODULE(_caps, m) {
         "progress to progress(step, fraction in 0..1).");
 
   m.def(
-      "defaults_json", [](const std::string& name) { return find_verb(name).defaults(); },
+      "defaults_json", [](const std::string& name) { return app::find_verb(name).defaults_json(); },
       py::arg("verb"), "Every field of a verb's request with its default, as JSON text.");
 
-  m.def("verbs", &verb_names, "The verb names run_json() accepts.");
+  m.def("verbs", &verb_names,
+        "The verb names run_json() accepts: every verb of the caps program (app's list), in its "
+        "order.");
+
+  m.def(
+      "command_line_names",
+      [] {
+        std::vector<std::string> names;
+        for (const app::VerbEntry& v : app::verbs()) names.push_back(v.name);
+        return names;
+      },
+      "The same verbs as verbs(), spelled as the command line's words (\"model from-volume\").");
+
+  m.def(
+      "verb_help", [](const std::string& name) { return std::string(app::find_verb(name).help); },
+      py::arg("verb"), "A verb's help, as `caps <verb> --help` prints it.");
 
   m.def("load_model", &load_model, py::arg("model_dir"),
         "A model directory's model.json (text) and maps: numpy arrays of shape (n_z, n_theta), "

@@ -18,6 +18,45 @@ def test_every_verb_has_its_defaults():
     assert caps.defaults("model from-volume") == caps.defaults("model_from_volume")
 
 
+def test_every_verb_of_the_program_is_callable_from_python(cli):
+    # The list is the program's own (app's list of verbs), not one kept here.
+    names = caps.verbs()
+    words = caps._caps.command_line_names()
+    assert len(names) == len(words) == len(set(names))
+    assert "compare_models" in names and "model_sensitivity" in names
+    for name, spelled in zip(names, words):
+        assert name == spelled.replace(" ", "_").replace("-", "_")
+        # The program has the verb, with the same help.
+        c = cli(*spelled.split(), "--help")
+        assert c.returncode == 0, (spelled, c.stderr)
+        assert c.stdout.startswith(caps.verb_help(name) + "\n"), spelled
+        # Python reaches the verb's request: its defaults, and an empty request is refused for
+        # the field it lacks (or, with none required, runs).
+        assert isinstance(caps.defaults(name), dict)
+        assert caps.defaults(spelled) == caps.defaults(name)
+        try:
+            caps.run(spelled, {})
+        except caps.InvalidInput as e:
+            assert "is required" in str(e), (name, str(e))
+        else:
+            assert not [k for k, v in caps.defaults(name).items() if v == ""], name
+
+
+def test_the_sensitivity_map_through_python_equals_the_cli(model, work, cli):
+    # A verb Python lacked while it kept its own list: one plan centre, the linear model.
+    args = {"theta": "0,0,15", "z": "60,60,10", "thickness": 5, "mesh_size": 3, "threads": 1,
+            "material": "linear"}
+    py = caps.model_sensitivity(model, work / "sens_py", **args)
+    flags = [x for k, v in args.items() for x in ("--" + k.replace("_", "-"), str(v))]
+    c = cli("model", "sensitivity", model, "-o", work / "sens_cli", *flags, "-q", "--json")
+    assert c.returncode == 0, c.stdout + c.stderr
+    from_cli = json.loads(c.stdout)
+    assert py["planned"] == 1 and py["constant_thickness_mm"] == 5
+    for r in (py, from_cli):
+        del r["output"], r["timings_s"]
+    assert py == from_cli
+
+
 def test_model_maps_are_numpy_arrays_on_the_grid(model):
     m = caps.load_model(model)
     assert m["info"]["grid"]["n_theta"] == 128 and m["info"]["grid"]["n_z"] == 64

@@ -1,12 +1,10 @@
 #include "caps/server/planner_server.hpp"
 
 #include "caps/app/loaded_model.hpp"
-#include "caps/app/model.hpp"
-#include "caps/app/plan.hpp"
-#include "caps/app/render.hpp"
-#include "caps/app/simulation.hpp"
+#include "caps/app/verbs.hpp"
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/json_file.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "skin_views.hpp"
@@ -115,12 +113,7 @@ void send_json(httplib::Response& res, const std::string& text) {
 }
 
 json parse_object(const std::string& body, const std::string& source) {
-  json j;
-  try {
-    j = json::parse(body);
-  } catch (const json::exception& e) {
-    throw InvalidInput(cat(source, ": not valid JSON (", e.what(), ")"));
-  }
+  const json j = parse_json<json>(body, source);
   if (!j.is_object()) throw InvalidInput(cat(source, ": expected a JSON object"));
   return j;
 }
@@ -357,8 +350,7 @@ struct PlannerServer::Impl {
     j["model"] = current()->dir;
     j["output"] = (request_folder() / "plan.json").string();
     j["force"] = true;
-    const auto request = app::read_request<app::PlanNewRequest>(j.dump(), source);
-    return app::to_json(app::run_plan_new(request));
+    return app::find_verb("plan new").run_json(j.dump(), source, nullptr);
   }
 
   // `name`: what the user calls the plan (the page sends its file's name), for the messages.
@@ -366,10 +358,8 @@ struct PlannerServer::Impl {
     parse_object(body, "plan check request");
     const fs::path plan = request_folder() / name;
     write_text_atomic(plan, body);
-    app::PlanCheckRequest request;
-    request.plan = plan.string();
-    request.model = current()->dir;
-    return app::to_json(app::run_plan_check(request));
+    const json request{{"plan", plan.string()}, {"model", current()->dir}};
+    return app::find_verb("plan check").run_json(request.dump(), "plan check request", nullptr);
   }
 
   std::string simulate(const std::string& body) {
@@ -395,7 +385,9 @@ struct PlannerServer::Impl {
     options_json["model"] = on->dir;
     options_json["plan"] = plan.string();
     options_json["output"] = (work / "results" / std::to_string(id)).string();
-    const auto request = app::read_request<app::SimulateRequest>(options_json.dump(), source);
+    const app::VerbEntry& verb = app::find_verb("simulate");
+    const std::string request = options_json.dump();
+    verb.check_json(request, source);  // a mistake is answered at once, not after the queue
     write_text_atomic(plan, j["plan"].dump(2) + "\n");
 
     // A newer request cancels this one: its ticket is no longer the latest.
@@ -409,14 +401,14 @@ struct PlannerServer::Impl {
       ~Finish() { board.finish(); }
     } finish{*progress};
     const auto t0 = std::chrono::steady_clock::now();
-    const app::SimulateResult result = app::run_simulate(request, &cancellable);
+    const std::string result = verb.run_json(request, source, &cancellable);
     const double total_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     progress->finish();
     // The plan beside its result, for exporting them together.
     write_text_atomic(work / "results" / std::to_string(id) / "plan.json",
                       j["plan"].dump(2) + "\n");
-    json out = json::parse(app::to_json(result));
+    json out = json::parse(result);
     // Where the time went (not reproducible, so under timings_s): each progress step, and the
     // whole request's simulation, files included.
     out["timings_s"]["steps"] = progress->steps_s();
@@ -481,11 +473,12 @@ struct PlannerServer::Impl {
     request.erase("head");
     request["model"] = head->dir;
     request["output"] = (work / "charts" / std::to_string(n)).string();
-    const auto r = app::read_request<app::ChartRequest>(request.dump(), source);
+    const app::VerbEntry& verb = app::find_verb("model chart");
+    verb.check_json(request.dump(), source);
     fs::create_directories(work / "charts");
-    app::run_chart(r, reporter);
+    verb.run_json(request.dump(), source, reporter);
     auto next = std::make_shared<Served>();
-    next->dir = fs::absolute(r.output).lexically_normal().string();
+    next->dir = fs::absolute(request["output"].get<std::string>()).lexically_normal().string();
     next->model = app::loaded_model(next->dir);
     next->generation = n;
     {
@@ -523,15 +516,15 @@ struct PlannerServer::Impl {
     const fs::path info = dir / "export.json";
     std::lock_guard<std::mutex> lock(export_mutex);
     if (!fs::is_regular_file(info)) {
-      app::RenderRequest r;
-      r.result = dir.string();
-      r.model = model_of(id)->dir;
-      r.output = (dir / "export").string();
-      r.plan = (dir / "plan.json").string();
-      r.gltf = true;
-      r.tension_map = true;
-      r.force = true;
-      write_text_atomic(info, app::to_json(app::run_render(r, reporter)));
+      const json r{{"result", dir.string()},
+                   {"model", model_of(id)->dir},
+                   {"output", (dir / "export").string()},
+                   {"plan", (dir / "plan.json").string()},
+                   {"gltf", true},
+                   {"tension_map", true},
+                   {"force", true}};
+      write_text_atomic(info, app::find_verb("render").run_json(r.dump(), "export request",
+                                                                reporter));
     }
     json rendered = json::parse(read_file(info));
     json files = json::array();
@@ -592,10 +585,9 @@ struct PlannerServer::Impl {
     // The model's anatomical landmarks (docs/landmarks.md), found without writing model.json.
     http.Get("/api/landmarks",
              guarded([this](const httplib::Request&, httplib::Response& res) {
-               app::LandmarksRequest r;
-               r.model = current()->dir;
-               r.no_write = true;
-               send_json(res, app::to_json(app::run_model_landmarks(r)));
+               const json r{{"model", current()->dir}, {"no_write", true}};
+               send_json(res, app::find_verb("model landmarks")
+                                  .run_json(r.dump(), "landmarks request", nullptr));
              }));
     http.Get(R"(/api/model/(.+))",
              guarded([this](const httplib::Request& req, httplib::Response& res) {
@@ -633,7 +625,7 @@ struct PlannerServer::Impl {
                 send_json(res, result_export(req.matches[1]).dump());
               }));
     http.Get("/api/templates", guarded([](const httplib::Request&, httplib::Response& res) {
-               send_json(res, app::to_json(app::run_templates({})));
+               send_json(res, app::find_verb("plan templates").run_json("{}", "templates", nullptr));
              }));
     http.Post("/api/plan/new", guarded([this](const httplib::Request& req, httplib::Response& res) {
                 send_json(res, plan_new(req.body));

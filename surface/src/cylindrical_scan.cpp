@@ -8,7 +8,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
-#include "caps/core/json_limits.hpp"
+#include "caps/core/json_file.hpp"
 #include "caps/core/units.hpp"
 #include "caps/image/image_io.hpp"
 
@@ -33,17 +33,8 @@ void check_spec(const CylindricalScanSpec& s, const std::string& where) {
 }  // namespace
 
 CylindricalScanSpec read_cylindrical_sidecar(const fs::path& json_path) {
-  std::ifstream in(json_path);
-  if (!in) throw IoError(cat(json_path.string(), ": cannot open the sidecar"));
-  std::stringstream text;
-  text << in.rdbuf();
-  check_json_depth(text.str(), json_path.string());
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(text.str());
-  } catch (const nlohmann::json::exception& e) {
-    throw InvalidInput(cat(json_path.string(), ": not valid JSON (", e.what(), ")"));
-  }
+  const auto j = read_json_file<nlohmann::json>(
+      json_path, "give the range image's sidecar .json (caps model export-range writes one)");
   CylindricalScanSpec s;
   const fs::path dir = json_path.parent_path();
   try {

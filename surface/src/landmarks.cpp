@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "caps/core/error.hpp"
+#include "caps/core/json_file.hpp"
 #include "caps/core/units.hpp"
 
 namespace caps {
@@ -699,8 +700,13 @@ std::string landmarks_to_json(const Landmarks& landmarks) {
 
 Landmarks landmarks_from_json(const std::string& text, const std::string& source) {
   Landmarks out;
+  json j;
   try {
-    const json j = json::parse(text);
+    j = parse_json<json>(text, cat(source, ": landmarks"));  // nesting bounded as every reader's
+  } catch (const InvalidInput& e) {
+    throw InvalidInput(cat(e.what(), "; recompute them with `caps model landmarks MODEL_DIR`"));
+  }
+  try {
     out.midline_theta_deg = j.value("midline_theta_deg", 0.0);
     const json& items = j.at("items");
     if (!items.is_object()) throw InvalidInput(cat(source, ": landmarks: \"items\" must be an object"));

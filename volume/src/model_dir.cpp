@@ -12,7 +12,7 @@
 #include "caps/core/checked_numbers.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/file_access.hpp"
-#include "caps/core/json_limits.hpp"
+#include "caps/core/json_file.hpp"
 #include "caps/core/reporter.hpp"
 #include "caps/image/image_io.hpp"
 #include "caps/volume/isosurface.hpp"
@@ -34,12 +34,7 @@ Eigen::Vector3d vec3(const json& v) {
 double finite_or_zero(double x) { return std::isfinite(x) ? x : 0.0; }
 
 json parse_object(const std::string& text, const char* what) {
-  check_json_depth(text, cat("model.json: ", what));
-  try {
-    return text.empty() ? json::object() : json::parse(text);
-  } catch (const json::exception& e) {
-    throw InvalidInput(cat("model.json: ", what, " is not valid JSON (", e.what(), ")"));
-  }
+  return text.empty() ? json::object() : parse_json<json>(text, cat("model.json: ", what));
 }
 
 // model.json's "files": every file the directory holds, by role.
@@ -195,18 +190,7 @@ json load_model_json(const fs::path& dir) {
   if (!why.empty())
     throw IoError(cat(dir.string(), ": not a model directory (", why, "); build one with "
                       "`caps model from-volume`"));
-  require_readable(file, false, cat("is ", dir.string(), " a caps model?"));
-  std::ifstream in(file);
-  if (!in) throw IoError(cat(file.string(), ": cannot be read; is ", dir.string(), " a caps model?"));
-  std::stringstream text;
-  text << in.rdbuf();
-  check_json_depth(text.str(), file.string());
-  json j;
-  try {
-    j = json::parse(text.str());
-  } catch (const json::exception& e) {
-    throw InvalidInput(cat(file.string(), ": not valid JSON (", e.what(), ")"));
-  }
+  const json j = read_json_file<json>(file, cat("is ", dir.string(), " a caps model?"));
   // Checked by hand: json::value() and get() throw on a field of another type.
   if (!j.is_object() || !j.contains("format") || j["format"] != "caps-model")
     throw InvalidInput(cat(file.string(), ": 'format' is not \"caps-model\""));

@@ -51,6 +51,13 @@ struct CompareModelsResult {
   std::string comparison_json;  ///< model_comparison.json
   std::vector<CompareModelsSide> sides;  ///< ct first
   std::vector<std::string> warnings;
+
+  /// The JSON is model_comparison.json and the output folder.
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v.document(r.comparison_json, {"comparison_json", "model_comparison.json"});
+    v(r.output, {"output", "the folder written"});
+  }
 };
 
 /// Places the plan at the same anatomical point on the scan-built model (through the
@@ -116,6 +123,26 @@ struct SensitivityResult {
   double within_10_percent = 0;
   std::vector<std::string> warnings;
   double seconds = 0;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.output, {"output", "the folder written"});
+    v(r.points, {"points", "plan centres on the grid"});
+    v(r.planned, {"planned", "centres where the plan could be laid and simulated"});
+    v(r.constant_thickness_mm, {"constant_thickness_mm"});
+    v.group({"abs_force_change", "|relative change of the closing force|"}, [&] {
+      v(r.median_force_change, {"median"});
+      v(r.max_force_change, {"max"});
+    });
+    v.group({"abs_displacement_change", "|relative change of the largest displacement|"}, [&] {
+      v(r.median_displacement_change, {"median"});
+      v(r.max_displacement_change, {"max"});
+    });
+    v(r.within_10_percent, {"within_10_percent"});
+    v(r.warnings, {"warnings"});
+    v.group({"timings_s", "wall-clock seconds (not reproducible)"},
+            [&] { v(r.seconds, {"total"}); });
+  }
 };
 
 /// Runs fem::thickness_sensitivity() on the model and writes sensitivity.png (the picture over

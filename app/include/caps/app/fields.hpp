@@ -8,6 +8,19 @@
 /// `MODEL_DIR`). Defaults are the request struct's member initialisers, which take them from the
 /// library's options structs. Field types: std::string, double, int, bool, std::optional<double>,
 /// std::map<std::string, double> (named parameters such as a template's).
+///
+/// Results are declared the same way: a static `fields(result, visitor)` lists the keys of the
+/// result's JSON, from which `to_json(result)` is derived (and `result_from_json` reads it back).
+/// Besides `v(value, {"key"})` (the types above, std::vector<std::string>, Eigen 3-vectors) a
+/// result's fields may use
+///   v.group({"lengthening"}, [&] { ... })   a nested object of fields;
+///   v.when(flag, [&] { ... })               fields written only when `flag` holds (a bool member
+///                                           is set on reading to whether they were there);
+///   v.computed({"mm"}, [&] { return x; })   a value computed from others: written, not read;
+///   v.pair(a, b, {"thickness_mm"})           [a, b] under one key;
+///   v.document(text, {"model_json"})         a JSON document written elsewhere (model.json) whose
+///                                           keys sit beside the declared ones (declare it first:
+///                                           the declared keys win).
 
 #include <string>
 #include <string_view>
@@ -25,7 +38,7 @@ enum class FieldKind {
 /// One field of a request.
 struct Field {
   std::string_view key;             ///< JSON key, snake_case
-  std::string_view help;            ///< one line, with the unit
+  std::string_view help = {};       ///< one line, with the unit
   FieldKind kind = FieldKind::Option;
   std::string_view cli = {};        ///< command-line spelling when not "--" + dashed key
   std::string_view old_cli = {};    ///< a former spelling, still accepted with a note
@@ -46,5 +59,14 @@ Request read_request(const std::string& json_text, const std::string& source = "
 /// Writes every field of a request as JSON text.
 template <class Request>
 std::string write_request(const Request& request);
+
+/// A result's JSON from its declared fields (what each result's to_json() returns).
+template <class Result>
+std::string result_to_json(const Result& result);
+
+/// Reads a result back from its JSON (to_json()'s): every key must be a declared field (or go to
+/// its document); errors name `source`. Defined for every result type in app/.
+template <class Result>
+Result result_from_json(const std::string& json_text, const std::string& source = "result");
 
 }  // namespace caps::app

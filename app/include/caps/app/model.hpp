@@ -22,6 +22,13 @@ struct ModelResult {
   std::string model_json;  ///< model.json as written
   std::string summary;     ///< the model's summary for reading (model_summary())
   std::vector<std::string> warnings;
+
+  /// The JSON is model.json and, when one was written, the output.
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v.document(r.model_json, {"model_json", "model.json"});
+    v.when(!r.output.empty(), [&] { v(r.output, {"output", "the model directory written"}); });
+  }
 };
 std::string to_json(const ModelResult& result);
 std::string summary(const ModelResult& result);
@@ -224,6 +231,19 @@ struct PickResult {
   double theta_deg = 0, z_mm = 0, distance_mm = 0;
   std::string flags;
   bool on_pole_cap = false;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.hit, {"hit"});
+    v.when(r.hit, [&] {
+      v(r.lps, {"lps", "the skin point, LPS mm"});
+      v(r.theta_deg, {"theta_deg"});
+      v(r.z_mm, {"z_mm"});
+      v(r.distance_mm, {"distance_mm", "along the ray"});
+      v(r.flags, {"flags"});
+      v(r.on_pole_cap, {"on_pole_cap"});
+    });
+  }
 };
 
 PickResult run_pick(const PickRequest& request, Reporter* reporter = nullptr);
@@ -247,6 +267,12 @@ struct ExportRangeRequest {
 struct PathResult {
   std::string output;
   std::vector<std::string> warnings;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.output, {"output", "the file written"});
+    v(r.warnings, {"warnings"});
+  }
 };
 std::string to_json(const PathResult& result);
 std::string summary(const PathResult& result);
@@ -286,6 +312,15 @@ struct LandmarksResult {
   std::string table;           ///< landmarks_table(): one line per landmark
   bool written = false;        ///< model.json was updated
   std::vector<std::string> warnings;
+
+  /// The JSON is model.json's "landmarks" object with the model, written and the warnings.
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v.document(r.landmarks_json, {"landmarks_json", "model.json's \"landmarks\""});
+    v(r.model, {"model"});
+    v(r.written, {"written", "model.json was updated"});
+    v(r.warnings, {"warnings"});
+  }
 };
 /// Finds the model's landmarks and (unless no_write) writes them into its model.json, so a model
 /// built before landmarks existed gains them.
@@ -317,6 +352,26 @@ struct SiteResult {
   double skin_mm = 0, fat_mm = 0, deep_mm = 0;  ///< the layers along the normal (has_layers)
   std::string flags;                     ///< describe_flags() of the cells there ("valid")
   std::vector<std::string> warnings;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model"});
+    v(r.at, {"at"});
+    v(r.theta_deg, {"theta_deg"});
+    v(r.z_mm, {"z_mm"});
+    v(r.lps, {"lps", "the skin point, LPS mm"});
+    v(r.thickness_mm, {"thickness_mm", "soft tissue along the skin normal"});
+    v(r.thickness_radial_mm, {"thickness_radial_mm", "soft tissue along the ray from the axis"});
+    v(r.flags, {"flags"});
+    v(r.warnings, {"warnings"});
+    v.when(r.has_layers, [&] {
+      v.group({"layers_mm", "the measured layers along the normal"}, [&] {
+        v(r.skin_mm, {"skin"});
+        v(r.fat_mm, {"fat"});
+        v(r.deep_mm, {"deep"});
+      });
+    });
+  }
 };
 /// Resolves `at` on the model (a landmark placement as plan new does) and samples its maps there.
 SiteResult run_model_site(const SiteRequest& request, Reporter* reporter = nullptr);
@@ -341,6 +396,11 @@ struct VolumeInfoRequest {
 struct VolumeInfoResult {
   std::string json;  ///< geometry (LPS), modality, value range, notes, DICOM series
   std::string text;  ///< the same for reading
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v.document(r.json, {"json"});
+  }
 };
 VolumeInfoResult run_volume_info(const VolumeInfoRequest& request, Reporter* reporter = nullptr);
 std::string to_json(const VolumeInfoResult& result);
@@ -378,6 +438,18 @@ struct PhantomResult {
   bool thin_bone = false;
   bool face = false;
   double scale = 1.0;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.output, {"output", "the NIfTI file written"});
+    v(r.dims, {"dims", "voxels along L,P,S"});
+    v(r.spacing_mm, {"spacing_mm"});
+    v(r.head_holder, {"head_holder"});
+    v(r.layered, {"layered"});
+    v(r.thin_bone, {"thin_bone"});
+    v(r.face, {"face"});
+    v(r.scale, {"scale"});
+  }
 };
 PhantomResult run_phantom(const PhantomRequest& request, Reporter* reporter = nullptr);
 std::string to_json(const PhantomResult& result);

@@ -19,6 +19,12 @@ struct PlanResult {
   int points = 0, loop_nodes = 0, suture_pairs = 0;
   double cut_length_mm = 0;
   std::vector<std::string> warnings;
+
+  /// The JSON is the plan with its check.
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v.document(r.plan_json, {"plan_json", "the plan with its check"});
+  }
 };
 std::string to_json(const PlanResult& result);
 std::string summary(const PlanResult& result);
@@ -114,6 +120,11 @@ struct TemplatesRequest {
 struct TemplatesResult {
   std::string json;  ///< [{name, summary, parameters: [{name, unit, default, min, max, meaning}]}]
   std::string text;  ///< the same for reading, parameters spelled as options
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v.document(r.json, {"json", "the templates"});
+  }
 };
 TemplatesResult run_templates(const TemplatesRequest& request, Reporter* reporter = nullptr);
 std::string to_json(const TemplatesResult& result);

@@ -84,6 +84,14 @@ struct RegisterResult {
   std::string json;     ///< registration.json as written
   ScanRegistration registration;  ///< without the per-vertex distances
   std::vector<std::string> warnings;
+
+  /// The JSON is registration.json with the output and the warnings.
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v.document(r.json, {"json", "registration.json"});
+    v(r.output, {"output", "the folder written"});
+    v(r.warnings, {"warnings"});
+  }
 };
 
 /// Registers the scan to the model's skin and writes registration.json (the 4×4 scan-to-model

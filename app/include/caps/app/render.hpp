@@ -61,6 +61,32 @@ struct RenderResult {
   bool has_tension = false;
   double max_skin_tension_kpa = 0, min_skin_tension_kpa = 0, tension_scale_max_kpa = 0;
   std::vector<std::string> warnings;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.output, {"output", "the image directory written"});
+    v(r.skin_elements, {"skin_elements"});
+    v(r.subdivisions, {"subdivisions"});
+    v(r.micropolygon_vertices, {"micropolygon_vertices"});
+    v(r.triangles, {"triangles"});
+    v(r.max_displacement_mm, {"max_displacement_mm"});
+    v.group({"wound_area_mm2"}, [&] {
+      v(r.wound_area_pre_mm2, {"pre"});
+      v(r.wound_area_post_mm2, {"post"});
+    });
+    v(r.images, {"images"});
+    v(r.warnings, {"warnings"});
+    v.when(r.has_tension, [&] {
+      v(r.max_skin_tension_kpa, {"max_skin_tension_kpa"});
+      v(r.min_skin_tension_kpa, {"min_skin_tension_kpa"});
+      v(r.tension_scale_max_kpa, {"tension_scale_max_kpa"});
+    });
+    v.when(r.gltf, [&] { v.computed({"gltf"}, [] { return std::string("skin.glb"); }); });
+    v.when(!r.animations.empty() || r.frames, [&] {
+      v(r.animations, {"animations"});
+      v(r.frames, {"frames"});
+    });
+  }
 };
 
 /// Renders a simulation's result directory on its model into `output`.

@@ -127,6 +127,37 @@ struct MeshResult {
   std::string tissue;  ///< the tissue layering used: uniform or measured
   double min_thickness_mm = 0, max_thickness_mm = 0, min_jacobian = 0;
   std::vector<std::string> warnings;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.output, {"output", "the mesh directory written"});
+    v.group({"surface", "the surface mesh (stage 1 and 2)"}, [&] {
+      v(r.surface_vertices, {"vertices"});
+      v(r.quads, {"quads"});
+      v(r.triangles, {"triangles"});
+      v(r.surface_layers, {"layers"});
+      v(r.extent_mm, {"extent_mm"});
+      v(r.wound_size_mm, {"wound_size_mm"});
+      v(r.trimmed_polygons, {"trimmed_polygons"});
+      v(r.min_angle_deg, {"min_angle_deg"});
+      v(r.max_angle_deg, {"max_angle_deg"});
+      v(r.max_aspect_ratio, {"max_aspect_ratio"});
+      v(r.mean_aspect_ratio, {"mean_aspect_ratio"});
+    });
+    v.group({"continuum", "the volume mesh"}, [&] {
+      v(r.nodes, {"nodes"});
+      v(r.elements, {"elements"});
+      v(r.hex20, {"hex20"});
+      v(r.wedge15, {"wedge15"});
+      v(r.layers, {"layers"});
+      v(r.fixed_nodes, {"fixed_nodes"});
+      v(r.suture_pairs, {"suture_pairs"});
+      v(r.rim, {"rim"});
+      v(r.tissue, {"tissue"});
+      v.pair(r.min_thickness_mm, r.max_thickness_mm, {"thickness_mm", "least and greatest"});
+      v(r.min_jacobian, {"min_jacobian"});
+    });
+    v(r.warnings, {"warnings"});
+  }
 };
 
 /// Meshes the plan's (or border's) wound on the model into `output` (see docs/mesh-format.md):
@@ -163,6 +194,13 @@ struct SimulateRequest {
   }
 };
 
+/// The wound's length along a plan's axis, before and after closure.
+struct AxisLengthening {
+  double before_mm = 0, after_mm = 0;
+  double change_mm() const { return after_mm - before_mm; }
+  double change_percent() const { return before_mm > 0 ? 100.0 * (after_mm / before_mm - 1) : 0; }
+};
+
 struct SimulateResult {
   std::string output;
   int elements = 0, nodes = 0, suture_pairs = 0;
@@ -184,13 +222,44 @@ struct SimulateResult {
   std::vector<std::string> images;  ///< with render
   std::vector<std::string> warnings;
   double solve_s = 0;  ///< the solver's wall time (not reproducible: under "timings_s")
-};
 
-/// The wound's length along a plan's axis, before and after closure.
-struct AxisLengthening {
-  double before_mm = 0, after_mm = 0;
-  double change_mm() const { return after_mm - before_mm; }
-  double change_percent() const { return before_mm > 0 ? 100.0 * (after_mm / before_mm - 1) : 0; }
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.output, {"output", "the result directory written"});
+    v(r.elements, {"elements"});
+    v(r.nodes, {"nodes"});
+    v(r.suture_pairs, {"suture_pairs"});
+    v(r.max_displacement_mm, {"max_displacement_mm"});
+    v(r.closing_force_n, {"closing_force_n", "the sum of the suture pairs' forces (N)"});
+    v(r.max_suture_force_n, {"max_suture_force_n", "the largest force on one suture pair (N)"});
+    v(r.max_suture_gap_mm, {"max_suture_gap_mm"});
+    v.group({"sutures_at_spacing", "the closing force per suture, sutures every spacing_mm"}, [&] {
+      v(r.suture_spacing_mm, {"spacing_mm"});
+      v(r.sutures, {"sutures"});
+      v(r.max_force_per_suture_n, {"max_force_per_suture_n"});
+      v(r.force_per_mm_n, {"force_per_mm_n"});
+      v(r.wound_length_mm, {"wound_length_mm"});
+    });
+    v(r.strain_energy_mj, {"strain_energy_mj"});
+    v.group({"lengthening", "the wound's length along the plan's axis (axis_lengthening())"}, [&] {
+      v(r.axis_length_before_mm, {"axis_before_mm"});
+      v(r.axis_length_after_mm, {"axis_after_mm"});
+      v.computed({"mm"}, [&] { return r.axis_length_after_mm - r.axis_length_before_mm; });
+      v.computed({"percent"}, [&] {
+        return AxisLengthening{r.axis_length_before_mm, r.axis_length_after_mm}.change_percent();
+      });
+    });
+    v(r.material, {"material"});
+    v(r.prestretch, {"prestretch"});
+    v(r.gape_mm, {"gape_mm"});
+    v(r.load_steps, {"load_steps"});
+    v(r.newton_iterations, {"newton_iterations"});
+    v(r.inverted_elements, {"inverted_elements"});
+    v(r.images, {"images"});
+    v(r.warnings, {"warnings"});
+    v.group({"timings_s", "wall-clock seconds (not reproducible)"},
+            [&] { v(r.solve_s, {"solve"}); });
+  }
 };
 
 /// The length of a wound's border along the plan's axis: its loop nodes projected on `axis`
@@ -239,6 +308,20 @@ struct SolveResult {
          strain_energy_mj = 0;
   std::vector<std::string> warnings;
   double total_s = 0;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.output, {"output", "the result directory written"});
+    v(r.solver, {"solver"});
+    v(r.equations, {"equations"});
+    v(r.max_displacement_mm, {"max_displacement_mm"});
+    v(r.max_von_mises_mpa, {"max_von_mises_mpa"});
+    v(r.total_suture_force_n, {"total_suture_force_n"});
+    v(r.strain_energy_mj, {"strain_energy_mj"});
+    v(r.warnings, {"warnings"});
+    v.group({"timings_s", "wall-clock seconds (not reproducible)"},
+            [&] { v(r.total_s, {"total"}); });
+  }
 };
 
 SolveResult run_solve(const SolveRequest& request, Reporter* reporter = nullptr);
@@ -265,6 +348,14 @@ struct BoxRequest {
 struct BoxResult {
   std::string output;
   int nodes = 0, elements = 0, sutures = 0;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.output, {"output", "the mesh directory written"});
+    v(r.nodes, {"nodes"});
+    v(r.elements, {"elements"});
+    v(r.sutures, {"sutures", "suture pairs"});
+  }
 };
 
 BoxResult run_box(const BoxRequest& request, Reporter* reporter = nullptr);
@@ -303,6 +394,13 @@ struct CompareResult {
   std::string layers_tissue;  ///< "measured", or "uniform" where the model has no layers
   double constant_thickness_mm = 0;
   std::vector<std::string> warnings;
+
+  /// The JSON is comparison.json (the table, warnings included) and the output folder.
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v.document(r.comparison_json, {"comparison_json", "comparison.json"});
+    v(r.output, {"output", "the folder written"});
+  }
 };
 
 /// Simulates the plan with the measured and with a constant thickness (one material), and with
