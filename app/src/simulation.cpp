@@ -184,12 +184,30 @@ AxisLengthening axis_lengthening(const Eigen::MatrixX3d& pre, const Eigen::Matri
   return {hi - lo, far - near};
 }
 
+CornerLengthening corner_lengthening(const Eigen::MatrixX3d& pre, const Eigen::MatrixX3d& post,
+                                     const std::vector<std::array<int, 4>>& sutures) {
+  if (post.rows() != pre.rows())
+    throw InvalidInput(cat("corner lengthening: ", pre.rows(), " loop nodes before and ",
+                           post.rows(), " after closure; give the same nodes"));
+  std::vector<int> corners;
+  for (const auto& q : sutures)
+    for (const int c : {q[0] == q[2] ? q[0] : -1, q[1] == q[3] ? q[1] : -1})
+      if (c >= 0 && c < pre.rows() && std::find(corners.begin(), corners.end(), c) == corners.end())
+        corners.push_back(c);
+  std::sort(corners.begin(), corners.end());
+  CornerLengthening out;
+  for (std::size_t i = 0; i < corners.size(); ++i)
+    for (std::size_t j = i + 1; j < corners.size(); ++j) {
+      const double d = (pre.row(corners[i]) - pre.row(corners[j])).norm();
+      if (d > out.before_mm) out = {d, (post.row(corners[i]) - post.row(corners[j])).norm(), corners[i], corners[j]};
+    }
+  return out;
+}
+
 namespace {
 
-// The simulation's lengthening along its plan's axis (the frame's x, the orientation, as the
-// tangent at the plan's centre).
-AxisLengthening plan_lengthening(const fem::Simulation& sim, const plan::Plan& plan,
-                                 const PatientModel& model) {
+// The loop nodes' skin positions before and after the closure (#L×3 each, LPS mm).
+std::pair<Eigen::MatrixX3d, Eigen::MatrixX3d> loop_positions(const fem::Simulation& sim) {
   const std::vector<int>& loop = sim.wound.surface.loop_vertex;
   const fem::Mesh& mesh = sim.wound.continuum.mesh;
   Eigen::MatrixX3d pre(static_cast<Eigen::Index>(loop.size()), 3), post(pre.rows(), 3);
@@ -198,6 +216,14 @@ AxisLengthening plan_lengthening(const fem::Simulation& sim, const plan::Plan& p
     pre.row(static_cast<Eigen::Index>(i)) = mesh.nodes.row(n);
     post.row(static_cast<Eigen::Index>(i)) = mesh.nodes.row(n) + sim.result.displacement_mm.row(n);
   }
+  return {pre, post};
+}
+
+// The simulation's lengthening along its plan's axis (the frame's x, the orientation, as the
+// tangent at the plan's centre).
+AxisLengthening plan_lengthening(const fem::Simulation& sim, const plan::Plan& plan,
+                                 const PatientModel& model) {
+  const auto [pre, post] = loop_positions(sim);
   const auto on_skin = [&](double x_mm) {
     const Eigen::Vector2d tz = plan.frame.to_theta_z(Eigen::Vector2d(x_mm, 0));
     return model.skin_point(tz[0], tz[1]);
@@ -266,9 +292,38 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   const AxisLengthening lengthening = plan_lengthening(sim, plan, model);
   s.axis_length_before_mm = lengthening.before_mm;
   s.axis_length_after_mm = lengthening.after_mm;
+  const auto [pre, post] = loop_positions(sim);
+  const CornerLengthening corners = corner_lengthening(pre, post, sim.wound.surface.sutures);
+  s.corner_length_before_mm = corners.before_mm;
+  s.corner_length_after_mm = corners.after_mm;
+  s.corner_a = corners.corner_a;
+  s.corner_b = corners.corner_b;
   s.solve_s = res.timings.total_s;
   return s;
 }
+
+namespace {
+
+// The headline lengthening (corner to corner), the axis projection named as such.
+json lengthening_json(const SimulateResult& s) {
+  const AxisLengthening axis{s.axis_length_before_mm, s.axis_length_after_mm};
+  const bool corners = s.corner_a >= 0;
+  const AxisLengthening head =
+      corners ? AxisLengthening{s.corner_length_before_mm, s.corner_length_after_mm} : axis;
+  return {{"between", corners ? cat("closed corners ", s.corner_a, " and ", s.corner_b)
+                              : std::string("the wound's ends along the plan's axis")},
+          {"corners", corners ? json::array({s.corner_a, s.corner_b}) : json::array()},
+          {"before_mm", head.before_mm},
+          {"after_mm", head.after_mm},
+          {"mm", head.change_mm()},
+          {"percent", head.change_percent()},
+          {"axis_projection", {{"before_mm", axis.before_mm},
+                               {"after_mm", axis.after_mm},
+                               {"mm", axis.change_mm()},
+                               {"percent", axis.change_percent()}}}};
+}
+
+}  // namespace
 
 std::string to_json(const SimulateResult& s) {
   json j{{"output", s.output},
@@ -285,11 +340,7 @@ std::string to_json(const SimulateResult& s) {
                                  {"force_per_mm_n", s.force_per_mm_n},
                                  {"wound_length_mm", s.wound_length_mm}}},
          {"strain_energy_mj", s.strain_energy_mj},
-         {"lengthening", {{"axis_before_mm", s.axis_length_before_mm},
-                          {"axis_after_mm", s.axis_length_after_mm},
-                          {"mm", s.axis_length_after_mm - s.axis_length_before_mm},
-                          {"percent", AxisLengthening{s.axis_length_before_mm,
-                                                      s.axis_length_after_mm}.change_percent()}}},
+         {"lengthening", lengthening_json(s)},
          {"material", s.material},
          {"prestretch", s.prestretch},
          {"gape_mm", s.gape_mm},

@@ -4,6 +4,7 @@
 /// Every request lists its fields once (see fields.hpp); defaults come from the library's
 /// options structs (fem::SurfaceMeshOptions, fem::ContinuumMeshOptions, fem::SolveOptions).
 
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
@@ -178,8 +179,14 @@ struct SimulateResult {
   double suture_spacing_mm = 0, max_force_per_suture_n = 0, force_per_mm_n = 0,
          wound_length_mm = 0;
   int sutures = 0;
-  /// The wound's length along the plan's axis before and after closure (axis_lengthening(); for
-  /// a Z-plasty the central limb and the gain the transposition gives), mm.
+  /// The headline lengthening (corner_lengthening()): the distance between the wound's two
+  /// closed corners farthest apart (loop nodes corner_a, corner_b), before and after closure, mm;
+  /// a Z-plasty's central limb, corner to corner: its gain as surgeons measure it. Without two
+  /// closed corners (corner_a < 0) the axis projection below.
+  double corner_length_before_mm = 0, corner_length_after_mm = 0;
+  int corner_a = -1, corner_b = -1;
+  /// The wound's length projected on the plan's axis before and after closure
+  /// (axis_lengthening(): `lengthening.axis_projection`; not the gain), mm.
   double axis_length_before_mm = 0, axis_length_after_mm = 0;
   std::vector<std::string> images;  ///< with render
   std::vector<std::string> warnings;
@@ -204,6 +211,22 @@ struct AxisLengthening {
 /// @param post  #L×3 the same nodes after closure (LPS mm)
 AxisLengthening axis_lengthening(const Eigen::MatrixX3d& pre, const Eigen::MatrixX3d& post,
                                  const Eigen::Vector3d& axis);
+
+/// The distance between a wound's two closed corners farthest apart, before and after closure:
+/// the corners are the loop nodes both runs of a suture share (a == c or b == d of the
+/// fem::WoundBorder quadruples (a, b, c, d)). A Z-plasty has two, the ends of its central limb
+/// on the lips that stay (loop 5 and 2; the flap tips 1 and 4 swing across), so this is its
+/// central limb's length corner to corner, and the change its gain (a 60 deg Z with rigid flaps:
+/// sqrt(5 - 4 cos 60) - 1 = 73 %); a multiple Z's, its whole central line's. Returns before =
+/// after = 0 and corners -1 without two corners.
+/// @param pre   #L×3 loop node positions before closure (LPS mm)
+/// @param post  #L×3 the same nodes after closure (LPS mm)
+struct CornerLengthening {
+  double before_mm = 0, after_mm = 0;
+  int corner_a = -1, corner_b = -1;  ///< loop nodes, corner_a < corner_b
+};
+CornerLengthening corner_lengthening(const Eigen::MatrixX3d& pre, const Eigen::MatrixX3d& post,
+                                     const std::vector<std::array<int, 4>>& sutures);
 
 /// Meshes the plan on the model and solves the closure into `output`: the files of caps mesh
 /// and caps solve (result.json carries the warnings), and with `render` the images.
