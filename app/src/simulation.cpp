@@ -289,6 +289,9 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   s.max_force_per_suture_n = sim.sutures.max_suture_force_n;
   s.force_per_mm_n = sim.sutures.force_per_mm_n;
   s.wound_length_mm = sim.sutures.wound_length_mm;
+  s.sutures_total_force_n = sim.sutures.total_force_n;
+  s.compressive_sutures = static_cast<int>(sim.sutures.compressive.size());
+  s.compressive_force_n = sim.sutures.compressive_force_n;
   const AxisLengthening lengthening = plan_lengthening(sim, plan, model);
   s.axis_length_before_mm = lengthening.before_mm;
   s.axis_length_after_mm = lengthening.after_mm;
@@ -338,7 +341,10 @@ std::string to_json(const SimulateResult& s) {
                                  {"sutures", s.sutures},
                                  {"max_force_per_suture_n", s.max_force_per_suture_n},
                                  {"force_per_mm_n", s.force_per_mm_n},
-                                 {"wound_length_mm", s.wound_length_mm}}},
+                                 {"wound_length_mm", s.wound_length_mm},
+                                 {"total_force_n", s.sutures_total_force_n},
+                                 {"compressive_sutures", s.compressive_sutures},
+                                 {"compressive_force_n", s.compressive_force_n}}},
          {"strain_energy_mj", s.strain_energy_mj},
          {"lengthening", lengthening_json(s)},
          {"material", s.material},
@@ -357,7 +363,12 @@ std::string summary(const SimulateResult& s) {
   return cat("caps simulate: ", s.elements, " elements, closing force ",
              round_to(s.closing_force_n, 2), " N (", s.sutures, " sutures every ",
              round_to(s.suture_spacing_mm, 1), " mm: up to ", round_to(s.max_force_per_suture_n, 2),
-             " N each; ", round_to(s.force_per_mm_n, 3), " N per mm of wound), max displacement ",
+             " N each; ", round_to(s.force_per_mm_n, 3), " N per mm of wound",
+             s.compressive_sutures > 0
+                 ? cat("; ", s.compressive_sutures, " more pressed shut, ",
+                       round_to(-s.compressive_force_n, 2), " N of compression")
+                 : std::string(),
+             "), max displacement ",
              round_to(s.max_displacement_mm, 2), " mm, suture gap after closure ",
              s.max_suture_gap_mm < 1e-6 ? std::string("0") : cat(round_sig(s.max_suture_gap_mm, 2)),
              " mm",

@@ -179,6 +179,10 @@ struct SimulateResult {
   double suture_spacing_mm = 0, max_force_per_suture_n = 0, force_per_mm_n = 0,
          wound_length_mm = 0;
   int sutures = 0;
+  /// The tensile sutures' total; the sutures whose pairs push in sum (reported apart, in no
+  /// total) and their sum (<= 0), N. The two add up to closing_force_n, the net force.
+  double sutures_total_force_n = 0, compressive_force_n = 0;
+  int compressive_sutures = 0;
   /// The headline lengthening (corner_lengthening()): the distance between the wound's two
   /// closed corners farthest apart (loop nodes corner_a, corner_b), before and after closure, mm;
   /// a Z-plasty's central limb, corner to corner: its gain as surgeons measure it. Without two
