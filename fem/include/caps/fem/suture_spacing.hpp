@@ -13,8 +13,8 @@
 /// add up to SolveResult::total_suture_force_n, the net force across the wound.
 ///
 /// Single nodal pairs are not sutures: quadratic elements' consistent nodal forces make many of
-/// them negative where the wound is pulled shut (on the demo's Z-plasty 76 of 187, -0.79 N
-/// against +2.14 N), so pairs are judged only in sum, by the suture that holds them.
+/// them negative where the wound is pulled shut, so pairs are judged only in sum, by the suture
+/// that holds them (docs/fem.md, "Suture forces in surgeons' terms").
 
 #include <Eigen/Core>
 #include <vector>
