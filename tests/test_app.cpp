@@ -11,12 +11,17 @@
 #include "caps/core/error.hpp"
 #include "caps/surface/landmarks.hpp"
 #include "caps/core/units.hpp"
+#include "caps/fem/mesh_io.hpp"
+#include "caps/fem/result_io.hpp"
+#include "caps/plan/plan_io.hpp"
 #include "cli_run.hpp"
 #include "phantom_model.hpp"
 
 #include <Eigen/Geometry>
 
+#include <array>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -376,11 +381,22 @@ TEST_F(AppWithModel, WarningsReachResultJsonSummaryJsonAndTheReport) {
   EXPECT_NE(html.find(limited), std::string::npos);
   EXPECT_EQ(json::parse(slurp(kTmp / "top_compare" / "comparison.json"))["warnings"],
             json(cmp.warnings));
+  // Its largest suture is simulate's (the largest force on one suture at the spacing), and the
+  // measured layers are compared with the measured thickness as well.
+  const json measured = json::parse(slurp(kTmp / "top_compare" / "comparison.json"))["measured"];
+  EXPECT_NEAR(measured["max_suture_at_spacing_n"].get<double>(), sim.max_force_per_suture_n,
+              1e-9 * sim.max_force_per_suture_n);
+  char cell[64];
+  std::snprintf(cell, sizeof cell, "</td><td>N</td><td>%.2f</td>", sim.max_force_per_suture_n);
+  EXPECT_NE(html.find("largest force on one suture (sutures every 5.0 mm, as caps simulate)" +
+                      std::string(cell)),
+            std::string::npos);
   // Three columns: the third, the measured tissue layers (or one material where the model has
   // none), has its own folder with the same files and its own pictures.
   const std::string third = cmp.layers_tissue == "measured" ? "measured layers"
                                                             : "one material (no layers)";
   EXPECT_NE(html.find("<th>" + third + "</th>"), std::string::npos);
+  EXPECT_NE(html.find("<th>" + third + " vs measured</th>"), std::string::npos);
   EXPECT_NE(html.find("src=\"layers/post_plan.png\""), std::string::npos);
   EXPECT_TRUE(fs::exists(kTmp / "top_compare" / "layers" / "section.png"));
   EXPECT_NEAR(json::parse(slurp(kTmp / "top_compare" / "layers" / "result.json"))
@@ -558,8 +574,71 @@ TEST_F(AppWithModel, AZPlastyReportsTheLengtheningOfItsCentralLimb) {
   s.force = true;
   const app::SimulateResult r = app::run_simulate(s);
   EXPECT_NEAR(r.axis_length_before_mm, 15, 0.5);
+  EXPECT_NEAR(r.corner_length_before_mm, 15, 0.5);
   const json l = json::parse(app::to_json(r)).at("lengthening");
   EXPECT_GT(l.at("mm").get<double>(), 0.1 * 15);
   EXPECT_LT(l.at("percent").get<double>(), 100 * (std::sqrt(5 - 4 * std::cos(kPi / 3)) - 1));
-  EXPECT_NEAR(l.at("mm").get<double>(), r.axis_length_after_mm - r.axis_length_before_mm, 1e-12);
+  EXPECT_NEAR(l.at("mm").get<double>(), r.corner_length_after_mm - r.corner_length_before_mm, 1e-12);
+  EXPECT_NEAR(l.at("axis_projection").at("mm").get<double>(),
+              r.axis_length_after_mm - r.axis_length_before_mm, 1e-12);
+}
+
+// A Z-plasty's gain as surgeons measure it: its central limb corner to corner. The closed
+// corners, worked by hand on the loop of the axis test above (quadruples as
+// plan::oriented_suture() writes the paper's pairs: 5 and 2 are shared, the corners), moved to
+// (-12, -3) and (13, 3): 25.71 mm from 20, +28.6 %, where the axis projection says 25 mm.
+TEST(CornerLengthening, ZPlastyLoopWorkedByHand) {
+  const double h = 20 * std::sin(kPi / 3);
+  Eigen::MatrixX3d pre(6, 3), post(6, 3);
+  pre << 0, h, 0, -10, 0, 0, 10, 0, 0, 0, -h, 0, 10, 0, 0, -10, 0, 0;
+  post << 0.5, h, 0, 0, -h, 0, 13, 3, 0, -0.5, -h, 0, 0, h, 0, -12, -3, 0;
+  const std::vector<std::array<int, 4>> sutures{{5, 0, 5, 4}, {2, 3, 2, 1}, {0, 1, 4, 3}};
+  const app::CornerLengthening c = app::corner_lengthening(pre, post, sutures);
+  EXPECT_EQ(c.corner_a, 2);
+  EXPECT_EQ(c.corner_b, 5);
+  EXPECT_NEAR(c.before_mm, 20, 1e-12);
+  EXPECT_NEAR(c.after_mm, std::hypot(25.0, 6.0), 1e-12);
+  EXPECT_NEAR(app::axis_lengthening(pre, post, Eigen::Vector3d::UnitX()).after_mm, 25, 1e-12);
+  // Without two closed corners there is no corner-to-corner length.
+  const app::CornerLengthening none = app::corner_lengthening(pre, post, {{0, 1, 4, 3}});
+  EXPECT_EQ(none.corner_a, -1);
+  EXPECT_EQ(none.before_mm, 0);
+}
+
+// The 90 deg Z-plasty's reported gain is its corner-to-corner gain, found here from the files
+// alone: the nodes at the plan's points 1 and 2 (one on each lip), the one of each that stays
+// (the closed corner; the flap tip swings across), their distance before and after. On
+// Cranium's forehead the axis projection said 4.3 % where the corners moved 40.7 % apart.
+TEST_F(AppWithModel, A90DegreeZPlastyReportsItsCornerToCornerGain) {
+  app::SimulateRequest s;
+  s.model = kModel;
+  s.plan = plan_at("z-plasty", "0,60", {{"length", 15}, {"angle", 90}}, "z90.json", kModel, 90).output;
+  s.output = (kTmp / "z90").string();
+  s.meshing.mesh_size = 2.5;
+  s.force = true;
+  const app::SimulateResult r = app::run_simulate(s);
+  const json l = json::parse(app::to_json(r)).at("lengthening");
+  const plan::Plan p = plan::read_plan(s.plan);
+  const fem::Mesh m = fem::read_mesh_dir(s.output);
+  const Eigen::MatrixX3d u = fem::read_result_displacement(s.output, m.n_nodes());
+  auto corner = [&](int point, bool after) -> Eigen::Vector3d {
+    int best = -1, near = 0;
+    for (Eigen::Index n = 0; n < m.n_nodes(); ++n)
+      if ((m.nodes.row(n).transpose() - p.points[point].lps).norm() < 0.05) {
+        ++near;
+        if (best < 0 || u.row(n).norm() < u.row(best).norm()) best = static_cast<int>(n);
+      }
+    EXPECT_EQ(near, 2) << "point " << point;
+    const Eigen::RowVector3d x = m.nodes.row(best) + (after ? 1.0 : 0.0) * u.row(best);
+    return x.transpose();
+  };
+  const double before = (corner(2, false) - corner(1, false)).norm();
+  const double after = (corner(2, true) - corner(1, true)).norm();
+  std::printf("90 deg Z-plasty: corners %.2f -> %.2f mm (%+.1f %%), axis projection %+.1f %%\n",
+              before, after, 100 * (after / before - 1),
+              l.at("axis_projection").at("percent").get<double>());
+  EXPECT_NEAR(l.at("before_mm").get<double>(), before, 1e-9);
+  EXPECT_NEAR(l.at("after_mm").get<double>(), after, 1e-9);
+  EXPECT_NEAR(l.at("percent").get<double>(), 100 * (after / before - 1), 1e-6);
+  EXPECT_EQ(l.at("corners"), json::array({2, 5}));
 }

@@ -759,6 +759,7 @@ TEST(SutureSpacing, ForcePerSutureAndPerMmOfWound) {
   const SutureSpacing& s = sim.sutures;
   const double total = sim.result.total_suture_force_n;
   EXPECT_EQ(s.spacing_mm, 5.0);
+  EXPECT_TRUE(s.compressive.empty());  // an ellipse pulled shut: every suture pulls
   EXPECT_NEAR(s.total_force_n, total, 1e-9 * std::abs(total));
   // The closed line from apex to apex: the side's 10.44 mm, pulled straight by the closure.
   EXPECT_GT(s.wound_length_mm, 19.0);
@@ -784,6 +785,113 @@ TEST(SutureSpacing, ForcePerSutureAndPerMmOfWound) {
   ASSERT_EQ(one.sutures.size(), 1u);
   EXPECT_NEAR(one.max_suture_force_n, total, 1e-9 * std::abs(total));
   EXPECT_THROW(suture_spacing(sim.wound.continuum, sim.result, 0.0), InvalidInput);
+}
+
+namespace {
+
+// The skin node of node n's column, found as the test's own: the node of level 0 nearest to n
+// on the same lip, i.e. among the level-0 nodes at n's (theta, z), the one joined to n by a
+// chain of element-sharing nodes at that (theta, z).
+int skin_of(const ContinuumMesh& c, int n) {
+  const Mesh& m = c.mesh;
+  std::set<int> column{n};
+  for (bool grew = true; grew;) {
+    grew = false;
+    for (const Element& e : m.elements) {
+      bool touches = false;
+      for (int k = 0; k < e.n_nodes(); ++k) touches |= column.count(e.nodes[k]) > 0;
+      if (!touches) continue;
+      for (int k = 0; k < e.n_nodes(); ++k)
+        if (c.node_theta_z.row(e.nodes[k]) == c.node_theta_z.row(n) && column.insert(e.nodes[k]).second)
+          grew = true;
+    }
+  }
+  for (int k : column)
+    if (c.node_level[k] == 0) return k;
+  return -1;
+}
+
+}  // namespace
+
+// The sutures of a Z-plasty (60 deg, 20 mm limbs) cover its whole sutured length: the closed
+// scar is three lines of about 20 mm (the central limb turned across and the two lateral limbs),
+// and every sutured node pair's column meets the skin within the spacing of a reported suture.
+// The two lips of each cut have columns at the same (theta, z); the row once looked the skin
+// node up by (theta, z) and took the other lip's for half the pairs, which a Z sews elsewhere:
+// on Cranium's forehead (15 mm limbs) 3 sutures over 14.4 mm of a 45 mm cut.
+TEST(SutureSpacing, AZPlastysSuturesCoverItsWholeSuturedLength) {
+  const PatientModel model = constant_cylinder();
+  const double L = 20;
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("z-plasty", {{"length", L}}), model, 0.0, 40.0, 0.0);
+  SimulateOptions o;
+  o.surface.size_mm = 2.5;
+  o.surface.extent_mm = 40;
+  const Simulation sim = simulate(model, p, o);
+  const SutureSpacing& s = sim.sutures;
+  const ContinuumMesh& c = sim.wound.continuum;
+  const auto x = [&](int n) -> Eigen::Vector3d {
+    return (c.mesh.nodes.row(n) + sim.result.displacement_mm.row(n)).transpose();
+  };
+  std::vector<Eigen::Vector3d> reported;
+  for (const auto* row : {&s.sutures, &s.compressive})
+    for (const SutureStitch& t : *row) reported.push_back(t.position_mm);
+  double worst = 0;
+  int pairs = 0;
+  for (const SuturePair& q : c.mesh.sutures) {
+    const int k = skin_of(c, q.a);
+    ASSERT_GE(k, 0);
+    double nearest = 1e300;
+    for (const auto& r : reported) nearest = std::min(nearest, (x(k) - r).norm());
+    worst = std::max(worst, nearest);
+  }
+  for (const auto* row : {&s.sutures, &s.compressive})
+    for (const SutureStitch& t : *row) pairs += t.n_pairs;
+  std::printf("Z-plasty 20 mm, 60 deg: wound %.1f mm, %zu sutures (+%zu pressed shut), every "
+              "sutured column within %.2f mm of one\n", s.wound_length_mm, s.sutures.size(),
+              s.compressive.size(), worst);
+  EXPECT_EQ(pairs, static_cast<int>(c.mesh.sutures.size()));
+  EXPECT_LE(worst, s.spacing_mm);
+  EXPECT_GT(s.wound_length_mm, 2.7 * L);
+  EXPECT_LT(s.wound_length_mm, 3.6 * L);
+  EXPECT_GE(s.sutures.size() + s.compressive.size(), static_cast<std::size_t>(2.7 * L / s.spacing_mm));
+}
+
+// A suture cannot push. Quadratic elements' consistent nodal forces make single pairs push where
+// the wound is pulled shut, so at a 1 mm spacing some sutures' pairs push in sum: they are
+// reported apart and are in no total, maximum, mean or force per mm; with the tensile sutures
+// they add up to the solver's net force across the wound.
+TEST(SutureSpacing, CompressiveSuturesAreReportedApartAndInNoTotal) {
+  const PatientModel model = constant_cylinder();
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("z-plasty", {{"length", 20.0}}), model, 0.0, 40.0, 0.0);
+  SimulateOptions o;
+  o.surface.size_mm = 2.5;
+  o.surface.extent_mm = 40;
+  o.suture_spacing_mm = 1.0;
+  const Simulation sim = simulate(model, p, o);
+  const SutureSpacing& s = sim.sutures;
+  ASSERT_FALSE(s.compressive.empty());
+  double tensile = 0, pushing = 0, max = 0;
+  for (const SutureStitch& t : s.sutures) {
+    EXPECT_GE(t.force_n, 0.0);
+    tensile += t.force_n;
+    max = std::max(max, t.force_n);
+  }
+  for (const SutureStitch& t : s.compressive) {
+    EXPECT_LT(t.force_n, 0.0);
+    pushing += t.force_n;
+  }
+  std::printf("Z-plasty at 1 mm: %zu sutures pull %.3f N, %zu push %.3f N, net %.3f N\n",
+              s.sutures.size(), tensile, s.compressive.size(), pushing,
+              sim.result.total_suture_force_n);
+  EXPECT_NEAR(s.total_force_n, tensile, 1e-12);
+  EXPECT_NEAR(s.compressive_force_n, pushing, 1e-12);
+  EXPECT_EQ(s.max_suture_force_n, max);
+  EXPECT_NEAR(s.mean_suture_force_n, tensile / static_cast<double>(s.sutures.size()), 1e-12);
+  EXPECT_NEAR(s.force_per_mm_n, tensile / s.wound_length_mm, 1e-12);
+  EXPECT_NEAR(tensile + pushing, sim.result.total_suture_force_n,
+              1e-9 * std::abs(sim.result.total_suture_force_n));
 }
 
 // The Z-plasty transposes its flaps (paper Figure 2): flap 0's tip (loop point 1) meets the end

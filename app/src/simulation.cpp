@@ -170,12 +170,30 @@ AxisLengthening axis_lengthening(const Eigen::MatrixX3d& pre, const Eigen::Matri
   return {hi - lo, far - near};
 }
 
+CornerLengthening corner_lengthening(const Eigen::MatrixX3d& pre, const Eigen::MatrixX3d& post,
+                                     const std::vector<std::array<int, 4>>& sutures) {
+  if (post.rows() != pre.rows())
+    throw InvalidInput(cat("corner lengthening: ", pre.rows(), " loop nodes before and ",
+                           post.rows(), " after closure; give the same nodes"));
+  std::vector<int> corners;
+  for (const auto& q : sutures)
+    for (const int c : {q[0] == q[2] ? q[0] : -1, q[1] == q[3] ? q[1] : -1})
+      if (c >= 0 && c < pre.rows() && std::find(corners.begin(), corners.end(), c) == corners.end())
+        corners.push_back(c);
+  std::sort(corners.begin(), corners.end());
+  CornerLengthening out;
+  for (std::size_t i = 0; i < corners.size(); ++i)
+    for (std::size_t j = i + 1; j < corners.size(); ++j) {
+      const double d = (pre.row(corners[i]) - pre.row(corners[j])).norm();
+      if (d > out.before_mm) out = {d, (post.row(corners[i]) - post.row(corners[j])).norm(), corners[i], corners[j]};
+    }
+  return out;
+}
+
 namespace {
 
-// The simulation's lengthening along its plan's axis (the frame's x, the orientation, as the
-// tangent at the plan's centre).
-AxisLengthening plan_lengthening(const fem::Simulation& sim, const plan::Plan& plan,
-                                 const PatientModel& model) {
+// The loop nodes' skin positions before and after the closure (#L×3 each, LPS mm).
+std::pair<Eigen::MatrixX3d, Eigen::MatrixX3d> loop_positions(const fem::Simulation& sim) {
   const std::vector<int>& loop = sim.wound.surface.loop_vertex;
   const fem::Mesh& mesh = sim.wound.continuum.mesh;
   Eigen::MatrixX3d pre(static_cast<Eigen::Index>(loop.size()), 3), post(pre.rows(), 3);
@@ -184,6 +202,14 @@ AxisLengthening plan_lengthening(const fem::Simulation& sim, const plan::Plan& p
     pre.row(static_cast<Eigen::Index>(i)) = mesh.nodes.row(n);
     post.row(static_cast<Eigen::Index>(i)) = mesh.nodes.row(n) + sim.result.displacement_mm.row(n);
   }
+  return {pre, post};
+}
+
+// The simulation's lengthening along its plan's axis (the frame's x, the orientation, as the
+// tangent at the plan's centre).
+AxisLengthening plan_lengthening(const fem::Simulation& sim, const plan::Plan& plan,
+                                 const PatientModel& model) {
+  const auto [pre, post] = loop_positions(sim);
   const auto on_skin = [&](double x_mm) {
     const Eigen::Vector2d tz = plan.frame.to_theta_z(Eigen::Vector2d(x_mm, 0));
     return model.skin_point(tz[0], tz[1]);
@@ -249,9 +275,22 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   s.max_force_per_suture_n = sim.sutures.max_suture_force_n;
   s.force_per_mm_n = sim.sutures.force_per_mm_n;
   s.wound_length_mm = sim.sutures.wound_length_mm;
+  s.sutures_total_force_n = sim.sutures.total_force_n;
+  s.compressive_sutures = static_cast<int>(sim.sutures.compressive.size());
+  s.compressive_force_n = sim.sutures.compressive_force_n;
   const AxisLengthening lengthening = plan_lengthening(sim, plan, model);
   s.axis_length_before_mm = lengthening.before_mm;
   s.axis_length_after_mm = lengthening.after_mm;
+  const auto [pre, post] = loop_positions(sim);
+  const CornerLengthening corners = corner_lengthening(pre, post, sim.wound.surface.sutures);
+  s.corner_length_before_mm = corners.before_mm;
+  s.corner_length_after_mm = corners.after_mm;
+  s.corner_a = corners.corner_a;
+  s.corner_b = corners.corner_b;
+  if (corners.corner_a < 0) {  // no two closed corners: the headline is the axis projection
+    s.corner_length_before_mm = s.axis_length_before_mm;
+    s.corner_length_after_mm = s.axis_length_after_mm;
+  }
   s.solve_s = res.timings.total_s;
   return s;
 }
@@ -260,7 +299,12 @@ std::string summary(const SimulateResult& s) {
   return cat("caps simulate: ", s.elements, " elements, closing force ",
              round_to(s.closing_force_n, 2), " N (", s.sutures, " sutures every ",
              round_to(s.suture_spacing_mm, 1), " mm: up to ", round_to(s.max_force_per_suture_n, 2),
-             " N each; ", round_to(s.force_per_mm_n, 3), " N per mm of wound), max displacement ",
+             " N each; ", round_to(s.force_per_mm_n, 3), " N per mm of wound",
+             s.compressive_sutures > 0
+                 ? cat("; ", s.compressive_sutures, " more pressed shut, ",
+                       round_to(-s.compressive_force_n, 2), " N of compression")
+                 : std::string(),
+             "), max displacement ",
              round_to(s.max_displacement_mm, 2), " mm, suture gap after closure ",
              s.max_suture_gap_mm < 1e-6 ? std::string("0") : cat(round_sig(s.max_suture_gap_mm, 2)),
              " mm",

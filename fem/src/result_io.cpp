@@ -71,17 +71,24 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
   j["total_suture_force_n"] = r.total_suture_force_n;
   j["sum_suture_magnitudes_n"] = r.sum_suture_magnitudes_n;
   if (sutures) {
-    nlohmann::json row = nlohmann::json::array();
-    for (const SutureStitch& s : sutures->sutures)
-      row.push_back({{"position_mm", {s.position_mm.x(), s.position_mm.y(), s.position_mm.z()}},
-                     {"force_n", s.force_n}, {"pairs", s.n_pairs}});
+    const auto stitches = [](const std::vector<SutureStitch>& v) {
+      nlohmann::json row = nlohmann::json::array();
+      for (const SutureStitch& s : v)
+        row.push_back({{"position_mm", {s.position_mm.x(), s.position_mm.y(), s.position_mm.z()}},
+                       {"force_n", s.force_n}, {"pairs", s.n_pairs}});
+      return row;
+    };
     j["sutures_at_spacing"] = {{"spacing_mm", sutures->spacing_mm},
                                {"wound_length_mm", sutures->wound_length_mm},
                                {"n_sutures", sutures->sutures.size()},
+                               {"total_force_n", sutures->total_force_n},
                                {"max_suture_force_n", sutures->max_suture_force_n},
                                {"mean_suture_force_n", sutures->mean_suture_force_n},
                                {"force_per_mm_n", sutures->force_per_mm_n},
-                               {"sutures", row}};
+                               {"sutures", stitches(sutures->sutures)},
+                               {"n_compressive", sutures->compressive.size()},
+                               {"compressive_force_n", sutures->compressive_force_n},
+                               {"compressive", stitches(sutures->compressive)}};
   }
   j["suture_forces"] = nlohmann::json::array();
   for (const SutureForce& s : r.suture_forces)

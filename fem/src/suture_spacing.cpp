@@ -12,18 +12,40 @@ namespace caps::fem {
 
 namespace {
 
+// The skin node of node n's column: up the column (the same (theta, z), a lower level) through
+// the elements n belongs to, to level 0. A column is not found by its (theta, z) alone: the two
+// lips of a cut have columns at the same (theta, z), and a Z's lips are sewn to different places.
+int column_skin_node(const ContinuumMesh& cm, const std::vector<std::vector<int>>& elements_of,
+                     int n) {
+  const Mesh& mesh = cm.mesh;
+  while (cm.node_level[n] > 0) {
+    int up = -1;
+    for (int e : elements_of[static_cast<std::size_t>(n)]) {
+      const Element& el = mesh.elements[static_cast<std::size_t>(e)];
+      for (int k = 0; k < el.n_nodes(); ++k)
+        if (const int m = el.nodes[static_cast<std::size_t>(k)];
+            cm.node_theta_z.row(m) == cm.node_theta_z.row(n) &&
+            cm.node_level[m] < cm.node_level[n] && (up < 0 || cm.node_level[m] < cm.node_level[up]))
+          up = m;
+    }
+    if (up < 0) break;  // not a column of the continuum mesher: the node itself
+    n = up;
+  }
+  return n;
+}
+
 // The closed skin sites: for each suture pair, the deformed position of the skin node of its
-// first node's column (its column: the same (theta, z); the skin: level 0).
+// first node's column.
 std::vector<Eigen::Vector3d> pair_sites(const ContinuumMesh& cm, const Eigen::MatrixX3d& u) {
   const Mesh& mesh = cm.mesh;
-  std::map<std::pair<double, double>, int> skin_of_column;
-  for (Eigen::Index n = 0; n < mesh.n_nodes(); ++n)
-    if (cm.node_level[n] == 0)
-      skin_of_column[{cm.node_theta_z(n, 0), cm.node_theta_z(n, 1)}] = static_cast<int>(n);
+  std::vector<std::vector<int>> elements_of(static_cast<std::size_t>(mesh.n_nodes()));
+  for (std::size_t e = 0; e < mesh.elements.size(); ++e)
+    for (int k = 0; k < mesh.elements[e].n_nodes(); ++k)
+      elements_of[static_cast<std::size_t>(mesh.elements[e].nodes[static_cast<std::size_t>(k)])]
+          .push_back(static_cast<int>(e));
   std::vector<Eigen::Vector3d> site;
   for (const auto& s : mesh.sutures) {
-    const auto it = skin_of_column.find({cm.node_theta_z(s.a, 0), cm.node_theta_z(s.a, 1)});
-    const int n = it == skin_of_column.end() ? s.a : it->second;
+    const int n = column_skin_node(cm, elements_of, s.a);
     site.push_back(mesh.nodes.row(n).transpose() + u.row(n).transpose());
   }
   return site;
@@ -102,20 +124,29 @@ SutureSpacing suture_spacing(const ContinuumMesh& cm, const SolveResult& r, doub
     if (next == sites.size()) break;
     centres.push_back(sites[next]);
   }
-  out.sutures.resize(centres.size());
-  for (std::size_t c = 0; c < centres.size(); ++c) out.sutures[c].position_mm = centres[c];
+  std::vector<SutureStitch> row(centres.size());
+  for (std::size_t c = 0; c < centres.size(); ++c) row[c].position_mm = centres[c];
   for (std::size_t k = 0; k < site.size(); ++k) {
     std::size_t best = 0;
     for (std::size_t c = 1; c < centres.size(); ++c)
       if ((site[k] - centres[c]).norm() < (site[k] - centres[best]).norm()) best = c;
-    out.sutures[best].force_n += closing[k];
-    out.sutures[best].n_pairs += 1;
+    row[best].force_n += closing[k];
+    row[best].n_pairs += 1;
   }
-  for (const auto& s : out.sutures) {
+  // A suture cannot push: one whose pairs push the lips apart in sum is reported apart, in no
+  // total (the tissue there is pressed together; contact, not the suture, carries it).
+  for (const SutureStitch& s : row) {
+    if (s.force_n < 0) {
+      out.compressive.push_back(s);
+      out.compressive_force_n += s.force_n;
+      continue;
+    }
+    out.sutures.push_back(s);
     out.total_force_n += s.force_n;
     out.max_suture_force_n = std::max(out.max_suture_force_n, s.force_n);
   }
-  out.mean_suture_force_n = out.total_force_n / static_cast<double>(out.sutures.size());
+  if (!out.sutures.empty())
+    out.mean_suture_force_n = out.total_force_n / static_cast<double>(out.sutures.size());
   out.force_per_mm_n = out.wound_length_mm > 0 ? out.total_force_n / out.wound_length_mm : 0.0;
   return out;
 }

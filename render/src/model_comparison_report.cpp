@@ -203,7 +203,10 @@ void write_model_comparison_report(const fem::ModelComparison& c,
   using S = fem::SimulationSummary;
   std::string table = "<table>" + head +
       row("closing force across the wound", "N", [](const S& s) { return s.closing_force_n; }) +
-      row("largest force on one suture pair", "N", [](const S& s) { return s.max_suture_force_n; }) +
+      row("largest force on one suture (sutures every " + fmt(c.sides[0].simulation.sutures.spacing_mm, 1) +
+          " mm, as caps simulate)", "N", [](const S& s) { return s.max_suture_at_spacing_n; }) +
+      row("largest force on one nodal suture pair (one node of one depth)", "N",
+          [](const S& s) { return s.max_suture_force_n; }) +
       row("peak skin tension (max principal stress)", "kPa", [](const S& s) { return s.max_skin_tension_kpa; }, 1) +
       row("largest skin displacement", "mm", [](const S& s) { return s.max_displacement_mm; }) +
       row("mean skin displacement near the wound", "mm", [](const S& s) { return s.mean_displacement_mm; }) +

@@ -137,12 +137,18 @@ void write_comparison_report(const fem::Comparison& c, const PatientModel& model
   const auto& a = c.measured_summary;
   const auto& b = c.constant_summary;
   const auto& l = c.layered_summary;
+  // The two differences: measured against the constant thickness, and the measured layers
+  // against the measured thickness (one material), each relative to the second.
   auto row = [&](const std::string& what, const std::string& unit, double x, double y, double z,
                  int d = 2) {
-    const std::string diff = y != 0 ? fmt(100.0 * (x - y) / std::abs(y), 1) + " %" : "";
+    const auto percent = [](double p, double q) {
+      return q != 0 ? fmt(100.0 * (p - q) / std::abs(q), 1) + " %" : std::string();
+    };
     return "<tr><td>" + what + "</td><td>" + unit + "</td><td>" + fmt(x, d) + "</td><td>" +
-           fmt(y, d) + "</td><td>" + fmt(z, d) + "</td><td>" + diff + "</td></tr>\n";
+           fmt(y, d) + "</td><td>" + fmt(z, d) + "</td><td>" + percent(x, y) + "</td><td>" +
+           percent(z, x) + "</td></tr>\n";
   };
+  const std::string spacing = fmt(c.measured.sutures.spacing_mm, 1);
   // One picture per column: measured thickness, constant thickness, measured layers.
   auto pair = [&](const std::string& title, const std::string& image) {
     std::string out = "<h2>" + title + "</h2>\n<div class=\"pair\">";
@@ -173,7 +179,8 @@ void write_comparison_report(const fem::Comparison& c, const PatientModel& model
       "material model and the wound closed by suture constraints: docs/fem.md.</p>\n" +
       warnings_html(c.warnings) +
       "<table><tr><th>quantity</th><th>unit</th><th>measured</th><th>constant</th><th>" +
-      layers_label + "</th><th>measured vs constant</th></tr>\n" +
+      layers_label + "</th><th>measured vs constant</th><th>" + layers_label +
+      " vs measured</th></tr>\n" +
       row("thickness under the wound, mean", "mm", a.thickness_mean_mm, b.thickness_mean_mm,
           l.thickness_mean_mm) +
       row("thickness under the wound, min", "mm", a.thickness_min_mm, b.thickness_min_mm,
@@ -186,8 +193,10 @@ void write_comparison_report(const fem::Comparison& c, const PatientModel& model
           b.mean_displacement_mm, l.mean_displacement_mm) +
       row("closing force across the wound", "N", a.closing_force_n, b.closing_force_n,
           l.closing_force_n) +
-      row("largest force on one suture pair", "N", a.max_suture_force_n, b.max_suture_force_n,
-          l.max_suture_force_n) +
+      row("largest force on one suture (sutures every " + spacing + " mm, as caps simulate)",
+          "N", a.max_suture_at_spacing_n, b.max_suture_at_spacing_n, l.max_suture_at_spacing_n) +
+      row("largest force on one nodal suture pair (one node of one depth)", "N",
+          a.max_suture_force_n, b.max_suture_force_n, l.max_suture_force_n) +
       row("largest skin tension (max principal stress)", "kPa", a.max_skin_tension_kpa,
           b.max_skin_tension_kpa, l.max_skin_tension_kpa, 1) +
       row("strain energy", "mJ", a.strain_energy_mj, b.strain_energy_mj, l.strain_energy_mj) +

@@ -163,7 +163,7 @@ export class Results {
       ['Force per mm of wound', `${fmt(s.force_per_mm_n, 3)} N/mm over ${fmt(s.wound_length_mm, 1)} mm`],
       ['Skin tension (99th percentile)', `${fmt(row.view.tension_scale_max_kpa, 1)} kPa`],
       ['Largest displacement', `${fmt(r.max_displacement_mm)} mm`],
-      ['Lengthening along the plan\'s axis', `${fmt(r.lengthening?.mm, 1)} mm (${fmt(r.lengthening?.percent, 0)} %: ${fmt(r.lengthening?.axis_before_mm, 1)} → ${fmt(r.lengthening?.axis_after_mm, 1)} mm)`],
+      ['Lengthening (corner to corner)', `${fmt(r.lengthening?.mm, 1)} mm (${fmt(r.lengthening?.percent, 0)} %: ${fmt(r.lengthening?.before_mm, 1)} → ${fmt(r.lengthening?.after_mm, 1)} mm between the ${escapeHtml(r.lengthening?.between ?? '')})`],
       ['Excised area', `${fmt(row.view.wound_area_mm2?.pre, 1)} mm²`],
       ['Model', `${r.elements} elements, ${escapeHtml(r.material)}`],
     ].map(([k, v]) => `<tr><th>${k}</th><td>${v}</td></tr>`).join('');
@@ -279,7 +279,7 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
         <td class="closing">${fmt(r.closing_force_n)}</td>
         <td class="largest">${fmt(r.sutures_at_spacing?.max_force_per_suture_n)}</td>
         <td>${fmt(row.view.tension_scale_max_kpa, 1)}</td>
-        <td class="lengthening" title="along the plan's axis: ${fmt(r.lengthening?.axis_before_mm, 1)} → ${fmt(r.lengthening?.axis_after_mm, 1)} mm">${fmt(r.lengthening?.mm, 1)}<br>${fmt(r.lengthening?.percent, 0)} %</td>
+        <td class="lengthening" title="between the ${escapeHtml(r.lengthening?.between ?? '')}: ${fmt(r.lengthening?.before_mm, 1)} → ${fmt(r.lengthening?.after_mm, 1)} mm">${fmt(r.lengthening?.mm, 1)}<br>${fmt(r.lengthening?.percent, 0)} %</td>
         <td>${fmt(row.view.wound_area_mm2?.pre, 1)}</td>
         <td><button data-show="0" title="Show in view A">A</button><button data-show="1" title="Show in view B">B</button></td>`;
       tr.querySelectorAll('button').forEach((b) =>

@@ -4,11 +4,13 @@
 /// Every request lists its fields once (see fields.hpp); defaults come from the library's
 /// options structs (fem::SurfaceMeshOptions, fem::ContinuumMeshOptions, fem::SolveOptions).
 
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "caps/app/fields.hpp"
+#include "caps/core/error.hpp"
 #include "caps/core/reporter.hpp"
 #include "caps/fem/simulate.hpp"
 
@@ -216,8 +218,18 @@ struct SimulateResult {
   double suture_spacing_mm = 0, max_force_per_suture_n = 0, force_per_mm_n = 0,
          wound_length_mm = 0;
   int sutures = 0;
-  /// The wound's length along the plan's axis before and after closure (axis_lengthening(); for
-  /// a Z-plasty the central limb and the gain the transposition gives), mm.
+  /// The tensile sutures' total; the sutures whose pairs push in sum (reported apart, in no
+  /// total) and their sum (<= 0), N. The two add up to closing_force_n, the net force.
+  double sutures_total_force_n = 0, compressive_force_n = 0;
+  int compressive_sutures = 0;
+  /// The headline lengthening (corner_lengthening()): the distance between the wound's two
+  /// closed corners farthest apart (loop nodes corner_a, corner_b), before and after closure, mm;
+  /// a Z-plasty's central limb, corner to corner: its gain as surgeons measure it. Without two
+  /// closed corners (corner_a < 0) the axis projection below.
+  double corner_length_before_mm = 0, corner_length_after_mm = 0;
+  int corner_a = -1, corner_b = -1;
+  /// The wound's length projected on the plan's axis before and after closure
+  /// (axis_lengthening(): `lengthening.axis_projection`; not the gain), mm.
   double axis_length_before_mm = 0, axis_length_after_mm = 0;
   std::vector<std::string> images;  ///< with render
   std::vector<std::string> warnings;
@@ -239,14 +251,32 @@ struct SimulateResult {
       v(r.max_force_per_suture_n, {"max_force_per_suture_n"});
       v(r.force_per_mm_n, {"force_per_mm_n"});
       v(r.wound_length_mm, {"wound_length_mm"});
+      v(r.sutures_total_force_n, {"total_force_n", "the pulling sutures' forces added (N)"});
+      v(r.compressive_sutures, {"compressive_sutures", "sutures whose pairs push in sum"});
+      v(r.compressive_force_n, {"compressive_force_n", "their forces added (N, <= 0)"});
     });
     v(r.strain_energy_mj, {"strain_energy_mj"});
-    v.group({"lengthening", "the wound's length along the plan's axis (axis_lengthening())"}, [&] {
-      v(r.axis_length_before_mm, {"axis_before_mm"});
-      v(r.axis_length_after_mm, {"axis_after_mm"});
-      v.computed({"mm"}, [&] { return r.axis_length_after_mm - r.axis_length_before_mm; });
+    v.group({"lengthening", "the gain: the distance between the wound's two closed corners "
+                            "(corner_lengthening()), else the axis projection"}, [&] {
+      v.computed({"between"}, [&] {
+        return r.corner_a >= 0 ? cat("closed corners ", r.corner_a, " and ", r.corner_b)
+                               : std::string("the wound's ends along the plan's axis");
+      });
+      v.pair(r.corner_a, r.corner_b, {"corners", "the two closed corners' loop nodes (-1: none)"});
+      v(r.corner_length_before_mm, {"before_mm"});
+      v(r.corner_length_after_mm, {"after_mm"});
+      v.computed({"mm"}, [&] { return r.corner_length_after_mm - r.corner_length_before_mm; });
       v.computed({"percent"}, [&] {
-        return AxisLengthening{r.axis_length_before_mm, r.axis_length_after_mm}.change_percent();
+        return AxisLengthening{r.corner_length_before_mm, r.corner_length_after_mm}.change_percent();
+      });
+      v.group({"axis_projection", "the wound's length projected on the plan's axis "
+                                  "(axis_lengthening()): not the gain"}, [&] {
+        v(r.axis_length_before_mm, {"before_mm"});
+        v(r.axis_length_after_mm, {"after_mm"});
+        v.computed({"mm"}, [&] { return r.axis_length_after_mm - r.axis_length_before_mm; });
+        v.computed({"percent"}, [&] {
+          return AxisLengthening{r.axis_length_before_mm, r.axis_length_after_mm}.change_percent();
+        });
       });
     });
     v(r.material, {"material"});
@@ -273,6 +303,22 @@ struct SimulateResult {
 /// @param post  #L×3 the same nodes after closure (LPS mm)
 AxisLengthening axis_lengthening(const Eigen::MatrixX3d& pre, const Eigen::MatrixX3d& post,
                                  const Eigen::Vector3d& axis);
+
+/// The distance between a wound's two closed corners farthest apart, before and after closure:
+/// the corners are the loop nodes both runs of a suture share (a == c or b == d of the
+/// fem::WoundBorder quadruples (a, b, c, d)). A Z-plasty has two, the ends of its central limb
+/// on the lips that stay (loop 5 and 2; the flap tips 1 and 4 swing across), so this is its
+/// central limb's length corner to corner, and the change its gain (a 60 deg Z with rigid flaps:
+/// sqrt(5 - 4 cos 60) - 1 = 73 %); a multiple Z's, its whole central line's. Returns before =
+/// after = 0 and corners -1 without two corners.
+/// @param pre   #L×3 loop node positions before closure (LPS mm)
+/// @param post  #L×3 the same nodes after closure (LPS mm)
+struct CornerLengthening {
+  double before_mm = 0, after_mm = 0;
+  int corner_a = -1, corner_b = -1;  ///< loop nodes, corner_a < corner_b
+};
+CornerLengthening corner_lengthening(const Eigen::MatrixX3d& pre, const Eigen::MatrixX3d& post,
+                                     const std::vector<std::array<int, 4>>& sutures);
 
 /// Meshes the plan on the model and solves the closure into `output`: the files of caps mesh
 /// and caps solve (result.json carries the warnings), and with `render` the images.
