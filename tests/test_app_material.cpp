@@ -59,7 +59,7 @@ TEST(AppMaterials, MaterialPicksTheKinematicsAndTheSkinsMaterialAndParamsSetEach
   EXPECT_EQ(fem::parameters_of(*goh.continuum.dermis).at("kappa"), 0.1);
   EXPECT_EQ(fem::parameters_of(*goh.continuum.fat), (fem::MaterialParameters{{"E", 0.004}, {"nu", 0.45}}));
   // Refusals name the option and what to give.
-  EXPECT_NE(error_of([] { app::simulate_options({}, with("rubber")); }).find("{material} 'rubber' is unknown"),
+  EXPECT_NE(error_of([] { app::simulate_options({}, with("rubber")); }).find("material 'rubber' is unknown"),
             std::string::npos);
   EXPECT_NE(error_of([] { app::simulate_options({}, with("neo-hookean", "dermis.E")); })
                 .find("give LAYER.NAME=VALUE"),
@@ -71,7 +71,7 @@ TEST(AppMaterials, MaterialPicksTheKinematicsAndTheSkinsMaterialAndParamsSetEach
                 .find("the layers are skin"),
             std::string::npos);
   EXPECT_NE(error_of([] { app::simulate_options({}, with("neo-hookean", "dermis.k1=5")); })
-                .find("{material_params} dermis: neo-hookean has no parameter 'k1'"),
+                .find("material_params dermis: neo-hookean has no parameter 'k1'"),
             std::string::npos);
 }
 
@@ -80,6 +80,7 @@ TEST(AppMaterials, ASolveRecordsTheMaterialItWasGivenInResultJson) {
   // recorded as goh (it was recorded as "kinematics": "neo-hookean" and no material).
   const fs::path dir = fs::temp_directory_path() / "caps_test_app_material";
   fs::remove_all(dir);
+  fs::create_directories(dir);
   app::BoxRequest box;
   box.output = (dir / "mesh").string();
   box.box_size = "30,20,6";
