@@ -168,7 +168,12 @@ TEST(GasserOgdenHolzapfel, StressAndTangentAreDerivativesOfTheEnergy) {
   iso.stress_and_tangent_in_layer(F - Eigen::Matrix3d::Identity(), Eigen::Vector3d::UnitX(), S2, C);
   EXPECT_LT((S1 - S2).cwiseAbs().maxCoeff(), 1e-12 * S1.cwiseAbs().maxCoeff());
   // Declared and checked parameters.
-  EXPECT_EQ(m.parameters().size(), 6u);
+  ASSERT_EQ(m.parameters().size(), 9u);  // mu K k1 k2 kappa gamma, the fibre direction normalised
+  EXPECT_EQ(m.parameters()[6].name, "fibre_x");
+  const Eigen::Vector3d langer = Eigen::Vector3d(1, 0.3, 0).normalized();
+  EXPECT_EQ(m.values()[6], langer.x());
+  EXPECT_EQ(m.values()[7], langer.y());
+  EXPECT_EQ(m.values()[8], langer.z());
   EXPECT_THROW(GasserOgdenHolzapfel(0.05, 0.24, 4.97, 2.88, 0.4, 0.0, Eigen::Vector3d::UnitX()), InvalidInput);
   EXPECT_THROW(GasserOgdenHolzapfel(0.05, 0.01, 4.97, 2.88, 0.1, 0.0, Eigen::Vector3d::UnitX()), InvalidInput);
   EXPECT_THROW(GasserOgdenHolzapfel(0.05, 0.24, 4.97, 2.88, 0.1, 0.0, Eigen::Vector3d::Zero()), InvalidInput);
