@@ -46,17 +46,21 @@ TEST(AppMaterials, MaterialPicksTheKinematicsAndTheSkinsMaterialAndParamsSetEach
   for (const auto& m : {lin.continuum.material, lin.continuum.dermis, lin.continuum.fat, lin.continuum.deep})
     EXPECT_EQ(m->name(), "linear");
   EXPECT_EQ(fem::parameters_of(*lin.continuum.fat), fem::parameters_of(*fem::default_fat()));
-  // goh: the skin (uniform model) and the dermis (measured layers) get the porcine-skin preset,
-  // fat and deep tissue stay neo-Hookean.
+  // goh: the skin's surface layer (element layer 0: the measured dermis, the uniform model's top
+  // element layer) gets the porcine-skin preset, the tissue below stays neo-Hookean; skin and
+  // dermis parameters are the goh layer's.
   const fem::SimulateOptions goh = app::simulate_options({}, with("goh", "skin.k1=5, dermis.kappa=0.1,fat.E=0.004"));
   EXPECT_EQ(goh.solve.kinematics, fem::Kinematics::Finite);
-  EXPECT_EQ(goh.continuum.material->name(), "goh");
-  EXPECT_EQ(goh.continuum.dermis->name(), "goh");
+  EXPECT_EQ(goh.continuum.material, fem::default_skin());
+  EXPECT_EQ(goh.continuum.dermis, fem::default_dermis());
   EXPECT_EQ(goh.continuum.deep, fem::default_deep());
+  ASSERT_TRUE(goh.continuum.surface_material);
   auto expected = fem::parameters_of(*fem::default_goh_skin());
   expected["k1"] = 5;
-  EXPECT_EQ(fem::parameters_of(*goh.continuum.material), expected);
-  EXPECT_EQ(fem::parameters_of(*goh.continuum.dermis).at("kappa"), 0.1);
+  expected["kappa"] = 0.1;
+  EXPECT_EQ(goh.continuum.surface_material->name(), "goh");
+  EXPECT_EQ(fem::parameters_of(*goh.continuum.surface_material), expected);
+  EXPECT_FALSE(neo.continuum.surface_material);
   EXPECT_EQ(fem::parameters_of(*goh.continuum.fat), (fem::MaterialParameters{{"E", 0.004}, {"nu", 0.45}}));
   // Refusals name the option and what to give.
   EXPECT_NE(error_of([] { app::simulate_options({}, with("rubber")); }).find("material 'rubber' is unknown"),

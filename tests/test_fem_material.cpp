@@ -14,6 +14,7 @@
 #include "caps/fem/box.hpp"
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/material_registry.hpp"
+#include "caps/fem/mesh_io.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/fem/solve.hpp"
 
@@ -209,5 +210,22 @@ TEST(MaterialPresets, AMissingOrBadFileIsAClearError) {
   EXPECT_NE(error_of([] { data_dir(); }).find("has no materials/ folder (from CAPS_DATA_DIR)"), std::string::npos);
   ASSERT_EQ(unsetenv("CAPS_DATA_DIR"), 0);
   EXPECT_NO_THROW(preset_material("skin"));
+  fs::remove_all(dir);
+}
+
+TEST(MaterialRegistry, AMeshDirectoryOfTheOldFormatReadsItsConstantsAsTheNeoHookeanSolid) {
+  // Before materials were named, mesh.json had {"layer", "model": "linear_elastic", "E_kpa",
+  // "nu"}: constants both solves used (the finite-strain one as the neo-Hookean solid).
+  const fs::path dir = fs::temp_directory_path() / "caps_test_fem_material_old_mesh";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  write_mesh_dir(pulled_cube(default_skin(), 1e-3), dir);
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(dir / "mesh.json"));
+  ASSERT_EQ(j["materials"][0]["material"], "neo-hookean");
+  j["materials"] = nlohmann::json::array({{{"layer", 0}, {"model", "linear_elastic"}, {"E_kpa", 50.0}, {"nu", 0.4}}});
+  std::ofstream(dir / "mesh.json") << j.dump();
+  const Mesh back = read_mesh_dir(dir);
+  EXPECT_EQ(back.materials.at(0)->name(), "neo-hookean");
+  EXPECT_EQ(parameters_of(*back.materials.at(0)), (MaterialParameters{{"E", 0.05}, {"nu", 0.4}}));
   fs::remove_all(dir);
 }

@@ -82,10 +82,12 @@ std::shared_ptr<const fem::Material> from_option(F&& make) {
 }
 
 // The material kind --material gives the layers: linear and neo-hookean keep each layer's
-// parameters (E, nu), goh is the preset porcine skin with fibres along the patient's left-right.
+// parameters (E, nu); goh (the preset porcine skin, fibres along the patient's left-right) is
+// the skin's surface layer's alone (fem::ContinuumMeshOptions::surface_material), the others
+// keep theirs.
 std::shared_ptr<const fem::Material> as_chosen(const std::shared_ptr<const fem::Material>& m,
-                                               const std::string& material, bool skin) {
-  if (material == "goh") return skin ? fem::default_goh_skin() : m;
+                                               const std::string& material, bool surface) {
+  if (material == "goh") return surface ? fem::default_goh_skin() : m;
   if (m->name() == material) return m;
   return from_option([&] { return fem::make_material(material, fem::parameters_of(*m), cat("{material} ", material)); });
 }
@@ -101,12 +103,16 @@ void set_materials(fem::SimulateOptions& o, const SolverFields& s) {
   check_material(s.material);
   o.solve.kinematics = s.material == "linear" ? fem::Kinematics::Linear : fem::Kinematics::Finite;
   auto& c = o.continuum;
-  c.material = as_chosen(c.material, s.material, true);
-  c.dermis = as_chosen(c.dermis, s.material, true);
-  c.fat = as_chosen(c.fat, s.material, false);
-  c.deep = as_chosen(c.deep, s.material, false);
+  for (auto* m : {&c.material, &c.dermis, &c.fat, &c.deep}) *m = as_chosen(*m, s.material, false);
+  const bool goh = s.material == "goh";
+  if (goh) c.surface_material = fem::default_goh_skin();
   for (const auto& [layer, changes] : parse_material_params(s.material_params)) {
-    auto& m = layer == "skin" ? c.material : layer == "dermis" ? c.dermis : layer == "fat" ? c.fat : c.deep;
+    // With goh, skin and dermis name the goh surface layer.
+    auto& m = goh && (layer == "skin" || layer == "dermis") ? c.surface_material
+              : layer == "skin"                             ? c.material
+              : layer == "dermis"                           ? c.dermis
+              : layer == "fat"                              ? c.fat
+                                                            : c.deep;
     m = from_option([&] { return fem::with_parameters(*m, changes, cat("{material_params} ", layer)); });
   }
 }
@@ -114,12 +120,14 @@ void set_materials(fem::SimulateOptions& o, const SolverFields& s) {
 void set_materials(fem::Mesh& mesh, const SolverFields& s) {
   check_material(s.material);
   // A mesh directory's layers: its skin is layer 0 and every layer of the same material (all of
-  // a uniform mesh's), dermis, fat and deep are layers 0, 1 and 2 (the measured layers' ids).
+  // a uniform mesh's; with goh, layer 0 alone, the goh layer), dermis, fat and deep are layers
+  // 0, 1 and 2 (the measured layers' ids).
   const fem::Material* top = mesh.materials.count(0) ? mesh.materials.at(0).get() : nullptr;
   const std::string top_json = top ? fem::material_json(*top) : std::string();
   std::map<int, bool> skin;
-  for (const auto& [layer, m] : mesh.materials) skin[layer] = top && fem::material_json(*m) == top_json;
-  for (auto& [layer, m] : mesh.materials) m = as_chosen(m, s.material, skin[layer]);
+  for (const auto& [layer, m] : mesh.materials)
+    skin[layer] = layer == 0 || (s.material != "goh" && top && fem::material_json(*m) == top_json);
+  for (auto& [layer, m] : mesh.materials) m = as_chosen(m, s.material, layer == 0);
   for (const auto& [name, changes] : parse_material_params(s.material_params))
     for (auto& [layer, m] : mesh.materials)
       if (name == "skin" ? skin[layer] : layer == (name == "dermis" ? 0 : name == "fat" ? 1 : 2))

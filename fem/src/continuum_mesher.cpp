@@ -369,6 +369,7 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   } else {
     for (int k = 0; k < NL; ++k) mesh.materials.emplace(k, o.material);
   }
+  if (o.surface_material) mesh.materials[0] = o.surface_material;
   mesh.flaps.assign(surface.flaps_theta_z.size(), {});
   for (std::size_t p = 0; p < surface.polygons.size(); ++p) {
     std::vector<int> v(surface.polygons[p].rbegin(), surface.polygons[p].rend());

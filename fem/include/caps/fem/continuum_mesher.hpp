@@ -104,6 +104,10 @@ struct ContinuumMeshOptions {
   std::shared_ptr<const Material> dermis = default_dermis();
   std::shared_ptr<const Material> fat = default_fat();
   std::shared_ptr<const Material> deep = default_deep();
+  /// When set, the material of element layer 0, the skin's surface (the measured dermis, or the
+  /// uniform model's top element layer), instead of `dermis` or `material`: e.g.
+  /// default_goh_skin(), the fibre-reinforced skin over the neo-Hookean tissue (`--material goh`).
+  std::shared_ptr<const Material> surface_material;
 };
 
 /// The continuum mesh and where its nodes came from.
