@@ -526,9 +526,10 @@ ContinuumAttempt try_mesh_continuum(const SurfaceMesh& surface, const PatientMod
   // without bound as the mesh is refined: docs/fem.md, "The freed base slides").
   if (o.base == BaseCondition::Slide) {
     constexpr double kSlidingStiffness = 1e5;
-    const double E_sliding = measured ? std::max({o.dermis->stiffness_scale_mpa(), o.fat->stiffness_scale_mpa(),
-                                                  o.deep->stiffness_scale_mpa()})
-                                      : o.material->stiffness_scale_mpa();
+    const double E_sliding =
+        measured ? std::max({o.dermis->stiffness_scale_mpa(), o.fat->stiffness_scale_mpa(),
+                             o.deep->stiffness_scale_mpa()})
+                 : o.material->stiffness_scale_mpa();
     // The base's normal at a bottom node: the bottom faces' Newell vectors (area-weighted
     // normals) summed over the faces whose centres lie within kNormalRadiusMm of it (at least
     // the nearest face), turned to point up its column. A fixed radius rather than the node's
