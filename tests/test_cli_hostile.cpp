@@ -731,7 +731,7 @@ TEST_F(HostileModel, JsonFieldsAreCheckedAndNamed) {
        std::vector<std::tuple<std::string, nlohmann::json, std::vector<std::string>>>{
            {"/fixed_nodes/0", 1e300, {"mesh.json", "fixed_nodes[0]", "whole number"}},
            {"/sutures", nlohmann::json::array({{0.5, 1}}), {"mesh.json", "sutures[0][0]"}},
-           {"/materials/0/E_kpa", "soft", {"mesh.json", "/materials/0/E_kpa"}}}) {
+           {"/materials/0/parameters/E", "soft", {"mesh.json", "material of layer 0", "parameter E must be a number"}}}) {
     nlohmann::json j = nlohmann::json::parse(json_text);
     j[nlohmann::json::json_pointer(pointer)] = value;
     write_file(mesh / "mesh.json", j.dump(1));

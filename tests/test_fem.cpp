@@ -15,6 +15,7 @@
 #include "caps/core/units.hpp"
 #include "caps/fem/box.hpp"
 #include "caps/fem/elements.hpp"
+#include "caps/fem/material_registry.hpp"
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/fem/solve.hpp"
@@ -79,7 +80,7 @@ Mesh box(ElementType t, Eigen::Vector3d size, Eigen::Vector3i cells, bool fix_bo
   o.cells = cells;
   o.wedges = t == ElementType::Wedge15;
   o.fix_bottom = fix_bottom;
-  o.material = mat;
+  o.material = std::make_shared<LinearElastic>(mat);
   return make_box_mesh(o);
 }
 
@@ -611,6 +612,7 @@ TEST(FemMeshIo, DirectoryRoundTripsBothElementTypes) {
     o.slot = true;
     Mesh m = make_box_mesh(o);
     m.materials.emplace(1, default_subcutaneous());
+    m.materials[2] = make_material("goh", parameters_of(*default_goh_skin()));  // no elements
     m.elements.back().layer = 1;
     m.fixed_dofs.push_back({static_cast<int>(m.n_nodes()) - 1, 1, 0.25});
     m.loads.push_back({3, Eigen::Vector3d(0.1, 0.2, 0.3)});
@@ -619,7 +621,7 @@ TEST(FemMeshIo, DirectoryRoundTripsBothElementTypes) {
     std::filesystem::remove_all(dir);
     std::filesystem::create_directories(dir);
     write_mesh_dir(m, dir);
-    const Mesh back = read_mesh_dir(dir);
+    Mesh back = read_mesh_dir(dir);
     EXPECT_EQ(back.nodes, m.nodes);
     ASSERT_EQ(back.elements.size(), m.elements.size());
     for (std::size_t e = 0; e < m.elements.size(); ++e) {
@@ -632,7 +634,13 @@ TEST(FemMeshIo, DirectoryRoundTripsBothElementTypes) {
     EXPECT_EQ(back.fixed_dofs.size(), 1u);
     EXPECT_DOUBLE_EQ(back.fixed_dofs[0].value_mm, 0.25);
     EXPECT_EQ(back.loads[0].force_n, m.loads[0].force_n);
-    EXPECT_DOUBLE_EQ(back.materials.at(1).E_mpa(), 0.005);
+    // Each layer's material and parameters come back as written.
+    EXPECT_EQ(back.materials.at(1)->name(), "neo-hookean");
+    EXPECT_EQ(parameters_of(*back.materials.at(1)), (MaterialParameters{{"E", 0.005}, {"nu", 0.45}}));
+    EXPECT_EQ(back.materials.at(2)->name(), "goh");
+    EXPECT_EQ(parameters_of(*back.materials.at(2)), parameters_of(*m.materials.at(2)));
+    EXPECT_EQ(parameters_of(*back.materials.at(0)), parameters_of(*default_skin()));
+    back.materials.erase(2);  // the small-strain solve has no form of goh
     EXPECT_EQ(back.model, "models/p1");
     std::ifstream v(dir / "mesh.vtu");
     std::string text((std::istreambuf_iterator<char>(v)), {});

@@ -19,6 +19,7 @@
 #include "caps/fem/compare.hpp"
 #include "caps/fem/continuum_mesher.hpp"
 #include "caps/fem/inp_io.hpp"
+#include "caps/fem/material_registry.hpp"
 #include "caps/fem/simulate.hpp"
 #include "caps/fem/solve.hpp"
 #include "caps/plan/procedures.hpp"
@@ -115,15 +116,12 @@ TEST(MeasuredLayers, InterfaceNodesLieOnTheLayerMapsDepths) {
   ASSERT_EQ(c.mesh.n_elements(), 3 * n_poly);
   for (std::size_t e = 0; e < c.mesh.n_elements(); ++e) EXPECT_EQ(c.mesh.elements[e].layer, static_cast<int>(e % 3));
   ASSERT_EQ(c.mesh.materials.size(), 3u);
-  EXPECT_DOUBLE_EQ(c.mesh.materials.at(kDermisLayer).E_mpa(), 0.1);
-  EXPECT_DOUBLE_EQ(c.mesh.materials.at(kFatLayer).E_mpa(), 0.003);
-  EXPECT_DOUBLE_EQ(c.mesh.materials.at(kDeepLayer).E_mpa(), 0.02);
-  for (int id : {kDermisLayer, kFatLayer, kDeepLayer}) {
-    const auto* nh = dynamic_cast<const NeoHookean*>(c.mesh.finite_materials.at(id).get());
-    ASSERT_NE(nh, nullptr);
-    EXPECT_DOUBLE_EQ(nh->E_mpa(), c.mesh.materials.at(id).E_mpa());
-    EXPECT_DOUBLE_EQ(nh->nu(), c.mesh.materials.at(id).nu());
-  }
+  // The presets (data/materials/dermis.json, fat.json, deep.json): neo-Hookean solids.
+  EXPECT_EQ(parameters_of(*c.mesh.materials.at(kDermisLayer)), (MaterialParameters{{"E", 0.1}, {"nu", 0.45}}));
+  EXPECT_EQ(parameters_of(*c.mesh.materials.at(kFatLayer)), (MaterialParameters{{"E", 0.003}, {"nu", 0.45}}));
+  EXPECT_EQ(parameters_of(*c.mesh.materials.at(kDeepLayer)), (MaterialParameters{{"E", 0.02}, {"nu", 0.45}}));
+  for (int id : {kDermisLayer, kFatLayer, kDeepLayer})
+    EXPECT_EQ(c.mesh.materials.at(id)->name(), "neo-hookean");
   // Six element layers: two per tissue layer, each halving its tissue layer.
   o.n_layers = 6;
   const WoundMesh w6 = mesh_wound(lens(), model, small_surface(), o);

@@ -21,6 +21,7 @@
 #include "caps/core/error.hpp"
 #include "caps/fem/box.hpp"
 #include "caps/fem/elements.hpp"
+#include "caps/fem/material_registry.hpp"
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/fem/solve.hpp"
@@ -38,7 +39,7 @@ Mesh unit_box(Eigen::Vector3d size, Eigen::Vector3i cells, bool wedges = false) 
   o.cells = cells;
   o.wedges = wedges;
   o.fix_bottom = false;
-  o.material = LinearElastic(kE, kNu);
+  o.material = std::make_shared<NeoHookean>(kE, kNu);
   return make_box_mesh(o);
 }
 
@@ -167,7 +168,12 @@ TEST(GasserOgdenHolzapfel, StressAndTangentAreDerivativesOfTheEnergy) {
   iso.stress_and_tangent_in_layer(F - Eigen::Matrix3d::Identity(), Eigen::Vector3d::UnitX(), S2, C);
   EXPECT_LT((S1 - S2).cwiseAbs().maxCoeff(), 1e-12 * S1.cwiseAbs().maxCoeff());
   // Declared and checked parameters.
-  EXPECT_EQ(m.parameters().size(), 6u);
+  ASSERT_EQ(m.parameters().size(), 9u);  // mu K k1 k2 kappa gamma, the fibre direction normalised
+  EXPECT_EQ(m.parameters()[6].name, "fibre_x");
+  const Eigen::Vector3d langer = Eigen::Vector3d(1, 0.3, 0).normalized();
+  EXPECT_EQ(m.values()[6], langer.x());
+  EXPECT_EQ(m.values()[7], langer.y());
+  EXPECT_EQ(m.values()[8], langer.z());
   EXPECT_THROW(GasserOgdenHolzapfel(0.05, 0.24, 4.97, 2.88, 0.4, 0.0, Eigen::Vector3d::UnitX()), InvalidInput);
   EXPECT_THROW(GasserOgdenHolzapfel(0.05, 0.01, 4.97, 2.88, 0.1, 0.0, Eigen::Vector3d::UnitX()), InvalidInput);
   EXPECT_THROW(GasserOgdenHolzapfel(0.05, 0.24, 4.97, 2.88, 0.1, 0.0, Eigen::Vector3d::Zero()), InvalidInput);
@@ -188,7 +194,7 @@ TEST(FiniteStrain, SkinPulledAcrossItsFibresIsItsGroundMatrixAndAlongThemStiffen
         if (std::abs(m.nodes(i, c)) < 1e-9) m.fixed_dofs.push_back({i, c, 0.0});
     for (int i = 0; i < m.n_nodes(); ++i)
       if (std::abs(m.nodes(i, axis) - L) < 1e-9) m.fixed_dofs.push_back({i, axis, (l1 - 1) * L});
-    m.finite_materials[0] = skin;
+    m.materials[0] = skin;
     SolveOptions o = finite(4);
     o.solver = SolverKind::Cholmod;
     const SolveResult r = solve(m, o);
@@ -222,9 +228,9 @@ TEST(NeoHookean, ParametersAreDeclaredAndValidated) {
       EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
     }
   }
-  EXPECT_EQ(parse_kinematics("neo-hookean"), Kinematics::Finite);
-  EXPECT_EQ(parse_kinematics("linear"), Kinematics::Linear);
-  EXPECT_THROW(parse_kinematics("rubber"), InvalidInput);
+  EXPECT_EQ(parse_kinematics("finite-strain"), Kinematics::Finite);
+  EXPECT_EQ(parse_kinematics("small-strain"), Kinematics::Linear);
+  EXPECT_THROW(parse_kinematics("neo-hookean"), InvalidInput);  // a material, not kinematics
 }
 
 TEST(FiniteElements, TangentIsTheDerivativeOfTheInternalForce) {
@@ -296,14 +302,14 @@ TEST(FiniteStrain, UniaxialStretchMatchesTheClosedForm) {
     for (int i = 0; i < m.n_nodes(); ++i)
       if (std::abs(m.nodes(i, 0) - L) < 1e-9) fx += r.reaction_n(i, 0);
     EXPECT_NEAR(fx, s11 * l2 * l2 * L * L, 1e-6 * s11 * L * L);
-    EXPECT_EQ(r.kinematics, "neo-hookean");
+    EXPECT_EQ(r.kinematics, "finite-strain");
     EXPECT_GE(r.newton_steps.size(), 10u);
   }
 }
 
 TEST(FiniteStrain, ALayerCarriesItsOwnMaterial) {
-  // Uniaxial stretch as above with the layer's finite-strain material twice as stiff as its
-  // linear constants: the stress doubles, the stretches do not change.
+  // Uniaxial stretch as above with the layer's material twice as stiff as the box's default:
+  // the stress doubles, the stretches do not change.
   const double L = 10, l1 = 1.2;
   Mesh m = unit_box({L, L, L}, {1, 1, 1});
   for (int i = 0; i < m.n_nodes(); ++i)
@@ -311,7 +317,7 @@ TEST(FiniteStrain, ALayerCarriesItsOwnMaterial) {
       if (std::abs(m.nodes(i, c)) < 1e-9) m.fixed_dofs.push_back({i, c, 0.0});
   for (int i = 0; i < m.n_nodes(); ++i)
     if (std::abs(m.nodes(i, 0) - L) < 1e-9) m.fixed_dofs.push_back({i, 0, (l1 - 1) * L});
-  m.finite_materials[0] = std::make_shared<NeoHookean>(2 * kE, kNu);
+  m.materials[0] = std::make_shared<NeoHookean>(2 * kE, kNu);
   SolveOptions o = finite(2);
   o.solver = SolverKind::Cholmod;  // (MUMPS's PORD exits the process on so small a graph)
   const SolveResult r = solve(m, o);
@@ -321,7 +327,7 @@ TEST(FiniteStrain, ALayerCarriesItsOwnMaterial) {
   EXPECT_NEAR(r.gauss_stress_mpa(0, 0), 2 * s11, 1e-6 * s11);
   // The linear material is the small-strain model: refused as a finite-strain material, and a
   // material CalculiX has no form for is refused by the export.
-  m.finite_materials[0] = std::make_shared<LinearElastic>(kE, kNu);
+  m.materials[0] = std::make_shared<LinearElastic>(kE, kNu);
   EXPECT_THROW(solve(m, o), InvalidInput);
   InpOptions io;
   io.finite_strain = true;
@@ -434,7 +440,7 @@ TEST(FiniteStrain, SmallLoadsGiveTheLinearSolution) {
   BoxOptions o;
   o.size_mm = {40, 10, 10};
   o.cells = {8, 2, 2};
-  o.material = LinearElastic(kE, kNu);
+  o.material = std::make_shared<NeoHookean>(kE, kNu);
   Mesh m = make_box_mesh(o);
   for (int i = 0; i < m.n_nodes(); ++i)
     if (std::abs(m.nodes(i, 2) - 10) < 1e-9 && std::abs(m.nodes(i, 0) - 40) < 1e-9)
@@ -447,7 +453,7 @@ TEST(FiniteStrain, SmallLoadsGiveTheLinearSolution) {
   EXPECT_LT(diff, 1e-4 * scale);
   EXPECT_LT((fin.gauss_stress_mpa - lin.gauss_stress_mpa).cwiseAbs().maxCoeff(),
             1e-4 * lin.gauss_stress_mpa.cwiseAbs().maxCoeff());
-  EXPECT_EQ(lin.kinematics, "linear");
+  EXPECT_EQ(lin.kinematics, "small-strain");
   EXPECT_TRUE(lin.newton_steps.empty());
 }
 
@@ -491,7 +497,7 @@ Mesh slotted_box(double slot_mm) {
   o.size_mm = {30, 20, 6};
   o.cells = {5, 6, 2};
   o.slot = true;
-  o.material = LinearElastic(kE, kNu);
+  o.material = std::make_shared<NeoHookean>(kE, kNu);
   Mesh m = make_box_mesh(o);
   const double x0 = 12, x1 = 18, c = 15;  // the slot column
   for (int i = 0; i < m.n_nodes(); ++i) {
@@ -663,7 +669,8 @@ TEST(FiniteStrain, ResultJsonRecordsTheModelAndTheNewtonHistory) {
   write_result_dir(m, r, dir);
   std::ifstream in(dir / "result.json");
   const std::string json((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  EXPECT_NE(json.find("\"kinematics\": \"neo-hookean\""), std::string::npos);
+  EXPECT_NE(json.find("\"kinematics\": \"finite-strain\""), std::string::npos);
+  EXPECT_NE(json.find("\"material\": \"neo-hookean\""), std::string::npos);
   EXPECT_NE(json.find("\"newton\""), std::string::npos);
   EXPECT_NE(json.find("\"relative_residuals\""), std::string::npos);
   std::filesystem::remove_all(dir);

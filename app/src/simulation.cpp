@@ -13,6 +13,7 @@
 #include "caps/fem/box.hpp"
 #include "caps/fem/compare.hpp"
 #include "caps/fem/inp_io.hpp"
+#include "caps/fem/material_registry.hpp"
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/mesh_pictures.hpp"
 #include "caps/fem/result_io.hpp"
@@ -41,6 +42,105 @@ namespace caps::app {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
+namespace {
+
+// "LAYER.NAME=VALUE,..." (SolverFields::material_params) -> layer -> parameter changes.
+std::map<std::string, fem::MaterialParameters> parse_material_params(const std::string& text) {
+  std::map<std::string, fem::MaterialParameters> out;
+  std::stringstream items(text);
+  std::string item;
+  while (std::getline(items, item, ',')) {
+    item.erase(0, item.find_first_not_of(" \t"));
+    item.erase(item.find_last_not_of(" \t") + 1);
+    if (item.empty()) continue;
+    const std::size_t dot = item.find('.'), eq = item.find('=');
+    double value = NAN;
+    if (eq != std::string::npos) {
+      const std::string text = item.substr(eq + 1);
+      std::istringstream in(text);
+      if (!(in >> value) || !in.eof()) value = NAN;
+    }
+    if (dot == std::string::npos || eq == std::string::npos || eq < dot || dot == 0 ||
+        eq == dot + 1 || !std::isfinite(value))
+      throw InvalidParameter(cat("{material_params} '", item, "': give LAYER.NAME=VALUE items "
+                                 "separated by commas, e.g. dermis.E=0.12,fat.nu=0.4"));
+    const std::string layer = item.substr(0, dot);
+    if (layer != "skin" && layer != "dermis" && layer != "fat" && layer != "deep")
+      throw InvalidParameter(cat("{material_params} '", item, "': the layers are skin (the uniform "
+                                 "model's one material), dermis, fat and deep"));
+    out[layer][item.substr(dot + 1, eq - dot - 1)] = value;
+  }
+  return out;
+}
+
+// A material made from an option's values: its InvalidInput (which names the option in braces)
+// becomes an InvalidParameter, so that each front end spells the option its own way.
+template <class F>
+std::shared_ptr<const fem::Material> from_option(F&& make) {
+  try {
+    return make();
+  } catch (const InvalidParameter&) {
+    throw;
+  } catch (const InvalidInput& e) {
+    throw InvalidParameter(e.what());
+  }
+}
+
+// The material kind --material gives the layers: linear and neo-hookean keep each layer's
+// parameters (E, nu); goh (the preset porcine skin, fibres along the patient's left-right) is
+// the skin's surface layer's alone (fem::ContinuumMeshOptions::surface_material), the others
+// keep theirs.
+std::shared_ptr<const fem::Material> as_chosen(const std::shared_ptr<const fem::Material>& m,
+                                               const std::string& material, bool surface) {
+  if (material == "goh") return surface ? fem::default_goh_skin() : m;
+  if (m->name() == material) return m;
+  return from_option([&] { return fem::make_material(material, fem::parameters_of(*m), cat("{material} ", material)); });
+}
+
+void check_material(const std::string& material) {
+  if (material != "goh" && material != "linear" && material != "neo-hookean")
+    throw InvalidParameter(cat("{material} '", material, "' is unknown: use neo-hookean (finite "
+                               "strain, the default), linear (small strain, the 1992 model) or "
+                               "goh (finite strain, skin with collagen fibres)"));
+}
+
+void set_materials(fem::SimulateOptions& o, const SolverFields& s) {
+  check_material(s.material);
+  o.solve.kinematics = s.material == "linear" ? fem::Kinematics::Linear : fem::Kinematics::Finite;
+  auto& c = o.continuum;
+  for (auto* m : {&c.material, &c.dermis, &c.fat, &c.deep}) *m = as_chosen(*m, s.material, false);
+  const bool goh = s.material == "goh";
+  if (goh) c.surface_material = fem::default_goh_skin();
+  for (const auto& [layer, changes] : parse_material_params(s.material_params)) {
+    // With goh, skin and dermis name the goh surface layer.
+    auto& m = goh && (layer == "skin" || layer == "dermis") ? c.surface_material
+              : layer == "skin"                             ? c.material
+              : layer == "dermis"                           ? c.dermis
+              : layer == "fat"                              ? c.fat
+                                                            : c.deep;
+    m = from_option([&] { return fem::with_parameters(*m, changes, cat("{material_params} ", layer)); });
+  }
+}
+
+void set_materials(fem::Mesh& mesh, const SolverFields& s) {
+  check_material(s.material);
+  // A mesh directory's layers: its skin is layer 0 and every layer of the same material (all of
+  // a uniform mesh's; with goh, layer 0 alone, the goh layer), dermis, fat and deep are layers
+  // 0, 1 and 2 (the measured layers' ids).
+  const fem::Material* top = mesh.materials.count(0) ? mesh.materials.at(0).get() : nullptr;
+  const std::string top_json = top ? fem::material_json(*top) : std::string();
+  std::map<int, bool> skin;
+  for (const auto& [layer, m] : mesh.materials)
+    skin[layer] = layer == 0 || (s.material != "goh" && top && fem::material_json(*m) == top_json);
+  for (auto& [layer, m] : mesh.materials) m = as_chosen(m, s.material, layer == 0);
+  for (const auto& [name, changes] : parse_material_params(s.material_params))
+    for (auto& [layer, m] : mesh.materials)
+      if (name == "skin" ? skin[layer] : layer == (name == "dermis" ? 0 : name == "fat" ? 1 : 2))
+        m = from_option([&] { return fem::with_parameters(*m, changes, cat("{material_params} ", name)); });
+}
+
+}  // namespace
+
 fem::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields& s) {
   fem::SimulateOptions o;
   o.surface.size_mm = m.mesh_size;
@@ -57,18 +157,7 @@ fem::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields
   o.continuum.tissue = fem::parse_tissue_layers(m.tissue);
   o.solve.solver = fem::parse_solver(s.solver);
   o.solve.mixed_precision = fem::parse_precision(s.precision);
-  if (s.material == "goh") {
-    // Skin with collagen fibres along the forehead's Langer lines (the patient's left-right).
-    o.solve.kinematics = fem::Kinematics::Finite;
-    o.skin_finite_material = std::make_shared<fem::GasserOgdenHolzapfel>(
-        fem::default_goh_skin(Eigen::Vector3d::UnitX()));
-  } else if (s.material == "linear" || s.material == "neo-hookean") {
-    o.solve.kinematics = fem::parse_kinematics(s.material);
-  } else {
-    throw InvalidParameter(cat("{material} '", s.material, "' is unknown: use neo-hookean (finite "
-                               "strain, the default), linear (small strain, the 1992 model) or "
-                               "goh (finite strain, skin with collagen fibres)"));
-  }
+  set_materials(o, s);
   o.solve.prestretch = s.prestretch;
   if (s.steps < 1 || s.steps > 1000)
     throw InvalidParameter(cat("{steps} ", s.steps, ": give 1..1000 load steps"));
@@ -264,7 +353,7 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   s.max_suture_gap_mm = sim.max_suture_gap_mm;
   s.strain_energy_mj = res.strain_energy_mj;
   s.warnings = sim.wound.continuum.mesh.warnings;
-  s.material = o.skin_finite_material ? o.skin_finite_material->name() : res.kinematics;
+  s.material = sim.wound.continuum.mesh.materials.at(0)->name();  // the skin's (layer 0)
   s.prestretch = res.prestretch;
   s.gape_mm = sim.gape_mm;
   s.load_steps = static_cast<int>(res.newton_steps.size());
@@ -325,9 +414,13 @@ SolveResult run_solve(const SolveRequest& r, Reporter* reporter) {
   OutputDirectory out(r.output, r.force);
   fem::Mesh mesh = fem::read_mesh_dir(r.mesh);
   if (r.E || r.nu)
-    for (auto& [layer, m] : mesh.materials)
-      m = fem::LinearElastic(r.E ? *r.E * 1e-3 : m.E_mpa(), r.nu ? *r.nu : m.nu(), "--E/--nu");
-  if (so.skin_finite_material) mesh.finite_materials[0] = so.skin_finite_material;
+    for (auto& [layer, m] : mesh.materials) {
+      fem::MaterialParameters changes;
+      if (r.E) changes["E"] = *r.E * 1e-3;
+      if (r.nu) changes["nu"] = *r.nu;
+      m = fem::with_parameters(*m, changes, "--E/--nu");
+    }
+  set_materials(mesh, r.solver);
   Progress progress(reporter, "solving", 1);
   o.reporter = reporter;
   const fem::SolveResult res = fem::solve(mesh, o);

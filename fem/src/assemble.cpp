@@ -8,6 +8,7 @@
 #include <string>
 
 
+#include "caps/core/error.hpp"
 #include "caps/fem/elements.hpp"
 #include "elements_impl.hpp"
 
@@ -257,12 +258,20 @@ void for_each_coloured_element(const Mesh& mesh, const Assembly& sys, Body&& bod
 
 }  // namespace
 
+const IsotropicElastic& small_strain_material(const Mesh& mesh, int layer) {
+  const Material& m = *mesh.materials.at(layer);
+  if (const IsotropicElastic* iso = m.small_strain()) return *iso;
+  throw InvalidInput(cat("layer ", layer, ": the small-strain solve has no form of the '", m.name(),
+                         "' material (only of isotropic ones: linear, neo-hookean); use the "
+                         "finite-strain solve"));
+}
+
 void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys) {
   add_loads(mesh, map, 1.0, sys.f);
   double* f = sys.f.data();
   for_each_coloured_element(mesh, sys, [&](int e, ElementScratch& w) {
     const Element& el = mesh.elements[e];
-    const LinearElastic& mat = mesh.materials.at(el.layer);
+    const IsotropicElastic& mat = small_strain_material(mesh, el.layer);
     stiffness_kernel(el.type, w.X, mat.lambda_mpa(), mat.mu_mpa(), e, w.Ke);
     const bool has_g = gather_element(el, map, map.g.data(), w.blk, w.eq, w.ge);
     scatter_matrix(sys, map, el.n_nodes(), w.blk, w.eq, w.Ke);

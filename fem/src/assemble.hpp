@@ -44,6 +44,10 @@ void add_loads(const Mesh& mesh, const DofMap& map, double scale, Eigen::VectorX
 /// Layer id -> the material of the finite-strain solve (not owned; must outlive the assembly).
 using FiniteMaterials = std::map<int, const Material*>;
 
+/// The small-strain constants of the layer's material (Material::small_strain()); InvalidInput
+/// naming the layer and the material if it has none (solve() checks every layer first).
+const IsotropicElastic& small_strain_material(const Mesh& mesh, int layer);
+
 /// The in-plane prestretch of one element layer (detail::prestretch_tensor); stretch 1: none.
 struct LayerPrestretch {
   int layer = 0;

@@ -74,7 +74,7 @@ Mesh make_box_mesh(const BoxOptions& o) {
   }
   m.nodes.resize(static_cast<Eigen::Index>(pts.size()), 3);
   for (std::size_t i = 0; i < pts.size(); ++i) m.nodes.row(static_cast<Eigen::Index>(i)) = pts[i];
-  m.materials.emplace(0, o.material);
+  m.materials[0] = o.material;
   std::set<int> sutured;
   if (o.slot)
     for (int k = 0; k < Lz; ++k)

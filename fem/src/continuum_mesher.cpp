@@ -445,21 +445,16 @@ std::optional<ContinuumAttempt> ContinuumBuild::place_edge_columns() {
   return std::nullopt;
 }
 
-// The layers' materials (Mesh::materials, Mesh::finite_materials).
+// The layers' materials (Mesh::materials): the uniform or measured tissue's, and the surface layer's
+// own (ContinuumMeshOptions::surface_material, the goh skin) where it is given.
 void ContinuumBuild::assign_materials() {
   if (measured) {
-    // Element layer ids are the tissue layers; the finite-strain solve gets each one's
-    // neo-Hookean solid (the same E and nu).
-    const std::array<std::pair<int, const LinearElastic*>, 3> tissues{
-        {{kDermisLayer, &o.dermis}, {kFatLayer, &o.fat}, {kDeepLayer, &o.deep}}};
-    for (const auto& [id, m] : tissues) {
-      mesh.materials.emplace(id, *m);
-      mesh.finite_materials[id] =
-          std::make_shared<NeoHookean>(*m, cat(id == kDermisLayer ? "dermis" : id == kFatLayer ? "fat" : "deep tissue"));
-    }
+    // Element layer ids are the tissue layers, each with its material.
+    mesh.materials = {{kDermisLayer, o.dermis}, {kFatLayer, o.fat}, {kDeepLayer, o.deep}};
   } else {
     for (int k = 0; k < NL; ++k) mesh.materials.emplace(k, o.material);
   }
+  if (o.surface_material) mesh.materials[0] = o.surface_material;
 }
 
 // Elements: polygons run counter-clockwise in (theta, z), i.e. seen from outside the skin;
@@ -624,8 +619,10 @@ void ContinuumBuild::fix_nodes() {
 // without bound as the mesh is refined: docs/fem.md, "The freed base slides").
 void ContinuumBuild::add_sliding_base() {
   constexpr double kSlidingStiffness = 1e5;
-  const double E_sliding = measured ? std::max({o.dermis.E_mpa(), o.fat.E_mpa(), o.deep.E_mpa()})
-                                    : o.material.E_mpa();
+  const double E_sliding =
+      measured ? std::max({o.dermis->stiffness_scale_mpa(), o.fat->stiffness_scale_mpa(),
+                           o.deep->stiffness_scale_mpa()})
+               : o.material->stiffness_scale_mpa();
   // The base's normal at a bottom node: the bottom faces' Newell vectors (area-weighted
   // normals) summed over the faces whose centres lie within kNormalRadiusMm of it (at least
   // the nearest face), turned to point up its column. A fixed radius rather than the node's

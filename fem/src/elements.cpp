@@ -443,14 +443,14 @@ Eigen::MatrixX3d element_coordinates(const Mesh& mesh, int element) {
 }
 
 Eigen::MatrixXd element_stiffness(ElementType type, const Eigen::MatrixX3d& X,
-                                  const LinearElastic& material, int element) {
+                                  const IsotropicElastic& material, int element) {
   Eigen::MatrixXd K;
   detail::stiffness_kernel(type, X, material.lambda_mpa(), material.mu_mpa(), element, K);
   return K;
 }
 
 Eigen::VectorXd element_internal_force(ElementType type, const Eigen::MatrixX3d& X,
-                                       const LinearElastic& material, const Eigen::VectorXd& u_e,
+                                       const IsotropicElastic& material, const Eigen::VectorXd& u_e,
                                        int element) {
   const auto& t = detail::shape_table(type);
   Eigen::MatrixX3d G(t.n, 3), F = Eigen::MatrixX3d::Zero(t.n, 3);
@@ -468,7 +468,7 @@ Eigen::VectorXd element_internal_force(ElementType type, const Eigen::MatrixX3d&
 }
 
 Vector6d element_stress(ElementType type, const Eigen::MatrixX3d& X,
-                        const LinearElastic& material, const Eigen::VectorXd& u_e,
+                        const IsotropicElastic& material, const Eigen::VectorXd& u_e,
                         const Eigen::Vector3d& xi, int element) {
   const Eigen::MatrixX3d G = gradients_at(type, X, xi, element);
   return detail::stress_from_strain(detail::strain_tensor(G, u_e), material.lambda_mpa(),

@@ -2,6 +2,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/fem/material_registry.hpp"
 #include "constraints.hpp"
 
 #include <cmath>
@@ -26,14 +27,16 @@ void id_lines(std::ostringstream& os, const std::vector<int>& ids) {
     os << ids[i] + 1 << (i + 1 == ids.size() ? "\n" : (i % 16 == 15 ? ",\n" : ", "));
 }
 
-// The layer's finite-strain material as a neo-Hookean solid (CalculiX has its NEO HOOKE form).
-NeoHookean finite_neo_hookean(const Mesh& mesh, int layer) {
-  const auto it = mesh.finite_materials.find(layer);
-  if (it == mesh.finite_materials.end() || !it->second)
-    return NeoHookean(mesh.materials.at(layer), cat("layer ", layer));
-  if (const auto* nh = dynamic_cast<const NeoHookean*>(it->second.get())) return *nh;
-  throw InvalidInput(cat("inp export: layer ", layer, " has the finite-strain material '",
-                         it->second->name(), "', which has no CalculiX form here; use neo-hookean"));
+// The layer's material in a CalculiX form: small strain, *ELASTIC of its small-strain constants;
+// finite strain, *HYPERELASTIC, NEO HOOKE (the neo-Hookean solid only).
+const IsotropicElastic& calculix_material(const Mesh& mesh, int layer, bool finite_strain) {
+  const Material& m = *mesh.materials.at(layer);
+  const IsotropicElastic* iso = m.small_strain();
+  if (!iso || (finite_strain && m.name() != "neo-hookean"))
+    throw InvalidInput(cat("inp export: layer ", layer, " has the ", finite_strain ? "finite" : "small",
+                           "-strain material '", m.name(),
+                           "', which has no CalculiX form here; use neo-hookean"));
+  return *iso;
 }
 
 }  // namespace
@@ -102,11 +105,11 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
       }
     }
   for (int layer : layers) {
-    const LinearElastic& m = mesh.materials.at(layer);
+    const IsotropicElastic& m = calculix_material(mesh, layer, options.finite_strain);
+    os << "** layer " << layer << ": " << material_json(*mesh.materials.at(layer)) << "\n";
     os << "*MATERIAL, NAME=MAT" << layer << "\n";
-    if (options.finite_strain) {
-      const NeoHookean nh = finite_neo_hookean(mesh, layer);
-      os << "*HYPERELASTIC, NEO HOOKE\n" << num(nh.c10_mpa()) << ", " << num(nh.d1_per_mpa()) << "\n";
+    if (options.finite_strain) {  // C10 = mu/2, D1 = 2/K (NeoHookean)
+      os << "*HYPERELASTIC, NEO HOOKE\n" << num(0.5 * m.mu_mpa()) << ", " << num(2 / m.bulk_mpa()) << "\n";
     } else {
       os << "*ELASTIC\n" << num(m.E_mpa()) << ", " << num(m.nu()) << "\n";
     }

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "caps/core/error.hpp"
+#include "caps/fem/material_registry.hpp"
 
 namespace caps::fem {
 namespace {
@@ -167,7 +168,10 @@ std::vector<ParameterSpec> GasserOgdenHolzapfel::parameters() const {
           {"k1", "MPa", 0.0, 1e3, false, false, "fibre stiffness; skin fits give 1-100 MPa"},
           {"k2", "1", 0.0, 1e3, true, false, "exponential stiffening; skin fits give 0.1-10"},
           {"kappa", "1", 0.0, 1.0 / 3.0, false, false, "0 = aligned fibres, 1/3 = isotropic"},
-          {"gamma", "deg", 0.0, 90.0, false, false, "fibre angle from the reference direction"}};
+          {"gamma", "deg", 0.0, 90.0, false, false, "fibre angle from the reference direction"},
+          {"fibre_x", "1", -1.0, 1.0, false, false, "reference fibre direction, LPS x (normalised)"},
+          {"fibre_y", "1", -1.0, 1.0, false, false, "reference fibre direction, LPS y (normalised)"},
+          {"fibre_z", "1", -1.0, 1.0, false, false, "reference fibre direction, LPS z (normalised)"}};
 }
 
 std::vector<Eigen::Vector3d> GasserOgdenHolzapfel::fibres(const Eigen::Vector3d& n) const {
@@ -230,26 +234,24 @@ double GasserOgdenHolzapfel::strain_energy_density(const Eigen::Matrix3d& H) con
   return strain_energy_density_in_layer(H, Eigen::Vector3d::UnitZ());
 }
 
-GasserOgdenHolzapfel default_goh_skin(const Eigen::Vector3d& langer) {
-  return GasserOgdenHolzapfel(0.05, 0.24, 4.97, 2.88, 0.0498, 0.0, langer, "default goh skin");
-}
+std::shared_ptr<const Material> default_goh_skin() { return preset_material("goh-porcine-skin"); }
 
 double volume_change(const Eigen::Matrix3d& H) {
   const double tr = H.trace();
   return tr + 0.5 * (tr * tr - (H * H).trace()) + H.determinant();
 }
 
-// Indicative values; sources and ranges in docs/fem.md.
-LinearElastic default_skin() { return LinearElastic(0.1, 0.45, "default skin"); }
-LinearElastic default_subcutaneous() { return LinearElastic(0.005, 0.45, "default subcutaneous"); }
+// Indicative values; the files give their sources (docs/fem.md, "Materials").
+std::shared_ptr<const Material> default_skin() { return preset_material("skin"); }
+std::shared_ptr<const Material> default_subcutaneous() { return preset_material("subcutaneous"); }
 
 }  // namespace caps::fem
 
 namespace caps::fem {
 
-// The measured tissue layers; sources in docs/fem.md ("Measured layers").
-LinearElastic default_dermis() { return LinearElastic(0.1, 0.45, "default dermis"); }
-LinearElastic default_fat() { return LinearElastic(0.003, 0.45, "default fat"); }
-LinearElastic default_deep() { return LinearElastic(0.02, 0.45, "default deep tissue"); }
+// The measured tissue layers; sources in the files (docs/fem.md, "Measured layers").
+std::shared_ptr<const Material> default_dermis() { return preset_material("dermis"); }
+std::shared_ptr<const Material> default_fat() { return preset_material("fat"); }
+std::shared_ptr<const Material> default_deep() { return preset_material("deep"); }
 
 }  // namespace caps::fem

@@ -34,7 +34,8 @@ void validate(const Mesh& mesh, const std::string& where) {
     if (dup != sorted.begin() + el.n_nodes())
       throw InvalidInput(cat(where, ": ", item(), " uses node ", *dup,
                              " twice; a collapsed hexahedron must be written as a Wedge15"));
-    if (!mesh.materials.count(el.layer))
+    const auto material = mesh.materials.find(el.layer);
+    if (material == mesh.materials.end() || !material->second)
       throw InvalidInput(cat(where, ": ", item(), " has layer ", el.layer,
                              " but no material is given for that layer"));
   }

@@ -10,6 +10,8 @@
 #include "caps/core/error.hpp"
 #include "caps/core/file_access.hpp"
 #include "caps/core/json_file.hpp"
+#include "caps/core/json_limits.hpp"
+#include "caps/fem/material_registry.hpp"
 #include "vtu.hpp"
 
 namespace fs = std::filesystem;
@@ -162,9 +164,11 @@ void write_mesh_dir(const Mesh& mesh, const fs::path& dir) {
                  {"wedge15", static_cast<long>(mesh.elements.size()) - n_hex},
                  {"fixed_nodes", mesh.fixed_nodes.size()}, {"sutures", mesh.sutures.size()}};
   j["materials"] = nlohmann::json::array();
-  for (const auto& [layer_id, m] : mesh.materials)
-    j["materials"].push_back({{"layer", layer_id}, {"model", "linear_elastic"},
-                              {"E_kpa", m.E_mpa() * 1e3}, {"nu", m.nu()}});
+  for (const auto& [layer_id, m] : mesh.materials) {
+    nlohmann::json entry = nlohmann::json::parse(material_json(*m));  // material, parameters, units
+    entry["layer"] = layer_id;
+    j["materials"].push_back(entry);
+  }
   j["fixed_nodes"] = mesh.fixed_nodes;
   j["fixed_dofs"] = nlohmann::json::array();
   for (const FixedDof& f : mesh.fixed_dofs) j["fixed_dofs"].push_back({f.node, f.component, f.value_mm});
@@ -205,9 +209,16 @@ Mesh read_mesh_dir(const fs::path& dir) {
     };
     for (const auto& m : j.at("materials")) {
       const int layer = integer(m.at("layer"), "materials: layer");
-      mesh.materials.emplace(layer, LinearElastic(m.at("E_kpa").get<double>() * 1e-3,
-                                                  m.at("nu").get<double>(),
-                                                  cat(jw, ": material of layer ", layer)));
+      const std::string where = cat(jw, ": material of layer ", layer);
+      if (m.contains("material")) {
+        mesh.materials[layer] = material_from_json(m.dump(), where);
+      } else {
+        // Before materials were named: small-strain constants that the finite-strain solve took
+        // as the neo-Hookean solid, which is what they are read as.
+        mesh.materials[layer] = make_material(
+            "neo-hookean", {{"E", m.at("E_kpa").get<double>() * 1e-3}, {"nu", m.at("nu").get<double>()}},
+            where);
+      }
     }
     const nlohmann::json fixed = entries("fixed_nodes");
     for (std::size_t i = 0; i < fixed.size(); ++i)

@@ -4,6 +4,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/fem/material_registry.hpp"
 #include "vtu.hpp"
 
 #include <cmath>
@@ -51,6 +52,12 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
                     {"solve", r.timings.solve_s}, {"recovery", r.timings.recovery_s},
                     {"total", r.timings.total_s}};
   j["kinematics"] = r.kinematics;
+  j["materials"] = nlohmann::json::array();  // what each layer was solved with
+  for (const auto& [layer, m] : mesh.materials) {
+    nlohmann::json entry = nlohmann::json::parse(material_json(*m));
+    entry["layer"] = layer;
+    j["materials"].push_back(entry);
+  }
   j["prestretch"] = r.prestretch;
   if (!r.newton_steps.empty()) {
     nlohmann::json steps = nlohmann::json::array();

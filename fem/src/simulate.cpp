@@ -28,10 +28,13 @@ double gape(const Mesh& mesh, SolveOptions options) {
   return widest;
 }
 
-// CalculiX has the neo-Hookean form of a finite-strain skin, not the others (mesh.inp).
-bool exports_to_calculix(const SimulateOptions& options) {
-  return options.solve.kinematics != Kinematics::Finite || !options.skin_finite_material ||
-         dynamic_cast<const NeoHookean*>(options.skin_finite_material.get());
+// The first layer material CalculiX has no form of under the solve's kinematics (mesh.inp:
+// *ELASTIC of the small-strain constants, or NEO HOOKE), or null.
+const Material* without_calculix_form(const Mesh& mesh, const SimulateOptions& options) {
+  const bool finite = options.solve.kinematics == Kinematics::Finite;
+  for (const auto& [layer, m] : mesh.materials)
+    if (!m->small_strain() || (finite && m->name() != "neo-hookean")) return m.get();
+  return nullptr;
 }
 
 }  // namespace
@@ -44,12 +47,10 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
   sim.wound =
       mesh_wound(plan::wound_border(plan), model, options.surface, options.continuum, reporter);
   progress.update(1);
-  if (options.skin_finite_material)
-    sim.wound.continuum.mesh.finite_materials[0] = options.skin_finite_material;
-  if (!exports_to_calculix(options))
+  if (const Material* m = without_calculix_form(sim.wound.continuum.mesh, options))
     sim.wound.continuum.mesh.warnings.push_back(
-        cat("mesh.inp is not written: CalculiX has no form of the '", options.skin_finite_material->name(),
-            "' skin here (use neo-hookean to cross-check with CalculiX)"));
+        cat("mesh.inp is not written: CalculiX has no form of the '", m->name(),
+            "' material here (use neo-hookean to cross-check with CalculiX)"));
   if (options.solve.prestretch != 1.0)
     sim.wound.continuum.mesh.warnings.push_back(
         "mesh.inp has no prestretch (CalculiX has no prestrain): it is the closure of unstressed skin");
@@ -89,7 +90,7 @@ void write_simulation(const Simulation& sim, const PatientModel& model,
   inp.finite_strain = options.solve.kinematics == Kinematics::Finite;
   inp.increments = options.solve.newton.n_steps;
   inp.grow_increments = options.solve.newton.grow_iterations > 0;
-  if (exports_to_calculix(options)) write_inp(mesh, dir / "mesh.inp", inp);
+  if (!without_calculix_form(mesh, options)) write_inp(mesh, dir / "mesh.inp", inp);
   write_result_dir(mesh, sim.result, dir, &sim.sutures);
   write_surface_mesh_png(dir / "surface.png", sim.wound.surface, cat("surface mesh of ", name));
   write_cross_section_png(dir / "section.png", sim.wound.surface, model, options.continuum,

@@ -64,6 +64,19 @@ int first_element_using(const Mesh& mesh, int node) {
   return -1;
 }
 
+// Each layer's material must have a form under the solve's kinematics (material.hpp).
+void check_materials(const Mesh& mesh, const SolveOptions& options) {
+  for (const auto& [layer, material] : mesh.materials) {
+    if (options.kinematics == Kinematics::Linear) {
+      detail::small_strain_material(mesh, layer);
+    } else if (!material->hyperelastic()) {
+      throw InvalidInput(cat("layer ", layer, ": the finite-strain solve was given the '",
+                             material->name(), "' material, which is not objective (a rotation "
+                             "stresses it); use neo-hookean, or the small-strain solve"));
+    }
+  }
+}
+
 // A warm start (SolveOptions::initial_displacement_mm) is for the finite-strain solve, with one
 // finite displacement per node.
 void check_initial_displacement(const Mesh& mesh, const SolveOptions& options) {
@@ -86,15 +99,14 @@ SolverKind parse_solver(const std::string& name) {
 }
 
 const char* kinematics_name(Kinematics kinematics) {
-  return kinematics == Kinematics::Linear ? "linear" : "neo-hookean";
+  return kinematics == Kinematics::Linear ? "small-strain" : "finite-strain";
 }
 
 Kinematics parse_kinematics(const std::string& name) {
-  if (name == "linear") return Kinematics::Linear;
-  if (name == "neo-hookean") return Kinematics::Finite;
-  throw InvalidInput(cat("material model '", name,
-                         "' is unknown; use linear (small strain, the 1992 model) or neo-hookean "
-                         "(finite strain)"));
+  if (name == "small-strain") return Kinematics::Linear;
+  if (name == "finite-strain") return Kinematics::Finite;
+  throw InvalidInput(cat("kinematics '", name,
+                         "' is unknown; use small-strain (the 1992 model) or finite-strain"));
 }
 
 bool parse_precision(const std::string& name) {
@@ -119,6 +131,7 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
     throw InvalidInput(cat("prestretch ", options.prestretch, " needs the large-deformation model: "
                            "use the neo-hookean material (the linear model has no prestress)"));
   check_initial_displacement(mesh, options);
+  check_materials(mesh, options);
   SolveResult res;
   res.solver = solver_name(options.solver);
   auto t = Clock::now();
@@ -206,7 +219,7 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   detail::recover(mesh, map, [&](int e, detail::ElementRecovery& out) {
     const Element& el = mesh.elements[e];
     const int nn = el.n_nodes();
-    const LinearElastic& mat = mesh.materials.at(el.layer);
+    const IsotropicElastic& mat = detail::small_strain_material(mesh, el.layer);
     const double lam = mat.lambda_mpa(), mu = mat.mu_mpa();
     const Eigen::MatrixX3d X = element_coordinates(mesh, e);
     Eigen::VectorXd ue(3 * nn);

@@ -60,20 +60,8 @@ class FiniteProblem {
  public:
   FiniteProblem(const Mesh& mesh, const DofMap& map, double prestretch)
       : mesh_(mesh), map_(map), path_(mesh, map), prestretch_(prestretch) {
-    for (const auto& [layer, linear] : mesh.materials) {
-      const auto it = mesh.finite_materials.find(layer);
-      if (it != mesh.finite_materials.end() && it->second) {
-        // Linear elasticity under finite kinematics is not objective (a rotation stresses it):
-        // the linear model is the small-strain solve.
-        if (dynamic_cast<const LinearElastic*>(it->second.get()))
-          throw InvalidInput(cat("layer ", layer, ": the finite-strain solve was given the linear "
-                                 "material; use neo-hookean, or the linear (small-strain) solve"));
-        materials_[layer] = it->second.get();
-      } else {
-        owned_.push_back(std::make_unique<NeoHookean>(linear, cat("layer ", layer)));
-        materials_[layer] = owned_.back().get();
-      }
-    }
+    // solve() has checked that every layer's material is hyperelastic.
+    for (const auto& [layer, material] : mesh.materials) materials_[layer] = material.get();
   }
 
   const FiniteMaterials& materials() const { return materials_; }
@@ -120,7 +108,6 @@ class FiniteProblem {
   ClosingPath path_;
   double prestretch_;
   FiniteMaterials materials_;
-  std::vector<std::unique_ptr<Material>> owned_;
 };
 
 void check_options(const NewtonOptions& o) {

@@ -66,7 +66,11 @@ struct SolverFields {
   /// Z-plasty's rotations and crushes thin fat (issue 12; docs/fem.md, "The default:
   /// neo-Hookean"); the fem library's own SolveOptions stay linear, the model its verification
   /// tests name.
-  std::string material = fem::kinematics_name(fem::Kinematics::Finite);
+  std::string material = "neo-hookean";
+  /// Per-layer material parameters, "LAYER.NAME=VALUE,..." in the material's declared units
+  /// (fem::material_kind(); e.g. "dermis.E=0.12,fat.nu=0.4"): layers skin (the uniform model's
+  /// one material), dermis, fat and deep (the measured layers).
+  std::string material_params;
   int steps = fem::NewtonOptions{}.n_steps;
   double prestretch = fem::SolveOptions{}.prestretch;
 
@@ -77,6 +81,10 @@ struct SolverFields {
                                "it inverts elements under large closures) or goh "
                                "(finite strain, skin with collagen fibres along the patient's "
                                "left-right, the forehead's Langer lines; docs/fem.md)"});
+    v(r.material_params, {"material_params", "per-layer material parameters LAYER.NAME=VALUE,... "
+                                             "in the material's units (E in MPa; layers skin, "
+                                             "dermis, fat, deep), e.g. dermis.E=0.12,fat.nu=0.4 "
+                                             "(docs/fem.md, \"Materials\")"});
     v(r.steps, {"steps", "neo-hookean: the first load step closes 1/steps of the sutures' gap; "
                          "a step that converges easily doubles the next, one that does not "
                          "converge is cut back (without cut-backs at most this many steps)"});
@@ -208,7 +216,7 @@ struct SimulateResult {
   int elements = 0, nodes = 0, suture_pairs = 0;
   double max_displacement_mm = 0, closing_force_n = 0, max_suture_force_n = 0,
          max_suture_gap_mm = 0, strain_energy_mj = 0;
-  std::string material;             ///< linear or neo-hookean
+  std::string material;             ///< the skin's material: linear, neo-hookean or goh
   double prestretch = 1;            ///< the skin's in-plane prestretch (1 = none)
   double gape_mm = 0;               ///< with prestretch: the open wound's largest widening
   int load_steps = 0, newton_iterations = 0;  ///< neo-hookean: converged steps, iterations

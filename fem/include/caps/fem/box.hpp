@@ -16,7 +16,7 @@ struct BoxOptions {
   /// Cut a slot one cell wide through the middle x column (cells.x() must be odd), over the
   /// middle half of the y cells, through all z; suture its two faces node by node.
   bool slot = false;
-  LinearElastic material = default_skin();
+  std::shared_ptr<const Material> material = default_skin();  ///< of the one layer (0)
 };
 
 /// Builds the box [0,size] with face 0 of every element at its low z. Throws InvalidInput on

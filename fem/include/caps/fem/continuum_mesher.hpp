@@ -91,16 +91,23 @@ struct ContinuumMeshOptions {
   /// their whole area whatever this is.
   double undermine_mm = 10;
   BaseCondition base = BaseCondition::Slide;  ///< the freed base: slides on the deep tissue or is free
-  LinearElastic material = default_skin();  ///< uniform: used for every layer
+  /// Uniform: the material of every element layer ("skin"; the preset data/materials/skin.json).
+  std::shared_ptr<const Material> material = default_skin();
   /// Uniform (default) or measured tissue layers (Auto: measured when the model has them).
   /// Measured layers are not the default yet: on Cranium the large-deformation Z-plasty did not
   /// converge with them and the small-strain one inverts the thin fat (docs/fem.md).
   TissueLayers tissue = TissueLayers::Uniform;
   /// Measured: the thinnest a tissue layer is meshed (mm; at most a quarter of the column).
   double min_tissue_layer_mm = 0.5;
-  LinearElastic dermis = default_dermis();  ///< measured: the skin layer's material
-  LinearElastic fat = default_fat();        ///< measured: the subcutaneous fat's
-  LinearElastic deep = default_deep();      ///< measured: the deep tissue's (muscle, fascia)
+  /// Measured: the materials of the dermis (layer kDermisLayer), the subcutaneous fat and the
+  /// deep tissue (muscle, fascia); presets data/materials/dermis.json, fat.json, deep.json.
+  std::shared_ptr<const Material> dermis = default_dermis();
+  std::shared_ptr<const Material> fat = default_fat();
+  std::shared_ptr<const Material> deep = default_deep();
+  /// When set, the material of element layer 0, the skin's surface (the measured dermis, or the
+  /// uniform model's top element layer), instead of `dermis` or `material`: e.g.
+  /// default_goh_skin(), the fibre-reinforced skin over the neo-Hookean tissue (`--material goh`).
+  std::shared_ptr<const Material> surface_material;
 };
 
 /// The continuum mesh and where its nodes came from.

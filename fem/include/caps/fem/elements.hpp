@@ -33,14 +33,16 @@ void shape_functions(ElementType type, const Eigen::Vector3d& xi, Eigen::VectorX
 /// Element coordinates X (#n×3, mm) gathered from the mesh.
 Eigen::MatrixX3d element_coordinates(const Mesh& mesh, int element);
 
+/// Small strain: the isotropic constants of `material` (LinearElastic, or the linearization of
+/// NeoHookean: Material::small_strain()).
 /// Element stiffness K_e (3n×3n, N/mm), dofs ordered node-major (u0x,u0y,u0z,u1x,...).
 /// Throws SolverError naming element `element` and the Gauss point if det J <= 0.
 Eigen::MatrixXd element_stiffness(ElementType type, const Eigen::MatrixX3d& X,
-                                  const LinearElastic& material, int element = -1);
+                                  const IsotropicElastic& material, int element = -1);
 
 /// Internal force f_e = int B^T sigma(u_e) dV (3n, N), computed from stresses, not from K_e.
 Eigen::VectorXd element_internal_force(ElementType type, const Eigen::MatrixX3d& X,
-                                       const LinearElastic& material, const Eigen::VectorXd& u_e,
+                                       const IsotropicElastic& material, const Eigen::VectorXd& u_e,
                                        int element = -1);
 
 /// Total-Lagrangian response of one element at displacement u_e (finite strain).
@@ -70,7 +72,7 @@ Vector6d element_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X,
 
 /// Stress (Voigt, MPa) at natural point xi for element displacements u_e (3n, mm).
 Vector6d element_stress(ElementType type, const Eigen::MatrixX3d& X,
-                        const LinearElastic& material, const Eigen::VectorXd& u_e,
+                        const IsotropicElastic& material, const Eigen::VectorXd& u_e,
                         const Eigen::Vector3d& xi, int element = -1);
 
 /// Von Mises equivalent stress (MPa) of a Voigt stress.

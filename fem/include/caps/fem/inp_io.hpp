@@ -30,9 +30,10 @@ namespace caps::fem {
 
 /// What kind of analysis the deck asks for.
 struct InpOptions {
-  /// false: *ELASTIC and a linear *STATIC step. true: *HYPERELASTIC, NEO HOOKE (every layer's
-  /// Mesh::finite_materials entry must be a NeoHookean; a layer without one uses
-  /// NeoHookean(materials[layer])) and *STEP, NLGEOM.
+  /// false: *ELASTIC (each layer's Material::small_strain() constants) and a linear *STATIC
+  /// step. true: *HYPERELASTIC, NEO HOOKE (every layer's material must be neo-hookean) and
+  /// *STEP, NLGEOM. A comment line before each *MATERIAL names the layer's material and its
+  /// parameters (material_json()); a material without a CalculiX form is InvalidInput.
   bool finite_strain = false;
   int increments = 10;  ///< initial increment 1/increments of the NLGEOM step
   /// true: CalculiX may grow its increments up to the whole step (its automatic incrementation,

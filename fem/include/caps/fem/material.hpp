@@ -1,7 +1,14 @@
 #pragma once
 /// @brief Materials (mm-N-MPa): the declared-parameter interface, isotropic linear elasticity
-/// (the small-strain model of the 1992 paper) and the compressible neo-Hookean solid for the
-/// finite-strain path, and the default soft-tissue layers.
+/// (the small-strain model of the 1992 paper), the compressible neo-Hookean solid, the
+/// Gasser-Ogden-Holzapfel skin, and the default soft-tissue layers (presets read from
+/// data/materials; material_registry.hpp makes any of them by name).
+///
+/// Kinematics are the solve's (SolveOptions::kinematics), not the material's: the small-strain
+/// solve uses a material's linearization at F = I (small_strain(): Hooke's law with the same E
+/// and nu for linear and neo-hookean; goh has none and is refused there), the finite-strain
+/// solve its hyperelastic response (hyperelastic(): linear is refused there, as it is not
+/// objective; St Venant-Kirchhoff is not offered).
 ///
 /// Every material declares its parameters once, with unit and valid range (FEBio's
 /// ADD_PARAMETER with a range), and validates them once, when it is built: an out-of-range value
@@ -12,10 +19,13 @@
 /// Piola-Kirchhoff stress: dS = C dE, C_IJ = C_ijkl (Holzapfel 2000, sec. 6.6).
 
 #include <Eigen/Core>
+#include <memory>
 #include <string>
 #include <vector>
 
 namespace caps::fem {
+
+class IsotropicElastic;
 
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
@@ -37,7 +47,7 @@ struct ParameterSpec {
 class Material {
  public:
   virtual ~Material() = default;
-  /// "linear", "neo-hookean".
+  /// The registered name (material_registry.hpp): "linear", "neo-hookean", "goh".
   virtual std::string name() const = 0;
   /// The declared parameters, in the order of values().
   virtual std::vector<ParameterSpec> parameters() const = 0;
@@ -63,6 +73,17 @@ class Material {
     (void)n;
     return strain_energy_density(H);
   }
+
+  /// The isotropic elastic constants of the material's response at F = I, which the
+  /// small-strain solve uses; null for a material without them (goh: its fibres switch on at
+  /// F = I), which the small-strain solve refuses.
+  virtual const IsotropicElastic* small_strain() const { return nullptr; }
+  /// Whether the finite-strain solve may use the material (false for linear elasticity, which a
+  /// rotation stresses).
+  virtual bool hyperelastic() const { return true; }
+  /// A Young's modulus for scaling (MPa; penalty springs): the small-strain E, or the ground
+  /// matrix's for a fibre-reinforced solid.
+  virtual double stiffness_scale_mpa() const = 0;
 
  protected:
   /// Checks values() against parameters(); throws InvalidInput naming `where` and the parameter.
@@ -90,6 +111,8 @@ class IsotropicElastic : public Material {
 
   std::vector<ParameterSpec> parameters() const override;
   std::vector<double> values() const override { return {E_mpa_, nu_}; }
+  const IsotropicElastic* small_strain() const override { return this; }
+  double stiffness_scale_mpa() const override { return E_mpa_; }
 
  protected:
   IsotropicElastic(double E_mpa, double nu) : E_mpa_(E_mpa), nu_(nu) {}
@@ -111,6 +134,7 @@ class LinearElastic final : public IsotropicElastic {
   LinearElastic(double E_mpa, double nu, const std::string& where = "material");
 
   std::string name() const override { return "linear"; }
+  bool hyperelastic() const override { return false; }
   void stress_and_tangent(const Eigen::Matrix3d& H, Vector6d& S, Matrix6d& C) const override;
   double strain_energy_density(const Eigen::Matrix3d& H) const override;
 };
@@ -156,6 +180,7 @@ class NeoHookean final : public IsotropicElastic {
 ///   k2     fibre exponential stiffening, dimensionless, (0, 1e3]
 ///   kappa  fibre dispersion, dimensionless, [0, 1/3] (1/3: isotropic)
 ///   gamma  fibre angle from `langer`, deg, [0, 90]
+///   fibre_x, fibre_y, fibre_z  `langer` (LPS, dimensionless, each in [-1, 1]; normalised)
 /// The stress and tangent follow Holzapfel 2000, sec. 6.7, written for any Ibar_h = J^(-2/3) Hs:C
 /// with Hs = kappa I + (1 - 3 kappa) a (x) a (tr Hs = 1, so Ebar = Ibar_h - 1).
 class GasserOgdenHolzapfel final : public Material {
@@ -166,8 +191,11 @@ class GasserOgdenHolzapfel final : public Material {
 
   std::string name() const override { return "goh"; }
   std::vector<ParameterSpec> parameters() const override;
-  std::vector<double> values() const override { return {mu_, K_, k1_, k2_, kappa_, gamma_deg_}; }
+  std::vector<double> values() const override {
+    return {mu_, K_, k1_, k2_, kappa_, gamma_deg_, langer_.x(), langer_.y(), langer_.z()};
+  }
   bool uses_layer_normal() const override { return true; }
+  double stiffness_scale_mpa() const override { return matrix_.E_mpa(); }
   /// The frame-free forms take the layer's normal as +z.
   void stress_and_tangent(const Eigen::Matrix3d& H, Vector6d& S, Matrix6d& C) const override;
   double strain_energy_density(const Eigen::Matrix3d& H) const override;
@@ -186,33 +214,35 @@ class GasserOgdenHolzapfel final : public Material {
   NeoHookean matrix_;
 };
 
-/// Porcine skin (Tepole group's Bayesian calibration, ../shared/docs/references.md): mu =
-/// 0.05 MPa, K = 0.24 MPa, k1 = 4.97 MPa, k2 = 2.88, kappa = 0.0498, one fibre family along
-/// `langer`.
-GasserOgdenHolzapfel default_goh_skin(const Eigen::Vector3d& langer = Eigen::Vector3d::UnitX());
+/// Porcine skin, the preset data/materials/goh-porcine-skin.json (Tepole group's Bayesian
+/// calibration, ../shared/docs/references.md): mu = 0.05 MPa, K = 0.24 MPa, k1 = 4.97 MPa,
+/// k2 = 2.88, kappa = 0.0498, one fibre family along the patient's left-right (LPS x).
+std::shared_ptr<const Material> default_goh_skin();
 
 /// det(I + H) - 1 without the cancellation of det(F) - 1 at small strain:
 /// tr H + ((tr H)^2 - tr(H^2)) / 2 + det H.
 double volume_change(const Eigen::Matrix3d& H);
 
-/// Indicative skin (dermis + epidermis) in vivo: E = 100 kPa, nu = 0.45. Sources in docs/fem.md.
-LinearElastic default_skin();
-/// Indicative subcutaneous fat: E = 5 kPa, nu = 0.45. Sources in docs/fem.md.
-LinearElastic default_subcutaneous();
+/// The presets of data/materials (their sources are in the files; InvalidInput if a file is
+/// missing or bad). E and nu are small-strain constants; the presets are neo-Hookean solids,
+/// whose small-strain response (small_strain()) is the linear material of the same E and nu.
+/// Indicative skin (dermis + epidermis) in vivo, skin.json: E = 100 kPa, nu = 0.45.
+std::shared_ptr<const Material> default_skin();
+/// Indicative subcutaneous fat, subcutaneous.json: E = 5 kPa, nu = 0.45.
+std::shared_ptr<const Material> default_subcutaneous();
 
 }  // namespace caps::fem
 
 namespace caps::fem {
 
 /// The tissue layers the continuum mesher follows with TissueLayers::Measured (docs/fem.md,
-/// "Measured layers", has the sources). Small-strain constants; the finite-strain solve uses the
-/// neo-Hookean solid with the same E and nu.
-/// Dermis (skin layer down to the subcutaneous fat): E = 100 kPa, nu = 0.45 (as default_skin()).
-LinearElastic default_dermis();
-/// Subcutaneous fat: E = 3 kPa, nu = 0.45.
-LinearElastic default_fat();
-/// Deep soft tissue between the fat and the bone (muscle, fascia, galea, SMAS): E = 20 kPa,
-/// nu = 0.45.
-LinearElastic default_deep();
+/// "Measured layers"), presets as above.
+/// Dermis (skin layer down to the subcutaneous fat), dermis.json: E = 100 kPa, nu = 0.45.
+std::shared_ptr<const Material> default_dermis();
+/// Subcutaneous fat, fat.json: E = 3 kPa, nu = 0.45.
+std::shared_ptr<const Material> default_fat();
+/// Deep soft tissue between the fat and the bone (muscle, fascia, galea, SMAS), deep.json:
+/// E = 20 kPa, nu = 0.45.
+std::shared_ptr<const Material> default_deep();
 
 }  // namespace caps::fem

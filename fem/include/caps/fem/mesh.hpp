@@ -85,11 +85,10 @@ struct SlidingNode {
 struct Mesh {
   Eigen::MatrixX3d nodes;                 ///< #N×3 positions, LPS mm
   std::vector<Element> elements;          ///< connectivity in the numbering above
-  std::map<int, LinearElastic> materials; ///< layer id -> material
-  /// layer id -> material of the finite-strain solve (SolveOptions::kinematics = Finite); a
-  /// layer without an entry is NeoHookean(materials.at(layer)). Not read from / written to
-  /// mesh directories yet (mesh_io keeps the linear constants).
-  std::map<int, std::shared_ptr<const Material>> finite_materials;
+  /// Layer id -> its material, one for both kinematics (SolveOptions::kinematics: the
+  /// small-strain solve uses Material::small_strain(), the finite-strain one the material
+  /// itself). mesh.json, result.json and the CalculiX deck name each one and its parameters.
+  std::map<int, std::shared_ptr<const Material>> materials;
   std::vector<int> fixed_nodes;           ///< all three components fixed at 0
   std::vector<FixedDof> fixed_dofs;       ///< single prescribed components
   std::vector<NodalLoad> loads;           ///< nodal forces

@@ -26,9 +26,6 @@ struct SimulateOptions {
   SolveOptions solve;
   /// The spacing of the sutures the closing force is reported per (mm; suture_spacing()).
   double suture_spacing_mm = 5.0;
-  /// The finite-strain material of the skin layer (layer 0, Mesh::finite_materials), e.g.
-  /// default_goh_skin(); null: the neo-Hookean solid of the layer's E and nu.
-  std::shared_ptr<const Material> skin_finite_material;
 };
 
 struct Simulation {

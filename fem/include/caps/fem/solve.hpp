@@ -27,16 +27,15 @@ SolverKind parse_solver(const std::string& name);
 /// throws InvalidInput otherwise.
 bool parse_precision(const std::string& name);
 
-/// Kinematics and material model of the solve.
+/// Kinematics of the solve, apart from the materials (Mesh::materials, one per layer).
 enum class Kinematics {
-  Linear,  ///< small strain, LinearElastic per layer (the 1992 model); one linear solve
-  Finite   ///< finite strain, Mesh::finite_materials per layer (neo-Hookean by default)
+  Linear,  ///< small strain (the 1992 model): each material's small_strain() constants; one linear solve
+  Finite   ///< finite strain: each layer's hyperelastic material (linear is refused)
 };
 
-/// "linear" / "neo-hookean".
+/// "small-strain" / "finite-strain".
 const char* kinematics_name(Kinematics kinematics);
-/// Parses a material model name: "linear" -> Linear, "neo-hookean" -> Finite; throws
-/// InvalidInput otherwise.
+/// Parses "small-strain" -> Linear, "finite-strain" -> Finite; throws InvalidInput otherwise.
 Kinematics parse_kinematics(const std::string& name);
 
 /// Load stepping and Newton-Raphson controls of the finite-strain solve. The load factor
@@ -190,7 +189,7 @@ struct SolveResult {
   int refinement_iterations = 0;             ///< CG iterations of a mixed-precision solve
   bool fell_back_to_double = false;          ///< mixed precision was tried and not enough
   SolveTimings timings;
-  std::string kinematics = "linear";         ///< kinematics_name() of the solve
+  std::string kinematics = "small-strain";   ///< kinematics_name() of the solve
   double prestretch = 1.0;                   ///< SolveOptions::prestretch of the solve
   std::vector<NewtonStep> newton_steps;      ///< finite strain: the converged load steps
   int newton_iterations = 0;                 ///< finite strain: total, including cut-back attempts
