@@ -362,11 +362,60 @@ def test_one_file_reads_its_series_beside_a_damaged_file_of_another():
     assert any("MR_truncated.dcm" in n for n in info["notes"]), info["notes"]
 
 
+# What it would take for caps to read a file the reference reads (docs/formats.md).
+WOULD_TAKE = [
+    (".dconn.nii", "refused by design: CIFTI is a matrix over brain-ordinates, not an image"),
+    (".mnc", "MINC 1 (NetCDF) / MINC 2 (HDF5): a reader over libminc2 or netCDF/HDF5"),
+    (".mgz", "FreeSurfer MGH/MGZ: a small own parser (gzip, a 284-byte header, vox2ras)"),
+    (".HEAD", "AFNI HEAD/BRIK: a parser of the HEAD attributes and the BRIK data"),
+    (".BRIK", "AFNI HEAD/BRIK: a parser of the HEAD attributes and the BRIK data"),
+    (".BRIK.gz", "AFNI HEAD/BRIK: a parser of the HEAD attributes and the BRIK data"),
+    (".PAR", "Philips PAR/REC: a parser of PAR and its slice orientation conventions"),
+    (".REC", "Philips PAR/REC: a parser of PAR and its slice orientation conventions"),
+    (".gii", "out of scope: GIFTI holds surfaces and per-vertex data, not volumes"),
+    (".gii.gz", "out of scope: GIFTI holds surfaces and per-vertex data, not volumes"),
+    (".gii.bz2", "out of scope: GIFTI holds surfaces and per-vertex data, not volumes"),
+    ("analyze.hdr", "Analyze 7.5 has no orientation (left/right unknown); its .img is not "
+                    "shipped either"),
+]
+
+
+def would_take(path):
+    for ending, what in WOULD_TAKE:
+        if path.endswith(ending):
+            return what
+    return "a reader for the format"
+
+
 def table():
-    rows = ["| File | Verdict | Detail |", "|---|---|---|"]
+    """Markdown rows: file(s), verdict, caps's reason or read, the reference's."""
+    rows = ["| File | Verdict | caps | Reference |", "|---|---|---|---|"]
+    groups = []
     for f in FILES:
         ok, what, detail = verdict(f)
-        rows.append(f"| {short(f)} | {what if ok else 'FAIL: ' + what} | {detail.replace('|', '/')} |")
+        caps_part, _, ref_part = detail.partition("; reference: ")
+        caps_part = caps_part.removeprefix("caps: ")
+        first, _, rest = caps_part.partition(": ")
+        if rest and " " not in first:  # the file or folder named first
+            caps_part = rest
+        caps_part = caps_part.split("; ")[0]
+        if not ok:
+            what = "FAIL: " + what
+        elif ref_part.startswith("nibabel reads it as") or (
+                what == "refused by both" and "nibabel reads" in ref_part):
+            what = "reference reads, caps refuses: " + would_take(f)
+        elif what == "same values and geometry":
+            ref_part = "reads the same"
+        key = (os.path.dirname(f), what, caps_part, ref_part)
+        if groups and groups[-1][0] == key and what == "refused by both":
+            groups[-1][1].append(f)
+        else:
+            groups.append((key, [f]))
+    for (_, what, caps_part, ref_part), files in groups:
+        label = short(files[0]) if len(files) == 1 else (
+            f"{short(files[0])} .. {os.path.basename(files[-1])} ({len(files)} files)")
+        cell = lambda t: t.replace("|", "/")  # noqa: E731
+        rows.append(f"| {cell(label)} | {cell(what)} | {cell(caps_part)} | {cell(ref_part)} |")
     return "\n".join(rows)
 
 

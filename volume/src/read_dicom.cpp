@@ -898,7 +898,8 @@ Volume read_dicom(const fs::path& input, const ReadOptions& options) {
     if (!read_header(input, h))
       throw InvalidInput(cat(input.string(), ": not a DICOM image (or it has no SeriesInstanceUID)"
                                              "; caps reads a DICOM folder or .dcm file, .nii, "
-                                             ".nii.gz, .nrrd, .nhdr, .mha, .mhd or .inv3"));
+                                             ".nii.gz, a NIfTI .hdr/.img pair, .nrrd, .nhdr, "
+                                             ".mha, .mhd or .inv3"));
     // The named file itself must be an image caps can place; the reason is about it, not about
     // its neighbours.
     if (!h.has_pixel_data)
