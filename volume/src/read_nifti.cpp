@@ -178,11 +178,11 @@ void mark_nan_outside_field(const std::string& name, Volume& v) {
     }
     if (std::isnan(v.data[at])) {
       const std::size_t inside = n_nan - std::count(outside.begin(), outside.end(), 1);
-      throw InvalidInput(cat(name, ": ", inside, " not-a-number voxel(s) enclosed by data, first ",
-                             "at (", at % nx, ", ", (at / nx) % ny, ", ",
-                             at / (static_cast<std::size_t>(nx) * ny), "); NaN is read as "
-                             "outside the field of view only where it reaches the edge of the "
-                             "grid: the data are damaged"));
+      throw InvalidInput(cat(name, ": ", inside, " NaN voxel(s) enclosed by data, first at (",
+                             at % nx, ", ", (at / nx) % ny, ", ",
+                             at / (static_cast<std::size_t>(nx) * ny), "), are not finite "
+                             "numbers; NaN is read as outside the field of view only where it "
+                             "reaches the edge of the grid: the data are damaged"));
     }
   }
   v.acquired.assign(n, 1);
