@@ -620,6 +620,9 @@ Volume build_volume(std::vector<SliceHeader> slices, const std::string& where,
       else throw InvalidInput(cat(s.file.string(), ": ", why));
     }
     slices = std::move(kept);
+    if (slices.empty())
+      throw InvalidInput(cat(where, ": no file of the series is a single slice caps can place, "
+                                    "first: ", left_out.front()));
     if (!left_out.empty())
       v.notes.push_back(cat("left out ", left_out.size(), " file(s) of the series that are not "
                             "single slices caps can place, first: ", left_out.front()));
@@ -938,7 +941,7 @@ Volume read_dicom(const fs::path& input, const ReadOptions& options) {
   }
   if (n_skipped > 0) notes.push_back(cat("skipped ", n_skipped, " non-DICOM file(s)"));
   auto& files = series[uid];
-  if (is_dir && files.size() == 1 && files[0].frames > 1) return read_multiframe(files[0], opts);
+  if (files.size() == 1 && files[0].frames > 1) return read_multiframe(files[0], opts);
   return build_volume(std::move(files), folder.string(), opts, std::move(notes),
                       is_dir ? fs::path() : input);
 }
