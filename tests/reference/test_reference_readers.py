@@ -31,7 +31,10 @@ import pytest
 
 pydicom = pytest.importorskip("pydicom")
 nibabel = pytest.importorskip("nibabel")
-from pydicom.pixel_data_handlers.util import apply_modality_lut  # noqa: E402
+try:  # pydicom 2 (Debian 12); pydicom 3 moved it
+    from pydicom.pixel_data_handlers.util import apply_modality_lut
+except ImportError:  # pragma: no cover
+    from pydicom.pixels import apply_modality_lut
 
 warnings.simplefilter("ignore")
 
