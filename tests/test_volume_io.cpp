@@ -11,6 +11,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
@@ -351,6 +352,129 @@ TEST(VolumeIo, NiftiRoundTripKeepsObliqueGeometryAndValues) {
     EXPECT_LT((r.index_to_lps(ijk) - v.index_to_lps(ijk)).norm(), 1e-4);
   }
   EXPECT_FALSE(fs::exists(tmp / "rt.nii.gz.tmp"));
+}
+
+/// A NIfTI-1 header (348 bytes) for a float32 image of `dims` (3 to 5 of them) with 1 mm axes
+/// along RAS from the origin (sform code 1); `pair` writes the magic of a .hdr/.img pair.
+std::string nifti1_header(const std::vector<int>& dims, int intent = 0, bool pair = false) {
+  std::string h(348, '\0');
+  auto i16 = [&](int at, int v) {
+    const std::int16_t x = static_cast<std::int16_t>(v);
+    std::memcpy(&h[at], &x, 2);
+  };
+  auto f32 = [&](int at, float v) { std::memcpy(&h[at], &v, 4); };
+  const std::int32_t size = 348;
+  std::memcpy(&h[0], &size, 4);
+  i16(40, static_cast<int>(dims.size()));
+  for (std::size_t d = 0; d < dims.size(); ++d) i16(42 + 2 * static_cast<int>(d), dims[d]);
+  i16(68, intent);
+  i16(70, 16);  // DT_FLOAT32
+  i16(72, 32);
+  for (int d = 0; d < 8; ++d) f32(76 + 4 * d, 1.0f);
+  f32(108, pair ? 0.0f : 352.0f);
+  h[123] = 2;   // xyzt_units: mm
+  i16(254, 1);  // sform_code
+  f32(280, 1.0f);
+  f32(296 + 4, 1.0f);
+  f32(312 + 8, 1.0f);
+  f32(280 + 12, -3.0f);  // origin (-3, 4, 5) RAS
+  f32(296 + 12, 4.0f);
+  f32(312 + 12, 5.0f);
+  std::memcpy(&h[344], pair ? "ni1\0" : "n+1\0", 4);
+  return h;
+}
+
+std::string nifti1_file(const std::vector<int>& dims, const std::vector<float>& values,
+                        int intent = 0) {
+  return nifti1_header(dims, intent) + std::string(4, '\0') + raw_bytes(values);
+}
+
+TEST(VolumeIo, Nifti4dReadsTheVolumeAskedForAndSaysWhich) {
+  TempDir tmp;
+  const int nx = 4, ny = 3, nz = 2, nt = 5;
+  std::vector<float> values;
+  for (int t = 0; t < nt; ++t)
+    for (int n = 0; n < nx * ny * nz; ++n) values.push_back(1000.0f * t + n);
+  write_bytes(tmp / "fmri.nii", nifti1_file({nx, ny, nz, nt}, values));
+  const Volume first = caps::read_volume(tmp / "fmri.nii");
+  EXPECT_EQ(first.geom.dims, Eigen::Vector3i(nx, ny, nz));
+  EXPECT_FLOAT_EQ(first.at(3, 2, 1), 23.0f);
+  bool said = false;
+  for (const auto& n : first.notes) said |= n.find("5 volumes") != std::string::npos &&
+                                            n.find("read volume 0") != std::string::npos;
+  EXPECT_TRUE(said);
+  ReadOptions o;
+  o.volume_index = 3;
+  const Volume fourth = caps::read_volume(tmp / "fmri.nii", o);
+  EXPECT_FLOAT_EQ(fourth.at(0, 0, 0), 3000.0f);
+  EXPECT_FLOAT_EQ(fourth.at(3, 2, 1), 3023.0f);
+  o.volume_index = 5;
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "fmri.nii", o); }, "fmri.nii",
+                                   "5 volume(s)");
+}
+
+TEST(VolumeIo, NiftiIntentsThatAreNotImagesAreRefused) {
+  TempDir tmp;
+  // A vector field (1007) and a CIFTI dense connectivity matrix (3001, as nibabel's
+  // row_major.dconn.nii, which was read as a 1x1x1 volume).
+  write_bytes(tmp / "vec.nii", nifti1_file({2, 2, 2, 1, 3}, std::vector<float>(24, 1.0f), 1007));
+  write_bytes(tmp / "conn.nii", nifti1_file({1, 1, 1, 1, 4, 4}, std::vector<float>(16, 0.5f), 3001));
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "vec.nii"); }, "vec.nii",
+                                   "intent 1007");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "conn.nii"); }, "conn.nii",
+                                   "intent 3001");
+  // A statistic (t-test, 3) is an image of one value per voxel.
+  write_bytes(tmp / "t.nii", nifti1_file({2, 2, 2}, std::vector<float>(8, 2.0f), 3));
+  EXPECT_FLOAT_EQ(caps::read_volume(tmp / "t.nii").at(1, 1, 1), 2.0f);
+}
+
+TEST(VolumeIo, NiftiNanReachingTheEdgeIsOutsideTheFieldAndEnclosedNanIsRefused) {
+  TempDir tmp;
+  const int n = 6;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::vector<float> values(n * n * n);
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) values[(k * n + j) * n + i] = 100.0f + i + 10.0f * j + k;
+  // No data in the plane i = 0 and in a channel from it to the centre (i = 1..3 at j = k = 3):
+  // all joined to the edge.
+  std::vector<float> edge = values;
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j) edge[(k * n + j) * n] = nan;
+  for (int i = 1; i <= 3; ++i) edge[(3 * n + 3) * n + i] = nan;
+  write_bytes(tmp / "edge.nii", nifti1_file({n, n, n}, edge));
+  const Volume v = caps::read_volume(tmp / "edge.nii");
+  ASSERT_EQ(v.acquired.size(), v.data.size());
+  EXPECT_EQ(v.acquired[v.geom.linear(0, 2, 2)], 0);
+  EXPECT_EQ(v.acquired[v.geom.linear(3, 3, 3)], 0);
+  EXPECT_EQ(v.acquired[v.geom.linear(4, 3, 3)], 1);
+  EXPECT_FLOAT_EQ(v.at(0, 2, 2), 101.0f);  // the smallest finite value: (1, 0, 0)
+  EXPECT_FLOAT_EQ(v.at(4, 3, 3), 100.0f + 4 + 30 + 3);
+  // One NaN voxel enclosed by data: damage inside the image.
+  std::vector<float> inner = values;
+  inner[(3 * n + 3) * n + 3] = nan;
+  write_bytes(tmp / "inner.nii", nifti1_file({n, n, n}, inner));
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "inner.nii"); }, "inner.nii",
+                                   "enclosed by data, first at (3, 3, 3)");
+}
+
+TEST(VolumeIo, NiftiPairReadsLikeTheSingleFile) {
+  TempDir tmp;
+  std::vector<float> values(24);
+  for (std::size_t n = 0; n < values.size(); ++n) values[n] = static_cast<float>(n) * 0.5f;
+  write_bytes(tmp / "one.nii", nifti1_file({4, 3, 2}, values));
+  write_bytes(tmp / "two.hdr", nifti1_header({4, 3, 2}, 0, true));
+  write_bytes(tmp / "two.img", raw_bytes(values));
+  const Volume one = caps::read_volume(tmp / "one.nii");
+  for (const char* name : {"two.hdr", "two.img"}) {
+    const Volume two = caps::read_volume(tmp / name);
+    EXPECT_EQ(two.geom.dims, one.geom.dims) << name;
+    EXPECT_LT((two.geom.origin_lps - Eigen::Vector3d(3, -4, 5)).norm(), 1e-9) << name;
+    EXPECT_EQ(two.data, one.data) << name;
+  }
+  // A header whose image file is missing names it.
+  write_bytes(tmp / "lone.hdr", nifti1_header({4, 3, 2}, 0, true));
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "lone.hdr"); }, "lone.img");
 }
 
 TEST(VolumeIo, NiftiWriteRejectsWrongExtension) {
@@ -702,6 +826,148 @@ TEST(VolumeIo, DicomCompressedFramesDisagreeingWithTheHeaderAreRefused) {
   write_dicom_slice(tmp / "mpeg" / "mpeg.dcm", s, [](int, int) { return 0; });
   expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "mpeg" / "mpeg.dcm"); }, "mpeg.dcm",
                                    "gdcmconv --raw");
+}
+
+/// One slice in Explicit VR Big Endian (1.2.840.10008.1.2.2), as pydicom's MR_small_expb.dcm and
+/// rtdose_expb_1frame.dcm: 8 x 6 pixels of `bits` (16 signed or 32 unsigned) in an OW element,
+/// stored(x, y) at column x, row y, rescale 1/0.
+template <typename F>
+void write_big_endian_slice(const fs::path& p, int bits, F stored) {
+  auto be16 = [](std::string& s, std::uint16_t v) {
+    s += static_cast<char>(v >> 8);
+    s += static_cast<char>(v & 0xff);
+  };
+  auto be32 = [](std::string& s, std::uint32_t v) {
+    for (int b = 3; b >= 0; --b) s += static_cast<char>((v >> (8 * b)) & 0xff);
+  };
+  auto elem = [&](std::string& s, std::uint16_t g, std::uint16_t e, const char* vr,
+                  std::string value) {
+    if (value.size() % 2) value += std::strcmp(vr, "UI") == 0 ? '\0' : ' ';
+    be16(s, g);
+    be16(s, e);
+    s += vr;
+    if (std::strcmp(vr, "OW") == 0) {
+      be16(s, 0);
+      be32(s, static_cast<std::uint32_t>(value.size()));
+    } else {
+      be16(s, static_cast<std::uint16_t>(value.size()));
+    }
+    s += value;
+  };
+  auto us_be = [&](std::uint16_t v) {
+    std::string s;
+    be16(s, v);
+    return s;
+  };
+  std::string meta;
+  element(meta, 0x0002, 0x0001, "OB", std::string("\0\1", 2));
+  element(meta, 0x0002, 0x0002, "UI", "1.2.840.10008.5.1.4.1.1.4");
+  element(meta, 0x0002, 0x0003, "UI", "1.2.3.4.9.1");
+  element(meta, 0x0002, 0x0010, "UI", "1.2.840.10008.1.2.2");
+  std::string out(128, '\0');
+  out += "DICM";
+  std::string len;
+  put_le32(len, static_cast<std::uint32_t>(meta.size()));
+  element(out, 0x0002, 0x0000, "UL", len);
+  out += meta;
+  elem(out, 0x0008, 0x0016, "UI", "1.2.840.10008.5.1.4.1.1.4");
+  elem(out, 0x0008, 0x0018, "UI", "1.2.3.4.9.1");
+  elem(out, 0x0008, 0x0060, "CS", "MR");
+  elem(out, 0x0020, 0x000d, "UI", "1.2.3.4");
+  elem(out, 0x0020, 0x000e, "UI", "1.2.3.4.7");
+  elem(out, 0x0020, 0x0032, "DS", "-10\\-20\\30");
+  elem(out, 0x0020, 0x0037, "DS", "1\\0\\0\\0\\1\\0");
+  elem(out, 0x0028, 0x0002, "US", us_be(1));
+  elem(out, 0x0028, 0x0004, "CS", "MONOCHROME2");
+  elem(out, 0x0028, 0x0010, "US", us_be(6));
+  elem(out, 0x0028, 0x0011, "US", us_be(8));
+  elem(out, 0x0028, 0x0030, "DS", "0.5\\0.75");
+  elem(out, 0x0028, 0x0100, "US", us_be(static_cast<std::uint16_t>(bits)));
+  elem(out, 0x0028, 0x0101, "US", us_be(static_cast<std::uint16_t>(bits)));
+  elem(out, 0x0028, 0x0102, "US", us_be(static_cast<std::uint16_t>(bits - 1)));
+  elem(out, 0x0028, 0x0103, "US", us_be(bits == 16 ? 1 : 0));
+  std::string px;
+  for (int y = 0; y < 6; ++y)
+    for (int x = 0; x < 8; ++x) {
+      if (bits == 16) be16(px, static_cast<std::uint16_t>(static_cast<std::int16_t>(stored(x, y))));
+      else be32(px, static_cast<std::uint32_t>(stored(x, y)));
+    }
+  elem(out, 0x7fe0, 0x0010, "OW", px);
+  write_bytes(p, out);
+}
+
+TEST(VolumeIo, DicomBigEndianPixelsAreSwappedOnce) {
+  // GDCM swaps an OW value into host order as it reads; caps swapped each pixel again (pydicom's
+  // MR_small_expb.dcm read as -32767..32518 instead of 127..2145).
+  TempDir tmp;
+  fs::create_directories(tmp / "s16");
+  fs::create_directories(tmp / "u32");
+  auto v16 = [](int x, int y) { return 300 * x - 700 * y + 129; };  // both signs, both bytes
+  auto v32 = [](int x, int y) { return 795000 + 65537 * x + 259 * y; };
+  write_big_endian_slice(tmp / "s16" / "be.dcm", 16, v16);
+  write_big_endian_slice(tmp / "u32" / "be.dcm", 32, v32);
+  const Volume a = caps::read_volume(tmp / "s16" / "be.dcm");
+  const Volume b = caps::read_volume(tmp / "u32" / "be.dcm");
+  EXPECT_EQ(a.geom.dims, Eigen::Vector3i(8, 6, 1));
+  for (int y = 0; y < 6; ++y)
+    for (int x = 0; x < 8; ++x) {
+      ASSERT_FLOAT_EQ(a.at(x, y, 0), static_cast<float>(v16(x, y))) << x << "," << y;
+      ASSERT_FLOAT_EQ(b.at(x, y, 0), static_cast<float>(v32(x, y))) << x << "," << y;
+    }
+}
+
+TEST(VolumeIo, DicomRtDoseFramesArePlacedByTheirGridFrameOffsets) {
+  TempDir tmp;
+  SliceSpec s;
+  s.ipp = Eigen::Vector3d(5, 6, 7);
+  s.frames = 3;
+  element(s.before_pixels, 0x3004, 0x000c, "DS", "0\\-2.5\\-5");
+  write_dicom_image(tmp / "dose.dcm", s, [](int x, int y, int k) { return 1000 * k + 10 * y + x; });
+  const Volume v = caps::read_volume(tmp / "dose.dcm");
+  EXPECT_EQ(v.geom.dims, Eigen::Vector3i(8, 6, 3));
+  EXPECT_LT((v.geom.spacing_mm - Eigen::Vector3d(0.75, 0.5, 2.5)).norm(), 1e-9);
+  EXPECT_LT((v.geom.origin_lps - Eigen::Vector3d(5, 6, 7)).norm(), 1e-9);
+  EXPECT_NEAR(v.geom.direction(2, 2), -1.0, 1e-12);  // offsets run towards -z
+  EXPECT_FLOAT_EQ(v.at(7, 5, 2), 2000 + 57 - 1024.0f);
+}
+
+TEST(VolumeIo, DicomNamedFileReadsItsSeriesBesideADamagedFileOfAnother) {
+  // As pydicom's test folder: CT_small.dcm beside MR_truncated.dcm (another series) was refused
+  // for the damaged neighbour.
+  TempDir tmp;
+  write_uniform_series(tmp / "mixed", 3);
+  SliceSpec other;
+  other.ipp = Eigen::Vector3d(0, 0, 0);
+  other.series_uid = "1.2.3.4.5.9";
+  write_dicom_slice(tmp / "mixed" / "Z_other.dcm", other, [](int, int) { return 1; });
+  const std::string whole = read_bytes(tmp / "mixed" / "Z_other.dcm");
+  write_bytes(tmp / "mixed" / "Z_other.dcm", whole.substr(0, whole.find("1.2.3.4.5.9") + 4));
+  // A copy of the named slice under another name (another encoding of it, as pydicom's
+  // MR_small*.dcm family) and a slice of the series in another orientation.
+  fs::copy_file(tmp / "mixed" / "IM001.dcm", tmp / "mixed" / "IM001_copy.dcm");
+  SliceSpec loc;
+  loc.ipp = Eigen::Vector3d(0, 0, 31);
+  loc.row = Eigen::Vector3d(0, 1, 0);
+  loc.col = Eigen::Vector3d(0, 0, -1);
+  loc.instance = 9;
+  write_dicom_slice(tmp / "mixed" / "LOC.dcm", loc, [](int, int) { return 5; });
+
+  const Volume v = caps::read_volume(tmp / "mixed" / "IM001.dcm");
+  EXPECT_EQ(v.geom.dims, Eigen::Vector3i(8, 6, 3));
+  EXPECT_FLOAT_EQ(v.at(3, 2, 2), 200 + 20 + 3 - 1024.0f);
+  std::string notes;
+  for (const auto& n : v.notes) notes += n + "\n";
+  EXPECT_NE(notes.find("Z_other.dcm"), std::string::npos) << notes;
+  EXPECT_NE(notes.find("IM001_copy.dcm"), std::string::npos) << notes;
+  // The localizer named reads its own orientation group, not the larger axial one.
+  const Volume l = caps::read_volume(tmp / "mixed" / "LOC.dcm");
+  EXPECT_EQ(l.geom.dims[2], 1);
+  EXPECT_FLOAT_EQ(l.at(0, 0, 0), 5 - 1024.0f);
+  // The folder itself is still refused for the damaged file, and for the copies.
+  expect_error<caps::IoError>([&] { caps::read_volume(tmp / "mixed"); }, "Z_other.dcm");
+  fs::remove(tmp / "mixed" / "Z_other.dcm");
+  expect_error<caps::InvalidInput>([&] { caps::read_volume(tmp / "mixed"); }, "IM001",
+                                   "same position");
 }
 
 TEST(VolumeIo, DicomRescaleSlopeOfZeroIsRefused) {

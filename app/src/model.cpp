@@ -428,9 +428,29 @@ VolumeInfoResult run_volume_info(const VolumeInfoRequest& r, Reporter*) {
   ro.series_uid = r.series;
   ro.max_voxels = r.max_voxels;
   ro.max_bytes = r.max_bytes;
+  ro.volume_index = r.volume_index;
   const Volume v = read_volume(r.input, ro);
   const auto [lo, hi] = std::minmax_element(v.data.begin(), v.data.end());
   const auto& g = v.geom;
+  // Moments of the acquired voxels, to compare a read with another reader's: the mean, the
+  // standard deviation and the centroid (LPS) of value - min, which moves if values or axes do.
+  double n = 0, sum = 0, sum2 = 0, wsum = 0;
+  Eigen::Vector3d wpos = Eigen::Vector3d::Zero();
+  for (int k = 0; k < g.dims[2]; ++k)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int i = 0; i < g.dims[0]; ++i) {
+        const std::size_t at = g.linear(i, j, k);
+        if (!v.acquired.empty() && !v.acquired[at]) continue;
+        const double x = v.data[at], w = x - *lo;
+        n += 1;
+        sum += x;
+        sum2 += x * x;
+        wsum += w;
+        wpos += w * v.index_to_lps(Eigen::Vector3d(i, j, k));
+      }
+  const double mean = n > 0 ? sum / n : 0.0;
+  const double sd = n > 0 ? std::sqrt(std::max(0.0, sum2 / n - mean * mean)) : 0.0;
+  const Eigen::Vector3d centroid = wsum > 0 ? Eigen::Vector3d(wpos / wsum) : g.origin_lps;
   json j{{"source", v.source},
          {"format", v.format},
          {"modality", to_string(v.modality)},
@@ -442,6 +462,10 @@ VolumeInfoResult run_volume_info(const VolumeInfoRequest& r, Reporter*) {
                                 {g.direction(0, 2), g.direction(1, 2), g.direction(2, 2)}}},
          {"min", *lo},
          {"max", *hi},
+         {"mean", mean},
+         {"std", sd},
+         {"centroid_lps", {centroid[0], centroid[1], centroid[2]}},
+         {"outside_field_voxels", static_cast<std::size_t>(g.n_voxels() - n)},
          {"notes", v.notes}};
   if (v.format == "DICOM") {
     json list = json::array();

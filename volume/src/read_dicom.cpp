@@ -72,7 +72,9 @@ struct SliceHeader {
   int bits_allocated = 16, bits_stored = 0, pixel_representation = 0, samples_per_pixel = 1;
   std::string photometric;
   bool encapsulated = false, big_endian = false;
+  bool has_pixel_data = false;             // a PixelData (7FE0,0010) element is present
   std::uintmax_t pixel_bytes_in_file = 0;  // file size minus the offset of the PixelData value
+  std::vector<double> frame_offsets;       // GridFrameOffsetVector (3004,000C) of an RT dose
 };
 
 std::string trim(std::string s) {
@@ -148,9 +150,13 @@ bool read_header(const fs::path& file, SliceHeader& h) {
   h.ipp = split_numbers(str(0x0020, 0x0032));
   h.iop = split_numbers(str(0x0020, 0x0037));
   h.pixel_spacing = split_numbers(str(0x0028, 0x0030));
+  h.frame_offsets = split_numbers(str(0x3004, 0x000c));
   h.rows = std::atoi(str(0x0028, 0x0010).c_str());
   h.cols = std::atoi(str(0x0028, 0x0011).c_str());
   const std::string frames = str(0x0028, 0x0008);
+  if (!frames.empty() && frames.find_first_not_of("+0123456789") != std::string::npos)
+    throw InvalidInput(cat(file.string(), ": NumberOfFrames (0028,0008) = '", frames,
+                           "' is not a whole number; the file is damaged"));
   h.frames = frames.empty() ? 1 : std::atoi(frames.c_str());
   h.instance = std::atoi(str(0x0020, 0x0013).c_str());
   const auto slope = split_numbers(str(0x0028, 0x1053));
@@ -176,11 +182,17 @@ bool read_header(const fs::path& file, SliceHeader& h) {
   const auto size = fs::file_size(file, ec);
   const auto pos = reader.GetStreamCurrentPosition();
   h.pixel_bytes_in_file = !ec && size > pos ? size - pos : 0;
+  // ReadUpToTag leaves the PixelData element out of the data set: bytes left after the point
+  // where it stopped say that one was found.
+  h.has_pixel_data = h.pixel_bytes_in_file > 0;
   return true;
 }
 
 /// All DICOM image headers under `folder` (recursively), and how many files were not DICOM.
-std::vector<SliceHeader> scan_folder(const fs::path& folder, int& n_skipped) {
+/// A damaged file refuses the folder, unless `damaged` is given: then it is listed there
+/// ("name: why") and left out.
+std::vector<SliceHeader> scan_folder(const fs::path& folder, int& n_skipped,
+                                     std::vector<std::string>* damaged = nullptr) {
   quiet_gdcm();
   std::vector<SliceHeader> out;
   n_skipped = 0;
@@ -202,8 +214,15 @@ std::vector<SliceHeader> scan_folder(const fs::path& folder, int& n_skipped) {
   std::sort(files.begin(), files.end());
   for (const auto& f : files) {
     SliceHeader h;
-    if (read_header(f, h)) out.push_back(std::move(h));
-    else ++n_skipped;
+    try {
+      if (read_header(f, h)) out.push_back(std::move(h));
+      else ++n_skipped;
+    } catch (const Error& e) {
+      if (damaged == nullptr) throw;
+      std::string why = e.what();
+      if (why.rfind(f.string() + ": ", 0) == 0) why = why.substr(f.string().size() + 2);
+      damaged->push_back(cat(f.filename().string(), ": ", why));
+    }
   }
   return out;
 }
@@ -306,11 +325,9 @@ std::string decode_contained(std::size_t n, char* out, const std::function<bool(
   return why;
 }
 
-/// Decoded pixels of one file as floats (rescale applied), rows*cols*frames values. The pixel
-/// format is the one read_header took from the header and checked here; native pixel data are
-/// copied from the file as they are, encapsulated (compressed) ones go through GDCM's codec for
-/// the transfer syntax.
-std::vector<float> read_pixels(const SliceHeader& h, int expected_frames) {
+/// Refuses (InvalidInput naming the file) a pixel format caps does not read: colour, inverted
+/// greyscale, BitsAllocated other than 8/16/32, a damaged PixelRepresentation.
+void check_pixel_format(const SliceHeader& h) {
   const std::string name = h.file.string();
   if (h.samples_per_pixel != 1)
     throw InvalidInput(cat(name, ": ", h.samples_per_pixel,
@@ -321,15 +338,24 @@ std::vector<float> read_pixels(const SliceHeader& h, int expected_frames) {
   if (!h.photometric.empty() && h.photometric != "MONOCHROME2")
     throw InvalidInput(cat(name, ": PhotometricInterpretation ", h.photometric,
                            " is not greyscale (MONOCHROME2); caps reads CT/MR only"));
-  const unsigned bits = static_cast<unsigned>(h.bits_allocated);
-  if (bits != 8 && bits != 16 && bits != 32)
+  if (h.bits_allocated != 8 && h.bits_allocated != 16 && h.bits_allocated != 32)
     throw InvalidInput(cat(name, ": BitsAllocated = ", h.bits_allocated,
                            " is not supported (8, 16 or 32)"));
-  const unsigned stored = h.bits_stored >= 1 && h.bits_stored <= h.bits_allocated
-                              ? static_cast<unsigned>(h.bits_stored) : bits;
   if (h.pixel_representation != 0 && h.pixel_representation != 1)
     throw InvalidInput(cat(name, ": PixelRepresentation (0028,0103) = ", h.pixel_representation,
                            " is neither 0 (unsigned) nor 1 (signed); the file is damaged"));
+}
+
+/// Decoded pixels of one file as floats (rescale applied), rows*cols*frames values. The pixel
+/// format is the one read_header took from the header and checked here; native pixel data are
+/// copied from the file as they are, encapsulated (compressed) ones go through GDCM's codec for
+/// the transfer syntax.
+std::vector<float> read_pixels(const SliceHeader& h, int expected_frames) {
+  const std::string name = h.file.string();
+  check_pixel_format(h);
+  const unsigned bits = static_cast<unsigned>(h.bits_allocated);
+  const unsigned stored = h.bits_stored >= 1 && h.bits_stored <= h.bits_allocated
+                              ? static_cast<unsigned>(h.bits_stored) : bits;
   const bool is_signed = h.pixel_representation == 1;
   const std::size_t n = static_cast<std::size_t>(h.cols) * h.rows * expected_frames;
   const std::size_t bytes = n * (bits / 8);
@@ -353,6 +379,16 @@ std::vector<float> read_pixels(const SliceHeader& h, int expected_frames) {
       throw IoError(cat(name, ": the pixel data hold ", bv ? std::size_t{bv->GetLength()} : std::size_t{0}, " bytes, ",
                         bytes, " expected; the file is truncated"));
     buf.assign(bv->GetPointer(), bv->GetPointer() + bytes);
+    if (h.big_endian) {
+      // GDCM has already swapped a big-endian value into host order in units of its VR's
+      // word (2 bytes for OW, 4 for OL/OF, none for OB). Undo that to get the file's big-endian
+      // bytes back; decode_to_float below then swaps each pixel of BitsAllocated.
+      const std::size_t unit = std::max<std::size_t>(1, de.GetVR().GetSize());
+      if (unit > 1)
+        for (std::size_t at = 0; at + unit <= buf.size(); at += unit)
+          std::reverse(buf.begin() + static_cast<std::ptrdiff_t>(at),
+                       buf.begin() + static_cast<std::ptrdiff_t>(at + unit));
+    }
   } else {
     // GDCM's codecs trust the frames' own headers (its JPEG codec crashed on a precision above
     // BitsAllocated): each frame's header is checked against the DICOM header first.
@@ -510,6 +546,17 @@ Volume read_multiframe(const SliceHeader& h, const ReadOptions& options) {
         throw InvalidInput(cat(name, ": frame ", k, " is not where even spacing puts it; caps "
                                      "reads multi-frame images with evenly spaced frames"));
     }
+  } else if (h.frame_offsets.size() == static_cast<std::size_t>(h.frames) && h.frames > 1) {
+    // An RT dose grid: GridFrameOffsetVector gives each frame's offset along the normal,
+    // relative to the first (PS3.3 C.8.8.3.2: relative from 0, or absolute z for axial grids:
+    // either way frame k lies at IPP + (o[k] - o[0]) n).
+    const auto& o = h.frame_offsets;
+    step = o[1] - o[0];
+    for (int k = 2; k < h.frames; ++k)
+      if (!(std::abs(o[k] - o[0] - k * step) <= 0.01 * std::abs(step) + 1e-3))
+        throw InvalidInput(cat(name, ": GridFrameOffsetVector places frame ", k + 1,
+                               " away from where even spacing puts it; caps reads multi-frame "
+                               "images with evenly spaced frames"));
   } else {
     for (const gdcm::Tag& t : {gdcm::Tag(0x0018, 0x0088), gdcm::Tag(0x0018, 0x0050)}) {
       const auto x = split_numbers(element_text(ds, t));
@@ -518,7 +565,8 @@ Volume read_multiframe(const SliceHeader& h, const ReadOptions& options) {
   }
   if (!(std::abs(step) > 1e-6) || !std::isfinite(step))
     throw InvalidInput(cat(name, ": the spacing between frames is unknown or 0 (no per-frame "
-                                 "positions, SpacingBetweenSlices or SliceThickness)"));
+                                 "positions, GridFrameOffsetVector, SpacingBetweenSlices or "
+                                 "SliceThickness)"));
   auto& g = v.geom;
   g.dims = Eigen::Vector3i(h.cols, h.rows, h.frames);
   g.spacing_mm = Eigen::Vector3d(sp[1], sp[0], std::abs(step));
@@ -534,27 +582,55 @@ Volume read_multiframe(const SliceHeader& h, const ReadOptions& options) {
   return v;
 }
 
+/// Why `s` cannot be placed as a slice (empty if it can): position, orientation, spacing, size.
+std::string placement_problem(const SliceHeader& s) {
+  if (s.ipp.size() != 3 || s.iop.size() != 6)
+    return "ImagePositionPatient / ImageOrientationPatient missing or malformed; caps needs both "
+           "to place the slices (not a cross-sectional image?)";
+  if (s.pixel_spacing.size() != 2 || !(s.pixel_spacing[0] > 0) || !(s.pixel_spacing[1] > 0))
+    return "PixelSpacing missing or not positive";
+  if (s.rows <= 0 || s.cols <= 0)
+    return cat("Rows/Columns = ", s.rows, "/", s.cols, " must be positive");
+  return {};
+}
+
+/// Builds the volume of one series' slices. `named` is the file the user named (empty for a
+/// folder): its orientation group is read, other files at its position and files of the series
+/// that cannot be placed are left out (noted) instead of refusing the series.
 Volume build_volume(std::vector<SliceHeader> slices, const std::string& where,
-                    const ReadOptions& options, std::vector<std::string> notes) {
+                    const ReadOptions& options, std::vector<std::string> notes,
+                    const fs::path& named) {
   Volume v;
   v.source = where;
   v.format = "DICOM";
   v.notes = std::move(notes);
 
-  for (const auto& s : slices) {
-    if (s.ipp.size() != 3 || s.iop.size() != 6)
-      throw InvalidInput(cat(s.file.string(), ": ImagePositionPatient / ImageOrientationPatient "
-                                              "missing or malformed; caps needs both to place "
-                                              "the slices (not a cross-sectional image?)"));
-    if (s.pixel_spacing.size() != 2 || !(s.pixel_spacing[0] > 0) || !(s.pixel_spacing[1] > 0))
-      throw InvalidInput(cat(s.file.string(), ": PixelSpacing missing or not positive"));
-    if (s.rows <= 0 || s.cols <= 0)
-      throw InvalidInput(cat(s.file.string(), ": Rows/Columns = ", s.rows, "/", s.cols,
-                             " must be positive"));
-    if (s.frames != 1)
-      throw InvalidInput(cat(s.file.string(), ": a multi-frame file inside a series of ",
-                             slices.size(), " files; read it on its own"));
+  // Folder: every file of the series must be a placeable slice. Named file (checked before):
+  // the other files of its series that are not are left out, with a note.
+  {
+    std::vector<SliceHeader> kept;
+    std::vector<std::string> left_out;
+    for (auto& s : slices) {
+      std::string why = placement_problem(s);
+      if (why.empty() && s.frames != 1)
+        why = cat("a multi-frame file inside a series of ", slices.size(),
+                  " files; read it on its own");
+      if (why.empty()) kept.push_back(std::move(s));
+      else if (!named.empty()) left_out.push_back(cat(s.file.filename().string(), " (", why, ")"));
+      else throw InvalidInput(cat(s.file.string(), ": ", why));
+    }
+    slices = std::move(kept);
+    if (slices.empty())
+      throw InvalidInput(cat(where, ": no file of the series is a single slice caps can place, "
+                                    "first: ", left_out.front()));
+    if (!left_out.empty())
+      v.notes.push_back(cat("left out ", left_out.size(), " file(s) of the series that are not "
+                            "single slices caps can place, first: ", left_out.front()));
   }
+  auto is_named = [&](const SliceHeader& s) {
+    std::error_code ec;
+    return !named.empty() && fs::equivalent(s.file, named, ec);
+  };
 
   // Keep the largest group of slices sharing one orientation (drops localizers in the series).
   {
@@ -576,6 +652,11 @@ Volume build_volume(std::vector<SliceHeader> slices, const std::string& where,
     }
     std::stable_sort(groups.begin(), groups.end(),
                      [](const auto& a, const auto& b) { return a.size() > b.size(); });
+    // A named file's own group is read, whatever its size.
+    for (std::size_t gi = 1; gi < groups.size(); ++gi)
+      if (std::any_of(groups[gi].begin(), groups[gi].end(), is_named))
+        std::rotate(groups.begin(), groups.begin() + static_cast<std::ptrdiff_t>(gi),
+                    groups.begin() + static_cast<std::ptrdiff_t>(gi) + 1);
     if (groups.size() > 1) {
       std::size_t dropped = 0;
       for (std::size_t gi = 1; gi < groups.size(); ++gi) dropped += groups[gi].size();
@@ -586,7 +667,7 @@ Volume build_volume(std::vector<SliceHeader> slices, const std::string& where,
     slices = std::move(groups[0]);
   }
 
-  const auto& s0 = slices.front();
+  const SliceHeader s0 = slices.front();  // a copy: `slices` is filtered below
   Eigen::Vector3d r(s0.iop[0], s0.iop[1], s0.iop[2]), c(s0.iop[3], s0.iop[4], s0.iop[5]);
   if (r.norm() < 0.5 || c.norm() < 0.5 || std::abs(r.normalized().dot(c.normalized())) > 1e-2)
     throw InvalidInput(cat(s0.file.string(), ": ImageOrientationPatient (",
@@ -599,6 +680,26 @@ Volume build_volume(std::vector<SliceHeader> slices, const std::string& where,
   const int nx = s0.cols, ny = s0.rows;
 
   for (auto& s : slices) s.d = Eigen::Vector3d(s.ipp[0], s.ipp[1], s.ipp[2]).dot(n);
+  // A named file wins over the other files of its series at its own position (copies of the
+  // slice, other encodings of it): those are left out, with a note.
+  if (const auto it = std::find_if(slices.begin(), slices.end(), is_named); it != slices.end()) {
+    const double d_named = it->d;
+    std::vector<SliceHeader> kept;
+    std::size_t n_same = 0;
+    std::string first_same;
+    for (auto& s : slices) {
+      if (!is_named(s) && std::abs(s.d - d_named) < 0.01) {
+        if (n_same++ == 0) first_same = s.file.filename().string();
+        continue;
+      }
+      kept.push_back(std::move(s));
+    }
+    slices = std::move(kept);
+    if (n_same > 0)
+      v.notes.push_back(cat("left out ", n_same, " other file(s) of the series at the position of ",
+                            named.filename().string(), " (copies or other encodings of the same "
+                            "slice), first: ", first_same));
+  }
   std::stable_sort(slices.begin(), slices.end(),
                    [](const auto& a, const auto& b) { return a.d < b.d; });
   const std::size_t n_slices = slices.size();
@@ -800,15 +901,28 @@ Volume read_dicom(const fs::path& input, const ReadOptions& options) {
     if (!read_header(input, h))
       throw InvalidInput(cat(input.string(), ": not a DICOM image (or it has no SeriesInstanceUID)"
                                              "; caps reads a DICOM folder or .dcm file, .nii, "
-                                             ".nii.gz, .nrrd, .nhdr, .mha, .mhd or .inv3"));
+                                             ".nii.gz, a NIfTI .hdr/.img pair, .nrrd, .nhdr, "
+                                             ".mha, .mhd or .inv3"));
+    // The named file itself must be an image caps can place; the reason is about it, not about
+    // its neighbours.
+    if (!h.has_pixel_data)
+      throw InvalidInput(cat(input.string(), ": holds no pixel data (Modality '", h.modality,
+                             "'): not an image; caps reads CT/MR image series"));
+    check_pixel_format(h);
     if (h.frames > 1) return read_multiframe(h, opts);
+    if (std::string why = placement_problem(h); !why.empty())
+      throw InvalidInput(cat(input.string(), ": ", why));
     folder = input.parent_path().empty() ? fs::path(".") : input.parent_path();
     if (opts.series_uid.empty()) opts.series_uid = h.series_uid;
     notes.push_back(cat("read the series of ", input.filename().string(), " from its folder"));
   }
 
   int n_skipped = 0;
-  auto series = group_series(scan_folder(folder, n_skipped));
+  std::vector<std::string> damaged;
+  auto series = group_series(scan_folder(folder, n_skipped, is_dir ? nullptr : &damaged));
+  if (!damaged.empty())
+    notes.push_back(cat("left out ", damaged.size(), " damaged file(s) of the folder, first: ",
+                        damaged.front()));
   if (series.empty())
     throw InvalidInput(cat(folder.string(), ": no DICOM image files found (", n_skipped,
                            " other files); point caps at the folder holding the series' .dcm "
@@ -828,7 +942,8 @@ Volume read_dicom(const fs::path& input, const ReadOptions& options) {
   if (n_skipped > 0) notes.push_back(cat("skipped ", n_skipped, " non-DICOM file(s)"));
   auto& files = series[uid];
   if (files.size() == 1 && files[0].frames > 1) return read_multiframe(files[0], opts);
-  return build_volume(std::move(files), folder.string(), opts, std::move(notes));
+  return build_volume(std::move(files), folder.string(), opts, std::move(notes),
+                      is_dir ? fs::path() : input);
 }
 
 }  // namespace detail
@@ -838,7 +953,8 @@ std::vector<DicomSeriesInfo> list_dicom_series(const fs::path& folder) {
   if (!fs::is_directory(folder, ec))
     throw IoError(cat(folder.string(), ": not a folder; give the folder holding the DICOM files"));
   int n_skipped = 0;
-  return detail::summarize(detail::group_series(detail::scan_folder(folder, n_skipped)));
+  std::vector<std::string> damaged;  // a listing names what it can read
+  return detail::summarize(detail::group_series(detail::scan_folder(folder, n_skipped, &damaged)));
 }
 
 }  // namespace caps

@@ -2,12 +2,18 @@
 // two rows of the chosen affine are negated. Affine priority follows the NIfTI-1 standard
 // (nifti1.h, "METHOD 3 / 2 / 1"): sform if sform_code > 0, else qform if qform_code > 0, else the
 // pixdim-only Analyze fallback.
+//
+// Not-a-number voxels: resampling tools write NaN where the output grid leaves the input's field
+// of view. A NaN voxel joined to the grid's boundary through NaN voxels (6-neighbours) is taken as
+// outside the field of view: it gets the smallest finite value and Volume::acquired 0 (a note
+// counts them). A NaN region enclosed by data is damage inside the image: refused.
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -82,11 +88,12 @@ std::array<double, 3> raw_pixdim(const std::string& name) {
   return out;
 }
 
-// The first volume's voxel bytes, read here rather than by nifti_image_load, which reads every
-// volume and replaces non-finite floats with 0 silently. A single-file image (.nii, .nii.gz) is
-// read from `name` itself, never from another file nifti2_io finds by its base name.
-std::vector<char> read_first_volume(const std::string& name, const nifti_image& nim,
-                                    std::size_t n_bytes) {
+// One volume's voxel bytes (`n_bytes` from `skip` bytes past the data offset), read here rather
+// than by nifti_image_load, which reads every volume and replaces non-finite floats with 0
+// silently. A single-file image (.nii, .nii.gz) is read from `name` itself, never from another
+// file nifti2_io finds by its base name; a pair from its .img.
+std::vector<char> read_volume_bytes(const std::string& name, const nifti_image& nim,
+                                    std::uint64_t skip, std::size_t n_bytes) {
   const bool single = nim.nifti_type == NIFTI_FTYPE_NIFTI1_1 ||
                       nim.nifti_type == NIFTI_FTYPE_NIFTI2_1;
   const std::string data_file = single || !nim.iname ? name : std::string(nim.iname);
@@ -94,7 +101,7 @@ std::vector<char> read_first_volume(const std::string& name, const nifti_image& 
   if (znz_isnull(f))
     throw IoError(cat(data_file, ": cannot open the image data for reading (missing or permissions?)"));
   std::vector<char> raw;
-  bool ok = znzseek(f, static_cast<znz_off_t>(nim.iname_offset), SEEK_SET) >= 0;
+  bool ok = znzseek(f, static_cast<znz_off_t>(nim.iname_offset + skip), SEEK_SET) >= 0;
   if (ok) {
     raw.resize(n_bytes);
     std::size_t got = 0;
@@ -108,13 +115,84 @@ std::vector<char> read_first_volume(const std::string& name, const nifti_image& 
   znzclose(f);
   if (!ok)
     throw IoError(cat(name, ": the voxel data could not be read (truncated or corrupt ",
-                      is_gz(fs::path(name)) ? "gzip stream" : "file", "); re-export or re-download it"));
+                      is_gz(fs::path(data_file)) ? "gzip stream" : "file",
+                      data_file == name ? std::string() : cat(" ", data_file),
+                      "); re-export or re-download it"));
   // zlib's gzread stops once it has the bytes asked for: a stream cut short after them (its end
   // and checksum) would pass unseen.
   if (nifti_is_gzfile(data_file.c_str()))
     require_whole_gzip(fs::path(name), fs::path(data_file), 0,
-                       static_cast<std::uint64_t>(nim.iname_offset) + n_bytes);
+                       static_cast<std::uint64_t>(nim.iname_offset) + skip + n_bytes);
   return raw;
+}
+
+// Intents whose voxels are not one value of an image at a place: matrices, vectors, point sets,
+// meshes, RGB, shapes, FSL warp fields (2006..) and CIFTI (3000..).
+bool is_image_intent(int code) { return !((code >= 1004 && code <= 1010) || code >= 2002); }
+
+// The NaN rule above: NaN joined to the boundary -> outside the field (smallest finite value,
+// acquired 0); NaN enclosed by data -> InvalidInput.
+void mark_nan_outside_field(const std::string& name, Volume& v) {
+  const auto& g = v.geom;
+  const std::size_t n = v.data.size();
+  std::size_t n_nan = 0;
+  float lo = std::numeric_limits<float>::infinity();
+  for (float x : v.data) {
+    if (std::isnan(x)) ++n_nan;
+    else if (std::isfinite(x)) lo = std::min(lo, x);
+  }
+  if (n_nan == 0) return;
+  if (!std::isfinite(lo))
+    throw InvalidInput(cat(name, ": no voxel holds a finite number; the data are damaged or empty"));
+  const int nx = g.dims[0], ny = g.dims[1], nz = g.dims[2];
+  std::vector<std::uint8_t> outside(n, 0);
+  std::vector<std::size_t> stack;
+  auto push = [&](int i, int j, int k) {
+    const std::size_t at = g.linear(i, j, k);
+    if (!outside[at] && std::isnan(v.data[at])) {
+      outside[at] = 1;
+      stack.push_back(at);
+    }
+  };
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i)
+        if (i == 0 || j == 0 || k == 0 || i == nx - 1 || j == ny - 1 || k == nz - 1) push(i, j, k);
+  while (!stack.empty()) {
+    const std::size_t at = stack.back();
+    stack.pop_back();
+    const int i = static_cast<int>(at % nx), j = static_cast<int>((at / nx) % ny),
+              k = static_cast<int>(at / (static_cast<std::size_t>(nx) * ny));
+    if (i > 0) push(i - 1, j, k);
+    if (i + 1 < nx) push(i + 1, j, k);
+    if (j > 0) push(i, j - 1, k);
+    if (j + 1 < ny) push(i, j + 1, k);
+    if (k > 0) push(i, j, k - 1);
+    if (k + 1 < nz) push(i, j, k + 1);
+  }
+  std::size_t n_out = 0;
+  for (std::size_t at = 0; at < n; ++at) {
+    if (outside[at]) {
+      ++n_out;
+      continue;
+    }
+    if (std::isnan(v.data[at])) {
+      const std::size_t inside = n_nan - std::count(outside.begin(), outside.end(), 1);
+      throw InvalidInput(cat(name, ": ", inside, " NaN voxel(s) enclosed by data, first at (",
+                             at % nx, ", ", (at / nx) % ny, ", ",
+                             at / (static_cast<std::size_t>(nx) * ny), "), are not finite "
+                             "numbers; NaN is read as outside the field of view only where it "
+                             "reaches the edge of the grid: the data are damaged"));
+    }
+  }
+  v.acquired.assign(n, 1);
+  for (std::size_t at = 0; at < n; ++at)
+    if (outside[at]) {
+      v.data[at] = lo;
+      v.acquired[at] = 0;
+    }
+  v.notes.push_back(cat(n_out, " not-a-number voxel(s) reaching the edge of the grid taken as "
+                        "outside the field of view (set to the smallest value, ", lo, ")"));
 }
 
 }  // namespace
@@ -133,7 +211,18 @@ Volume read_nifti(const fs::path& file, const ReadOptions& options) {
   if (nim->dim[0] < 1 || nim->dim[0] > 7)
     throw InvalidInput(cat(name, ": header field dim[0] = ", nim->dim[0],
                            " must be 1..7; the header is damaged"));
-  const auto pixdim = raw_pixdim(name);
+  if (nim->nifti_type == NIFTI_FTYPE_ANALYZE)
+    throw InvalidInput(cat(name, ": an Analyze 7.5 header (no NIfTI magic): it has no "
+                                 "orientation, so left and right are unknown; convert it to "
+                                 "NIfTI with its orientation set"));
+  if (!is_image_intent(nim->intent_code))
+    throw InvalidInput(cat(name, ": NIfTI intent ", nim->intent_code, " (",
+                           nifti_intent_string(nim->intent_code),
+                           ") is not an image of one value per voxel (a matrix, vectors, points, "
+                           "a mesh or CIFTI data); caps reads CT/MR volumes"));
+  // The header file: a pair named by its .img has its header in nim->fname.
+  const std::string header_name = nim->fname ? std::string(nim->fname) : name;
+  const auto pixdim = raw_pixdim(header_name);
   for (int d = 1; d <= 3; ++d)
     if (!std::isfinite(pixdim[d - 1]))
       throw InvalidInput(cat(name, ": header field pixdim[", d, "] = ", pixdim[d - 1],
@@ -143,8 +232,12 @@ Volume read_nifti(const fs::path& file, const ReadOptions& options) {
   v.format = nim->nifti_type >= NIFTI_FTYPE_NIFTI2_1 ? "NIfTI-2" : "NIfTI-1";
   double extra = 1;  // a double: dims 4..7 are 64-bit and their product may overflow
   for (int d = 4; d <= nim->dim[0]; ++d) extra *= static_cast<double>(std::max<int64_t>(nim->dim[d], 1));
+  if (options.volume_index < 0 || static_cast<double>(options.volume_index) >= extra)
+    throw InvalidInput(cat(name, ": volume index ", options.volume_index, " is out of range: the "
+                           "file holds ", extra, " volume(s) (dims 4..7), numbered from 0"));
   if (extra > 1)
-    v.notes.push_back(cat("the file holds ", extra, " volumes (dims 4..7); read the first one"));
+    v.notes.push_back(cat("the file holds ", extra, " volumes (dims 4..7); read volume ",
+                          options.volume_index, " (choose another with --volume-index)"));
 
   const std::string type = nifti_element_type(nim->datatype);
   if (type.empty())
@@ -166,15 +259,16 @@ Volume read_nifti(const fs::path& file, const ReadOptions& options) {
                       nim->iname_offset, " + ", nim->nx, "x", nim->ny, "x", nim->nz,
                       " voxels of ", nim->nbyper, " bytes) but the file has ", file_bytes,
                       "; re-export or re-download it"));
-  // Only the first volume is read: its raw bytes are held beside the float volume.
+  // Only one volume is read: its raw bytes are held beside the float volume.
   check_dims(file, "dim[1..3]", {nim->nx, nim->ny, nim->nz}, options, n3 * nim->nbyper);
 
   auto& g = v.geom;
   g.dims = Eigen::Vector3i(static_cast<int>(nim->nx), static_cast<int>(nim->ny),
                            static_cast<int>(nim->nz));
   {
-    const std::vector<char> raw =
-        read_first_volume(name, *nim, g.n_voxels() * static_cast<std::size_t>(nim->nbyper));
+    const std::size_t volume_bytes = g.n_voxels() * static_cast<std::size_t>(nim->nbyper);
+    const std::vector<char> raw = read_volume_bytes(
+        name, *nim, static_cast<std::uint64_t>(options.volume_index) * volume_bytes, volume_bytes);
     v.data.resize(g.n_voxels());
     decode_to_float(raw.data(), v.data.size(), type, nim->byteorder != nifti_short_order(),
                     v.data.data());
@@ -224,6 +318,7 @@ Volume read_nifti(const fs::path& file, const ReadOptions& options) {
   if ((gram - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-4)
     v.notes.push_back("the affine is sheared (axes not orthogonal); kept as is");
 
+  mark_nan_outside_field(name, v);
   v.modality = guess_modality(v.data, v.notes);
   validate_volume(v);
   return v;

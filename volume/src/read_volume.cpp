@@ -148,7 +148,8 @@ void decode_to_float(const char* src, std::size_t n, const std::string& t, bool 
 namespace {
 
 constexpr const char* kAccepted =
-    "a DICOM folder or .dcm file, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd or .inv3";
+    "a DICOM folder or .dcm file, .nii, .nii.gz, a NIfTI .hdr/.img pair, .nrrd, .nhdr, .mha, "
+    ".mhd or .inv3";
 
 }  // namespace
 
@@ -161,7 +162,9 @@ Volume read_by_kind(const fs::path& input, const ReadOptions& options, bool is_d
     return name.size() >= suffix.size() &&
            name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
   };
-  if (ends_with(".nii") || ends_with(".nii.gz")) return detail::read_nifti(input, options);
+  if (ends_with(".nii") || ends_with(".nii.gz") || ends_with(".hdr") || ends_with(".hdr.gz") ||
+      ends_with(".img") || ends_with(".img.gz"))
+    return detail::read_nifti(input, options);
   if (ends_with(".nrrd") || ends_with(".nhdr")) return detail::read_nrrd(input, options);
   if (ends_with(".mha") || ends_with(".mhd")) return detail::read_metaimage(input, options);
   if (ends_with(".inv3")) return detail::read_inv3(input, options);

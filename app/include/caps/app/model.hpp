@@ -382,19 +382,21 @@ std::string summary(const SiteResult& result);
 
 struct VolumeInfoRequest {
   std::string input, series;
+  int volume_index = 0;
   double max_voxels = kDefaultMaxVoxels, max_bytes = kDefaultMaxBytes;
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
-    v(r.input, {"input", "a DICOM folder, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .inv3",
+    v(r.input, {"input", "a DICOM folder, .nii/.nii.gz, .hdr/.img, .nrrd/.nhdr, .mha/.mhd, .inv3",
                 FieldKind::Positional, "INPUT"});
     v(r.series, {"series", "DICOM SeriesInstanceUID"});
+    v(r.volume_index, {"volume_index", "NIfTI with several volumes (4-D): the one to read, from 0"});
     v(r.max_voxels, {"max_voxels", "refuse a volume declaring more voxels (default 2^31)"});
     v(r.max_bytes, {"max_bytes", "refuse a volume needing more bytes of memory (default 8 GiB)"});
   }
 };
 
 struct VolumeInfoResult {
-  std::string json;  ///< geometry (LPS), modality, value range, notes, DICOM series
+  std::string json;  ///< geometry (LPS), modality, value range and moments, notes, DICOM series
   std::string text;  ///< the same for reading
 
   template <class Self, class V>

@@ -27,6 +27,9 @@ struct ReadOptions {
   /// A header whose voxels need more bytes than this (float volume + raw data) is refused
   /// before any allocation.
   double max_bytes = kDefaultMaxBytes;
+  /// NIfTI with several volumes (dims 4..7, e.g. an fMRI time series): the volume to read,
+  /// counted from 0 with dim 4 fastest. Out of range is an InvalidInput naming the count.
+  long long volume_index = 0;
 };
 
 /// One DICOM series found in a folder.
@@ -37,12 +40,12 @@ struct DicomSeriesInfo {
   int n_files = 0;
 };
 
-/// Reads a volume. `input` is a DICOM folder (or one DICOM file), .nii/.nii.gz, .nrrd/.nhdr,
-/// .mha/.mhd or .inv3. Throws IoError (missing, unreadable, truncated) or InvalidInput (not an
+/// Reads a volume. `input` is a DICOM folder (or one DICOM file), .nii/.nii.gz, a NIfTI-1/2
+/// pair (.hdr + .img, either named, optionally .gz), .nrrd/.nhdr, .mha/.mhd or .inv3. Throws IoError (missing, unreadable, truncated) or InvalidInput (not an
 /// image, inconsistent header, missing slices) with the file named and what to do.
 Volume read_volume(const std::filesystem::path& input, const ReadOptions& options = {});
 
-/// Lists the DICOM series in a folder, largest first.
+/// Lists the DICOM series in a folder, largest first (damaged files are left out).
 std::vector<DicomSeriesInfo> list_dicom_series(const std::filesystem::path& folder);
 
 /// Writes a volume as NIfTI-1 (.nii, or gzip-compressed .nii.gz), float32, with qform and sform
