@@ -1,6 +1,10 @@
 # caps_add_module(<name> [DEPENDS <lower caps modules>] [SOURCES <files>] [LIBS <third-party targets>])
 # Builds the library caps::<name>. A dependency must be a lower layer that was already added,
-# so the module graph cannot contain a cycle (core -> image -> volume -> surface -> plan -> fem -> render -> tools).
+# so the module graph cannot contain a cycle (the order is CAPS_MODULES in the top CMakeLists).
+# Its sources and headers may include only caps/<m>/ of itself and of the modules it depends on,
+# directly or through them (caps_check_includes, cmake/CapsLayering.cmake): checked here, at
+# configure time.
+include(${CMAKE_CURRENT_LIST_DIR}/CapsLayering.cmake)
 function(caps_add_module name)
   cmake_parse_arguments(ARG "" "" "DEPENDS;SOURCES;LIBS" ${ARGN})
   add_library(caps_${name} ${ARG_SOURCES})
@@ -14,6 +18,14 @@ function(caps_add_module name)
     endif()
     target_link_libraries(caps_${name} PUBLIC caps::${dep})
   endforeach()
+  set(allowed ${name})
+  foreach(dep IN LISTS ARG_DEPENDS)
+    get_property(below GLOBAL PROPERTY CAPS_LAYERS_${dep})
+    list(APPEND allowed ${dep} ${below})
+  endforeach()
+  list(REMOVE_DUPLICATES allowed)
+  set_property(GLOBAL PROPERTY CAPS_LAYERS_${name} ${allowed})
+  caps_check_includes(${name} "${CMAKE_CURRENT_SOURCE_DIR}" "${allowed}")
   if(ARG_LIBS)
     target_link_libraries(caps_${name} PRIVATE ${ARG_LIBS})
   endif()

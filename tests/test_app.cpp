@@ -93,13 +93,19 @@ TEST(Fields, RequestJsonRoundTripKeepsEveryFieldAndTheLibraryDefaults) {
   EXPECT_EQ(r.model, "m");
   EXPECT_EQ(r.meshing.mesh_size, 1.5);
   EXPECT_EQ(r.meshing.rim, "free");
-  EXPECT_EQ(r.meshing.layers, fem::ContinuumMeshOptions{}.n_layers);   // library default
-  EXPECT_EQ(r.meshing.t1, fem::SurfaceMeshOptions{}.t1_deg);
+  // Unset fields take the documented defaults (docs/mesher.md: 2 element layers through the
+  // tissue, stage 1 at t1 = 30 deg, undermining 10 mm), which the request takes from the
+  // library's options: a changed default in either place fails here.
+  EXPECT_EQ(r.meshing.layers, 2);
+  EXPECT_EQ(mesher::ContinuumMeshOptions{}.n_layers, 2);
+  EXPECT_EQ(r.meshing.t1, 30.0);
+  EXPECT_EQ(mesher::SurfaceMeshOptions{}.t1_deg, 30.0);
   const auto back = app::read_request<app::MeshRequest>(app::write_request(r));
   EXPECT_EQ(app::write_request(back), app::write_request(r));
   const json j = json::parse(app::write_request(r));
   EXPECT_EQ(j["mesh_size"], 1.5);
-  EXPECT_EQ(j["undermine"], fem::ContinuumMeshOptions{}.undermine_mm);  // library default
+  EXPECT_EQ(j["undermine"], 10.0);
+  EXPECT_EQ(mesher::ContinuumMeshOptions{}.undermine_mm, 10.0);
   EXPECT_TRUE(j.contains("stage1_angle"));
 }
 

@@ -22,8 +22,8 @@
 #include "caps/app/simulation.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
-#include "caps/fem/compare_models.hpp"
-#include "caps/fem/thickness_sensitivity.hpp"
+#include "caps/study/compare_models.hpp"
+#include "caps/study/thickness_sensitivity.hpp"
 #include "caps/image/image_io.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/plan/procedures.hpp"
@@ -70,15 +70,15 @@ plan::Plan forehead_ellipse(const PatientModel& model, double theta_deg = 10.0) 
                                model, theta_deg, nose.z_mm + 35.0, 70.0);
 }
 
-fem::SimulateOptions small_mesh() {
-  fem::SimulateOptions o;
+closure::SimulateOptions small_mesh() {
+  closure::SimulateOptions o;
   o.surface.size_mm = 2.0;
   o.surface.extent_mm = 16.0;
   return o;
 }
 
 // The options `caps compare-models` uses by default (the neo-Hookean closure), on that mesh.
-fem::SimulateOptions small_mesh_app_defaults() {
+closure::SimulateOptions small_mesh_app_defaults() {
   app::MeshingFields meshing;
   meshing.mesh_size = 2.0;
   meshing.extent = 16.0;
@@ -109,7 +109,7 @@ TEST(CompareModels, PlanCarriedToAMovedCopyLandsOnTheSameSkinAndClosesAlike) {
   const Eigen::Matrix4d T = pose(14.0, {-1, 0.5, 2}, {-30, 20, 35});
   const PatientModel b = moved_model(a, T);
   const plan::Plan plan = forehead_ellipse(a);
-  const fem::TransferredPlan moved = fem::transfer_plan(plan, a, b, T);
+  const study::TransferredPlan moved = study::transfer_plan(plan, a, b, T);
   EXPECT_NEAR(moved.plan.frame.theta_deg, plan.frame.theta_deg, 1e-6);
   EXPECT_NEAR(moved.plan.frame.z_mm, plan.frame.z_mm, 1e-6);
   EXPECT_NEAR(moved.plan.frame.orientation_deg, plan.frame.orientation_deg, 1e-6);
@@ -119,9 +119,9 @@ TEST(CompareModels, PlanCarriedToAMovedCopyLandsOnTheSameSkinAndClosesAlike) {
     EXPECT_LT((moved.plan.points[i].lps - transform_points(T, plan.points[i].lps.transpose()).row(0).transpose()).norm(),
               1e-6);
 
-  const fem::SimulateOptions o = small_mesh();
-  const fem::ModelComparison c =
-      fem::compare_models({"a", "a", &a, Eigen::Matrix4d::Identity()}, plan, {{"b", "b moved", &b, T}}, o);
+  const closure::SimulateOptions o = small_mesh();
+  const study::ModelComparison c =
+      study::compare_models({"a", "a", &a, Eigen::Matrix4d::Identity()}, plan, {{"b", "b moved", &b, T}}, o);
   ASSERT_EQ(c.sides.size(), 2u);
   const auto& sa = c.sides[0].summary;
   const auto& sb = c.sides[1].summary;
@@ -175,8 +175,8 @@ TEST(CompareModels, ScanCtAndFusedModelsOfOnePhantom) {
 
   // Measured thickness under the wound on the CT model, then scan-built models with twice and
   // half of it.
-  const fem::Simulation measured = fem::simulate(ct, plan, small_mesh_app_defaults());
-  const double t_ct = fem::summarize(measured, ct, "ct").thickness_mean_mm;
+  const closure::Simulation measured = closure::simulate(ct, plan, small_mesh_app_defaults());
+  const double t_ct = study::summarize(measured, ct, "ct").thickness_mean_mm;
   ASSERT_GT(t_ct, 2.0);
   std::map<double, app::CompareModelsResult> results;
   for (double factor : {2.0, 0.5}) {
@@ -212,8 +212,8 @@ TEST(CompareModels, ScanCtAndFusedModelsOfOnePhantom) {
     // The direction: carried back, within 2 degrees of the plan's.
     const plan::Plan scan_plan = plan::place_procedure(plan::layout_procedure("ellipse", {{"length", 16.0}, {"width", 6.0}}), scan_model,
                                                        side.theta_deg, side.z_mm, side.orientation_deg);
-    const Eigen::Vector3d d_back = (M.topLeftCorner<3, 3>().inverse() * fem::plan_direction(scan_plan, scan_model)).normalized();
-    EXPECT_GT(d_back.dot(fem::plan_direction(plan, ct)), std::cos(deg_to_rad(2.0)));
+    const Eigen::Vector3d d_back = (M.topLeftCorner<3, 3>().inverse() * study::plan_direction(scan_plan, scan_model)).normalized();
+    EXPECT_GT(d_back.dot(study::plan_direction(plan, ct)), std::cos(deg_to_rad(2.0)));
     for (const char* f : {"report.html", "model_comparison.json", "difference_scan_displacement.png",
                           "difference_scan_tension.png", "difference_fused_displacement.png",
                           "difference_fused_tension.png", "ct/post_plan.png", "scan/post_plan.png",
@@ -229,7 +229,7 @@ TEST(CompareModels, ScanCtAndFusedModelsOfOnePhantom) {
   // displacement within 2 % and the largest tension, a peak, within 3 % (2.2 % since the
   // wound's floor slides on the base; 2 % before).
   EXPECT_NEAR(twice[0].closing_force_n, half[0].closing_force_n, 1e-9 * twice[0].closing_force_n);
-  EXPECT_NEAR(twice[0].closing_force_n, fem::summarize(measured, ct, "ct").closing_force_n, 1e-6 * twice[0].closing_force_n);
+  EXPECT_NEAR(twice[0].closing_force_n, study::summarize(measured, ct, "ct").closing_force_n, 1e-6 * twice[0].closing_force_n);
   ASSERT_EQ(half[2].key, "fused");
   EXPECT_NEAR(half[2].theta_deg, plan.frame.theta_deg, 1e-9);
   EXPECT_NEAR(half[2].closing_force_n, half[0].closing_force_n, 1e-9 * half[0].closing_force_n);
@@ -262,7 +262,7 @@ TEST(CompareModels, ScanCtAndFusedModelsOfOnePhantom) {
 TEST(ThicknessSensitivity, ZeroWhereTheConstantIsTheMeasuredAndTheSameInTwoThreads) {
   const PatientModel ct = PatientModel::load(model_dir());
   const CylindricalPoint nose = ct.to_cylindrical(ct.skin_point(0.0, -20.0));
-  fem::SensitivityOptions o;
+  study::SensitivityOptions o;
   o.parameters = {{"length", 16.0}, {"width", 6.0}};
   o.simulate = small_mesh();
   o.theta_min_deg = -20;
@@ -274,7 +274,7 @@ TEST(ThicknessSensitivity, ZeroWhereTheConstantIsTheMeasuredAndTheSameInTwoThrea
   o.z_max_mm = o.z_min_mm + 2 * o.z_step_mm;
   o.threads = 1;
   o.simulate.solve.solver = fem::SolverKind::Cholmod;
-  const fem::SensitivityMap one = fem::thickness_sensitivity(ct, o);
+  const study::SensitivityMap one = study::thickness_sensitivity(ct, o);
   ASSERT_EQ(one.points.size(), 9u);
   EXPECT_EQ(one.planned, 3);
   for (std::size_t i = 0; i < 3; ++i) EXPECT_TRUE(one.points[i].planned) << one.points[i].reason;
@@ -283,7 +283,7 @@ TEST(ThicknessSensitivity, ZeroWhereTheConstantIsTheMeasuredAndTheSameInTwoThrea
     EXPECT_FALSE(one.points[i].reason.empty());
   }
   o.threads = 2;
-  const fem::SensitivityMap two = fem::thickness_sensitivity(ct, o);
+  const study::SensitivityMap two = study::thickness_sensitivity(ct, o);
   for (std::size_t i = 0; i < 9; ++i) {
     EXPECT_EQ(two.points[i].planned, one.points[i].planned);
     EXPECT_DOUBLE_EQ(two.points[i].closing_force_constant_n, one.points[i].closing_force_constant_n);
@@ -291,15 +291,15 @@ TEST(ThicknessSensitivity, ZeroWhereTheConstantIsTheMeasuredAndTheSameInTwoThrea
   // With the constant set to the mean measured thickness under the wound the change is small
   // (the phantom's thickness still varies over the 16 mm around the wound that the mesh covers,
   // which moves the largest displacement most); a constant twice as thick raises the force.
-  const fem::SensitivityPoint& p = one.points[1];
+  const study::SensitivityPoint& p = one.points[1];
   o.theta_min_deg = o.theta_max_deg = p.theta_deg;
   o.z_min_mm = o.z_max_mm = p.z_mm;
   o.constant_thickness_mm = p.thickness_mean_mm;
-  const fem::SensitivityMap same = fem::thickness_sensitivity(ct, o);
+  const study::SensitivityMap same = study::thickness_sensitivity(ct, o);
   ASSERT_EQ(same.planned, 1);
   EXPECT_LT(std::abs(same.points[0].force_change), 0.05);
   EXPECT_LT(std::abs(same.points[0].displacement_change), 0.1);
   o.constant_thickness_mm = 2 * p.thickness_mean_mm;
-  const fem::SensitivityMap thick = fem::thickness_sensitivity(ct, o);
+  const study::SensitivityMap thick = study::thickness_sensitivity(ct, o);
   EXPECT_GT(thick.points[0].force_change, 0.1);
 }

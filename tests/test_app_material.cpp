@@ -36,12 +36,12 @@ app::SolverFields with(const std::string& material, const std::string& params = 
 }  // namespace
 
 TEST(AppMaterials, MaterialPicksTheKinematicsAndTheSkinsMaterialAndParamsSetEachLayer) {
-  const fem::SimulateOptions neo = app::simulate_options({}, {});
+  const closure::SimulateOptions neo = app::simulate_options({}, {});
   EXPECT_EQ(neo.solve.kinematics, fem::Kinematics::Finite);
   EXPECT_EQ(neo.continuum.material, fem::default_skin());
   EXPECT_EQ(neo.continuum.fat, fem::default_fat());
   // linear: the small-strain model, every layer the linear material of its preset's E and nu.
-  const fem::SimulateOptions lin = app::simulate_options({}, with("linear"));
+  const closure::SimulateOptions lin = app::simulate_options({}, with("linear"));
   EXPECT_EQ(lin.solve.kinematics, fem::Kinematics::Linear);
   for (const auto& m : {lin.continuum.material, lin.continuum.dermis, lin.continuum.fat, lin.continuum.deep})
     EXPECT_EQ(m->name(), "linear");
@@ -49,7 +49,7 @@ TEST(AppMaterials, MaterialPicksTheKinematicsAndTheSkinsMaterialAndParamsSetEach
   // goh: the skin's surface layer (element layer 0: the measured dermis, the uniform model's top
   // element layer) gets the porcine-skin preset, the tissue below stays neo-Hookean; skin and
   // dermis parameters are the goh layer's.
-  const fem::SimulateOptions goh = app::simulate_options({}, with("goh", "skin.k1=5, dermis.kappa=0.1,fat.E=0.004"));
+  const closure::SimulateOptions goh = app::simulate_options({}, with("goh", "skin.k1=5, dermis.kappa=0.1,fat.E=0.004"));
   EXPECT_EQ(goh.solve.kinematics, fem::Kinematics::Finite);
   EXPECT_EQ(goh.continuum.material, fem::default_skin());
   EXPECT_EQ(goh.continuum.dermis, fem::default_dermis());

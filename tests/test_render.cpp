@@ -12,8 +12,8 @@
 #include <set>
 
 #include "caps/core/units.hpp"
-#include "caps/fem/continuum_mesher.hpp"
-#include "caps/fem/simulate.hpp"
+#include "caps/mesher/continuum_mesher.hpp"
+#include "caps/closure/simulate.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/render/render.hpp"
 #include "caps/render/simulation_report.hpp"
@@ -55,10 +55,10 @@ plan::Plan ellipse_plan(const PatientModel& model, double width_mm = 6.0, double
       z_mm, 90.0);
 }
 
-fem::Simulation ellipse_on(const PatientModel& model) {
-  fem::SimulateOptions o;
+closure::Simulation ellipse_on(const PatientModel& model) {
+  closure::SimulateOptions o;
   o.surface.size_mm = 3.0;
-  return fem::simulate(model, ellipse_plan(model), o);
+  return closure::simulate(model, ellipse_plan(model), o);
 }
 
 // The directed edges of the surface without exactly one opposite edge: 0 for a closed, manifold,
@@ -73,8 +73,8 @@ int open_or_misoriented_edges(const SkinSurfaces& s) {
   return bad;
 }
 
-const fem::Simulation& bumpy_sim() {
-  static const fem::Simulation s = ellipse_on(bumpy());
+const closure::Simulation& bumpy_sim() {
+  static const closure::Simulation s = ellipse_on(bumpy());
   return s;
 }
 
@@ -86,7 +86,7 @@ double off_skin_mm(const PatientModel& m, const Eigen::Vector3d& p) {
 }  // namespace
 
 TEST(SkinSurface, ZeroDisplacementLiesOnTheRangeSurface) {
-  const fem::Simulation& sim = bumpy_sim();
+  const closure::Simulation& sim = bumpy_sim();
   const SkinSurfaces s = displaced_skin(bumpy(), sim.wound.continuum.mesh,
                                         static_cast<const fem::SolveResult*>(nullptr), 4);
   ASSERT_GT(s.n_micropolygon_vertices, 100);
@@ -120,7 +120,7 @@ TEST(SkinSurface, ConstantTranslationMovesMicropolygonsExactly) {
 }
 
 TEST(SkinSurface, ClosedOrientedSurfaceWithoutCracks) {
-  const fem::Simulation& sim = bumpy_sim();
+  const closure::Simulation& sim = bumpy_sim();
   const SkinSurfaces s = displaced_skin(bumpy(), sim.wound.continuum.mesh, &sim.result, 5);
   // every directed edge has exactly one opposite: closed, manifold, consistently oriented
   const int bad = open_or_misoriented_edges(s);
@@ -146,7 +146,7 @@ TEST(SkinSurface, ClosedOrientedSurfaceWithoutCracks) {
 // (replaced_cells) are exactly those the whole head's range mesh does not draw, so the page's
 // range mesh without them and the patch together are the whole head's skin.
 TEST(SkinSurface, ThePatchIsTheWholeHeadWithoutItsRangeCells) {
-  const fem::Simulation& sim = bumpy_sim();
+  const closure::Simulation& sim = bumpy_sim();
   const fem::Mesh& mesh = sim.wound.continuum.mesh;
   const SkinSurfaces whole = displaced_skin(bumpy(), mesh, &sim.result, 3);
   const SkinSurfaces patch =
@@ -200,7 +200,7 @@ TEST(SkinSurface, ThePatchIsTheWholeHeadWithoutItsRangeCells) {
 }
 
 TEST(SkinSurface, FixedNodesStayOnTheSkinAndTheWoundCloses) {
-  const fem::Simulation& sim = bumpy_sim();
+  const closure::Simulation& sim = bumpy_sim();
   const fem::Mesh& mesh = sim.wound.continuum.mesh;
   const Eigen::MatrixX3d& u = sim.result.displacement_mm;
   const SkinSurfaces s = displaced_skin(bumpy(), mesh, &sim.result, 4);
@@ -230,9 +230,9 @@ TEST(SkinSurface, ClosedWhereverTheRimFallsBetweenSamples) {
   for (const Placement& at : {Placement{5.98, 10.0, 5.0}, Placement{6.00, 10.0, 5.0},
                               Placement{6.02, 10.0, 5.0}, Placement{6.00, 10.02, 5.0},
                               Placement{6.00, 10.0, 5.02}}) {
-    fem::SurfaceMeshOptions surface;
+    mesher::SurfaceMeshOptions surface;
     surface.size_mm = 3.0;
-    const fem::WoundMesh wound = fem::mesh_wound(
+    const mesher::WoundMesh wound = mesher::mesh_wound(
         plan::wound_border(ellipse_plan(bumpy(), at.width_mm, at.theta_deg, at.z_mm)), bumpy(),
         surface);
     const SkinSurfaces s = displaced_skin(bumpy(), wound.continuum.mesh,
@@ -246,7 +246,7 @@ TEST(SkinSurface, ClosedWhereverTheRimFallsBetweenSamples) {
 }
 
 TEST(RenderImage, ZeroDisplacementGivesIdenticalPreAndPostImages) {
-  const fem::Simulation& sim = bumpy_sim();
+  const closure::Simulation& sim = bumpy_sim();
   const Eigen::MatrixX3d zero = Eigen::MatrixX3d::Zero(sim.wound.continuum.mesh.n_nodes(), 3);
   const SkinSurfaces s = displaced_skin(bumpy(), sim.wound.continuum.mesh, &zero, 4);
   RenderOptions o;
@@ -265,7 +265,7 @@ TEST(RenderImage, ZeroDisplacementGivesIdenticalPreAndPostImages) {
 }
 
 TEST(RenderImage, CylinderSilhouetteWidth) {
-  const fem::Simulation sim = ellipse_on(round_cylinder());
+  const closure::Simulation sim = ellipse_on(round_cylinder());
   const SkinSurfaces s = displaced_skin(round_cylinder(), sim.wound.continuum.mesh,
                                         static_cast<const Eigen::MatrixX3d*>(nullptr), 2);
   RenderOptions o;
@@ -294,7 +294,7 @@ TEST(RenderImage, CylinderSilhouetteWidth) {
   }
 }
 TEST(SkinSurface, WoundFillCollapsesWhenTheWoundCloses) {
-  const fem::Simulation& sim = bumpy_sim();
+  const closure::Simulation& sim = bumpy_sim();
   const SkinSurfaces s = displaced_skin(bumpy(), sim.wound.continuum.mesh, &sim.result, 4);
   double pre = 0, post = 0;
   for (Eigen::Index f = 0; f < s.pre.F.rows(); ++f) {
@@ -315,14 +315,14 @@ TEST(SkinSurface, WoundFillCollapsesWhenTheWoundCloses) {
 // the lobes as a fan of flat triangles cutting through the skin (seen on Cranium's nasal
 // sidewall). The closed wound's fill has vertices of its own, gathered at one point afterwards.
 TEST(SkinSurface, AClosedTranspositionFlapsFillVanishesInsteadOfFanningAcrossTheLobes) {
-  fem::SimulateOptions o;
+  closure::SimulateOptions o;
   o.surface.size_mm = 3.0;
   o.surface.extent_mm = 12.0;
   o.solve.kinematics = fem::Kinematics::Finite;
   o.solve.newton.n_steps = 5;
   const plan::Plan p = plan::place_procedure(plan::layout_procedure("bilobed", {}),
                                              round_cylinder(), 10.0, 5.0, 90.0);
-  const fem::Simulation sim = fem::simulate(round_cylinder(), p, o);
+  const closure::Simulation sim = closure::simulate(round_cylinder(), p, o);
   ASSERT_LT(sim.max_suture_gap_mm, 1e-6);
   const SkinSurfaces s = displaced_skin(round_cylinder(), sim.wound.continuum.mesh, &sim.result, 2);
   const auto [pre, post] = wound_fill_area_mm2(s);
@@ -349,9 +349,9 @@ TEST(SkinSurface, AnIncisionWithoutExcisionGetsNoFill) {
   const plan::Plan p = plan::place_procedure(
       plan::layout_procedure("v-y-advancement", {{"length", 15.0}, {"advance", 5.0}}),
       round_cylinder(), 10.0, 5.0, 0.0);
-  fem::SimulateOptions o;
+  closure::SimulateOptions o;
   o.surface.size_mm = 3.0;
-  const fem::Simulation sim = fem::simulate(round_cylinder(), p, o);
+  const closure::Simulation sim = closure::simulate(round_cylinder(), p, o);
   const SkinSurfaces s = displaced_skin(round_cylinder(), sim.wound.continuum.mesh, &sim.result, 2);
   int fills = 0;
   for (Eigen::Index f = 0; f < s.pre.F.rows(); ++f) fills += s.face_part[f] == SkinPart::WoundFill;

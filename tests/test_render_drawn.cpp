@@ -8,7 +8,7 @@
 #include <cstdio>
 
 #include "caps/core/units.hpp"
-#include "caps/fem/simulate.hpp"
+#include "caps/closure/simulate.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/core/error.hpp"
 #include "caps/render/drawn_skin.hpp"
@@ -145,14 +145,14 @@ TEST(DrawnSkin, KeepsTheNose) {
 
 namespace {
 
-const fem::Simulation& phantom_ellipse() {
-  static const fem::Simulation s = [] {
+const closure::Simulation& phantom_ellipse() {
+  static const closure::Simulation s = [] {
     const plan::Plan p = plan::place_procedure(
         plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), phantom().model,
         20.0, 40.0, 90.0);
-    fem::SimulateOptions o;
+    closure::SimulateOptions o;
     o.surface.size_mm = 3.0;
-    return fem::simulate(phantom().model, p, o);
+    return closure::simulate(phantom().model, p, o);
   }();
   return s;
 }

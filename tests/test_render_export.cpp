@@ -16,7 +16,7 @@
 #include <string>
 
 #include "caps/core/units.hpp"
-#include "caps/fem/simulate.hpp"
+#include "caps/closure/simulate.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/render/animation.hpp"
 #include "caps/render/gltf_export.hpp"
@@ -44,15 +44,15 @@ const PatientModel& bumpy() {
   return model;
 }
 
-const fem::Simulation& sim() {
-  static const fem::Simulation s = [] {
+const closure::Simulation& sim() {
+  static const closure::Simulation s = [] {
     const plan::Plan p =
         plan::place_procedure(plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}),
                               bumpy(), 10.0, 5.0, 90.0);
-    fem::SimulateOptions o;
+    closure::SimulateOptions o;
     o.surface.size_mm = 3.0;
     o.continuum.undermine_mm = 0;  // the sutured columns only: the closure's shading stays local
-    return fem::simulate(bumpy(), p, o);
+    return closure::simulate(bumpy(), p, o);
   }();
   return s;
 }

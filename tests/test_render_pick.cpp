@@ -13,7 +13,7 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
-#include "caps/fem/simulate.hpp"
+#include "caps/closure/simulate.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/render/render.hpp"
 #include "caps/render/skin_surface.hpp"
@@ -44,9 +44,9 @@ const SkinSurfaces& skin() {
     const plan::Plan p =
         plan::place_procedure(plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}),
                               bumpy(), 10.0, 5.0, 90.0);
-    fem::SimulateOptions o;
+    closure::SimulateOptions o;
     o.surface.size_mm = 3.0;
-    const fem::Simulation sim = fem::simulate(bumpy(), p, o);
+    const closure::Simulation sim = closure::simulate(bumpy(), p, o);
     return displaced_skin(bumpy(), sim.wound.continuum.mesh, &sim.result, 4);
   }();
   return s;

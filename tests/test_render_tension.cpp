@@ -16,7 +16,7 @@
 #include <unistd.h>
 
 #include "caps/core/error.hpp"
-#include "caps/fem/simulate.hpp"
+#include "caps/closure/simulate.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/render/overlay.hpp"
 #include "caps/render/render.hpp"
@@ -37,14 +37,14 @@ const PatientModel& round_cylinder() {
   return m;
 }
 
-const fem::Simulation& ellipse_sim() {
-  static const fem::Simulation s = [] {
+const closure::Simulation& ellipse_sim() {
+  static const closure::Simulation s = [] {
     const plan::Plan p = plan::place_procedure(
         plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), round_cylinder(),
         10.0, 5.0, 90.0);
-    fem::SimulateOptions o;
+    closure::SimulateOptions o;
     o.surface.size_mm = 3.0;
-    return fem::simulate(round_cylinder(), p, o);
+    return closure::simulate(round_cylinder(), p, o);
   }();
   return s;
 }

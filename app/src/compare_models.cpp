@@ -13,7 +13,7 @@
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/json_limits.hpp"
-#include "caps/fem/compare_models.hpp"
+#include "caps/study/compare_models.hpp"
 #include "caps/image/image_io.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/render/model_comparison_report.hpp"
@@ -80,13 +80,13 @@ CompareModelsResult run_compare_models(const CompareModelsRequest& r, Reporter* 
                        "SCAN --to MODEL` for the scan the model was built from");
   if (r.meshing.constant_thickness != 0)
     throw InvalidInput("compare-models uses each model's own thickness; --constant-thickness does not apply");
-  const fem::SimulateOptions o = simulate_options(r.meshing, r.solver);
+  const closure::SimulateOptions o = simulate_options(r.meshing, r.solver);
   require_utf8(r.model, "the model folder");
   require_utf8(r.plan, "the plan file");
   const plan::Plan plan = plan::read_plan(r.plan);
   const auto ct = loaded_model(r.model);
   std::shared_ptr<const PatientModel> scan, fused;
-  std::vector<fem::ComparedModel> others;
+  std::vector<study::ComparedModel> others;
   if (!r.scan_model.empty()) {
     double thickness_mm = 0;
     const Eigen::Matrix4d file_to_scan_model = scan_file_to_model(r.scan_model, &thickness_mm);
@@ -106,8 +106,8 @@ CompareModelsResult run_compare_models(const CompareModelsRequest& r, Reporter* 
     others.push_back({"fused", "fused (scan + CT depths)", fused.get(), Eigen::Matrix4d::Identity()});
   }
   OutputDirectory out(r.output, r.force);
-  const fem::ComparedModel reference{"ct", "CT (measured thickness)", ct.get(), Eigen::Matrix4d::Identity()};
-  const fem::ModelComparison c = fem::compare_models(reference, plan, others, o, reporter);
+  const study::ComparedModel reference{"ct", "CT (measured thickness)", ct.get(), Eigen::Matrix4d::Identity()};
+  const study::ModelComparison c = study::compare_models(reference, plan, others, o, reporter);
   const std::string name = fs::path(r.plan).filename().string();
   std::vector<const PatientModel*> models{ct.get()};
   for (const auto& m : others) models.push_back(m.model);
@@ -115,7 +115,7 @@ CompareModelsResult run_compare_models(const CompareModelsRequest& r, Reporter* 
   out.commit();
   CompareModelsResult s;
   s.output = r.output;
-  s.comparison_json = fem::model_comparison_json(c, name);
+  s.comparison_json = study::model_comparison_json(c, name);
   for (const auto& side : c.sides)
     s.sides.push_back({side.key, side.label, side.plan.frame.theta_deg, side.plan.frame.z_mm,
                        side.plan.frame.orientation_deg, side.centre_gap_mm, side.summary.closing_force_n,
@@ -138,7 +138,7 @@ std::string summary(const CompareModelsResult& s) {
 SensitivityResult run_sensitivity(const SensitivityRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   require_utf8(r.model, "the model folder");
-  fem::SensitivityOptions o;
+  study::SensitivityOptions o;
   o.procedure = r.procedure;
   o.parameters = {{"length", r.length}};
   if (r.procedure == "ellipse") o.parameters["width"] = r.width;
@@ -166,14 +166,14 @@ SensitivityResult run_sensitivity(const SensitivityRequest& r, Reporter* reporte
     throw InvalidInput(cat(r.model, ": its thickness is a constant (a scan-built model); the map needs a "
                            "model with a measured thickness (caps model from-volume)"));
   OutputDirectory out(r.output, r.force);
-  const fem::SensitivityMap map = fem::thickness_sensitivity(*model, o, reporter);
+  const study::SensitivityMap map = study::thickness_sensitivity(*model, o, reporter);
   const std::string title = cat("Where a constant thickness misleads: ", r.procedure, " ", r.length, " mm",
                                 r.procedure == "ellipse" ? cat(" x ", r.width, " mm") : std::string(),
                                 " at ", map.points.size(), " points, ",
                                 fs::path(r.model).filename().string());
   write_png(out.path() / "sensitivity.png", render::sensitivity_picture(map, *model, title, r.credit));
-  write_text_atomic(out.path() / "sensitivity.json", fem::sensitivity_json(map) + "\n");
-  write_text_atomic(out.path() / "sensitivity.csv", fem::sensitivity_csv(map));
+  write_text_atomic(out.path() / "sensitivity.json", study::sensitivity_json(map) + "\n");
+  write_text_atomic(out.path() / "sensitivity.csv", study::sensitivity_csv(map));
   out.commit();
   SensitivityResult s;
   s.output = r.output;

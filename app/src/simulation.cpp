@@ -11,11 +11,11 @@
 #include "caps/core/error.hpp"
 #include "caps/core/json_limits.hpp"
 #include "caps/fem/box.hpp"
-#include "caps/fem/compare.hpp"
+#include "caps/study/compare.hpp"
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/material_registry.hpp"
 #include "caps/fem/mesh_io.hpp"
-#include "caps/fem/mesh_pictures.hpp"
+#include "caps/mesher/mesh_pictures.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/render/drawn_skin.hpp"
@@ -88,7 +88,7 @@ std::shared_ptr<const fem::Material> from_option(F&& make) {
 
 // The material kind --material gives the layers: linear and neo-hookean keep each layer's
 // parameters (E, nu); goh (the preset porcine skin, fibres along the patient's left-right) is
-// the skin's surface layer's alone (fem::ContinuumMeshOptions::surface_material), the others
+// the skin's surface layer's alone (mesher::ContinuumMeshOptions::surface_material), the others
 // keep theirs.
 std::shared_ptr<const fem::Material> as_chosen(const std::shared_ptr<const fem::Material>& m,
                                                const std::string& material, bool surface) {
@@ -104,7 +104,7 @@ void check_material(const std::string& material) {
                                "goh (finite strain, skin with collagen fibres)"));
 }
 
-void set_materials(fem::SimulateOptions& o, const SolverFields& s) {
+void set_materials(closure::SimulateOptions& o, const SolverFields& s) {
   check_material(s.material);
   o.solve.kinematics = s.material == "linear" ? fem::Kinematics::Linear : fem::Kinematics::Finite;
   auto& c = o.continuum;
@@ -141,8 +141,8 @@ void set_materials(fem::Mesh& mesh, const SolverFields& s) {
 
 }  // namespace
 
-fem::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields& s) {
-  fem::SimulateOptions o;
+closure::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields& s) {
+  closure::SimulateOptions o;
   o.surface.size_mm = m.mesh_size;
   o.surface.extent_mm = m.extent;
   o.surface.t1_deg = m.t1;
@@ -150,11 +150,11 @@ fem::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields
   o.surface.t2_deg = m.t2;
   o.continuum.n_layers = m.layers;
   o.continuum.grading = m.grading;
-  o.continuum.rim = fem::parse_rim_condition(m.rim);
+  o.continuum.rim = mesher::parse_rim_condition(m.rim);
   o.continuum.constant_thickness_mm = m.constant_thickness;
   o.continuum.undermine_mm = m.undermine;
-  o.continuum.base = fem::parse_base_condition(m.base);
-  o.continuum.tissue = fem::parse_tissue_layers(m.tissue);
+  o.continuum.base = mesher::parse_base_condition(m.base);
+  o.continuum.tissue = mesher::parse_tissue_layers(m.tissue);
   o.solve.solver = fem::parse_solver(s.solver);
   o.solve.mixed_precision = fem::parse_precision(s.precision);
   set_materials(o, s);
@@ -186,21 +186,21 @@ MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
   require_utf8(r.model, "the model folder");
   require_utf8(r.plan.empty() ? r.border : r.plan, "the wound's file");
   detail::refuse_output_over_inputs(r);
-  const fem::SimulateOptions o = simulate_options(r.meshing, {});
-  const fem::WoundBorder border = border_of(r);
+  const closure::SimulateOptions o = simulate_options(r.meshing, {});
+  const mesher::WoundBorder border = border_of(r);
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
-  fem::WoundMesh w = fem::mesh_wound(border, model, o.surface, o.continuum, reporter);
+  mesher::WoundMesh w = mesher::mesh_wound(border, model, o.surface, o.continuum, reporter);
   const std::string wound = r.plan.empty() ? r.border : r.plan;
   w.continuum.mesh.model = r.model;
   w.continuum.mesh.plan = wound;
   fem::write_mesh_dir(w.continuum.mesh, out.path());
   fem::write_inp(w.continuum.mesh, out.path() / "mesh.inp");
   if (!r.no_pictures) {
-    fem::write_surface_mesh_png(out.path() / "surface.png", w.surface,
+    mesher::write_surface_mesh_png(out.path() / "surface.png", w.surface,
                                 cat("caps mesh: surface mesh of ", wound));
-    fem::write_cross_section_png(out.path() / "section.png", w.surface, model, o.continuum,
+    mesher::write_cross_section_png(out.path() / "section.png", w.surface, model, o.continuum,
                                  cat("caps mesh: cross-section of ", wound));
   }
   const auto& s = w.surface;
@@ -226,7 +226,7 @@ MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
   m.fixed_nodes = static_cast<int>(c.mesh.fixed_nodes.size());
   m.suture_pairs = static_cast<int>(c.mesh.sutures.size());
   m.rim = r.meshing.rim;
-  m.tissue = fem::tissue_layers_name(c.tissue);
+  m.tissue = mesher::tissue_layers_name(c.tissue);
   m.min_thickness_mm = c.min_thickness_mm;
   m.max_thickness_mm = c.max_thickness_mm;
   m.min_jacobian = c.min_jacobian;
@@ -282,7 +282,7 @@ CornerLengthening corner_lengthening(const Eigen::MatrixX3d& pre, const Eigen::M
 namespace {
 
 // The loop nodes' skin positions before and after the closure (#L×3 each, LPS mm).
-std::pair<Eigen::MatrixX3d, Eigen::MatrixX3d> loop_positions(const fem::Simulation& sim) {
+std::pair<Eigen::MatrixX3d, Eigen::MatrixX3d> loop_positions(const closure::Simulation& sim) {
   const std::vector<int>& loop = sim.wound.surface.loop_vertex;
   const fem::Mesh& mesh = sim.wound.continuum.mesh;
   Eigen::MatrixX3d pre(static_cast<Eigen::Index>(loop.size()), 3), post(pre.rows(), 3);
@@ -296,7 +296,7 @@ std::pair<Eigen::MatrixX3d, Eigen::MatrixX3d> loop_positions(const fem::Simulati
 
 // The simulation's lengthening along its plan's axis (the frame's x, the orientation, as the
 // tangent at the plan's centre).
-AxisLengthening plan_lengthening(const fem::Simulation& sim, const plan::Plan& plan,
+AxisLengthening plan_lengthening(const closure::Simulation& sim, const plan::Plan& plan,
                                  const PatientModel& model) {
   const auto [pre, post] = loop_positions(sim);
   const auto on_skin = [&](double x_mm) {
@@ -310,7 +310,7 @@ AxisLengthening plan_lengthening(const fem::Simulation& sim, const plan::Plan& p
 
 SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
-  fem::SimulateOptions o = simulate_options(r.meshing, r.solver);
+  closure::SimulateOptions o = simulate_options(r.meshing, r.solver);
   if (!(r.suture_spacing > 0) || !std::isfinite(r.suture_spacing))
     throw InvalidParameter(cat("{suture_spacing} ", r.suture_spacing, ": give the distance "
                                "between sutures in mm, > 0 (e.g. 5)"));
@@ -324,10 +324,10 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
-  fem::Simulation sim = fem::simulate(model, plan, o, reporter);
+  closure::Simulation sim = closure::simulate(model, plan, o, reporter);
   sim.wound.continuum.mesh.model = r.model;
   sim.wound.continuum.mesh.plan = r.plan;
-  fem::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string());
+  closure::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string());
   SimulateResult s;
   if (r.render) {
     const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);
@@ -407,7 +407,7 @@ std::string summary(const SimulateResult& s) {
 
 SolveResult run_solve(const SolveRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
-  const fem::SimulateOptions so = simulate_options({}, r.solver);
+  const closure::SimulateOptions so = simulate_options({}, r.solver);
   fem::SolveOptions o = so.solve;
   if (r.E && !(*r.E > 0 && std::isfinite(*r.E)))
     throw InvalidInput(cat("--E ", *r.E, ": give Young's modulus in kPa, > 0"));
@@ -480,14 +480,14 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
   if (r.meshing.constant_thickness != 0)
     throw InvalidInput("compare meshes the measured and a constant thickness itself; give the "
                        "constant one with --thickness, not --constant-thickness");
-  const fem::SimulateOptions o = simulate_options(r.meshing, r.solver);
+  const closure::SimulateOptions o = simulate_options(r.meshing, r.solver);
   require_utf8(r.model, "the model folder");
   require_utf8(r.plan, "the plan file");
   const plan::Plan plan = plan::read_plan(r.plan);
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
-  const fem::Comparison c = fem::compare_thickness(model, plan, r.thickness, o, reporter);
+  const study::Comparison c = study::compare_thickness(model, plan, r.thickness, o, reporter);
   const std::string name = fs::path(r.plan).filename().string();
   const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);
   render::SimulationPictures pictures;
@@ -497,7 +497,7 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
   out.commit();
   CompareResult s;
   s.output = r.output;
-  s.comparison_json = fem::comparison_json(c, name);
+  s.comparison_json = study::comparison_json(c, name);
   s.measured_closing_force_n = c.measured_summary.closing_force_n;
   s.constant_closing_force_n = c.constant_summary.closing_force_n;
   s.measured_max_displacement_mm = c.measured_summary.max_displacement_mm;

@@ -6,24 +6,12 @@
 #include <numeric>
 #include <vector>
 
+#include "caps/core/union_find.hpp"
 #include "caps/fem/mesh.hpp"
 
 namespace caps::fem::detail {
 
-/// Disjoint sets of node ids 0..n-1; each set's root is its smallest member.
-struct UnionFind {
-  std::vector<int> p;
-  explicit UnionFind(int n) : p(static_cast<std::size_t>(n)) { std::iota(p.begin(), p.end(), 0); }
-  int find(int x) {
-    while (p[x] != x) x = p[x] = p[p[x]];
-    return x;
-  }
-  void unite(int a, int b) {
-    a = find(a);
-    b = find(b);
-    if (a != b) p[std::max(a, b)] = std::min(a, b);
-  }
-};
+using caps::UnionFind;
 
 /// u_full = T q + g: dof d is q[eq[d]] + g[d] when eq[d] >= 0, or prescribed g[d] otherwise.
 struct DofMap {

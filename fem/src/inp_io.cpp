@@ -56,7 +56,7 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
        << num(mesh.nodes(i, 2)) << "\n";
 
   // Suture groups: a spanning forest of the pairs, so that no equation is redundant.
-  detail::UnionFind groups(N);  // each group's root is its smallest node
+  UnionFind groups(N);  // each group's root is its smallest node
   for (const auto& s : mesh.sutures) groups.unite(s.a, s.b);
   std::vector<int> members;
   for (int i = 0; i < N; ++i)

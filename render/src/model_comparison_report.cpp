@@ -75,7 +75,7 @@ double percentile(std::vector<double> v, double q) {
 }
 
 // The skin's tension at its vertices (kPa), as the tension map shows it.
-Eigen::VectorXd skin_tension_kpa(const SkinSurfaces& skin, const fem::Simulation& sim) {
+Eigen::VectorXd skin_tension_kpa(const SkinSurfaces& skin, const closure::Simulation& sim) {
   return tension_map(skin, sim.wound.continuum.mesh, sim.result.max_principal_mpa).value;
 }
 
@@ -121,9 +121,9 @@ SkinDifference skin_difference(const SkinSurfaces& reference, const Eigen::Vecto
   return d;
 }
 
-void write_model_comparison_report(const fem::ModelComparison& c,
+void write_model_comparison_report(const study::ModelComparison& c,
                                    const std::vector<const PatientModel*>& models,
-                                   const fem::SimulateOptions& options, const fs::path& dir,
+                                   const closure::SimulateOptions& options, const fs::path& dir,
                                    const std::string& plan_name, const RenderOptions& ro,
                                    Reporter* reporter) {
   if (c.sides.empty() || models.size() != c.sides.size())
@@ -135,7 +135,7 @@ void write_model_comparison_report(const fem::ModelComparison& c,
     const auto& side = c.sides[i];
     const PatientModel& model = *models[i];
     fs::create_directories(dir / side.key);
-    fem::write_simulation(side.simulation, model, options, dir / side.key, plan_name + ", " + side.label);
+    closure::write_simulation(side.simulation, model, options, dir / side.key, plan_name + ", " + side.label);
     skins.push_back(simulated_skin(model, side.simulation));
     tensions.push_back(skin_tension_kpa(skins.back(), side.simulation));
     Overlays overlays;
@@ -186,7 +186,7 @@ void write_model_comparison_report(const fem::ModelComparison& c,
                        "difference\"></div></div>\n";
     progress.update(static_cast<double>(c.sides.size() + i));
   }
-  write_text_atomic(dir / "model_comparison.json", fem::model_comparison_json(c, plan_name) + "\n");
+  write_text_atomic(dir / "model_comparison.json", study::model_comparison_json(c, plan_name) + "\n");
 
   std::string head = "<tr><th>quantity</th><th>unit</th>";
   for (const auto& s : c.sides) head += "<th>" + html_escape(s.label) + "</th>";
@@ -200,7 +200,7 @@ void write_model_comparison_report(const fem::ModelComparison& c,
       r += "<td>" + (base != 0 ? fmt(100.0 * (get(c.sides[i].summary) - base) / std::abs(base), 1) + " %" : std::string()) + "</td>";
     return r + "</tr>\n";
   };
-  using S = fem::SimulationSummary;
+  using S = study::SimulationSummary;
   std::string table = "<table>" + head +
       row("closing force across the wound", "N", [](const S& s) { return s.closing_force_n; }) +
       row("largest force on one suture (sutures every " + fmt(c.sides[0].simulation.sutures.spacing_mm, 1) +

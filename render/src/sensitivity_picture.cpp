@@ -19,13 +19,13 @@ namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-double change_of(const fem::SensitivityPoint& p, bool force) {
+double change_of(const study::SensitivityPoint& p, bool force) {
   return force ? p.force_change : p.displacement_change;
 }
 
 // A colour scale in percent: at least 10 %, else the 95th percentile of |change| rounded up to
 // 10, 20, 25, 50 or 100 x a power of ten.
-double scale_percent(const fem::SensitivityMap& map) {
+double scale_percent(const study::SensitivityMap& map) {
   std::vector<double> a;
   for (const auto& p : map.points)
     if (p.planned) {
@@ -44,14 +44,14 @@ double scale_percent(const fem::SensitivityMap& map) {
 
 }  // namespace
 
-double sensitivity_at(const fem::SensitivityMap& map, double theta_deg, double z_mm, bool force) {
+double sensitivity_at(const study::SensitivityMap& map, double theta_deg, double z_mm, bool force) {
   const int nt = static_cast<int>(map.theta_deg.size()), nz = static_cast<int>(map.z_mm.size());
   if (nt == 0 || nz == 0) return kNaN;
   const double dt = nt > 1 ? map.theta_deg[1] - map.theta_deg[0] : 1.0;
   const double dz = nz > 1 ? map.z_mm[1] - map.z_mm[0] : 1.0;
   const double fi = (theta_deg - map.theta_deg[0]) / dt, fk = (z_mm - map.z_mm[0]) / dz;
   if (fi < -0.5 || fi > nt - 0.5 || fk < -0.5 || fk > nz - 0.5) return kNaN;
-  auto at = [&](int i, int k) -> const fem::SensitivityPoint& { return map.points[std::size_t(k) * nt + i]; };
+  auto at = [&](int i, int k) -> const study::SensitivityPoint& { return map.points[std::size_t(k) * nt + i]; };
   if (nt > 1 && nz > 1 && fi >= 0 && fi <= nt - 1 && fk >= 0 && fk <= nz - 1) {
     const int i = std::min(static_cast<int>(std::floor(fi)), nt - 2);
     const int k = std::min(static_cast<int>(std::floor(fk)), nz - 2);
@@ -66,7 +66,7 @@ double sensitivity_at(const fem::SensitivityMap& map, double theta_deg, double z
   return at(i, k).planned ? change_of(at(i, k), force) : kNaN;
 }
 
-RgbImage sensitivity_picture(const fem::SensitivityMap& map, const PatientModel& model,
+RgbImage sensitivity_picture(const study::SensitivityMap& map, const PatientModel& model,
                              const std::string& title, const std::string& credit, int panel_px) {
   if (panel_px < 200 || panel_px > 4000)
     throw InvalidInput(cat("sensitivity picture: panel size ", panel_px, " px must be in [200, 4000]"));

@@ -45,7 +45,7 @@ std::pair<double, double> wound_fill_area_mm2(const SkinSurfaces& skin) {
   return {pre, post};
 }
 
-SkinSurfaces simulated_skin(const PatientModel& model, const fem::Simulation& sim,
+SkinSurfaces simulated_skin(const PatientModel& model, const closure::Simulation& sim,
                             const DrawnSkin* drawn) {
   const fem::Mesh& mesh = sim.wound.continuum.mesh;
   return displaced_skin(model, mesh, &sim.result, full_resolution_subdivisions(model, mesh), drawn);
@@ -63,7 +63,7 @@ Overlays simulation_overlays(const PatientModel& model, const SimulationPictures
 
 }  // namespace
 
-std::vector<fs::path> render_simulation(const PatientModel& model, const fem::Simulation& sim,
+std::vector<fs::path> render_simulation(const PatientModel& model, const closure::Simulation& sim,
                                         const std::vector<View>& views, const RenderOptions& options,
                                         const fs::path& dir, const SimulationPictures& pictures,
                                         Reporter* reporter) {
@@ -77,22 +77,22 @@ std::vector<fs::path> render_simulation(const PatientModel& model, const fem::Si
   return render_views_with_overlays(model, skin, views, options, overlays, dir, reporter);
 }
 
-void write_comparison_report(const fem::Comparison& c, const PatientModel& model,
-                             const fem::SimulateOptions& options, const fs::path& dir,
+void write_comparison_report(const study::Comparison& c, const PatientModel& model,
+                             const closure::SimulateOptions& options, const fs::path& dir,
                              const std::string& plan_name, const RenderOptions& render_options,
                              Reporter* reporter, const SimulationPictures& pictures) {
   fs::create_directories(dir / "measured");
   fs::create_directories(dir / "constant");
   fs::create_directories(dir / "layers");
-  fem::SimulateOptions constant = options;
+  closure::SimulateOptions constant = options;
   constant.continuum.constant_thickness_mm = c.constant_thickness_mm;
-  fem::SimulateOptions layered = options;
+  closure::SimulateOptions layered = options;
   layered.continuum.tissue = c.layered.wound.continuum.tissue;
-  const bool has_layers = c.layered.wound.continuum.tissue == fem::TissueLayers::Measured;
+  const bool has_layers = c.layered.wound.continuum.tissue == mesher::TissueLayers::Measured;
   const std::string layers_label = has_layers ? "measured layers" : "one material (no layers)";
-  fem::write_simulation(c.measured, model, options, dir / "measured", plan_name + ", measured thickness");
-  fem::write_simulation(c.constant, model, constant, dir / "constant", plan_name + ", constant thickness");
-  fem::write_simulation(c.layered, model, layered, dir / "layers", plan_name + ", " + layers_label);
+  closure::write_simulation(c.measured, model, options, dir / "measured", plan_name + ", measured thickness");
+  closure::write_simulation(c.constant, model, constant, dir / "constant", plan_name + ", constant thickness");
+  closure::write_simulation(c.layered, model, layered, dir / "layers", plan_name + ", " + layers_label);
   const std::vector<View> views{View::Plan, View::Oblique};
   SimulationPictures plain = pictures;
   plain.tension_map = false;
@@ -132,7 +132,7 @@ void write_comparison_report(const fem::Comparison& c, const PatientModel& model
   } else {
     difference_html = "<p>No difference image: the two skins were not meshed alike.</p>\n";
   }
-  write_text_atomic(dir / "comparison.json", fem::comparison_json(c, plan_name) + "\n");
+  write_text_atomic(dir / "comparison.json", study::comparison_json(c, plan_name) + "\n");
 
   const auto& a = c.measured_summary;
   const auto& b = c.constant_summary;

@@ -9,7 +9,7 @@
 #include "caps/app/fields.hpp"
 #include "caps/app/simulation.hpp"
 #include "caps/core/reporter.hpp"
-#include "caps/fem/thickness_sensitivity.hpp"
+#include "caps/study/thickness_sensitivity.hpp"
 
 namespace caps::app {
 
@@ -73,15 +73,15 @@ std::string summary(const CompareModelsResult& result);
 
 struct SensitivityRequest {
   std::string model, output, credit;
-  std::string procedure = fem::SensitivityOptions{}.procedure;
-  double length = fem::SensitivityOptions{}.parameters.at("length");
-  double width = fem::SensitivityOptions{}.parameters.at("width");
-  double orientation = fem::SensitivityOptions{}.orientation_deg;
+  std::string procedure = study::SensitivityOptions{}.procedure;
+  double length = study::SensitivityOptions{}.parameters.at("length");
+  double width = study::SensitivityOptions{}.parameters.at("width");
+  double orientation = study::SensitivityOptions{}.orientation_deg;
   std::string theta = "-75,75,15";
   std::string z;
-  double margin = fem::SensitivityOptions{}.margin_mm;
-  double thickness = fem::SensitivityOptions{}.constant_thickness_mm;
-  int threads = fem::SensitivityOptions{}.threads;
+  double margin = study::SensitivityOptions{}.margin_mm;
+  double thickness = study::SensitivityOptions{}.constant_thickness_mm;
+  int threads = study::SensitivityOptions{}.threads;
   MeshingFields meshing;
   SolverFields solver;
   bool force = false;
@@ -145,7 +145,7 @@ struct SensitivityResult {
   }
 };
 
-/// Runs fem::thickness_sensitivity() on the model and writes sensitivity.png (the picture over
+/// Runs study::thickness_sensitivity() on the model and writes sensitivity.png (the picture over
 /// the face), sensitivity.json and sensitivity.csv into `output`.
 SensitivityResult run_sensitivity(const SensitivityRequest& request, Reporter* reporter = nullptr);
 std::string to_json(const SensitivityResult& result);

@@ -2,7 +2,7 @@
 /// @brief The mesh, solve, simulate, compare and `fem box` verbs as requests and results.
 ///
 /// Every request lists its fields once (see fields.hpp); defaults come from the library's
-/// options structs (fem::SurfaceMeshOptions, fem::ContinuumMeshOptions, fem::SolveOptions).
+/// options structs (mesher::SurfaceMeshOptions, mesher::ContinuumMeshOptions, fem::SolveOptions).
 
 #include <array>
 #include <optional>
@@ -12,24 +12,24 @@
 #include "caps/app/fields.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/reporter.hpp"
-#include "caps/fem/simulate.hpp"
+#include "caps/closure/simulate.hpp"
 
 namespace caps::app {
 
 /// How a wound is meshed (caps mesh, simulate and compare share these).
 struct MeshingFields {
-  int layers = fem::ContinuumMeshOptions{}.n_layers;
-  double mesh_size = fem::SurfaceMeshOptions{}.size_mm;
-  double extent = fem::SurfaceMeshOptions{}.extent_mm;
-  double undermine = fem::ContinuumMeshOptions{}.undermine_mm;
-  std::string rim = fem::rim_condition_name(fem::ContinuumMeshOptions{}.rim);
-  std::string base = fem::base_condition_name(fem::ContinuumMeshOptions{}.base);
-  double grading = fem::ContinuumMeshOptions{}.grading;
-  double t1 = fem::SurfaceMeshOptions{}.t1_deg;
-  double stage1_angle = fem::SurfaceMeshOptions{}.stage1_min_angle_deg;
-  double t2 = fem::SurfaceMeshOptions{}.t2_deg;
-  double constant_thickness = fem::ContinuumMeshOptions{}.constant_thickness_mm;
-  std::string tissue = fem::tissue_layers_name(fem::ContinuumMeshOptions{}.tissue);
+  int layers = mesher::ContinuumMeshOptions{}.n_layers;
+  double mesh_size = mesher::SurfaceMeshOptions{}.size_mm;
+  double extent = mesher::SurfaceMeshOptions{}.extent_mm;
+  double undermine = mesher::ContinuumMeshOptions{}.undermine_mm;
+  std::string rim = mesher::rim_condition_name(mesher::ContinuumMeshOptions{}.rim);
+  std::string base = mesher::base_condition_name(mesher::ContinuumMeshOptions{}.base);
+  double grading = mesher::ContinuumMeshOptions{}.grading;
+  double t1 = mesher::SurfaceMeshOptions{}.t1_deg;
+  double stage1_angle = mesher::SurfaceMeshOptions{}.stage1_min_angle_deg;
+  double t2 = mesher::SurfaceMeshOptions{}.t2_deg;
+  double constant_thickness = mesher::ContinuumMeshOptions{}.constant_thickness_mm;
+  std::string tissue = mesher::tissue_layers_name(mesher::ContinuumMeshOptions{}.tissue);
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
@@ -100,7 +100,7 @@ struct SolverFields {
 
 /// The library options of the meshing and solver fields (names checked, InvalidInput naming
 /// the option otherwise).
-fem::SimulateOptions simulate_options(const MeshingFields& meshing, const SolverFields& solver);
+closure::SimulateOptions simulate_options(const MeshingFields& meshing, const SolverFields& solver);
 
 // ---- caps mesh ----------------------------------------------------------------------------
 
@@ -127,7 +127,7 @@ struct MeshResult {
   std::string output;
   int surface_vertices = 0, quads = 0, triangles = 0, surface_layers = 0;
   /// Surface polygons left out where they reached cells the model cannot carry (0: a whole mesh;
-  /// fem::SurfaceMesh::trimmed_polygons).
+  /// mesher::SurfaceMesh::trimmed_polygons).
   int trimmed_polygons = 0;
   double extent_mm = 0, wound_size_mm = 0, min_angle_deg = 0, max_angle_deg = 0;
   double max_aspect_ratio = 0, mean_aspect_ratio = 0;
@@ -182,7 +182,7 @@ struct SimulateRequest {
   std::string model, plan, output;
   MeshingFields meshing;
   SolverFields solver;
-  double suture_spacing = fem::SimulateOptions{}.suture_spacing_mm;
+  double suture_spacing = closure::SimulateOptions{}.suture_spacing_mm;
   bool render = false, tension_map = false;
   bool force = false;
 
@@ -221,7 +221,7 @@ struct SimulateResult {
   double gape_mm = 0;               ///< with prestretch: the open wound's largest widening
   int load_steps = 0, newton_iterations = 0;  ///< neo-hookean: converged steps, iterations
   int inverted_elements = 0;        ///< elements the closure turned inside out (linear only)
-  /// Surgeons' terms (fem::suture_spacing()): sutures every suture_spacing_mm along the wound,
+  /// Surgeons' terms (closure::suture_spacing()): sutures every suture_spacing_mm along the wound,
   /// how many, the largest single-suture force, the force per mm of wound, the wound's length.
   double suture_spacing_mm = 0, max_force_per_suture_n = 0, force_per_mm_n = 0,
          wound_length_mm = 0;
@@ -314,7 +314,7 @@ AxisLengthening axis_lengthening(const Eigen::MatrixX3d& pre, const Eigen::Matri
 
 /// The distance between a wound's two closed corners farthest apart, before and after closure:
 /// the corners are the loop nodes both runs of a suture share (a == c or b == d of the
-/// fem::WoundBorder quadruples (a, b, c, d)). A Z-plasty has two, the ends of its central limb
+/// mesher::WoundBorder quadruples (a, b, c, d)). A Z-plasty has two, the ends of its central limb
 /// on the lips that stay (loop 5 and 2; the flap tips 1 and 4 swing across), so this is its
 /// central limb's length corner to corner, and the change its gain (a 60 deg Z with rigid flaps:
 /// sqrt(5 - 4 cos 60) - 1 = 73 %); a multiple Z's, its whole central line's. Returns before =

@@ -8,7 +8,7 @@
 
 #include "caps/fem/mesh.hpp"
 #include "caps/fem/solve.hpp"
-#include "caps/fem/suture_spacing.hpp"
+#include "caps/fem/suture_report.hpp"
 
 namespace caps::fem {
 

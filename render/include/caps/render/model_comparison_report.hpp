@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "caps/core/reporter.hpp"
-#include "caps/fem/compare_models.hpp"
+#include "caps/study/compare_models.hpp"
 #include "caps/render/render.hpp"
 #include "caps/render/skin_surface.hpp"
 
@@ -37,15 +37,15 @@ SkinDifference skin_difference(const SkinSurfaces& reference, const Eigen::Vecto
                                const SkinSurfaces& other, const Eigen::VectorXd& other_tension_kpa,
                                const Eigen::Matrix4d& reference_to_other, double match_mm = 2.0);
 
-/// Writes the report into an existing folder: <key>/ for each side (fem::write_simulation and
+/// Writes the report into an existing folder: <key>/ for each side (closure::write_simulation and
 /// its post_plan.png and pre_plan.png with the plan's lines), for each side but the reference
 /// difference_<key>_displacement.png and difference_<key>_tension.png (the reference's skin
 /// after the closure, seen along the plan's normal, one colour scale for all sides),
 /// model_comparison.json and report.html.
 /// @param models  the sides' models, in the order of c.sides (not owned)
-void write_model_comparison_report(const fem::ModelComparison& c,
+void write_model_comparison_report(const study::ModelComparison& c,
                                    const std::vector<const PatientModel*>& models,
-                                   const fem::SimulateOptions& options,
+                                   const closure::SimulateOptions& options,
                                    const std::filesystem::path& dir, const std::string& plan_name,
                                    const RenderOptions& render_options = {},
                                    Reporter* reporter = nullptr);

@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <string>
 
-#include "caps/fem/thickness_sensitivity.hpp"
+#include "caps/study/thickness_sensitivity.hpp"
 #include "caps/image/rgb_image.hpp"
 
 namespace caps {
@@ -20,14 +20,14 @@ namespace caps::render {
 /// half a grid step, else NaN (outside the grid or not planned). `force` picks the closing
 /// force's change, else the displacement's; the value is a fraction ((constant - measured) /
 /// measured).
-double sensitivity_at(const fem::SensitivityMap& map, double theta_deg, double z_mm, bool force);
+double sensitivity_at(const study::SensitivityMap& map, double theta_deg, double z_mm, bool force);
 
 /// Two front views of the model's range skin side by side (each `panel_px` square), coloured by
 /// the change in percent (blue: the constant underestimates, red: it overestimates, white: no
 /// change; one symmetric scale, the larger of 10 % and the 95th percentile of |change| rounded
 /// up), with a colour bar, a dot at every plan centre, a cross where the plan could not be
 /// made, the title and the credit line. Returns the image.
-RgbImage sensitivity_picture(const fem::SensitivityMap& map, const PatientModel& model,
+RgbImage sensitivity_picture(const study::SensitivityMap& map, const PatientModel& model,
                              const std::string& title, const std::string& credit = "",
                              int panel_px = 800);
 

@@ -7,8 +7,8 @@
 #include <utility>
 #include <vector>
 
-#include "caps/fem/compare.hpp"
-#include "caps/fem/simulate.hpp"
+#include "caps/study/compare.hpp"
+#include "caps/closure/simulate.hpp"
 #include "caps/plan/plan.hpp"
 #include "caps/render/drawn_skin.hpp"
 #include "caps/render/render.hpp"
@@ -22,7 +22,7 @@ std::pair<double, double> wound_fill_area_mm2(const SkinSurfaces& skin);
 
 /// The displacement-mapped skin of a simulation at full resolution, drawn on `drawn` (null: the
 /// model's range image; see displaced_skin()).
-SkinSurfaces simulated_skin(const PatientModel& model, const fem::Simulation& sim,
+SkinSurfaces simulated_skin(const PatientModel& model, const closure::Simulation& sim,
                             const DrawnSkin* drawn = nullptr);
 
 /// What the pictures of a simulation show besides the skin.
@@ -36,20 +36,20 @@ struct SimulationPictures {
 /// simulation in `dir`, each with a scale bar (see render_views_with_overlays), and with
 /// `pictures.tension_map` also tension_<view>.png (the skin tension, see tension_map()).
 std::vector<std::filesystem::path> render_simulation(const PatientModel& model,
-                                                     const fem::Simulation& sim,
+                                                     const closure::Simulation& sim,
                                                      const std::vector<View>& views,
                                                      const RenderOptions& options,
                                                      const std::filesystem::path& dir,
                                                      const SimulationPictures& pictures = {},
                                                      Reporter* reporter = nullptr);
 
-/// Writes a comparison into an existing folder: measured/ and constant/ (fem::write_simulation
+/// Writes a comparison into an existing folder: measured/ and constant/ (closure::write_simulation
 /// plus their pre- and post-operative plan and oblique views), difference_plan.png (the skin
 /// after the closure coloured by the distance between the two post-operative skins, mm),
 /// comparison.json, and report.html with the table of differences and the results side by side.
 /// `pictures.tension_map` is ignored.
-void write_comparison_report(const fem::Comparison& c, const PatientModel& model,
-                             const fem::SimulateOptions& options, const std::filesystem::path& dir,
+void write_comparison_report(const study::Comparison& c, const PatientModel& model,
+                             const closure::SimulateOptions& options, const std::filesystem::path& dir,
                              const std::string& plan_name, const RenderOptions& render_options = {},
                              Reporter* reporter = nullptr, const SimulationPictures& pictures = {});
 

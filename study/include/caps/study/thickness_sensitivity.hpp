@@ -10,9 +10,9 @@
 #include <vector>
 
 #include "caps/core/reporter.hpp"
-#include "caps/fem/simulate.hpp"
+#include "caps/closure/simulate.hpp"
 
-namespace caps::fem {
+namespace caps::study {
 
 struct SensitivityOptions {
   std::string procedure = "ellipse";  ///< a template of the procedure library
@@ -30,7 +30,7 @@ struct SensitivityOptions {
   /// Simulations run at once, >= 1; with more than one, MUMPS (whose sequential build is not
   /// thread-safe) is replaced by CHOLMOD.
   int threads = 2;
-  SimulateOptions simulate;           ///< meshing and solver options of every run
+  closure::SimulateOptions simulate;           ///< meshing and solver options of every run
 };
 
 /// One plan centre of the map.
@@ -70,4 +70,4 @@ std::string sensitivity_json(const SensitivityMap& map);
 /// The map as CSV, one row per point (sensitivity.csv).
 std::string sensitivity_csv(const SensitivityMap& map);
 
-}  // namespace caps::fem
+}  // namespace caps::study

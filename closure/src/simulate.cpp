@@ -1,16 +1,19 @@
-#include "caps/fem/simulate.hpp"
+#include "caps/closure/simulate.hpp"
 
 #include <algorithm>
 
 #include "caps/core/error.hpp"
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/mesh_io.hpp"
-#include "caps/fem/mesh_pictures.hpp"
+#include "caps/mesher/mesh_pictures.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/plan/check.hpp"
 #include "caps/surface/patient_model.hpp"
 
-namespace caps::fem {
+namespace caps::closure {
+
+using namespace caps::fem;
+using namespace caps::mesher;
 namespace {
 
 // The prestressed skin cut and left open: the largest widening (mm) between sutured nodes.
@@ -97,4 +100,4 @@ void write_simulation(const Simulation& sim, const PatientModel& model,
                           cat("cross-section of ", name));
 }
 
-}  // namespace caps::fem
+}  // namespace caps::closure

@@ -1,4 +1,4 @@
-#include "caps/fem/thickness_sensitivity.hpp"
+#include "caps/study/thickness_sensitivity.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -12,11 +12,15 @@
 #include <thread>
 
 #include "caps/core/error.hpp"
-#include "caps/fem/compare.hpp"
+#include "caps/study/compare.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/surface/patient_model.hpp"
 
-namespace caps::fem {
+namespace caps::study {
+
+using namespace caps::fem;
+using namespace caps::mesher;
+using namespace caps::closure;
 namespace {
 
 constexpr int kMaxThreads = 64;
@@ -226,4 +230,4 @@ std::string sensitivity_csv(const SensitivityMap& m) {
   return out;
 }
 
-}  // namespace caps::fem
+}  // namespace caps::study

@@ -19,35 +19,11 @@
 #include <Eigen/Core>
 #include <vector>
 
-#include "caps/fem/continuum_mesher.hpp"
+#include "caps/mesher/continuum_mesher.hpp"
 #include "caps/fem/solve.hpp"
+#include "caps/fem/suture_report.hpp"
 
-namespace caps::fem {
-
-/// One suture of the row.
-struct SutureStitch {
-  Eigen::Vector3d position_mm{0, 0, 0};  ///< where it sits on the closed skin, LPS mm
-  double force_n = 0;                    ///< its closing force, N
-  int n_pairs = 0;                       ///< nodal suture pairs it holds (all depths)
-};
-
-/// The row of sutures and its summary.
-struct SutureSpacing {
-  double spacing_mm = 5;              ///< the spacing asked for
-  double wound_length_mm = 0;         ///< the closed wound's length on the skin (all its lines)
-  std::vector<SutureStitch> sutures;  ///< the tensile ones (force >= 0), along the wound
-  /// The sutures whose pairs push in sum (force < 0): where the closure presses the lips
-  /// together. Reported apart: in no total, maximum, mean or force per mm.
-  std::vector<SutureStitch> compressive;
-  double max_suture_force_n = 0;      ///< the largest single-suture force, N
-  double mean_suture_force_n = 0;     ///< over the tensile sutures, N
-  double force_per_mm_n = 0;          ///< total_force_n / wound length, N/mm
-  double total_force_n = 0;           ///< the sum over the tensile sutures, N
-  double compressive_force_n = 0;     ///< the sum over the compressive ones (<= 0), N
-};
-
-/// The largest force on one sutured node pair (N): max over result.suture_forces of magnitude_n.
-double max_suture_pair_force_n(const SolveResult& result);
+namespace caps::closure {
 
 /// Groups the closing force of `result` (a solve of `mesh.mesh`) into sutures every `spacing_mm`
 /// along the closed wound. Each pair sits where its column (found up through the elements, not
@@ -56,7 +32,7 @@ double max_suture_pair_force_n(const SolveResult& result);
 /// of the closed skin sites (the suture lines of a Z are one tree). Throws InvalidInput if
 /// spacing_mm is not > 0 or the result does not belong to the mesh; a mesh without sutures gives
 /// an empty row.
-SutureSpacing suture_spacing(const ContinuumMesh& mesh, const SolveResult& result,
+fem::SutureSpacing suture_spacing(const mesher::ContinuumMesh& mesh, const fem::SolveResult& result,
                              double spacing_mm = 5.0);
 
-}  // namespace caps::fem
+}  // namespace caps::closure

@@ -7,7 +7,7 @@
 #include <array>
 #include <vector>
 
-namespace caps::fem::detail {
+namespace caps::mesher::detail {
 
 struct RegionTriangulation {
   std::vector<Eigen::Vector2d> new_points;    ///< interior points, ids P.size(), P.size() + 1, ...
@@ -23,4 +23,4 @@ RegionTriangulation triangulate_region(const std::vector<Eigen::Vector2d>& P,
                                        const std::vector<std::array<int, 2>>& boundary,
                                        double size_mm, double min_angle_deg);
 
-}  // namespace caps::fem::detail
+}  // namespace caps::mesher::detail

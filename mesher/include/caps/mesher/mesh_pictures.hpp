@@ -5,10 +5,10 @@
 #include <filesystem>
 #include <string>
 
-#include "caps/fem/continuum_mesher.hpp"
-#include "caps/fem/surface_mesher.hpp"
+#include "caps/mesher/continuum_mesher.hpp"
+#include "caps/mesher/surface_mesher.hpp"
 
-namespace caps::fem {
+namespace caps::mesher {
 
 /// The surface mesh in the local plane (arc mm across, z mm up), whole on the left and around the
 /// wound on the right: the wound border in bold, stage-1 triangles shaded orange, polygons of
@@ -23,4 +23,4 @@ void write_cross_section_png(const std::filesystem::path& path, const SurfaceMes
                              const PatientModel& model, const ContinuumMeshOptions& options,
                              const std::string& title, double depth_scale = 3.0);
 
-}  // namespace caps::fem
+}  // namespace caps::mesher

@@ -8,29 +8,29 @@
 #include <string>
 
 #include "caps/core/reporter.hpp"
-#include "caps/fem/continuum_mesher.hpp"
+#include "caps/mesher/continuum_mesher.hpp"
 #include "caps/fem/solve.hpp"
-#include "caps/fem/surface_mesher.hpp"
-#include "caps/fem/suture_spacing.hpp"
+#include "caps/mesher/surface_mesher.hpp"
+#include "caps/closure/suture_spacing.hpp"
 #include "caps/plan/plan.hpp"
 
 namespace caps {
 class PatientModel;
 }
 
-namespace caps::fem {
+namespace caps::closure {
 
 struct SimulateOptions {
-  SurfaceMeshOptions surface;
-  ContinuumMeshOptions continuum;
-  SolveOptions solve;
+  mesher::SurfaceMeshOptions surface;
+  mesher::ContinuumMeshOptions continuum;
+  fem::SolveOptions solve;
   /// The spacing of the sutures the closing force is reported per (mm; suture_spacing()).
   double suture_spacing_mm = 5.0;
 };
 
 struct Simulation {
-  WoundMesh wound;
-  SolveResult result;
+  mesher::WoundMesh wound;
+  fem::SolveResult result;
   /// The largest distance (mm) between sutured nodes after the closure: 0 up to round-off.
   double max_suture_gap_mm = 0;
   /// Elements turned inside out by the closure (det J <= 0 at a Gauss point of the deformed
@@ -42,7 +42,7 @@ struct Simulation {
   double gape_mm = 0;
   /// The closing force per suture at SimulateOptions::suture_spacing_mm, the largest one and
   /// the force per mm of wound (suture_spacing()).
-  SutureSpacing sutures;
+  fem::SutureSpacing sutures;
 };
 
 /// Checks the plan on the model (plan::check_plan), meshes its wound border and solves the
@@ -57,4 +57,4 @@ void write_simulation(const Simulation& sim, const PatientModel& model,
                       const SimulateOptions& options, const std::filesystem::path& dir,
                       const std::string& name);
 
-}  // namespace caps::fem
+}  // namespace caps::closure

@@ -1,4 +1,4 @@
-#include "caps/fem/surface_mesher.hpp"
+#include "caps/mesher/surface_mesher.hpp"
 
 #include "caps/core/error.hpp"
 #include "caps/surface/patient_model.hpp"
@@ -10,7 +10,9 @@
 #include <numbers>
 #include <numeric>
 
-namespace caps::fem {
+namespace caps::mesher {
+
+using namespace caps::fem;
 namespace {
 
 constexpr double kPi = std::numbers::pi;
@@ -617,4 +619,4 @@ SurfaceMesh mesh_surface(const WoundBorder& border, double ref_radius_mm,
   return std::move(*outcome.mesh);
 }
 
-}  // namespace caps::fem
+}  // namespace caps::mesher

@@ -12,7 +12,7 @@
 #include <map>
 #include <numbers>
 
-namespace caps::fem::detail {
+namespace caps::mesher::detail {
 namespace {
 
 using K = CGAL::Exact_predicates_inexact_constructions_kernel;
@@ -102,4 +102,4 @@ RegionTriangulation triangulate_region(const std::vector<Eigen::Vector2d>& P,
   return out;
 }
 
-}  // namespace caps::fem::detail
+}  // namespace caps::mesher::detail

@@ -33,9 +33,9 @@
 #include "caps/fem/material.hpp"
 #include "caps/fem/mesh.hpp"
 #include "caps/core/error.hpp"
-#include "caps/fem/surface_mesher.hpp"
+#include "caps/mesher/surface_mesher.hpp"
 
-namespace caps::fem {
+namespace caps::mesher {
 
 /// What holds the outer rim of the mesh.
 enum class RimCondition { Fixed, Free };
@@ -92,7 +92,7 @@ struct ContinuumMeshOptions {
   double undermine_mm = 10;
   BaseCondition base = BaseCondition::Slide;  ///< the freed base: slides on the deep tissue or is free
   /// Uniform: the material of every element layer ("skin"; the preset data/materials/skin.json).
-  std::shared_ptr<const Material> material = default_skin();
+  std::shared_ptr<const fem::Material> material = fem::default_skin();
   /// Uniform (default) or measured tissue layers (Auto: measured when the model has them).
   /// Measured layers are not the default yet: on Cranium the large-deformation Z-plasty did not
   /// converge with them and the small-strain one inverts the thin fat (docs/fem.md).
@@ -101,18 +101,18 @@ struct ContinuumMeshOptions {
   double min_tissue_layer_mm = 0.5;
   /// Measured: the materials of the dermis (layer kDermisLayer), the subcutaneous fat and the
   /// deep tissue (muscle, fascia); presets data/materials/dermis.json, fat.json, deep.json.
-  std::shared_ptr<const Material> dermis = default_dermis();
-  std::shared_ptr<const Material> fat = default_fat();
-  std::shared_ptr<const Material> deep = default_deep();
+  std::shared_ptr<const fem::Material> dermis = fem::default_dermis();
+  std::shared_ptr<const fem::Material> fat = fem::default_fat();
+  std::shared_ptr<const fem::Material> deep = fem::default_deep();
   /// When set, the material of element layer 0, the skin's surface (the measured dermis, or the
   /// uniform model's top element layer), instead of `dermis` or `material`: e.g.
   /// default_goh_skin(), the fibre-reinforced skin over the neo-Hookean tissue (`--material goh`).
-  std::shared_ptr<const Material> surface_material;
+  std::shared_ptr<const fem::Material> surface_material;
 };
 
 /// The continuum mesh and where its nodes came from.
 struct ContinuumMesh {
-  Mesh mesh;
+  fem::Mesh mesh;
   Eigen::MatrixX2d node_theta_z;      ///< #N×2 (theta deg, z mm) of each node's column
   Eigen::VectorXd node_level;         ///< #N depth level: 0 skin .. n_layers bone (k + 0.5 centre)
   std::vector<int> element_polygon;   ///< element -> surface polygon
@@ -176,7 +176,7 @@ MeshOutcome<ContinuumMesh> try_mesh_continuum(const SurfaceMesh& surface, const 
                                               const ContinuumMeshOptions& options = {});
 
 /// The smallest Jacobian determinant of each element over its Gauss points (#E).
-Eigen::VectorXd min_element_jacobians(const Mesh& mesh);
+Eigen::VectorXd min_element_jacobians(const fem::Mesh& mesh);
 
 /// The whole mesher: surface mesh, then continuum mesh.
 struct WoundMesh {
@@ -216,4 +216,4 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
                      const ContinuumMeshOptions& continuum_options = {},
                      Reporter* reporter = nullptr);
 
-}  // namespace caps::fem
+}  // namespace caps::mesher

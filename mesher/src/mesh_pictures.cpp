@@ -1,6 +1,6 @@
-#include "caps/fem/mesh_pictures.hpp"
+#include "caps/mesher/mesh_pictures.hpp"
 
-#include "caps/fem/continuum_mesher.hpp"
+#include "caps/mesher/continuum_mesher.hpp"
 
 #include "caps/core/error.hpp"
 #include "caps/image/canvas.hpp"
@@ -11,7 +11,9 @@
 #include <numbers>
 #include <vector>
 
-namespace caps::fem {
+namespace caps::mesher {
+
+using namespace caps::fem;
 namespace {
 
 namespace fs = std::filesystem;
@@ -208,4 +210,4 @@ void write_cross_section_png(const fs::path& path, const SurfaceMesh& s, const P
   cv.write_png(path);
 }
 
-}  // namespace caps::fem
+}  // namespace caps::mesher

@@ -1,4 +1,4 @@
-#include "caps/fem/suture_spacing.hpp"
+#include "caps/closure/suture_spacing.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -8,7 +8,10 @@
 
 #include "caps/core/error.hpp"
 
-namespace caps::fem {
+namespace caps::closure {
+
+using namespace caps::fem;
+using namespace caps::mesher;
 
 namespace {
 
@@ -151,10 +154,4 @@ SutureSpacing suture_spacing(const ContinuumMesh& cm, const SolveResult& r, doub
   return out;
 }
 
-double max_suture_pair_force_n(const SolveResult& result) {
-  double f = 0;
-  for (const auto& s : result.suture_forces) f = std::max(f, s.magnitude_n);
-  return f;
-}
-
-}  // namespace caps::fem
+}  // namespace caps::closure

@@ -1,4 +1,4 @@
-#include "caps/fem/compare_models.hpp"
+#include "caps/study/compare_models.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -12,7 +12,11 @@
 #include "caps/plan/skin_walk.hpp"
 #include "caps/surface/patient_model.hpp"
 
-namespace caps::fem {
+namespace caps::study {
+
+using namespace caps::fem;
+using namespace caps::mesher;
+using namespace caps::closure;
 namespace {
 
 // The skins of the compared models may disagree by this much at the plan's centre before a
@@ -166,4 +170,4 @@ std::string model_comparison_json(const ModelComparison& c, const std::string& p
       .dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
-}  // namespace caps::fem
+}  // namespace caps::study

@@ -1,4 +1,4 @@
-#include "caps/fem/compare.hpp"
+#include "caps/study/compare.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -9,7 +9,11 @@
 #include "caps/core/error.hpp"
 #include "caps/surface/patient_model.hpp"
 
-namespace caps::fem {
+namespace caps::study {
+
+using namespace caps::fem;
+using namespace caps::mesher;
+using namespace caps::closure;
 namespace {
 
 double median(std::vector<double> v) {
@@ -141,4 +145,4 @@ std::string comparison_json(const Comparison& c, const std::string& plan_name) {
       .dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
-}  // namespace caps::fem
+}  // namespace caps::study

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "ccx_run.hpp"
+#include "cylinder_model.hpp"
 #include "synthetic_model.hpp"
 
 #include <algorithm>
@@ -19,37 +20,26 @@
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
 #include "caps/fem/box.hpp"
-#include "caps/fem/compare.hpp"
-#include "caps/fem/continuum_mesher.hpp"
+#include "caps/mesher/continuum_mesher.hpp"
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/mesh_io.hpp"
-#include "caps/fem/simulate.hpp"
-#include "caps/fem/suture_spacing.hpp"
+#include "caps/closure/simulate.hpp"
+#include "caps/closure/suture_spacing.hpp"
 #include "caps/fem/solve.hpp"
-#include "caps/fem/surface_mesher.hpp"
+#include "caps/mesher/surface_mesher.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/surface/patient_model.hpp"
 
 using namespace caps;
 using namespace caps::fem;
+using namespace caps::mesher;
+using namespace caps::closure;
 
 namespace {
 
-constexpr double kR = 70.0;
-
-// A cylinder of radius 70 mm about the LPS z axis, z in [-200, 200], with thickness T(theta, z).
-template <typename Thickness>
-PatientModel cylinder(Thickness&& T, std::uint8_t flag_band = 0) {
-  CylindricalMaps m = caps_test::synthetic_maps(caps_test::grid(360, 401, -200, 1),
-                                                [](double, double) { return kR; }, T);
-  // an invalid band at z in [60, 70] (e.g. no bone)
-  for (int k = 0; k < m.grid.n_z; ++k)
-    for (int j = 0; j < m.grid.n_theta; ++j)
-      if (flag_band && m.grid.z_mm(k) >= 60 && m.grid.z_mm(k) <= 70) m.flags[m.grid.index(j, k)] = flag_band;
-  return PatientModel(std::move(m));
-}
-
-PatientModel constant_cylinder() { return cylinder([](double, double) { return 5.0; }); }
+using caps_test::constant_cylinder;
+using caps_test::cylinder;
+using caps_test::kR;
 
 // (x mm of arc, z mm) on the cylinder to (theta deg, z mm).
 Eigen::Vector2d tz(double x, double z) { return {x / kR * 180.0 / kPi, z}; }
@@ -299,8 +289,7 @@ TEST(InpExport, CalculixSolvesTheSameProblem) {
   EXPECT_NE(deck.find("TYPE=C3D20"), std::string::npos);
   EXPECT_NE(deck.find("TYPE=C3D15"), std::string::npos);
   EXPECT_NE(deck.find("*EQUATION"), std::string::npos);
-  if (std::system("command -v ccx > /dev/null 2>&1") != 0)
-    GTEST_SKIP() << "ccx (Debian calculix-ccx) is not installed; scripts/setup.sh installs it";
+  ASSERT_TRUE(test::has_ccx()) << "ccx (Debian calculix-ccx) is not installed: scripts/setup.sh installs it; the CalculiX cross-checks need it";
   for (const Mesh* m : {&hex, &mixed}) {
     const Eigen::MatrixX3d u = ccx_displacements(*m, m == &hex ? "hex" : "mixed");
     ASSERT_TRUE(u.allFinite()) << "ccx did not print every node's displacement";
@@ -345,8 +334,7 @@ TEST(InpExport, SuturedNodesThatAreAlsoFixedExportAsCalculixCanSolve) {
   const SuturePair s0 = m.sutures[0], s1 = m.sutures[1];
   m.fixed_nodes.push_back(std::max(s0.a, s0.b));  // a non-root member (the export's root is the min)
   m.fixed_dofs.push_back({std::max(s1.a, s1.b), 2, 0.25});
-  if (std::system("command -v ccx > /dev/null 2>&1") != 0)
-    GTEST_SKIP() << "ccx (Debian calculix-ccx) is not installed; scripts/setup.sh installs it";
+  ASSERT_TRUE(test::has_ccx()) << "ccx (Debian calculix-ccx) is not installed: scripts/setup.sh installs it; the CalculiX cross-checks need it";
   const Eigen::MatrixX3d u = ccx_displacements(m, "fixed_sutured");
   ASSERT_TRUE(u.allFinite()) << "ccx did not solve the deck";
   const SolveResult r = solve(m);
@@ -371,8 +359,7 @@ TEST(InpExport, SlidingSupportOfASuturedNodeIsWrittenOnItsGroup) {
   EXPECT_EQ(tail.substr(0, tail.find('\n', 10) + 1), "*EQUATION\n4\n") << tail.substr(0, 200);
   EXPECT_EQ(tail.find(cat(member + 1, ", ")), std::string::npos) << tail.substr(0, 200);
   EXPECT_NE(tail.find(cat(std::min(s0.a, s0.b) + 1, ", 3, ")), std::string::npos) << tail.substr(0, 200);
-  if (std::system("command -v ccx > /dev/null 2>&1") != 0)
-    GTEST_SKIP() << "ccx (Debian calculix-ccx) is not installed; scripts/setup.sh installs it";
+  ASSERT_TRUE(test::has_ccx()) << "ccx (Debian calculix-ccx) is not installed: scripts/setup.sh installs it; the CalculiX cross-checks need it";
   const Eigen::MatrixX3d u = ccx_displacements(m, "sliding_sutured");
   ASSERT_TRUE(u.allFinite()) << "ccx did not solve the deck";
   const SolveResult r = solve(m);
@@ -402,30 +389,6 @@ TEST(Simulate, PlanToClosedWoundWithAnAutomaticExtent) {
       plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0.0, 65.0, 90.0);
   o.surface.extent_mm = 0.0;
   EXPECT_THROW(simulate(model, on_band, o), InvalidInput);
-}
-
-TEST(Compare, ConstantEqualsMeasuredWhenTheThicknessIsConstant) {
-  const auto ellipse = plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}});
-  SimulateOptions o;
-  o.surface.size_mm = 2.0;
-  o.surface.extent_mm = 20.0;
-  // Thickness 5 mm everywhere: the median under the wound is 5 mm and both sides are one problem.
-  const PatientModel flat = constant_cylinder();
-  const Comparison same = compare_thickness(flat, plan::place_procedure(ellipse, flat, 0, 0, 90), 0, o);
-  EXPECT_NEAR(same.constant_thickness_mm, 5.0, 1e-6);
-  EXPECT_NEAR(same.measured_summary.closing_force_n, same.constant_summary.closing_force_n, 1e-9);
-  EXPECT_NEAR(same.measured_summary.max_displacement_mm, same.constant_summary.max_displacement_mm, 1e-9);
-  EXPECT_GT(same.measured_summary.closing_force_n, 0.0);
-  // Thickness varying under the wound (3 to 9 mm across it): the results differ, and the summary
-  // reports the measured range.
-  const PatientModel varying = cylinder([](double theta, double) { return 6.0 + 3.0 * std::sin(theta * kPi / 180 * 10); });
-  const Comparison diff = compare_thickness(varying, plan::place_procedure(ellipse, varying, 0, 0, 90), 0, o);
-  EXPECT_LT(diff.measured_summary.thickness_min_mm, diff.constant_thickness_mm);
-  EXPECT_GT(diff.measured_summary.thickness_max_mm, diff.constant_thickness_mm);
-  EXPECT_GT(std::abs(diff.measured_summary.strain_energy_mj - diff.constant_summary.strain_energy_mj),
-            1e-3 * diff.constant_summary.strain_energy_mj);
-  EXPECT_EQ(diff.measured_summary.elements, diff.constant_summary.elements);  // the same mesh
-  EXPECT_THROW(compare_thickness(flat, plan::place_procedure(ellipse, flat, 0, 0, 90), -1, o), InvalidInput);
 }
 
 TEST(Simulate, VYAdvancementPushesTheFlapAlongItsAxis) {

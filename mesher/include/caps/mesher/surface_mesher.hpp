@@ -32,7 +32,7 @@ namespace caps {
 class PatientModel;
 }
 
-namespace caps::fem {
+namespace caps::mesher {
 
 /// The wound border the plan layer hands to the mesher (plan::wound_border()): the hole's border
 /// loop in (theta deg, z mm), excision offsets applied, coincident twins allowed; and the border
@@ -139,4 +139,4 @@ MeshOutcome<SurfaceMesh> try_mesh_surface(const WoundBorder& border, double ref_
 SurfaceQuality surface_quality(const Eigen::MatrixX2d& xy_mm,
                                const std::vector<std::vector<int>>& polygons);
 
-}  // namespace caps::fem
+}  // namespace caps::mesher

@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
-#include "caps/fem/simulate.hpp"
+#include "caps/closure/simulate.hpp"
 
-namespace caps::fem {
+namespace caps::study {
 
 /// What a surgeon compares between two simulations of one plan (clinical units).
 struct SimulationSummary {
@@ -33,7 +33,7 @@ struct Comparison {
   /// measured: measured thickness, one material; constant: constant thickness, one material;
   /// layered: measured thickness in measured tissue layers (one material where the model has no
   /// measured layers under the mesh: then a warning says so).
-  Simulation measured, constant, layered;
+  closure::Simulation measured, constant, layered;
   SimulationSummary measured_summary, constant_summary, layered_summary;
   double constant_thickness_mm = 0;
   /// The warnings of both simulations, each prefixed with its side ("measured: ...").
@@ -41,7 +41,7 @@ struct Comparison {
 };
 
 /// Summarises a simulation; `model` gives the thickness under the wound.
-SimulationSummary summarize(const Simulation& sim, const PatientModel& model, const std::string& label,
+SimulationSummary summarize(const closure::Simulation& sim, const PatientModel& model, const std::string& label,
                             double constant_thickness_mm = 0);
 
 /// Simulates the plan with the model's measured thickness and with a constant one, both in one
@@ -51,10 +51,10 @@ SimulationSummary summarize(const Simulation& sim, const PatientModel& model, co
 /// layers (TissueLayers::Auto, options.continuum's dermis, fat and deep materials) on the same
 /// surface mesh.
 Comparison compare_thickness(const PatientModel& model, const plan::Plan& plan, double constant_mm,
-                             const SimulateOptions& options = {}, Reporter* reporter = nullptr);
+                             const closure::SimulateOptions& options = {}, Reporter* reporter = nullptr);
 
 /// The comparison's table as JSON (comparison.json): the plan, the constant thickness, and each
 /// column's summary ("measured", "constant", "layers").
 std::string comparison_json(const Comparison& c, const std::string& plan_name);
 
-}  // namespace caps::fem
+}  // namespace caps::study

@@ -1,10 +1,10 @@
-#include "caps/fem/continuum_mesher.hpp"
+#include "caps/mesher/continuum_mesher.hpp"
 
 #include "caps/core/error.hpp"
 #include "caps/core/reporter.hpp"
 #include "caps/fem/elements.hpp"
 #include "caps/surface/patient_model.hpp"
-#include "constraints.hpp"
+#include "caps/core/union_find.hpp"
 
 #include <algorithm>
 #include <array>
@@ -15,7 +15,9 @@
 #include <set>
 #include <string>
 
-namespace caps::fem {
+namespace caps::mesher {
+
+using namespace caps::fem;
 
 namespace {
 // How much farther apart than at the skin a deep suture pair's nodes may lie (mm; and half the
@@ -677,7 +679,7 @@ void ContinuumBuild::add_sliding_base() {
   for (int v = 0; v < NV; ++v) add_base(vnode(v, 2 * NL), vnode(v, 0));
   for (int e = 0; e < NE; ++e) add_base(enode(e, NL), enode(e, 0));
   // Suture groups among the bottom nodes, each named by its smallest node.
-  detail::UnionFind group(static_cast<int>(mesh.n_nodes()));
+  UnionFind group(static_cast<int>(mesh.n_nodes()));
   for (const auto& [a, b] : pairs)
     if (base.count(a) && base.count(b)) group.unite(a, b);
   struct Merged {
@@ -1210,4 +1212,4 @@ WoundMesh mesh_wound(const WoundBorder& border, const PatientModel& model,
   return ExtentSearch(border, model, surface_options, continuum_options, reporter).run();
 }
 
-}  // namespace caps::fem
+}  // namespace caps::mesher

@@ -12,11 +12,11 @@
 #include <vector>
 
 #include "caps/core/reporter.hpp"
-#include "caps/fem/compare.hpp"
-#include "caps/fem/simulate.hpp"
+#include "caps/study/compare.hpp"
+#include "caps/closure/simulate.hpp"
 #include "caps/plan/plan.hpp"
 
-namespace caps::fem {
+namespace caps::study {
 
 /// A model compared with the reference, and where the reference's points lie in it.
 struct ComparedModel {
@@ -55,7 +55,7 @@ Eigen::Vector3d plan_direction(const plan::Plan& plan, const PatientModel& model
 struct ModelComparisonSide {
   std::string key, label;
   plan::Plan plan;        ///< as placed on this model
-  Simulation simulation;
+  closure::Simulation simulation;
   SimulationSummary summary;
   Eigen::Matrix4d reference_to_model = Eigen::Matrix4d::Identity();
   double centre_gap_mm = 0;  ///< see TransferredPlan (0 for the reference)
@@ -75,10 +75,10 @@ struct ModelComparison {
 /// Throws what simulate() throws, naming the side.
 /// `reference.reference_to_model` must be the identity.
 ModelComparison compare_models(const ComparedModel& reference, const plan::Plan& plan, const std::vector<ComparedModel>& others,
-                               const SimulateOptions& options = {}, Reporter* reporter = nullptr);
+                               const closure::SimulateOptions& options = {}, Reporter* reporter = nullptr);
 
 /// The comparison's table as JSON (model_comparison.json): the plan and, for each side, its
 /// label, placement (theta, z, orientation, centre gap) and summary.
 std::string model_comparison_json(const ModelComparison& c, const std::string& plan_name);
 
-}  // namespace caps::fem
+}  // namespace caps::study
