@@ -51,8 +51,6 @@ double plate_peak_hu(double t_mm) {
 }  // namespace
 
 TEST(ThinBone, PhantomPlateIsBelowTheThresholdWhereThinnerThanAboutHalfAMillimetre) {
-  EXPECT_NEAR(plate_peak_hu(0.5), 226.6667, 1e-4);
-  EXPECT_NEAR(plate_peak_hu(1.5), 600.0, 1e-9);
   const HeadPhantom ph(false, true);
   EXPECT_NEAR(ph.thin_bone_mm(deg_to_rad(-50.0), -50.0), 0.5, 1e-12);
   EXPECT_NEAR(ph.thin_bone_mm(deg_to_rad(-50.0), -10.0), 1.5, 1e-12);
@@ -66,8 +64,11 @@ TEST(ThinBone, PhantomPlateIsBelowTheThresholdWhereThinnerThanAboutHalfAMillimet
     const Eigen::Vector3d p = ph.axis_point() + Eigen::Vector3d(0, 0, z) + r * HeadPhantom::ray_direction(th);
     peak = std::max<double>(peak, sample_trilinear(v, v.lps_to_index(p), -1000.0f));
   }
+  // The phantom's voxels against the closed form of the plate's partial-volume peak (226.7 HU at
+  // 0.5 mm): trilinear sampling between 1 mm voxels lowers it a little (219 HU). Below the
+  // 250 HU bone threshold either way, which is why the threshold misses the plate there.
+  EXPECT_NEAR(peak, plate_peak_hu(0.5), 12.0);
   EXPECT_LT(peak, 250.0);
-  EXPECT_GT(peak, 190.0);
 }
 
 // Over the plate (away from its edges), the fixed threshold misses the plate wherever it is
