@@ -9,9 +9,13 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <numeric>
 
+#include "caps/core/data_dir.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/json_limits.hpp"
 #include "caps/core/units.hpp"
@@ -720,4 +724,98 @@ TEST(PlanGeometry, EllipseWidthApexAndLevelOnTheSkin) {
   expect_ellipse_on_skin(cylinder(), 0, 60);
   expect_ellipse_on_skin(curved(), 45, 40);
   expect_ellipse_on_skin(curved(), 100, -35);
+}
+
+// The procedure library's declarations are data (data/procedures/library.json); the layouts are
+// code. The shipped file declares every layout, in the library's order, with the clinical ranges
+// docs/plan.md gives, and a file that does not match the code is refused, naming the entry.
+namespace {
+
+std::string shipped_library_text() {
+  std::ifstream in(data_file("procedures/library.json"));
+  std::ostringstream t;
+  t << in.rdbuf();
+  return t.str();
+}
+
+// Writes `text` as a library file and reads it; the message of the refusal, or "" if accepted.
+std::string library_refusal(const std::string& text) {
+  const auto file = std::filesystem::temp_directory_path() /
+                    ("caps_test_library_" + std::to_string(::getpid()) + ".json");
+  std::ofstream(file) << text;
+  std::string message;
+  try {
+    read_procedure_library(file);
+  } catch (const InvalidInput& e) {
+    message = e.what();
+  }
+  std::filesystem::remove(file);
+  return message;
+}
+
+std::string replaced(std::string s, const std::string& from, const std::string& to) {
+  const auto at = s.find(from);
+  EXPECT_NE(at, std::string::npos) << from;
+  if (at != std::string::npos) s.replace(at, from.size(), to);
+  return s;
+}
+
+}  // namespace
+
+TEST(ProcedureLibrary, TheShippedFileDeclaresEveryLayoutWithItsClinicalRanges) {
+  const auto lib = read_procedure_library(data_file("procedures/library.json"));
+  std::vector<std::string> names;
+  for (const auto& p : lib) names.push_back(p.name);
+  EXPECT_EQ(names, (std::vector<std::string>{"ellipse", "z-plasty", "multiple-z-plasty", "w-plasty",
+                                             "rhomboid", "rotation-flap", "v-y-advancement",
+                                             "bilobed"}));
+  // Z-plasty: 30-90 deg (the textbooks' range, docs/plan.md), central limb 20 mm by default.
+  const ParameterInfo& angle = lib[1].parameters[1];
+  EXPECT_EQ(angle.name, "angle");
+  EXPECT_EQ(angle.unit, "deg");
+  EXPECT_EQ(angle.default_value, 60);
+  EXPECT_EQ(angle.min, 30);
+  EXPECT_EQ(angle.max, 90);
+  EXPECT_EQ(lib[0].parameters[2].alternative_to, "width");  // the ellipse's apex angle
+  // The registry serves what the file says: a default from the file lays the template out.
+  EXPECT_EQ(procedure_library().size(), lib.size());
+  const LocalProcedure z = layout_procedure("z-plasty", {});
+  EXPECT_EQ(z.parameters.at("length"), lib[1].parameters[0].default_value);
+  EXPECT_NEAR((z.points_mm[2] - z.points_mm[1]).norm(), 20.0, 1e-12);
+}
+
+TEST(ProcedureLibrary, AFileThatDoesNotMatchTheLayoutsIsRefusedNamingTheEntry) {
+  const std::string text = shipped_library_text();
+  EXPECT_EQ(library_refusal(text), "");
+  EXPECT_NE(library_refusal(replaced(text, "\"name\": \"bilobed\"", "\"name\": \"trilobed\""))
+                .find("'trilobed' has no layout"),
+            std::string::npos);
+  EXPECT_NE(library_refusal(R"({"format": "caps-procedure-library", "version": 1, "procedures": []})")
+                .find("'bilobed' is missing"),
+            std::string::npos);
+  EXPECT_NE(library_refusal(replaced(text, "\"default\": 30, \"min\": 5", "\"default\": 3, \"min\": 5"))
+                .find("ellipse: the default 3 mm of 'length' is outside its range [5, 150]"),
+            std::string::npos);
+  EXPECT_NE(library_refusal(replaced(text, "\"name\": \"bilobed\"", "\"name\": \"ellipse\""))
+                .find("'ellipse' is listed twice"),
+            std::string::npos);
+  EXPECT_NE(library_refusal(replaced(text, "caps-procedure-library", "caps-procedure")).find("not a caps procedure library"),
+            std::string::npos);
+}
+
+TEST(ProcedureLibrary, AMissingDataFolderIsAnErrorNamingCapsDataDir) {
+  const auto empty = std::filesystem::temp_directory_path() /
+                     ("caps_test_no_data_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(empty);
+  ::setenv("CAPS_DATA_DIR", empty.c_str(), 1);
+  try {
+    data_file("procedures/library.json");
+    ADD_FAILURE() << "a missing data file was accepted";
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("CAPS_DATA_DIR"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(empty.string()), std::string::npos) << e.what();
+  }
+  ::unsetenv("CAPS_DATA_DIR");
+  std::filesystem::remove_all(empty);
+  EXPECT_NO_THROW(data_file("procedures/library.json"));
 }

@@ -2,10 +2,14 @@
 
 #include <algorithm>
 #include <array>
+#include <fstream>
+#include <set>
+#include <sstream>
 #include <cmath>
 #include <nlohmann/json.hpp>
 #include <numeric>
 
+#include "caps/core/data_dir.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/json_file.hpp"
 #include "caps/core/units.hpp"
@@ -396,71 +400,30 @@ LocalProcedure bilobed(std::map<std::string, double>& p) {
   return out;
 }
 
+using Layout = LocalProcedure (*)(std::map<std::string, double>&);
+
 struct Template {
   ProcedureInfo info;
-  LocalProcedure (*layout)(std::map<std::string, double>&);
+  Layout layout;
 };
 
+// The layouts in code, by the library's names (data/procedures/library.json holds each one's
+// summary and parameters).
+const std::map<std::string, Layout>& layouts() {
+  static const std::map<std::string, Layout> m = {
+      {"ellipse", ellipse},          {"z-plasty", z_plasty}, {"multiple-z-plasty", multiple_z},
+      {"w-plasty", w_plasty},        {"rhomboid", rhomboid}, {"rotation-flap", rotation_flap},
+      {"v-y-advancement", v_y},      {"bilobed", bilobed}};
+  return m;
+}
+
 const std::vector<Template>& templates() {
-  static const std::vector<Template> t = {
-      {{"ellipse",
-        "elliptical (fusiform) excision, the paper's Figure 1",
-        {{"length", "mm", 30, 5, 150, "apex to apex"},
-         {"width", "mm", 10, 1, 60, "widest point (or give apex_angle)"},
-         {"apex_angle", "deg", 36.87, 15, 90, "angle at each apex; sets the width", "width"}}},
-       ellipse},
-      {{"z-plasty",
-        "Z-plasty (transposition of two triangular flaps), the paper's Figure 2",
-        {{"length", "mm", 20, 5, 80, "central limb (and each lateral limb)"},
-         {"angle", "deg", 60, 30, 90, "between each lateral limb and the central limb"}}},
-       z_plasty},
-      {{"multiple-z-plasty",
-        "serial Z-plasties along one central line",
-        {{"length", "mm", 45, 10, 200, "the whole central line"},
-         {"angle", "deg", 60, 30, 90, "between lateral and central limbs"},
-         {"segments", "count", 3, 2, 8, "number of Z-plasties"}}},
-       multiple_z},
-      {{"w-plasty",
-        "W-plasty: zigzag excision of a scar with interdigitating closure",
-        {{"length", "mm", 30, 10, 150, "along the scar"},
-         {"width", "mm", 3, 1, 15, "how far the two zigzags are moved apart"},
-         {"limb", "mm", 6, 3, 10, "each zigzag limb"},
-         {"angle", "deg", 60, 50, 120, "at each tooth"}}},
-       w_plasty},
-      {{"rhomboid",
-        "rhomboid (Limberg) transposition flap closing a rhombic defect",
-        {{"side", "mm", 15, 5, 50, "side of the 60/120 deg rhombus (and of the flap)"}}},
-       rhomboid},
-      {{"rotation-flap",
-        "rotation flap: a curved flap turned about its pivot into a triangular defect",
-        {{"radius", "mm", 15, 5, 40, "legs of the triangular defect = radius of the arc"},
-         {"defect_angle", "deg", 40, 20, 60, "at the defect's apex (the arc's centre)"},
-         {"arc_angle", "deg", 120, 60, 180, "sweep of the curved incision from the defect"},
-         {"back_cut", "mm", 0, 0, 20,
-          "cut from the pivot towards the centre (0: none; at most "
-          "half the radius)"},
-         {"arc_side", "sign", 1, -1, 1,
-          "1: the arc sweeps to the left of the orientation, -1: right"}}},
-       rotation_flap},
-      {{"v-y-advancement",
-        "V-Y advancement: a V-shaped flap pushed along its axis, closed as a Y",
-        {{"length", "mm", 20, 5, 60, "each arm of the V, from the apex"},
-         {"angle", "deg", 50, 20, 90, "at the V's apex"},
-         {"advance", "mm", 6, 1, 30,
-          "how far the flap moves = the stem of the Y (at most half "
-          "the arm)"}}},
-       v_y},
-      {{"bilobed",
-        "bilobed flap (Zitelli): two lobes transposed about one pivot into a round defect",
-        {{"radius", "mm", 6, 3, 15, "radius of the round defect (the first lobe's too)"},
-         {"lobe_angle", "deg", 45, 40, 55,
-          "from the defect's axis to the first lobe's, and from "
-          "the first to the second (Zitelli: 45-50)"},
-         {"second_lobe", "ratio", 0.75, 0.5, 0.9, "the second lobe's width over the first's"},
-         {"lobe_side", "sign", 1, -1, 1,
-          "1: the lobes to the left of the orientation, -1: right"}}},
-       bilobed},
-  };
+  static const std::vector<Template> t = [] {
+    std::vector<Template> v;
+    for (auto& info : read_procedure_library(data_file("procedures/library.json")))
+      v.push_back({info, layouts().at(info.name)});
+    return v;
+  }();
   return t;
 }
 
@@ -746,6 +709,58 @@ LocalProcedure procedure_from_plan(const Plan& plan) {
   p.flaps = plan.flaps;
   p.notes = plan.notes;
   return p;
+}
+
+std::vector<ProcedureInfo> read_procedure_library(const std::filesystem::path& file) {
+  const std::string source = file.string();
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw IoError(cat("cannot read the procedure library ", source));
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (text.str().size() > (1u << 20))
+    throw InvalidInput(cat(source, ": larger than 1 MiB; the procedure library is a few kB"));
+  check_json_depth(text.str(), source);
+  std::vector<ProcedureInfo> lib;
+  try {
+    const json j = json::parse(text.str());
+    if (j.value("format", "") != "caps-procedure-library" || j.value("version", 0) != 1)
+      throw InvalidInput(cat(source, ": not a caps procedure library (\"format\": "
+                             "\"caps-procedure-library\", \"version\": 1)"));
+    for (const auto& e : j.at("procedures")) {
+      ProcedureInfo info;
+      info.name = e.at("name").get<std::string>();
+      info.summary = e.at("summary").get<std::string>();
+      if (!layouts().count(info.name))
+        throw InvalidInput(cat(source, ": the procedure '", info.name, "' has no layout in caps "
+                               "(a new template needs its geometry in plan/src/procedures.cpp)"));
+      for (const auto& q : e.at("parameters")) {
+        ParameterInfo pi;
+        pi.name = q.at("name").get<std::string>();
+        pi.unit = q.at("unit").get<std::string>();
+        pi.default_value = q.at("default").get<double>();
+        pi.min = q.at("min").get<double>();
+        pi.max = q.at("max").get<double>();
+        pi.meaning = q.at("help").get<std::string>();
+        pi.alternative_to = q.value("alternative_to", "");
+        if (!(pi.min <= pi.default_value && pi.default_value <= pi.max))
+          throw InvalidInput(cat(source, ": ", info.name, ": the default ", pi.default_value, " ",
+                                 pi.unit, " of '", pi.name, "' is outside its range [", pi.min,
+                                 ", ", pi.max, "]"));
+        info.parameters.push_back(pi);
+      }
+      for (const auto& x : lib)
+        if (x.name == info.name)
+          throw InvalidInput(cat(source, ": the procedure '", info.name, "' is listed twice"));
+      lib.push_back(info);
+    }
+  } catch (const json::exception& e) {
+    throw InvalidInput(cat(source, ": ", e.what(), " (the procedure library: docs/plan-format.md)"));
+  }
+  for (const auto& [name, layout] : layouts())
+    if (std::none_of(lib.begin(), lib.end(), [&](const ProcedureInfo& x) { return x.name == name; }))
+      throw InvalidInput(cat(source, ": the procedure '", name, "' is missing (caps lays it out; "
+                             "its parameters must be declared here)"));
+  return lib;
 }
 
 }  // namespace caps::plan

@@ -7,6 +7,7 @@
 /// its left, mm, centred on the given point. Users can define their own procedure by listing
 /// points, paths, excisions and suture pairs in a procedure file (docs/plan-format.md) and reuse it.
 
+#include <filesystem>
 #include <map>
 #include <string>
 #include <vector>
@@ -34,8 +35,14 @@ struct ProcedureInfo {
   std::vector<ParameterInfo> parameters;   ///< besides the centre and the orientation
 };
 
-/// The library, in a fixed order.
+/// The library, in a fixed order: data/procedures/library.json (caps/core/data_dir.hpp), each
+/// template's parameters with their units, defaults and clinical ranges, read once.
 const std::vector<ProcedureInfo>& procedure_library();
+
+/// Reads a procedure library file and checks it against the layouts caps has: every entry must
+/// have a layout and every layout an entry, each default within its range. Throws IoError
+/// (unreadable) or InvalidInput naming the file and the entry.
+std::vector<ProcedureInfo> read_procedure_library(const std::filesystem::path& file);
 
 /// A procedure in local coordinates: what a template or a procedure file produces.
 struct LocalProcedure {
