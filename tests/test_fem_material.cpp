@@ -200,14 +200,14 @@ TEST(MaterialPresets, AMissingOrBadFileIsAClearError) {
   std::ofstream(dir / "materials" / "wrong.json")
       << R"({"format": "caps-material-preset", "version": 1, "material": "neo-hookean", "parameters": {"E": 0.1}})";
   ASSERT_EQ(setenv("CAPS_DATA_DIR", dir.c_str(), 1), 0);
-  EXPECT_EQ(data_dir(), dir);
+  EXPECT_EQ(materials_dir(), dir / "materials");
   EXPECT_NE(error_of([] { material_preset("broken"); }).find("broken.json: not valid JSON"), std::string::npos);
   EXPECT_NE(error_of([] { material_preset("wrong"); }).find("wrong.json: neo-hookean needs its parameter nu"),
             std::string::npos);
   EXPECT_NE(error_of([] { material_preset("skin"); }).find("cannot read"), std::string::npos);
   EXPECT_NE(error_of([] { material_preset("skin"); }).find("the presets are broken, wrong"), std::string::npos);
   ASSERT_EQ(setenv("CAPS_DATA_DIR", (dir / "none").c_str(), 1), 0);
-  EXPECT_NE(error_of([] { data_dir(); }).find("has no materials/ folder (from CAPS_DATA_DIR)"), std::string::npos);
+  EXPECT_NE(error_of([] { materials_dir(); }).find("has no materials/ folder (from CAPS_DATA_DIR)"), std::string::npos);
   ASSERT_EQ(unsetenv("CAPS_DATA_DIR"), 0);
   EXPECT_NO_THROW(preset_material("skin"));
   fs::remove_all(dir);

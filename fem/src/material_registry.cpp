@@ -7,12 +7,10 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "caps/core/data_dir.hpp"
 #include "caps/core/error.hpp"
-#include "caps/core/json_limits.hpp"
+#include "caps/core/json_file.hpp"
 
-#ifndef CAPS_SOURCE_DATA_DIR
-#error "CAPS_SOURCE_DATA_DIR (the source tree's data folder) must be defined by the build"
-#endif
 
 namespace caps::fem {
 namespace {
@@ -188,12 +186,7 @@ std::shared_ptr<const Material> material_of(const json& j, const std::string& wh
 }
 
 json parsed(const std::string& text, const std::string& where) {
-  check_json_depth(text, where);
-  try {
-    return json::parse(text);
-  } catch (const std::exception& e) {
-    throw InvalidInput(cat(where, ": not valid JSON: ", e.what()));
-  }
+  return parse_json<json>(text, where);
 }
 
 }  // namespace
@@ -203,20 +196,20 @@ std::shared_ptr<const Material> material_from_json(const std::string& json_text,
   return material_of(parsed(json_text, where), where);
 }
 
-std::filesystem::path data_dir() {
-  const char* env = std::getenv("CAPS_DATA_DIR");
-  const std::filesystem::path dir = env && *env ? std::filesystem::path(env)
-                                                : std::filesystem::path(CAPS_SOURCE_DATA_DIR);
+std::filesystem::path materials_dir() {
+  const std::filesystem::path dir = data_dir() / "materials";
   std::error_code ec;
-  if (!std::filesystem::is_directory(dir / "materials", ec))
-    throw InvalidInput(cat("the data folder ", dir.string(), " has no materials/ folder",
+  if (!std::filesystem::is_directory(dir, ec)) {
+    const char* env = std::getenv("CAPS_DATA_DIR");
+    throw InvalidInput(cat("the data folder ", data_dir().string(), " has no materials/ folder",
                            env && *env ? " (from CAPS_DATA_DIR)" : " (the source tree's data/)",
                            "; set CAPS_DATA_DIR to the caps data folder"));
+  }
   return dir;
 }
 
 MaterialPreset material_preset(const std::string& name) {
-  const std::filesystem::path path = data_dir() / "materials" / (name + ".json");
+  const std::filesystem::path path = materials_dir() / (name + ".json");
   const std::string where = path.string();
   Registry& r = registry();
   {
@@ -259,7 +252,7 @@ std::shared_ptr<const Material> preset_material(const std::string& name) {
 
 std::vector<std::string> material_preset_names() {
   std::vector<std::string> names;
-  for (const auto& e : std::filesystem::directory_iterator(data_dir() / "materials"))
+  for (const auto& e : std::filesystem::directory_iterator(materials_dir()))
     if (e.path().extension() == ".json") names.push_back(e.path().stem().string());
   std::sort(names.begin(), names.end());
   return names;

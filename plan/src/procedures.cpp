@@ -2,9 +2,6 @@
 
 #include <algorithm>
 #include <array>
-#include <fstream>
-#include <set>
-#include <sstream>
 #include <cmath>
 #include <nlohmann/json.hpp>
 #include <numeric>
@@ -713,16 +710,10 @@ LocalProcedure procedure_from_plan(const Plan& plan) {
 
 std::vector<ProcedureInfo> read_procedure_library(const std::filesystem::path& file) {
   const std::string source = file.string();
-  std::ifstream in(file, std::ios::binary);
-  if (!in) throw IoError(cat("cannot read the procedure library ", source));
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (text.str().size() > (1u << 20))
-    throw InvalidInput(cat(source, ": larger than 1 MiB; the procedure library is a few kB"));
-  check_json_depth(text.str(), source);
+  const json j = read_json_file<json>(file, "the procedure library is data/procedures/library.json",
+                                      std::size_t(1) << 20);
   std::vector<ProcedureInfo> lib;
   try {
-    const json j = json::parse(text.str());
     if (j.value("format", "") != "caps-procedure-library" || j.value("version", 0) != 1)
       throw InvalidInput(cat(source, ": not a caps procedure library (\"format\": "
                              "\"caps-procedure-library\", \"version\": 1)"));

@@ -12,7 +12,7 @@
 /// Presets (parameters with their literature sources) are files data/materials/NAME.json:
 ///   {"format": "caps-material-preset", "version": 1, "material": "neo-hookean",
 ///    "parameters": {"E": 0.1, "nu": 0.45}, "description": "...", "sources": ["..."]}
-/// found under data_dir(). A missing or bad file is InvalidInput naming the file.
+/// found under materials_dir(). A missing or bad file is InvalidInput naming the file.
 
 #include <filesystem>
 #include <functional>
@@ -66,11 +66,11 @@ std::string material_json(const Material& material);
 std::shared_ptr<const Material> material_from_json(const std::string& json_text,
                                                    const std::string& where = "material");
 
-/// The folder of the project's data files: $CAPS_DATA_DIR if set, else the source tree's
-/// data/ (compiled in). Throws InvalidInput if that folder has no materials/ in it.
-std::filesystem::path data_dir();
+/// The presets' folder: materials/ in caps's data folder (caps::data_dir(), caps/core/data_dir.hpp:
+/// $CAPS_DATA_DIR if set, else the source tree's data/). Throws InvalidInput if it is missing.
+std::filesystem::path materials_dir();
 
-/// A preset from data_dir()/materials/NAME.json.
+/// A preset from materials_dir()/NAME.json.
 struct MaterialPreset {
   std::string name;         ///< the file's stem: "dermis"
   std::string description;  ///< what it models
@@ -82,7 +82,7 @@ struct MaterialPreset {
 MaterialPreset material_preset(const std::string& name);
 /// The preset's material (material_preset(name).material).
 std::shared_ptr<const Material> preset_material(const std::string& name);
-/// The preset names in data_dir()/materials, sorted.
+/// The preset names in materials_dir(), sorted.
 std::vector<std::string> material_preset_names();
 
 }  // namespace caps::fem
