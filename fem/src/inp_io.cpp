@@ -39,6 +39,42 @@ const IsotropicElastic& calculix_material(const Mesh& mesh, int layer, bool fini
   return *iso;
 }
 
+// The elements by layer and type (element ids in caps order + 1) and each layer's material and
+// section.
+void write_elements_and_materials(std::ostream& os, const Mesh& mesh, const InpOptions& options) {
+  std::set<int> layers;
+  for (const auto& e : mesh.elements) layers.insert(e.layer);
+  for (int layer : layers)
+    for (ElementType type : {ElementType::Hex20, ElementType::Wedge15}) {
+      bool header = false;
+      for (std::size_t e = 0; e < mesh.n_elements(); ++e) {
+        const Element& el = mesh.elements[e];
+        if (el.layer != layer || el.type != type) continue;
+        if (!header) {
+          os << "*ELEMENT, TYPE=" << (type == ElementType::Hex20 ? "C3D20" : "C3D15")
+             << ", ELSET=LAYER" << layer << "\n";
+          header = true;
+        }
+        // C3D20 and C3D15 follow the caps numbering node for node (see inp_io.hpp).
+        os << e + 1;
+        for (int k = 0; k < el.n_nodes(); ++k)
+          os << (k == 15 ? ",\n" : ", ") << el.nodes[k] + 1;
+        os << "\n";
+      }
+    }
+  for (int layer : layers) {
+    const IsotropicElastic& m = calculix_material(mesh, layer, options.finite_strain);
+    os << "** layer " << layer << ": " << material_json(*mesh.materials.at(layer)) << "\n";
+    os << "*MATERIAL, NAME=MAT" << layer << "\n";
+    if (options.finite_strain) {  // C10 = mu/2, D1 = 2/K (NeoHookean)
+      os << "*HYPERELASTIC, NEO HOOKE\n" << num(0.5 * m.mu_mpa()) << ", " << num(2 / m.bulk_mpa()) << "\n";
+    } else {
+      os << "*ELASTIC\n" << num(m.E_mpa()) << ", " << num(m.nu()) << "\n";
+    }
+    os << "*SOLID SECTION, ELSET=LAYER" << layer << ", MATERIAL=MAT" << layer << "\n";
+  }
+}
+
 }  // namespace
 
 std::string inp_text(const Mesh& mesh, const InpOptions& options) {
@@ -83,38 +119,7 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
     for (std::size_t k = 0; k < members.size(); ++k) os << N + 1 + k << ", 0, 0, 0\n";
   }
 
-  // Elements by layer and type, element ids in caps order + 1.
-  std::set<int> layers;
-  for (const auto& e : mesh.elements) layers.insert(e.layer);
-  for (int layer : layers)
-    for (ElementType type : {ElementType::Hex20, ElementType::Wedge15}) {
-      bool header = false;
-      for (std::size_t e = 0; e < mesh.n_elements(); ++e) {
-        const Element& el = mesh.elements[e];
-        if (el.layer != layer || el.type != type) continue;
-        if (!header) {
-          os << "*ELEMENT, TYPE=" << (type == ElementType::Hex20 ? "C3D20" : "C3D15")
-             << ", ELSET=LAYER" << layer << "\n";
-          header = true;
-        }
-        // C3D20 and C3D15 follow the caps numbering node for node (see inp_io.hpp).
-        os << e + 1;
-        for (int k = 0; k < el.n_nodes(); ++k)
-          os << (k == 15 ? ",\n" : ", ") << el.nodes[k] + 1;
-        os << "\n";
-      }
-    }
-  for (int layer : layers) {
-    const IsotropicElastic& m = calculix_material(mesh, layer, options.finite_strain);
-    os << "** layer " << layer << ": " << material_json(*mesh.materials.at(layer)) << "\n";
-    os << "*MATERIAL, NAME=MAT" << layer << "\n";
-    if (options.finite_strain) {  // C10 = mu/2, D1 = 2/K (NeoHookean)
-      os << "*HYPERELASTIC, NEO HOOKE\n" << num(0.5 * m.mu_mpa()) << ", " << num(2 / m.bulk_mpa()) << "\n";
-    } else {
-      os << "*ELASTIC\n" << num(m.E_mpa()) << ", " << num(m.nu()) << "\n";
-    }
-    os << "*SOLID SECTION, ELSET=LAYER" << layer << ", MATERIAL=MAT" << layer << "\n";
-  }
+  write_elements_and_materials(os, mesh, options);
   if (!fixed.empty()) {
     os << "*NSET, NSET=FIXED\n";
     id_lines(os, std::vector<int>(fixed.begin(), fixed.end()));

@@ -85,9 +85,8 @@ struct NewtonOptions {
   /// factorization (of an earlier tangent; any solver and precision), which is kept if that
   /// converges within this many iterations (to the accuracy an inexact Newton step needs, a
   /// relative residual of 1e-2 ||r|| / ||r_0||, at most 1e-3); otherwise the tangent is
-  /// factorized. 0 = factorize every tangent. 16 rather than 8: on the Cranium 60 deg Z-plasty
-  /// (26.5k DOF) 8 -> 13 factorizations, 16 -> 8, 10.2 -> 7.4 s; on the 50.6k-DOF slab 4 -> 2
-  /// factorizations, about 0.5 s less (docs/benchmarks.md).
+  /// factorized. 0 = factorize every tangent. The default is the faster of those measured
+  /// (docs/benchmarks.md, "factor reuse").
   int reuse_iterations = 16;
 };
 
@@ -97,10 +96,10 @@ struct SolveOptions {
   NewtonOptions newton;
   SolverKind solver = SolverKind::Mumps;
   /// MUMPS ICNTL(7) ordering: 0 AMD, 2 AMF, 3 SCOTCH (if built), 4 PORD, 5 METIS (if built),
-  /// 6 QAMD, 7 automatic. PORD is measured fastest here (docs/benchmarks.md).
+  /// 6 QAMD, 7 automatic. The default is the fastest measured (docs/benchmarks.md).
   int mumps_ordering = 4;
   /// MUMPS only: factor in single precision and refine with conjugate gradients on the
-  /// double-precision system to a relative residual of 1e-12 (about 1.7× faster at 50k DOF);
+  /// double-precision system to a relative residual of 1e-12 (faster: docs/benchmarks.md);
   /// falls back to a double-precision factorization by itself when that does not converge.
   /// false = factor in double precision.
   bool mixed_precision = true;

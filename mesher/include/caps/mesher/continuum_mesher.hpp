@@ -94,8 +94,8 @@ struct ContinuumMeshOptions {
   /// Uniform: the material of every element layer ("skin"; the preset data/materials/skin.json).
   std::shared_ptr<const fem::Material> material = fem::default_skin();
   /// Uniform (default) or measured tissue layers (Auto: measured when the model has them).
-  /// Measured layers are not the default yet: on Cranium the large-deformation Z-plasty did not
-  /// converge with them and the small-strain one inverts the thin fat (docs/fem.md).
+  /// Measured layers are not the default yet: why, and on which plans, is in docs/fem.md
+  /// ("Measured layers").
   TissueLayers tissue = TissueLayers::Uniform;
   /// Measured: the thinnest a tissue layer is meshed (mm; at most a quarter of the column).
   double min_tissue_layer_mm = 0.5;

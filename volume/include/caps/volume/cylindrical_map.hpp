@@ -82,7 +82,7 @@ inline constexpr std::uint8_t kInvalidFlags =
 /// fat, bone or air) under the skin before a band of the orbit's fat at least kOrbitFatMm thick.
 /// The globe is 22-26 mm across and the lids over it 1-3 mm; elsewhere on the face subcutaneous
 /// fat, bone or air comes within 12 mm of the skin, and the muscles of the neck that reach fat
-/// only deeper than the globe (30-33 mm on Cranium) are not taken for it.
+/// only deeper than the globe are not taken for it (docs/volume.md, "The eye: not operable").
 inline constexpr double kGlobeRunMm = 15.0;
 inline constexpr double kGlobeMaxRunMm = 29.0;
 inline constexpr double kOrbitFatMm = 2.0;
@@ -159,9 +159,9 @@ struct BoneOptions {
   bool cavity_base = true;
   /// CT: a cell with neither bone nor a cavity within the cap (kNoBone and nothing else) at most
   /// this far (mm, over the skin) from a cell with a measured base is kBaseTissue, its depth
-  /// interpolated from the measured ones; 0 leaves every such cell kNoBone. 15 mm: every such
-  /// cell of Cranium's face (the buccal region, the skull defect; 1860 cells) lies within it, all
-  /// but 19 within 10 mm; the interpolation is not trusted farther from any measurement.
+  /// interpolated from the measured ones; 0 leaves every such cell kNoBone. The interpolation
+  /// is not trusted farther from any measurement (the default's measurement: docs/volume.md,
+  /// "the tissue base").
   double tissue_reach_mm = 15.0;
 };
 
