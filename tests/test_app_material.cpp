@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include "error_of.hpp"
+
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -17,14 +19,7 @@ using namespace caps;
 
 namespace {
 
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InvalidInput& e) {
-    return e.what();
-  }
-  return "(accepted)";
-}
+using caps_test::error_of;
 
 app::SolverFields with(const std::string& material, const std::string& params = {}) {
   app::SolverFields s;

@@ -2,6 +2,8 @@
 // (cantilever, Lame cylinder), suture closure, mesh directory IO and the bad-input catalogue.
 #include <gtest/gtest.h>
 
+#include "error_of.hpp"
+
 #include <Eigen/Dense>
 #include <Eigen/Eigenvalues>
 #include <dlfcn.h>
@@ -84,17 +86,7 @@ Mesh box(ElementType t, Eigen::Vector3d size, Eigen::Vector3i cells, bool fix_bo
   return make_box_mesh(o);
 }
 
-template <typename F>
-std::string error_of(F&& f) {
-  try {
-    f();
-  } catch (const InvalidInput& e) {
-    return e.what();
-  } catch (const std::exception& e) {
-    return std::string("WRONG TYPE: ") + e.what();
-  }
-  return "NO ERROR";
-}
+using caps_test::error_of;
 
 }  // namespace
 

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include "error_of.hpp"
+
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -24,14 +26,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InvalidInput& e) {
-    return e.what();
-  }
-  return "(accepted)";
-}
+using caps_test::error_of;
 
 // A 10 mm cube of one Hex20 on symmetry planes x = 0, y = 0, z = 0, its face y = 10 pulled by
 // `strain` (uniaxial stress along y).
