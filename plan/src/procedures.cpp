@@ -745,12 +745,14 @@ std::vector<ProcedureInfo> read_procedure_library(const std::filesystem::path& f
       lib.push_back(info);
     }
   } catch (const json::exception& e) {
-    throw InvalidInput(cat(source, ": ", e.what(), " (the procedure library: docs/plan-format.md)"));
+    throw InvalidInput(cat(source, ": ", e.what(), " (the procedure library: docs/plan.md, The library)"));
   }
-  for (const auto& [name, layout] : layouts())
+  for (const auto& entry : layouts()) {
+    const std::string& name = entry.first;  // clang 14 cannot capture a structured binding
     if (std::none_of(lib.begin(), lib.end(), [&](const ProcedureInfo& x) { return x.name == name; }))
       throw InvalidInput(cat(source, ": the procedure '", name, "' is missing (caps lays it out; "
                              "its parameters must be declared here)"));
+  }
   return lib;
 }
 
