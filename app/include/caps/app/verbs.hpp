@@ -37,6 +37,14 @@ struct Verb {
   Result (*run)(const Request&, Reporter*);
   Answer answer = Answer::Written;
 };
+// Deduction guides: an aggregate's template arguments are deduced from its initializer only
+// from C++20's P1816 on, which clang 14 (the sanitizer and fuzzer builds) does not implement.
+template <class Request, class Result>
+Verb(std::string_view, std::string_view, Result (*)(const Request&, Reporter*))
+    -> Verb<Request, Result>;
+template <class Request, class Result>
+Verb(std::string_view, std::string_view, Result (*)(const Request&, Reporter*), Answer)
+    -> Verb<Request, Result>;
 
 /// The command line's groups of verbs ("model from-volume" is in "model") and their help.
 struct VerbGroup {
