@@ -111,7 +111,10 @@ void set_materials(closure::SimulateOptions& o, const SolverFields& s) {
   for (auto* m : {&c.material, &c.dermis, &c.fat, &c.deep}) *m = as_chosen(*m, s.material, false);
   const bool goh = s.material == "goh";
   if (goh) c.surface_material = fem::default_goh_skin();
-  for (const auto& [layer, changes] : parse_material_params(s.material_params)) {
+  for (const auto& item : parse_material_params(s.material_params)) {
+    // (No structured bindings: clang 14 cannot capture them in the lambda below.)
+    const std::string& layer = item.first;
+    const auto& changes = item.second;
     // With goh, skin and dermis name the goh surface layer.
     auto& m = goh && (layer == "skin" || layer == "dermis") ? c.surface_material
               : layer == "skin"                             ? c.material
@@ -133,10 +136,16 @@ void set_materials(fem::Mesh& mesh, const SolverFields& s) {
   for (const auto& [layer, m] : mesh.materials)
     skin[layer] = layer == 0 || (s.material != "goh" && top && fem::material_json(*m) == top_json);
   for (auto& [layer, m] : mesh.materials) m = as_chosen(m, s.material, layer == 0);
-  for (const auto& [name, changes] : parse_material_params(s.material_params))
-    for (auto& [layer, m] : mesh.materials)
+  for (const auto& item : parse_material_params(s.material_params)) {
+    const std::string& name = item.first;  // (clang 14 cannot capture structured bindings)
+    const auto& changes = item.second;
+    for (auto& entry : mesh.materials) {
+      const int layer = entry.first;
+      auto& m = entry.second;
       if (name == "skin" ? skin[layer] : layer == (name == "dermis" ? 0 : name == "fat" ? 1 : 2))
         m = from_option([&] { return fem::with_parameters(*m, changes, cat("{material_params} ", name)); });
+    }
+  }
 }
 
 }  // namespace
