@@ -44,7 +44,7 @@ TEST(AppMaterials, MaterialPicksTheKinematicsAndTheSkinsMaterialAndParamsSetEach
   // goh: the skin's surface layer (element layer 0: the measured dermis, the uniform model's top
   // element layer) gets the porcine-skin preset, the tissue below stays neo-Hookean; skin and
   // dermis parameters are the goh layer's.
-  const closure::SimulateOptions goh = app::simulate_options({}, with("goh", "skin.k1=5, dermis.kappa=0.1,fat.E=0.004"));
+  const closure::SimulateOptions goh = app::simulate_options({}, with("goh", "skin.k1=5, dermis.kappa=0.1,fat.E=4kPa"));
   EXPECT_EQ(goh.solve.kinematics, fem::Kinematics::Finite);
   EXPECT_EQ(goh.continuum.material, fem::default_skin());
   EXPECT_EQ(goh.continuum.dermis, fem::default_dermis());
@@ -72,6 +72,18 @@ TEST(AppMaterials, MaterialPicksTheKinematicsAndTheSkinsMaterialAndParamsSetEach
   EXPECT_NE(error_of([] { app::simulate_options({}, with("neo-hookean", "dermis.k1=5")); })
                 .find("material_params dermis: neo-hookean has no parameter 'k1'"),
             std::string::npos);
+  // A modulus in the surgeon's kPa or in MPa; a bare 50 (kPa meant, 50 MPa read: skin 500 times
+  // too stiff) is refused with the unit to write.
+  const closure::SimulateOptions kpa = app::simulate_options({}, with("neo-hookean", "dermis.E=120kPa"));
+  const closure::SimulateOptions mpa = app::simulate_options({}, with("neo-hookean", "dermis.E=0.12MPa"));
+  EXPECT_NEAR(fem::parameters_of(*kpa.continuum.dermis).at("E"), 0.12, 1e-15);
+  EXPECT_EQ(fem::parameters_of(*mpa.continuum.dermis).at("E"), 0.12);
+  EXPECT_NE(error_of([] { app::simulate_options({}, with("neo-hookean", "skin.E=50")); })
+                .find("'skin.E=50': 50 MPa is far stiffer than soft tissue (0.001-1 MPa); write "
+                      "the unit: skin.E=50kPa, or skin.E=50MPa if you mean it"),
+            std::string::npos);
+  EXPECT_EQ(fem::parameters_of(*app::simulate_options({}, with("neo-hookean", "skin.E=50MPa"))
+                                    .continuum.material).at("E"), 50);
 }
 
 TEST(AppMaterials, ASolveRecordsTheMaterialItWasGivenInResultJson) {

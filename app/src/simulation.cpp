@@ -55,15 +55,31 @@ std::map<std::string, fem::MaterialParameters> parse_material_params(const std::
     if (item.empty()) continue;
     const std::size_t dot = item.find('.'), eq = item.find('=');
     double value = NAN;
+    std::string unit;  // "kPa" or "MPa" when the value says it; none: the declared unit
     if (eq != std::string::npos) {
-      const std::string text = item.substr(eq + 1);
+      std::string text = item.substr(eq + 1);
+      for (const char* u : {"kPa", "MPa"})
+        if (text.size() > 3 && text.compare(text.size() - 3, 3, u) == 0) {
+          unit = u;
+          text.resize(text.size() - 3);
+        }
       std::istringstream in(text);
       if (!(in >> value) || !in.eof()) value = NAN;
     }
     if (dot == std::string::npos || eq == std::string::npos || eq < dot || dot == 0 ||
         eq == dot + 1 || !std::isfinite(value))
       throw InvalidParameter(cat("{material_params} '", item, "': give LAYER.NAME=VALUE items "
-                                 "separated by commas, e.g. dermis.E=0.12,fat.nu=0.4"));
+                                 "separated by commas, e.g. dermis.E=120kPa,fat.nu=0.4"));
+    // Moduli are declared in MPa; a surgeon thinks of soft tissue in kPa. A bare modulus above
+    // kMaxBareModulusMpa (soft tissue is 0.001-1 MPa, collagen fibres' k1 about 5 MPa) is most
+    // likely kPa typed as MPa: the unit must then be written.
+    constexpr double kMaxBareModulusMpa = 10;
+    if (unit == "kPa") value *= 1e-3;
+    if (unit.empty() && std::abs(value) > kMaxBareModulusMpa)
+      throw InvalidParameter(cat("{material_params} '", item, "': ", value, " MPa is far stiffer "
+                                 "than soft tissue (0.001-1 MPa); write the unit: ",
+                                 item.substr(0, eq), "=", value, "kPa, or ", item.substr(0, eq),
+                                 "=", value, "MPa if you mean it"));
     const std::string layer = item.substr(0, dot);
     if (layer != "skin" && layer != "dermis" && layer != "fat" && layer != "deep")
       throw InvalidParameter(cat("{material_params} '", item, "': the layers are skin (the uniform "

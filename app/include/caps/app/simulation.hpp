@@ -82,8 +82,9 @@ struct SolverFields {
                                "(finite strain, skin with collagen fibres along the patient's "
                                "left-right, the forehead's Langer lines; docs/fem.md)"});
     v(r.material_params, {"material_params", "per-layer material parameters LAYER.NAME=VALUE,... "
-                                             "in the material's units (E in MPa; layers skin, "
-                                             "dermis, fat, deep), e.g. dermis.E=0.12,fat.nu=0.4 "
+                                             "(layers skin, dermis, fat, deep); a modulus takes "
+                                             "its unit, kPa or MPa (a bare number is MPa, refused "
+                                             "above 10), e.g. dermis.E=120kPa,fat.nu=0.4 "
                                              "(docs/fem.md, \"Materials\")"});
     v(r.steps, {"steps", "neo-hookean: the first load step closes 1/steps of the sutures' gap; "
                          "a step that converges easily doubles the next, one that does not "
