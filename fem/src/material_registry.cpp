@@ -2,10 +2,8 @@
 
 #include <algorithm>
 #include <cstdlib>
-#include <fstream>
 #include <mutex>
 #include <nlohmann/json.hpp>
-#include <sstream>
 
 #include "caps/core/data_dir.hpp"
 #include "caps/core/error.hpp"
@@ -217,8 +215,9 @@ MaterialPreset material_preset(const std::string& name) {
     const auto it = r.presets.find(where);
     if (it != r.presets.end()) return it->second;
   }
-  std::ifstream in(path);
-  if (name.empty() || name.find('/') != std::string::npos || !in) {
+  std::error_code ec;
+  if (name.empty() || name.find('/') != std::string::npos ||
+      !std::filesystem::is_regular_file(path, ec)) {
     std::vector<std::string> names;
     try {
       names = material_preset_names();
@@ -227,9 +226,9 @@ MaterialPreset material_preset(const std::string& name) {
     throw InvalidInput(cat("material preset '", name, "': cannot read ", where,
                            "; the presets are ", joined(names)));
   }
-  std::stringstream text;
-  text << in.rdbuf();
-  const json j = parsed(text.str(), where);
+  // A preset is a few hundred bytes: 1 MiB bounds what a damaged data folder can make us read.
+  const json j = read_json_file<json>(path, "the presets are caps's data/materials/*.json",
+                                      std::size_t(1) << 20);
   if (!j.is_object() || j.value("format", "") != "caps-material-preset" || j.value("version", 0.0) != 1.0)
     throw InvalidInput(cat(where, ": format must be \"caps-material-preset\" version 1"));
   MaterialPreset p;
