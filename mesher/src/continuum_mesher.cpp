@@ -26,7 +26,12 @@ constexpr double kDeepGapSlackMm = 2.0;
 }  // namespace
 
 const char* rim_condition_name(RimCondition rim) {
-  return rim == RimCondition::Fixed ? "fixed" : "free";
+  switch (rim) {
+    case RimCondition::Fixed: return "fixed";
+    case RimCondition::Free: return "free";
+    case RimCondition::Tied: break;
+  }
+  return "tied";
 }
 
 const char* base_condition_name(BaseCondition base) {
@@ -58,7 +63,8 @@ TissueLayers parse_tissue_layers(const std::string& name) {
 RimCondition parse_rim_condition(const std::string& name) {
   if (name == "fixed") return RimCondition::Fixed;
   if (name == "free") return RimCondition::Free;
-  throw InvalidInput(cat("rim condition '", name, "': expected fixed or free"));
+  if (name == "tied") return RimCondition::Tied;
+  throw InvalidInput(cat("rim condition '", name, "': expected fixed, free or tied"));
 }
 
 Eigen::VectorXd min_element_jacobians(const Mesh& mesh) {
@@ -599,14 +605,15 @@ void ContinuumBuild::fix_nodes() {
     if (free_base_at(edges[e].first, edges[e].second)) free_base.insert(enode(e, NL));
     else if (!undermined(edges[e].first, edges[e].second)) fixed.insert(enode(e, NL));
   }
-  if (o.rim == RimCondition::Fixed) {
-    const auto& rim = surface.outer_border;
-    for (std::size_t i = 0; i < rim.size(); ++i) {
-      const int e = edge_id.at(std::minmax(rim[i], rim[(i + 1) % rim.size()]));
-      for (int h = 0; h <= 2 * NL; ++h) fixed.insert(vnode(rim[i], h));
-      for (int k = 0; k <= NL; ++k) fixed.insert(enode(e, k));
-    }
+  std::set<int> rim_nodes;
+  const auto& rim = surface.outer_border;
+  for (std::size_t i = 0; i < rim.size(); ++i) {
+    const int e = edge_id.at(std::minmax(rim[i], rim[(i + 1) % rim.size()]));
+    for (int h = 0; h <= 2 * NL; ++h) rim_nodes.insert(vnode(rim[i], h));
+    for (int k = 0; k <= NL; ++k) rim_nodes.insert(enode(e, k));
   }
+  out.rim_nodes.assign(rim_nodes.begin(), rim_nodes.end());
+  if (o.rim == RimCondition::Fixed) fixed.insert(rim_nodes.begin(), rim_nodes.end());
   for (int id : fixed)
     if (!sutured.count(id)) mesh.fixed_nodes.push_back(id);
 }
@@ -1086,7 +1093,8 @@ void ExtentSearch::mesh_full_surface() {
 
 void ExtentSearch::finish(WoundMesh& done, double extent, std::string cliff) {
   std::vector<std::string> messages;
-  if (extent != full_)
+  // Tied to the whole-face model, the rim holds nothing: a smaller patch is not a weaker answer.
+  if (extent != full_ && continuum_options_.rim != RimCondition::Tied)
     messages.push_back(cat("mesh: the extent was limited to ", std::round(extent * 10) / 10, " mm (",
                            std::round(extent / done.surface.wound_size_mm * 100) / 100,
                            "x the wound's size) to stay on valid cells of the model",
@@ -1139,8 +1147,11 @@ void ExtentSearch::keep_trimmed(Trimmed& t, ContinuumAttempt& attempt, double ex
       "; the rim follows the valid cells there and is held like the rest of the rim, so "
       "the result depends more on the rim condition (docs/mesher.md, \"Trimmed to the "
       "model\")");
-  w_.continuum.mesh.warnings.push_back(m);
-  warn(reporter_, m);
+  // Tied to the whole-face model, the trimmed rim holds nothing either.
+  if (continuum_options_.rim != RimCondition::Tied) {
+    w_.continuum.mesh.warnings.push_back(m);
+    warn(reporter_, m);
+  }
   finish(w_, full_, std::move(attempt.cliff));  // the message above gives the extent
 }
 

@@ -37,8 +37,11 @@
 
 namespace caps::mesher {
 
-/// What holds the outer rim of the mesh.
-enum class RimCondition { Fixed, Free };
+/// What holds the outer rim of the mesh. Fixed: clamped (the 1992 patch); Free: traction free;
+/// Tied: joined to the patient's whole-face tissue model (closure/face_domain.hpp), so the rim
+/// decides nothing: the mesher leaves it free, lists it (ContinuumMesh::rim_nodes) for the tie,
+/// and a limited extent is no longer a warning.
+enum class RimCondition { Fixed, Free, Tied };
 
 /// What holds the base of undermined tissue and raised flaps (the freed bottom nodes).
 /// Slide: it rests on the deep tissue and slides over it (held along the base's normal only,
@@ -117,6 +120,9 @@ struct ContinuumMesh {
   Eigen::VectorXd node_level;         ///< #N depth level: 0 skin .. n_layers bone (k + 0.5 centre)
   std::vector<int> element_polygon;   ///< element -> surface polygon
   std::vector<int> skin_node;         ///< surface vertex -> its node on the skin
+  /// The nodes of the outer rim's columns (vertex and edge columns, skin to bone), sorted; those
+  /// the rim condition holds when Fixed, those tied to the whole-face model when Tied.
+  std::vector<int> rim_nodes;
   int n_layers = 0;
   /// The tissue layering used (Uniform or Measured; Auto is resolved).
   TissueLayers tissue = TissueLayers::Uniform;
