@@ -1,8 +1,9 @@
 // caps::fem Tet10 (the quadratic tetrahedron of the whole-face model): shape functions and the
 // 4-point rule, linear tets made quadratic (shared mid-edge nodes, bad tets refused), the patch
-// test (small strain, both solvers) and the homogeneous finite-strain stretch on irregular tet
-// meshes, the tangent against finite differences, Tet10 against Hex20 in bending as the meshes
-// are refined, CalculiX C3D10 on the same decks (linear and NLGEOM), and the mesh files.
+// test (small strain, both solvers), a manufactured solution's convergence and the homogeneous
+// finite-strain stretch on irregular tet meshes, the tangent against finite differences, Tet10
+// against Hex20 in bending as the meshes are refined, CalculiX C3D10 on the same decks (linear
+// and NLGEOM), and the mesh files.
 #include <gtest/gtest.h>
 
 #include "ccx_run.hpp"
@@ -333,6 +334,43 @@ TEST(Tet10Patch, LinearFieldIsExactOnIrregularTetsBothSolvers) {
   }
 }
 
+namespace {
+
+// u = grad phi with phi = a e^{x/L} cos(y/L) harmonic: div u = 0 and Laplace u = 0, so it solves
+// Navier's equations without body force for any lambda, mu (as tests/test_fem.cpp).
+Eigen::Vector3d manufactured(const Eigen::Vector3d& x) {
+  const double a = 0.01, L = 0.5;
+  return a / L * std::exp(x[0] / L) * Eigen::Vector3d(std::cos(x[1] / L), -std::sin(x[1] / L), 0.0);
+}
+
+}  // namespace
+
+TEST(Tet10Convergence, ManufacturedSolutionConvergesAtThirdOrder) {
+  // Unit cube, n^3 cubes of six tets, the exact field on the boundary: the largest nodal error
+  // falls as h^3 (quadratic elements), like Hex20's and Wedge15's in tests/test_fem.cpp.
+  const Eigen::Vector3d size(1, 1, 1);
+  std::vector<double> err;
+  for (int n : {2, 4, 8}) {
+    Mesh m = tet_mesh(size, {n, n, n}, std::make_shared<LinearElastic>(kE, 0.3));
+    const auto boundary = on_box_boundary(m, size);
+    for (Eigen::Index i = 0; i < m.n_nodes(); ++i)
+      if (boundary[i]) {
+        const Eigen::Vector3d v = manufactured(m.nodes.row(i).transpose());
+        for (int c = 0; c < 3; ++c) m.fixed_dofs.push_back({static_cast<int>(i), c, v[c]});
+      }
+    const SolveResult r = solve(m);
+    double e = 0;
+    for (Eigen::Index i = 0; i < m.n_nodes(); ++i)
+      e = std::max(e, (r.displacement_mm.row(i).transpose() - manufactured(m.nodes.row(i).transpose())).norm());
+    err.push_back(e);
+  }
+  const double rate1 = std::log2(err[0] / err[1]), rate2 = std::log2(err[1] / err[2]);
+  std::cout << "Tet10 manufactured solution: max nodal error " << err[0] << " / " << err[1] << " / "
+            << err[2] << " mm for h = 1/2, 1/4, 1/8 (rates " << rate1 << ", " << rate2 << ")\n";
+  EXPECT_GT(rate2, 3.0);
+  EXPECT_GT(rate1, 2.5);
+}
+
 TEST(Tet10Element, StiffnessIsSymmetricWithSixRigidModesAndMatchesTheInternalForce) {
   const TetGrid g = tet_grid({1, 1, 1}, {1, 1, 1});
   QuadraticTetMesh q = quadratic_tetrahedra(g.V, g.T);
@@ -537,6 +575,10 @@ TEST(Tet10Calculix, LinearC3D10SolvesTheSameProblem) {
   std::cout << "ccx C3D10 linear vs caps Tet10: max |du| " << diff << " mm of " << scale << " mm\n";
   EXPECT_GT(scale, 0.05);
   EXPECT_LT(diff, 1e-5 * scale);  // the .dat file prints about 6 digits
+  SolveOptions cholmod;
+  cholmod.solver = SolverKind::Cholmod;
+  EXPECT_LT((solve(m, cholmod).displacement_mm - r.displacement_mm).cwiseAbs().maxCoeff(), 1e-8 * scale)
+      << "CHOLMOD and MUMPS differ";
 }
 
 TEST(Tet10Calculix, NlgeomNeoHookeanC3D10SolvesTheSameProblem) {
