@@ -246,7 +246,7 @@ MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
   m.nodes = static_cast<int>(c.mesh.n_nodes());
   m.elements = static_cast<int>(c.mesh.n_elements());
   for (const auto& e : c.mesh.elements) m.hex20 += e.type == fem::ElementType::Hex20;
-  m.wedge15 = m.elements - m.hex20;
+  for (const auto& e : c.mesh.elements) m.wedge15 += e.type == fem::ElementType::Wedge15;
   m.layers = c.n_layers;
   m.fixed_nodes = static_cast<int>(c.mesh.fixed_nodes.size());
   m.suture_pairs = static_cast<int>(c.mesh.sutures.size());

@@ -25,6 +25,13 @@ constexpr double kWedgeNodes[15][3] = {
     {0, 1, 1},    {0.5, 0, -1}, {0.5, 0.5, -1}, {0, 0.5, -1}, {0.5, 0, 1},
     {0.5, 0.5, 1}, {0, 0.5, 1}, {0, 0, 0},    {1, 0, 0},   {0, 1, 0}};
 
+// Tet10 natural node coordinates (xi, eta, zeta) = (L1, L2, L3); mid-edge nodes of edges 0-1,
+// 1-2, 2-0, 0-3, 1-3, 2-3 (mesh.hpp).
+constexpr double kTetNodes[10][3] = {
+    {0, 0, 0},     {1, 0, 0},     {0, 1, 0},   {0, 0, 1},     {0.5, 0, 0},
+    {0.5, 0.5, 0}, {0, 0.5, 0},   {0, 0, 0.5}, {0.5, 0, 0.5}, {0, 0.5, 0.5}};
+constexpr int kTetEdges[6][2] = {{0, 1}, {1, 2}, {2, 0}, {0, 3}, {1, 3}, {2, 3}};
+
 // Serendipity hexahedron (Zienkiewicz, Taylor & Zhu 2005, sec. 6.5, eq. 6.32-6.33).
 void hex20_shape(const Eigen::Vector3d& p, double* N, double (*dN)[3]) {
   for (int a = 0; a < 20; ++a) {
@@ -93,6 +100,22 @@ void wedge15_shape(const Eigen::Vector3d& p, double* N, double (*dN)[3]) {
   }
 }
 
+// Quadratic tetrahedron in volume coordinates: corners L_i (2 L_i - 1), mid-edge nodes
+// 4 L_i L_j (Zienkiewicz, Taylor & Zhu 2005, sec. 6.6; CalculiX C3D10, shape10tet.f).
+void tet10_shape(const Eigen::Vector3d& p, double* N, double (*dN)[3]) {
+  const double L[4] = {1 - p[0] - p[1] - p[2], p[0], p[1], p[2]};
+  const double dL[4][3] = {{-1, -1, -1}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};  // dL_i/d(xi,eta,zeta)
+  for (int i = 0; i < 4; ++i) {
+    N[i] = L[i] * (2 * L[i] - 1);
+    for (int c = 0; c < 3; ++c) dN[i][c] = (4 * L[i] - 1) * dL[i][c];
+  }
+  for (int e = 0; e < 6; ++e) {
+    const int i = kTetEdges[e][0], j = kTetEdges[e][1];
+    N[4 + e] = 4 * L[i] * L[j];
+    for (int c = 0; c < 3; ++c) dN[4 + e][c] = 4 * (dL[i][c] * L[j] + L[i] * dL[j][c]);
+  }
+}
+
 std::vector<QuadraturePoint> make_hex_rule() {
   const double g = std::sqrt(0.6);
   const double x[3] = {-g, 0, g}, w[3] = {5.0 / 9, 8.0 / 9, 5.0 / 9};
@@ -117,6 +140,18 @@ std::vector<QuadraturePoint> make_wedge_rule() {
     for (int t = 0; t < 7; ++t)
       q.push_back({Eigen::Vector3d(tri[t][0], tri[t][1], z[k]), 0.5 * tri[t][2] * wz[k]});
   return q;
+}
+
+// The 4-point degree-2 tetrahedron rule (Hammer, Marlowe & Stroud 1956; Zienkiewicz, Taylor &
+// Zhu 2005, Table 6.4): the points at volume coordinates (b, a, a, a) and permutations,
+// a = (5 - sqrt 5)/20, b = (5 + 3 sqrt 5)/20, weight 1/24 each (the volume 1/6 of the unit
+// tetrahedron). CalculiX integrates C3D10 with this rule (its 4-point rule for C3D10), so caps
+// and ccx solve the same discrete problem on Tet10 meshes, at finite strain too; it integrates
+// the small-strain stiffness of a straight-sided Tet10 (B^T D B of degree 2) exactly.
+std::vector<QuadraturePoint> make_tet_rule() {
+  const double a = (5 - std::sqrt(5.0)) / 20, b = (5 + 3 * std::sqrt(5.0)) / 20;
+  return {{Eigen::Vector3d(a, a, a), 1.0 / 24}, {Eigen::Vector3d(b, a, a), 1.0 / 24},
+          {Eigen::Vector3d(a, b, a), 1.0 / 24}, {Eigen::Vector3d(a, a, b), 1.0 / 24}};
 }
 
 // dN/dx (#n×3) at natural point xi of the element with nodes X; throws as detail::gradients().
@@ -151,7 +186,13 @@ ShapeTable make_shape_table(ElementType type, int n_nodes) {
 const ShapeTable& shape_table(ElementType type) {
   static const ShapeTable hex = make_shape_table(ElementType::Hex20, 20);
   static const ShapeTable wedge = make_shape_table(ElementType::Wedge15, 15);
-  return type == ElementType::Hex20 ? hex : wedge;
+  static const ShapeTable tet = make_shape_table(ElementType::Tet10, 10);
+  switch (type) {
+    case ElementType::Hex20: return hex;
+    case ElementType::Wedge15: return wedge;
+    case ElementType::Tet10: return tet;
+  }
+  throw InvalidInput("shape_table: unknown element type");
 }
 
 double gradients(const Eigen::MatrixX3d& dN_dxi, const Eigen::MatrixX3d& X, Eigen::MatrixX3d& G,
@@ -164,7 +205,8 @@ double gradients(const Eigen::MatrixX3d& dN_dxi, const Eigen::MatrixX3d& X, Eige
     throw SolverError(cat(gauss_point >= 0 ? "" : "at one of its nodes, ", "Jacobian determinant ",
                           det, " mm^3 (relative ", det / scale,
                           ") is not positive; the element is inverted or degenerate: check its "
-                          "node order (0-1-2-3 must turn towards the bottom face, mesh.hpp) and "
+                          "node order (0-1-2-3 must turn towards the bottom face; a Tet10's 0-1-2 "
+                          "towards node 3: mesh.hpp) and "
                           "that no nodes coincide"),
                       element, gauss_point);
   }
@@ -306,6 +348,11 @@ FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
   FiniteKernelResult out;
   // The layer's plane matters to a prestretch and to fibres in it.
   const bool layered = prestretch != 1.0 || material.uses_layer_normal();
+  if (layered && type == ElementType::Tet10)
+    throw InvalidInput(cat("element ", element, " (Tet10): the '", material.name(), "' material",
+                           prestretch != 1.0 ? " with a prestretch" : "",
+                           " needs the plane of the skin's layer, which a tetrahedron does not "
+                           "define; use neo-hookean without prestretch on Tet10 elements"));
   for (std::size_t q = 0; q < t.w.size(); ++q) {
     const int gp = static_cast<int>(q);
     const double w = t.w[q] * gradients(t.dN[q], X, G, element, gp);
@@ -398,23 +445,44 @@ Vector6d element_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X,
   return detail::finite_cauchy_stress(type, X, material, u_e, xi, element, 1.0);
 }
 
-int n_element_nodes(ElementType type) { return type == ElementType::Hex20 ? 20 : 15; }
+int n_element_nodes(ElementType type) {
+  switch (type) {
+    case ElementType::Hex20: return 20;
+    case ElementType::Wedge15: return 15;
+    case ElementType::Tet10: return 10;
+  }
+  return 0;
+}
+
 const char* element_type_name(ElementType type) {
-  return type == ElementType::Hex20 ? "Hex20" : "Wedge15";
+  switch (type) {
+    case ElementType::Hex20: return "Hex20";
+    case ElementType::Wedge15: return "Wedge15";
+    case ElementType::Tet10: return "Tet10";
+  }
+  return "unknown";
 }
 
 const std::vector<QuadraturePoint>& quadrature(ElementType type) {
   static const std::vector<QuadraturePoint> hex = make_hex_rule();
   static const std::vector<QuadraturePoint> wedge = make_wedge_rule();
-  return type == ElementType::Hex20 ? hex : wedge;
+  static const std::vector<QuadraturePoint> tet = make_tet_rule();
+  switch (type) {
+    case ElementType::Hex20: return hex;
+    case ElementType::Wedge15: return wedge;
+    case ElementType::Tet10: return tet;
+  }
+  throw InvalidInput("quadrature: unknown element type");
 }
 
 Eigen::MatrixX3d natural_nodes(ElementType type) {
   const int n = n_element_nodes(type);
+  const double(*table)[3] = type == ElementType::Hex20     ? kHexNodes
+                            : type == ElementType::Wedge15 ? kWedgeNodes
+                                                           : kTetNodes;
   Eigen::MatrixX3d P(n, 3);
   for (int a = 0; a < n; ++a)
-    for (int c = 0; c < 3; ++c)
-      P(a, c) = type == ElementType::Hex20 ? kHexNodes[a][c] : kWedgeNodes[a][c];
+    for (int c = 0; c < 3; ++c) P(a, c) = table[a][c];
   return P;
 }
 
@@ -422,10 +490,11 @@ void shape_functions(ElementType type, const Eigen::Vector3d& xi, Eigen::VectorX
                      Eigen::MatrixX3d& dN_dxi) {
   double n[20], d[20][3];
   const int m = n_element_nodes(type);
-  if (type == ElementType::Hex20)
-    hex20_shape(xi, n, d);
-  else
-    wedge15_shape(xi, n, d);
+  switch (type) {
+    case ElementType::Hex20: hex20_shape(xi, n, d); break;
+    case ElementType::Wedge15: wedge15_shape(xi, n, d); break;
+    case ElementType::Tet10: tet10_shape(xi, n, d); break;
+  }
   N.resize(m);
   dN_dxi.resize(m, 3);
   for (int a = 0; a < m; ++a) {

@@ -45,17 +45,18 @@ void write_elements_and_materials(std::ostream& os, const Mesh& mesh, const InpO
   std::set<int> layers;
   for (const auto& e : mesh.elements) layers.insert(e.layer);
   for (int layer : layers)
-    for (ElementType type : {ElementType::Hex20, ElementType::Wedge15}) {
+    for (ElementType type : {ElementType::Hex20, ElementType::Wedge15, ElementType::Tet10}) {
       bool header = false;
       for (std::size_t e = 0; e < mesh.n_elements(); ++e) {
         const Element& el = mesh.elements[e];
         if (el.layer != layer || el.type != type) continue;
         if (!header) {
-          os << "*ELEMENT, TYPE=" << (type == ElementType::Hex20 ? "C3D20" : "C3D15")
+          os << "*ELEMENT, TYPE="
+             << (type == ElementType::Hex20 ? "C3D20" : type == ElementType::Wedge15 ? "C3D15" : "C3D10")
              << ", ELSET=LAYER" << layer << "\n";
           header = true;
         }
-        // C3D20 and C3D15 follow the caps numbering node for node (see inp_io.hpp).
+        // C3D20, C3D15 and C3D10 follow the caps numbering node for node (see inp_io.hpp).
         os << e + 1;
         for (int k = 0; k < el.n_nodes(); ++k)
           os << (k == 15 ? ",\n" : ", ") << el.nodes[k] + 1;

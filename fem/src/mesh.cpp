@@ -24,7 +24,8 @@ void validate(const Mesh& mesh, const std::string& where) {
   for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
     const Element& el = mesh.elements[e];
     const auto item = [&] { return cat("element ", e, " (", element_type_name(el.type), ")"); };
-    if (el.type != ElementType::Hex20 && el.type != ElementType::Wedge15)
+    if (el.type != ElementType::Hex20 && el.type != ElementType::Wedge15 &&
+        el.type != ElementType::Tet10)
       throw InvalidInput(cat(where, ": element ", e, " has an unknown type"));
     std::array<int, 20> sorted = el.nodes;
     for (int a = 0; a < el.n_nodes(); ++a)

@@ -30,6 +30,16 @@ namespace {
 
 constexpr int kVtkQuadraticHexahedron = 25;
 constexpr int kVtkQuadraticWedge = 26;
+constexpr int kVtkQuadraticTetra = 24;
+
+int vtk_cell_type(ElementType type) {
+  switch (type) {
+    case ElementType::Hex20: return kVtkQuadraticHexahedron;
+    case ElementType::Wedge15: return kVtkQuadraticWedge;
+    case ElementType::Tet10: return kVtkQuadraticTetra;
+  }
+  return 0;
+}
 
 std::string attribute(const std::string& tag, const std::string& name) {
   const std::string key = " " + name + "=\"";
@@ -82,7 +92,7 @@ void write_vtu(const fs::path& path, const Eigen::MatrixX3d& points,
     for (const Element& el : elements) o << (off += el.n_nodes()) << '\n';
     o << "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n";
     for (const Element& el : elements)
-      o << (el.type == ElementType::Hex20 ? kVtkQuadraticHexahedron : kVtkQuadraticWedge) << '\n';
+      o << vtk_cell_type(el.type) << '\n';
     o << "</DataArray>\n</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n";
     if (!o) throw IoError(cat(path.string(), ": write failed (disk full?)"));
   });
@@ -158,10 +168,14 @@ void write_mesh_dir(const Mesh& mesh, const fs::path& dir) {
   j["format"] = "caps-mesh";
   j["version"] = 1;
   j["units"] = {{"length", "mm"}, {"force", "N"}, {"stress", "MPa"}, {"frame", "LPS"}};
-  long n_hex = 0;
-  for (const Element& e : mesh.elements) n_hex += e.type == ElementType::Hex20;
+  long n_hex = 0, n_wedge = 0, n_tet = 0;
+  for (const Element& e : mesh.elements) {
+    n_hex += e.type == ElementType::Hex20;
+    n_wedge += e.type == ElementType::Wedge15;
+    n_tet += e.type == ElementType::Tet10;
+  }
   j["counts"] = {{"nodes", n}, {"elements", mesh.elements.size()}, {"hex20", n_hex},
-                 {"wedge15", static_cast<long>(mesh.elements.size()) - n_hex},
+                 {"wedge15", n_wedge}, {"tet10", n_tet},
                  {"fixed_nodes", mesh.fixed_nodes.size()}, {"sutures", mesh.sutures.size()}};
   j["materials"] = nlohmann::json::array();
   for (const auto& [layer_id, m] : mesh.materials) {
@@ -283,10 +297,13 @@ Mesh read_mesh_dir(const fs::path& dir) {
   for (long c = 0; c < v.n_cells; ++c) {
     Element el;
     const int t = static_cast<int>(whole("types", c, types[c], 0, 255));
-    if (t != 25 && t != 26)
-      throw InvalidInput(cat(vw, ": cell ", c, " has VTK type ", t, "; only 25 (quadratic hexahedron) "
-                             "and 26 (quadratic wedge) are supported"));
-    el.type = t == 25 ? ElementType::Hex20 : ElementType::Wedge15;
+    using detail::kVtkQuadraticHexahedron, detail::kVtkQuadraticTetra, detail::kVtkQuadraticWedge;
+    if (t != kVtkQuadraticHexahedron && t != kVtkQuadraticWedge && t != kVtkQuadraticTetra)
+      throw InvalidInput(cat(vw, ": cell ", c, " has VTK type ", t, "; only 25 (quadratic hexahedron), "
+                             "26 (quadratic wedge) and 24 (quadratic tetrahedron) are supported"));
+    el.type = t == kVtkQuadraticHexahedron ? ElementType::Hex20
+              : t == kVtkQuadraticWedge    ? ElementType::Wedge15
+                                           : ElementType::Tet10;
     el.layer = static_cast<int>(whole("layer", c, layer[c], -1e9, 1e9));
     const long end = whole("offsets", c, offs[c], 0, static_cast<double>(conn.size()));
     if (end - begin != el.n_nodes())

@@ -75,6 +75,20 @@ void check_materials(const Mesh& mesh, const SolveOptions& options) {
                              "stresses it); use neo-hookean, or the small-strain solve"));
     }
   }
+  // A tetrahedron has no layer plane (mesh.hpp): fibres in the skin's plane and the skin's
+  // prestretch (layer 0, SolveOptions::prestretch) cannot be placed in it.
+  if (options.kinematics != Kinematics::Finite) return;
+  for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
+    const Element& el = mesh.elements[e];
+    if (el.type != ElementType::Tet10) continue;
+    const Material& m = *mesh.materials.at(el.layer);
+    if (m.uses_layer_normal() || (options.prestretch != 1.0 && el.layer == 0))
+      throw InvalidInput(cat("element ", e, " (Tet10, layer ", el.layer, "): ",
+                             m.uses_layer_normal() ? cat("the '", m.name(), "' material")
+                                                   : cat("prestretch ", options.prestretch),
+                             " needs the plane of the skin's layer, which a tetrahedron does not "
+                             "define; use neo-hookean without prestretch on Tet10 elements"));
+  }
 }
 
 // A warm start (SolveOptions::initial_displacement_mm) is for the finite-strain solve, with one

@@ -18,7 +18,8 @@ struct VtuArray {
   bool integer = false;
 };
 
-/// Writes points + Hex20/Wedge15 cells (converted to VTK order) with point and cell arrays.
+/// Writes points + Hex20/Wedge15/Tet10 cells (VTK types 25/26/24, converted to VTK order) with
+/// point and cell arrays.
 void write_vtu(const std::filesystem::path& path, const Eigen::MatrixX3d& points,
                const std::vector<Element>& elements, const std::vector<VtuArray>& point_data,
                const std::vector<VtuArray>& cell_data);

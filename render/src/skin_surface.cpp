@@ -137,10 +137,15 @@ std::vector<std::array<int, 3>> ear_clip(const std::vector<Eigen::Vector2d>& pol
   return out;
 }
 
-// The face nodes (corners then mid-edge nodes) of an element's top face.
+// The face nodes (corners then mid-edge nodes) of an element's top face; none for a Tet10,
+// which has no top face (fem/mesh.hpp).
 std::vector<int> top_face_local(fem::ElementType t) {
-  if (t == fem::ElementType::Hex20) return {0, 1, 2, 3, 8, 9, 10, 11};
-  return {0, 1, 2, 6, 7, 8};
+  switch (t) {
+    case fem::ElementType::Hex20: return {0, 1, 2, 3, 8, 9, 10, 11};
+    case fem::ElementType::Wedge15: return {0, 1, 2, 6, 7, 8};
+    case fem::ElementType::Tet10: return {};
+  }
+  return {};
 }
 
 }  // namespace
@@ -149,8 +154,9 @@ std::vector<int> skin_elements(const PatientModel& model, const fem::Mesh& mesh)
   std::vector<int> out;
   for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
     const fem::Element& el = mesh.elements[e];
-    bool on = true;
-    for (int a : top_face_local(el.type)) {
+    const std::vector<int> face = top_face_local(el.type);
+    bool on = !face.empty();
+    for (int a : face) {
       const CylindricalPoint c = model.to_cylindrical(mesh.nodes.row(el.nodes[a]).transpose());
       if (!(std::abs(c.r_mm - model.r_skin(c.theta_deg, c.z_mm)) <= kOnSkinToleranceMm)) {
         on = false;

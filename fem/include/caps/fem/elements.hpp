@@ -1,7 +1,10 @@
 #pragma once
 /// @brief Element kernels: shape functions, Gauss rules, stiffness, internal force and stress
-/// for Hex20Q27 (20-node serendipity hexahedron, 3x3x3 Gauss) and Wedge15Q21 (15-node quadratic
-/// wedge, 7-point degree-5 triangle rule x 3-point Gauss line). Numbering: mesh.hpp.
+/// for Hex20Q27 (20-node serendipity hexahedron, 3x3x3 Gauss), Wedge15Q21 (15-node quadratic
+/// wedge, 7-point degree-5 triangle rule x 3-point Gauss line) and Tet10Q4 (10-node quadratic
+/// tetrahedron, the 4-point degree-2 rule CalculiX uses for C3D10). Numbering: mesh.hpp.
+/// A Tet10 has no layer plane: materials that need one (goh) and the skin's prestretch are
+/// refused on it (InvalidInput).
 ///
 /// Voigt order for stresses and strains: xx, yy, zz, xy, yz, xz (VTK's tensor order); shear
 /// strains are tensor components (not engineering gamma). Stresses in MPa.
@@ -20,7 +23,8 @@ struct QuadraturePoint {
   double weight;
 };
 
-/// Gauss rule used for the element type: 27 points for Hex20, 21 for Wedge15.
+/// Gauss rule used for the element type: 27 points for Hex20, 21 for Wedge15, 4 for Tet10
+/// (weights sum to the natural volume: 8, 1, 1/6).
 const std::vector<QuadraturePoint>& quadrature(ElementType type);
 
 /// Natural coordinates of the element's nodes (#n×3).

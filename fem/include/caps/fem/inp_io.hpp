@@ -4,7 +4,8 @@
 ///
 /// Node ids are caps ids + 1. Elements: C3D20 (caps Hex20 order, identity) and C3D15 (caps
 /// Wedge15 order, identity: CalculiX's wedge has nodes 1-3 at zeta = -1 with the right-hand
-/// normal of 1-2-3 towards 4-6, like caps; checked by running ccx, docs/mesher.md), one ELSET and
+/// normal of 1-2-3 towards 4-6, like caps; checked by running ccx, docs/mesher.md) and C3D10
+/// (caps Tet10 order, identity: corners, then edges 1-2, 2-3, 3-1, 1-4, 2-4, 3-4), one ELSET and
 /// material per layer. Fixed nodes: NSET FIXED with *BOUNDARY 1-3. Sutures: the pairs are grouped
 /// (union-find) and each group member n other than its root m gets, per component i,
 ///   *EQUATION  u_n,i - u_m,i - u_h,i = 0
@@ -20,6 +21,7 @@
 ///
 /// CalculiX integrates C3D20 like caps (27 points) but C3D15 with 9 points where caps uses 21, so
 /// on meshes with Wedge15 the two codes solve slightly different discrete problems (docs/mesher.md).
+/// C3D10 is integrated alike (4 points; tests/test_fem_tet10.cpp runs ccx on Tet10 meshes).
 
 #include <filesystem>
 #include <string>

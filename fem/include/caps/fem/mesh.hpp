@@ -1,5 +1,5 @@
 #pragma once
-/// @brief The continuum mesh the solver reads: quadratic hexahedra and wedges, layers,
+/// @brief The continuum mesh the solver reads: quadratic hexahedra, wedges and tetrahedra, layers,
 /// fixed degrees of freedom, nodal loads and suture pairs. Units mm (LPS), N.
 ///
 /// Local node numbering (paper Figure 5; docs/mesh-format.md has the drawings):
@@ -21,6 +21,22 @@
 /// collapsed hexahedron with hex nodes 2=3=10, 18=19 and 6=7=14 merged (wedge_from_collapsed_hex).
 /// VTK_QUADRATIC_WEDGE (26) orients 0-1-2 the other way, so VTK order = caps order permuted by
 /// kWedge15ToVtk (an involution: the same table converts back).
+///
+/// Tet10 (volume coordinates L1 = xi, L2 = eta, L3 = zeta, L0 = 1-xi-eta-zeta):
+///   0-3   corners (0,0,0) (1,0,0) (0,1,0) (0,0,1)
+///   4-9   mid-edge nodes of edges 0-1, 1-2, 2-0, 0-3, 1-3, 2-3
+///
+///            3
+///           /|\             the right-hand normal of 0-1-2 points towards 3:
+///          7 | 9            det J > 0 when (x1-x0) x (x2-x0) . (x3-x0) > 0
+///         /  8  \           (quadratic_tetrahedra() refuses a tet that is not)
+///        0 -6-|- 2
+///         \   |  /
+///          4  | 5
+///           \ |/
+///             1
+/// This is VTK_QUADRATIC_TETRA (24) and CalculiX C3D10 node for node: identity mapping. A
+/// tetrahedron has no top face and no layer plane (the whole-face model, not the extruded patch).
 
 #include <Eigen/Core>
 #include <array>
@@ -34,11 +50,11 @@
 
 namespace caps::fem {
 
-enum class ElementType : std::uint8_t { Hex20, Wedge15 };
+enum class ElementType : std::uint8_t { Hex20, Wedge15, Tet10 };
 
-/// 20 for Hex20, 15 for Wedge15.
+/// 20 for Hex20, 15 for Wedge15, 10 for Tet10.
 int n_element_nodes(ElementType type);
-/// "Hex20" / "Wedge15".
+/// "Hex20" / "Wedge15" / "Tet10".
 const char* element_type_name(ElementType type);
 
 /// vtk_node[k] = caps_node[kWedge15ToVtk[k]].

@@ -4,8 +4,8 @@
 /// the rest of the head is the model's range mesh, stitched to the micropolygons without cracks.
 ///
 /// For each element whose top face (nodes 0-3 of a Hex20, 0-2 of a Wedge15, with their mid-edge
-/// nodes) lies on the skin, the face is subdivided n × n in its natural coordinates. At each
-/// micropolygon vertex (xi, eta):
+/// nodes; a Tet10 has no top face and is never a skin element) lies on the skin, the face is
+/// subdivided n × n in its natural coordinates. At each micropolygon vertex (xi, eta):
 ///   x_face = sum_a N_a(xi, eta, -1) X_a           the element's face (its shape functions)
 ///   (theta, z) of x_face; s = skin_point(theta, z), colour = color_at(theta, z)
 ///   d = s - x_face                                 the range offset, kept per vertex
