@@ -11,6 +11,7 @@
 #include "caps/core/error.hpp"
 #include "caps/core/json_file.hpp"
 #include "caps/core/units.hpp"
+#include "caps/image/canvas.hpp"
 
 namespace caps {
 namespace {
@@ -111,38 +112,56 @@ struct Column {
 
 std::vector<Column> trace_rows(const Face& f, const std::vector<double>& xs,
                                const std::function<std::pair<double, double>(double)>& window,
-                               int sign, double h, double jump = 2.0) {
-  std::vector<Column> cols;
-  for (double x : xs) {
-    Column c;
-    c.x = x;
-    const auto [z0, z1] = window(x);
-    const int side = x >= 0 ? +1 : -1;
-    c.t = f.theta_at(std::abs(x), side, 0.5 * (z0 + z1));
-    double best = 0;
-    for (double z = z0; z <= z1 + 1e-9; z += 0.25) {
-      if (!f.ok(c.t, z) || !f.ok(c.t, z - h) || !f.ok(c.t, z + h)) continue;
-      const double k = sign * f.kz(c.t, z, h);
-      if (k > best) {
-        best = k;
-        c.z = z;
-      }
+                               int sign, double h, double jump = 1.0) {
+  // The line is the path through the columns, at most `jump` mm up or down from one column to
+  // the next (1 mm apart), that collects the most crease (or ridge) curvature: a dynamic
+  // programme over z samples 0.25 mm apart, so that a stronger crease a few millimetres away in
+  // one column (the lid-cheek junction below the fissure) does not pull the line off it.
+  constexpr double dz = 0.25;
+  const std::size_t nc = xs.size();
+  std::vector<Column> cols(nc);
+  std::vector<std::vector<double>> zs(nc), k(nc), acc(nc);
+  std::vector<std::vector<int>> from(nc);
+  for (std::size_t i = 0; i < nc; ++i) {
+    const auto [z0, z1] = window(xs[i]);
+    const int side = xs[i] >= 0 ? +1 : -1;
+    cols[i].x = xs[i];
+    cols[i].t = f.theta_at(std::abs(xs[i]), side, 0.5 * (z0 + z1));
+    for (double z = z0; z <= z1 + 1e-9; z += dz) {
+      zs[i].push_back(z);
+      const bool ok = f.ok(cols[i].t, z) && f.ok(cols[i].t, z - h) && f.ok(cols[i].t, z + h);
+      k[i].push_back(ok ? std::max(0.0, sign * f.kz(cols[i].t, z, h)) : 0.0);
     }
-    c.strength = best;
-    c.ok = best >= kMinCurvature;
-    cols.push_back(c);
   }
-  // Outliers against the median of the neighbours (a pore, a fold of the eyelid skin).
-  std::vector<Column> out = cols;
-  for (std::size_t i = 0; i < cols.size(); ++i) {
-    if (!cols[i].ok) continue;
-    std::vector<double> zs;
-    for (std::size_t j = i >= 2 ? i - 2 : 0; j <= std::min(cols.size() - 1, i + 2); ++j)
-      if (cols[j].ok) zs.push_back(cols[j].z);
-    std::nth_element(zs.begin(), zs.begin() + zs.size() / 2, zs.end());
-    if (std::abs(cols[i].z - zs[zs.size() / 2]) > jump) out[i].ok = false;
+  const int reach = static_cast<int>(std::lround(jump / dz));
+  for (std::size_t i = 0; i < nc; ++i) {
+    acc[i].assign(zs[i].size(), 0.0);
+    from[i].assign(zs[i].size(), -1);
+    for (std::size_t a = 0; a < zs[i].size(); ++a) {
+      double best = 0;
+      int arg = -1;
+      if (i > 0)
+        for (std::size_t b = 0; b < zs[i - 1].size(); ++b)
+          if (std::abs(zs[i - 1][b] - zs[i][a]) <= reach * dz + 1e-9 &&
+              (arg < 0 || acc[i - 1][b] > best)) {
+            best = acc[i - 1][b];
+            arg = static_cast<int>(b);
+          }
+      acc[i][a] = best + k[i][a];
+      from[i][a] = arg;
+    }
   }
-  return out;
+  if (nc == 0) return cols;
+  int a = static_cast<int>(std::max_element(acc[nc - 1].begin(), acc[nc - 1].end()) -
+                           acc[nc - 1].begin());
+  for (std::size_t i = nc; i-- > 0;) {
+    if (a < 0 || zs[i].empty()) break;
+    cols[i].z = zs[i][a];
+    cols[i].strength = k[i][a];
+    cols[i].ok = k[i][a] >= kMinCurvature;
+    a = from[i][a];
+  }
+  return cols;
 }
 
 // The fraction of columns kept and their median strength.
@@ -398,7 +417,7 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
         mm_text(x1), " from the midline, ", mm_text(6.0 * s), "..", mm_text(30.0 * s), " above ", from,
         use_rim ? "; within 4 mm below to 12 mm above the supraorbital rim of the bone under it"
                 : "; the skin alone (no bone rim under it)");
-    put(from_columns(name, side_name, "medial-lateral", trace_rows(f, xs, window, +1, 3.0, 3.0),
+    put(from_columns(name, side_name, "medial-lateral", trace_rows(f, xs, window, +1, 3.0),
                      method, 0.1));
   }
 
@@ -548,9 +567,10 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
                                                        "subnasale; one is absent"));
       continue;
     }
-    // From the subnasale's height up to 60 % of the way to the pronasale and 6 mm on, 0.4..1.5
+    // From 2 mm above the subnasale (lower, the nostril sill is the deepest crease) up to 60 %
+    // of the way to the pronasale and 6 mm on, 0.4..1.5
     // times Farkas' al-al/2 from the midline.
-    const double z0 = sn->z_mm, z1 = sn->z_mm + 0.6 * (prn->z_mm - sn->z_mm) + 6.0 * s;
+    const double z0 = sn->z_mm + 2.0 * s, z1 = sn->z_mm + 0.6 * (prn->z_mm - sn->z_mm) + 6.0 * s;
     const double x0 = 0.4 * kHalfAlAlMm * s, x1 = 1.5 * kHalfAlAlMm * s;
     if (coverage(f, side, x0, x1, z0, z1) < 0.5) {
       put(absent_line(name, side_name, "inferior-superior", fov_note(f, z0, z1)));
@@ -586,7 +606,7 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
     const std::string method = cat(
         "alar crease: the deepest crease across theta (curvature of the horizontal section over "
         "+-1.5 mm) ", mm_text(x0), "..", mm_text(x1), " from the midline (Farkas' al-al/2 ",
-        mm_text(kHalfAlAlMm * s), "), from the subnasale's height up to 60 % of the way to the "
+        mm_text(kHalfAlAlMm * s), "), from 2 mm above the subnasale's height up to 60 % of the way to the "
         "pronasale's and ", mm_text(6.0 * s), " more");
     put(from_columns(name, side_name, "inferior-superior", rows, method, 0.3));
   }
@@ -734,6 +754,112 @@ std::string feature_lines_table(const FeatureLines& lines) {
     s << "  confidence " << std::setprecision(2) << l.confidence << std::setprecision(1) << "\n";
   }
   return s.str();
+}
+
+void write_feature_lines_png(const std::filesystem::path& path, const PatientModel& model,
+                             const Landmarks& landmarks, const FeatureLines& lines,
+                             const std::string& title) {
+  const SkinRangeView view = skin_range_view(model);
+  const Face f{view, landmarks.midline_theta_deg, 1.0};
+  // The window: 80 mm to either side, from 20 mm below the lowest line or landmark (or the
+  // scan's end) to 40 mm above the highest.
+  double zlo = 1e9, zhi = -1e9;
+  for (const auto& l : landmarks.items)
+    if (l.found && std::abs(wrap180(l.theta_deg - f.tm)) < 60) {
+      zlo = std::min(zlo, l.z_mm);
+      zhi = std::max(zhi, l.z_mm);
+    }
+  for (const auto& l : lines.items)
+    for (const auto& tz : l.theta_z) {
+      zlo = std::min(zlo, tz[1]);
+      zhi = std::max(zhi, tz[1]);
+    }
+  if (zlo > zhi) zlo = view.z_min_mm, zhi = view.z_max_mm;
+  zlo = std::max(view.z_min_mm, zlo - 20.0);
+  zhi = std::min(view.z_max_mm, zhi + 40.0);
+  constexpr double kPx = 4.0, kHalfWidth = 80.0;
+  constexpr int kTop = 40, kBottom = 60;
+  const int w = static_cast<int>(2 * kHalfWidth * kPx), h = static_cast<int>((zhi - zlo) * kPx);
+  RgbImage img = make_image(w, std::max(h, 1), {1, 1, 1});
+  const AnatomicalFrame fr = anatomical_frame(model);
+  const Eigen::Vector3d light = (fr.front + 0.5 * fr.up + 0.3 * fr.left).normalized();
+  const Eigen::Vector3d tone(0.93, 0.76, 0.65);
+  // Pixel column i is x = (i + 0.5) / kPx - kHalfWidth mm towards the patient's left: the
+  // patient's right is on the picture's left, as one faces the patient.
+  for (int i = 0; i < w; ++i) {
+    const double x = (i + 0.5) / kPx - kHalfWidth;
+    for (int k = 0; k < h; ++k) {
+      const double z = zhi - (k + 0.5) / kPx;
+      const double t = f.theta_at(std::abs(x), x >= 0 ? +1 : -1, z);
+      if (std::abs(std::abs(x) - f.r(t, z) * std::abs(std::sin((t - f.tm) * kPi / 180.0))) > 0.5)
+        continue;  // beyond the face's outline
+      const Eigen::Vector3d nrm = model.skin_normal(t, z);
+      const double shade = 0.25 + 0.75 * std::max(0.0, nrm.dot(light));
+      img.set(i, k, view.measured(t, z) ? Eigen::Vector3d(tone * shade)
+                                        : Eigen::Vector3d(Eigen::Vector3d::Constant(0.8 * shade)));
+    }
+  }
+  Canvas c(w, h + kTop + kBottom);
+  c.draw_image(img, 0, kTop);
+  auto px = [&](double t, double z) {
+    const double x = f.r(t, z) * std::sin((t - f.tm) * kPi / 180.0);
+    return Eigen::Vector2d((x + kHalfWidth) * kPx, kTop + (zhi - z) * kPx);
+  };
+  auto colour = [](const std::string& n) -> Eigen::Vector3d {
+    if (n.rfind("eyebrow", 0) == 0) return {0.55, 0.27, 0.07};
+    if (n.rfind("upper_eyelid", 0) == 0) return {0.0, 0.35, 0.9};
+    if (n.rfind("lower_eyelid", 0) == 0) return {0.0, 0.75, 0.9};
+    if (n.find("lip") != std::string::npos) return {0.85, 0.0, 0.3};
+    if (n.rfind("oral_commissure", 0) == 0) return {0.9, 0.5, 0.0};
+    if (n.rfind("alar", 0) == 0) return {0.1, 0.6, 0.1};
+    return {0.3, 0.3, 0.3};
+  };
+  for (const auto& l : lines.items) {
+    if (!l.found) continue;
+    std::vector<Eigen::Vector2d> p;
+    for (const auto& tz : l.theta_z) p.push_back(px(tz[0], tz[1]));
+    if (p.size() == 1) {
+      c.fill_circle(p[0], 5, colour(l.name));
+    } else {
+      Pen pen;
+      pen.colour = colour(l.name);
+      pen.width_px = 2.5;
+      c.polyline(p, pen);
+    }
+  }
+  for (const auto& l : landmarks.items) {
+    if (!l.found || std::abs(wrap180(l.theta_deg - f.tm)) > 85) continue;
+    const Eigen::Vector2d p = px(l.theta_deg, l.z_mm);
+    Pen pen;
+    pen.colour = {0, 0, 0};
+    pen.width_px = 1.5;
+    c.line(p - Eigen::Vector2d(5, 5), p + Eigen::Vector2d(5, 5), pen);
+    c.line(p - Eigen::Vector2d(5, -5), p + Eigen::Vector2d(5, -5), pen);
+  }
+  TextStyle ts;
+  ts.size_px = 14;
+  c.text(8, 24, title, ts);
+  ts.size_px = 11;
+  double lx = 8;
+  for (const auto& [label, n] :
+       std::vector<std::pair<std::string, std::string>>{{"brow", "eyebrow"},
+                                                        {"upper lid", "upper_eyelid"},
+                                                        {"lower lid", "lower_eyelid"},
+                                                        {"lip border", "upper_lip"},
+                                                        {"commissure", "oral_commissure"},
+                                                        {"alar rim", "alar"},
+                                                        {"x landmark", "none"}}) {
+    c.fill_rect(lx, kTop + h + 14, 10, 10, colour(n));
+    c.text(lx + 14, kTop + h + 23, label, ts);
+    lx += 22 + c.text_width(label, 11);
+  }
+  Pen bar;
+  bar.colour = {0, 0, 0};
+  bar.width_px = 2;
+  c.line({8, kTop + h + 42.0}, {8 + 20 * kPx, kTop + h + 42.0}, bar);
+  c.text(8 + 20 * kPx + 6, kTop + h + 46, "20 mm; front view, the patient's right on the left",
+         ts);
+  c.write_png(path);
 }
 
 AnatomicalFrame anatomical_frame(const PatientModel& model) {

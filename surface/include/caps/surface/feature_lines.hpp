@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 
+#include <filesystem>
 #include <functional>
 #include <optional>
 #include <string>
@@ -75,6 +76,13 @@ FeatureLines feature_lines_from_json(const std::string& text, const std::string&
 /// A table for reading: one line per feature (name, points, length, z range, confidence, or the
 /// reason it is absent).
 std::string feature_lines_table(const FeatureLines& lines);
+
+/// Draws the lines and the landmarks on a front view of the model's skin (an orthographic
+/// projection onto the frontal plane, the patient's right on the left of the picture, Lambert
+/// shaded) into a PNG, 4 pixels per mm, with a legend and a millimetre scale. Written atomically.
+void write_feature_lines_png(const std::filesystem::path& path, const PatientModel& model,
+                             const Landmarks& landmarks, const FeatureLines& lines,
+                             const std::string& title);
 
 /// The patient's anatomical directions, unit vectors in LPS: front (anterior), left (the
 /// patient's left), up (superior). A model's: its axis' front, left and direction.
