@@ -524,7 +524,7 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
           found.push_back(c);
         }
         // The vermilion borders: the sharpest convex turn across z above the crease (up to the
-        // subnasale) and below it (12 mm), column by column between the commissures (or as far
+        // subnasale) and below it (14 mm), column by column between the commissures (or as far
         // as the crease went).
         const double xr = sides[1].cols.empty() ? 0 : std::abs(sides[1].cols.back().x);
         const double xl = sides[0].cols.empty() ? 0 : std::abs(sides[0].cols.back().x);
@@ -540,13 +540,14 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
         for (int upper : {1, 0}) {
           auto window = [&](double x) {
             const double zc = crease_z(x);
-            return upper ? std::make_pair(zc + 1.0, std::max(zc + 1.5, std::min(zc + 12.0, zs - 2.0)))
-                         : std::make_pair(zc - 12.0, zc - 1.0);
+            // 3 mm off the crease: its own convex shoulders are not the border.
+            return upper ? std::make_pair(zc + 3.0, std::max(zc + 3.5, std::min(zc + 14.0, zs - 2.0)))
+                         : std::make_pair(zc - 14.0, zc - 3.0);
           };
           const std::string method = cat(
               upper ? "upper" : "lower", " vermilion border: the sharpest convex turn across z "
-              "(curvature over +-1.5 mm) ", upper ? "from 1 mm above the stomion crease up to "
-              "2 mm below the subnasale" : "from 1 to 12 mm below the stomion crease",
+              "(curvature over +-1.5 mm) ", upper ? "from 3 mm above the stomion crease up to "
+              "2 mm below the subnasale" : "from 3 to 14 mm below the stomion crease",
               ", between the mouth's corners (", mm_text(xr), " right, ", mm_text(xl), " left)");
           FeatureLine l = from_columns(upper ? lip_names[0] : lip_names[1], "midline",
                                        "right-left", trace_rows(f, xs, window, +1, 1.5), method,
@@ -942,13 +943,14 @@ std::vector<FeatureDisplacement> feature_displacements(const FeatureLines& lines
       w[i] += 0.5 * seg;
       s[i] = s[i - 1] + seg;
     }
-    double wsum = 0, lsum = 0, max_down = 0, max_up = 0;
+    double wsum = 0, lsum = 0, max_down = 0, max_up = 0, min_len = 1e300;
     std::size_t imax = 0;
     for (std::size_t i = 0; i < np; ++i) {
       const auto u = displacement_at(l.lps[i]);
       if (!u || !u->allFinite()) continue;
       ++d.n_with_value;
       const double len = u->norm();
+      min_len = std::min(min_len, len);
       wsum += w[i];
       lsum += w[i] * len;
       const double up = u->dot(frame.up);
@@ -988,8 +990,11 @@ std::vector<FeatureDisplacement> feature_displacements(const FeatureLines& lines
     if (std::abs(parts[1].v) >= 0.5 * std::abs(parts[0].v) && std::abs(parts[1].v) > 0)
       d.direction += " and " + word(parts[1]);
     // Where: the third of the line (by arc length) the largest displacement is in.
+    const bool whole = d.n_with_value == d.n_points && min_len >= 0.9 * d.max_mm;
     if (l.along == "point" || np == 1) {
       d.where = "the mouth's corner";
+    } else if (whole) {
+      d.where = "whole length";  // within 10 % of the largest everywhere: no third stands out
     } else {
       const double frac = s.back() > 0 ? s[imax] / s.back() : 0.5;
       std::string lo = "medial", hi = "lateral";
@@ -999,7 +1004,8 @@ std::vector<FeatureDisplacement> feature_displacements(const FeatureLines& lines
     }
     std::ostringstream num;
     num << std::fixed << std::setprecision(1) << d.max_mm;
-    d.sentence = who + " is pulled " + num.str() + " mm " + d.direction + " at its " + d.where;
+    d.sentence = who + " is pulled " + num.str() + " mm " + d.direction +
+                 (whole ? " along its whole length" : " at its " + d.where);
     if (l.along == "point") d.sentence = who + " is pulled " + num.str() + " mm " + d.direction;
     // Warnings: every threshold of this feature that is passed.
     for (const auto& t : clinical_thresholds()) {
