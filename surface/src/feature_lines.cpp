@@ -417,7 +417,7 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
         mm_text(x1), " from the midline, ", mm_text(6.0 * s), "..", mm_text(30.0 * s), " above ", from,
         use_rim ? "; within 4 mm below to 12 mm above the supraorbital rim of the bone under it"
                 : "; the skin alone (no bone rim under it)");
-    put(from_columns(name, side_name, "medial-lateral", trace_rows(f, xs, window, +1, 3.0),
+    put(from_columns(name, side_name, "medial-lateral", trace_rows(f, xs, window, +1, 3.0, 0.5),
                      method, 0.1));
   }
 
