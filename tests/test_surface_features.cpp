@@ -13,6 +13,8 @@
 
 #include "caps/surface/feature_lines.hpp"
 #include "caps/surface/landmarks.hpp"
+#include "caps/volume/model.hpp"
+#include "caps/volume/model_dir.hpp"
 #include "caps/volume/phantom.hpp"
 
 using namespace caps;
@@ -338,4 +340,75 @@ TEST(FeatureLines, OnCraniumTheLinesLieWhereAnatomyPutsThem) {
   const FeatureLine& lip = *lines.find("lower_lip_vermilion");
   EXPECT_FALSE(lip.found);
   EXPECT_NE(lip.note.find("field of view"), std::string::npos) << lip.note;
+}
+
+TEST(FeatureLines, OnTheFacePhantomsCtTheLinesLieOnItsAnalyticFeatures) {
+  // The face phantom (caps phantom --face) in 1.5 mm voxels and its model on a 512 x 256 grid, as
+  // tests/test_surface_landmarks.cpp builds it. Its face has no eyelid crease, no brow ridges
+  // beside the glabella and no alar crease: its eyes are 5 mm dips (z 5, theta +-20 deg), its lips
+  // two bumps (z -36 and -48, 0.3 rad wide) with a saddle between them. The lines found must lie
+  // on those: the fissure in the eye's dip, the stomion in the saddle, the lip borders on the
+  // lips' crests, the corners where the saddle fades out.
+  PhantomOptions o;
+  o.dims = {160, 160, 150};
+  o.spacing_mm = {1.5, 1.5, 1.5};
+  o.face = true;
+  o.head_holder = false;
+  const Volume ct = make_phantom(o);
+  ModelOptions mo;
+  mo.maps.n_theta = 512;
+  mo.maps.n_z = 256;
+  const PatientModel model(build_volume_model(ct, mo).maps);
+  const Landmarks lm = find_landmarks(model);
+  const FeatureLines lines = find_feature_lines(model, lm);
+  const double z0 = -model.axis().origin_lps[2];  // the phantom's z = 0 in the model's z
+  auto mean_z = [&](const FeatureLine& l) {
+    double s = 0;
+    for (const auto& tz : l.theta_z) s += tz[1];
+    return s / l.theta_z.size() - z0;
+  };
+  for (const char* sfx : {"_left", "_right"}) {
+    const FeatureLine& up = *lines.find(std::string("upper_eyelid_margin") + sfx);
+    const FeatureLine& lo = *lines.find(std::string("lower_eyelid_margin") + sfx);
+    ASSERT_TRUE(up.found && lo.found) << sfx << ": " << up.note;
+    EXPECT_NEAR(0.5 * (mean_z(up) + mean_z(lo)), 5.0, 2.0) << sfx;
+  }
+  const FeatureLine& ul = *lines.find("upper_lip_vermilion");
+  const FeatureLine& ll = *lines.find("lower_lip_vermilion");
+  ASSERT_TRUE(ul.found) << ul.note;
+  ASSERT_TRUE(ll.found) << ll.note;
+  EXPECT_NEAR(ul.theta_z[ul.theta_z.size() / 2][1] - z0, -36.0, 2.0);
+  EXPECT_NEAR(ll.theta_z[ll.theta_z.size() / 2][1] - z0, -48.0, 2.0);
+  const FeatureLine& ch = *lines.find("oral_commissure_left");
+  ASSERT_TRUE(ch.found) << ch.note;
+  EXPECT_NEAR(ch.theta_z[0][1] - z0, -42.0, 2.0);
+}
+
+TEST(FeatureLines, ModelJsonKeepsThemWhenTheLandmarksAreWrittenAgain) {
+  std::string root = CAPS_SHARED_DATA;
+  const std::string tail = "/../shared/data";
+  if (root.size() > tail.size() && root.compare(root.size() - tail.size(), tail.size(), tail) == 0)
+    root = root.substr(0, root.size() - tail.size());
+  const fs::path src = fs::path(root) / "out" / "cranium";
+  if (!fs::exists(src / "model.json")) GTEST_SKIP() << src << " is not there (scripts/demo.sh)";
+  const fs::path dir = fs::temp_directory_path() / "caps_test_features_model";
+  fs::remove_all(dir);
+  fs::copy(src, dir, fs::copy_options::recursive);
+  const PatientModel model = PatientModel::load(dir);
+  const Landmarks lm = find_landmarks(model);
+  const FeatureLines lines = find_feature_lines(model, lm);
+  write_model_features(dir, feature_lines_to_json(lines));
+  // Rewriting the landmarks (caps model landmarks) keeps the features, and they read back.
+  write_model_landmarks(dir, landmarks_to_json(lm));
+  const ModelInfo info = read_model_info(dir);
+  ASSERT_FALSE(info.features_json.empty());
+  const FeatureLines back =
+      feature_lines_from_json(info.features_json, (dir / "model.json").string());
+  const FeatureLine* a = lines.find("upper_eyelid_margin_left");
+  const FeatureLine* b = back.find("upper_eyelid_margin_left");
+  ASSERT_TRUE(a && b && a->found && b->found);
+  ASSERT_EQ(a->lps.size(), b->lps.size());
+  EXPECT_LT((a->lps.back() - b->lps.back()).norm(), 1e-3);
+  EXPECT_THROW(write_model_features(dir, "[1, 2]"), InvalidInput);
+  fs::remove_all(dir);
 }

@@ -303,7 +303,9 @@ void write_model_landmarks(const fs::path& dir, const std::string& landmarks_jso
 
 void write_model_features(const fs::path& dir, const std::string& features_json) {
   ModelInfo info = read_model_info(dir);
-  parse_object(features_json, "features");
+  if (!parse_object(features_json, "features").is_object())
+    throw InvalidInput(cat(dir.string(), ": the features to write into model.json are not a "
+                           "JSON object"));
   info.features_json = features_json;
   write_text_atomic(dir / model_file::kJson, model_json_text(info));
 }
