@@ -412,3 +412,43 @@ TEST(FeatureLines, ModelJsonKeepsThemWhenTheLandmarksAreWrittenAgain) {
   EXPECT_THROW(write_model_features(dir, "[1, 2]"), InvalidInput);
   fs::remove_all(dir);
 }
+
+TEST(FeatureDisplacements, AFieldFromSamplesIsExactAtThemAndAbsentFarFromThem) {
+  // Samples of u = (0, 0, -0.1 x) on a 1 mm grid in the plane y = -90 (x 0..20, z 30..50).
+  std::vector<Eigen::Vector3d> p, u;
+  for (int i = 0; i <= 20; ++i)
+    for (int k = 0; k <= 20; ++k) {
+      p.emplace_back(i, -90, 30 + k);
+      u.emplace_back(0, 0, -0.1 * i);
+    }
+  Eigen::MatrixX3d P(p.size(), 3), U(u.size(), 3);
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    P.row(i) = p[i].transpose();
+    U.row(i) = u[i].transpose();
+  }
+  const DisplacementAt at = displacement_from_samples(P, U, 1.5);
+  ASSERT_TRUE(at(Eigen::Vector3d(7, -90, 40)));
+  EXPECT_NEAR((*at(Eigen::Vector3d(7, -90, 40)))[2], -0.7, 1e-12);
+  // Between samples: a weighted mean of the neighbours, symmetric about a column's midpoint.
+  EXPECT_NEAR((*at(Eigen::Vector3d(7.5, -90, 40)))[2], -0.75, 1e-12);
+  EXPECT_FALSE(at(Eigen::Vector3d(30, -90, 40)));  // beyond the samples: nothing
+  // A lower eyelid along x 5..15 at z 40: 1.0 mm down at its lateral end.
+  FeatureLines lines;
+  FeatureLine l;
+  l.name = "lower_eyelid_margin_left";
+  l.found = true;
+  l.side = "left";
+  l.along = "medial-lateral";
+  for (int x = 5; x <= 15; ++x) {
+    l.theta_z.emplace_back(0, 0);
+    l.lps.emplace_back(x, -90, 40);
+  }
+  lines.items.push_back(l);
+  const auto d = feature_displacements(lines, at, AnatomicalFrame{});
+  EXPECT_NEAR(d[0].max_mm, 1.5, 1e-12);
+  EXPECT_NEAR(d[0].mean_mm, 1.0, 1e-12);
+  EXPECT_EQ(d[0].where, "lateral third");
+  EXPECT_NE(d[0].sentence.find("pulled 1.5 mm down at its lateral third"), std::string::npos)
+      << d[0].sentence;
+  EXPECT_THROW(displacement_from_samples(P, U.topRows(3), 1.0), InvalidInput);
+}

@@ -872,6 +872,29 @@ AnatomicalFrame anatomical_frame(const PatientModel& model) {
   return fr;
 }
 
+DisplacementAt displacement_from_samples(const Eigen::MatrixX3d& points,
+                                         const Eigen::MatrixX3d& displacements, double radius_mm) {
+  if (points.rows() != displacements.rows())
+    throw InvalidInput(cat("displacement_from_samples: ", points.rows(), " points but ",
+                           displacements.rows(), " displacements"));
+  if (!(radius_mm > 0))
+    throw InvalidInput(cat("displacement_from_samples: radius ", radius_mm, " mm must be positive"));
+  return [P = points, U = displacements, r2 = radius_mm * radius_mm](
+             const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
+    Eigen::Vector3d sum(0, 0, 0);
+    double wsum = 0;
+    for (Eigen::Index i = 0; i < P.rows(); ++i) {
+      const double d2 = (P.row(i).transpose() - x).squaredNorm();
+      if (d2 > r2) continue;
+      if (d2 < 1e-18) return Eigen::Vector3d(U.row(i).transpose());
+      sum += U.row(i).transpose() / d2;
+      wsum += 1.0 / d2;
+    }
+    if (wsum == 0) return std::nullopt;
+    return Eigen::Vector3d(sum / wsum);
+  };
+}
+
 const std::vector<ClinicalThreshold>& clinical_thresholds() {
   // docs/landmarks.md, "Feature lines and what a closure does to them", has the table with its
   // sources; the sources were read, the numbers are theirs.

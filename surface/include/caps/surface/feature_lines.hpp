@@ -97,6 +97,17 @@ AnatomicalFrame anatomical_frame(const PatientModel& model);
 /// nothing where the field has no value (outside the closure's model).
 using DisplacementAt = std::function<std::optional<Eigen::Vector3d>(const Eigen::Vector3d&)>;
 
+/// A displacement field from samples of it (a closure's skin nodes and their displacements): at a
+/// point, the inverse-distance-squared mean of the samples within `radius_mm` (the sample itself
+/// where the point is one), nothing where no sample is that close (the closure's model does not
+/// reach the point). Brute force over the samples: for a few hundred line points and some
+/// ten thousand nodes, well under a second.
+/// @param points         #P×3 sample positions (LPS mm)
+/// @param displacements  #P×3 displacements there (mm, LPS)
+/// @param radius_mm      how far a sample speaks for (e.g. twice the mesh size)
+DisplacementAt displacement_from_samples(const Eigen::MatrixX3d& points,
+                                         const Eigen::MatrixX3d& displacements, double radius_mm);
+
 /// A clinical threshold: the displacement of a feature, in one anatomical direction, beyond which
 /// it matters, and where the number comes from (docs/landmarks.md's table).
 struct ClinicalThreshold {
