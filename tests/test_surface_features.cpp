@@ -382,6 +382,9 @@ TEST(FeatureLines, OnTheFacePhantomsCtTheLinesLieOnItsAnalyticFeatures) {
   const FeatureLine& ch = *lines.find("oral_commissure_left");
   ASSERT_TRUE(ch.found) << ch.note;
   EXPECT_NEAR(ch.theta_z[0][1] - z0, -42.0, 2.0);
+  // It has no brow ridges beside the glabella and no alar creases: none are invented.
+  for (const char* n : {"eyebrow_left", "eyebrow_right", "alar_rim_left", "alar_rim_right"})
+    EXPECT_FALSE(lines.find(n)->found) << n << ": " << lines.find(n)->note;
 }
 
 TEST(FeatureLines, ModelJsonKeepsThemWhenTheLandmarksAreWrittenAgain) {

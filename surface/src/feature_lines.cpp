@@ -33,6 +33,9 @@ constexpr double kZyZyMm = 135.0;
 
 // A curvature (1/mm) below which a crease or a ridge is not one: a radius of 20 mm.
 constexpr double kMinCurvature = 0.05;
+// A line fainter than this (its columns kept times its curvature against the reference) is not
+// taken: the face phantom's nose flank, which has no alar crease, gave a zigzag at 0.14.
+constexpr double kMinConfidence = 0.25;
 
 std::string mm_text(double x) {
   std::ostringstream s;
@@ -219,10 +222,18 @@ FeatureLine from_columns(const std::string& name, const std::string& side,
                  " % needed)");
     return l;
   }
+  const double confidence = std::clamp(kept * std::min(1.0, strength / ref_strength), 0.0, 1.0);
+  if (confidence < kMinConfidence) {
+    l.note = cat("too faint to be the ", method.substr(0, method.find(':')), ": confidence ",
+                 std::round(confidence * 100) / 100, " (", std::round(kept * 100),
+                 " % of the columns, median curvature ", std::round(strength * 1000) / 1000,
+                 " /mm), below ", kMinConfidence);
+    return l;
+  }
   for (const auto& c : cols)
     if (c.ok) l.theta_z.emplace_back(wrap180(c.t), c.z);
   l.found = true;
-  l.confidence = std::clamp(kept * std::min(1.0, strength / ref_strength), 0.0, 1.0);
+  l.confidence = confidence;
   l.note = cat(std::round(kept * 100), " % of the columns, median curvature across it ",
                std::round(strength * 1000) / 1000, " /mm");
   return l;
