@@ -269,6 +269,11 @@ TEST(FeatureDisplacements, AFieldGrowingAlongTheLineIsLargestAtItsEndInItsWords)
   EXPECT_EQ(d[1].direction, "up and laterally") << d[1].sentence;
   EXPECT_NE(d[1].sentence.find("the right brow is pulled"), std::string::npos) << d[1].sentence;
   EXPECT_NE(d[1].warning.find("brow"), std::string::npos);
+  // The summary names the feature displaced most (the brow: 4 mm up and laterally at x = -50).
+  EXPECT_EQ(feature_displacements_summary(d).rfind(d[1].sentence, 0), 0u)
+      << feature_displacements_summary(d);
+  EXPECT_NE(feature_displacements_summary(d).find("feature warning"), std::string::npos);
+  EXPECT_EQ(feature_displacements_summary({}), "");
 }
 
 TEST(FeatureDisplacements, NoneWhereTheFieldHasNoValue) {

@@ -1063,6 +1063,20 @@ std::vector<FeatureDisplacement> feature_displacements(const FeatureLines& lines
   return out;
 }
 
+std::string feature_displacements_summary(const std::vector<FeatureDisplacement>& ds) {
+  const FeatureDisplacement* most = nullptr;
+  int warned = 0;
+  for (const auto& d : ds) {
+    if (!d.has_value) continue;
+    if (!d.warning.empty()) ++warned;
+    if (!most || d.max_mm > most->max_mm) most = &d;
+  }
+  if (!most) return {};
+  std::string s = most->sentence;
+  if (warned > 0) s += cat("; ", warned, warned == 1 ? " feature warning" : " feature warnings");
+  return s;
+}
+
 std::string feature_displacements_to_json(const std::vector<FeatureDisplacement>& ds) {
   auto r3 = [](double x) { return std::round(x * 1000.0) / 1000.0; };
   json a = json::array();

@@ -148,6 +148,11 @@ std::vector<FeatureDisplacement> feature_displacements(const FeatureLines& lines
                                                        const DisplacementAt& displacement_at,
                                                        const AnatomicalFrame& frame);
 
+/// One clause for a summary line: the sentence of the feature displaced most (among those with a
+/// value), with how many warn ("the left lower eyelid margin is pulled 2.4 mm down at its middle
+/// third; 1 feature warning"); empty when the field reaches no feature.
+std::string feature_displacements_summary(const std::vector<FeatureDisplacement>& displacements);
+
 /// The displacements as a JSON array (text) for result.json: [{name, found, has_value, max_mm,
 /// mean_mm, direction_lps, direction, where, sentence, warning?}, ...] (max_mm and mean_mm null
 /// without a value).
