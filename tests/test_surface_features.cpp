@@ -34,7 +34,7 @@ double band(double t, double a, double b) {
 
 // The crease and ridge placement of the synthetic face (deg, mm).
 constexpr double kFissureZ = 3.0, kBrowZ = 22.0, kStomionZ = -42.0;
-constexpr double kEyeFrom = 8.0, kEyeTo = 30.0;      // theta of the fissure's ends, each side
+constexpr double kEyeFrom = 8.0, kEyeTo = 30.0;  // theta of the fissure's ends, each side
 constexpr double kBrowFrom = 6.0, kBrowTo = 34.0;
 constexpr double kMouthTo = 16.0;                   // theta of the mouth's corners
 constexpr double kAlaTheta = 12.0;                  // theta of the alar creases
@@ -44,8 +44,8 @@ constexpr double kAlaFrom = -25.0, kAlaTo = -12.0;  // their z extent
 double synthetic_r(const HeadPhantom& head, double t, double z) {
   double r = head.skin_radius(t * kPi / 180.0, z);
   const double a = std::abs(t);
-  r += -1.5 * band(a, kEyeFrom, kEyeTo) * gauss((z - kFissureZ) / 1.0);   // fissure
-  r += 2.0 * band(a, kBrowFrom, kBrowTo) * gauss((z - kBrowZ) / 3.0);     // brow ridges
+  r += -1.5 * band(a, kEyeFrom, kEyeTo) * gauss((z - kFissureZ) / 1.0);  // fissure
+  r += 2.0 * band(a, kBrowFrom, kBrowTo) * gauss((z - kBrowZ) / 3.0);    // brow ridges
   // The stomion crease: shallow enough that the subnasale (the sharpest concave turn of the
   // midline profile below the nose) stays at the nose's base.
   r += -0.6 * band(a, -kMouthTo, kMouthTo) * gauss((z - kStomionZ) / 1.2);

@@ -94,7 +94,7 @@ struct Face {
 };
 
 FeatureLine absent_line(const std::string& name, const std::string& side, const std::string& along,
-                   const std::string& why) {
+                        const std::string& why) {
   FeatureLine l;
   l.name = name;
   l.side = side;
@@ -198,18 +198,22 @@ double coverage(const Face& f, int side, double x0, double x1, double z0, double
 
 std::string fov_note(const Face& f, double z0, double z1) {
   if (z0 < f.view.z_min_mm)
-    return cat("the scan ends at z ", std::round(f.view.z_min_mm), " mm, below which the window "
-               "reaches (z ", std::round(z0), "..", std::round(z1), " mm): outside the field of view");
+    return cat("the scan ends at z ", std::round(f.view.z_min_mm),
+               " mm, below which the window "
+               "reaches (z ",
+               std::round(z0), "..", std::round(z1), " mm): outside the field of view");
   if (z1 > f.view.z_max_mm)
-    return cat("the scan ends at z ", std::round(f.view.z_max_mm), " mm, above which the window "
-               "reaches (z ", std::round(z0), "..", std::round(z1), " mm): outside the field of view");
+    return cat("the scan ends at z ", std::round(f.view.z_max_mm),
+               " mm, above which the window "
+               "reaches (z ",
+               std::round(z0), "..", std::round(z1), " mm): outside the field of view");
   return cat("the skin in the window (z ", std::round(z0), "..", std::round(z1),
              " mm) is mostly not measured (outside the scan, undercut or truncated)");
 }
 
-FeatureLine from_columns(const std::string& name, const std::string& side,
-                         const std::string& along, const std::vector<Column>& cols,
-                         const std::string& method, double ref_strength, double min_kept = 0.6) {
+FeatureLine from_columns(const std::string& name, const std::string& side, const std::string& along,
+                         const std::vector<Column>& cols, const std::string& method,
+                         double ref_strength, double min_kept = 0.6) {
   const auto [kept, strength] = quality(cols);
   FeatureLine l;
   l.name = name;
@@ -217,9 +221,9 @@ FeatureLine from_columns(const std::string& name, const std::string& side,
   l.along = along;
   l.method = method;
   if (kept < min_kept) {
-    l.note = cat("no continuous ", method.substr(0, method.find(':')), ": only ",
-                 std::round(kept * 100), " % of the columns show it (", std::round(min_kept * 100),
-                 " % needed)");
+    l.note =
+        cat("no continuous ", method.substr(0, method.find(':')), ": only ", std::round(kept * 100),
+            " % of the columns show it (", std::round(min_kept * 100), " % needed)");
     return l;
   }
   const double confidence = std::clamp(kept * std::min(1.0, strength / ref_strength), 0.0, 1.0);
@@ -254,12 +258,19 @@ double lateral_of(const Face& f, const Landmark& l) {
 }  // namespace
 
 const std::vector<std::string>& feature_line_names() {
-  static const std::vector<std::string> names = {
-      "eyebrow_left",           "eyebrow_right",           "upper_eyelid_margin_left",
-      "upper_eyelid_margin_right", "lower_eyelid_margin_left", "lower_eyelid_margin_right",
-      "upper_lip_vermilion",    "lower_lip_vermilion",     "oral_commissure_left",
-      "oral_commissure_right",  "alar_rim_left",           "alar_rim_right",
-      "hairline"};
+  static const std::vector<std::string> names = {"eyebrow_left",
+                                                 "eyebrow_right",
+                                                 "upper_eyelid_margin_left",
+                                                 "upper_eyelid_margin_right",
+                                                 "lower_eyelid_margin_left",
+                                                 "lower_eyelid_margin_right",
+                                                 "upper_lip_vermilion",
+                                                 "lower_lip_vermilion",
+                                                 "oral_commissure_left",
+                                                 "oral_commissure_right",
+                                                 "alar_rim_left",
+                                                 "alar_rim_right",
+                                                 "hairline"};
   return names;
 }
 
@@ -272,7 +283,8 @@ const FeatureLine* FeatureLines::find(const std::string& name) const {
 FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& landmarks,
                                 const std::function<double(double, double)>& r_bone) {
   if (!view.r_mm || !view.measured || !(view.dz_mm > 0) || !(view.z_max_mm > view.z_min_mm))
-    throw InvalidInput("find_feature_lines: the range view needs r, measured, a step and a z extent");
+    throw InvalidInput(
+        "find_feature_lines: the range view needs r, measured, a step and a z extent");
   Anchors a;
   const Landmark* prn = a.get(landmarks, "pronasale");
   const Landmark* sn = a.get(landmarks, "subnasale");
@@ -288,9 +300,12 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
     const Landmark* zl = a.get(landmarks, "zygion_left");
     const Landmark* zr = a.get(landmarks, "zygion_right");
     double w = 0;
-    if (zl && zr) w = lateral_of(f, *zl) + lateral_of(f, *zr);
-    else if (zl) w = 2 * lateral_of(f, *zl);
-    else if (zr) w = 2 * lateral_of(f, *zr);
+    if (zl && zr)
+      w = lateral_of(f, *zl) + lateral_of(f, *zr);
+    else if (zl)
+      w = 2 * lateral_of(f, *zl);
+    else if (zr)
+      w = 2 * lateral_of(f, *zr);
     if (w > 0) f.scale = std::clamp(w / kZyZyMm, 0.7, 1.3);
   }
   const double s = f.scale;
@@ -332,10 +347,12 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
     for (double x : range_mm(x0, x1, 1.0)) xs.push_back(side * x);
     const std::string method =
         cat("palpebral fissure: the deepest crease across z (curvature of the vertical profile "
-            "over +-1.5 mm) in ", mm_text(x0), "..", mm_text(x1), " from the midline (Farkas' en-en/2..ex-ex/2",
+            "over +-1.5 mm) in ",
+            mm_text(x0), "..", mm_text(x1), " from the midline (Farkas' en-en/2..ex-ex/2",
             s != 1.0 ? cat(" times ", std::round(s * 100) / 100) : std::string(), "), ",
             mm_text(7.0 * s), " about ", zc_from);
-    const auto cols = trace_rows(f, xs, [&](double) { return std::make_pair(z0, z1); }, -1, 1.5);
+    const auto cols = trace_rows(
+        f, xs, [&](double) { return std::make_pair(z0, z1); }, -1, 1.5);
     FeatureLine fissure = from_columns("fissure", side_name, "medial-lateral", cols, method, 0.3);
     if (!fissure.found) {
       put(absent_line(up_name, side_name, "medial-lateral", fissure.note));
@@ -381,8 +398,9 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
       from = "10 mm below the nasion (no fissure)";
     }
     if (!std::isfinite(zf)) {
-      put(absent_line(name, side_name, "medial-lateral", "neither the palpebral fissure nor the nasion "
-                                                    "was found"));
+      put(absent_line(name, side_name, "medial-lateral",
+                      "neither the palpebral fissure nor the nasion "
+                      "was found"));
       continue;
     }
     const double x0 = 10.0 * s, x1 = 52.0 * s;
@@ -423,11 +441,12 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
       if (!std::isfinite(zr)) return std::make_pair(z0, z1);
       return std::make_pair(std::max(z0, zr - 4.0), std::min(z1, zr + 12.0));
     };
-    const std::string method = cat(
-        "brow ridge: the sharpest convex turn across z (curvature over +-3 mm) ", mm_text(x0), "..",
-        mm_text(x1), " from the midline, ", mm_text(6.0 * s), "..", mm_text(30.0 * s), " above ", from,
-        use_rim ? "; within 4 mm below to 12 mm above the supraorbital rim of the bone under it"
-                : "; the skin alone (no bone rim under it)");
+    const std::string method =
+        cat("brow ridge: the sharpest convex turn across z (curvature over +-3 mm) ", mm_text(x0),
+            "..", mm_text(x1), " from the midline, ", mm_text(6.0 * s), "..", mm_text(30.0 * s),
+            " above ", from,
+            use_rim ? "; within 4 mm below to 12 mm above the supraorbital rim of the bone under it"
+                    : "; the skin alone (no bone rim under it)");
     put(from_columns(name, side_name, "medial-lateral", trace_rows(f, xs, window, +1, 3.0, 0.5),
                      method, 0.1));
   }
@@ -468,8 +487,10 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
       if (2 * unmeasured > rows) {
         all_absent(fov_note(f, w0, w1) + " (the stomion's window, 8..30 mm below the subnasale)");
       } else if (!(k0 >= kMinCurvature)) {
-        all_absent(cat("no crease between the lips on the midline 8..30 mm below the subnasale "
-                       "(strongest curvature ", std::round(k0 * 1000) / 1000, " /mm)"));
+        all_absent(
+            cat("no crease between the lips on the midline 8..30 mm below the subnasale "
+                "(strongest curvature ",
+                std::round(k0 * 1000) / 1000, " /mm)"));
       } else {
         // Outwards on both sides: the crease followed within 2 mm of its last height, until it
         // weakens below 0.35 of the midline's or the skin is not measured; that end is the
@@ -504,19 +525,23 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
           }
           const double reach = sides[si].cols.empty() ? 0 : std::abs(sides[si].cols.back().x);
           if (reach < 0.55 * kHalfChChMm * s)
-            sides[si].why = cat("the crease between the lips ends ", mm_text(reach), " from the "
-                                "midline, short of a mouth's corner (", mm_text(0.55 * kHalfChChMm * s),
-                                " at least)");
+            sides[si].why = cat("the crease between the lips ends ", mm_text(reach),
+                                " from the "
+                                "midline, short of a mouth's corner (",
+                                mm_text(0.55 * kHalfChChMm * s), " at least)");
           else if (reach > 1.4 * kHalfChChMm * s)
-            sides[si].why = cat("the crease between the lips goes on beyond ",
-                                mm_text(1.4 * kHalfChChMm * s), " from the midline: no corner found");
+            sides[si].why =
+                cat("the crease between the lips goes on beyond ", mm_text(1.4 * kHalfChChMm * s),
+                    " from the midline: no corner found");
           else
             sides[si].corner = sides[si].cols.back();
         }
-        const std::string sto_method =
-            cat("the stomion crease (curvature across z over +-1.5 mm) at z ", std::round(zsto * 10) / 10,
-                " mm on the midline, followed outwards until it weakens below 0.35 of the midline's "
-                "(Farkas' ch-ch/2 ", mm_text(kHalfChChMm * s), ")");
+        const std::string sto_method = cat(
+            "the stomion crease (curvature across z over +-1.5 mm) at z ",
+            std::round(zsto * 10) / 10,
+            " mm on the midline, followed outwards until it weakens below 0.35 of the midline's "
+            "(Farkas' ch-ch/2 ",
+            mm_text(kHalfChChMm * s), ")");
         for (int si = 0; si < 2; ++si) {
           const std::string side_name = si == 0 ? "left" : "right";
           FeatureLine c;
@@ -552,17 +577,20 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
           auto window = [&](double x) {
             const double zc = crease_z(x);
             // 3 mm off the crease: its own convex shoulders are not the border.
-            return upper ? std::make_pair(zc + 3.0, std::max(zc + 3.5, std::min(zc + 14.0, zs - 2.0)))
-                         : std::make_pair(zc - 14.0, zc - 3.0);
+            return upper
+                       ? std::make_pair(zc + 3.0, std::max(zc + 3.5, std::min(zc + 14.0, zs - 2.0)))
+                       : std::make_pair(zc - 14.0, zc - 3.0);
           };
-          const std::string method = cat(
-              upper ? "upper" : "lower", " vermilion border: the sharpest convex turn across z "
-              "(curvature over +-1.5 mm) ", upper ? "from 3 mm above the stomion crease up to "
-              "2 mm below the subnasale" : "from 3 to 14 mm below the stomion crease",
-              ", between the mouth's corners (", mm_text(xr), " right, ", mm_text(xl), " left)");
-          FeatureLine l = from_columns(upper ? lip_names[0] : lip_names[1], "midline",
-                                       "right-left", trace_rows(f, xs, window, +1, 1.5), method,
-                                       0.2);
+          const std::string method = cat(upper ? "upper" : "lower",
+                                         " vermilion border: the sharpest convex turn across z "
+                                         "(curvature over +-1.5 mm) ",
+                                         upper ? "from 3 mm above the stomion crease up to "
+                                                 "2 mm below the subnasale"
+                                               : "from 3 to 14 mm below the stomion crease",
+                                         ", between the mouth's corners (", mm_text(xr), " right, ",
+                                         mm_text(xl), " left)");
+          FeatureLine l = from_columns(upper ? lip_names[0] : lip_names[1], "midline", "right-left",
+                                       trace_rows(f, xs, window, +1, 1.5), method, 0.2);
           put(l);
         }
       }
@@ -575,8 +603,9 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
     const std::string side_name = side > 0 ? "left" : "right";
     const std::string name = "alar_rim" + sfx;
     if (!sn || !prn) {
-      put(absent_line(name, side_name, "inferior-superior", "found beside the pronasale and the "
-                                                       "subnasale; one is absent"));
+      put(absent_line(name, side_name, "inferior-superior",
+                      "found beside the pronasale and the "
+                      "subnasale; one is absent"));
       continue;
     }
     // From 2 mm above the subnasale (lower, the nostril sill is the deepest crease) up to 60 %
@@ -617,15 +646,19 @@ FeatureLines find_feature_lines(const SkinRangeView& view, const Landmarks& land
     }
     const std::string method = cat(
         "alar crease: the deepest crease across theta (curvature of the horizontal section over "
-        "+-1.5 mm) ", mm_text(x0), "..", mm_text(x1), " from the midline (Farkas' al-al/2 ",
-        mm_text(kHalfAlAlMm * s), "), from 2 mm above the subnasale's height up to 60 % of the way to the "
-        "pronasale's and ", mm_text(6.0 * s), " more");
+        "+-1.5 mm) ",
+        mm_text(x0), "..", mm_text(x1), " from the midline (Farkas' al-al/2 ",
+        mm_text(kHalfAlAlMm * s),
+        "), from 2 mm above the subnasale's height up to 60 % of the way to the "
+        "pronasale's and ",
+        mm_text(6.0 * s), " more");
     put(from_columns(name, side_name, "inferior-superior", rows, method, 0.3));
   }
 
-  put(absent_line("hairline", "midline", "right-left",
-             "not visible in the CT: hair is near air density and is not part of the segmented "
-             "skin (a surface scan's colour could show it; not looked for)"));
+  put(absent_line(
+      "hairline", "midline", "right-left",
+      "not visible in the CT: hair is near air density and is not part of the segmented "
+      "skin (a surface scan's colour could show it; not looked for)"));
 
   FeatureLines out;
   for (const auto& nm : feature_line_names())
@@ -665,8 +698,9 @@ std::string feature_lines_to_json(const FeatureLines& lines) {
     }
     items[l.name] = o;
   }
-  return json{{"definitions", "docs/landmarks.md, \"Feature lines and what a closure does to them\""},
-              {"items", items}}
+  return json{
+      {"definitions", "docs/landmarks.md, \"Feature lines and what a closure does to them\""},
+      {"items", items}}
       .dump(-1, ' ', false, json::error_handler_t::replace);
 }
 
@@ -698,12 +732,13 @@ FeatureLines feature_lines_from_json(const std::string& text, const std::string&
       l.method = o.value("method", std::string());
       if (l.found) {
         l.confidence = o.at("confidence").get<double>();
-        for (const auto& v : o.at("theta_z")) l.theta_z.emplace_back(v.at(0).get<double>(), v.at(1).get<double>());
+        for (const auto& v : o.at("theta_z"))
+          l.theta_z.emplace_back(v.at(0).get<double>(), v.at(1).get<double>());
         for (const auto& v : o.at("lps"))
           l.lps.emplace_back(v.at(0).get<double>(), v.at(1).get<double>(), v.at(2).get<double>());
         if (l.lps.size() != l.theta_z.size())
-          throw InvalidInput(cat(source, ": features: ", nm, " has ", l.lps.size(), " LPS points for ",
-                                 l.theta_z.size(), " (theta, z)"));
+          throw InvalidInput(cat(source, ": features: ", nm, " has ", l.lps.size(),
+                                 " LPS points for ", l.theta_z.size(), " (theta, z)"));
       }
       out.items.push_back(l);
     }
@@ -720,24 +755,6 @@ double polyline_length(const std::vector<Eigen::Vector3d>& p) {
   double s = 0;
   for (std::size_t i = 1; i < p.size(); ++i) s += (p[i] - p[i - 1]).norm();
   return s;
-}
-
-// "lower_eyelid_margin_left" -> "the left lower eyelid margin"; "oral_commissure_right" -> "the
-// right oral commissure"; "upper_lip_vermilion" -> "the upper lip's vermilion border".
-std::string spoken(const std::string& name) {
-  std::string base = name, side;
-  for (const char* sfx : {"_left", "_right"}) {
-    const std::string s(sfx);
-    if (base.size() > s.size() && base.compare(base.size() - s.size(), s.size(), s) == 0) {
-      side = s.substr(1) + " ";
-      base = base.substr(0, base.size() - s.size());
-    }
-  }
-  if (base == "upper_lip_vermilion") return "the upper lip's vermilion border";
-  if (base == "lower_lip_vermilion") return "the lower lip's vermilion border";
-  if (base == "eyebrow") base = "brow";
-  std::replace(base.begin(), base.end(), '_', ' ');
-  return "the " + side + base;
 }
 
 }  // namespace
@@ -807,8 +824,9 @@ void write_feature_lines_png(const std::filesystem::path& path, const PatientMod
         continue;  // beyond the face's outline
       const Eigen::Vector3d nrm = model.skin_normal(t, z);
       const double shade = 0.25 + 0.75 * std::max(0.0, nrm.dot(light));
-      img.set(i, k, view.measured(t, z) ? Eigen::Vector3d(tone * shade)
-                                        : Eigen::Vector3d(Eigen::Vector3d::Constant(0.8 * shade)));
+      img.set(i, k,
+              view.measured(t, z) ? Eigen::Vector3d(tone * shade)
+                                  : Eigen::Vector3d(Eigen::Vector3d::Constant(0.8 * shade)));
     }
   }
   Canvas c(w, h + kTop + kBottom);
@@ -869,239 +887,8 @@ void write_feature_lines_png(const std::filesystem::path& path, const PatientMod
   bar.colour = {0, 0, 0};
   bar.width_px = 2;
   c.line({8, kTop + h + 42.0}, {8 + 20 * kPx, kTop + h + 42.0}, bar);
-  c.text(8 + 20 * kPx + 6, kTop + h + 46, "20 mm; front view, the patient's right on the left",
-         ts);
+  c.text(8 + 20 * kPx + 6, kTop + h + 46, "20 mm; front view, the patient's right on the left", ts);
   c.write_png(path);
-}
-
-AnatomicalFrame anatomical_frame(const PatientModel& model) {
-  const auto& ax = model.axis();
-  AnatomicalFrame fr;
-  fr.up = ax.direction.normalized();
-  fr.front = ax.front.normalized();
-  fr.left = ax.left().normalized();
-  return fr;
-}
-
-DisplacementAt displacement_from_samples(const Eigen::MatrixX3d& points,
-                                         const Eigen::MatrixX3d& displacements, double radius_mm) {
-  if (points.rows() != displacements.rows())
-    throw InvalidInput(cat("displacement_from_samples: ", points.rows(), " points but ",
-                           displacements.rows(), " displacements"));
-  if (!(radius_mm > 0))
-    throw InvalidInput(cat("displacement_from_samples: radius ", radius_mm, " mm must be positive"));
-  return [P = points, U = displacements, r2 = radius_mm * radius_mm](
-             const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
-    Eigen::Vector3d sum(0, 0, 0);
-    double wsum = 0;
-    for (Eigen::Index i = 0; i < P.rows(); ++i) {
-      const double d2 = (P.row(i).transpose() - x).squaredNorm();
-      if (d2 > r2) continue;
-      if (d2 < 1e-18) return Eigen::Vector3d(U.row(i).transpose());
-      sum += U.row(i).transpose() / d2;
-      wsum += 1.0 / d2;
-    }
-    if (wsum == 0) return std::nullopt;
-    return Eigen::Vector3d(sum / wsum);
-  };
-}
-
-const std::vector<ClinicalThreshold>& clinical_thresholds() {
-  // docs/landmarks.md, "Feature lines and what a closure does to them", has the table with its
-  // sources; the sources were read, the numbers are theirs.
-  static const std::vector<ClinicalThreshold> t = {
-      {"lower_eyelid_margin", "down", 1.0,
-       "scleral show, ectropion: the margin rests at or up to 1 mm above the inferior corneal "
-       "limbus",
-       "Dutton, Surgical management of eyelid retraction in thyroid eye disease (Taylor & Francis, "
-       "doi:10.3109/9780203908983-43); EyeWiki, Lower Eyelid Retraction (AAO 2024)"},
-      {"upper_eyelid_margin", "down", 2.0,
-       "ptosis: the margin rests about 2 mm above the pupil's margin",
-       "GPnotebook, Ptosis (reviewed 2018); Dutton (upper margin 2-3 mm below the superior limbus)"},
-      {"upper_eyelid_margin", "up", 2.0,
-       "upper scleral show, lagophthalmos: the margin rests 2-3 mm below the superior limbus",
-       "Dutton, Surgical management of eyelid retraction in thyroid eye disease"},
-      {"eyebrow", "vertical", 2.0,
-       "a brow height change beyond the natural left-right brow asymmetry (1.8 mm on average "
-       "at the central brow)",
-       "Eyelid and brow asymmetry in patients evaluated for upper lid blepharoplasty, J "
-       "Otolaryngol Head Neck Surg 2014 (doi:10.1186/s40463-014-0036-4)"},
-      {"oral_commissure", "vertical", 2.5,
-       "a canted lip line: 2.5 mm of vertical lip asymmetry made a smile less attractive, 2 mm "
-       "did not",
-       "Batwa, McDonald, Cash 2013, Cleft Palate Craniofac J"},
-      {"oral_commissure", "any", 3.0,
-       "a visible facial asymmetry (noticed above 3 mm)",
-       "Analysis of Facial Asymmetry, Arch Craniofac Surg (PMC5556787)"},
-      {"upper_lip_vermilion", "vertical", 2.5, "a canted or notched lip line",
-       "Batwa, McDonald, Cash 2013, Cleft Palate Craniofac J"},
-      {"lower_lip_vermilion", "vertical", 2.5, "a canted lip line",
-       "Batwa, McDonald, Cash 2013, Cleft Palate Craniofac J"},
-      {"alar_rim", "up", 1.0,
-       "alar retraction: the rim lies 1-2 mm above the nostril's long axis, more than 2 mm is a "
-       "retracted ala",
-       "Gunter, Rohrich, Friedman 1996, Plast Reconstr Surg 97:643"},
-      {"alar_rim", "down", 1.0, "a hanging ala (the rim less than 1 mm above the nostril's axis)",
-       "Gunter, Rohrich, Friedman 1996, Plast Reconstr Surg 97:643"},
-  };
-  return t;
-}
-
-std::vector<FeatureDisplacement> feature_displacements(const FeatureLines& lines,
-                                                       const DisplacementAt& displacement_at,
-                                                       const AnatomicalFrame& frame) {
-  if (!displacement_at) throw InvalidInput("feature_displacements: no displacement field");
-  std::vector<FeatureDisplacement> out;
-  for (const auto& l : lines.items) {
-    if (l.name == "hairline" && !l.found) continue;
-    FeatureDisplacement d;
-    d.name = l.name;
-    d.found = l.found;
-    d.n_points = static_cast<int>(l.lps.size());
-    const std::string who = spoken(l.name);
-    if (!l.found || l.lps.empty()) {
-      d.sentence = who + " was not found on the model (" + l.note + ")";
-      out.push_back(d);
-      continue;
-    }
-    // The lateral direction: away from the midline for a paired line, the patient's left for a
-    // midline one.
-    const double lat_sign = l.side == "right" ? -1.0 : 1.0;
-    const bool paired = l.side == "left" || l.side == "right";
-    // Arc-length weights (half of each adjacent segment; a single point weighs 1).
-    const std::size_t np = l.lps.size();
-    std::vector<double> w(np, np == 1 ? 1.0 : 0.0), s(np, 0.0);
-    for (std::size_t i = 1; i < np; ++i) {
-      const double seg = (l.lps[i] - l.lps[i - 1]).norm();
-      w[i - 1] += 0.5 * seg;
-      w[i] += 0.5 * seg;
-      s[i] = s[i - 1] + seg;
-    }
-    double wsum = 0, lsum = 0, max_down = 0, max_up = 0, min_len = 1e300;
-    std::size_t imax = 0;
-    for (std::size_t i = 0; i < np; ++i) {
-      const auto u = displacement_at(l.lps[i]);
-      if (!u || !u->allFinite()) continue;
-      ++d.n_with_value;
-      const double len = u->norm();
-      min_len = std::min(min_len, len);
-      wsum += w[i];
-      lsum += w[i] * len;
-      const double up = u->dot(frame.up);
-      max_down = std::max(max_down, -up);
-      max_up = std::max(max_up, up);
-      if (!d.has_value || len > d.max_mm) {
-        d.max_mm = len;
-        d.max_lps = *u;
-        imax = i;
-      }
-      d.has_value = true;
-    }
-    if (!d.has_value) {
-      d.sentence = who + " has no displacement: the closure's model does not reach it";
-      out.push_back(d);
-      continue;
-    }
-    d.mean_mm = wsum > 0 ? lsum / wsum : d.max_mm;
-    d.max_at_lps = l.lps[imax];
-    d.up_mm = d.max_lps.dot(frame.up);
-    d.lateral_mm = lat_sign * d.max_lps.dot(frame.left);
-    d.forward_mm = d.max_lps.dot(frame.front);
-    // Words: the dominant component, and the second where it is at least half of it.
-    struct Part {
-      double v;
-      std::string pos, neg;
-    };
-    std::vector<Part> parts = {
-        {d.up_mm, "up", "down"},
-        {d.lateral_mm, paired ? "laterally" : "to the patient's left",
-         paired ? "medially" : "to the patient's right"},
-        {d.forward_mm, "forward", "back"}};
-    std::sort(parts.begin(), parts.end(),
-              [](const Part& a, const Part& b) { return std::abs(a.v) > std::abs(b.v); });
-    auto word = [](const Part& p) { return p.v >= 0 ? p.pos : p.neg; };
-    d.direction = word(parts[0]);
-    if (std::abs(parts[1].v) >= 0.5 * std::abs(parts[0].v) && std::abs(parts[1].v) > 0)
-      d.direction += " and " + word(parts[1]);
-    // Where: the third of the line (by arc length) the largest displacement is in.
-    const bool whole = d.n_with_value == d.n_points && min_len >= 0.9 * d.max_mm;
-    if (l.along == "point" || np == 1) {
-      d.where = "the mouth's corner";
-    } else if (whole) {
-      d.where = "whole length";  // within 10 % of the largest everywhere: no third stands out
-    } else {
-      const double frac = s.back() > 0 ? s[imax] / s.back() : 0.5;
-      std::string lo = "medial", hi = "lateral";
-      if (l.along == "right-left") lo = "right", hi = "left";
-      if (l.along == "inferior-superior") lo = "inferior", hi = "superior";
-      d.where = (frac < 1.0 / 3 ? lo : frac > 2.0 / 3 ? hi : std::string("middle")) + " third";
-    }
-    std::ostringstream num;
-    num << std::fixed << std::setprecision(1) << d.max_mm;
-    d.sentence = who + " is pulled " + num.str() + " mm " + d.direction +
-                 (whole ? " along its whole length" : " at its " + d.where);
-    if (l.along == "point") d.sentence = who + " is pulled " + num.str() + " mm " + d.direction;
-    // Warnings: every threshold of this feature that is passed.
-    for (const auto& t : clinical_thresholds()) {
-      if (l.name.rfind(t.feature, 0) != 0) continue;
-      double v = 0;
-      std::string how;
-      if (t.direction == "down") v = max_down, how = "down";
-      else if (t.direction == "up") v = max_up, how = "up";
-      else if (t.direction == "vertical")
-        v = std::max(max_down, max_up), how = max_down >= max_up ? "down" : "up";
-      else v = d.max_mm, how = d.direction;
-      if (v < t.threshold_mm) continue;
-      std::ostringstream w1;
-      w1 << std::fixed << std::setprecision(1) << who << " moves " << v << " mm " << how
-         << " (at " << t.threshold_mm << " mm: " << t.risk << "; " << t.source << ")";
-      if (!d.warning.empty()) d.warning += "; ";
-      d.warning += w1.str();
-    }
-    out.push_back(d);
-  }
-  return out;
-}
-
-std::string feature_displacements_summary(const std::vector<FeatureDisplacement>& ds) {
-  const FeatureDisplacement* most = nullptr;
-  int warned = 0;
-  for (const auto& d : ds) {
-    if (!d.has_value) continue;
-    if (!d.warning.empty()) ++warned;
-    if (!most || d.max_mm > most->max_mm) most = &d;
-  }
-  if (!most) return {};
-  std::string s = most->sentence;
-  if (warned > 0) s += cat("; ", warned, warned == 1 ? " feature warning" : " feature warnings");
-  return s;
-}
-
-std::string feature_displacements_to_json(const std::vector<FeatureDisplacement>& ds) {
-  auto r3 = [](double x) { return std::round(x * 1000.0) / 1000.0; };
-  json a = json::array();
-  for (const auto& d : ds) {
-    json o = {{"name", d.name}, {"found", d.found}, {"has_value", d.has_value},
-              {"sentence", d.sentence}};
-    if (d.has_value) {
-      o["max_mm"] = r3(d.max_mm);
-      o["mean_mm"] = r3(d.mean_mm);
-      o["direction_lps"] = {r3(d.max_lps[0]), r3(d.max_lps[1]), r3(d.max_lps[2])};
-      o["at_lps"] = {r3(d.max_at_lps[0]), r3(d.max_at_lps[1]), r3(d.max_at_lps[2])};
-      o["components_mm"] = {{"up", r3(d.up_mm)}, {"lateral", r3(d.lateral_mm)},
-                            {"forward", r3(d.forward_mm)}};
-      o["direction"] = d.direction;
-      o["where"] = d.where;
-      o["points_with_value"] = d.n_with_value;
-    } else {
-      o["max_mm"] = nullptr;
-      o["mean_mm"] = nullptr;
-    }
-    o["points"] = d.n_points;
-    if (!d.warning.empty()) o["warning"] = d.warning;
-    a.push_back(o);
-  }
-  return a.dump(-1, ' ', false, json::error_handler_t::replace);
 }
 
 }  // namespace caps

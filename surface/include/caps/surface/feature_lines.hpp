@@ -27,8 +27,8 @@ namespace caps {
 
 /// One feature line on a model's skin.
 struct FeatureLine {
-  std::string name;       ///< e.g. "lower_eyelid_margin_left", "eyebrow_right" (feature_line_names())
-  bool found = false;     ///< false: absent, `note` says why
+  std::string name;    ///< e.g. "lower_eyelid_margin_left", "eyebrow_right" (feature_line_names())
+  bool found = false;  ///< false: absent, `note` says why
   /// "left" or "right" (the patient's) for a paired line, "midline" for a lip border.
   std::string side;
   /// How its thirds are named: "medial-lateral" (brows, eyelids: points from medial to lateral),
@@ -37,9 +37,9 @@ struct FeatureLine {
   std::string along;
   std::vector<Eigen::Vector2d> theta_z;  ///< (theta deg, z mm) on the model's cylinder
   std::vector<Eigen::Vector3d> lps;      ///< the skin points, LPS mm (one per theta_z)
-  double confidence = 0;  ///< 0..1: how clearly and continuously the skin shows it
-  std::string method;     ///< what was searched where (the window, the criterion)
-  std::string note;       ///< why it is absent, or what limits it
+  double confidence = 0;                 ///< 0..1: how clearly and continuously the skin shows it
+  std::string method;                    ///< what was searched where (the window, the criterion)
+  std::string note;                      ///< why it is absent, or what limits it
 };
 
 /// The feature lines of one model, in the order of feature_line_names().
@@ -114,8 +114,8 @@ struct ClinicalThreshold {
   std::string feature;    ///< the line names it applies to start with this ("lower_eyelid_margin")
   std::string direction;  ///< "down", "up", "vertical" (either), "any" (the whole displacement)
   double threshold_mm = 0;
-  std::string risk;       ///< what it risks ("scleral show, ectropion")
-  std::string source;     ///< author year, journal; or "no source found; a rule of thumb"
+  std::string risk;    ///< what it risks ("scleral show, ectropion")
+  std::string source;  ///< author year, journal; or "no source found; a rule of thumb"
 };
 
 /// The thresholds caps warns at, one or more per feature (docs/landmarks.md).
@@ -127,8 +127,8 @@ struct FeatureDisplacement {
   bool found = false;      ///< the line was found on the model
   bool has_value = false;  ///< the field has a value at one of its points at least
   int n_points = 0, n_with_value = 0;
-  double max_mm = 0;   ///< the largest displacement's length
-  double mean_mm = 0;  ///< the mean length over the line (weighted by arc length)
+  double max_mm = 0;                    ///< the largest displacement's length
+  double mean_mm = 0;                   ///< the mean length over the line (weighted by arc length)
   Eigen::Vector3d max_lps{0, 0, 0};     ///< the largest displacement (mm, LPS)
   Eigen::Vector3d max_at_lps{0, 0, 0};  ///< where on the line it is (LPS mm)
   /// The largest displacement's components in the anatomical frame (mm): up, lateral (away from
