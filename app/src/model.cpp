@@ -12,9 +12,11 @@
 #include "caps/surface/color_picture.hpp"
 #include "caps/surface/cylindrical_scan.hpp"
 #include "caps/plan/placement.hpp"
+#include "caps/surface/feature_lines.hpp"
 #include "caps/surface/landmarks.hpp"
 #include "caps/surface/picking.hpp"
 #include "caps/volume/mesh_io.hpp"
+#include "caps/volume/model_dir.hpp"
 #include "caps/volume/read_volume.hpp"
 #include "json_fields.hpp"
 #include "numbers.hpp"
@@ -32,9 +34,11 @@ CAPS_APP_REQUEST_JSON(caps::app::ColorPictureRequest)
 CAPS_APP_REQUEST_JSON(caps::app::VolumeInfoRequest)
 CAPS_APP_REQUEST_JSON(caps::app::PhantomRequest)
 CAPS_APP_REQUEST_JSON(caps::app::LandmarksRequest)
+CAPS_APP_REQUEST_JSON(caps::app::FeaturesRequest)
 CAPS_APP_REQUEST_JSON(caps::app::SiteRequest)
 CAPS_APP_RESULT_JSON(caps::app::ModelResult)
 CAPS_APP_RESULT_JSON(caps::app::LandmarksResult)
+CAPS_APP_RESULT_JSON(caps::app::FeaturesResult)
 CAPS_APP_RESULT_JSON(caps::app::SiteResult)
 CAPS_APP_RESULT_JSON(caps::app::PickResult)
 CAPS_APP_RESULT_JSON(caps::app::PathResult)
@@ -61,6 +65,8 @@ Landmarks add_landmarks(const std::string& dir, Reporter* reporter) {
   write_model_landmarks(dir, landmarks_to_json(l));
   for (const auto& item : l.items)
     if (!item.found) note(reporter, cat("landmark ", item.name, " absent: ", item.note));
+  // The feature lines beside them: a few hundred curvature samples per line, cheap.
+  write_model_features(dir, feature_lines_to_json(find_feature_lines(model, l)));
   return l;
 }
 
@@ -338,6 +344,39 @@ LandmarksResult run_model_landmarks(const LandmarksRequest& r, Reporter* reporte
 std::string summary(const LandmarksResult& r) {
   std::string s = r.table;
   while (!s.empty() && s.back() == '\n') s.pop_back();
+  return s;
+}
+
+FeaturesResult run_model_features(const FeaturesRequest& r, Reporter* reporter) {
+  FeaturesResult out;
+  out.model = r.model;
+  const PatientModel model = PatientModel::load(r.model);
+  const ModelInfo info = read_model_info(r.model);
+  const Landmarks l = info.landmarks_json.empty()
+                          ? find_landmarks(model)
+                          : landmarks_from_json(info.landmarks_json,
+                                                (fs::path(r.model) / model_file::kJson).string());
+  const FeatureLines lines = find_feature_lines(model, l);
+  for (const auto& item : lines.items)
+    if (!item.found) note(reporter, cat("feature line ", item.name, " absent: ", item.note));
+  out.features_json = feature_lines_to_json(lines);
+  out.table = feature_lines_table(lines);
+  if (!r.no_write) {
+    write_model_features(r.model, out.features_json);
+    out.written = true;
+  }
+  if (!r.picture.empty()) {
+    write_feature_lines_png(r.picture, model, l, lines,
+                            cat("Feature lines on the skin, ", fs::path(r.model).filename().string()));
+    out.picture = r.picture;
+  }
+  return out;
+}
+
+std::string summary(const FeaturesResult& r) {
+  std::string s = r.table;
+  while (!s.empty() && s.back() == '\n') s.pop_back();
+  if (!r.picture.empty()) s += "\npicture: " + r.picture;
   return s;
 }
 

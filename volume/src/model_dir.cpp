@@ -179,6 +179,7 @@ json to_json(const ModelInfo& info) {
   j["meshes"] = {{"skin", mesh_json(info.skin)}, {"bone", mesh_json(info.bone)}};
   if (!info.content_hash.empty()) j["content_hash"] = info.content_hash;
   if (!info.landmarks_json.empty()) j["landmarks"] = parse_object(info.landmarks_json, "landmarks");
+  if (!info.features_json.empty()) j["features"] = parse_object(info.features_json, "features");
   j["warnings"] = info.warnings;
   return j;
 }
@@ -286,6 +287,8 @@ ModelInfo read_model_info_fields(const fs::path& dir) {
       if (w.is_string()) info.warnings.push_back(w.get<std::string>());
   if (j.contains("landmarks") && j["landmarks"].is_object())
     info.landmarks_json = j["landmarks"].dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+  if (j.contains("features") && j["features"].is_object())
+    info.features_json = j["features"].dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   return info;
 }
 
@@ -295,6 +298,15 @@ void write_model_landmarks(const fs::path& dir, const std::string& landmarks_jso
   ModelInfo info = read_model_info(dir);
   parse_object(landmarks_json, "landmarks");
   info.landmarks_json = landmarks_json;
+  write_text_atomic(dir / model_file::kJson, model_json_text(info));
+}
+
+void write_model_features(const fs::path& dir, const std::string& features_json) {
+  ModelInfo info = read_model_info(dir);
+  if (!parse_object(features_json, "features").is_object())
+    throw InvalidInput(cat(dir.string(), ": the features to write into model.json are not a "
+                           "JSON object"));
+  info.features_json = features_json;
   write_text_atomic(dir / model_file::kJson, model_json_text(info));
 }
 

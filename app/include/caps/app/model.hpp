@@ -328,6 +328,47 @@ LandmarksResult run_model_landmarks(const LandmarksRequest& request, Reporter* r
 std::string to_json(const LandmarksResult& result);
 std::string summary(const LandmarksResult& result);
 
+// ---- caps model features ------------------------------------------------------------------
+
+struct FeaturesRequest {
+  std::string model;
+  bool no_write = false;
+  std::string picture;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "a model directory", FieldKind::Positional, "MODEL_DIR"});
+    v(r.no_write, {"no_write", "print the feature lines without writing them into model.json",
+                   FieldKind::Flag});
+    v(r.picture, {"picture", "also draw the lines and the landmarks on a front view of the "
+                             "skin into this PNG (e.g. MODEL_DIR/features.png)"});
+  }
+};
+
+/// The feature lines on a model's skin (surface/feature_lines.hpp), as model.json stores them.
+struct FeaturesResult {
+  std::string model;
+  std::string features_json;  ///< model.json's "features" object
+  std::string table;          ///< feature_lines_table(): one line per feature
+  bool written = false;       ///< model.json was updated
+  std::string picture;        ///< the PNG drawn, or empty
+  std::vector<std::string> warnings;
+
+  /// The JSON is model.json's "features" object with the model, written, picture and warnings.
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v.document(r.features_json, {"features_json", "model.json's \"features\""});
+    v(r.model, {"model"});
+    v(r.written, {"written", "model.json was updated"});
+    v(r.picture, {"picture", "the PNG drawn, or empty"});
+    v(r.warnings, {"warnings"});
+  }
+};
+/// Finds the feature lines of a model beside its landmarks (found again if model.json has none)
+/// and (unless no_write) writes them into its model.json.
+FeaturesResult run_model_features(const FeaturesRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const FeaturesResult& result);
+std::string summary(const FeaturesResult& result);
+
 // ---- caps model site ----------------------------------------------------------------------
 
 struct SiteRequest {

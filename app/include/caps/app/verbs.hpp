@@ -94,6 +94,12 @@ void for_each_verb(F&& f) {
          "pogonion,\nzygion, exocanthion, tragion; docs/landmarks.md), write them into its "
          "model.json and print them.\nExample: caps model landmarks cranium",
          &run_model_landmarks, Answer::Printed});
+  f(Verb{"model features",
+         "Find the feature lines on a model's skin (brows, eyelid margins, lip vermilion borders,\n"
+         "oral commissures, alar rims; docs/landmarks.md) beside its landmarks, write them into "
+         "its\nmodel.json and print them.\nExample: caps model features cranium --picture "
+         "cranium/features.png",
+         &run_model_features, Answer::Printed});
   f(Verb{"model site",
          "Print the skin point and the soft tissue (thickness, layers) at a place on a model,\n"
          "given as THETA,Z or relative to a landmark.\n"

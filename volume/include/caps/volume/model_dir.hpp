@@ -92,6 +92,9 @@ struct ModelInfo {
   /// "landmarks": the anatomical landmarks found on the skin (surface/landmarks.hpp), as JSON
   /// text; empty for a model without them (written before they existed).
   std::string landmarks_json;
+  /// "features": the feature lines found on the skin (surface/feature_lines.hpp), as JSON text;
+  /// empty for a model without them.
+  std::string features_json;
 
   /// source.kind; "volume" if absent.
   std::string source_kind() const;
@@ -155,6 +158,10 @@ void write_model_directory(const ModelContent& model, const ModelProvenance& pro
 /// (JSON text) and rewrites model.json atomically; nothing else changes. Throws as
 /// read_model_info(), InvalidInput for text that is not a JSON object.
 void write_model_landmarks(const std::filesystem::path& dir, const std::string& landmarks_json);
+
+/// Replaces model.json's "features" object (the feature lines, JSON text) as
+/// write_model_landmarks() does the landmarks; nothing else changes.
+void write_model_features(const std::filesystem::path& dir, const std::string& features_json);
 
 /// A few human-readable lines summarising a model directory.
 std::string model_summary(const std::filesystem::path& dir);
