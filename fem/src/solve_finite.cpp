@@ -91,9 +91,9 @@ class FiniteProblem {
     const FiniteAssembly a = assemble_finite(mesh_, map_, materials_, u, load_lambda, lift, true,
                                              sys, unit_lift, prestretch_at(load_lambda));
     if (a.inverted_element < 0) {
-      const double sliding = add_sliding_supports(mesh_, map_, lift.size() ? Eigen::VectorXd(u + lift) : u,
-                                                  true, sys, unit_lift);
-      if (energy) *energy = a.energy_mj + sliding;
+      const double sliding = add_sliding_supports(mesh_, map_, u, lift, true, true, sys, unit_lift);
+      const double tied = add_ties(mesh_, map_, u, lift, true, sys, unit_lift);
+      if (energy) *energy = a.energy_mj + sliding + tied;
     }
     if (a.inverted_element >= 0)
       return Failure{inverted_message(a.inverted_element, a.inverted_gauss_point, a.det_F),
