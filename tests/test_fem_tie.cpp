@@ -55,7 +55,7 @@ struct TiedBlocks {
   std::vector<int> slaves;
 };
 
-TiedBlocks tied_blocks() {
+TiedBlocks tied_blocks(TieMethod method = TieMethod::Mortar) {
   TiedBlocks t;
   Mesh bottom = box({4, 4, 2}, {2, 2, 1});
   const Mesh top = box({4, 4, 2}, {3, 3, 1});
@@ -73,8 +73,9 @@ TiedBlocks tied_blocks() {
   for (std::size_t e = 0; e < bottom.elements.size(); ++e) masters.push_back(static_cast<int>(e));
   for (int i = t.n_bottom_nodes; i < m.n_nodes(); ++i)
     if (std::abs(m.nodes(i, 2) - 2) < 1e-12) t.slaves.push_back(i);
-  const TieSearchResult found = tie_nodes(m, t.slaves, masters, 1e-6);
+  const TieSearchResult found = tie_nodes(m, t.slaves, masters, 1e-6, method);
   EXPECT_TRUE(found.unmatched.empty());
+  EXPECT_EQ(found.n_mortar, method == TieMethod::Mortar ? static_cast<int>(t.slaves.size()) : 0);
   EXPECT_EQ(found.ties.size(), t.slaves.size());
   m.ties = found.ties;
   return t;
@@ -216,68 +217,72 @@ TEST(Tie, TheSearchInvertsACurvedElementAndProjectsOntoTheNearestWithinTheTolera
 
 TEST(Tie, UniaxialTensionAcrossANonMatchingInterfaceIsUniform) {
   // Patch test: 2 x 2 cells tied to 3 x 3 on the shared face, pulled 0.2 mm (5 %) in z across
-  // it. Quadratic elements hold the uniform state exactly and the tie's weights interpolate it
-  // exactly, so the answer is the analytic one: small strain u = eps (-nu (x - 2), -nu (y - 2),
-  // z), sigma_zz = E eps everywhere; finite strain (neo-Hookean) the homogeneous stretch.
+  // it. Quadratic elements hold the uniform state exactly and the mortar rows pass it across
+  // the interface, so the answer is the analytic one to the penalty's give: small strain u =
+  // eps (-nu (x - 2), -nu (y - 2), z), sigma_zz = E eps everywhere; finite strain (neo-Hookean)
+  // the homogeneous stretch. Node-to-surface ties (CalculiX's *TIE) do not pass it: the top
+  // block's consistent nodal forces, sent to the masters at the slaves' positions, are not the
+  // bottom block's, and the stress near the interface is off by a quarter.
   const double delta = 0.2, L = 4;
   for (const bool finite_strain : {false, true}) {
     SCOPED_TRACE(finite_strain ? "finite strain" : "small strain");
-    TiedBlocks t = tied_blocks();
-    uniaxial_supports(t.mesh, delta);
-    const SolveResult r = solve(t.mesh, finite_strain ? finite() : SolveOptions{});
     double lt = 1 - kNu * delta / L, sigma = kE * delta / L;
     if (finite_strain) std::tie(lt, sigma) = neo_hookean_uniaxial(1 + delta / L);
-    double max_err = 0;
-    for (int i = 0; i < t.mesh.n_nodes(); ++i) {
-      const Eigen::Vector3d x = t.mesh.nodes.row(i).transpose();
-      const Eigen::Vector3d u((lt - 1) * (x.x() - 2), (lt - 1) * (x.y() - 2), delta / L * x.z());
-      max_err = std::max(max_err, (r.displacement_mm.row(i).transpose() - u).norm());
+    for (const TieMethod method : {TieMethod::Mortar, TieMethod::NodeToSurface}) {
+      const bool mortar = method == TieMethod::Mortar;
+      TiedBlocks t = tied_blocks(method);
+      uniaxial_supports(t.mesh, delta);
+      const SolveResult r = solve(t.mesh, finite_strain ? finite() : SolveOptions{});
+      double max_err = 0;
+      for (int i = 0; i < t.mesh.n_nodes(); ++i) {
+        const Eigen::Vector3d x = t.mesh.nodes.row(i).transpose();
+        const Eigen::Vector3d u((lt - 1) * (x.x() - 2), (lt - 1) * (x.y() - 2), delta / L * x.z());
+        max_err = std::max(max_err, (r.displacement_mm.row(i).transpose() - u).norm());
+      }
+      double stress_err = 0;
+      for (Eigen::Index g = 0; g < r.gauss_stress_mpa.rows(); ++g) {
+        Vector6d expected = Vector6d::Zero();
+        expected[2] = sigma;
+        stress_err = std::max(stress_err, (r.gauss_stress_mpa.row(g).transpose() - expected).norm());
+      }
+      std::cout << (finite_strain ? "finite" : "small") << " strain, "
+                << (mortar ? "mortar" : "node-to-surface") << ": max |u - exact| " << max_err
+                << " mm of " << delta << ", stress " << stress_err << " MPa of " << sigma
+                << ", tie force " << r.tie_force_n.transpose() << " N, largest gap "
+                << r.tie_gap_max_mm << " mm, precision " << r.precision
+                << (r.fell_back_to_double ? " (fell back)" : "") << "\n";
+      if (!mortar) {
+        EXPECT_GT(stress_err, 0.1 * sigma);
+        continue;
+      }
+      EXPECT_LT(max_err, 1e-6 * delta);
+      EXPECT_LT(stress_err, 1e-5 * sigma);
+      // The tie carries the whole load: the force on the top block's face is -sigma a (a: the
+      // deformed area).
+      const double force = sigma * 16 * (finite_strain ? lt * lt : 1.0);
+      EXPECT_NEAR(r.tie_force_n.z(), -force, 1e-5 * force);
+      EXPECT_NEAR(r.tie_force_n.head<2>().norm(), 0, 1e-7 * force);
+      EXPECT_LT(r.tie_gap_max_mm, 1e-6 * delta);  // the penalty gives way by < 1e-6
     }
-    EXPECT_LT(max_err, 1e-8 * delta);
-    double stress_err = 0;
-    for (Eigen::Index g = 0; g < r.gauss_stress_mpa.rows(); ++g) {
-      Vector6d expected = Vector6d::Zero();
-      expected[2] = sigma;
-      stress_err = std::max(stress_err, (r.gauss_stress_mpa.row(g).transpose() - expected).norm());
-    }
-    EXPECT_LT(stress_err, 1e-7 * sigma);
-    // The tie carries the whole load: the force on the top block's face is -sigma A.
-    EXPECT_NEAR(r.tie_force_n.z(), -sigma * 16 * (finite_strain ? lt * lt : 1.0), 1e-7 * sigma * 16);
-    EXPECT_NEAR(r.tie_force_n.head<2>().norm(), 0, 1e-9 * sigma * 16);
-    EXPECT_LT(r.tie_gap_max_mm, 1e-9 * delta);
-    std::cout << (finite_strain ? "finite" : "small") << " strain: max |u - exact| " << max_err
-              << " mm, stress " << stress_err << " MPa, tie force " << r.tie_force_n.transpose()
-              << " N, precision " << r.precision << (r.fell_back_to_double ? " (fell back)" : "")
-              << "\n";
   }
 }
 
-TEST(Tie, AGeneralLinearFieldPassesTheTiedInterface) {
-  // Every outer node but the slaves is given u = A x (stretch, shear and rotation; small and,
-  // as the homogeneous deformation F = I + A, finite strain); the interface's interior nodes
-  // and the slaves are free or tied. The exact answer is u = A x at every node.
+TEST(Tie, TheRowsHoldEveryLinearField) {
+  // Kinematics of the rows: for u = A x (stretch, shear, rotation) every tie's gap u_s - sum w
+  // u_m is zero (both faces reproduce linear fields and the weights sum to 1), mortar and
+  // node-to-surface.
   Eigen::Matrix3d A;
   A << 0.02, 0.015, -0.01, 0.005, -0.01, 0.02, 0.01, -0.015, 0.03;
-  for (const bool finite_strain : {false, true}) {
-    SCOPED_TRACE(finite_strain ? "finite strain" : "small strain");
-    TiedBlocks t = tied_blocks();
-    std::vector<char> slave(t.mesh.n_nodes(), 0);
-    for (int s : t.slaves) slave[s] = 1;
-    for (int i = 0; i < t.mesh.n_nodes(); ++i) {
-      const Eigen::Vector3d x = t.mesh.nodes.row(i).transpose();
-      const bool outer = x.x() < 1e-12 || x.x() > 4 - 1e-12 || x.y() < 1e-12 || x.y() > 4 - 1e-12 ||
-                         x.z() < 1e-12 || x.z() > 4 - 1e-12;
-      if (!outer || slave[i]) continue;
-      for (int c = 0; c < 3; ++c) t.mesh.fixed_dofs.push_back({i, c, (A * x)[c]});
+  for (const TieMethod method : {TieMethod::Mortar, TieMethod::NodeToSurface}) {
+    const TiedBlocks t = tied_blocks(method);
+    double worst = 0;
+    for (const TiedNode& tie : t.mesh.ties) {
+      Eigen::Vector3d gap = A * t.mesh.nodes.row(tie.node).transpose();
+      for (std::size_t k = 0; k < tie.masters.size(); ++k)
+        gap -= tie.weights[k] * A * t.mesh.nodes.row(tie.masters[k]).transpose();
+      worst = std::max(worst, gap.norm());
     }
-    const SolveResult r = solve(t.mesh, finite_strain ? finite(2) : SolveOptions{});
-    double max_err = 0, max_u = 0;
-    for (int i = 0; i < t.mesh.n_nodes(); ++i) {
-      const Eigen::Vector3d u = A * t.mesh.nodes.row(i).transpose();
-      max_err = std::max(max_err, (r.displacement_mm.row(i).transpose() - u).norm());
-      max_u = std::max(max_u, u.norm());
-    }
-    EXPECT_LT(max_err, 1e-8 * max_u);
+    EXPECT_LT(worst, 1e-13);
   }
 }
 

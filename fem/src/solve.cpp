@@ -347,16 +347,23 @@ void recover(const Mesh& mesh, const DofMap& map, const ElementRecoveryFn& eleme
     res.total_suture_force_n += d.norm() > 0 ? s.force_on_a_n.dot(d.normalized()) : s.magnitude_n;
     res.sum_suture_magnitudes_n += s.magnitude_n;
   }
-  // The ties' forces on their slaves, -k gap, from the penalty itself (at equilibrium each is
-  // the slave's reaction).
+  // The force the ties apply on the slave side, from the penalty itself: a tie's force on its
+  // nodes is -k c_a gap (c = 1 on the slave, -w on the others), which sums to zero over them;
+  // on the slave side (the slave and, in a mortar row, its face neighbours, which are slaves
+  // too) it is the opposite of that on the master nodes, -k gap sum of the master weights.
   res.tie_force_n.setZero();
   res.tie_gap_max_mm = 0;
+  std::vector<char> slave(static_cast<std::size_t>(n_nodes), 0);
+  for (const TiedNode& t : mesh.ties) slave[t.node] = 1;
   for (std::size_t i = 0; i < mesh.ties.size(); ++i) {
     const TiedNode& t = mesh.ties[i];
     Eigen::Vector3d gap = res.displacement_mm.row(t.node).transpose();
-    for (std::size_t a = 0; a < t.masters.size(); ++a)
+    double master_weight = 0;
+    for (std::size_t a = 0; a < t.masters.size(); ++a) {
       gap -= t.weights[a] * res.displacement_mm.row(t.masters[a]).transpose();
-    res.tie_force_n -= map.tie_stiffness[i] * gap;
+      if (!slave[t.masters[a]]) master_weight += t.weights[a];
+    }
+    res.tie_force_n -= map.tie_stiffness[i] * master_weight * gap;
     res.tie_gap_max_mm = std::max(res.tie_gap_max_mm, gap.norm());
   }
 }

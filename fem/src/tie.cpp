@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <unordered_map>
 
@@ -154,10 +155,138 @@ struct Box {
   }
 };
 
+// The mortar rows (tie.hpp): for every slave on a slave face (a face of an element outside the
+// masters whose nodes are all slaves), int_G N_s (u_slave - u_master) dA = 0 over its faces,
+// integrated on n x n sub-cells of each face with 3 x 3 Gauss points, each point's master value
+// taken at its nearest master point. A face with a point farther than the tolerance is left out.
+template <class Locate>
+void mortar_rows(const Mesh& mesh, const std::vector<int>& slaves, const std::vector<int>& master_elements,
+                 double tolerance_mm, double master_size, const Locate& locate,
+                 const std::unordered_map<int, std::size_t>& tie_of, TieSearchResult& out) {
+  const Eigen::Index n_nodes = mesh.n_nodes();
+  std::vector<char> is_slave(static_cast<std::size_t>(n_nodes), 0), is_master(mesh.elements.size(), 0);
+  for (int s : slaves) is_slave[s] = 1;
+  for (int e : master_elements) is_master[e] = 1;
+  std::unordered_map<int, ReferenceDomain> domains;
+  std::unordered_map<int, std::unordered_map<int, double>> M, D;  // slave -> slave' / master -> value
+  const double gauss[3] = {0.5 - std::sqrt(0.15), 0.5, 0.5 + std::sqrt(0.15)};
+  const double gw[3] = {5.0 / 18, 8.0 / 18, 5.0 / 18};
+  Eigen::VectorXd N, Nm;
+  Eigen::MatrixX3d dN, dNm;
+  for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
+    if (is_master[e]) continue;
+    const Element& el = mesh.elements[e];
+    bool touches = false;
+    for (int a = 0; a < el.n_nodes() && !touches; ++a) touches = is_slave[el.nodes[a]];
+    if (!touches) continue;
+    if (!domains.count(static_cast<int>(el.type))) domains.emplace(static_cast<int>(el.type), reference_domain(el.type));
+    const ReferenceDomain& dom = domains.at(static_cast<int>(el.type));
+    const Eigen::MatrixX3d P = natural_nodes(el.type);
+    const Eigen::MatrixX3d X = element_coordinates(mesh, static_cast<int>(e));
+    for (std::size_t f = 0; f < dom.a.size(); ++f) {
+      std::vector<int> face;  // local nodes on the facet
+      bool all_slaves = true;
+      for (int a = 0; a < el.n_nodes(); ++a)
+        if (std::abs(dom.a[f].dot(P.row(a).transpose()) - dom.b[f]) < 1e-9) {
+          face.push_back(a);
+          all_slaves = all_slaves && is_slave[el.nodes[a]];
+        }
+      if (!all_slaves || face.size() < 3) continue;
+      // The facet's corners (its nodes that are no midpoint of two others), in order around it.
+      std::vector<Eigen::Vector3d> corners;
+      for (int a : face) {
+        bool mid = false;
+        for (int b : face)
+          for (int c : face)
+            if (b < c && a != b && a != c && (P.row(a) - 0.5 * (P.row(b) + P.row(c))).norm() < 1e-9) mid = true;
+        if (!mid) corners.push_back(P.row(a).transpose());
+      }
+      if (corners.size() != 3 && corners.size() != 4) continue;
+      Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+      for (const auto& c : corners) centre += c / static_cast<double>(corners.size());
+      const Eigen::Vector3d u0 = (corners[0] - centre).normalized(), v0 = dom.a[f].cross(u0);
+      std::sort(corners.begin(), corners.end(), [&](const Eigen::Vector3d& p, const Eigen::Vector3d& q) {
+        return std::atan2((p - centre).dot(v0), (p - centre).dot(u0)) <
+               std::atan2((q - centre).dot(v0), (q - centre).dot(u0));
+      });
+      const bool quad = corners.size() == 4;
+      double face_size = 0;
+      for (int a : face)
+        for (int b : face) face_size = std::max(face_size, (X.row(a) - X.row(b)).norm());
+      const int n = std::clamp(static_cast<int>(std::ceil(4 * face_size / master_size)), 4, 16);
+      std::unordered_map<int, std::unordered_map<int, double>> Mf, Df;
+      bool matched = true;
+      for (int ci = 0; ci < n && matched; ++ci)
+        for (int cj = 0; cj < n && matched; ++cj)
+          for (int gi = 0; gi < 3 && matched; ++gi)
+            for (int gj = 0; gj < 3 && matched; ++gj) {
+              const double s = (ci + gauss[gi]) / n, t = (cj + gauss[gj]) / n, w = gw[gi] * gw[gj] / (n * n);
+              Eigen::Vector3d xi, xs, xt;
+              if (quad) {
+                xi = (1 - s) * (1 - t) * corners[0] + s * (1 - t) * corners[1] + s * t * corners[2] + (1 - s) * t * corners[3];
+                xs = (1 - t) * (corners[1] - corners[0]) + t * (corners[2] - corners[3]);
+                xt = (1 - s) * (corners[3] - corners[0]) + s * (corners[2] - corners[1]);
+              } else {  // the triangle as a collapsed square (Duffy): (s, t (1 - s))
+                xi = corners[0] + s * (corners[1] - corners[0]) + t * (1 - s) * (corners[2] - corners[0]);
+                xs = (corners[1] - corners[0]) - t * (corners[2] - corners[0]);
+                xt = (1 - s) * (corners[2] - corners[0]);
+              }
+              shape_functions(el.type, xi, N, dN);
+              const Eigen::Matrix3d J = X.transpose() * dN;
+              const double dA = (J * xs).cross(J * xt).norm() * w;
+              const Eigen::Vector3d x = X.transpose() * N;
+              Closest c;
+              const int mi = locate(x, -1, c);
+              if (mi < 0 || c.distance > tolerance_mm) {
+                matched = false;
+                break;
+              }
+              const Element& mel = mesh.elements[master_elements[mi]];
+              shape_functions(mel.type, c.xi, Nm, dNm);
+              for (int a : face) {
+                if (N[a] == 0) continue;
+                for (int b : face) Mf[el.nodes[a]][el.nodes[b]] += dA * N[a] * N[b];
+                for (int m = 0; m < mel.n_nodes(); ++m) Df[el.nodes[a]][mel.nodes[m]] += dA * N[a] * Nm[m];
+              }
+            }
+      if (!matched) continue;
+      for (auto& [row, entries] : Mf)
+        for (auto& [col, v] : entries) M[row][col] += v;
+      for (auto& [row, entries] : Df)
+        for (auto& [col, v] : entries) D[row][col] += v;
+    }
+  }
+  // Each slave's row, scaled so that its own coefficient is 1: u_s = sum_m (D_sm / M_ss) u_m -
+  // sum_{s' != s} (M_ss' / M_ss) u_s'; the weights sum to 1 (sum_m N_m = 1 at every point).
+  for (const auto& [s, row] : M) {
+    const auto found = tie_of.find(s);
+    const auto diagonal = row.find(s);
+    if (found == tie_of.end() || diagonal == row.end() || !(diagonal->second > 0)) continue;
+    const double mss = diagonal->second;
+    std::map<int, double> w;
+    for (const auto& [col, v] : row)
+      if (col != s) w[col] -= v / mss;
+    for (const auto& [col, v] : D[s]) w[col] += v / mss;
+    TiedNode t;
+    t.node = s;
+    double sum = 0;
+    for (const auto& [node, weight] : w)
+      if (std::abs(weight) >= kDropWeight && node != s) {
+        t.masters.push_back(node);
+        t.weights.push_back(weight);
+        sum += weight;
+      }
+    for (double& weight : t.weights) weight /= sum;
+    out.ties[found->second] = std::move(t);
+    ++out.n_mortar;
+  }
+}
+
 }  // namespace
 
 TieSearchResult tie_nodes(const Mesh& mesh, const std::vector<int>& slaves,
-                          const std::vector<int>& master_elements, double tolerance_mm) {
+                          const std::vector<int>& master_elements, double tolerance_mm,
+                          TieMethod method) {
   if (!(tolerance_mm >= 0) || !std::isfinite(tolerance_mm))
     throw InvalidInput(cat("tie: the tolerance ", tolerance_mm, " mm must be finite and >= 0"));
   const Eigen::Index n_nodes = mesh.n_nodes();
@@ -224,13 +353,14 @@ TieSearchResult tie_nodes(const Mesh& mesh, const std::vector<int>& slaves,
     return closest_point(el.type, domains.at(static_cast<int>(el.type)), element_coordinates(mesh, e), p);
   };
 
-  TieSearchResult out;
-  for (int s : slaves) {
-    const Eigen::Vector3d p = mesh.nodes.row(s).transpose();
-    Closest best;
+  // The nearest point of the master elements to p (not of an element using node `exclude`):
+  // the grid's candidates first, then, if none is within the tolerance, every element in order
+  // of its box's distance until the next box is farther than the best point found.
+  const auto locate = [&](const Eigen::Vector3d& p, int exclude, Closest& best) {
+    best = Closest{};
     int best_i = -1;
     const auto consider = [&](std::size_t i) {
-      if (uses(master_elements[i], s)) return;
+      if (exclude >= 0 && uses(master_elements[i], exclude)) return;
       const Closest c = try_element(i, p);
       // Equal distances (a point on a face two masters share) keep the first element.
       if (c.distance < best.distance - 1e-12) {
@@ -245,8 +375,6 @@ TieSearchResult tie_nodes(const Mesh& mesh, const std::vector<int>& slaves,
     for (int i : big)
       if (boxes[i].distance(p) == 0) consider(static_cast<std::size_t>(i));
     if (best_i < 0 || best.distance > tolerance_mm) {
-      // The nearest master element, exactly: elements in order of their box's distance until
-      // the next box is farther than the best point found.
       std::vector<std::pair<double, std::size_t>> order;
       for (std::size_t i = 0; i < boxes.size(); ++i) order.emplace_back(boxes[i].distance(p), i);
       std::sort(order.begin(), order.end());
@@ -255,6 +383,15 @@ TieSearchResult tie_nodes(const Mesh& mesh, const std::vector<int>& slaves,
         consider(i);
       }
     }
+    return best_i;
+  };
+
+  TieSearchResult out;
+  std::unordered_map<int, std::size_t> tie_of;  // slave -> its entry in out.ties
+  for (int s : slaves) {
+    const Eigen::Vector3d p = mesh.nodes.row(s).transpose();
+    Closest best;
+    const int best_i = locate(p, s, best);
     if (best_i < 0 || best.distance > tolerance_mm) {
       out.unmatched.push_back(s);
       out.unmatched_distance_mm.push_back(best.distance);
@@ -274,11 +411,13 @@ TieSearchResult tie_nodes(const Mesh& mesh, const std::vector<int>& slaves,
       }
     const double sum = std::accumulate(t.weights.begin(), t.weights.end(), 0.0);
     for (double& w : t.weights) w /= sum;
+    tie_of[s] = out.ties.size();
     out.ties.push_back(std::move(t));
     out.master_element.push_back(e);
     out.natural.push_back(best.xi);
     out.distance_mm.push_back(best.distance);
   }
+  if (method == TieMethod::Mortar) mortar_rows(mesh, slaves, master_elements, tolerance_mm, cell, locate, tie_of, out);
   return out;
 }
 

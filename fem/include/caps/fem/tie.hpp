@@ -10,6 +10,17 @@
 
 namespace caps::fem {
 
+/// How tie_nodes() ties a slave that lies on a face of slave nodes.
+enum class TieMethod {
+  /// The mortar condition int N_s (u_slave - u_master) dA = 0 over the slave's faces (a row
+  /// coupling the slave to its face neighbours and to the master nodes under those faces):
+  /// passes the patch test (a uniform stress crosses the interface exactly).
+  Mortar,
+  /// The slave's own displacement equals the master's at its position (CalculiX's *TIE for
+  /// quadratic elements): does not pass the patch test on non-matching quadratic faces.
+  NodeToSurface
+};
+
 /// What tie_nodes() found.
 struct TieSearchResult {
   std::vector<TiedNode> ties;           ///< one per slave that found a master, in input order
@@ -19,6 +30,7 @@ struct TieSearchResult {
   std::vector<int> unmatched;           ///< slaves with no master element within the tolerance
   /// per unmatched slave: its distance to the nearest master element (mm; infinity if none)
   std::vector<double> unmatched_distance_mm;
+  int n_mortar = 0;  ///< ties that are mortar rows (the others are node-to-surface)
 };
 
 /// Ties `slaves` to `master_elements` of `mesh` (any element type, through its shape functions):
@@ -33,6 +45,7 @@ struct TieSearchResult {
 /// @param tolerance_mm     >= 0: how far outside the master elements a slave may be
 /// Throws InvalidInput for ids out of range, repeated slaves or a negative tolerance.
 TieSearchResult tie_nodes(const Mesh& mesh, const std::vector<int>& slaves,
-                          const std::vector<int>& master_elements, double tolerance_mm);
+                          const std::vector<int>& master_elements, double tolerance_mm,
+                          TieMethod method = TieMethod::Mortar);
 
 }  // namespace caps::fem
