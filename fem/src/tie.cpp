@@ -68,7 +68,7 @@ ReferenceDomain reference_domain(ElementType type) {
 // it crosses (which joins the set), and a face whose multiplier pulls inwards leaves it. Inside
 // the element this is Newton's inversion of the map x(xi) = p.
 struct Closest {
-  Eigen::Vector3d xi;
+  Eigen::Vector3d xi = Eigen::Vector3d::Zero();
   double distance = INFINITY;
 };
 

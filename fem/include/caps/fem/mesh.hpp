@@ -90,15 +90,16 @@ struct SlidingNode {
   bool on_surface = false;
 };
 
-/// A node tied to a master element of a non-matching mesh (Abaqus's and CalculiX's *TIE): its
-/// displacement is sum_i weights[i] u_masters[i], the master element's shape functions at the
-/// slave's position (fem::tie_nodes() makes the entries; the weights sum to 1). Held by a
-/// penalty in both solves and written as exact *EQUATIONs to CalculiX (docs/fem.md, "Ties and
-/// sliding on the bone").
+/// A node tied to a non-matching mesh (Abaqus's and CalculiX's *TIE): u_node = sum_i
+/// weights[i] u_masters[i], the weights summing to 1. fem::tie_nodes() makes the entries: a
+/// mortar row (the masters are the master nodes under the slave's faces and its neighbours on
+/// those faces, which are slaves too) or the master element's shape functions at the slave's
+/// position. Held by a penalty in both solves and written as exact *EQUATIONs to CalculiX
+/// (docs/fem.md, "Ties and sliding on the bone").
 struct TiedNode {
   int node = 0;                  ///< the slave
-  std::vector<int> masters;      ///< master node ids (at most 20)
-  std::vector<double> weights;   ///< one per master, summing to 1
+  std::vector<int> masters;      ///< the other nodes of the row
+  std::vector<double> weights;   ///< one per master, summing to 1 (mortar rows: some negative)
 };
 
 /// The solver's input mesh.
