@@ -442,6 +442,9 @@ TEST(SlidingSurface, AStripPulledOverACylinderStaysOnItUnderFiniteStrain) {
     EXPECT_NEAR(cyl.distance(xp), std::sqrt(R * R + d * d) - R, 1e-5);
     EXPECT_NEAR(xp.z() - xc.z(), R - std::sqrt(R * R - d * d), 1e-3);
   }
+  // Put back on the surface after each correction, Newton converges about as fast as along
+  // the fixed normals (12 solves against 8; 39 without the projection).
+  EXPECT_LE(rc.newton_iterations, 2 * rp.newton_iterations);
   std::cout << "strip on a cylinder of " << R << " mm pulled " << d << " mm: |phi| at most "
             << worst_curved << " mm on the surface, " << worst_plane
             << " mm along the start normals; Newton iterations " << rc.newton_iterations << " / "
