@@ -251,6 +251,9 @@ TEST(Tie, UniaxialTensionAcrossANonMatchingInterfaceIsUniform) {
                 << ", tie force " << r.tie_force_n.transpose() << " N, largest gap "
                 << r.tie_gap_max_mm << " mm, precision " << r.precision
                 << (r.fell_back_to_double ? " (fell back)" : "") << "\n";
+      // Factored in double precision from the start, not after a failed single-precision try.
+      EXPECT_EQ(r.precision, "double");
+      EXPECT_FALSE(r.fell_back_to_double);
       if (!mortar) {
         EXPECT_GT(stress_err, 0.1 * sigma);
         continue;

@@ -157,8 +157,10 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   res.n_nonzeros = sys.K.nonZeros();
   Eigen::VectorXd q;
   {
+    // Ties' penalties leave single precision too few digits (docs/fem.md, "Ties and sliding on
+    // the bone"): a tied mesh is factored in double precision from the start.
     auto solver = detail::make_direct_solver(options.solver, options.mumps_ordering,
-                                             options.mixed_precision);
+                                             options.mixed_precision && mesh.ties.empty());
     try {
       auto analysis = std::async(options.threads == 1 ? std::launch::deferred : std::launch::async,
                                  [&] {

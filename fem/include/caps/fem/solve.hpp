@@ -101,7 +101,8 @@ struct SolveOptions {
   /// MUMPS only: factor in single precision and refine with conjugate gradients on the
   /// double-precision system to a relative residual of 1e-12 (faster: docs/benchmarks.md);
   /// falls back to a double-precision factorization by itself when that does not converge.
-  /// false = factor in double precision.
+  /// false = factor in double precision. A mesh with ties (Mesh::ties) is always factored in
+  /// double precision (their penalties leave single precision too few digits).
   bool mixed_precision = true;
   /// Threads for assembly and stress recovery (0 = all).
   int threads = 0;
