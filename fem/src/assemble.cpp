@@ -77,12 +77,41 @@ Csr colour_elements(const Mesh& mesh, const DofMap& map, const Csr& by_block) {
   return out;
 }
 
+// The distinct blocks of a tie's slave and masters.
+void tie_blocks(const TiedNode& t, const DofMap& map, std::vector<int>& out) {
+  out.clear();
+  for (std::size_t a = 0; a <= t.masters.size(); ++a) {
+    const int b = map.node_block[a == 0 ? t.node : t.masters[a - 1]];
+    if (b >= 0 && std::find(out.begin(), out.end(), b) == out.end()) out.push_back(b);
+  }
+}
+
+// Block -> ties touching it (their penalty couples the slave's block to the masters').
+Csr block_ties(const Mesh& mesh, const DofMap& map, int n_blocks) {
+  Csr c;
+  c.start.assign(n_blocks + 1, 0);
+  std::vector<int> blocks;
+  for (const TiedNode& t : mesh.ties) {
+    tie_blocks(t, map, blocks);
+    for (int b : blocks) ++c.start[b + 1];
+  }
+  for (int b = 0; b < n_blocks; ++b) c.start[b + 1] += c.start[b];
+  c.items.resize(c.start[n_blocks]);
+  std::vector<int> fill(c.start.begin(), c.start.end() - 1);
+  for (int i = 0; i < static_cast<int>(mesh.ties.size()); ++i) {
+    tie_blocks(mesh.ties[i], map, blocks);
+    for (int b : blocks) c.items[fill[b]++] = i;
+  }
+  return c;
+}
+
 }  // namespace
 
 Assembly assemble_structure(const Mesh& mesh, const DofMap& map) {
   const int n = map.n_eq;
   const int n_blocks = static_cast<int>(map.block_start.size()) - 1;
   const Csr by_block = block_elements(mesh, map, n_blocks);
+  const Csr ties_by_block = block_ties(mesh, map, n_blocks);
   Assembly out;
 
   // Block pattern: column block B couples to the blocks B' <= B of the elements touching it.
@@ -92,6 +121,7 @@ Assembly assemble_structure(const Mesh& mesh, const DofMap& map) {
   tbb::parallel_for(tbb::blocked_range<int>(0, n_blocks, 256), [&](const tbb::blocked_range<int>& r) {
     auto& mark = marks.local();
     int blocks[20];
+    std::vector<int> tied;
     for (int B = r.begin(); B < r.end(); ++B) {
       auto& c = cols[B];
       for (int k = by_block.start[B]; k < by_block.start[B + 1]; ++k) {
@@ -100,6 +130,14 @@ Assembly assemble_structure(const Mesh& mesh, const DofMap& map) {
           if (blocks[i] <= B && mark[blocks[i]] != B) {
             mark[blocks[i]] = B;
             c.push_back(blocks[i]);
+          }
+      }
+      for (int k = ties_by_block.start[B]; k < ties_by_block.start[B + 1]; ++k) {
+        tie_blocks(mesh.ties[ties_by_block.items[k]], map, tied);
+        for (int b : tied)
+          if (b <= B && mark[b] != B) {
+            mark[b] = B;
+            c.push_back(b);
           }
       }
       std::sort(c.begin(), c.end());
@@ -322,27 +360,91 @@ FiniteAssembly assemble_finite(const Mesh& mesh, const DofMap& map,
   return out;
 }
 
-double add_sliding_supports(const Mesh& mesh, const DofMap& map, const Eigen::VectorXd& w,
-                            bool with_tangent, Assembly& sys, Eigen::VectorXd* unit_lift) {
+double add_sliding_supports(const Mesh& mesh, const DofMap& map, const Eigen::VectorXd& u,
+                            const Eigen::VectorXd& lift, bool finite_strain, bool with_tangent,
+                            Assembly& sys, Eigen::VectorXd* unit_lift) {
   double energy = 0;
   for (const SlidingNode& s : mesh.sliding) {
     const Eigen::Index base = 3 * static_cast<Eigen::Index>(s.node);
-    const double k = s.stiffness_n_per_mm, wn = s.normal.dot(w.segment<3>(base));
-    energy += 0.5 * k * wn * wn;
-    const double gn = unit_lift ? s.normal.dot(map.g.segment<3>(base)) : 0.0;
+    const double k = s.stiffness_n_per_mm;
+    // The penalty's direction n, the force -k r n at u with the lifting term -k n (n . lift),
+    // and the tangent k n n^T: r = n . u along a fixed normal, r = phi(X + u) - phi(X) with n
+    // = grad phi(X + u) on the curved surface (the tangent then omits k r Hess phi, which
+    // vanishes as the penalty closes r; Wriggers 2006, Computational Contact Mechanics,
+    // sec. 6.2, neglects the same curvature term in its penalty contact tangent).
+    Eigen::Vector3d n;
+    double r;
+    if (s.on_surface && mesh.sliding_surface && finite_strain) {
+      const Eigen::Vector3d X = mesh.nodes.row(s.node).transpose();
+      n = mesh.sliding_surface->gradient(X + u.segment<3>(base));
+      r = mesh.sliding_surface->distance(X + u.segment<3>(base)) - mesh.sliding_surface->distance(X);
+    } else {
+      n = start_normal(mesh, s);
+      r = n.dot(u.segment<3>(base));
+    }
+    energy += 0.5 * k * r * r;
+    const double rl = r + (lift.size() ? n.dot(lift.segment<3>(base)) : 0.0);
+    const double gn = unit_lift ? n.dot(map.g.segment<3>(base)) : 0.0;
     for (int c = 0; c < 3; ++c) {
       const int ec = map.eq[base + c];
       if (ec < 0) continue;
-      sys.f[ec] -= k * wn * s.normal[c];
-      if (unit_lift) (*unit_lift)[ec] -= k * gn * s.normal[c];
+      sys.f[ec] -= k * rl * n[c];
+      if (unit_lift) (*unit_lift)[ec] -= k * gn * n[c];
       if (!with_tangent) continue;
       for (int d = c; d < 3; ++d) {
         const int ed = map.eq[base + d];
         if (ed < 0) continue;
-        const double v = k * s.normal[c] * s.normal[d];
+        const double v = k * n[c] * n[d];
         sys.K.coeffRef(std::min(ec, ed), std::max(ec, ed)) += v;
       }
     }
+  }
+  return energy;
+}
+
+double add_ties(const Mesh& mesh, const DofMap& map, const Eigen::VectorXd& u,
+                const Eigen::VectorXd& lift, bool with_tangent, Assembly& sys,
+                Eigen::VectorXd* unit_lift) {
+  double energy = 0;
+  std::vector<int> node, blk, eq;
+  std::vector<double> coef;
+  Eigen::MatrixXd Ke;
+  for (std::size_t i = 0; i < mesh.ties.size(); ++i) {
+    const TiedNode& t = mesh.ties[i];
+    const double k = map.tie_stiffness[i];
+    // gap = sum_a c_a u_a with c = (1, -w_1, ..., -w_n) over (slave, masters).
+    const int nn = static_cast<int>(t.masters.size()) + 1;
+    node.assign(1, t.node);
+    node.insert(node.end(), t.masters.begin(), t.masters.end());
+    coef.assign(1, 1.0);
+    for (double w : t.weights) coef.push_back(-w);
+    const auto gap_of = [&](const Eigen::VectorXd& v) {
+      Eigen::Vector3d g = Eigen::Vector3d::Zero();
+      for (int a = 0; a < nn; ++a) g += coef[a] * v.segment<3>(3 * static_cast<Eigen::Index>(node[a]));
+      return g;
+    };
+    const Eigen::Vector3d gap = gap_of(u);
+    energy += 0.5 * k * gap.squaredNorm();
+    const Eigen::Vector3d gl = lift.size() ? Eigen::Vector3d(gap + gap_of(lift)) : gap;
+    const Eigen::Vector3d gg = unit_lift ? gap_of(map.g) : Eigen::Vector3d::Zero();
+    eq.resize(3 * static_cast<std::size_t>(nn));
+    blk.resize(static_cast<std::size_t>(nn));
+    for (int a = 0; a < nn; ++a) {
+      blk[a] = map.node_block[node[a]];
+      for (int c = 0; c < 3; ++c) {
+        const int e = map.eq[3 * static_cast<std::size_t>(node[a]) + c];
+        eq[3 * a + c] = e;
+        if (e < 0) continue;
+        sys.f[e] -= k * coef[a] * gl[c];
+        if (unit_lift) (*unit_lift)[e] -= k * coef[a] * gg[c];
+      }
+    }
+    if (!with_tangent) continue;
+    Ke.setZero(3 * nn, 3 * nn);  // k (c c^T) ⊗ I
+    for (int a = 0; a < nn; ++a)
+      for (int b = 0; b < nn; ++b)
+        for (int c = 0; c < 3; ++c) Ke(3 * a + c, 3 * b + c) = k * coef[a] * coef[b];
+    scatter_matrix(sys, map, nn, blk.data(), eq.data(), Ke);
   }
   return energy;
 }

@@ -31,12 +31,26 @@ Assembly assemble_structure(const Mesh& mesh, const DofMap& map);
 /// colour in parallel over elements.
 void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys);
 
-/// The sliding supports' penalty springs (Mesh::sliding) at the full displacement w (3N, mm):
-/// T^T k n n^T T into K's values (with_tangent) and -T^T k (w_i . n) n into f; with `unit_lift`,
-/// also -T^T k (g_i . n) n for the offsets g = map.g. Returns their energy 1/2 k (w_i . n)^2 (mJ).
-/// The linear solve passes w = g (the lifting term), the finite-strain one w = u + lift.
-double add_sliding_supports(const Mesh& mesh, const DofMap& map, const Eigen::VectorXd& w,
-                            bool with_tangent, Assembly& sys, Eigen::VectorXd* unit_lift = nullptr);
+/// The sliding supports' penalty springs (Mesh::sliding) at the full displacement u (3N, mm),
+/// with the predictor's lifting term for `lift` (3N mm, or empty): each entry's -T^T k r n
+/// into f, minus T^T k n (n . lift), and T^T k n n^T T into K's values (with_tangent); with
+/// `unit_lift`, also -T^T k n (n . g) for the offsets g = map.g. Along a fixed normal (and for
+/// every entry in the small-strain solve, `finite_strain` false, with n = start_normal()) r =
+/// n . u; an entry on Mesh::sliding_surface in the finite-strain solve has r = phi(X + u) -
+/// phi(X) and n = grad phi(X + u). Returns their energy 1/2 k r^2 (mJ) at u.
+/// The linear solve passes u = g (the lifting term), the finite-strain one its state.
+double add_sliding_supports(const Mesh& mesh, const DofMap& map, const Eigen::VectorXd& u,
+                            const Eigen::VectorXd& lift, bool finite_strain, bool with_tangent,
+                            Assembly& sys, Eigen::VectorXd* unit_lift = nullptr);
+
+/// The ties' penalties (Mesh::ties, k = map.tie_stiffness) at the full displacement u (3N, mm):
+/// energy k/2 |gap|^2 with gap = u_s - sum w_i u_m_i; -T^T k c gap into f (c = (1, -w)), with
+/// the lifting term of `lift` (3N mm, or empty) as add_sliding_supports(), T^T k (c c^T ⊗ I) T
+/// into K's values (with_tangent; assemble_structure() has their pattern), and with `unit_lift`
+/// -T^T k c gap(g). Returns their energy (mJ) at u.
+double add_ties(const Mesh& mesh, const DofMap& map, const Eigen::VectorXd& u,
+                const Eigen::VectorXd& lift, bool with_tangent, Assembly& sys,
+                Eigen::VectorXd* unit_lift = nullptr);
 
 /// f += scale × T^T f_ext (the nodal loads, N).
 void add_loads(const Mesh& mesh, const DofMap& map, double scale, Eigen::VectorXd& f);

@@ -93,7 +93,65 @@ void check_rotations(const Mesh& mesh, const DofMap& m, UnionFind& part, const s
   }
 }
 
+// A tie holds a slave node of an element to nodes of other elements. Its slave is moved only by
+// the tie: a prescribed or sutured slave is refused (the CalculiX deck writes the tie as an
+// *EQUATION whose dependent dofs are the slave's, which may be neither prescribed nor another
+// equation's dependent; a sliding node's equation has one of its dofs as the dependent).
+void check_ties(const Mesh& mesh, const DofMap& m) {
+  if (mesh.ties.empty()) return;
+  std::vector<char> sliding(static_cast<std::size_t>(mesh.n_nodes()), 0);
+  for (const SlidingNode& s : mesh.sliding) sliding[s.node] = 1;
+  for (std::size_t i = 0; i < mesh.ties.size(); ++i) {
+    const TiedNode& t = mesh.ties[i];
+    if (!m.used[t.node])
+      throw InvalidInput(cat("tie ", i, ": slave node ", t.node, " is not part of any element; tie "
+                             "nodes of the mesh"));
+    for (int master : t.masters)
+      if (!m.used[master])
+        throw InvalidInput(cat("tie ", i, ": master node ", master, " is not part of any element"));
+    if (m.group[t.node] >= 0)
+      throw InvalidInput(cat("tie ", i, ": slave node ", t.node, " is also sutured; a tied node "
+                             "moves with its masters: suture other nodes or leave it untied"));
+    if (sliding[t.node])
+      throw InvalidInput(cat("tie ", i, ": slave node ", t.node, " also slides; a tied node "
+                             "moves with its masters: leave it untied or not sliding"));
+    for (int c = 0; c < 3; ++c)
+      if (m.eq[3 * static_cast<std::size_t>(t.node) + c] < 0)
+        throw InvalidInput(cat("tie ", i, ": slave node ", t.node, " (", kAxis[c], ") is also "
+                               "prescribed; a tied node moves with its masters: unfix it or leave "
+                               "it untied"));
+  }
+}
+
 }  // namespace
+
+Eigen::Vector3d start_normal(const Mesh& mesh, const SlidingNode& s) {
+  if (!s.on_surface || !mesh.sliding_surface) return s.normal;
+  return mesh.sliding_surface->gradient(mesh.nodes.row(s.node).transpose()).normalized();
+}
+
+std::vector<double> tie_penalties(const Mesh& mesh) {
+  if (mesh.ties.empty()) return {};
+  const Eigen::Index n = mesh.n_nodes();
+  Eigen::VectorXd node_scale = Eigen::VectorXd::Zero(n);  // largest E h of the node's elements (N/mm)
+  for (const Element& el : mesh.elements) {
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
+    for (int a = 0; a < el.n_nodes(); ++a) {
+      lo = lo.cwiseMin(mesh.nodes.row(el.nodes[a]).transpose());
+      hi = hi.cwiseMax(mesh.nodes.row(el.nodes[a]).transpose());
+    }
+    const double scale = mesh.materials.at(el.layer)->stiffness_scale_mpa() * (hi - lo).maxCoeff();
+    for (int a = 0; a < el.n_nodes(); ++a)
+      node_scale[el.nodes[a]] = std::max(node_scale[el.nodes[a]], scale);
+  }
+  std::vector<double> k(mesh.ties.size());
+  for (std::size_t i = 0; i < mesh.ties.size(); ++i) {
+    double scale = node_scale[mesh.ties[i].node];
+    for (int master : mesh.ties[i].masters) scale = std::max(scale, node_scale[master]);
+    k[i] = kTiePenalty * scale;
+  }
+  return k;
+}
 
 int equation_dof(const DofMap& map, int e) {
   for (std::size_t d = 0; d < map.eq.size(); ++d)
@@ -209,12 +267,19 @@ DofMap build_dof_map(const Mesh& mesh) {
     m.constrained[node] = m.used[node] && (m.group[node] >= 0 || m.eq[3 * node] < 0 ||
                                           m.eq[3 * node + 1] < 0 || m.eq[3 * node + 2] < 0);
 
-  // Every connected part (elements + sutures) needs support in x, y and z; rotations are
-  // caught later by the factorization.
+  check_ties(mesh, m);
+  m.tie_stiffness = tie_penalties(mesh);
+
+  // Every connected part (elements, sutures and ties) needs support in x, y and z, and against
+  // rotations (check_rotations). A tie holds no rigid motion of the parts it joins (u_s =
+  // sum w u_m for any rigid motion of both, the weights reproducing it), so it joins parts but
+  // adds no rows there.
   UnionFind part(n);
   for (const Element& el : mesh.elements)
     for (int a = 1; a < el.n_nodes(); ++a) part.unite(el.nodes[0], el.nodes[a]);
   for (const SuturePair& s : mesh.sutures) part.unite(s.a, s.b);
+  for (const TiedNode& t : mesh.ties)
+    for (int master : t.masters) part.unite(t.node, master);
   std::vector<int> support(3 * static_cast<std::size_t>(n), 0), size(n, 0);
   for (int node = 0; node < n; ++node) {
     if (!m.used[node]) continue;

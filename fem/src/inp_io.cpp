@@ -76,6 +76,35 @@ void write_elements_and_materials(std::ostream& os, const Mesh& mesh, const InpO
   }
 }
 
+// Ties: u_s - sum_i w_i u_m_i = 0 for each component, exact (caps holds them by a penalty that
+// gives way by about 1e-6 of the displacement); the slave's dof is the dependent one, which
+// solve() keeps free of prescriptions, sutures and sliding (constraints.cpp, check_ties).
+void write_tie_equations(std::ostream& os, const Mesh& mesh) {
+  if (mesh.ties.empty()) return;
+  os << "** ties (" << mesh.ties.size() << " slave nodes): u_slave - sum w u_master = 0\n";
+  for (const TiedNode& t : mesh.ties)
+    for (int c = 1; c <= 3; ++c) {
+      os << "*EQUATION\n" << t.masters.size() + 1 << "\n" << t.node + 1 << ", " << c << ", 1.";
+      for (std::size_t k = 0; k < t.masters.size(); ++k)
+        os << ((k + 1) % 4 == 0 ? ",\n" : ", ") << t.masters[k] + 1 << ", " << c << ", " << num(-t.weights[k]);
+      os << "\n";
+    }
+}
+
+// Entries sliding on a curved surface are written as their linearisation at the start.
+void write_sliding_surface_note(std::ostream& os, const Mesh& mesh, const InpOptions& options) {
+  long n = 0;
+  for (const SlidingNode& s : mesh.sliding) n += s.on_surface;
+  if (n == 0) return;
+  os << "** " << n << " nodes slide on the '" << mesh.sliding_surface_name
+     << "' surface: written as its linearisation at the start, n . u = 0 with n = grad phi(X) / "
+        "|grad phi(X)|"
+     << (options.finite_strain ? " (caps's finite-strain solve follows the curved surface: the "
+                                 "two differ by about d^2 / 2R for a slide d on a radius R)"
+                               : "")
+     << "\n";
+}
+
 }  // namespace
 
 std::string inp_text(const Mesh& mesh, const InpOptions& options) {
@@ -142,7 +171,10 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
   // support is written on those two: n . (u_root + u_helper) = 0.
   std::map<int, int> helper_of;
   for (std::size_t k = 0; k < members.size(); ++k) helper_of[members[k]] = N + static_cast<int>(k);
-  for (const SlidingNode& s : mesh.sliding) {
+  write_sliding_surface_note(os, mesh, options);
+  for (const SlidingNode& sliding : mesh.sliding) {
+    SlidingNode s = sliding;
+    s.normal = detail::start_normal(mesh, sliding);
     int first = 0;
     for (int c = 1; c < 3; ++c)
       if (std::abs(s.normal[c]) > std::abs(s.normal[first])) first = c;
@@ -162,6 +194,7 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
       }
     os << "\n";
   }
+  write_tie_equations(os, mesh);
   if (options.finite_strain) {
     // *STATIC: initial increment, step time, smallest and largest increment.
     const double inc = 1.0 / options.increments;

@@ -7,6 +7,45 @@
 
 namespace caps::fem {
 
+ImplicitSurface::~ImplicitSurface() = default;
+
+namespace {
+
+template <class CheckNode>
+void validate_ties(const Mesh& mesh, const std::string& where, const CheckNode& check_node) {
+  std::vector<char> slave(static_cast<std::size_t>(mesh.n_nodes()), 0);
+  for (std::size_t i = 0; i < mesh.ties.size(); ++i) {
+    const TiedNode& t = mesh.ties[i];
+    const auto item = [&] { return cat("tie ", i, " (slave node ", t.node, ")"); };
+    check_node(t.node, [&] { return cat("tie ", i); });
+    if (slave[t.node]++)
+      throw InvalidInput(cat(where, ": ", item(), " ties a node that an earlier tie already ties; "
+                             "tie each slave once"));
+    if (t.masters.empty() || t.masters.size() != t.weights.size())
+      throw InvalidInput(cat(where, ": ", item(), " has ", t.masters.size(), " masters and ",
+                             t.weights.size(), " weights; it needs one weight per master, at least one"));
+    double sum = 0;
+    for (std::size_t k = 0; k < t.masters.size(); ++k) {
+      check_node(t.masters[k], [&] { return cat(item(), " master ", k); });
+      if (t.masters[k] == t.node)
+        throw InvalidInput(cat(where, ": ", item(), " is tied to itself; a slave's masters are "
+                               "the nodes of another element"));
+      if (std::find(t.masters.begin(), t.masters.begin() + static_cast<long>(k), t.masters[k]) !=
+          t.masters.begin() + static_cast<long>(k))
+        throw InvalidInput(cat(where, ": ", item(), " names master node ", t.masters[k], " twice"));
+      if (!std::isfinite(t.weights[k]))
+        throw InvalidInput(cat(where, ": ", item(), " has a non-finite weight"));
+      sum += t.weights[k];
+    }
+    if (!(std::abs(sum - 1) <= 1e-6))
+      throw InvalidInput(cat(where, ": ", item(), " has weights summing to ", sum, ", not 1: the "
+                             "weights are the master element's shape functions at the slave "
+                             "(fem::tie_nodes())"));
+  }
+}
+
+}  // namespace
+
 void validate(const Mesh& mesh, const std::string& where) {
   const Eigen::Index n = mesh.n_nodes();
   if (n == 0) throw InvalidInput(cat(where, ": the mesh has no nodes"));
@@ -66,6 +105,17 @@ void validate(const Mesh& mesh, const std::string& where) {
       throw InvalidInput(cat(where, ": sliding node entry ", i, " (node ", s.node,
                              ") needs a unit normal and a stiffness in (0, 1e12] N/mm"));
   }
+  for (std::size_t i = 0; i < mesh.sliding.size(); ++i) {
+    const SlidingNode& s = mesh.sliding[i];
+    if (!s.on_surface || !mesh.sliding_surface) continue;
+    const Eigen::Vector3d x = mesh.nodes.row(s.node).transpose();
+    const Eigen::Vector3d g = mesh.sliding_surface->gradient(x);
+    if (!std::isfinite(mesh.sliding_surface->distance(x)) || !g.allFinite() || !(g.norm() > 1e-9))
+      throw InvalidInput(cat(where, ": sliding node entry ", i, " (node ", s.node, ") slides on the '",
+                             mesh.sliding_surface_name, "' surface, whose level set has no finite "
+                             "value or nonzero gradient there; the node is outside the field"));
+  }
+  validate_ties(mesh, where, check_node);
   for (std::size_t i = 0; i < mesh.loads.size(); ++i) {
     check_node(mesh.loads[i].node, [&] { return cat("load entry ", i); });
     if (!mesh.loads[i].force_n.allFinite())

@@ -1,5 +1,6 @@
 #include "caps/fem/mesh_io.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -12,6 +13,7 @@
 #include "caps/core/json_file.hpp"
 #include "caps/core/json_limits.hpp"
 #include "caps/fem/material_registry.hpp"
+#include "constraints.hpp"
 #include "vtu.hpp"
 
 namespace fs = std::filesystem;
@@ -150,6 +152,47 @@ VtuContent read_vtu(const fs::path& path) {
 
 }  // namespace detail
 
+namespace {
+
+// mesh.json "ties": [[slave, [masters], [weights]]]; "sliding_surface": the surface's name
+// (the surface itself is not stored: docs/fem.md, "Ties and sliding on the bone").
+void write_ties_and_surface(const Mesh& mesh, nlohmann::json& j) {
+  if (!mesh.ties.empty()) {
+    j["ties"] = nlohmann::json::array();
+    for (const TiedNode& t : mesh.ties) j["ties"].push_back({t.node, t.masters, t.weights});
+  }
+  const bool on_surface = std::any_of(mesh.sliding.begin(), mesh.sliding.end(),
+                                      [](const SlidingNode& s) { return s.on_surface; });
+  if (on_surface) j["sliding_surface"] = mesh.sliding_surface_name;
+}
+
+void read_ties_and_surface(const nlohmann::json& j, const std::string& jw, Mesh& mesh) {
+  const nlohmann::json ties = j.value("ties", nlohmann::json::array());
+  if (!ties.is_array()) throw InvalidInput(cat(jw, ": ties must be an array"));
+  for (std::size_t i = 0; i < ties.size(); ++i) {
+    const nlohmann::json& t = ties[i];
+    if (!t.is_array() || t.size() != 3 || !t[1].is_array() || !t[2].is_array())
+      throw InvalidInput(cat(jw, ": ties[", i, "] must be [slave, [masters], [weights]]"));
+    TiedNode tie;
+    tie.node = to_int(t[0].get<double>(), cat(jw, ": ties[", i, "][0]"));
+    for (std::size_t k = 0; k < t[1].size(); ++k)
+      tie.masters.push_back(to_int(t[1][k].get<double>(), cat(jw, ": ties[", i, "][1][", k, "]")));
+    for (const auto& w : t[2]) tie.weights.push_back(w.get<double>());
+    mesh.ties.push_back(std::move(tie));
+  }
+  const long n_on_surface = std::count_if(mesh.sliding.begin(), mesh.sliding.end(),
+                                          [](const SlidingNode& s) { return s.on_surface; });
+  if (n_on_surface == 0) return;
+  mesh.sliding_surface_name = j.value("sliding_surface", std::string());
+  const std::string note =
+      cat("the ", n_on_surface, " nodes sliding on the '", mesh.sliding_surface_name,
+          "' surface slide along their start normals: mesh.json does not store the surface");
+  if (std::find(mesh.warnings.begin(), mesh.warnings.end(), note) == mesh.warnings.end())
+    mesh.warnings.push_back(note);
+}
+
+}  // namespace
+
 void write_mesh_dir(const Mesh& mesh, const fs::path& dir) {
   validate(mesh, dir.string());
   const Eigen::Index n = mesh.n_nodes();
@@ -193,9 +236,15 @@ void write_mesh_dir(const Mesh& mesh, const fs::path& dir) {
   for (const SuturePair& s : mesh.sutures) j["sutures"].push_back({s.a, s.b});
   if (!mesh.sliding.empty()) {
     j["sliding_nodes"] = nlohmann::json::array();  // node, normal x y z, stiffness N/mm
-    for (const SlidingNode& s : mesh.sliding)
-      j["sliding_nodes"].push_back({s.node, s.normal.x(), s.normal.y(), s.normal.z(), s.stiffness_n_per_mm});
+    for (const SlidingNode& s : mesh.sliding) {
+      // An entry on the sliding surface: its start normal, and a sixth value 1.
+      const Eigen::Vector3d n = detail::start_normal(mesh, s);
+      nlohmann::json entry = {s.node, n.x(), n.y(), n.z(), s.stiffness_n_per_mm};
+      if (s.on_surface) entry.push_back(1);
+      j["sliding_nodes"].push_back(entry);
+    }
   }
+  write_ties_and_surface(mesh, j);
   if (!mesh.flaps.empty()) j["flaps"] = mesh.flaps;  // the elements of each raised flap
   j["model"] = mesh.model;
   j["plan"] = mesh.plan;
@@ -253,10 +302,13 @@ Mesh read_mesh_dir(const fs::path& dir) {
     for (const auto& s : entries("sutures"))
       mesh.sutures.push_back({integer(s.at(0), cat("sutures[", mesh.sutures.size(), "][0]")),
                               integer(s.at(1), cat("sutures[", mesh.sutures.size(), "][1]"))});
-    for (const auto& s : entries("sliding_nodes"))
+    for (const auto& s : entries("sliding_nodes")) {
       mesh.sliding.push_back({integer(s.at(0), cat("sliding_nodes[", mesh.sliding.size(), "][0]")),
                               Eigen::Vector3d(s.at(1).get<double>(), s.at(2).get<double>(), s.at(3).get<double>()),
                               s.at(4).get<double>()});
+      mesh.sliding.back().on_surface =
+          s.size() > 5 && integer(s.at(5), cat("sliding_nodes[", mesh.sliding.size() - 1, "][5]")) != 0;
+    }
     for (const auto& f : entries("flaps")) {
       if (!f.is_array()) throw InvalidInput(cat(jw, ": flaps[", mesh.flaps.size(), "] must be an array of element ids"));
       mesh.flaps.emplace_back();
@@ -265,6 +317,7 @@ Mesh read_mesh_dir(const fs::path& dir) {
     mesh.model = j.value("model", "");
     mesh.plan = j.value("plan", "");
     if (j.contains("warnings")) mesh.warnings = j.at("warnings").get<std::vector<std::string>>();
+    read_ties_and_surface(j, jw, mesh);
   } catch (const nlohmann::json::exception& e) {
     throw InvalidInput(cat(jw, ": missing or mistyped field: ", e.what()));
   }

@@ -171,8 +171,10 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   res.n_nonzeros = sys.K.nonZeros();
   Eigen::VectorXd q;
   {
+    // Ties' penalties leave single precision too few digits (docs/fem.md, "Ties and sliding on
+    // the bone"): a tied mesh is factored in double precision from the start.
     auto solver = detail::make_direct_solver(options.solver, options.mumps_ordering,
-                                             options.mixed_precision);
+                                             options.mixed_precision && mesh.ties.empty());
     try {
       auto analysis = std::async(options.threads == 1 ? std::launch::deferred : std::launch::async,
                                  [&] {
@@ -183,7 +185,8 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
       // One core for the analysis, the others for the values.
       tbb::task_arena arena(std::max(1, tbb::this_task_arena::max_concurrency() - 1));
       arena.execute([&] { detail::assemble_values(mesh, map, sys); });
-      detail::add_sliding_supports(mesh, map, map.g, true, sys);
+      detail::add_sliding_supports(mesh, map, map.g, {}, false, true, sys);
+      detail::add_ties(mesh, map, map.g, {}, true, sys);
       res.timings.assembly_s = seconds_since(t);
       res.timings.analysis_s = analysis.get();
       t = Clock::now();
@@ -302,6 +305,10 @@ void recover(const Mesh& mesh, const DofMap& map, const ElementRecoveryFn& eleme
   Eigen::MatrixX3d f_int = Eigen::MatrixX3d::Zero(n_nodes, 3);
   std::vector<double> energy(n_el, 0.0);
   std::vector<Eigen::MatrixXd> elem_nodal(n_el);
+  // The nodes whose reactions are reported: constrained, sliding and tied (slave) nodes.
+  std::vector<char> held(map.constrained);
+  for (const SlidingNode& s : mesh.sliding) held[s.node] = 1;
+  for (const TiedNode& t : mesh.ties) held[t.node] = 1;
   tbb::parallel_for(tbb::blocked_range<int>(0, n_el, 32), [&](const tbb::blocked_range<int>& rr) {
     ElementRecovery out;
     for (int e = rr.begin(); e < rr.end(); ++e) {
@@ -312,7 +319,7 @@ void recover(const Mesh& mesh, const DofMap& map, const ElementRecoveryFn& eleme
       energy[e] = out.energy_mj;
       elem_nodal[e] = out.nodal_stress;
       for (int a = 0; a < el.n_nodes(); ++a)
-        if (map.constrained[el.nodes[a]])
+        if (held[el.nodes[a]])
           for (int c = 0; c < 3; ++c)
             std::atomic_ref<double>(f_int(el.nodes[a], c)).fetch_add(out.f_int(a, c), std::memory_order_relaxed);
     }
@@ -335,10 +342,8 @@ void recover(const Mesh& mesh, const DofMap& map, const ElementRecoveryFn& eleme
     res.von_mises_mpa[i] = von_mises(s);
     res.max_principal_mpa[i] = max_principal(s);
   }
-  // Reactions: R = f_int - f_ext on constrained and sliding nodes (the force the supports and
-  // sutures apply; a sliding support's is along its normal).
-  std::vector<char> held(map.constrained);
-  for (const SlidingNode& s : mesh.sliding) held[s.node] = 1;
+  // Reactions: R = f_int - f_ext on constrained, sliding and tied nodes (the force the
+  // supports, sutures and ties apply; a sliding support's is along its normal).
   res.reaction_n = Eigen::MatrixX3d::Zero(n_nodes, 3);
   for (Eigen::Index i = 0; i < n_nodes; ++i)
     if (held[i]) res.reaction_n.row(i) = f_int.row(i);
@@ -357,6 +362,25 @@ void recover(const Mesh& mesh, const DofMap& map, const ElementRecoveryFn& eleme
     const Eigen::Vector3d d = (mesh.nodes.row(s.b) - mesh.nodes.row(s.a)).transpose();
     res.total_suture_force_n += d.norm() > 0 ? s.force_on_a_n.dot(d.normalized()) : s.magnitude_n;
     res.sum_suture_magnitudes_n += s.magnitude_n;
+  }
+  // The force the ties apply on the slave side, from the penalty itself: a tie's force on its
+  // nodes is -k c_a gap (c = 1 on the slave, -w on the others), which sums to zero over them;
+  // on the slave side (the slave and, in a mortar row, its face neighbours, which are slaves
+  // too) it is the opposite of that on the master nodes, -k gap sum of the master weights.
+  res.tie_force_n.setZero();
+  res.tie_gap_max_mm = 0;
+  std::vector<char> slave(static_cast<std::size_t>(n_nodes), 0);
+  for (const TiedNode& t : mesh.ties) slave[t.node] = 1;
+  for (std::size_t i = 0; i < mesh.ties.size(); ++i) {
+    const TiedNode& t = mesh.ties[i];
+    Eigen::Vector3d gap = res.displacement_mm.row(t.node).transpose();
+    double master_weight = 0;
+    for (std::size_t a = 0; a < t.masters.size(); ++a) {
+      gap -= t.weights[a] * res.displacement_mm.row(t.masters[a]).transpose();
+      if (!slave[t.masters[a]]) master_weight += t.weights[a];
+    }
+    res.tie_force_n -= map.tie_stiffness[i] * master_weight * gap;
+    res.tie_gap_max_mm = std::max(res.tie_gap_max_mm, gap.norm());
   }
 }
 

@@ -47,6 +47,9 @@ constexpr int kMaxFreshIterations = 20;
 constexpr double kDivergence = 1e8;
 // The layer SolveOptions::prestretch acts on: the one under the skin surface.
 constexpr int kSkinLayer = 0;
+// A sliding node farther than this off its curved surface after a Newton correction is put back
+// on it (FiniteProblem::project_on_surface); the penalty's give is orders of magnitude less.
+constexpr double kSurfaceProjectionMm = 1e-4;
 
 // Why an attempt at a load step failed: an inverted element, a singular tangent or no
 // convergence.
@@ -91,15 +94,46 @@ class FiniteProblem {
     const FiniteAssembly a = assemble_finite(mesh_, map_, materials_, u, load_lambda, lift, true,
                                              sys, unit_lift, prestretch_at(load_lambda));
     if (a.inverted_element < 0) {
-      const double sliding = add_sliding_supports(mesh_, map_, lift.size() ? Eigen::VectorXd(u + lift) : u,
-                                                  true, sys, unit_lift);
-      if (energy) *energy = a.energy_mj + sliding;
+      const double sliding = add_sliding_supports(mesh_, map_, u, lift, true, true, sys, unit_lift);
+      const double tied = add_ties(mesh_, map_, u, lift, true, sys, unit_lift);
+      if (energy) *energy = a.energy_mj + sliding + tied;
     }
     if (a.inverted_element >= 0)
       return Failure{inverted_message(a.inverted_element, a.inverted_gauss_point, a.det_F),
                      a.inverted_element, a.inverted_gauss_point};
     if (!sys.f.allFinite()) return Failure{"the out-of-balance force is not finite"};
     return std::nullopt;
+  }
+
+  // Second-order correction for sliding on a curved surface: each sliding node of `q` (at
+  // load factor lambda) that a correction has left more than kSurfaceProjectionMm off its level
+  // set is moved back onto it along grad phi, within its free dofs (two Newton steps of the
+  // scalar equation phi(X + u) = phi(X)). A straight Newton correction leaves the curved surface
+  // by d^2 / 2R, and the stiff penalty then stops the line search at a fraction of the step
+  // (the Maratos effect; Nocedal & Wright 2006, sec. 15.5-15.6); the nodes' positions within
+  // the penalty's give are left to Newton. Returns whether q changed.
+  bool project_on_surface(Eigen::VectorXd& q, double lambda) const {
+    if (!mesh_.sliding_surface) return false;
+    bool changed = false;
+    for (int pass = 0; pass < 2; ++pass) {
+      const Eigen::VectorXd u = expand(q, lambda);
+      for (const SlidingNode& s : mesh_.sliding) {
+        if (!s.on_surface) continue;
+        const Eigen::Index base = 3 * static_cast<Eigen::Index>(s.node);
+        const Eigen::Vector3d X = mesh_.nodes.row(s.node).transpose(), x = X + u.segment<3>(base);
+        const double r = mesh_.sliding_surface->distance(x) - mesh_.sliding_surface->distance(X);
+        if (!(std::abs(r) > kSurfaceProjectionMm)) continue;
+        Eigen::Vector3d g = mesh_.sliding_surface->gradient(x);
+        for (int c = 0; c < 3; ++c)
+          if (map_.eq[base + c] < 0) g[c] = 0;
+        if (!(g.squaredNorm() > 1e-12)) continue;
+        const Eigen::Vector3d du = -r * g / g.squaredNorm();
+        for (int c = 0; c < 3; ++c)
+          if (map_.eq[base + c] >= 0) q[map_.eq[base + c]] += du[c];
+        changed = true;
+      }
+    }
+    return changed;
   }
 
  private:
@@ -227,6 +261,8 @@ class FiniteStrainSolver {
   std::unique_ptr<DirectSolver> solver_;
   const Eigen::VectorXd no_lift_;
   Eigen::VectorXd f_ext_, unit_lift_;
+  Eigen::VectorXd q_trial_;  // the line search's state (q + alpha dq, put back on the surfaces)
+  bool projected_ = false;   // q_trial_ was put back on the surfaces
   // The diagonal of K's stored upper triangle (the last entry of each column), for the shift.
   std::vector<Eigen::Index> diagonal_;
   Eigen::VectorXd kept_diagonal_;
@@ -253,7 +289,9 @@ FiniteStrainSolver::FiniteStrainSolver(const Mesh& mesh, const SolveOptions& opt
   sys_ = assemble_structure(mesh, map);
   res_.n_nonzeros = sys_.K.nonZeros();
   res_.timings.assembly_s += seconds_since(t);
-  solver_ = make_direct_solver(options.solver, options.mumps_ordering, options.mixed_precision);
+  // A tied mesh in double precision from the start (as the linear solve, solve.cpp).
+  solver_ = make_direct_solver(options.solver, options.mumps_ordering,
+                               options.mixed_precision && mesh.ties.empty());
   t = Clock::now();
   solver_->analyze(sys_.K, map.block_start);  // once: every tangent has this structure
   res_.timings.analysis_s = seconds_since(t);
@@ -408,7 +446,9 @@ IterationOutcome FiniteStrainSolver::newton_iteration(StepAttempt& s, int it) {
     return IterationOutcome::Failed;
   }
   s.energy = energy_at;
-  q_ += alpha * dq;
+  // alpha |dq|, or the move including the projection onto the surface
+  const double du = projected_ ? (q_trial_ - q_).norm() : alpha * dq.norm();
+  q_ = q_trial_;
   if (alpha < kPoorStep * alpha_start)
     s.damping = std::max(kFirstShift, 10 * shift);
   else if (alpha == alpha_start)
@@ -424,8 +464,7 @@ IterationOutcome FiniteStrainSolver::newton_iteration(StepAttempt& s, int it) {
                             " times the step's load)"), -1, -1, it};
     return IterationOutcome::Failed;
   }
-  const double du = alpha * dq.norm(),
-               step_norm = std::max(s.scale * (q_ - s.q_start).norm(), 1e-300);
+  const double step_norm = std::max(s.scale * (q_ - s.q_start).norm(), 1e-300);
   // The correction the next iteration would make, estimated from this one and the residual's
   // fall (Abaqus's and CalculiX's test: c_next = c rn / r_prev, an overestimate once Newton
   // converges faster than linearly). Only after a full step along the tangent's own direction: a
@@ -455,7 +494,9 @@ std::optional<Failure> FiniteStrainSolver::line_search(StepAttempt& s, const Eig
   std::optional<Failure> inverted, first_inverted;
   for (int ls = 0; ls < kMaxLineSearch; ++ls) {
     const auto t = Clock::now();
-    inverted = problem_.evaluate(q_ + alpha * dq, s.lambda_new, s.lambda_new, no_lift_, sys_,
+    q_trial_ = q_ + alpha * dq;
+    projected_ = problem_.project_on_surface(q_trial_, s.lambda_new);
+    inverted = problem_.evaluate(q_trial_, s.lambda_new, s.lambda_new, no_lift_, sys_,
                                  &unit_lift_, &energy_at);
     res_.timings.assembly_s += seconds_since(t);
     if (inverted) {
@@ -464,7 +505,7 @@ std::optional<Failure> FiniteStrainSolver::line_search(StepAttempt& s, const Eig
       continue;
     }
     const double slope = dq.dot(sys_.f);
-    const double pi = energy_at - s.lambda_new * f_ext_.dot(q_ + alpha * dq);
+    const double pi = energy_at - s.lambda_new * f_ext_.dot(q_trial_);
     const double drop = pi0 - pi;  // > 0: the energy fell
     const bool energy_ok = std::isnan(pi0) || drop >= kArmijo * alpha * s0 ||
                            std::abs(drop) <= 1e-12 * std::max(std::abs(pi0), std::abs(pi));

@@ -46,6 +46,7 @@
 #include <string>
 #include <vector>
 
+#include "caps/fem/implicit_surface.hpp"
 #include "caps/fem/material.hpp"
 
 namespace caps::fem {
@@ -91,10 +92,30 @@ struct SuturePair {
 /// fascia: frictionless contact that stays closed, linearized about the start): its
 /// displacement along the unit `normal` is held at 0 by a penalty spring of
 /// `stiffness_n_per_mm` (N/mm); along the surface it is free.
+///
+/// With `on_surface` (and Mesh::sliding_surface given) the node slides on that curved surface
+/// instead: the finite-strain solve holds phi(X + u) = phi(X) by the penalty
+/// k/2 (phi(X + u) - phi(X))^2, re-evaluated at every Newton iteration, so the node ends on the
+/// level set it started on; the small-strain solve holds its linearisation, the displacement
+/// along grad phi(X) / |grad phi(X)| (docs/fem.md, "Ties and sliding on the bone"). `normal` is
+/// then the start normal (written to mesh.json and the CalculiX deck).
 struct SlidingNode {
   int node = 0;
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
   double stiffness_n_per_mm = 0;
+  bool on_surface = false;
+};
+
+/// A node tied to a non-matching mesh (Abaqus's and CalculiX's *TIE): u_node = sum_i
+/// weights[i] u_masters[i], the weights summing to 1. fem::tie_nodes() makes the entries: a
+/// mortar row (the masters are the master nodes under the slave's faces and its neighbours on
+/// those faces, which are slaves too) or the master element's shape functions at the slave's
+/// position. Held by a penalty in both solves and written as exact *EQUATIONs to CalculiX
+/// (docs/fem.md, "Ties and sliding on the bone").
+struct TiedNode {
+  int node = 0;                  ///< the slave
+  std::vector<int> masters;      ///< the other nodes of the row
+  std::vector<double> weights;   ///< one per master, summing to 1 (mortar rows: some negative)
 };
 
 /// The solver's input mesh.
@@ -110,6 +131,12 @@ struct Mesh {
   std::vector<NodalLoad> loads;           ///< nodal forces
   std::vector<SuturePair> sutures;        ///< suture constraints
   std::vector<SlidingNode> sliding;       ///< nodes held only along a normal (undermined base)
+  /// What SlidingNode::on_surface entries slide on (shared, immutable; may be null). Not
+  /// written to mesh.json, which keeps only its name and each entry's start normal: a mesh read
+  /// back without it slides those entries along their start normals (a warning says so).
+  std::shared_ptr<const ImplicitSurface> sliding_surface;
+  std::string sliding_surface_name;       ///< e.g. "bone"; recorded in mesh.json
+  std::vector<TiedNode> ties;             ///< slave nodes tied to master elements
   /// The elements of each flap the plan raises (transposed, rotated or advanced tissue): the
   /// finite-strain solve swings each flap into place along an arc (docs/fem.md, "Closing path").
   std::vector<std::vector<int>> flaps;
@@ -122,7 +149,9 @@ struct Mesh {
 };
 
 /// Checks ids in range, finite coordinates, known layers, no self-sutures, no duplicate
-/// elements nodes, component in 0..2. Throws InvalidInput naming `where` and the item.
+/// elements nodes, component in 0..2, ties (ids in range, one entry per slave, not tied to
+/// itself, finite weights summing to 1 within 1e-6). Throws InvalidInput naming `where` and
+/// the item.
 void validate(const Mesh& mesh, const std::string& where = "mesh");
 
 /// Builds a Wedge15 from a 20-entry collapsed hexahedron (paper section 6: hex nodes 2, 10, 3

@@ -101,7 +101,8 @@ struct SolveOptions {
   /// MUMPS only: factor in single precision and refine with conjugate gradients on the
   /// double-precision system to a relative residual of 1e-12 (faster: docs/benchmarks.md);
   /// falls back to a double-precision factorization by itself when that does not converge.
-  /// false = factor in double precision.
+  /// false = factor in double precision. A mesh with ties (Mesh::ties) is always factored in
+  /// double precision (their penalties leave single precision too few digits).
   bool mixed_precision = true;
   /// Threads for assembly and stress recovery (0 = all).
   int threads = 0;
@@ -169,13 +170,18 @@ struct SolveResult {
   Eigen::VectorXd von_mises_mpa;             ///< #N
   Eigen::VectorXd max_principal_mpa;         ///< #N
   Eigen::VectorXd element_von_mises_mpa;     ///< #E mean over the element's Gauss points
-  Eigen::MatrixX3d reaction_n;               ///< #N×3 constraint reactions (fixed and sutured)
+  Eigen::MatrixX3d reaction_n;               ///< #N×3 reactions: fixed, sutured, sliding, tied slaves
   std::vector<SutureForce> suture_forces;    ///< one per mesh.sutures entry
   /// The closing tension: sum over pairs of the force on a along the unit vector from x_a to
   /// x_b (N). Single pairs of quadratic elements may carry negative (pushing) consistent forces;
   /// this signed sum is the net force across the wound.
   double total_suture_force_n = 0;
   double sum_suture_magnitudes_n = 0;        ///< sum of |force| over pairs (N)
+  /// The force the ties (Mesh::ties) apply on their slaves, summed (N): what the tied part
+  /// (the patch) receives from the part it is tied to.
+  Eigen::Vector3d tie_force_n = Eigen::Vector3d::Zero();
+  /// The largest tie gap |u_s - sum w u_m| (mm): how far the penalty gives way.
+  double tie_gap_max_mm = 0;
   double strain_energy_mj = 0;               ///< N·mm = mJ
   double relative_residual = 0;              ///< ||K q - f|| / ||f|| of the reduced system
   long n_dofs = 0;                           ///< 3 × nodes
