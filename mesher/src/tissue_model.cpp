@@ -31,6 +31,10 @@ constexpr SamplePoint kCornerTet{0, 5.0 / 8, 1.0 / 8, 1.0 / 8};
 constexpr SamplePoint kCutFace{0, 7.0 / 16, 3.0 / 16, 1.0 / 16};
 constexpr SamplePoint kInnerFace{0, 1.0 / 16, 5.0 / 16, 1.0 / 16};
 
+// The skin level set's depth inside (mm): deeper than the subcutaneous fat almost everywhere on
+// the head; the cost of building the level set grows with it.
+constexpr double kSkinDepthBandMm = 16.0;
+
 }  // namespace
 
 const char* tissue_layer_name(TissueLayer layer) {
@@ -73,8 +77,10 @@ TissueLevelSets tissue_level_sets(const Segmentation& seg, const TissueModelOpti
     throw InvalidInput(cat("tissue model: band ", o.band_mm, " mm and depth limit ",
                            o.depth_limit_mm, " mm must be positive"));
   TissueLevelSets ls;
-  // The skin's band reaches the depth limit inside: the layers are found by depth below it.
-  ls.skin = SignedDistanceField::from_mask(seg.skin, voxel, o.band_mm, o.depth_limit_mm + 2.0);
+  // The skin's band reaches kSkinDepthBandMm inside: the layers are found by depth below it
+  // (deeper, build_tissue_model takes the depth from the voxels' distance transform).
+  ls.skin = SignedDistanceField::from_mask(seg.skin, voxel, o.band_mm,
+                                           std::min(kSkinDepthBandMm, o.depth_limit_mm + 2.0));
   if (seg.bone.count() == 0)
     throw InvalidInput("tissue model: the segmentation has no bone; a tissue model needs the "
                        "bone under the skin");
@@ -275,6 +281,18 @@ TissueModel build_tissue_model(const Segmentation& seg, const CylindricalMaps& m
     fat_bottom = med_dermis + med_fat;
     return false;
   };
+  // Depth below the skin (mm): the level set within its band, the voxels' exact distance
+  // transform (nearest voxel) deeper.
+  const double band_inside = ls.skin.interior_mm() - 2.0 * ls.skin.voxel_mm();
+  auto depth_below_skin = [&](const Eigen::Vector3d& p) {
+    const double phi = ls.skin(p);
+    if (phi > -band_inside) return std::max(0.0, -phi);
+    const Eigen::Vector3d ijk = g.lps_to_index(p);
+    const int i = std::clamp(static_cast<int>(std::lround(ijk[0])), 0, g.dims[0] - 1);
+    const int j = std::clamp(static_cast<int>(std::lround(ijk[1])), 0, g.dims[1] - 1);
+    const int k = std::clamp(static_cast<int>(std::lround(ijk[2])), 0, g.dims[2] - 1);
+    return std::max(band_inside, static_cast<double>(std::sqrt(depth2[g.linear(i, j, k)])));
+  };
   const SamplePoint rules[3] = {kCornerTet, kCutFace, kInnerFace};
   const double rule_weight[3] = {1.0 / 8, 1.0 / 16, 1.0 / 16};
   m.layer_fraction.resize(m.tets.rows(), 3);
@@ -288,7 +306,7 @@ TissueModel build_tissue_model(const Segmentation& seg, const CylindricalMaps& m
       for (int corner = 0; corner < 4; ++corner) {
         Eigen::Vector3d p = Eigen::Vector3d::Zero();
         for (int c = 0; c < 4; ++c) p += (c == corner ? rules[r].own : rules[r].other) * x[c];
-        const double depth = std::max(0.0, -ls.skin(p));
+        const double depth = depth_below_skin(p);
         double dermis = 0, fat_bottom = 0;
         if (!layer_depths(p, dermis, fat_bottom)) ++fb;
         const int layer = depth < dermis ? 0 : (depth < fat_bottom ? 1 : 2);

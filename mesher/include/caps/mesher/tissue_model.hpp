@@ -100,8 +100,9 @@ struct TissueModel {
 };
 
 /// The level sets of the skin envelope and of the bone of a segmentation (from its masks on the
-/// working grid; SignedDistanceField::from_mask). The skin's band reaches options.depth_limit_mm
-/// inside (the layers are found by depth below it). Throws InvalidInput for empty masks.
+/// working grid; SignedDistanceField::from_mask). The skin's band reaches 16 mm
+/// inside (the layers are found by depth below it; deeper, by the voxels' distance transform).
+/// Throws InvalidInput for empty masks.
 TissueLevelSets tissue_level_sets(const Segmentation& seg, const TissueModelOptions& options = {});
 
 /// Builds the model: the soft tissue (inside the skin envelope, not bone, above the skin
