@@ -3,7 +3,11 @@
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Interpolation.h>
+#include <openvdb/tools/Dense.h>
+#include <openvdb/tools/FastSweeping.h>
 #include <openvdb/tools/MeshToVolume.h>
+#include <openvdb/tools/Prune.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
@@ -14,6 +18,7 @@
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/volume/isosurface.hpp"
+#include "caps/volume/morphology.hpp"
 
 namespace caps {
 
@@ -110,9 +115,88 @@ SignedDistanceField SignedDistanceField::from_mask(const Mask& mask, double voxe
         }
   }
   field.data.swap(tmp);  // three passes: the result is in tmp
-  const TriMesh surface = extract_isosurface(field, 0.5f);
-  if (surface.n_faces() == 0) throw InvalidInput("signed distance field: the mask has no surface");
-  return from_mesh(surface, voxel_mm, exterior_mm, interior_mm);
+  // The signed distance on the (padded) working grid. Near the surface, from the smoothed
+  // occupancy s: across a boundary the 3-voxel box mean falls by a third per voxel, so
+  // (0.5 - s) * 3 h is the distance to its 0.5 level (sub-voxel). Farther, where s is 0 or 1,
+  // the exact distance transform of the mask (to the nearest voxel of the other side, less
+  // half a voxel along the way there).
+  Mask inside, outside_m;
+  inside.geom = outside_m.geom = field.geom;
+  inside.data.resize(raw.size());
+  outside_m.data.resize(raw.size());
+  for (std::size_t v = 0; v < raw.size(); ++v) {
+    inside.data[v] = raw[v] > 0.5f ? 1 : 0;
+    outside_m.data[v] = raw[v] > 0.5f ? 0 : 1;
+  }
+  const std::vector<float> to_inside = squared_distance_mm2(inside);
+  const std::vector<float> to_outside = squared_distance_mm2(outside_m);
+  const double h_min = g.spacing_mm.minCoeff(), h_mean = g.spacing_mm.mean();
+  std::vector<float> phi(raw.size());
+  tbb::parallel_for(std::size_t(0), raw.size(), [&](std::size_t v) {
+    const float sm = field.data[v];
+    if (sm > 1e-4f && sm < 1.0f - 1e-4f) {
+      phi[v] = static_cast<float>((0.5 - sm) * 3.0 * h_mean);
+    } else if (raw[v] > 0.5f) {
+      phi[v] = -static_cast<float>(std::max(std::sqrt(to_outside[v]) - 0.5 * h_min, 1.5 * h_min));
+    } else {
+      phi[v] = static_cast<float>(std::max(std::sqrt(to_inside[v]) - 0.5 * h_min, 1.5 * h_min));
+    }
+  });
+  // Sample it on cubes of voxel_mm (world space = LPS mm) over the padded grid's extent, within
+  // the band; the rest are inactive tiles of +-background.
+  const double background = std::max(exterior_mm, interior_mm);
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d ijk((c & 1) ? d[0] - 1 : 0, (c & 2) ? d[1] - 1 : 0, (c & 4) ? d[2] - 1 : 0);
+    const Eigen::Vector3d p = field.geom.index_to_lps(ijk);
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  initialize_vdb();
+  const openvdb::CoordBBox box(
+      openvdb::Coord(static_cast<int>(std::ceil(lo[0] / voxel_mm)), static_cast<int>(std::ceil(lo[1] / voxel_mm)),
+                     static_cast<int>(std::ceil(lo[2] / voxel_mm))),
+      openvdb::Coord(static_cast<int>(std::floor(hi[0] / voxel_mm)), static_cast<int>(std::floor(hi[1] / voxel_mm)),
+                     static_cast<int>(std::floor(hi[2] / voxel_mm))));
+  openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ> dense(box, static_cast<float>(background));
+  Volume phi_volume;
+  phi_volume.geom = field.geom;
+  phi_volume.data = std::move(phi);
+  const openvdb::Coord b0 = box.min(), b1 = box.max();
+  tbb::parallel_for(b0.z(), b1.z() + 1, [&](int z) {
+    for (int y = b0.y(); y <= b1.y(); ++y)
+      for (int x = b0.x(); x <= b1.x(); ++x) {
+        const Eigen::Vector3d p(x * voxel_mm, y * voxel_mm, z * voxel_mm);
+        const double value = sample_trilinear(phi_volume, phi_volume.lps_to_index(p),
+                                              static_cast<float>(background));
+        dense.setValue(openvdb::Coord(x, y, z),
+                       static_cast<float>(std::clamp(value, -background, background)));
+      }
+  });
+  auto grid = openvdb::FloatGrid::create(static_cast<float>(background));
+  grid->setTransform(openvdb::math::Transform::createLinearTransform(voxel_mm));
+  grid->setGridClass(openvdb::GRID_LEVEL_SET);
+  openvdb::tools::copyFromDense(dense, *grid, 1e-6f);
+  // Outside the band: inactive, then pruned into tiles of +-background.
+  for (auto it = grid->tree().beginValueOn(); it; ++it) {
+    const float value = *it;
+    if (value >= static_cast<float>(exterior_mm) || value <= -static_cast<float>(interior_mm))
+      it.setValueOff();
+  }
+  // The distances away from the surface solved again from its zero level (fast sweeping of the
+  // Eikonal equation over the band): exact for the surface the near values place sub-voxel,
+  // instead of the voxel staircase's distance transform.
+  grid = openvdb::tools::sdfToSdf(*grid, 0.0f, 1);
+  grid->setGridClass(openvdb::GRID_LEVEL_SET);
+  openvdb::tools::pruneLevelSet(grid->tree());
+  auto impl = std::make_shared<Impl>();
+  impl->grid = grid;
+  impl->voxel = voxel_mm;
+  impl->exterior = background;
+  impl->interior = background;
+  SignedDistanceField f;
+  f.impl_ = std::move(impl);
+  return f;
 }
 
 SignedDistanceField SignedDistanceField::read(const std::filesystem::path& path) {
