@@ -192,8 +192,16 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   const VolumeModel m = build_volume_model(v, o, reporter);
   write_model(m, r.output, r.force, reporter);
   add_landmarks(r.output, reporter);
-  if (!r.no_tissue && m.chart_json.empty())
-    make_tissue(r.output, m.segmentation, m.maps, m.stats, mesher::TissueModelOptions{}, reporter);
+  // The whole-face tissue model; a volume it cannot be made of (no bone, no soft tissue) still
+  // gives the model, with a warning.
+  if (!r.no_tissue && m.chart_json.empty()) {
+    try {
+      make_tissue(r.output, m.segmentation, m.maps, m.stats, mesher::TissueModelOptions{},
+                  reporter);
+    } catch (const InvalidInput& e) {
+      warn(reporter, cat("no whole-face tissue model: ", e.what()));
+    }
+  }
   return detail::model_result(r.output, r.output);
 }
 
