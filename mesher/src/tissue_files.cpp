@@ -2,6 +2,7 @@
 // tissue.json (provenance), skin.vdb and bone.vdb (the level sets).
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
@@ -21,7 +22,7 @@ namespace {
 
 constexpr char kNoModel[] =
     "the model has no whole-face tissue model: run `caps model tissue MODEL`";
-constexpr std::uintmax_t kMaxVtuBytes = std::uintmax_t(4) << 30;  // 4 GiB
+constexpr std::uintmax_t kMaxVtuBytes = std::uintmax_t(1) << 30;  // 1 GiB: about 10 M tets
 constexpr std::uintmax_t kMaxJsonBytes = 1 << 20;
 
 void require(const fs::path& dir, const char* name) {
@@ -100,7 +101,8 @@ struct VtuText {
     std::size_t p = find(">", tag) + 1;
     const std::size_t end = find("</DataArray>", p);
     std::vector<T> out;
-    out.reserve(count);
+    // Each value takes at least two characters of the array's text.
+    out.reserve(std::min(count, (end - p) / 2 + 1));
     const char* c = s.c_str() + p;
     const char* e = s.c_str() + end;
     while (c < e) {

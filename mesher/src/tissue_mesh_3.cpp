@@ -6,6 +6,7 @@
 #include <CGAL/Mesh_complex_3_in_triangulation_3.h>
 #include <CGAL/Mesh_criteria_3.h>
 #include <CGAL/Mesh_triangulation_3.h>
+#include <CGAL/exude_mesh_3.h>
 #include <CGAL/make_mesh_3.h>
 
 #include <cstring>
@@ -104,6 +105,12 @@ Mesh3Output mesh_label_image(const LabelImage& image, const Mesh3Criteria& crite
   CGAL::refine_mesh_3(c3t3, domain, mesh_criteria, CGAL::parameters::no_perturb(),
                       CGAL::parameters::no_exude(), CGAL::parameters::no_lloyd(),
                       CGAL::parameters::no_odt());
+  // Sliver exudation (weights on the vertices, the connectivity changed, no point moved) within
+  // a time budget: cheap beside the refinement, and it removes most slivers a solver would
+  // suffer from.
+  if (criteria.exude_seconds > 0)
+    CGAL::exude_mesh_3(c3t3, CGAL::parameters::time_limit = criteria.exude_seconds,
+                       CGAL::parameters::sliver_bound = criteria.exude_sliver_bound_deg);
 
   Mesh3Output out;
   std::unordered_map<Tr::Vertex_handle, int> id;

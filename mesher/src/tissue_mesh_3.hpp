@@ -27,6 +27,10 @@ struct Mesh3Criteria {
   /// Initial surface points: up to this many, spread over the label boundary (every component
   /// gets some), so that no component is missed.
   int max_seeds = 4000;
+  /// Sliver exudation after the refinement: at most this long (s; 0: none), aiming at a
+  /// smallest dihedral angle of exude_sliver_bound_deg.
+  double exude_seconds = 0.0;
+  double exude_sliver_bound_deg = 10.0;
 };
 
 /// The tetrahedra of the subdomains (label != 0), in the image's frame.

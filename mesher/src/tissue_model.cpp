@@ -212,6 +212,7 @@ TissueModel build_tissue_model(const Segmentation& seg, const CylindricalMaps& m
     const double depth = std::max(0.0, -ls.skin(p));
     return 1.5 * facet_size_lps(p) + o.cell_growth * depth;
   };
+  criteria.exude_seconds = o.exude_seconds;
   const auto t_mesh = Clock::now();
   const detail::Mesh3Output mesh = detail::mesh_label_image(image, criteria, reporter);
   m.seconds_mesh = seconds_since(t_mesh);

@@ -61,6 +61,9 @@ struct TissueModelOptions {
   double level_set_voxel_mm = 0.0;
   /// Pieces of tissue smaller than this (ml) are left out (noise, a strand cut from the rest).
   double min_component_ml = 0.5;
+  /// Mesh_3's sliver exudation after the refinement, for at most this long (s; 0: none). No
+  /// Lloyd, ODT or perturbation.
+  double exude_seconds = 3.0;
 };
 
 /// The level sets the model is made from (negative inside the skin / inside the bone).
