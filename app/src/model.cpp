@@ -1,6 +1,9 @@
 #include "caps/app/model.hpp"
 
 #include <algorithm>
+#include <chrono>
+#include <fstream>
+#include <sstream>
 #include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -8,6 +11,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/mesher/tissue_model.hpp"
 #include "caps/surface/chart.hpp"
 #include "caps/surface/color_picture.hpp"
 #include "caps/surface/cylindrical_scan.hpp"
@@ -36,10 +40,12 @@ CAPS_APP_REQUEST_JSON(caps::app::PhantomRequest)
 CAPS_APP_REQUEST_JSON(caps::app::LandmarksRequest)
 CAPS_APP_REQUEST_JSON(caps::app::FeaturesRequest)
 CAPS_APP_REQUEST_JSON(caps::app::SiteRequest)
+CAPS_APP_REQUEST_JSON(caps::app::TissueRequest)
 CAPS_APP_RESULT_JSON(caps::app::ModelResult)
 CAPS_APP_RESULT_JSON(caps::app::LandmarksResult)
 CAPS_APP_RESULT_JSON(caps::app::FeaturesResult)
 CAPS_APP_RESULT_JSON(caps::app::SiteResult)
+CAPS_APP_RESULT_JSON(caps::app::TissueResult)
 CAPS_APP_RESULT_JSON(caps::app::PickResult)
 CAPS_APP_RESULT_JSON(caps::app::PathResult)
 CAPS_APP_RESULT_JSON(caps::app::VolumeInfoResult)
@@ -84,6 +90,34 @@ T recorded(const json& o, const char* key, T fallback, const std::string& where)
                            std::is_arithmetic_v<T> ? "number" : "string",
                            "; rebuild the model"));
   }
+}
+
+// Builds and writes the whole-face tissue model of the model directory `dir` from its CT's
+// segmentation; its warnings go to the reporter.
+TissueResult make_tissue(const std::string& dir, const Segmentation& seg, const CylindricalMaps& maps,
+                         const ModelStatistics& stats, const mesher::TissueModelOptions& o,
+                         Reporter* reporter) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const mesher::TissueLevelSets ls = mesher::tissue_level_sets(seg, o);
+  const double level_sets_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  mesher::TissueModel m = mesher::build_tissue_model(seg, maps, stats, ls, o, reporter);
+  m.seconds_level_sets = level_sets_s;
+  m.seconds_total += level_sets_s;
+  mesher::write_tissue_model(dir, m, ls);
+  TissueResult out;
+  out.model = dir;
+  std::ifstream in(fs::path(dir) / mesher::tissue_file::kJson);
+  std::stringstream text;
+  text << in.rdbuf();
+  out.tissue_json = text.str();
+  out.warnings = m.warnings;
+  out.summary = cat(dir, ": tissue model ", m.n_nodes(), " nodes, ", m.n_tets(), " tets, ",
+                    std::lround(m.volume_ml), " ml (dermis ", std::lround(m.layer_volume_ml[0]),
+                    ", fat ", std::lround(m.layer_volume_ml[1]), ", deep ",
+                    std::lround(m.layer_volume_ml[2]), " ml), built in ",
+                    std::lround(m.seconds_total * 10) / 10.0, " s");
+  return out;
 }
 
 }  // namespace
@@ -164,6 +198,16 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   const VolumeModel m = build_volume_model(v, o, reporter);
   write_model(m, r.output, r.force, reporter);
   add_landmarks(r.output, reporter);
+  // The whole-face tissue model; a volume it cannot be made of (no bone, no soft tissue) still
+  // gives the model, with a warning.
+  if (!r.no_tissue && m.chart_json.empty()) {
+    try {
+      make_tissue(r.output, m.segmentation, m.maps, m.stats, mesher::TissueModelOptions{},
+                  reporter);
+    } catch (const InvalidInput& e) {
+      warn(reporter, cat("no whole-face tissue model: ", e.what()));
+    }
+  }
   return detail::model_result(r.output, r.output);
 }
 
@@ -325,6 +369,55 @@ ModelResult run_from_scan(const FromScanRequest& r, Reporter* reporter) {
 ModelResult run_model_info(const ModelInfoRequest& r, Reporter*) {
   return detail::model_result(r.model, "");
 }
+
+TissueResult run_model_tissue(const TissueRequest& r, Reporter* reporter) {
+  const ModelInfo info = read_model_info(r.model);
+  if (mesher::has_tissue_model(r.model) && !r.force)
+    throw InvalidInput(cat(r.model, " has a tissue model already (", mesher::tissue_file::kMesh,
+                           "); give --force to build it again"));
+  mesher::TissueModelOptions o;
+  o.depth_limit_mm = r.depth_limit;
+  o.face_size_mm = r.face_size;
+  o.scalp_size_mm = r.scalp_size;
+  if (!(r.depth_limit > 0 && r.depth_limit <= 100))
+    throw InvalidInput(cat("--depth-limit ", r.depth_limit, " mm: give a depth in (0, 100] mm"));
+  if (!(r.face_size >= 0.5 && r.face_size <= 20) || !(r.scalp_size >= 0.5 && r.scalp_size <= 20))
+    throw InvalidInput(cat("--face-size ", r.face_size, " / --scalp-size ", r.scalp_size,
+                           " mm: give sizes in [0.5, 20] mm"));
+  const json j = json::parse(read_model_json(r.model));
+  const json& source = j.at("source");
+  if (source.value("kind", "volume") != "volume")
+    throw InvalidInput(cat(r.model, ": a model built from a surface scan has no CT to segment; "
+                           "its tissue model (the scan's skin and the constant thickness) is not "
+                           "made yet"));
+  if (source.contains("chart"))
+    throw InvalidInput(cat(r.model, " is a chart; build the tissue model on the whole-head model "
+                           "it came from"));
+  const json& seg_json = j.at("segmentation");
+  if (seg_json.value("bone_method", "").rfind("mask ", 0) == 0)
+    throw InvalidInput(cat(r.model, ": its bone came from a separate mask (--bone-mask), which "
+                           "caps model tissue cannot reuse yet; rebuild the model with caps model "
+                           "from-volume and the mask"));
+  const std::string volume_path = source.value("path", "");
+  if (volume_path.empty() || !fs::exists(volume_path))
+    throw IoError(cat(r.model, ": the volume it was built from (", volume_path, ") is not there; "
+                      "put it back or rebuild the model"));
+  SegmentOptions so;
+  const std::string at_s = cat(r.model, "/model.json: /segmentation");
+  if (seg_json.contains("skin_threshold") && seg_json.at("skin_threshold").is_number())
+    so.skin_threshold = recorded(seg_json, "skin_threshold", 0.0, at_s);
+  if (seg_json.contains("bone_threshold") && seg_json.at("bone_threshold").is_number())
+    so.bone_threshold = recorded(seg_json, "bone_threshold", 0.0, at_s);
+  Volume v = read_volume(volume_path);
+  const std::string modality = source.value("modality", "");
+  if (modality == "CT") v.modality = Modality::CT;
+  if (modality == "MR") v.modality = Modality::MR;
+  const Segmentation seg = segment_head(v, so, reporter);
+  const CylindricalMaps maps = read_model_maps(r.model, info);
+  return make_tissue(r.model, seg, maps, info.stats, o, reporter);
+}
+
+std::string summary(const TissueResult& r) { return r.summary; }
 
 LandmarksResult run_model_landmarks(const LandmarksRequest& r, Reporter* reporter) {
   LandmarksResult out;

@@ -9,6 +9,7 @@
 
 #include "caps/app/fields.hpp"
 #include "caps/core/reporter.hpp"
+#include "caps/mesher/tissue_model.hpp"
 #include "caps/surface/scan_model.hpp"
 #include "caps/volume/model.hpp"
 #include "caps/volume/phantom.hpp"
@@ -50,6 +51,7 @@ struct FromVolumeRequest {
   double fat_min_band = LayerOptions{}.min_band_mm;
   double max_voxels = kDefaultMaxVoxels, max_bytes = kDefaultMaxBytes;
   bool allow_missing_slices = false, no_layers = false, no_cavity_base = false, force = false;
+  bool no_tissue = false;
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
@@ -89,6 +91,8 @@ struct FromVolumeRequest {
     v(r.fat_min_band, {"fat_min_band", "tissue layers: narrower dips (mm) are noise, not fat"});
     v(r.no_layers, {"no_layers", "do not measure the tissue layers (skin, fat, deep)",
                     FieldKind::Flag});
+    v(r.no_tissue, {"no_tissue", "do not build the whole-face tissue model (tissue.vtu, skin.vdb, "
+                                 "bone.vdb; caps model tissue builds it later)", FieldKind::Flag});
     v(r.max_voxels, {"max_voxels", "refuse a volume declaring more voxels (default 2^31)"});
     v(r.max_bytes, {"max_bytes", "refuse a volume needing more bytes of memory (default 8 GiB)"});
     v(r.force, {"force", "replace an existing output", FieldKind::Flag});
@@ -368,6 +372,49 @@ struct FeaturesResult {
 FeaturesResult run_model_features(const FeaturesRequest& request, Reporter* reporter = nullptr);
 std::string to_json(const FeaturesResult& result);
 std::string summary(const FeaturesResult& result);
+// ---- caps model tissue -------------------------------------------------------------------
+
+/// The whole-face tissue model of a volume-built model (mesher/tissue_model.hpp), made again
+/// from the CT it was built from, segmented with the options model.json records.
+struct TissueRequest {
+  std::string model;
+  double depth_limit = mesher::TissueModelOptions{}.depth_limit_mm;
+  double face_size = mesher::TissueModelOptions{}.face_size_mm;
+  double scalp_size = mesher::TissueModelOptions{}.scalp_size_mm;
+  bool force = false;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "a model directory built by caps model from-volume",
+                FieldKind::Positional, "MODEL_DIR"});
+    v(r.depth_limit, {"depth_limit", "leave out soft tissue deeper than this below the skin (mm)"});
+    v(r.face_size, {"face_size", "element size on the face's skin and bone (mm)"});
+    v(r.scalp_size, {"scalp_size", "element size elsewhere: scalp, neck, behind the ears (mm)"});
+    v(r.force, {"force", "replace the model's existing tissue model", FieldKind::Flag});
+  }
+};
+
+/// What `caps model tissue` made: tissue.json (counts, sizes, times, method, warnings).
+struct TissueResult {
+  std::string model;
+  std::string tissue_json;  ///< tissue.json as written
+  std::string summary;      ///< one line: counts, volume, time
+  std::vector<std::string> warnings;
+
+  /// The JSON is tissue.json with the model and the warnings.
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v.document(r.tissue_json, {"tissue_json", "tissue.json"});
+    v(r.model, {"model"});
+    v(r.warnings, {"warnings"});
+  }
+};
+/// Builds the model directory's whole-face tissue model (tissue.vtu, skin.vdb, bone.vdb,
+/// tissue.json) from the CT named in its model.json. InvalidInput for a model built from a
+/// surface scan, a chart, one whose bone came from a separate mask, or one that has a tissue
+/// model already (without force); IoError when the CT is not there any more.
+TissueResult run_model_tissue(const TissueRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const TissueResult& result);
+std::string summary(const TissueResult& result);
 
 // ---- caps model site ----------------------------------------------------------------------
 

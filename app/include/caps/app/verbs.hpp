@@ -100,6 +100,12 @@ void for_each_verb(F&& f) {
          "its\nmodel.json and print them.\nExample: caps model features cranium --picture "
          "cranium/features.png",
          &run_model_features, Answer::Printed});
+  f(Verb{"model tissue",
+         "Build a model's whole-face tissue model: the soft tissue between skin and bone as\n"
+         "tetrahedra (tissue.vtu), the skin's and the bone's level sets (skin.vdb, bone.vdb) and\n"
+         "tissue.json, from the CT the model was built from (docs/mesher.md).\n"
+         "Example: caps model tissue cranium --force",
+         &run_model_tissue});
   f(Verb{"model site",
          "Print the skin point and the soft tissue (thickness, layers) at a place on a model,\n"
          "given as THETA,Z or relative to a landmark.\n"
