@@ -17,7 +17,6 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
-#include "caps/volume/isosurface.hpp"
 #include "caps/volume/morphology.hpp"
 
 namespace caps {
@@ -87,7 +86,7 @@ SignedDistanceField SignedDistanceField::from_mask(const Mask& mask, double voxe
       g.origin_lps - g.direction * g.spacing_mm.cwiseProduct((pad.array() + 1).cast<double>().matrix());
   const Eigen::Vector3i& d = field.geom.dims;
   std::vector<float> raw(field.geom.n_voxels(), 0.0f);
-  for (int k = 1; k < d[2] - 1; ++k)
+  tbb::parallel_for(1, d[2] - 1, [&](int k) {
     for (int j = 1; j < d[1] - 1; ++j)
       for (int i = 1; i < d[0] - 1; ++i) {
         const int si = std::clamp(i - pad[0] - 1, 0, g.dims[0] - 1);
@@ -95,13 +94,14 @@ SignedDistanceField SignedDistanceField::from_mask(const Mask& mask, double voxe
         const int sk = std::clamp(k - pad[2] - 1, 0, g.dims[2] - 1);
         raw[field.geom.linear(i, j, k)] = mask.at(si, sj, sk) ? 1.0f : 0.0f;
       }
+  });
   // 3x3x3 box mean, separably.
   field.data = raw;
   std::vector<float> tmp(raw.size());
   for (int a = 0; a < 3; ++a) {
     std::vector<float>& src = a % 2 == 0 ? field.data : tmp;
     std::vector<float>& dst = a % 2 == 0 ? tmp : field.data;
-    for (int k = 0; k < d[2]; ++k)
+    tbb::parallel_for(0, d[2], [&, a](int k) {
       for (int j = 0; j < d[1]; ++j)
         for (int i = 0; i < d[0]; ++i) {
           Eigen::Vector3i c(i, j, k);
@@ -113,6 +113,7 @@ SignedDistanceField SignedDistanceField::from_mask(const Mask& mask, double voxe
           }
           dst[field.geom.linear(i, j, k)] = s / 3.0f;
         }
+    });
   }
   field.data.swap(tmp);  // three passes: the result is in tmp
   // The signed distance on the (padded) working grid. Near the surface, from the smoothed
