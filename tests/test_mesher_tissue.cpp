@@ -154,10 +154,11 @@ TEST(TissueModel, PhantomEveryTetPositiveAndFractionsSumToOne) {
   const auto& t = phantom_tissue();
   const TissueModel& m = t.m;
   ASSERT_GT(m.n_tets(), 1000);
-  std::printf("phantom tissue model: %lld nodes, %lld tets, %.1f ml, %.1f s (labels %.1f, mesh "
-              "%.1f, layers %.1f s)\n",
-              static_cast<long long>(m.n_nodes()), static_cast<long long>(m.n_tets()), m.volume_ml,
-              t.seconds, m.seconds_labels, m.seconds_mesh, m.seconds_layers);
+  std::printf(
+      "phantom tissue model: %lld nodes, %lld tets, %.1f ml, %.1f s (labels %.1f, mesh "
+      "%.1f, layers %.1f s)\n",
+      static_cast<long long>(m.n_nodes()), static_cast<long long>(m.n_tets()), m.volume_ml,
+      t.seconds, m.seconds_labels, m.seconds_mesh, m.seconds_layers);
   for (Eigen::Index c = 0; c < m.n_tets(); ++c) {
     ASSERT_GT(tet_volume(m.nodes, m.tets.row(c).transpose()), 0.0) << "tet " << c;
     ASSERT_NEAR(m.layer_fraction.row(c).sum(), 1.0, 1e-6);
@@ -213,10 +214,10 @@ TEST(TissueModel, PhantomNodeFlagsLieOnSkinAndBone) {
     if (c[1] < -60 || c[1] > 60) continue;
     if (f & kTissueOnSkin) skin_err.push_back(std::abs(c[2] - h.skin_radius(c[0], c[1])));
     if (f & kTissueOnBone)
-      bone_err.push_back(std::abs(
-          c[2] - threshold_radius([&](double a, double b) { return h.bone_radius(a, b); }, c[0],
-                                  c[1], HeadPhantom::kMuscleHu, HeadPhantom::kBoneHu,
-                                  t.seg.bone_threshold, t.v.geom.spacing_mm[0])));
+      bone_err.push_back(
+          std::abs(c[2] - threshold_radius([&](double a, double b) { return h.bone_radius(a, b); },
+                                           c[0], c[1], HeadPhantom::kMuscleHu, HeadPhantom::kBoneHu,
+                                           t.seg.bone_threshold, t.v.geom.spacing_mm[0])));
   }
   ASSERT_GT(skin_err.size(), 500u);
   ASSERT_GT(bone_err.size(), 500u);
@@ -258,7 +259,8 @@ TEST(TissueModel, PhantomLayerFractionsIntegrateToTheLayers) {
                             HeadPhantom::kMuscleHu, HeadPhantom::kBoneHu, t.seg.bone_threshold,
                             t.v.geom.spacing_mm[0]);
   };
-  const double exact[3] = {shell_volume(R, Ft, t0, t1, z0, z1), shell_volume(Ft, Fb, t0, t1, z0, z1),
+  const double exact[3] = {shell_volume(R, Ft, t0, t1, z0, z1),
+                           shell_volume(Ft, Fb, t0, t1, z0, z1),
                            shell_volume(Fb, B, t0, t1, z0, z1)};
   const char* names[3] = {"dermis", "fat", "deep"};
   for (int l = 0; l < 3; ++l)
@@ -293,14 +295,16 @@ TEST(TissueModel, PhantomLevelSetsMeasureTheDistance) {
       for (double off : {-3.0, -1.0, 1.0, 3.0}) {
         // Points `off` mm from the skin along the ray: the signed distance is off * cos(alpha).
         const double cs = cos_normal(Rs, th, z);
-        const Eigen::Vector3d ps = h.axis_point() + (Rs(th, z) + off) * HeadPhantom::ray_direction(th) +
+        const Eigen::Vector3d ps = h.axis_point() +
+                                   (Rs(th, z) + off) * HeadPhantom::ray_direction(th) +
                                    Eigen::Vector3d(0, 0, z);
         worst_skin = std::max(worst_skin, std::abs(t.ls.skin(ps) - off * cs));
         const Eigen::Vector3d q = t.ls.skin.closest_point(ps);
         const Eigen::Vector3d cq = cyl(h, q);
         worst_closest = std::max(worst_closest, std::abs(cq[2] - Rs(cq[0], cq[1])));
         const double cb = cos_normal(Rb, th, z);
-        const Eigen::Vector3d pb = h.axis_point() + (Rb(th, z) + off) * HeadPhantom::ray_direction(th) +
+        const Eigen::Vector3d pb = h.axis_point() +
+                                   (Rb(th, z) + off) * HeadPhantom::ray_direction(th) +
                                    Eigen::Vector3d(0, 0, z);
         worst_bone = std::max(worst_bone, std::abs(t.ls.bone(pb) - off * cb));
       }
@@ -385,8 +389,9 @@ TEST(TissueModel, RefusesAMissingOrDamagedModel) {
     std::istringstream ids(flipped.substr(c, e - c));
     long long a, b, cc, d;
     ids >> a >> b >> cc >> d;
-    flipped.replace(c, e - c, std::to_string(a) + " " + std::to_string(b) + " " +
-                                  std::to_string(d) + " " + std::to_string(cc));
+    flipped.replace(c, e - c,
+                    std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(d) + " " +
+                        std::to_string(cc));
   }
   refuse(flipped, "an inverted tet");
   {
@@ -404,7 +409,8 @@ TEST(TissueModel, CraniumHoldsTheFaceAndNoAir) {
   if (!fs::exists(cranium)) GTEST_SKIP() << "Cranium.inv3 (invesalius-examples) is not installed";
   const Volume v = read_volume(cranium);
   const VolumeModel vm = build_volume_model(v);
-  const fs::path dir = fs::temp_directory_path() / ("caps_tissue_cranium_" + std::to_string(::getpid()));
+  const fs::path dir =
+      fs::temp_directory_path() / ("caps_tissue_cranium_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   write_model(vm, dir, false);
   const Landmarks lm = find_landmarks(PatientModel::load(dir));
@@ -436,7 +442,8 @@ TEST(TissueModel, CraniumHoldsTheFaceAndNoAir) {
     for (Eigen::Index n = 0; n < m.n_nodes(); ++n)
       if (m.node_flags[static_cast<std::size_t>(n)] & kTissueOnSkin)
         skin_d = std::min(skin_d, (m.nodes.row(n).transpose() - l->lps).norm());
-    std::printf("%s: nearest tet centroid %.2f mm, nearest skin node %.2f mm\n", name, tet_d, skin_d);
+    std::printf("%s: nearest tet centroid %.2f mm, nearest skin node %.2f mm\n", name, tet_d,
+                skin_d);
     EXPECT_LT(tet_d, 3.0) << name;
     EXPECT_LT(skin_d, 1.5) << name;
   }

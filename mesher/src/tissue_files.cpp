@@ -60,8 +60,10 @@ std::string tissue_json_text(const TissueModel& m) {
                           {"fat", m.layer_volume_ml[1]},
                           {"deep", m.layer_volume_ml[2]}};
   j["layer_fallback_fraction"] = m.layer_fallback_fraction;
-  j["timings_s"] = {{"level_sets", m.seconds_level_sets}, {"labels", m.seconds_labels},
-                    {"mesh", m.seconds_mesh},             {"layers", m.seconds_layers},
+  j["timings_s"] = {{"level_sets", m.seconds_level_sets},
+                    {"labels", m.seconds_labels},
+                    {"mesh", m.seconds_mesh},
+                    {"layers", m.seconds_layers},
                     {"total", m.seconds_total}};
   j["node_flags"] = {{"on_skin", kTissueOnSkin},
                      {"on_bone", kTissueOnBone},
@@ -77,7 +79,8 @@ struct VtuText {
   const std::string& where;
 
   [[noreturn]] void bad(const std::string& what) const {
-    throw InvalidInput(cat(where, ": ", what, "; not a tissue model caps wrote (rebuild it with "
+    throw InvalidInput(cat(where, ": ", what,
+                           "; not a tissue model caps wrote (rebuild it with "
                            "`caps model tissue MODEL --force`)"));
   }
   std::size_t find(const std::string& key, std::size_t from = 0) const {
@@ -137,26 +140,31 @@ void write_tissue_model(const fs::path& dir, const TissueModel& m, const TissueL
                  "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<UnstructuredGrid>\n"
                  "<Piece NumberOfPoints=\"%lld\" NumberOfCells=\"%lld\">\n",
                  static_cast<long long>(n), static_cast<long long>(t));
-    std::fprintf(f, "<PointData Scalars=\"node_flags\">\n"
-                    "<DataArray type=\"UInt8\" Name=\"node_flags\" format=\"ascii\">\n");
+    std::fprintf(f,
+                 "<PointData Scalars=\"node_flags\">\n"
+                 "<DataArray type=\"UInt8\" Name=\"node_flags\" format=\"ascii\">\n");
     for (Eigen::Index v = 0; v < n; ++v)
       std::fprintf(f, "%d%c", m.node_flags[static_cast<std::size_t>(v)], v % 20 == 19 ? '\n' : ' ');
-    std::fprintf(f, "\n</DataArray>\n</PointData>\n<CellData Scalars=\"dominant_layer\">\n"
-                    "<DataArray type=\"Float32\" Name=\"layer_fraction\" "
-                    "NumberOfComponents=\"3\" format=\"ascii\">\n");
+    std::fprintf(f,
+                 "\n</DataArray>\n</PointData>\n<CellData Scalars=\"dominant_layer\">\n"
+                 "<DataArray type=\"Float32\" Name=\"layer_fraction\" "
+                 "NumberOfComponents=\"3\" format=\"ascii\">\n");
     for (Eigen::Index c = 0; c < t; ++c)
       std::fprintf(f, "%.6g %.6g %.6g\n", m.layer_fraction(c, 0), m.layer_fraction(c, 1),
                    m.layer_fraction(c, 2));
-    std::fprintf(f, "</DataArray>\n<DataArray type=\"Int32\" Name=\"dominant_layer\" "
-                    "format=\"ascii\">\n");
+    std::fprintf(f,
+                 "</DataArray>\n<DataArray type=\"Int32\" Name=\"dominant_layer\" "
+                 "format=\"ascii\">\n");
     for (Eigen::Index c = 0; c < t; ++c)
       std::fprintf(f, "%d%c", dominant[static_cast<std::size_t>(c)], c % 20 == 19 ? '\n' : ' ');
-    std::fprintf(f, "\n</DataArray>\n</CellData>\n<Points>\n<DataArray type=\"Float64\" "
-                    "Name=\"Points\" NumberOfComponents=\"3\" format=\"ascii\">\n");
+    std::fprintf(f,
+                 "\n</DataArray>\n</CellData>\n<Points>\n<DataArray type=\"Float64\" "
+                 "Name=\"Points\" NumberOfComponents=\"3\" format=\"ascii\">\n");
     for (Eigen::Index v = 0; v < n; ++v)
       std::fprintf(f, "%.17g %.17g %.17g\n", m.nodes(v, 0), m.nodes(v, 1), m.nodes(v, 2));
-    std::fprintf(f, "</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" "
-                    "Name=\"connectivity\" format=\"ascii\">\n");
+    std::fprintf(f,
+                 "</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" "
+                 "Name=\"connectivity\" format=\"ascii\">\n");
     for (Eigen::Index c = 0; c < t; ++c)
       std::fprintf(f, "%d %d %d %d\n", m.tets(c, 0), m.tets(c, 1), m.tets(c, 2), m.tets(c, 3));
     std::fprintf(f, "</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");

@@ -57,11 +57,11 @@ Mesh3Output mesh_label_image(const LabelImage& image, const Mesh3Criteria& crite
 
   SizeField facet_size{&criteria.facet_size_mm}, facet_distance{&criteria.facet_distance_mm},
       cell_size{&criteria.cell_size_mm};
-  Mesh_criteria mesh_criteria(CGAL::parameters::facet_angle = criteria.facet_angle_deg,
-                         CGAL::parameters::facet_size = facet_size,
-                         CGAL::parameters::facet_distance = facet_distance,
-                         CGAL::parameters::cell_radius_edge_ratio = criteria.cell_radius_edge_ratio,
-                         CGAL::parameters::cell_size = cell_size);
+  Mesh_criteria mesh_criteria(
+      CGAL::parameters::facet_angle = criteria.facet_angle_deg,
+      CGAL::parameters::facet_size = facet_size, CGAL::parameters::facet_distance = facet_distance,
+      CGAL::parameters::cell_radius_edge_ratio = criteria.cell_radius_edge_ratio,
+      CGAL::parameters::cell_size = cell_size);
 
   // Initial points on the boundary: where a labelled voxel meets an unlabelled neighbour along
   // i, j or k, the domain's own intersection of the segment between their centres. Spread
@@ -82,8 +82,8 @@ Mesh3Output mesh_label_image(const LabelImage& image, const Mesh3Criteria& crite
   Tr& tr = c3t3.triangulation();
   const auto construct_intersection = domain.construct_intersection_object();
   const auto cwp = tr.geom_traits().construct_weighted_point_3_object();
-  const std::size_t stride =
-      std::max<std::size_t>(1, pairs.size() / static_cast<std::size_t>(std::max(1, criteria.max_seeds)));
+  const std::size_t stride = std::max<std::size_t>(
+      1, pairs.size() / static_cast<std::size_t>(std::max(1, criteria.max_seeds)));
   for (std::size_t s = 0; s < pairs.size(); s += stride) {
     const std::size_t a = pairs[s].first;
     const int axis = pairs[s].second;
@@ -93,8 +93,8 @@ Mesh3Output mesh_label_image(const LabelImage& image, const Mesh3Criteria& crite
     Eigen::Vector3d p0(i * image.spacing_mm[0], j * image.spacing_mm[1], k * image.spacing_mm[2]);
     Eigen::Vector3d p1 = p0;
     p1[axis] += image.spacing_mm[axis];
-    const auto hit =
-        construct_intersection(K::Segment_3(Point(p0[0], p0[1], p0[2]), Point(p1[0], p1[1], p1[2])));
+    const auto hit = construct_intersection(
+        K::Segment_3(Point(p0[0], p0[1], p0[2]), Point(p1[0], p1[1], p1[2])));
     if (std::get<2>(hit) == 0) continue;
     const auto v = tr.insert(cwp(std::get<0>(hit)));
     if (v == Tr::Vertex_handle()) continue;
@@ -141,7 +141,8 @@ Mesh3Output mesh_label_image(const LabelImage& image, const Mesh3Criteria& crite
     faces.push_back(t);
   }
   out.nodes.resize(static_cast<Eigen::Index>(nodes.size()), 3);
-  for (std::size_t v = 0; v < nodes.size(); ++v) out.nodes.row(static_cast<Eigen::Index>(v)) = nodes[v];
+  for (std::size_t v = 0; v < nodes.size(); ++v)
+    out.nodes.row(static_cast<Eigen::Index>(v)) = nodes[v];
   out.tets.resize(static_cast<Eigen::Index>(tets.size()), 4);
   for (std::size_t t = 0; t < tets.size(); ++t) {
     Eigen::Vector4i c = tets[t];

@@ -39,9 +39,12 @@ constexpr double kSkinDepthBandMm = 16.0;
 
 const char* tissue_layer_name(TissueLayer layer) {
   switch (layer) {
-    case TissueLayer::Dermis: return "dermis";
-    case TissueLayer::Fat: return "fat";
-    case TissueLayer::Deep: return "deep";
+    case TissueLayer::Dermis:
+      return "dermis";
+    case TissueLayer::Fat:
+      return "fat";
+    case TissueLayer::Deep:
+      return "deep";
   }
   return "?";
 }
@@ -65,9 +68,8 @@ std::vector<int> TissueModel::dominant_layer() const {
 }
 
 std::size_t TissueModel::count_nodes(std::uint8_t flag) const {
-  return static_cast<std::size_t>(
-      std::count_if(node_flags.begin(), node_flags.end(),
-                    [&](std::uint8_t f) { return (f & flag) == flag; }));
+  return static_cast<std::size_t>(std::count_if(
+      node_flags.begin(), node_flags.end(), [&](std::uint8_t f) { return (f & flag) == flag; }));
 }
 
 TissueLevelSets tissue_level_sets(const Segmentation& seg, const TissueModelOptions& o) {
@@ -82,8 +84,9 @@ TissueLevelSets tissue_level_sets(const Segmentation& seg, const TissueModelOpti
   ls.skin = SignedDistanceField::from_mask(seg.skin, voxel, o.band_mm,
                                            std::min(kSkinDepthBandMm, o.depth_limit_mm + 2.0));
   if (seg.bone.count() == 0)
-    throw InvalidInput("tissue model: the segmentation has no bone; a tissue model needs the "
-                       "bone under the skin");
+    throw InvalidInput(
+        "tissue model: the segmentation has no bone; a tissue model needs the "
+        "bone under the skin");
   ls.bone = SignedDistanceField::from_mask(seg.bone, voxel, o.band_mm, o.band_mm);
   return ls;
 }
@@ -131,18 +134,20 @@ TissueModel build_tissue_model(const Segmentation& seg, const CylindricalMaps& m
       for (int i = 0; i < g.dims[0]; ++i) {
         const std::size_t v = g.linear(i, j, k);
         if (!(seg.skin.data[v] && !seg.bone.data[v] && w.data[v] > seg.skin_threshold &&
-              depth2[v] <= limit2) || nearest[v] < 0)
+              depth2[v] <= limit2) ||
+            nearest[v] < 0)
           continue;
         const std::int64_t n = nearest[v];
         const Eigen::Vector3d a(i, j, k);
-        const Eigen::Vector3d b(static_cast<double>(n % g.dims[0]),
-                                static_cast<double>((n / g.dims[0]) % g.dims[1]),
-                                static_cast<double>(n / (static_cast<std::int64_t>(g.dims[0]) * g.dims[1])));
+        const Eigen::Vector3d b(
+            static_cast<double>(n % g.dims[0]), static_cast<double>((n / g.dims[0]) % g.dims[1]),
+            static_cast<double>(n / (static_cast<std::int64_t>(g.dims[0]) * g.dims[1])));
         const int steps = static_cast<int>(std::ceil(std::sqrt(depth2[v]) / step));
         bool under_bone = false;
         for (int s = 1; s < steps && !under_bone; ++s) {
           const Eigen::Vector3d q = a + (b - a) * (static_cast<double>(s) / steps);
-          const int qi = static_cast<int>(std::lround(q[0])), qj = static_cast<int>(std::lround(q[1])),
+          const int qi = static_cast<int>(std::lround(q[0])),
+                    qj = static_cast<int>(std::lround(q[1])),
                     qk = static_cast<int>(std::lround(q[2]));
           under_bone = seg.bone.data[g.linear(qi, qj, qk)] != 0;
         }
@@ -231,7 +236,8 @@ TissueModel build_tissue_model(const Segmentation& seg, const CylindricalMaps& m
   const double tol = 0.75 * g.spacing_mm.maxCoeff();
   std::vector<std::uint8_t> on_boundary(static_cast<std::size_t>(m.nodes.rows()), 0);
   for (Eigen::Index f = 0; f < mesh.boundary_faces.rows(); ++f)
-    for (int c = 0; c < 3; ++c) on_boundary[static_cast<std::size_t>(mesh.boundary_faces(f, c))] = 1;
+    for (int c = 0; c < 3; ++c)
+      on_boundary[static_cast<std::size_t>(mesh.boundary_faces(f, c))] = 1;
   m.node_flags.assign(on_boundary.size(), 0);
   tbb::parallel_for(std::size_t(0), on_boundary.size(), [&](std::size_t v) {
     if (!on_boundary[v]) return;
@@ -321,10 +327,11 @@ TissueModel build_tissue_model(const Segmentation& seg, const CylindricalMaps& m
   m.layer_fallback_fraction =
       static_cast<double>(n_fallback) / (12.0 * static_cast<double>(m.tets.rows()));
   if (have_medians && m.layer_fallback_fraction > 0.0)
-    m.warnings.push_back(cat(std::lround(100.0 * m.layer_fallback_fraction),
-                             " % of the layer samples lie where the model has no measured "
-                             "thickness (or beyond its maps): they take the model's medians (dermis ",
-                             med_dermis, " mm, fat ", med_fat, " mm)"));
+    m.warnings.push_back(
+        cat(std::lround(100.0 * m.layer_fallback_fraction),
+            " % of the layer samples lie where the model has no measured "
+            "thickness (or beyond its maps): they take the model's medians (dermis ",
+            med_dermis, " mm, fat ", med_fat, " mm)"));
   double total = 0;
   for (Eigen::Index t = 0; t < m.tets.rows(); ++t) {
     const double v = tet_volume(m.nodes, m.tets.row(t).transpose());
@@ -336,15 +343,18 @@ TissueModel build_tissue_model(const Segmentation& seg, const CylindricalMaps& m
   progress.update(4.0);
   progress.done();
   if (dropped > 0)
-    note(reporter, cat("tissue model: ", std::lround(dropped * voxel_ml), " ml of soft tissue in "
-                       "pieces that do not reach the skin (or smaller than ", o.min_component_ml,
-                       " ml) left out"));
-  m.method = cat("soft tissue (inside the skin envelope, not bone (", seg.bone_method,
-                 "), above the skin threshold ", seg.skin_threshold, ", within ", o.depth_limit_mm,
-                 " mm of the skin) as a label image on the working grid (",
-                 g.spacing_mm.transpose(), " mm); CGAL Mesh_3 (labelled image, linear tets, "
-                 "no optimisation); facets ", o.face_size_mm, " mm on the face, ", o.scalp_size_mm,
-                 " mm elsewhere; OpenVDB level sets (", m.level_set_voxel_mm, " mm voxels)");
+    note(reporter, cat("tissue model: ", std::lround(dropped * voxel_ml),
+                       " ml of soft tissue in "
+                       "pieces that do not reach the skin (or smaller than ",
+                       o.min_component_ml, " ml) left out"));
+  m.method =
+      cat("soft tissue (inside the skin envelope, not bone (", seg.bone_method,
+          "), above the skin threshold ", seg.skin_threshold, ", within ", o.depth_limit_mm,
+          " mm of the skin) as a label image on the working grid (", g.spacing_mm.transpose(),
+          " mm); CGAL Mesh_3 (labelled image, linear tets, "
+          "no optimisation); facets ",
+          o.face_size_mm, " mm on the face, ", o.scalp_size_mm,
+          " mm elsewhere; OpenVDB level sets (", m.level_set_voxel_mm, " mm voxels)");
   m.seconds_total = seconds_since(t_start);
   for (const auto& warning : m.warnings) warn(reporter, cat("tissue model: ", warning));
   return m;

@@ -2,9 +2,9 @@
 
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
-#include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/Dense.h>
 #include <openvdb/tools/FastSweeping.h>
+#include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/MeshToVolume.h>
 #include <openvdb/tools/Prune.h>
 #include <tbb/parallel_for.h>
@@ -17,7 +17,6 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
-#include "caps/volume/isosurface.hpp"
 #include "caps/volume/morphology.hpp"
 
 namespace caps {
@@ -78,16 +77,16 @@ SignedDistanceField SignedDistanceField::from_mask(const Mask& mask, double voxe
   const VolumeGeometry& g = mask.geom;
   // Carry the border slices on outward `pad` voxels (beyond the band), then one layer of air.
   Eigen::Vector3i pad;
-  for (int a = 0; a < 3; ++a)
-    pad[a] = static_cast<int>(std::ceil(band_mm / g.spacing_mm[a])) + 2;
+  for (int a = 0; a < 3; ++a) pad[a] = static_cast<int>(std::ceil(band_mm / g.spacing_mm[a])) + 2;
   Volume field;
   field.geom = g;
   for (int a = 0; a < 3; ++a) field.geom.dims[a] = g.dims[a] + 2 * (pad[a] + 1);
   field.geom.origin_lps =
-      g.origin_lps - g.direction * g.spacing_mm.cwiseProduct((pad.array() + 1).cast<double>().matrix());
+      g.origin_lps -
+      g.direction * g.spacing_mm.cwiseProduct((pad.array() + 1).cast<double>().matrix());
   const Eigen::Vector3i& d = field.geom.dims;
   std::vector<float> raw(field.geom.n_voxels(), 0.0f);
-  for (int k = 1; k < d[2] - 1; ++k)
+  tbb::parallel_for(1, d[2] - 1, [&](int k) {
     for (int j = 1; j < d[1] - 1; ++j)
       for (int i = 1; i < d[0] - 1; ++i) {
         const int si = std::clamp(i - pad[0] - 1, 0, g.dims[0] - 1);
@@ -95,13 +94,14 @@ SignedDistanceField SignedDistanceField::from_mask(const Mask& mask, double voxe
         const int sk = std::clamp(k - pad[2] - 1, 0, g.dims[2] - 1);
         raw[field.geom.linear(i, j, k)] = mask.at(si, sj, sk) ? 1.0f : 0.0f;
       }
+  });
   // 3x3x3 box mean, separably.
   field.data = raw;
   std::vector<float> tmp(raw.size());
   for (int a = 0; a < 3; ++a) {
     std::vector<float>& src = a % 2 == 0 ? field.data : tmp;
     std::vector<float>& dst = a % 2 == 0 ? tmp : field.data;
-    for (int k = 0; k < d[2]; ++k)
+    tbb::parallel_for(0, d[2], [&, a](int k) {
       for (int j = 0; j < d[1]; ++j)
         for (int i = 0; i < d[0]; ++i) {
           Eigen::Vector3i c(i, j, k);
@@ -113,6 +113,7 @@ SignedDistanceField SignedDistanceField::from_mask(const Mask& mask, double voxe
           }
           dst[field.geom.linear(i, j, k)] = s / 3.0f;
         }
+    });
   }
   field.data.swap(tmp);  // three passes: the result is in tmp
   // The signed distance on the (padded) working grid. Near the surface, from the smoothed
@@ -147,18 +148,21 @@ SignedDistanceField SignedDistanceField::from_mask(const Mask& mask, double voxe
   const double background = std::max(exterior_mm, interior_mm);
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
   for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3d ijk((c & 1) ? d[0] - 1 : 0, (c & 2) ? d[1] - 1 : 0, (c & 4) ? d[2] - 1 : 0);
+    const Eigen::Vector3d ijk((c & 1) ? d[0] - 1 : 0, (c & 2) ? d[1] - 1 : 0,
+                              (c & 4) ? d[2] - 1 : 0);
     const Eigen::Vector3d p = field.geom.index_to_lps(ijk);
     lo = lo.cwiseMin(p);
     hi = hi.cwiseMax(p);
   }
   initialize_vdb();
-  const openvdb::CoordBBox box(
-      openvdb::Coord(static_cast<int>(std::ceil(lo[0] / voxel_mm)), static_cast<int>(std::ceil(lo[1] / voxel_mm)),
-                     static_cast<int>(std::ceil(lo[2] / voxel_mm))),
-      openvdb::Coord(static_cast<int>(std::floor(hi[0] / voxel_mm)), static_cast<int>(std::floor(hi[1] / voxel_mm)),
-                     static_cast<int>(std::floor(hi[2] / voxel_mm))));
-  openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ> dense(box, static_cast<float>(background));
+  const openvdb::CoordBBox box(openvdb::Coord(static_cast<int>(std::ceil(lo[0] / voxel_mm)),
+                                              static_cast<int>(std::ceil(lo[1] / voxel_mm)),
+                                              static_cast<int>(std::ceil(lo[2] / voxel_mm))),
+                               openvdb::Coord(static_cast<int>(std::floor(hi[0] / voxel_mm)),
+                                              static_cast<int>(std::floor(hi[1] / voxel_mm)),
+                                              static_cast<int>(std::floor(hi[2] / voxel_mm))));
+  openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ> dense(box,
+                                                                static_cast<float>(background));
   Volume phi_volume;
   phi_volume.geom = field.geom;
   phi_volume.data = std::move(phi);
@@ -219,8 +223,8 @@ SignedDistanceField SignedDistanceField::read(const std::filesystem::path& path)
     auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
     if (!grid || grid->getGridClass() != openvdb::GRID_LEVEL_SET) continue;
     const openvdb::Vec3d vs = grid->voxelSize();
-    if (!grid->transform().isLinear() || !(vs[0] > 0) ||
-        std::abs(vs[0] - vs[1]) > 1e-6 * vs[0] || std::abs(vs[0] - vs[2]) > 1e-6 * vs[0])
+    if (!grid->transform().isLinear() || !(vs[0] > 0) || std::abs(vs[0] - vs[1]) > 1e-6 * vs[0] ||
+        std::abs(vs[0] - vs[2]) > 1e-6 * vs[0])
       throw InvalidInput(cat(path.string(), ": the level set's voxels are not cubes"));
     const double bg = grid->background();
     if (!(bg > 0) || !std::isfinite(bg))

@@ -29,12 +29,12 @@ inline constexpr char kBoneLevelSet[] = "bone.vdb";
 
 /// Where a node lies (OR-ed bits of TissueModel::node_flags; 0 = inside the tissue).
 enum TissueNodeFlag : std::uint8_t {
-  kTissueOnSkin = 1,          ///< on the skin (|phi_skin| within the tolerance)
-  kTissueOnBone = 2,          ///< on the bone (|phi_bone| within the tolerance)
-  kTissueFieldOfView = 4,     ///< where the CT's field of view cut the tissue (first/last slice,
-                              ///< grid border)
-  kTissueOtherBoundary = 8,   ///< on another boundary: an air cavity (sinus, nasal cavity,
-                              ///< airway, mouth) or the depth limit
+  kTissueOnSkin = 1,         ///< on the skin (|phi_skin| within the tolerance)
+  kTissueOnBone = 2,         ///< on the bone (|phi_bone| within the tolerance)
+  kTissueFieldOfView = 4,    ///< where the CT's field of view cut the tissue (first/last slice,
+                             ///< grid border)
+  kTissueOtherBoundary = 8,  ///< on another boundary: an air cavity (sinus, nasal cavity,
+                             ///< airway, mouth) or the depth limit
 };
 
 /// The layers of the soft tissue, in the order of TissueModel::layer_fraction's columns.
@@ -47,8 +47,8 @@ struct TissueModelOptions {
   /// Tissue deeper than this below the skin (Euclidean, from the skin envelope) is left out:
   /// the brain and the deep neck are not in the model; the globes and the cheek's deep fat are.
   double depth_limit_mm = 30.0;
-  double face_size_mm = 1.6;    ///< boundary facets on the face (|theta| <= face_half_angle_deg)
-  double scalp_size_mm = 4.0;   ///< boundary facets elsewhere (scalp, neck, behind the ears)
+  double face_size_mm = 1.6;   ///< boundary facets on the face (|theta| <= face_half_angle_deg)
+  double scalp_size_mm = 4.0;  ///< boundary facets elsewhere (scalp, neck, behind the ears)
   /// The face: within this angle of the front about the model's axis (in front of the ears),
   /// blending into the scalp's sizes over the next face_blend_deg.
   double face_half_angle_deg = 75.0;
@@ -56,7 +56,7 @@ struct TissueModelOptions {
   /// Tetrahedra: 1.5 x the facet size at the skin, growing by this many mm per mm of depth.
   double cell_growth = 0.3;
   double facet_distance_fraction = 0.25;  ///< the surface's allowed deviation, x the facet size
-  double band_mm = 6.0;  ///< the bone level set's band and the skin's outside band
+  double band_mm = 6.0;                   ///< the bone level set's band and the skin's outside band
   /// The level sets' voxel; 0 = the working grid's smallest spacing.
   double level_set_voxel_mm = 0.0;
   /// Pieces of tissue smaller than this (ml) are left out (noise, a strand cut from the rest).
@@ -73,18 +73,18 @@ struct TissueLevelSets {
 
 /// The volumetric model. Frame: patient LPS mm.
 struct TissueModel {
-  Eigen::MatrixX3d nodes;               ///< #nodes x 3, LPS mm
-  Eigen::MatrixX4i tets;                ///< corner ids; positive volume:
-                                        ///< (x1-x0)x(x2-x0).(x3-x0) > 0
-  Eigen::MatrixX3f layer_fraction;      ///< per tet: volume fractions of dermis, fat, deep (sum 1)
-  std::vector<std::uint8_t> node_flags; ///< per node, TissueNodeFlag bits
+  Eigen::MatrixX3d nodes;                ///< #nodes x 3, LPS mm
+  Eigen::MatrixX4i tets;                 ///< corner ids; positive volume:
+                                         ///< (x1-x0)x(x2-x0).(x3-x0) > 0
+  Eigen::MatrixX3f layer_fraction;       ///< per tet: volume fractions of dermis, fat, deep (sum 1)
+  std::vector<std::uint8_t> node_flags;  ///< per node, TissueNodeFlag bits
 
   // Provenance (tissue.json).
   TissueModelOptions options;
   Eigen::Vector3d label_voxel_mm{0, 0, 0};  ///< the label image's voxel (the working grid's)
   double level_set_voxel_mm = 0;
-  double volume_ml = 0;                     ///< sum of the tets' volumes
-  double layer_volume_ml[3] = {0, 0, 0};    ///< dermis, fat, deep (fractions x volumes)
+  double volume_ml = 0;                   ///< sum of the tets' volumes
+  double layer_volume_ml[3] = {0, 0, 0};  ///< dermis, fat, deep (fractions x volumes)
   double seconds_level_sets = 0, seconds_labels = 0, seconds_mesh = 0, seconds_layers = 0,
          seconds_total = 0;
   /// Share of the layer samples that fell back to the model's median layer thicknesses (their

@@ -25,11 +25,14 @@ class SignedDistanceField {
                                        double interior_mm);
 
   /// Builds the field of the boundary of a binary mask (inside = mask voxels), on cubes of
-  /// `voxel_mm` with a band of `exterior_mm` outside and `interior_mm` inside. The mask is smoothed by a 3x3x3 box mean
-  /// and its 0.5 level is taken (marching cubes, LPS mm): sub-voxel, without the voxels' stairs.
-  /// Where the mask touches its grid's border (the CT's field of view), its border slices are
-  /// carried on outward beyond the band, so the surface continues through the cut instead of
-  /// being capped there. Throws InvalidInput for an empty mask or non-positive sizes.
+  /// `voxel_mm` (world space = LPS mm) with a band of `exterior_mm` outside and `interior_mm`
+  /// inside. The surface is the 0.5 level of the mask's 3x3x3 box mean (sub-voxel, without the
+  /// voxels' stairs): near it the distance is (0.5 - mean) x 3 voxels, farther the mask's exact
+  /// distance transform; sampled onto the cubes and solved again from the zero level by fast
+  /// sweeping (OpenVDB sdfToSdf). Far values are +-max(exterior_mm, interior_mm). Where the mask
+  /// touches its grid's border (the CT's field of view), its border slices are carried on
+  /// outward beyond the band, so the surface continues through the cut instead of being capped
+  /// there. Throws InvalidInput for an empty mask or non-positive sizes.
   static SignedDistanceField from_mask(const Mask& mask, double voxel_mm, double exterior_mm,
                                        double interior_mm);
 
