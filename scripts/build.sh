@@ -5,9 +5,6 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$here/scripts/setup.sh"
 # ccache (installed by setup.sh) keeps compiled objects between builds: a rebuild after a small
 # change, or a CI run on a machine that keeps ~/.cache/ccache, compiles only what changed.
-# The test programs use precompiled headers (cmake/CapsPch.cmake): ccache caches them and the
-# sources that use them only with this sloppiness (its manual, "Precompiled headers").
-export CCACHE_SLOPPINESS="${CCACHE_SLOPPINESS:+$CCACHE_SLOPPINESS,}pch_defines,time_macros"
 launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
 cmake -S "$here" -B "$here/build" -DCMAKE_BUILD_TYPE=Release "${launcher[@]}" >/dev/null

@@ -13,9 +13,6 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 seconds=20
 [ "${1:-}" = "--seconds" ] && seconds="$2"
 build="$here/build-fuzz"
-# The test programs use precompiled headers (cmake/CapsPch.cmake): ccache caches them and the
-# sources that use them only with this sloppiness (its manual, "Precompiled headers").
-export CCACHE_SLOPPINESS="${CCACHE_SLOPPINESS:+$CCACHE_SLOPPINESS,}pch_defines,time_macros"
 launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
 data=()
