@@ -8,7 +8,9 @@
 #                       server tests, which link nlohmann_json::nlohmann_json).
 # The code compiled is the same: the headers are the ones each test includes itself (a test
 # still includes what it uses; CAPS_PCH=OFF checks that). ccache caches the precompiled header and
-# the sources that use it when CCACHE_SLOPPINESS has pch_defines,time_macros (scripts/build.sh).
+# the sources that use it only with the sloppiness pch_defines,time_macros (its manual,
+# "Precompiled headers"; without it they are "uncacheable"): caps_test_pch_launcher gives these
+# targets a launcher that sets it when the build's launcher is ccache.
 option(CAPS_PCH "Precompiled GoogleTest/Eigen/json headers for the test programs" ON)
 
 set(CAPS_TEST_PCH_HEADERS
@@ -37,4 +39,13 @@ function(caps_test_pch_target name like)
     list(APPEND headers <nlohmann/json.hpp>)
   endif()
   target_precompile_headers(${name} PRIVATE ${headers})
+endfunction()
+
+# caps_test_pch_launcher(<targets>): with ccache as the compiler launcher, compile <targets>
+# through `env CCACHE_SLOPPINESS=pch_defines,time_macros ccache`.
+function(caps_test_pch_launcher)
+  if(CMAKE_CXX_COMPILER_LAUNCHER MATCHES "(^|/)ccache$")
+    set_target_properties(${ARGN} PROPERTIES CXX_COMPILER_LAUNCHER
+      "env;CCACHE_SLOPPINESS=pch_defines,time_macros;${CMAKE_CXX_COMPILER_LAUNCHER}")
+  endif()
 endfunction()
