@@ -7,7 +7,8 @@
 #   caps_test_pch_json  the same and nlohmann/json with JSON_DIAGNOSTICS=1 (the app, cli and
 #                       server tests, which link nlohmann_json::nlohmann_json).
 # The code compiled is the same: the headers are the ones each test includes itself (a test
-# still includes what it uses; CAPS_PCH=OFF checks that). ccache caches the precompiled header and
+# still includes what it uses; CAPS_PCH=OFF checks that). The precompiled header comes before a
+# test's first line, so a test must not define a macro meant to change those headers (none does). ccache caches the precompiled header and
 # the sources that use it only with the sloppiness pch_defines,time_macros (its manual,
 # "Precompiled headers"; without it they are "uncacheable"): caps_test_pch_launcher gives these
 # targets a launcher that sets it when the build's launcher is ccache.
