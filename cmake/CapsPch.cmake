@@ -1,6 +1,6 @@
 # Precompiled headers for the test programs (docs/benchmarks.md, "Build and test time").
 # Every test program is one source that parses GoogleTest, Eigen and a dozen standard headers
-# before its own code: about 2.4 s of CPU each with GCC 12 at -O3. With CAPS_PCH those headers
+# before its own code: about 2 s of CPU each with GCC 12. With CAPS_PCH those headers
 # are compiled once into a precompiled header that the test programs reuse (REUSE_FROM), in two
 # flavours, as a precompiled header is only valid for the same macro definitions:
 #   caps_test_pch       GoogleTest, Eigen, the standard library (the module tests);
@@ -8,10 +8,11 @@
 #                       server tests, which link nlohmann_json::nlohmann_json).
 # The code compiled is the same: the headers are the ones each test includes itself (a test
 # still includes what it uses; CAPS_PCH=OFF checks that). The precompiled header comes before a
-# test's first line, so a test must not define a macro meant to change those headers (none does). ccache caches the precompiled header and
-# the sources that use it only with the sloppiness pch_defines,time_macros (its manual,
-# "Precompiled headers"; without it they are "uncacheable"): caps_test_pch_launcher gives these
-# targets a launcher that sets it when the build's launcher is ccache.
+# test's first line, so a test must not define a macro meant to change those headers (none
+# does). ccache caches the precompiled header and the sources that use it only with the
+# sloppiness pch_defines,time_macros (its manual, "Precompiled headers"; without it they are
+# "uncacheable"): caps_test_pch_launcher gives these targets a launcher that sets it when the
+# build's launcher is ccache.
 option(CAPS_PCH "Precompiled GoogleTest/Eigen/json headers for the test programs" ON)
 
 set(CAPS_TEST_PCH_HEADERS
