@@ -76,6 +76,11 @@ class JsonReader {
     read((*v)[1], b, name(f.key) + "[1]");
   }
 
+  /// A JSON value under one key, kept as its text.
+  void json_value(std::string& text, const Field& f) {
+    if (const json* v = take(f)) text = dump(*v);
+  }
+
   /// A JSON document whose keys sit beside the declared ones: it takes every key that is no
   /// field (or, alone, the whole value).
   void document(std::string& text, const Field&) { document_ = &text; }
@@ -212,6 +217,14 @@ class JsonWriter {
   template <class T>
   void pair(const T& a, const T& b, const Field& f) {
     here()[std::string(f.key)] = json::array({value_of(a), value_of(b)});
+  }
+
+  void json_value(const std::string& text, const Field& f) {
+    try {
+      here()[std::string(f.key)] = json::parse(text);
+    } catch (const json::exception& e) {
+      throw Error(cat("the result's \"", f.key, "\" is not JSON (", e.what(), ")"));
+    }
   }
 
   void document(const std::string& text, const Field& f) {

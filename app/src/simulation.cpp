@@ -190,6 +190,16 @@ closure::SimulateOptions simulate_options(const MeshingFields& m, const SolverFi
   return o;
 }
 
+void set_domain(closure::SimulateOptions& o, const DomainFields& d, const std::string& model_dir) {
+  o.domain = closure::parse_domain(d.domain);
+  if (!(d.face_radius >= 0) || !std::isfinite(d.face_radius) || d.face_radius > 500)
+    throw InvalidParameter(cat("{face_radius} ", d.face_radius, ": give the region's radius in "
+                               "mm, 0 (automatic) or up to 500"));
+  o.face.radius_mm = d.face_radius;
+  o.features = loaded_feature_lines(model_dir);
+  if (o.domain == closure::Domain::Face) o.tissue = loaded_tissue_model(model_dir);
+}
+
 namespace {
 
 // The plan's (or the bare border's) wound border.
@@ -336,6 +346,7 @@ AxisLengthening plan_lengthening(const closure::Simulation& sim, const plan::Pla
 SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   closure::SimulateOptions o = simulate_options(r.meshing, r.solver);
+  set_domain(o, r.domain, r.model);
   if (!(r.suture_spacing > 0) || !std::isfinite(r.suture_spacing))
     throw InvalidParameter(cat("{suture_spacing} ", r.suture_spacing, ": give the distance "
                                "between sutures in mm, > 0 (e.g. 5)"));
@@ -378,6 +389,24 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   s.max_suture_gap_mm = sim.max_suture_gap_mm;
   s.strain_energy_mj = res.strain_energy_mj;
   s.warnings = sim.wound.continuum.mesh.warnings;
+  s.domain = closure::domain_name(o.domain);
+  s.patch_nodes = static_cast<int>(sim.wound.continuum.mesh.n_nodes());
+  s.patch_elements = static_cast<int>(sim.wound.continuum.mesh.n_elements());
+  if (sim.face) {
+    const closure::FaceDomain& f = *sim.face;
+    s.nodes = static_cast<int>(f.mesh.n_nodes());
+    s.elements = static_cast<int>(f.mesh.n_elements());
+    s.face_radius_mm = f.radius_mm;
+    s.face_tets = f.tets;
+    s.tied_nodes = f.tied_nodes;
+    s.untied_nodes = f.untied_nodes;
+    s.max_tie_distance_mm = f.max_tie_distance_mm;
+    s.attached_nodes = f.attached_nodes;
+    s.held_nodes = f.held_nodes;
+    s.face_notes = f.notes;
+  }
+  s.features_json = feature_displacements_to_json(sim.features);
+  for (const FeatureDisplacement& f : sim.features) s.feature_sentences.push_back(f.sentence);
   s.material = sim.wound.continuum.mesh.materials.at(0)->name();  // the skin's (layer 0)
   s.prestretch = res.prestretch;
   s.gape_mm = sim.gape_mm;
@@ -410,7 +439,13 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
 }
 
 std::string summary(const SimulateResult& s) {
-  return cat("caps simulate: ", s.elements, " elements, closing force ",
+  std::string features;
+  for (const std::string& f : s.feature_sentences) features += cat("; ", f);
+  return cat("caps simulate: ", s.elements, " elements",
+             s.domain == "face" ? cat(" (the whole face within ", std::round(s.face_radius_mm),
+                                      " mm)")
+                                : std::string(" (the clamped patch)"),
+             ", closing force ",
              round_to(s.closing_force_n, 2), " N (", s.sutures, " sutures every ",
              round_to(s.suture_spacing_mm, 1), " mm: up to ", round_to(s.max_force_per_suture_n, 2),
              " N each; ", round_to(s.force_per_mm_n, 3), " N per mm of wound",
@@ -425,7 +460,7 @@ std::string summary(const SimulateResult& s) {
              s.prestretch != 1 ? cat("; skin prestretched ", s.prestretch, ": the open wound gapes ",
                                      round_to(s.gape_mm, 2), " mm")
                                : std::string(),
-             " -> ", s.output);
+             features, " -> ", s.output);
 }
 
 // ---- solve --------------------------------------------------------------------------------
@@ -505,7 +540,8 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
   if (r.meshing.constant_thickness != 0)
     throw InvalidInput("compare meshes the measured and a constant thickness itself; give the "
                        "constant one with --thickness, not --constant-thickness");
-  const closure::SimulateOptions o = simulate_options(r.meshing, r.solver);
+  closure::SimulateOptions o = simulate_options(r.meshing, r.solver);
+  set_domain(o, r.domain, r.model);
   require_utf8(r.model, "the model folder");
   require_utf8(r.plan, "the plan file");
   const plan::Plan plan = plan::read_plan(r.plan);

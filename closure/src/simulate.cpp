@@ -1,6 +1,7 @@
 #include "caps/closure/simulate.hpp"
 
 #include <algorithm>
+#include <set>
 
 #include "caps/core/error.hpp"
 #include "caps/fem/inp_io.hpp"
@@ -40,15 +41,45 @@ const Material* without_calculix_form(const Mesh& mesh, const SimulateOptions& o
   return nullptr;
 }
 
+// What the closure does to the patient's feature lines: the displacement on the skin (the
+// tissue model's and the patch's skin nodes in the whole face; the patch's alone, which says
+// nothing beyond its rim, otherwise). Lines the closure does not reach are left out.
+std::vector<FeatureDisplacement> moved_features(const Simulation& sim, const PatientModel& model,
+                                                const FeatureLines& lines) {
+  const Mesh& mesh = sim.face ? sim.face->mesh : sim.wound.continuum.mesh;
+  const Eigen::MatrixX3d& u = sim.face ? sim.face_result.displacement_mm : sim.result.displacement_mm;
+  const SkinDisplacement field = SkinDisplacement::of_mesh(mesh, u, sim.wound.continuum.skin_node);
+  std::vector<FeatureDisplacement> out;
+  for (FeatureDisplacement& f : feature_displacements(
+           lines, [&](const Eigen::Vector3d& p) { return field(p); }, anatomical_frame(model)))
+    if (f.found && f.has_value) out.push_back(std::move(f));
+  return out;
+}
+
 }  // namespace
 
 Simulation simulate(const PatientModel& model, const plan::Plan& plan,
                     const SimulateOptions& options, Reporter* reporter) {
   plan::check_plan(plan, model);
+  const bool face = options.domain == Domain::Face;
+  if (face && !options.tissue)
+    throw InvalidInput("--domain face needs the model's whole-face tissue model: build it with "
+                       "`caps model tissue MODEL`, or use --domain patch");
   Simulation sim;
   Progress progress(reporter, "meshing and solving", 2);
-  sim.wound =
-      mesh_wound(plan::wound_border(plan), model, options.surface, options.continuum, reporter);
+  ContinuumMeshOptions continuum = options.continuum;
+  if (face) continuum.rim = RimCondition::Tied;
+  sim.wound = mesh_wound(plan::wound_border(plan), model, options.surface, continuum, reporter);
+  if (face) {
+    sim.face = join_face_domain(sim.wound, model, *options.tissue, continuum,
+                                options.solve.kinematics, options.face);
+    for (const std::string& w : sim.face->mesh.warnings)
+      if (std::find(sim.wound.continuum.mesh.warnings.begin(),
+                    sim.wound.continuum.mesh.warnings.end(), w) == sim.wound.continuum.mesh.warnings.end()) {
+        warn(reporter, w);
+        sim.wound.continuum.mesh.warnings.push_back(w);
+      }
+  }
   progress.update(1);
   if (const Material* m = without_calculix_form(sim.wound.continuum.mesh, options))
     sim.wound.continuum.mesh.warnings.push_back(
@@ -59,7 +90,12 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
         "mesh.inp has no prestretch (CalculiX has no prestrain): it is the closure of unstressed skin");
   SolveOptions solve_options = options.solve;
   if (!solve_options.reporter) solve_options.reporter = reporter;
-  sim.result = solve(sim.wound.continuum.mesh, solve_options);
+  if (face) {
+    sim.face_result = solve(sim.face->mesh, solve_options);
+    sim.result = patch_part(sim.face_result, sim.face->n_patch_nodes, sim.face->n_patch_elements);
+  } else {
+    sim.result = solve(sim.wound.continuum.mesh, solve_options);
+  }
   progress.done();
   // The sutures must close: measured on the deformed positions, not assumed.
   const Mesh& mesh = sim.wound.continuum.mesh;
@@ -70,31 +106,34 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
     sim.max_suture_gap_mm = std::max(sim.max_suture_gap_mm, (a - b).norm());
   }
   // Inverted elements: the deformed mesh's Jacobians (a finite-strain solve refuses them).
-  Mesh deformed = mesh;
-  deformed.nodes += u;
+  const Mesh& solved = face ? sim.face->mesh : mesh;
+  Mesh deformed = solved;
+  deformed.nodes += face ? sim.face_result.displacement_mm : u;
   const Eigen::VectorXd det = min_element_jacobians(deformed);
   sim.inverted_elements = static_cast<int>((det.array() <= 0).count());
   if (sim.inverted_elements > 0)
     sim.wound.continuum.mesh.warnings.push_back(
-        cat("the closure turns ", sim.inverted_elements, " of ", mesh.n_elements(),
+        cat("the closure turns ", sim.inverted_elements, " of ", solved.n_elements(),
             " elements inside out: the small-strain (linear) model does not hold for a closure "
             "this large; use --material neo-hookean"));
   sim.sutures = suture_spacing(sim.wound.continuum, sim.result, options.suture_spacing_mm);
-  if (solve_options.prestretch != 1.0) sim.gape_mm = gape(mesh, solve_options);
+  if (solve_options.prestretch != 1.0) sim.gape_mm = gape(solved, solve_options);
+  if (options.features) sim.features = moved_features(sim, model, *options.features);
   return sim;
 }
 
 void write_simulation(const Simulation& sim, const PatientModel& model,
                       const SimulateOptions& options, const std::filesystem::path& dir,
                       const std::string& name) {
-  const Mesh& mesh = sim.wound.continuum.mesh;
+  // The whole face's mesh and result where it was solved (ParaView and CalculiX see all of it).
+  const Mesh& mesh = sim.face ? sim.face->mesh : sim.wound.continuum.mesh;
   write_mesh_dir(mesh, dir);
   InpOptions inp;
   inp.finite_strain = options.solve.kinematics == Kinematics::Finite;
   inp.increments = options.solve.newton.n_steps;
   inp.grow_increments = options.solve.newton.grow_iterations > 0;
   if (!without_calculix_form(mesh, options)) write_inp(mesh, dir / "mesh.inp", inp);
-  write_result_dir(mesh, sim.result, dir, &sim.sutures);
+  write_result_dir(mesh, sim.face ? sim.face_result : sim.result, dir, &sim.sutures);
   write_surface_mesh_png(dir / "surface.png", sim.wound.surface, cat("surface mesh of ", name));
   write_cross_section_png(dir / "section.png", sim.wound.surface, model, options.continuum,
                           cat("cross-section of ", name));

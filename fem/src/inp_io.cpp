@@ -5,6 +5,7 @@
 #include "caps/fem/material_registry.hpp"
 #include "constraints.hpp"
 
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -153,6 +154,13 @@ std::string inp_text(const Mesh& mesh, const InpOptions& options) {
   if (!fixed.empty()) {
     os << "*NSET, NSET=FIXED\n";
     id_lines(os, std::vector<int>(fixed.begin(), fixed.end()));
+  }
+  for (const auto& [name, ids] : mesh.node_sets) {  // names are checked by validate()
+    if (ids.empty()) continue;
+    std::string upper = name;
+    for (char& c : upper) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    os << "*NSET, NSET=" << upper << "\n";
+    id_lines(os, ids);
   }
   for (std::size_t k = 0; k < members.size(); ++k) {
     const int n = members[k], m = groups.find(n), h = N + static_cast<int>(k);

@@ -1,5 +1,6 @@
 #include "caps/fem/mesh.hpp"
 
+#include <cctype>
 #include <algorithm>
 #include <cmath>
 
@@ -116,6 +117,17 @@ void validate(const Mesh& mesh, const std::string& where) {
                              "value or nonzero gradient there; the node is outside the field"));
   }
   validate_ties(mesh, where, check_node);
+  for (const auto& [name, ids] : mesh.node_sets) {
+    const bool ok_name = !name.empty() && name.size() <= 64 &&
+                         std::all_of(name.begin(), name.end(), [](char c) {
+                           return std::isalnum(static_cast<unsigned char>(c)) || c == '_';
+                         });
+    if (!ok_name)
+      throw InvalidInput(cat(where, ": node set '", name, "': name it with 1-64 letters, digits "
+                             "and underscores"));
+    for (std::size_t k = 0; k < ids.size(); ++k)
+      check_node(ids[k], [&] { return cat("node set ", name, " entry ", k); });
+  }
   for (std::size_t i = 0; i < mesh.loads.size(); ++i) {
     check_node(mesh.loads[i].node, [&] { return cat("load entry ", i); });
     if (!mesh.loads[i].force_n.allFinite())

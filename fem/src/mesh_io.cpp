@@ -164,6 +164,10 @@ void write_ties_and_surface(const Mesh& mesh, nlohmann::json& j) {
   const bool on_surface = std::any_of(mesh.sliding.begin(), mesh.sliding.end(),
                                       [](const SlidingNode& s) { return s.on_surface; });
   if (on_surface) j["sliding_surface"] = mesh.sliding_surface_name;
+  if (!mesh.node_sets.empty()) {
+    j["node_sets"] = nlohmann::json::object();
+    for (const auto& [name, ids] : mesh.node_sets) j["node_sets"][name] = ids;
+  }
 }
 
 void read_ties_and_surface(const nlohmann::json& j, const std::string& jw, Mesh& mesh) {
@@ -179,6 +183,17 @@ void read_ties_and_surface(const nlohmann::json& j, const std::string& jw, Mesh&
       tie.masters.push_back(to_int(t[1][k].get<double>(), cat(jw, ": ties[", i, "][1][", k, "]")));
     for (const auto& w : t[2]) tie.weights.push_back(w.get<double>());
     mesh.ties.push_back(std::move(tie));
+  }
+  const nlohmann::json sets = j.value("node_sets", nlohmann::json::object());
+  if (!sets.is_object()) throw InvalidInput(cat(jw, ": node_sets must be an object of id arrays"));
+  for (const auto& [name, ids] : sets.items()) {
+    if (!ids.is_array()) throw InvalidInput(cat(jw, ": node_sets.", name, " must be an array of node ids"));
+    std::vector<int>& out = mesh.node_sets[name];
+    for (std::size_t k = 0; k < ids.size(); ++k) {
+      if (!ids[k].is_number())
+        throw InvalidInput(cat(jw, ": node_sets.", name, "[", k, "] must be a node id"));
+      out.push_back(to_int(ids[k].get<double>(), cat(jw, ": node_sets.", name, "[", k, "]")));
+    }
   }
   const long n_on_surface = std::count_if(mesh.sliding.begin(), mesh.sliding.end(),
                                           [](const SlidingNode& s) { return s.on_surface; });

@@ -47,8 +47,11 @@ std::pair<double, double> wound_fill_area_mm2(const SkinSurfaces& skin) {
 
 SkinSurfaces simulated_skin(const PatientModel& model, const closure::Simulation& sim,
                             const DrawnSkin* drawn) {
-  const fem::Mesh& mesh = sim.wound.continuum.mesh;
-  return displaced_skin(model, mesh, &sim.result, full_resolution_subdivisions(model, mesh), drawn);
+  // The whole face where it was solved: the patch's elements carry the micropolygons, the
+  // tissue model's skin nodes move the rest (displaced_skin()).
+  const fem::Mesh& mesh = sim.face ? sim.face->mesh : sim.wound.continuum.mesh;
+  return displaced_skin(model, mesh, sim.face ? &sim.face_result : &sim.result,
+                        full_resolution_subdivisions(model, sim.wound.continuum.mesh), drawn);
 }
 
 namespace {

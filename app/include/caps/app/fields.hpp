@@ -18,6 +18,7 @@
 ///                                           is set on reading to whether they were there);
 ///   v.computed({"mm"}, [&] { return x; })   a value computed from others: written, not read;
 ///   v.pair(a, b, {"thickness_mm"})           [a, b] under one key;
+///   v.json_value(text, {"features"})         a JSON value (array or object) kept as its text;
 ///   v.document(text, {"model_json"})         a JSON document written elsewhere (model.json) whose
 ///                                           keys sit beside the declared ones (declare it first:
 ///                                           the declared keys win).

@@ -7,6 +7,10 @@
 
 namespace caps {
 class PatientModel;
+struct FeatureLines;
+namespace mesher {
+struct TissueModel;
+}
 }
 
 namespace caps::app {
@@ -18,5 +22,11 @@ namespace caps::app {
 /// @param dir  the model directory (caps model from-volume / from-scan)
 /// @return     the model, shared and read-only
 std::shared_ptr<const PatientModel> loaded_model(const std::string& dir);
+
+/// The model directory's whole-face tissue model (mesher::read_tissue_model()), kept the same way.
+std::shared_ptr<const mesher::TissueModel> loaded_tissue_model(const std::string& dir);
+
+/// The model directory's feature lines (read_feature_lines()), kept the same way.
+std::shared_ptr<const FeatureLines> loaded_feature_lines(const std::string& dir);
 
 }  // namespace caps::app

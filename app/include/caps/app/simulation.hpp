@@ -99,6 +99,28 @@ struct SolverFields {
   }
 };
 
+/// Where the closure is solved (caps simulate and compare, the planner, Python, the cohort).
+struct DomainFields {
+  std::string domain = "face";
+  double face_radius = closure::FaceDomainOptions{}.radius_mm;
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.domain, {"domain", "face: the wound's patch tied into the patient's whole-face tissue "
+                           "model (built by caps model from-volume or caps model tissue), "
+                           "attached to the bone, free at the eyelids, lips and nostrils; "
+                           "patch: the 1992 patch clamped at its rim (docs/fem.md, \"The whole "
+                           "face\")"});
+    v(r.face_radius, {"face_radius", "--domain face: the tissue model is kept within this "
+                                     "distance of the wound (mm) and held beyond; 0 = automatic "
+                                     "(1.5 x the patch's reach, at least 40 mm)"});
+  }
+};
+
+/// Sets `o` to solve in the domain `d`: for face, reads the model directory's whole-face tissue
+/// model and the feature lines (InvalidInput saying how to build them).
+void set_domain(closure::SimulateOptions& o, const DomainFields& d, const std::string& model_dir);
+
 /// The library options of the meshing and solver fields (names checked, InvalidInput naming
 /// the option otherwise).
 closure::SimulateOptions simulate_options(const MeshingFields& meshing, const SolverFields& solver);
@@ -183,6 +205,7 @@ struct SimulateRequest {
   std::string model, plan, output;
   MeshingFields meshing;
   SolverFields solver;
+  DomainFields domain;
   double suture_spacing = closure::SimulateOptions{}.suture_spacing_mm;
   bool render = false, tension_map = false;
   bool force = false;
@@ -194,6 +217,7 @@ struct SimulateRequest {
     v(r.output, {"output", "result directory to create", FieldKind::Required, "-o,--output"});
     MeshingFields::fields(r.meshing, v);
     SolverFields::fields(r.solver, v);
+    DomainFields::fields(r.domain, v);
     v(r.suture_spacing, {"suture_spacing", "report the closing force per suture with sutures this "
                                            "far apart along the wound (mm)"});
     v(r.render, {"render", "also render pre_<view>.png and post_<view>.png (front, oblique, "
@@ -243,6 +267,15 @@ struct SimulateResult {
   std::vector<std::string> images;  ///< with render
   std::vector<std::string> warnings;
   double solve_s = 0;  ///< the solver's wall time (not reproducible: under "timings_s")
+  /// Where it was solved (closure::Domain) and, for the whole face, what the join did.
+  std::string domain = "patch";
+  double face_radius_mm = 0, max_tie_distance_mm = 0;
+  int face_tets = 0, tied_nodes = 0, untied_nodes = 0, attached_nodes = 0, held_nodes = 0;
+  int patch_nodes = 0, patch_elements = 0;
+  std::vector<std::string> face_notes;  ///< what the join did, in words
+  /// The feature lines the closure moves (closure::Simulation::features), as JSON.
+  std::string features_json = "[]";
+  std::vector<std::string> feature_sentences;  ///< one per line moved, for the summary
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
@@ -288,6 +321,24 @@ struct SimulateResult {
         });
       });
     });
+    v.group({"domain", "where the closure was solved (--domain)"}, [&] {
+      v(r.domain, {"name", "face (the patch tied into the whole-face model) or patch (clamped)"});
+      v(r.patch_nodes, {"patch_nodes"});
+      v(r.patch_elements, {"patch_elements"});
+      v.when(r.domain == "face", [&] {
+        v(r.face_radius_mm, {"radius_mm", "the tissue model kept within this distance of the wound"});
+        v(r.face_tets, {"tetrahedra"});
+        v(r.tied_nodes, {"tied_nodes", "the patch's rim nodes tied to the tetrahedra"});
+        v(r.untied_nodes, {"untied_nodes"});
+        v(r.max_tie_distance_mm, {"max_tie_distance_mm"});
+        v(r.attached_nodes, {"attached_nodes", "tissue nodes on the bone"});
+        v(r.held_nodes, {"held_nodes", "tissue nodes where the region or the CT ends"});
+        v(r.face_notes, {"notes"});
+      });
+    });
+    v.json_value(r.features_json, {"features", "each feature line's displacement by the closure "
+                                               "(mm, with direction, place and warning)"});
+    v(r.feature_sentences, {"feature_sentences"});
     v(r.material, {"material"});
     v(r.prestretch, {"prestretch"});
     v(r.gape_mm, {"gape_mm"});
@@ -424,6 +475,9 @@ struct CompareRequest {
   double thickness = 0;
   MeshingFields meshing;
   SolverFields solver;
+  /// The 1992 patch by default: what the constant-thickness assumption is held against is the
+  /// patch's own thickness (in the whole face the CT's tissue around it would stay measured).
+  DomainFields domain{"patch"};
   bool force = false;
 
   template <class Self, class V>
@@ -435,6 +489,7 @@ struct CompareRequest {
                                  "wound)"});
     MeshingFields::fields(r.meshing, v);
     SolverFields::fields(r.solver, v);
+    DomainFields::fields(r.domain, v);
     v(r.force, {"force", "replace an existing output", FieldKind::Flag});
   }
 };

@@ -5,14 +5,18 @@
 
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include "caps/core/reporter.hpp"
 #include "caps/mesher/continuum_mesher.hpp"
 #include "caps/fem/solve.hpp"
 #include "caps/mesher/surface_mesher.hpp"
+#include "caps/closure/face_domain.hpp"
 #include "caps/closure/suture_spacing.hpp"
 #include "caps/plan/plan.hpp"
+#include "caps/surface/feature_lines.hpp"
 
 namespace caps {
 class PatientModel;
@@ -26,6 +30,14 @@ struct SimulateOptions {
   fem::SolveOptions solve;
   /// The spacing of the sutures the closing force is reported per (mm; suture_spacing()).
   double suture_spacing_mm = 5.0;
+  /// Where the closure is solved. Face needs `tissue` (the model directory's whole-face tissue
+  /// model) and meshes the patch with a tied rim (continuum.rim is set to Tied); Patch is the
+  /// 1992 patch with continuum.rim as given (the library's default, fixed).
+  Domain domain = Domain::Patch;
+  FaceDomainOptions face;
+  std::shared_ptr<const mesher::TissueModel> tissue;
+  /// The patient's feature lines (surface/feature_lines.hpp): their displacement is reported.
+  std::shared_ptr<const FeatureLines> features;
 };
 
 struct Simulation {
@@ -43,6 +55,12 @@ struct Simulation {
   /// The closing force per suture at SimulateOptions::suture_spacing_mm, the largest one and
   /// the force per mm of wound (suture_spacing()).
   fem::SutureSpacing sutures;
+  /// Domain::Face: the joined mesh (patch first) and its solve; `result` above is then the
+  /// patch's part of it (patch_part()), so every patch-level report reads as before.
+  std::optional<FaceDomain> face;
+  fem::SolveResult face_result;
+  /// The displacement of each feature line the closure reaches (SimulateOptions::features).
+  std::vector<FeatureDisplacement> features;
 };
 
 /// Checks the plan on the model (plan::check_plan), meshes its wound border and solves the

@@ -137,6 +137,10 @@ struct Mesh {
   std::shared_ptr<const ImplicitSurface> sliding_surface;
   std::string sliding_surface_name;       ///< e.g. "bone"; recorded in mesh.json
   std::vector<TiedNode> ties;             ///< slave nodes tied to master elements
+  /// Named node sets (mesh.json "node_sets", CalculiX *NSET): e.g. the whole-face tissue
+  /// model's skin nodes, which the renderer moves the skin around the patch with. Names are
+  /// letters, digits and underscores.
+  std::map<std::string, std::vector<int>> node_sets;
   /// The elements of each flap the plan raises (transposed, rotated or advanced tissue): the
   /// finite-strain solve swings each flap into place along an arc (docs/fem.md, "Closing path").
   std::vector<std::vector<int>> flaps;

@@ -1,0 +1,123 @@
+#pragma once
+/// @brief The closure in the patient's whole face: the 1992 wound patch (Hex20/Wedge15, meshed
+/// on the cylindrical image and extruded to the measured bone) joined by a tie to the patient's
+/// volumetric soft-tissue model (quadratic tetrahedra from the CT, mesher/tissue_model.hpp)
+/// instead of clamped at its rim (docs/fem.md, "The whole face").
+///
+/// The tissue model is kept within FaceDomainOptions::radius_mm of the wound; its tetrahedra
+/// under the patch's footprint (skin to bone) are left out, and the patch's rim nodes are tied
+/// to the tetrahedra they lie in or next to (fem::TiedNode: the master element's shape functions
+/// at the slave's place, as CalculiX's *TIE). The tissue is attached where it lies on the bone,
+/// held where the region or the CT's field of view ends, and free on the skin (the eyelid
+/// margins, the lips and the nostrils are free surfaces as the CT shows them). Undermined tissue
+/// of the patch slides along its start normal, as in the patch (sliding on the bone's level set,
+/// fem::ImplicitSurface, is not yet used here: docs/fem.md, "The whole face").
+
+#include <Eigen/Core>
+#include <array>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "caps/fem/mesh.hpp"
+#include "caps/fem/solve.hpp"
+#include "caps/mesher/continuum_mesher.hpp"
+#include "caps/mesher/tissue_model.hpp"
+
+namespace caps {
+class PatientModel;
+}
+
+namespace caps::closure {
+
+/// Where the closure is solved: Face, the patch tied into the whole-face model (the default);
+/// Patch, the 1992 patch clamped at its rim (what `compare` holds the constant-thickness
+/// assumption against).
+enum class Domain { Face, Patch };
+const char* domain_name(Domain domain);
+/// "face" or "patch"; InvalidInput naming the value otherwise.
+Domain parse_domain(const std::string& name);
+
+struct FaceDomainOptions {
+  /// The tissue model is kept within this distance (mm) of the wound's centre and held beyond;
+  /// 0: automatic, kRadiusPerWound x the patch's extent + wound, at least kMinRadiusMm.
+  double radius_mm = 0;
+  /// A rim node farther than this (mm) from every tetrahedron is left untied (a warning counts
+  /// them); 0: 1.5 x the tissue model's largest cell size on the face.
+  double tie_tolerance_mm = 0;
+};
+
+/// The automatic region: at least this radius (mm)...
+inline constexpr double kMinRadiusMm = 40.0;
+/// ...and this many times the distance from the wound's centre to the patch's rim.
+inline constexpr double kRadiusPerWound = 1.5;
+
+/// The joined mesh and what the join did.
+struct FaceDomain {
+  /// The patch's nodes and elements first, in the patch's numbering (so the patch's node ids,
+  /// sutures and flaps stay valid), then the tissue's nodes and Tet10 elements.
+  fem::Mesh mesh;
+  int n_patch_nodes = 0, n_patch_elements = 0;
+  /// Joined-mesh ids of the tissue's nodes on the skin (corner and mid-edge nodes; also the
+  /// mesh's node set kFaceSkinNodes).
+  std::vector<int> skin_nodes;
+  Eigen::Vector3d centre_lps = Eigen::Vector3d::Zero();  ///< the wound's centre on the skin
+  double radius_mm = 0;               ///< the region kept
+  int tets = 0;                       ///< tetrahedra in the joined mesh
+  int tets_under_patch = 0;           ///< left out under the patch's footprint
+  int tets_detached = 0;              ///< pieces of the region with no support, left out
+  int tied_nodes = 0, untied_nodes = 0;
+  double max_tie_distance_mm = 0;     ///< the farthest a tied rim node lies from its master
+  int attached_nodes = 0;             ///< tissue nodes on the bone, fixed
+  int held_nodes = 0;                 ///< tissue nodes where the region or the CT ends, fixed
+  /// The layer ids of the tissue's elements (>= kFirstTissueLayer) and their mixture.
+  std::vector<std::string> notes;
+};
+
+/// Element layer ids of the tissue's materials start here (the patch's are 0..2).
+inline constexpr int kFirstTissueLayer = 10;
+
+/// Joins the patch `wound` (meshed with RimCondition::Tied) to `tissue`. Materials: each
+/// tetrahedron's mixture of the measured layers (TissueModel::layer_fraction, in fifths) gets
+/// the volume-weighted mean of `layers`'s dermis, fat and deep E and nu (for in-plane loading of
+/// layered tissue, the exact stiffness of the layers side by side), neo-Hookean under finite
+/// strain, linear under small strain. Throws InvalidInput when the tissue model does not reach
+/// the wound (another patient's, or a wound off its extent).
+FaceDomain join_face_domain(const mesher::WoundMesh& wound, const PatientModel& model,
+                            const mesher::TissueModel& tissue,
+                            const mesher::ContinuumMeshOptions& layers, fem::Kinematics kinematics,
+                            const FaceDomainOptions& options = {});
+
+/// The patch's part of a solve of the joined mesh: the rows of its first `n_nodes` nodes and
+/// first `n_elements` elements; the totals (suture forces, energy, counts, timings) as they are.
+fem::SolveResult patch_part(const fem::SolveResult& joined, int n_nodes, int n_elements);
+
+/// The closure's displacement on the skin, anywhere on the face: inverse-distance weights of the
+/// skin nodes within `reach_mm` of a point; nothing farther from every skin node (outside the
+/// modelled region, where the face does not move). The renderer moves the skin outside the patch
+/// with it (the joined mesh's node set kFaceSkinNodes); feature lines are measured on it.
+class SkinDisplacement {
+ public:
+  /// @param points         #P×3 skin node positions (LPS mm)
+  /// @param displacements  #P×3 their displacements (mm)
+  SkinDisplacement(Eigen::MatrixX3d points, Eigen::MatrixX3d displacements, double reach_mm = 6.0);
+  /// The nodes of `mesh`'s node set kFaceSkinNodes (and `extra`) with their rows of `u`.
+  static SkinDisplacement of_mesh(const fem::Mesh& mesh, const Eigen::MatrixX3d& u,
+                                  const std::vector<int>& extra = {}, double reach_mm = 6.0);
+  std::optional<Eigen::Vector3d> operator()(const Eigen::Vector3d& p_lps) const;
+  bool empty() const { return points_.rows() == 0; }
+
+ private:
+  std::array<int, 3> cell(const Eigen::Vector3d& p) const;
+  double reach_mm_;
+  Eigen::MatrixX3d points_, values_;
+  std::map<std::array<int, 3>, std::vector<int>> grid_;
+};
+
+/// The joined mesh's node set of the tissue's skin nodes (fem::Mesh::node_sets, mesh.json).
+inline constexpr const char* kFaceSkinNodes = "face_skin";
+
+
+}  // namespace caps::closure

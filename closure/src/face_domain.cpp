@@ -1,0 +1,371 @@
+#include "caps/closure/face_domain.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+
+#include "caps/core/error.hpp"
+#include "caps/core/union_find.hpp"
+#include "caps/fem/material_registry.hpp"
+#include "caps/fem/tet_mesh.hpp"
+#include "caps/fem/tie.hpp"
+#include "caps/surface/patient_model.hpp"
+
+namespace caps::closure {
+
+using namespace caps::fem;
+
+const char* domain_name(Domain domain) { return domain == Domain::Face ? "face" : "patch"; }
+
+Domain parse_domain(const std::string& name) {
+  if (name == "face") return Domain::Face;
+  if (name == "patch") return Domain::Patch;
+  throw InvalidInput(cat("domain '", name, "': expected face (the patch tied into the patient's "
+                         "whole-face model) or patch (the 1992 patch clamped at its rim)"));
+}
+
+namespace {
+
+// Winding test of a point against a closed polygon (theta, z).
+bool inside(const std::vector<Eigen::Vector2d>& poly, const Eigen::Vector2d& p) {
+  bool in = false;
+  for (std::size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
+    const Eigen::Vector2d& a = poly[i];
+    const Eigen::Vector2d& b = poly[j];
+    if ((a.y() > p.y()) != (b.y() > p.y()) &&
+        p.x() < (b.x() - a.x()) * (p.y() - a.y()) / (b.y() - a.y()) + a.x())
+      in = !in;
+  }
+  return in;
+}
+
+double wrap_deg(double d) { return d - 360.0 * std::floor((d + 180.0) / 360.0); }
+
+// The E and nu of a layer's material (its small-strain constants; a material without them,
+// such as goh, stands in with the dermis preset's).
+std::pair<double, double> constants(const std::shared_ptr<const Material>& m) {
+  const IsotropicElastic* e = m ? m->small_strain() : nullptr;
+  if (!e) e = default_dermis()->small_strain();
+  return {e->E_mpa(), e->nu()};
+}
+
+// The tissue model's part kept around the wound, before it is made quadratic.
+struct Region {
+  std::vector<int> tets;                 // tissue tet ids kept
+  std::vector<char> held;                // tissue node -> on the region's cut or the CT's end
+  int under_patch = 0, detached = 0;
+};
+
+class Join {
+ public:
+  Join(const mesher::WoundMesh& wound, const PatientModel& model, const mesher::TissueModel& tissue,
+       const mesher::ContinuumMeshOptions& layers, Kinematics kinematics,
+       const FaceDomainOptions& options)
+      : wound_(wound), model_(model), tissue_(tissue), layers_(layers), kinematics_(kinematics),
+        o_(options) {}
+
+  FaceDomain run();
+
+ private:
+  void place();
+  Region select() const;
+  void append_tissue(const Region& region);
+  void tie_rim();
+  std::shared_ptr<const Material> mixture(int dermis_fifths, int fat_fifths) const;
+
+  const mesher::WoundMesh& wound_;
+  const PatientModel& model_;
+  const mesher::TissueModel& tissue_;
+  const mesher::ContinuumMeshOptions& layers_;
+  Kinematics kinematics_;
+  FaceDomainOptions o_;
+  FaceDomain d_;
+  std::vector<Eigen::Vector2d> footprint_;  // the patch's outer rim (theta unwrapped, z)
+  double theta_c_ = 0;
+  std::vector<int> tissue_elements_;       // joined-mesh ids of the Tet10 elements
+};
+
+// The wound's centre, the region's radius and the patch's footprint.
+void Join::place() {
+  const mesher::SurfaceMesh& s = wound_.surface;
+  theta_c_ = s.theta_c_deg;
+  d_.centre_lps = model_.skin_point(s.theta_c_deg, s.z_c_mm);
+  double reach = 0;  // the centre to the farthest rim node
+  for (int n : wound_.continuum.rim_nodes)
+    reach = std::max(reach, (wound_.continuum.mesh.nodes.row(n).transpose() - d_.centre_lps).norm());
+  d_.radius_mm = o_.radius_mm > 0 ? o_.radius_mm : std::max(kMinRadiusMm, kRadiusPerWound * reach);
+  if (d_.radius_mm <= reach)
+    throw InvalidInput(cat("--face-radius ", d_.radius_mm, " mm: the whole-face region must "
+                           "reach beyond the patch's rim (", std::round(reach * 10) / 10,
+                           " mm from the wound's centre)"));
+  for (int v : s.outer_border) footprint_.emplace_back(s.theta_z(v, 0), s.theta_z(v, 1));
+}
+
+// The tetrahedra within the radius, less those under the patch's footprint (skin to bone) and
+// pieces with no support; nodes on the region's cut and at the CT's end are held.
+Region Join::select() const {
+  const Eigen::Index nt = tissue_.tets.rows(), nn = tissue_.nodes.rows();
+  Region r;
+  r.held.assign(static_cast<std::size_t>(nn), 0);
+  std::vector<char> kept(static_cast<std::size_t>(nt), 0);
+  std::vector<char> outside_node(static_cast<std::size_t>(nn), 0);
+  for (Eigen::Index t = 0; t < nt; ++t) {
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 4; ++k) c += tissue_.nodes.row(tissue_.tets(t, k)).transpose();
+    c /= 4;
+    if ((c - d_.centre_lps).norm() > d_.radius_mm) {
+      for (int k = 0; k < 4; ++k) outside_node[tissue_.tets(t, k)] = 1;
+      continue;
+    }
+    const CylindricalPoint p = model_.to_cylindrical(c);
+    const Eigen::Vector2d tz(theta_c_ + wrap_deg(p.theta_deg - theta_c_), p.z_mm);
+    // Under the patch: inside its rim and not below the bone the patch stands on (tissue deeper
+    // than the measured bone, such as the orbit's under a patch on the lid, stays).
+    if (inside(footprint_, tz) && model_.has_z(p.z_mm) &&
+        p.r_mm >= model_.r_bone(p.theta_deg, p.z_mm) - 1.0) {
+      ++r.under_patch;
+      continue;
+    }
+    kept[t] = 1;
+  }
+  for (Eigen::Index n = 0; n < nn; ++n)
+    r.held[n] = outside_node[n] || (tissue_.node_flags[n] & mesher::kTissueFieldOfView);
+  // Pieces with nothing holding them (cut loose by the radius or the patch) are left out.
+  UnionFind uf(static_cast<int>(nn));
+  for (Eigen::Index t = 0; t < nt; ++t)
+    if (kept[t])
+      for (int k = 1; k < 4; ++k) uf.unite(tissue_.tets(t, 0), tissue_.tets(t, k));
+  std::vector<char> supported(static_cast<std::size_t>(nn), 0);
+  for (Eigen::Index t = 0; t < nt; ++t)
+    if (kept[t])
+      for (int k = 0; k < 4; ++k) {
+        const int n = tissue_.tets(t, k);
+        if (r.held[n] || (tissue_.node_flags[n] & mesher::kTissueOnBone)) supported[uf.find(n)] = 1;
+      }
+  for (Eigen::Index t = 0; t < nt; ++t) {
+    if (!kept[t]) continue;
+    if (supported[uf.find(tissue_.tets(t, 0))]) r.tets.push_back(static_cast<int>(t));
+    else ++r.detached;
+  }
+  return r;
+}
+
+std::shared_ptr<const Material> Join::mixture(int dermis_fifths, int fat_fifths) const {
+  const bool uniform = wound_.continuum.tissue == mesher::TissueLayers::Uniform;
+  const auto dermis = constants(uniform ? layers_.material : layers_.dermis);
+  const auto fat = constants(uniform ? layers_.material : layers_.fat);
+  const auto deep = constants(uniform ? layers_.material : layers_.deep);
+  const double fd = dermis_fifths / 5.0, ff = fat_fifths / 5.0, fp = 1.0 - fd - ff;
+  const double E = fd * dermis.first + ff * fat.first + fp * deep.first;
+  const double nu = fd * dermis.second + ff * fat.second + fp * deep.second;
+  return make_material(kinematics_ == Kinematics::Finite ? "neo-hookean" : "linear",
+                       {{"E", E}, {"nu", nu}},
+                       cat("whole-face tissue (", dermis_fifths * 20, " % dermis, ",
+                           fat_fifths * 20, " % fat)"));
+}
+
+void Join::append_tissue(const Region& region) {
+  Mesh& mesh = d_.mesh;
+  // The kept tets, renumbered, made quadratic.
+  std::map<int, int> local;  // tissue node -> kept corner id
+  Eigen::MatrixX4i tets(static_cast<Eigen::Index>(region.tets.size()), 4);
+  for (std::size_t i = 0; i < region.tets.size(); ++i)
+    for (int k = 0; k < 4; ++k) {
+      const int n = tissue_.tets(region.tets[i], k);
+      const auto [it, added] = local.emplace(n, static_cast<int>(local.size()));
+      tets(static_cast<Eigen::Index>(i), k) = it->second;
+    }
+  Eigen::MatrixX3d corners(static_cast<Eigen::Index>(local.size()), 3);
+  std::vector<int> tissue_id(local.size());
+  for (const auto& [n, id] : local) {
+    corners.row(id) = tissue_.nodes.row(n);
+    tissue_id[id] = n;
+  }
+  const QuadraticTetMesh q = quadratic_tetrahedra(corners, tets);
+  const int base = static_cast<int>(mesh.n_nodes());
+  mesh.nodes.conservativeResize(base + q.nodes.rows(), 3);
+  mesh.nodes.bottomRows(q.nodes.rows()) = q.nodes;
+  // Materials: a layer per mixture in fifths.
+  std::map<std::pair<int, int>, int> layer_of;
+  for (std::size_t i = 0; i < region.tets.size(); ++i) {
+    const Eigen::Vector3f f = tissue_.layer_fraction.row(region.tets[i]).transpose();
+    const int fd = std::clamp(static_cast<int>(std::lround(5 * f.x())), 0, 5);
+    const int ff = std::clamp(static_cast<int>(std::lround(5 * f.y())), 0, 5 - fd);
+    auto [it, added] = layer_of.emplace(std::make_pair(fd, ff),
+                                        kFirstTissueLayer + static_cast<int>(layer_of.size()));
+    if (added) mesh.materials[it->second] = mixture(fd, ff);
+    Element e = q.elements[i];
+    e.layer = it->second;
+    for (int k = 0; k < 10; ++k) e.nodes[k] += base;
+    tissue_elements_.push_back(static_cast<int>(mesh.elements.size()));
+    mesh.elements.push_back(e);
+  }
+  d_.tets = static_cast<int>(region.tets.size());
+  // Supports: a corner on the bone is attached, one on the region's cut or the CT's end held; a
+  // mid-edge node as both its corners (the edge lies on that surface or spans the layer).
+  auto corner_state = [&](int c) {
+    const int n = tissue_id[c];
+    if (region.held[n]) return 2;
+    return (tissue_.node_flags[n] & mesher::kTissueOnBone) ? 1 : 0;
+  };
+  auto skin = [&](int c) { return (tissue_.node_flags[tissue_id[c]] & mesher::kTissueOnSkin) != 0; };
+  std::vector<char> done(static_cast<std::size_t>(q.nodes.rows()), 0);
+  auto visit = [&](int id, int state, bool on_skin) {
+    if (done[id]) return;
+    done[id] = 1;
+    if (state == 1) ++d_.attached_nodes;
+    if (state == 2) ++d_.held_nodes;
+    if (state > 0) mesh.fixed_nodes.push_back(base + id);
+    if (on_skin) d_.skin_nodes.push_back(base + id);
+  };
+  static constexpr int kEdge[6][2] = {{0, 1}, {1, 2}, {2, 0}, {0, 3}, {1, 3}, {2, 3}};
+  for (const Element& e : q.elements) {
+    for (int k = 0; k < 4; ++k) visit(e.nodes[k], corner_state(e.nodes[k]), skin(e.nodes[k]));
+    for (int k = 0; k < 6; ++k) {
+      const int a = e.nodes[kEdge[k][0]], b = e.nodes[kEdge[k][1]];
+      const int sa = corner_state(a), sb = corner_state(b);
+      visit(e.nodes[4 + k], sa > 0 && sb > 0 ? std::max(sa, sb) : 0, skin(a) && skin(b));
+    }
+  }
+}
+
+// The patch's rim nodes are tied to the tetrahedra they lie in or next to (mortar rows over the
+// rim's faces: fem::tie_nodes()); fixed, sutured and sliding rim nodes (the rim's base on the
+// bone) keep their own condition.
+void Join::tie_rim() {
+  Mesh& mesh = d_.mesh;
+  std::set<int> own(mesh.fixed_nodes.begin(), mesh.fixed_nodes.end());
+  for (const SuturePair& s : mesh.sutures) own.insert({s.a, s.b});
+  for (const SlidingNode& s : mesh.sliding) own.insert(s.node);
+  for (const FixedDof& f : mesh.fixed_dofs) own.insert(f.node);
+  std::vector<int> slaves;
+  for (int n : wound_.continuum.rim_nodes)
+    if (!own.count(n)) slaves.push_back(n);
+  // The patch's rim stands in the gap its footprint left in the tissue: within about a face
+  // cell of a tetrahedron.
+  const double tolerance = o_.tie_tolerance_mm > 0 ? o_.tie_tolerance_mm
+                                                    : 3.0 * tissue_.options.face_size_mm;
+  const TieSearchResult found = tie_nodes(mesh, slaves, tissue_elements_, tolerance);
+  for (const TiedNode& t : found.ties) mesh.ties.push_back(t);
+  d_.tied_nodes = static_cast<int>(found.ties.size());
+  d_.untied_nodes = static_cast<int>(found.unmatched.size());
+  for (double dist : found.distance_mm) d_.max_tie_distance_mm = std::max(d_.max_tie_distance_mm, dist);
+  if (d_.tied_nodes == 0)
+    throw InvalidInput(cat("the whole-face tissue model does not reach the wound's patch (none of "
+                           "its ", slaves.size(), " rim nodes lies within ", tolerance,
+                           " mm of a tetrahedron): is it this patient's? Rebuild it with `caps "
+                           "model tissue MODEL --force`, or use --domain patch"));
+  if (d_.untied_nodes > 0)
+    d_.mesh.warnings.push_back(
+        cat("whole face: ", d_.untied_nodes, " of ", slaves.size(), " rim nodes of the patch lie "
+            "farther than ", std::round(tolerance * 10) / 10, " mm from the tissue model and are "
+            "left free (the tissue model stops short of the patch there)"));
+}
+
+FaceDomain Join::run() {
+  if (wound_.continuum.rim_nodes.empty())
+    throw InvalidInput("the patch has no rim nodes to tie to the whole-face model");
+  place();
+  const Region region = select();
+  d_.tets_under_patch = region.under_patch;
+  d_.tets_detached = region.detached;
+  if (region.tets.empty())
+    throw InvalidInput(cat("the whole-face tissue model has no tissue within ", d_.radius_mm,
+                           " mm of the wound: is it this patient's? Rebuild it with `caps model "
+                           "tissue MODEL --force`, or use --domain patch"));
+  d_.mesh = wound_.continuum.mesh;
+  d_.n_patch_nodes = static_cast<int>(d_.mesh.n_nodes());
+  d_.n_patch_elements = static_cast<int>(d_.mesh.n_elements());
+  append_tissue(region);
+  tie_rim();
+  d_.mesh.node_sets[kFaceSkinNodes] = d_.skin_nodes;
+  d_.notes.push_back(cat("whole face: the patch is tied to ", d_.tets, " tetrahedra of the "
+                         "patient's tissue model within ", std::round(d_.radius_mm), " mm of the "
+                         "wound (", d_.tied_nodes, " rim nodes tied, the farthest ",
+                         std::round(d_.max_tie_distance_mm * 100) / 100, " mm from its "
+                         "tetrahedron; ", d_.attached_nodes, " nodes attached to the bone, ",
+                         d_.held_nodes, " held where the region or the CT ends)"));
+  return std::move(d_);
+}
+
+}  // namespace
+
+FaceDomain join_face_domain(const mesher::WoundMesh& wound, const PatientModel& model,
+                            const mesher::TissueModel& tissue,
+                            const mesher::ContinuumMeshOptions& layers, Kinematics kinematics,
+                            const FaceDomainOptions& options) {
+  return Join(wound, model, tissue, layers, kinematics, options).run();
+}
+
+SolveResult patch_part(const SolveResult& joined, int n_nodes, int n_elements) {
+  SolveResult r = joined;
+  r.displacement_mm = joined.displacement_mm.topRows(n_nodes);
+  if (joined.nodal_stress_mpa.rows() > 0) r.nodal_stress_mpa = joined.nodal_stress_mpa.topRows(n_nodes);
+  if (joined.von_mises_mpa.size() > 0) r.von_mises_mpa = joined.von_mises_mpa.head(n_nodes);
+  if (joined.max_principal_mpa.size() > 0)
+    r.max_principal_mpa = joined.max_principal_mpa.head(n_nodes);
+  if (joined.reaction_n.rows() > 0) r.reaction_n = joined.reaction_n.topRows(n_nodes);
+  if (joined.element_von_mises_mpa.size() > 0)
+    r.element_von_mises_mpa = joined.element_von_mises_mpa.head(n_elements);
+  if (!joined.gauss_offset.empty()) {
+    r.gauss_offset.assign(joined.gauss_offset.begin(), joined.gauss_offset.begin() + n_elements);
+    const int rows = static_cast<std::size_t>(n_elements) < joined.gauss_offset.size()
+                         ? joined.gauss_offset[n_elements]
+                         : static_cast<int>(joined.gauss_stress_mpa.rows());
+    r.gauss_stress_mpa = joined.gauss_stress_mpa.topRows(rows);
+  }
+  return r;
+}
+
+SkinDisplacement::SkinDisplacement(Eigen::MatrixX3d points, Eigen::MatrixX3d displacements,
+                                   double reach_mm)
+    : reach_mm_(reach_mm), points_(std::move(points)), values_(std::move(displacements)) {
+  if (points_.rows() != values_.rows() || !(reach_mm_ > 0))
+    throw InvalidInput("skin displacement: as many displacements as points, and a reach > 0");
+  for (Eigen::Index i = 0; i < points_.rows(); ++i)
+    grid_[cell(points_.row(i).transpose())].push_back(static_cast<int>(i));
+}
+
+SkinDisplacement SkinDisplacement::of_mesh(const Mesh& mesh, const Eigen::MatrixX3d& u,
+                                           const std::vector<int>& extra, double reach_mm) {
+  std::vector<int> ids = extra;
+  if (const auto it = mesh.node_sets.find(kFaceSkinNodes); it != mesh.node_sets.end())
+    ids.insert(ids.end(), it->second.begin(), it->second.end());
+  Eigen::MatrixX3d points(static_cast<Eigen::Index>(ids.size()), 3), values(points.rows(), 3);
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    points.row(static_cast<Eigen::Index>(i)) = mesh.nodes.row(ids[i]);
+    values.row(static_cast<Eigen::Index>(i)) = u.row(ids[i]);
+  }
+  return SkinDisplacement(std::move(points), std::move(values), reach_mm);
+}
+
+std::array<int, 3> SkinDisplacement::cell(const Eigen::Vector3d& p) const {
+  return {static_cast<int>(std::floor(p.x() / reach_mm_)), static_cast<int>(std::floor(p.y() / reach_mm_)),
+          static_cast<int>(std::floor(p.z() / reach_mm_))};
+}
+
+std::optional<Eigen::Vector3d> SkinDisplacement::operator()(const Eigen::Vector3d& p) const {
+  // Inverse-distance weights of the nodes within reach (the nearest dominates; at a node, its value).
+  const std::array<int, 3> c = cell(p);
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double weights = 0;
+  for (int i = -1; i <= 1; ++i)
+    for (int j = -1; j <= 1; ++j)
+      for (int k = -1; k <= 1; ++k) {
+        const auto it = grid_.find({c[0] + i, c[1] + j, c[2] + k});
+        if (it == grid_.end()) continue;
+        for (int n : it->second) {
+          const double d = (points_.row(n).transpose() - p).norm();
+          if (d > reach_mm_) continue;
+          if (d < 1e-9) return values_.row(n).transpose();
+          const double w = 1.0 / (d * d * d * d);
+          sum += w * values_.row(n).transpose();
+          weights += w;
+        }
+      }
+  if (weights == 0) return std::nullopt;
+  return sum / weights;
+}
+
+}  // namespace caps::closure

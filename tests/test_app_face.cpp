@@ -1,0 +1,154 @@
+// The closure in the whole face (closure/face_domain.hpp) on the phantom patient, through app::
+// as a user runs it: the patch is tied into the tissue model instead of clamped, the sutures
+// close, the answer does not depend on where the model stops, the tied rim holds (the patch's
+// rim moves with the tissue around it), and CalculiX solves the exported whole-face deck
+// (C3D10, the ties as *EQUATIONs) to the same displacements.
+#include <gtest/gtest.h>
+
+#include <Eigen/Core>
+#include <cmath>
+#include <filesystem>
+
+#include "caps/app/plan.hpp"
+#include "caps/app/simulation.hpp"
+#include "caps/closure/face_domain.hpp"
+#include "caps/closure/simulate.hpp"
+#include "caps/core/error.hpp"
+#include "caps/fem/mesh_io.hpp"
+#include "caps/fem/result_io.hpp"
+#include "caps/mesher/tissue_model.hpp"
+#include "caps/plan/plan_io.hpp"
+#include "caps/surface/patient_model.hpp"
+#include "ccx_run.hpp"
+#include "error_of.hpp"
+#include "phantom_model.hpp"
+
+using namespace caps;
+namespace fs = std::filesystem;
+
+namespace {
+
+const fs::path& folder() { return caps_test::program_folder("caps_test_app_face"); }
+
+// The phantom's model (its whole-face tissue model built by from-volume) and an ellipse on its
+// forehead.
+struct Case {
+  std::string model, plan;
+};
+
+const Case& phantom_case() {
+  static const Case c = [] {
+    Case k;
+    k.model = caps_test::program_phantom_model("caps_test_app_face");
+    app::PlanNewRequest pn;
+    pn.procedure = "ellipse";
+    pn.model = k.model;
+    pn.at = "0,40";
+    pn.orientation = 90;
+    pn.parameters = {{"length", 20}, {"width", 7}};
+    pn.output = (folder() / "ellipse.json").string();
+    app::run_plan_new(pn);
+    k.plan = pn.output;
+    return k;
+  }();
+  return c;
+}
+
+app::SimulateResult simulate(const std::string& name, const std::string& domain,
+                             const std::string& material = "neo-hookean", double radius = 0) {
+  const Case& c = phantom_case();
+  app::SimulateRequest r;
+  r.model = c.model;
+  r.plan = c.plan;
+  r.output = (folder() / name).string();
+  r.force = true;
+  r.domain.domain = domain;
+  r.domain.face_radius = radius;
+  r.solver.material = material;
+  return app::run_simulate(r);
+}
+
+}  // namespace
+
+TEST(FaceDomain, ThePatchIsTiedNotClampedAndTheWoundCloses) {
+  const app::SimulateResult face = simulate("face", "face");
+  const app::SimulateResult patch = simulate("patch", "patch");
+  EXPECT_EQ(face.domain, "face");
+  EXPECT_EQ(patch.domain, "patch");
+  EXPECT_LT(face.max_suture_gap_mm, 1e-6);
+  EXPECT_EQ(face.inverted_elements, 0);
+  EXPECT_GT(face.tied_nodes, 0);
+  EXPECT_EQ(face.untied_nodes, 0);
+  EXPECT_GT(face.face_tets, 1000);
+  EXPECT_GT(face.nodes, face.patch_nodes);
+  for (const std::string& w : face.warnings)
+    EXPECT_EQ(w.find("extent was limited"), std::string::npos) << w;
+  // The clamped rim holds the skin the closure pulls on: the patch needs more force than the
+  // same patch carried by the tissue around it.
+  EXPECT_GT(patch.closing_force_n, face.closing_force_n);
+  EXPECT_GT(face.closing_force_n, 0.2 * patch.closing_force_n);
+
+  // The tie holds: each rim node of the patch moves as the tissue at its place (the largest
+  // mismatch a small fraction of the closure's displacement), and the tissue moves.
+  const fem::Mesh mesh = fem::read_mesh_dir(face.output);
+  const Eigen::MatrixX3d u = fem::read_result_displacement(face.output, mesh.n_nodes());
+  ASSERT_FALSE(mesh.ties.empty());
+  double gap = 0, moved = 0;
+  for (const fem::TiedNode& t : mesh.ties) {
+    Eigen::Vector3d m = Eigen::Vector3d::Zero();
+    for (std::size_t k = 0; k < t.masters.size(); ++k) m += t.weights[k] * u.row(t.masters[k]).transpose();
+    gap = std::max(gap, (u.row(t.node).transpose() - m).norm());
+    moved = std::max(moved, u.row(t.node).norm());
+  }
+  EXPECT_LT(gap, 1e-3 * face.max_displacement_mm);
+  EXPECT_GT(moved, 0.01 * face.max_displacement_mm) << "the rim does not move: is it clamped?";
+  // Far from the wound the face does not move: the skin nodes near the region's edge are still.
+  ASSERT_TRUE(mesh.node_sets.count(closure::kFaceSkinNodes));
+  const Eigen::Vector3d centre = mesh.nodes.row(mesh.sutures.front().a).transpose();
+  double far = 0;
+  for (int n : mesh.node_sets.at(closure::kFaceSkinNodes))
+    if ((mesh.nodes.row(n).transpose() - centre).norm() > 0.9 * face.face_radius_mm)
+      far = std::max(far, u.row(n).norm());
+  EXPECT_LT(far, 0.05 * face.max_displacement_mm);
+}
+
+TEST(FaceDomain, TheAnswerDoesNotDependOnWhereTheModelStops) {
+  const app::SimulateResult near = simulate("near", "face", "neo-hookean", 0);
+  const app::SimulateResult far = simulate("far", "face", "neo-hookean", 2 * near.face_radius_mm);
+  EXPECT_GT(far.face_tets, near.face_tets);
+  EXPECT_NEAR(far.closing_force_n, near.closing_force_n, 0.05 * near.closing_force_n);
+  EXPECT_NEAR(far.max_suture_force_n, near.max_suture_force_n, 0.05 * near.max_suture_force_n);
+}
+
+TEST(FaceDomain, CalculixSolvesTheWholeFaceDeckAlike) {
+  ASSERT_TRUE(fem::test::has_ccx()) << "ccx (Debian calculix-ccx) is not installed: "
+                                       "scripts/setup.sh installs it";
+  const app::SimulateResult face = simulate("ccx", "face");
+  const fem::Mesh mesh = fem::read_mesh_dir(face.output);
+  const Eigen::MatrixX3d u = fem::read_result_displacement(face.output, mesh.n_nodes());
+  fem::InpOptions o;
+  o.finite_strain = true;
+  o.increments = fem::NewtonOptions{}.n_steps;
+  const Eigen::MatrixX3d v = fem::test::ccx_displacements(mesh, "face", o);
+  ASSERT_TRUE(v.allFinite()) << "ccx did not print every node's displacement";
+  const double scale = u.rowwise().norm().maxCoeff();
+  const double diff = (u - v).rowwise().norm().maxCoeff();
+  EXPECT_LT(diff, 1e-3 * scale) << "max |u_ccx - u_caps| = " << diff << " mm of " << scale;
+}
+
+TEST(FaceDomain, RefusesAnUnknownDomainAndAModelWithoutItsTissueModel) {
+  EXPECT_THROW(closure::parse_domain("head"), InvalidInput);
+  const Case& c = phantom_case();
+  const fs::path bare = folder() / "bare";
+  fs::remove_all(bare);
+  fs::create_directories(bare);
+  for (const auto& e : fs::directory_iterator(c.model))
+    if (e.path().filename() != mesher::tissue_file::kMesh) fs::copy(e.path(), bare / e.path().filename());
+  app::SimulateRequest r;
+  r.model = bare.string();
+  r.plan = c.plan;
+  r.output = (folder() / "never").string();
+  const std::string m = caps_test::error_of([&] { app::run_simulate(r); });
+  EXPECT_NE(m.find("caps model tissue"), std::string::npos) << m;
+  EXPECT_FALSE(fs::exists(r.output));
+}
