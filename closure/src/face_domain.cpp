@@ -242,10 +242,12 @@ void Join::tie_rim() {
   std::vector<int> slaves;
   for (int n : wound_.continuum.rim_nodes)
     if (!own.count(n)) slaves.push_back(n);
-  // The patch's rim stands in the gap its footprint left in the tissue: within about a face
-  // cell of a tetrahedron.
-  const double tolerance = o_.tie_tolerance_mm > 0 ? o_.tie_tolerance_mm
-                                                    : 3.0 * tissue_.options.face_size_mm;
+  // The patch's rim stands in the gap its footprint left in the tissue: within about a cell of
+  // a tetrahedron (the face's facets, or the label image's voxels where those are coarser).
+  const double tolerance =
+      o_.tie_tolerance_mm > 0 ? o_.tie_tolerance_mm
+                              : 3.0 * std::max(tissue_.options.face_size_mm,
+                                               tissue_.label_voxel_mm.maxCoeff());
   const TieSearchResult found = tie_nodes(mesh, slaves, tissue_elements_, tolerance);
   for (const TiedNode& t : found.ties) mesh.ties.push_back(t);
   d_.tied_nodes = static_cast<int>(found.ties.size());

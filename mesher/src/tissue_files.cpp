@@ -270,6 +270,10 @@ TissueModel read_tissue_model(const fs::path& dir) {
         m.options.scalp_size_mm = s.value("scalp_facet", m.options.scalp_size_mm);
         m.options.depth_limit_mm = s.value("depth_limit", m.options.depth_limit_mm);
         m.level_set_voxel_mm = s.value("level_set_voxel", 0.0);
+        const json lv = s.value("label_voxel", json::array());
+        if (lv.is_array() && lv.size() == 3)
+          for (int a = 0; a < 3; ++a)
+            if (lv[a].is_number()) m.label_voxel_mm[a] = std::clamp(lv[a].get<double>(), 0.0, 100.0);
       }
       if (j.contains("timings_s") && j["timings_s"].is_object())
         m.seconds_total = j["timings_s"].value("total", 0.0);

@@ -45,7 +45,7 @@ struct FaceDomainOptions {
   /// 0: automatic, kRadiusPerWound x the patch's extent + wound, at least kMinRadiusMm.
   double radius_mm = 0;
   /// A rim node farther than this (mm) from every tetrahedron is left untied (a warning counts
-  /// them); 0: 1.5 x the tissue model's largest cell size on the face.
+  /// them); 0: 3 x the tissue model's facet size on the face or its label voxel, the larger.
   double tie_tolerance_mm = 0;
 };
 
