@@ -34,16 +34,21 @@ img{max-width:100%;border:1px solid #ddd}.row{display:flex;gap:12px}.row div{fle
 <body>
 <h1>caps demo: a patient model from CT, three plans, their closure</h1>
 <p>The patient: <code>Cranium.inv3</code>, a head CT from Debian's invesalius-examples. caps measured
-the soft-tissue thickness between skin and bone in the CT, planned an elliptical excision, a
-Z-plasty and a V-Y advancement flap on the forehead, meshed each plan (20-node hexahedra and 15-node wedges down to the
-measured bone), closed the wound with suture constraints and rendered the skin before and after at
-the CT's full resolution. Each plan is also simulated with a constant thickness (the 1992 CAPS
-assumption for surface scans) for comparison.</p>
+the soft-tissue thickness between skin and bone in the CT and built a volumetric model of the
+soft tissue of the whole face (tetrahedra between skin and bone, <code>cranium/tissue.vtu</code>),
+planned an elliptical excision, a Z-plasty and a V-Y advancement flap on the forehead, meshed each
+plan (20-node hexahedra and 15-node wedges down to the measured bone), tied that patch into the
+whole-face model (no clamped rim), closed the wound with suture constraints and rendered the skin
+before and after at the CT's full resolution; <code>result.json</code> says how far the closure
+moves the brows, eyelid margins and alar rims. Each plan is also simulated with a constant
+thickness (the 1992 CAPS assumption for surface scans) for comparison, on the 1992 clamped
+patch.</p>
 <h2>The patient model</h2>
 <div class="row"><div><p>Soft-tissue thickness (mm)</p><img src="cranium/thickness.png" alt="thickness map"></div>
 <div><p>Skin range image</p><img src="cranium/skin.png" alt="skin range image"></div></div>
 <p>Files: <code>cranium/model.json</code>, the NRRD maps (3D Slicer), <code>skin.ply</code>,
-<code>bone.ply</code> (3D Slicer, ParaView, Blender).</p>
+<code>bone.ply</code> (3D Slicer, ParaView, Blender), <code>tissue.vtu</code> (ParaView),
+<code>skin.vdb</code> and <code>bone.vdb</code> (the level sets; Blender, Houdini).</p>
 HTML
 for p in ellipse z-plasty v-y-advancement; do
   cat >> "$out/index.html" <<HTML

@@ -119,7 +119,7 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   // Simulate: the result and the forces appear.
   await page.selectOption('#mesh-size', '2.5');
   await page.click('#simulate');
-  await page.waitForSelector('body[data-simulation="done"]', { timeout: 45000 });
+  await page.waitForSelector('body[data-simulation="done"]', { timeout: 240000 });
   const row1 = page.locator('#alternatives tbody tr').nth(0);
   const closing1 = Number(await row1.locator('td.closing').innerText());
   const largest1 = Number(await row1.locator('td.largest').innerText());
@@ -143,7 +143,7 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   await page.waitForFunction(() => window.caps.planner.state.parameters.angle === 45);
   await page.waitForSelector('body[data-check="ok"]');
   await page.click('#simulate');
-  await page.waitForFunction(() => window.caps.results.rows.length === 2, null, { timeout: 45000 });
+  await page.waitForFunction(() => window.caps.results.rows.length === 2, null, { timeout: 240000 });
   await page.waitForSelector('body[data-simulation="done"]');
   const closing2 = Number(await page.locator('#alternatives tbody tr').nth(1).locator('td.closing').innerText());
   assert.ok(closing2 > 0 && closing2 !== closing1, `two alternatives: ${closing1} N and ${closing2} N`);
@@ -264,7 +264,7 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   await page.waitForSelector('body[data-check="ok"]');
   log('three suture pairs picked beside the cut: the template\'s pairs; moved, removed, undone');
   await page.click('#simulate');
-  await page.waitForFunction(() => window.caps.results.rows.length === 3, null, { timeout: 45000 });
+  await page.waitForFunction(() => window.caps.results.rows.length === 3, null, { timeout: 240000 });
   await page.waitForSelector('body[data-simulation="done"]');
   const closing3 = await page.evaluate(() => window.caps.results.rows[2].result.closing_force_n);
   assert.ok(closing3 > 0, `the drawn Z closes with ${closing3} N`);
@@ -278,7 +278,7 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   assert.ok(Math.abs(exported.total_suture_force_n - closing3) < 1e-9 * Math.max(1, closing3));
   await page.click('#export-render');
   await page.waitForFunction(() => document.querySelectorAll('#export-files li').length > 0, null,
-    { timeout: 90000 });
+    { timeout: 300000 });
   const files = await page.locator('#export-files a').evaluateAll((as) => as.map((a) => a.href));
   for (const name of ['skin.glb', 'post_plan.png', 'tension_plan.png', 'plan.json', 'result.json'])
     assert.ok(files.some((f) => f.endsWith(`/${name}`)), `${name} offered: ${files.join(', ')}`);
