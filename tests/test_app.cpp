@@ -385,6 +385,7 @@ TEST_F(AppWithModel, WarningsReachResultJsonSummaryJsonAndTheReport) {
   s.model = kModel;
   s.plan = plan;
   s.output = (kTmp / "top_sim").string();
+  s.domain.domain = "patch";  // the clamped patch's warning, as compare's (the whole face has none)
   const app::SimulateResult sim = app::run_simulate(s);
   EXPECT_EQ(sim.warnings, mesh.warnings);
   EXPECT_EQ(json::parse(slurp(kTmp / "top_sim" / "result.json"))["warnings"], json(mesh.warnings));
@@ -474,6 +475,7 @@ TEST_F(AppWithModel, AWoundNearTheModelsTopIsMeshedSoThatItCanBeDrawn) {
   s.model = kModel;
   s.plan = plan;
   s.output = (kTmp / "near_top").string();
+  s.domain.domain = "patch";  // the clamped patch's own extent near the top
   s.render = true;
   const app::SimulateResult r = app::run_simulate(s);
   EXPECT_EQ(r.images.size(), 8u);

@@ -1,5 +1,7 @@
 #include "caps/app/simulation.hpp"
 
+#include "caps/mesher/tissue_model.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -190,14 +192,25 @@ closure::SimulateOptions simulate_options(const MeshingFields& m, const SolverFi
   return o;
 }
 
-void set_domain(closure::SimulateOptions& o, const DomainFields& d, const std::string& model_dir) {
+std::string set_domain(closure::SimulateOptions& o, const DomainFields& d,
+                       const std::string& model_dir) {
   o.domain = closure::parse_domain(d.domain);
   if (!(d.face_radius >= 0) || !std::isfinite(d.face_radius) || d.face_radius > 500)
     throw InvalidParameter(cat("{face_radius} ", d.face_radius, ": give the region's radius in "
                                "mm, 0 (automatic) or up to 500"));
   o.face.radius_mm = d.face_radius;
   o.features = loaded_feature_lines(model_dir);
-  if (o.domain == closure::Domain::Face) o.tissue = loaded_tissue_model(model_dir);
+  if (o.domain != closure::Domain::Face) return {};
+  if (!mesher::has_tissue_model(model_dir)) {
+    // A local chart, a scan-built model or one made before the tissue model existed: the
+    // clamped patch, said in every result.
+    o.domain = closure::Domain::Patch;
+    return "the model has no whole-face tissue model (a local chart, a surface-scan model, or one "
+           "made before it existed): solved on the 1992 clamped patch, whose rim decides more of "
+           "the answer; build it with `caps model tissue MODEL` (a CT-built model)";
+  }
+  o.tissue = loaded_tissue_model(model_dir);
+  return {};
 }
 
 namespace {
@@ -346,7 +359,7 @@ AxisLengthening plan_lengthening(const closure::Simulation& sim, const plan::Pla
 SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   closure::SimulateOptions o = simulate_options(r.meshing, r.solver);
-  set_domain(o, r.domain, r.model);
+  const std::string domain_warning = set_domain(o, r.domain, r.model);
   if (!(r.suture_spacing > 0) || !std::isfinite(r.suture_spacing))
     throw InvalidParameter(cat("{suture_spacing} ", r.suture_spacing, ": give the distance "
                                "between sutures in mm, > 0 (e.g. 5)"));
@@ -360,7 +373,9 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
+  if (!domain_warning.empty()) warn(reporter, domain_warning);
   closure::Simulation sim = closure::simulate(model, plan, o, reporter);
+  if (!domain_warning.empty()) sim.wound.continuum.mesh.warnings.push_back(domain_warning);
   sim.wound.continuum.mesh.model = r.model;
   sim.wound.continuum.mesh.plan = r.plan;
   closure::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string());
@@ -541,7 +556,7 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
     throw InvalidInput("compare meshes the measured and a constant thickness itself; give the "
                        "constant one with --thickness, not --constant-thickness");
   closure::SimulateOptions o = simulate_options(r.meshing, r.solver);
-  set_domain(o, r.domain, r.model);
+  if (const std::string w = set_domain(o, r.domain, r.model); !w.empty()) warn(reporter, w);
   require_utf8(r.model, "the model folder");
   require_utf8(r.plan, "the plan file");
   const plan::Plan plan = plan::read_plan(r.plan);

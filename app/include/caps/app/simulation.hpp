@@ -117,9 +117,12 @@ struct DomainFields {
   }
 };
 
-/// Sets `o` to solve in the domain `d`: for face, reads the model directory's whole-face tissue
-/// model and the feature lines (InvalidInput saying how to build them).
-void set_domain(closure::SimulateOptions& o, const DomainFields& d, const std::string& model_dir);
+/// Sets `o` to solve in the domain `d` and reads the model directory's feature lines; for face,
+/// its whole-face tissue model. A model without one (a local chart, a scan-built model, one made
+/// before it existed) is solved on the clamped patch: the returned warning says so (empty
+/// otherwise), for the caller to carry into the result.
+std::string set_domain(closure::SimulateOptions& o, const DomainFields& d,
+                       const std::string& model_dir);
 
 /// The library options of the meshing and solver fields (names checked, InvalidInput naming
 /// the option otherwise).
