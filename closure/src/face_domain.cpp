@@ -1,6 +1,7 @@
 #include "caps/closure/face_domain.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <set>
@@ -131,21 +132,33 @@ Region Join::select() const {
   }
   for (Eigen::Index n = 0; n < nn; ++n)
     r.held[n] = outside_node[n] || (tissue_.node_flags[n] & mesher::kTissueFieldOfView);
-  // Pieces with nothing holding them (cut loose by the radius or the patch) are left out.
-  UnionFind uf(static_cast<int>(nn));
+  // Pieces with nothing holding them (cut loose by the radius or the patch) are left out. A
+  // piece is tets joined face to face (one hanging on by an edge or a corner would turn about
+  // it); it is held when at least three of its nodes are held or on the bone.
+  std::vector<int> ids;
   for (Eigen::Index t = 0; t < nt; ++t)
-    if (kept[t])
-      for (int k = 1; k < 4; ++k) uf.unite(tissue_.tets(t, 0), tissue_.tets(t, k));
-  std::vector<char> supported(static_cast<std::size_t>(nn), 0);
-  for (Eigen::Index t = 0; t < nt; ++t)
-    if (kept[t])
-      for (int k = 0; k < 4; ++k) {
-        const int n = tissue_.tets(t, k);
-        if (r.held[n] || (tissue_.node_flags[n] & mesher::kTissueOnBone)) supported[uf.find(n)] = 1;
-      }
-  for (Eigen::Index t = 0; t < nt; ++t) {
-    if (!kept[t]) continue;
-    if (supported[uf.find(tissue_.tets(t, 0))]) r.tets.push_back(static_cast<int>(t));
+    if (kept[t]) ids.push_back(static_cast<int>(t));
+  UnionFind uf(static_cast<int>(ids.size()));
+  std::map<std::array<int, 3>, int> face_of;
+  static constexpr int kFace[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+  for (std::size_t i = 0; i < ids.size(); ++i)
+    for (const auto& f : kFace) {
+      std::array<int, 3> key{tissue_.tets(ids[i], f[0]), tissue_.tets(ids[i], f[1]),
+                             tissue_.tets(ids[i], f[2])};
+      std::sort(key.begin(), key.end());
+      const auto [it, added] = face_of.emplace(key, static_cast<int>(i));
+      if (!added) uf.unite(it->second, static_cast<int>(i));
+    }
+  std::map<int, std::set<int>> holds;  // piece root -> its held or attached nodes
+  for (std::size_t i = 0; i < ids.size(); ++i)
+    for (int k = 0; k < 4; ++k) {
+      const int n = tissue_.tets(ids[i], k);
+      if (r.held[n] || (tissue_.node_flags[n] & mesher::kTissueOnBone))
+        holds[uf.find(static_cast<int>(i))].insert(n);
+    }
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    const auto it = holds.find(uf.find(static_cast<int>(i)));
+    if (it != holds.end() && it->second.size() >= 3) r.tets.push_back(ids[i]);
     else ++r.detached;
   }
   return r;
