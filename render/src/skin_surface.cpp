@@ -717,34 +717,6 @@ void add_range_cells(Builder& b, const PatientModel& model, const Footprint& fp,
   }
 }
 
-// The range cells outside the footprint whose four corners the whole-face field moves (it has
-// a value there: within reach of the tissue model's skin nodes); returns their indices.
-std::vector<int> add_moved_cells(Builder& b, const PatientModel& model, const Footprint& fp,
-                                 RangeVertices& range, const closure::SkinDisplacement& field) {
-  const CylinderGrid& g = model.grid();
-  const int nt = g.n_theta, nz = g.n_z;
-  std::vector<char> moves(static_cast<std::size_t>(nt) * nz, 0);
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < nt; ++j)
-      moves[static_cast<std::size_t>(k) * nt + j] =
-          field(model.skin_point(g.theta_deg(j), g.z_mm(k))).has_value();
-  std::vector<int> cells;
-  for (long k = 0; k + 1 < nz; ++k)
-    for (long j = 0; j < nt; ++j) {
-      if (fp.removed(j, k, nt)) continue;
-      const long j1 = (j + 1) % nt;
-      if (!moves[k * nt + j] || !moves[k * nt + j1] || !moves[(k + 1) * nt + j] ||
-          !moves[(k + 1) * nt + j1])
-        continue;
-      const int v00 = range.at(j, k), v10 = range.at(j + 1, k), v01 = range.at(j, k + 1),
-                v11 = range.at(j + 1, k + 1);
-      b.tri(v00, v10, v11, SkinPart::Range);
-      b.tri(v00, v11, v01, SkinPart::Range);
-      cells.push_back(static_cast<int>(k * nt + j));
-    }
-  return cells;
-}
-
 // The staircase border of the footprint's cells, counter-clockwise around them, as grid
 // vertices (j, k) (j unwrapped).
 std::vector<std::pair<long, long>> footprint_border(const Footprint& fp) {
@@ -1005,21 +977,18 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
     add_range_cells(b, skin, fp, range,
                     drawn ? drawn->undercut_cells : std::vector<std::uint8_t>{});
     if (drawn) add_undercuts(b, skin, *drawn, fp, theta_c);
-  } else if (displacement_mm && mesh.node_sets.count(closure::kFaceSkinNodes)) {
-    // The part the simulation moved is the whole face it was solved in: the range cells the
-    // tissue model's skin moves are built too, and replaced like the footprint's.
-    const closure::SkinDisplacement field = closure::SkinDisplacement::of_mesh(mesh, *displacement_mm);
-    const std::vector<int> moved = add_moved_cells(b, skin, fp, range, field);
-    out.replaced_cells.insert(out.replaced_cells.end(), moved.begin(), moved.end());
-    std::sort(out.replaced_cells.begin(), out.replaced_cells.end());
   }
+  // The planner's part (SkinExtent::Patch) stays the patch and its seam: the range cells the
+  // whole face moves around it (add_moved_cells()) were drawn darker than the page's own skin,
+  // with the range image's slice terraces (the page draws the smoothed skin), a ring around
+  // the wound; until the page draws the same skin, it shows the patch moved alone.
   const double r_ref = skin.r_skin(theta_c, model.to_cylindrical(centre).z_mm);
   add_seam(b, model.grid(), loops[rim], fp, footprint_border(fp), range, r_ref);
 
   const std::vector<int> cap_centres = b.cap_centres;
   const auto given_normals = b.given_normals;
   pack(b, out);
-  if (displacement_mm) move_with_face(mesh, *displacement_mm, n_micro, out);
+  if (displacement_mm && whole) move_with_face(mesh, *displacement_mm, n_micro, out);
   shade_normals(skin, cap_centres, given_normals, out);
   return out;
 }
