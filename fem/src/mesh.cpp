@@ -117,7 +117,9 @@ void validate(const Mesh& mesh, const std::string& where) {
                              "value or nonzero gradient there; the node is outside the field"));
   }
   validate_ties(mesh, where, check_node);
-  for (const auto& [name, ids] : mesh.node_sets) {
+  for (const auto& node_set : mesh.node_sets) {
+    const std::string& name = node_set.first;  // not a structured binding: a lambda captures it
+    const auto& ids = node_set.second;
     const bool ok_name = !name.empty() && name.size() <= 64 &&
                          std::all_of(name.begin(), name.end(), [](char c) {
                            return std::isalnum(static_cast<unsigned char>(c)) || c == '_';
