@@ -215,6 +215,45 @@ TEST(Tie, TheSearchInvertsACurvedElementAndProjectsOntoTheNearestWithinTheTolera
   EXPECT_THROW(tie_nodes(m, {slaves[0]}, {0}, -1), InvalidInput);
 }
 
+TEST(Tie, AStraightTet10IsSearchedInClosedFormAsTheIterationWouldFindIt) {
+  // A straight-sided Tet10 (mid-edge nodes at the midpoints: the tissue model's) is searched in
+  // closed form; a copy with one mid-edge node moved 1e-7 mm takes the iterative search. For
+  // points inside and beyond every face, edge and vertex both find the same nearest point.
+  Mesh m;
+  const Eigen::Matrix<double, 4, 3> corners{{0.2, 0.1, 0}, {3, 0.4, 0.3}, {0.5, 2.6, -0.2}, {0.9, 0.8, 2.4}};
+  constexpr int kEdges[6][2] = {{0, 1}, {1, 2}, {2, 0}, {0, 3}, {1, 3}, {2, 3}};
+  m.nodes.resize(20, 3);
+  for (int copy = 0; copy < 2; ++copy) {
+    Element el;
+    el.type = ElementType::Tet10;
+    for (int a = 0; a < 10; ++a) el.nodes[a] = 10 * copy + a;
+    for (int a = 0; a < 4; ++a) m.nodes.row(10 * copy + a) = corners.row(a);
+    for (int k = 0; k < 6; ++k)
+      m.nodes.row(10 * copy + 4 + k) = 0.5 * (corners.row(kEdges[k][0]) + corners.row(kEdges[k][1]));
+    m.elements.push_back(el);
+  }
+  m.nodes(14, 2) += 1e-7;  // the copy is curved, just
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1.5, 4.0);
+  std::vector<int> slaves;
+  for (int i = 0; i < 400; ++i) {
+    m.nodes.conservativeResize(m.n_nodes() + 1, 3);
+    m.nodes.row(m.n_nodes() - 1) = Eigen::RowVector3d(u(rng), u(rng), u(rng));
+    slaves.push_back(static_cast<int>(m.n_nodes() - 1));
+  }
+  const TieSearchResult closed = tie_nodes(m, slaves, {0}, 10, TieMethod::NodeToSurface);
+  const TieSearchResult iterated = tie_nodes(m, slaves, {1}, 10, TieMethod::NodeToSurface);
+  ASSERT_EQ(closed.ties.size(), slaves.size());
+  ASSERT_EQ(iterated.ties.size(), slaves.size());
+  int inside = 0;
+  for (std::size_t i = 0; i < slaves.size(); ++i) {
+    EXPECT_NEAR(closed.distance_mm[i], iterated.distance_mm[i], 1e-6) << "point " << i;
+    EXPECT_LT((closed.natural[i] - iterated.natural[i]).norm(), 1e-5) << "point " << i;
+    inside += closed.distance_mm[i] < 1e-12;
+  }
+  EXPECT_GT(inside, 5);  // some points fall inside, the rest beyond faces, edges and vertices
+}
+
 TEST(Tie, UniaxialTensionAcrossANonMatchingInterfaceIsUniform) {
   // Patch test: 2 x 2 cells tied to 3 x 3 on the shared face, pulled 0.2 mm (5 %) in z across
   // it. Quadratic elements hold the uniform state exactly and the mortar rows pass it across

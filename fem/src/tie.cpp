@@ -62,18 +62,86 @@ ReferenceDomain reference_domain(ElementType type) {
   return d;
 }
 
-// The point of element X (#n×3) nearest to p: min 1/2 |x(xi) - p|^2 over the reference domain,
-// by Gauss-Newton with an active set of the domain's faces (Nocedal & Wright 2006, sec. 16.5):
-// each step solves the linearised problem on the faces held active, is cut at the first face
-// it crosses (which joins the set), and a face whose multiplier pulls inwards leaves it. Inside
-// the element this is Newton's inversion of the map x(xi) = p.
 struct Closest {
   Eigen::Vector3d xi = Eigen::Vector3d::Zero();
   double distance = INFINITY;
 };
 
+// The point of triangle a b c nearest to p, as (v, w): a + v (b - a) + w (c - a) (Ericson 2005,
+// "Real-Time Collision Detection", sec. 5.1.5: Voronoi regions of the vertices, edges and face).
+Eigen::Vector2d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
+                                    const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return {0, 0};
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return {1, 0};
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return {d1 / (d1 - d3), 0};
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return {0, 1};
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return {0, d2 / (d2 - d6)};
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const double t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return {1 - t, t};
+  }
+  const double denom = 1 / (va + vb + vc);
+  return {vb * denom, vc * denom};
+}
+
+// A Tet10 whose mid-edge nodes sit at their edges' midpoints (the tissue model's, made from
+// linear tets) is the affine image of the reference tetrahedron, x = X0 + J xi: its nearest point
+// is found in closed form, the point itself when inside, else the nearest point of its nearest
+// face. Other elements (curved Tet10, Hex20, Wedge15) return false and are searched iteratively.
+bool closest_point_affine_tet(ElementType type, const Eigen::MatrixX3d& X, const Eigen::Vector3d& p,
+                              Closest& out) {
+  if (type != ElementType::Tet10) return false;
+  static constexpr int kEdges[6][2] = {{0, 1}, {1, 2}, {2, 0}, {0, 3}, {1, 3}, {2, 3}};
+  Eigen::Matrix3d J;
+  for (int k = 0; k < 3; ++k) J.col(k) = (X.row(k + 1) - X.row(0)).transpose();
+  const double size = J.cwiseAbs().maxCoeff();
+  for (int k = 0; k < 6; ++k)
+    if ((X.row(4 + k) - 0.5 * (X.row(kEdges[k][0]) + X.row(kEdges[k][1]))).cwiseAbs().maxCoeff() > 1e-9 * size)
+      return false;
+  const double det = J.determinant();
+  if (!(std::abs(det) > 1e-12 * size * size * size)) return false;
+  const Eigen::Vector3d x0 = X.row(0).transpose();
+  const Eigen::Vector3d xi = J.inverse() * (p - x0);
+  if (xi.minCoeff() >= 0 && xi.sum() <= 1) {
+    out.xi = xi;
+    out.distance = (x0 + J * xi - p).norm();
+    return true;
+  }
+  // The four faces as (corner, corner, corner) with the natural coordinates of each corner.
+  static constexpr int kFaces[4][3] = {{0, 1, 2}, {0, 1, 3}, {1, 2, 3}, {0, 2, 3}};
+  const Eigen::Vector3d corner_xi[4] = {Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitX(),
+                                        Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()};
+  out.distance = INFINITY;
+  for (const auto& f : kFaces) {
+    const Eigen::Vector3d a = X.row(f[0]).transpose(), b = X.row(f[1]).transpose(), c = X.row(f[2]).transpose();
+    const Eigen::Vector2d vw = closest_on_triangle(p, a, b, c);
+    const double d = (a + vw[0] * (b - a) + vw[1] * (c - a) - p).norm();
+    if (d < out.distance) {
+      out.distance = d;
+      out.xi = corner_xi[f[0]] + vw[0] * (corner_xi[f[1]] - corner_xi[f[0]]) +
+               vw[1] * (corner_xi[f[2]] - corner_xi[f[0]]);
+    }
+  }
+  return true;
+}
+
+// The point of element X (#n×3) nearest to p: min 1/2 |x(xi) - p|^2 over the reference domain,
+// by Gauss-Newton with an active set of the domain's faces (Nocedal & Wright 2006, sec. 16.5):
+// each step solves the linearised problem on the faces held active, is cut at the first face
+// it crosses (which joins the set), and a face whose multiplier pulls inwards leaves it. Inside
+// the element this is Newton's inversion of the map x(xi) = p.
 Closest closest_point(ElementType type, const ReferenceDomain& dom, const Eigen::MatrixX3d& X,
                       const Eigen::Vector3d& p) {
+  if (Closest c; closest_point_affine_tet(type, X, p, c)) return c;
   Eigen::VectorXd N;
   Eigen::MatrixX3d dN;
   Eigen::Vector3d xi = dom.centre;
