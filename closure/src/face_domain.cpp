@@ -95,7 +95,7 @@ void Join::place() {
   double reach = 0;  // the centre to the farthest rim node
   for (int n : wound_.continuum.rim_nodes)
     reach = std::max(reach, (wound_.continuum.mesh.nodes.row(n).transpose() - d_.centre_lps).norm());
-  d_.radius_mm = o_.radius_mm > 0 ? o_.radius_mm : std::max(kMinRadiusMm, kRadiusPerWound * reach);
+  d_.radius_mm = o_.radius_mm > 0 ? o_.radius_mm : std::max(kMinRadiusMm, reach + kRadiusBeyondPatchMm);
   if (d_.radius_mm <= reach)
     throw InvalidInput(cat("--face-radius ", d_.radius_mm, " mm: the whole-face region must "
                            "reach beyond the patch's rim (", std::round(reach * 10) / 10,

@@ -113,7 +113,7 @@ struct DomainFields {
                            "face\")"});
     v(r.face_radius, {"face_radius", "--domain face: the tissue model is kept within this "
                                      "distance of the wound (mm) and held beyond; 0 = automatic "
-                                     "(1.5 x the patch's reach, at least 40 mm)"});
+                                     "(10 mm beyond the patch's rim, at least 40 mm)"});
   }
 };
 

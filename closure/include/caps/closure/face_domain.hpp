@@ -42,7 +42,7 @@ Domain parse_domain(const std::string& name);
 
 struct FaceDomainOptions {
   /// The tissue model is kept within this distance (mm) of the wound's centre and held beyond;
-  /// 0: automatic, kRadiusPerWound x the patch's extent + wound, at least kMinRadiusMm.
+  /// 0: automatic, kRadiusBeyondPatchMm beyond the patch's rim, at least kMinRadiusMm.
   double radius_mm = 0;
   /// A rim node farther than this (mm) from every tetrahedron is left untied (a warning counts
   /// them); 0: 3 x the tissue model's facet size on the face or its label voxel, the larger.
@@ -51,8 +51,10 @@ struct FaceDomainOptions {
 
 /// The automatic region: at least this radius (mm)...
 inline constexpr double kMinRadiusMm = 40.0;
-/// ...and this many times the distance from the wound's centre to the patch's rim.
-inline constexpr double kRadiusPerWound = 1.5;
+/// ...and this far (mm) beyond the patch's rim (its farthest node from the wound's centre).
+/// On Cranium, neo-Hookean, the closing force moves by at most 0.1 % when the region grows from
+/// there to twice the radius (docs/fem.md, "The whole face").
+inline constexpr double kRadiusBeyondPatchMm = 10.0;
 
 /// The joined mesh and what the join did.
 struct FaceDomain {
