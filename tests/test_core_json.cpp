@@ -1,15 +1,17 @@
-// core/json_file.hpp: the one way caps reads a JSON file. A file that cannot be read names the
-// reason and what to do; one too large or nested too deep is refused before parsing; a syntax
-// error names the file, the line and the column.
+// core/json_file.hpp (and core/plane_geometry.hpp, at the end): the one way caps reads a JSON
+// file. A file that cannot be read names the reason and what to do; one too large or nested too
+// deep is refused before parsing; a syntax error names the file, the line and the column.
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "caps/core/error.hpp"
 #include "caps/core/json_file.hpp"
+#include "caps/core/plane_geometry.hpp"
 
 namespace fs = std::filesystem;
 using namespace caps;
@@ -81,4 +83,24 @@ TEST(JsonFile, ASyntaxErrorNamesTheFileTheLineAndTheColumn) {
   EXPECT_EQ(m.find("[json.exception"), std::string::npos) << m;  // said once, in the user's terms
   const std::string cut = refusal<InvalidInput>([] { parse_json<json>("{\"a\": ", "the request"); });
   EXPECT_NE(cut.find("the request: not valid JSON at line 1, column 7"), std::string::npos) << cut;
+}
+
+// caps/core/plane_geometry.hpp: the point-in-polygon tests the face domain, the renderer and the
+// mesher share, on a concave polygon (an L) with points inside, outside, in the notch and on the
+// outline; and angles wrapped into [-180, 180).
+TEST(PlaneGeometry, PointInPolygonAndOnItsOutlineAndWrappedAngles) {
+  const std::vector<Eigen::Vector2d> L{{0, 0}, {4, 0}, {4, 1}, {1, 1}, {1, 3}, {0, 3}};
+  EXPECT_TRUE(caps::point_in_polygon(L, {0.5, 2.5}));
+  EXPECT_TRUE(caps::point_in_polygon(L, {3.5, 0.5}));
+  EXPECT_FALSE(caps::point_in_polygon(L, {2, 2}));    // the notch
+  EXPECT_FALSE(caps::point_in_polygon(L, {5, 0.5}));  // beyond the foot
+  EXPECT_FALSE(caps::point_in_polygon(L, {-0.1, 1}));
+  EXPECT_TRUE(caps::point_in_or_on_polygon(L, {2, 1}));      // on the notch's edge
+  EXPECT_TRUE(caps::point_in_or_on_polygon(L, {4, 0}));      // a corner
+  EXPECT_FALSE(caps::point_in_or_on_polygon(L, {2, 1.001}));  // just off it, in the notch
+  EXPECT_DOUBLE_EQ(caps::wrap_degrees(190), -170);
+  EXPECT_DOUBLE_EQ(caps::wrap_degrees(-190), 170);
+  EXPECT_DOUBLE_EQ(caps::wrap_degrees(180), -180);
+  EXPECT_DOUBLE_EQ(caps::wrap_degrees(-180), -180);
+  EXPECT_DOUBLE_EQ(caps::wrap_degrees(725), 5);
 }

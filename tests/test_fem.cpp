@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "error_of.hpp"
+#include "fem_test_support.hpp"
 
 #include <Eigen/Dense>
 #include <Eigen/Eigenvalues>
@@ -25,6 +26,7 @@
 
 using namespace caps;
 using namespace caps::fem;
+using caps::fem::test::max_displacement_error;
 
 namespace {
 
@@ -250,9 +252,7 @@ TEST(FemPatch, LinearFieldIsExactOnDistortedMeshesBothSolvers) {
       SolveOptions o;
       o.solver = sk;
       const SolveResult r = solve(m, o);
-      double err = 0;
-      for (Eigen::Index i = 0; i < m.n_nodes(); ++i)
-        err = std::max(err, (r.displacement_mm.row(i).transpose() - exact(m.nodes.row(i).transpose())).norm());
+      const double err = max_displacement_error(m, r, exact);
       EXPECT_LT(err, 1e-12) << element_type_name(t) << " " << solver_name(sk);
       const double s_err = (r.gauss_stress_mpa.rowwise() - s_exact.transpose()).cwiseAbs().maxCoeff();
       EXPECT_LT(s_err, 1e-10 * s_exact.cwiseAbs().maxCoeff()) << element_type_name(t);

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include "ccx_run.hpp"
+#include "fem_test_support.hpp"
 #include "caps/core/units.hpp"
 
 #include <Eigen/Dense>
@@ -31,24 +32,13 @@ using namespace caps::fem;
 
 namespace {
 
-constexpr double kE = 0.1, kNu = 0.45;  // MPa: the default skin
+using namespace caps::fem::test;
 
-Mesh unit_box(Eigen::Vector3d size, Eigen::Vector3i cells, bool wedges = false) {
-  BoxOptions o;
-  o.size_mm = size;
-  o.cells = cells;
-  o.wedges = wedges;
-  o.fix_bottom = false;
-  o.material = std::make_shared<NeoHookean>(kE, kNu);
-  return make_box_mesh(o);
+Mesh unit_box(const Eigen::Vector3d& size, const Eigen::Vector3i& cells, bool wedges = false) {
+  return neo_hookean_box(size, cells, wedges);
 }
 
-SolveOptions finite(int n_steps = 10) {
-  SolveOptions o;
-  o.kinematics = Kinematics::Finite;
-  o.newton.n_steps = n_steps;
-  return o;
-}
+SolveOptions finite(int n_steps = 10) { return finite_strain(n_steps); }
 
 void print_history(const SolveResult& r, const std::string& label) {
   for (const NewtonStep& s : r.newton_steps) {
@@ -57,24 +47,6 @@ void print_history(const SolveResult& r, const std::string& label) {
     for (double v : s.residual_norms) std::cout << " " << v;
     std::cout << "\n";
   }
-}
-
-// Cauchy stress of the decoupled neo-Hookean solid for F = diag(l1, l2, l2):
-// sigma = mu J^(-5/3) (b - I1/3 I) + K (J - 1) I (Holzapfel 2000, eq. 6.144 pushed forward).
-Eigen::Vector2d principal_cauchy(double l1, double l2, double mu, double K) {
-  const double J = l1 * l2 * l2, I1 = l1 * l1 + 2 * l2 * l2;
-  const double a = mu * std::pow(J, -5.0 / 3.0);
-  return {a * (l1 * l1 - I1 / 3) + K * (J - 1), a * (l2 * l2 - I1 / 3) + K * (J - 1)};
-}
-
-// Lateral stretch of a bar stretched by l1 with free lateral faces: sigma_22 = 0, by bisection.
-double lateral_stretch(double l1, double mu, double K) {
-  double lo = 0.3, hi = 1.0 + 1e-12;
-  for (int i = 0; i < 200; ++i) {
-    const double mid = 0.5 * (lo + hi);
-    (principal_cauchy(l1, mid, mu, K)[1] > 0 ? hi : lo) = mid;
-  }
-  return 0.5 * (lo + hi);
 }
 
 // S = 2 dW/dC and C = 2 dS/dC of a material response at F against central differences,

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include "ccx_run.hpp"
+#include "fem_test_support.hpp"
 
 #include <Eigen/Dense>
 #include <array>
@@ -34,7 +35,7 @@ using namespace caps::fem;
 
 namespace {
 
-constexpr double kE = 0.1, kNu = 0.45;  // MPa: the default skin
+using namespace caps::fem::test;
 
 // Linear tetrahedra filling the box [0,size]: each of cells.x × cells.y × cells.z cubes cut into
 // the six tets of its 000-111 diagonal (Kuhn's triangulation, conforming across cubes), every
@@ -118,23 +119,6 @@ Vector6d voigt(const Eigen::Matrix3d& s) {
   Vector6d v;
   v << s(0, 0), s(1, 1), s(2, 2), s(0, 1), s(1, 2), s(0, 2);
   return v;
-}
-
-// Neo-Hookean uniaxial stretch, closed form (as tests/test_fem_nonlinear.cpp): principal Cauchy
-// stresses of stretches (l1, l2, l2) and the lateral stretch that leaves the sides free.
-Eigen::Vector2d principal_cauchy(double l1, double l2, double mu, double K) {
-  const double J = l1 * l2 * l2, I1 = l1 * l1 + 2 * l2 * l2;
-  const double a = mu * std::pow(J, -5.0 / 3.0);
-  return {a * (l1 * l1 - I1 / 3) + K * (J - 1), a * (l2 * l2 - I1 / 3) + K * (J - 1)};
-}
-
-double lateral_stretch(double l1, double mu, double K) {
-  double lo = 0.3, hi = 1.0 + 1e-12;
-  for (int i = 0; i < 200; ++i) {
-    const double mid = 0.5 * (lo + hi);
-    (principal_cauchy(l1, mid, mu, K)[1] > 0 ? hi : lo) = mid;
-  }
-  return 0.5 * (lo + hi);
 }
 
 }  // namespace
@@ -317,9 +301,7 @@ TEST(Tet10Patch, LinearFieldIsExactOnIrregularTetsBothSolvers) {
     SolveOptions o;
     o.solver = sk;
     const SolveResult r = solve(m, o);
-    double err = 0;
-    for (Eigen::Index i = 0; i < m.n_nodes(); ++i)
-      err = std::max(err, (r.displacement_mm.row(i).transpose() - exact(m.nodes.row(i).transpose())).norm());
+    const double err = max_displacement_error(m, r, exact);
     EXPECT_LT(err, 1e-12) << solver_name(sk);
     EXPECT_EQ(r.gauss_stress_mpa.rows(), 4 * static_cast<Eigen::Index>(m.n_elements()));
     const double scale = s_exact.cwiseAbs().maxCoeff();

@@ -21,29 +21,18 @@
 #include "caps/fem/solve.hpp"
 #include "caps/fem/tie.hpp"
 #include "ccx_run.hpp"
+#include "fem_test_support.hpp"
 
 using namespace caps;
 using namespace caps::fem;
 
 namespace {
 
-constexpr double kE = 0.1, kNu = 0.45;  // MPa: the default skin
+using namespace caps::fem::test;
 
-Mesh box(const Eigen::Vector3d& size, const Eigen::Vector3i& cells) {
-  BoxOptions o;
-  o.size_mm = size;
-  o.cells = cells;
-  o.fix_bottom = false;
-  o.material = std::make_shared<NeoHookean>(kE, kNu);
-  return make_box_mesh(o);
-}
+Mesh box(const Eigen::Vector3d& size, const Eigen::Vector3i& cells) { return neo_hookean_box(size, cells); }
 
-SolveOptions finite(int n_steps = 4) {
-  SolveOptions o;
-  o.kinematics = Kinematics::Finite;
-  o.newton.n_steps = n_steps;
-  return o;
-}
+SolveOptions finite(int n_steps = 4) { return finite_strain(n_steps); }
 
 // Two 4 x 4 x 2 mm blocks stacked in z: the bottom one (z 0..2) of 2 x 2 cells, the top one
 // (z 2..4) of 3 x 3 cells on the shared face, so no node of the top block's bottom face but

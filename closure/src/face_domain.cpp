@@ -7,6 +7,7 @@
 #include <set>
 
 #include "caps/core/error.hpp"
+#include "caps/core/plane_geometry.hpp"
 #include "caps/core/union_find.hpp"
 #include "caps/fem/material_registry.hpp"
 #include "caps/fem/tet_mesh.hpp"
@@ -28,20 +29,6 @@ Domain parse_domain(const std::string& name) {
 
 namespace {
 
-// Winding test of a point against a closed polygon (theta, z).
-bool inside(const std::vector<Eigen::Vector2d>& poly, const Eigen::Vector2d& p) {
-  bool in = false;
-  for (std::size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
-    const Eigen::Vector2d& a = poly[i];
-    const Eigen::Vector2d& b = poly[j];
-    if ((a.y() > p.y()) != (b.y() > p.y()) &&
-        p.x() < (b.x() - a.x()) * (p.y() - a.y()) / (b.y() - a.y()) + a.x())
-      in = !in;
-  }
-  return in;
-}
-
-double wrap_deg(double d) { return d - 360.0 * std::floor((d + 180.0) / 360.0); }
 
 // The E and nu of a layer's material (its small-strain constants; a material without them,
 // such as goh, stands in with the dermis preset's).
@@ -120,10 +107,10 @@ Region Join::select() const {
       continue;
     }
     const CylindricalPoint p = model_.to_cylindrical(c);
-    const Eigen::Vector2d tz(theta_c_ + wrap_deg(p.theta_deg - theta_c_), p.z_mm);
+    const Eigen::Vector2d tz(theta_c_ + wrap_degrees(p.theta_deg - theta_c_), p.z_mm);
     // Under the patch: inside its rim and not below the bone the patch stands on (tissue deeper
     // than the measured bone, such as the orbit's under a patch on the lid, stays).
-    if (inside(footprint_, tz) && model_.has_z(p.z_mm) &&
+    if (point_in_polygon(footprint_, tz) && model_.has_z(p.z_mm) &&
         p.r_mm >= model_.r_bone(p.theta_deg, p.z_mm) - 1.0) {
       ++r.under_patch;
       continue;
@@ -333,17 +320,8 @@ SolveResult patch_part(const SolveResult& joined, int n_nodes, int n_elements) {
   return r;
 }
 
-SkinDisplacement::SkinDisplacement(Eigen::MatrixX3d points, Eigen::MatrixX3d displacements,
-                                   double reach_mm)
-    : reach_mm_(reach_mm), points_(std::move(points)), values_(std::move(displacements)) {
-  if (points_.rows() != values_.rows() || !(reach_mm_ > 0))
-    throw InvalidInput("skin displacement: as many displacements as points, and a reach > 0");
-  for (Eigen::Index i = 0; i < points_.rows(); ++i)
-    grid_[cell(points_.row(i).transpose())].push_back(static_cast<int>(i));
-}
-
-SkinDisplacement SkinDisplacement::of_mesh(const Mesh& mesh, const Eigen::MatrixX3d& u,
-                                           const std::vector<int>& extra, double reach_mm) {
+DisplacementAt skin_displacement(const Mesh& mesh, const Eigen::MatrixX3d& u,
+                                          const std::vector<int>& extra, double reach_mm) {
   std::vector<int> ids = extra;
   if (const auto it = mesh.node_sets.find(kFaceSkinNodes); it != mesh.node_sets.end())
     ids.insert(ids.end(), it->second.begin(), it->second.end());
@@ -352,35 +330,7 @@ SkinDisplacement SkinDisplacement::of_mesh(const Mesh& mesh, const Eigen::Matrix
     points.row(static_cast<Eigen::Index>(i)) = mesh.nodes.row(ids[i]);
     values.row(static_cast<Eigen::Index>(i)) = u.row(ids[i]);
   }
-  return SkinDisplacement(std::move(points), std::move(values), reach_mm);
-}
-
-std::array<int, 3> SkinDisplacement::cell(const Eigen::Vector3d& p) const {
-  return {static_cast<int>(std::floor(p.x() / reach_mm_)), static_cast<int>(std::floor(p.y() / reach_mm_)),
-          static_cast<int>(std::floor(p.z() / reach_mm_))};
-}
-
-std::optional<Eigen::Vector3d> SkinDisplacement::operator()(const Eigen::Vector3d& p) const {
-  // Inverse-distance weights of the nodes within reach (the nearest dominates; at a node, its value).
-  const std::array<int, 3> c = cell(p);
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  double weights = 0;
-  for (int i = -1; i <= 1; ++i)
-    for (int j = -1; j <= 1; ++j)
-      for (int k = -1; k <= 1; ++k) {
-        const auto it = grid_.find({c[0] + i, c[1] + j, c[2] + k});
-        if (it == grid_.end()) continue;
-        for (int n : it->second) {
-          const double d = (points_.row(n).transpose() - p).norm();
-          if (d > reach_mm_) continue;
-          if (d < 1e-9) return values_.row(n).transpose();
-          const double w = 1.0 / (d * d * d * d);
-          sum += w * values_.row(n).transpose();
-          weights += w;
-        }
-      }
-  if (weights == 0) return std::nullopt;
-  return sum / weights;
+  return displacement_from_samples(points, values, reach_mm);
 }
 
 }  // namespace caps::closure

@@ -48,10 +48,10 @@ std::vector<FeatureDisplacement> moved_features(const Simulation& sim, const Pat
                                                 const FeatureLines& lines) {
   const Mesh& mesh = sim.face ? sim.face->mesh : sim.wound.continuum.mesh;
   const Eigen::MatrixX3d& u = sim.face ? sim.face_result.displacement_mm : sim.result.displacement_mm;
-  const SkinDisplacement field = SkinDisplacement::of_mesh(mesh, u, sim.wound.continuum.skin_node);
+  const DisplacementAt field = skin_displacement(mesh, u, sim.wound.continuum.skin_node);
   std::vector<FeatureDisplacement> out;
   for (FeatureDisplacement& f : feature_displacements(
-           lines, [&](const Eigen::Vector3d& p) { return field(p); }, anatomical_frame(model)))
+           lines, field, anatomical_frame(model)))
     if (f.found && f.has_value) out.push_back(std::move(f));
   return out;
 }

@@ -1,6 +1,7 @@
 #include "caps/mesher/continuum_mesher.hpp"
 
 #include "caps/core/error.hpp"
+#include "caps/core/plane_geometry.hpp"
 #include "caps/core/reporter.hpp"
 #include "caps/fem/elements.hpp"
 #include "caps/surface/patient_model.hpp"
@@ -86,26 +87,6 @@ Eigen::VectorXd min_element_jacobians(const Mesh& mesh) {
 }
 
 namespace {
-
-// Whether q lies inside the polygon or on its outline (to 1e-9 of its size), in any plane
-// coordinates (the test is affine-invariant: theta deg and z mm may be mixed).
-bool inside_or_on(const std::vector<Eigen::Vector2d>& poly, const Eigen::Vector2d& q) {
-  const std::size_t n = poly.size();
-  bool inside = false;
-  double scale = 0;
-  for (const auto& p : poly) scale = std::max(scale, (p - poly[0]).norm());
-  const double tol = 1e-9 * std::max(scale, 1.0);
-  for (std::size_t i = 0, j = n - 1; i < n; j = i++) {
-    const Eigen::Vector2d a = poly[j], b = poly[i];
-    const double L2 = (b - a).squaredNorm();
-    const double t = L2 > 0 ? std::clamp((q - a).dot(b - a) / L2, 0.0, 1.0) : 0.0;
-    if ((a + t * (b - a) - q).norm() <= tol) return true;
-    if ((b.y() > q.y()) != (a.y() > q.y()) &&
-        q.x() < a.x() + (q.y() - a.y()) * (b.x() - a.x()) / (b.y() - a.y()))
-      inside = !inside;
-  }
-  return inside;
-}
 
 // Auto resolved: measured where the model has layer maps and at least a quarter of the surface
 // mesh's vertices lie on cells whose layers were measured (a stray measured cell in a model
@@ -477,7 +458,7 @@ void ContinuumBuild::add_elements() {
     for (int i : v) centroid += surface.theta_z.row(i).transpose() / n;
     int flap = -1;
     for (std::size_t f = 0; f < surface.flaps_theta_z.size() && flap < 0; ++f)
-      if (inside_or_on(surface.flaps_theta_z[f], centroid)) flap = static_cast<int>(f);
+      if (point_in_or_on_polygon(surface.flaps_theta_z[f], centroid)) flap = static_cast<int>(f);
     // Measured: a fat element whose corner columns mostly had no fat is deep tissue.
     int n_fatless = 0;
     for (int i : v) n_fatless += fatless[i];
@@ -581,7 +562,7 @@ void ContinuumBuild::fix_nodes() {
   };
   auto in_flap = [&](const Eigen::Vector2d& tz) {
     for (const auto& poly : surface.flaps_theta_z)
-      if (inside_or_on(poly, tz)) return true;
+      if (point_in_or_on_polygon(poly, tz)) return true;
     return false;
   };
   auto undermined = [&](int v0, int v1) {

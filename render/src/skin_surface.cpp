@@ -3,6 +3,7 @@
 #include "caps/closure/face_domain.hpp"
 
 #include "caps/core/error.hpp"
+#include "caps/core/plane_geometry.hpp"
 #include "caps/core/units.hpp"
 #include "caps/render/drawn_skin.hpp"
 #include "caps/fem/elements.hpp"
@@ -77,18 +78,6 @@ double signed_area(const std::vector<Eigen::Vector2d>& poly) {
     a += p.x() * q.y() - q.x() * p.y();
   }
   return 0.5 * a;
-}
-
-bool inside(const std::vector<Eigen::Vector2d>& poly, const Eigen::Vector2d& p) {
-  bool in = false;
-  for (std::size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
-    const auto& a = poly[i];
-    const auto& b = poly[j];
-    if ((a.y() > p.y()) != (b.y() > p.y()) &&
-        p.x() < (b.x() - a.x()) * (p.y() - a.y()) / (b.y() - a.y()) + a.x())
-      in = !in;
-  }
-  return in;
 }
 
 double cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& c) {
@@ -639,7 +628,7 @@ Footprint footprint_cells(const CylinderGrid& g, const std::vector<Eigen::Vector
   for (long k = k0; k <= k1 + 1; ++k)
     for (long j = j0; j <= j1 + 1; ++j)
       corner_in[static_cast<std::size_t>((k - k0) * (W + 1) + (j - j0))] =
-          inside(rim_poly, grid_corner(g, j, k));
+          point_in_polygon(rim_poly, grid_corner(g, j, k));
   for (long k = k0; k <= k1; ++k)
     for (long j = j0; j <= j1; ++j)
       for (long dk = 0; dk <= 1; ++dk)
@@ -855,7 +844,7 @@ void add_seam(Builder& b, const CylinderGrid& g, const std::vector<int>& P, cons
           in_fp = fp.in_box(j + dj, k + dk) && fp.cell(j + dj, k + dk);
       if (!in_fp) continue;
       const Eigen::Vector2d p = to_mm(grid_corner(g, j, k));
-      if (inside(rim, p) || distance_to_loop(rim, p) < keep_off_mm) continue;
+      if (point_in_polygon(rim, p) || distance_to_loop(rim, p) < keep_off_mm) continue;
       insert(p, range.at(j, k));
     }
   for (const auto* loop : {&rim_h, &border_h})
@@ -901,11 +890,11 @@ void shade_normals(const PatientModel& skin, const std::vector<int>& cap_centres
 
 // A closure in the whole face (closure/face_domain.hpp) moves the skin beyond the patch too:
 // the vertices of the range mesh, the seam and the undercuts follow the tissue model's skin
-// nodes (the mesh's node set closure::kFaceSkinNodes) by inverse-distance weights; the
+// nodes (the mesh's node set closure::kFaceSkinNodes) by inverse-distance-squared weights; the
 // micropolygons (the first n_micro vertices) carry the patch's own displacement.
 void move_with_face(const fem::Mesh& mesh, const Eigen::MatrixX3d& u, int n_micro, SkinSurfaces& out) {
   if (!mesh.node_sets.count(closure::kFaceSkinNodes)) return;
-  const closure::SkinDisplacement field = closure::SkinDisplacement::of_mesh(mesh, u);
+  const DisplacementAt field = closure::skin_displacement(mesh, u);
   for (Eigen::Index v = n_micro; v < out.pre.V.rows(); ++v)
     if (const auto d = field(out.pre.V.row(v).transpose())) out.post.V.row(v) += d->transpose();
 }

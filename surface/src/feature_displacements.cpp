@@ -3,8 +3,11 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <iomanip>
+#include <map>
+#include <memory>
 #include <sstream>
 
 #include "caps/core/error.hpp"
@@ -48,20 +51,42 @@ DisplacementAt displacement_from_samples(const Eigen::MatrixX3d& points,
   if (points.rows() != displacements.rows())
     throw InvalidInput(cat("displacement_from_samples: ", points.rows(), " points but ",
                            displacements.rows(), " displacements"));
-  if (!(radius_mm > 0))
+  if (!(radius_mm > 0) || !std::isfinite(radius_mm))
     throw InvalidInput(
         cat("displacement_from_samples: radius ", radius_mm, " mm must be positive"));
-  return [P = points, U = displacements,
-          r2 = radius_mm * radius_mm](const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
+  // The samples in cells of the radius: a point's samples within reach are in its cell and the
+  // 26 around it.
+  struct Samples {
+    Eigen::MatrixX3d P, U;
+    double r;
+    std::map<std::array<long, 3>, std::vector<Eigen::Index>> cells;
+    std::array<long, 3> cell(const Eigen::Vector3d& x) const {
+      return {static_cast<long>(std::floor(x.x() / r)), static_cast<long>(std::floor(x.y() / r)),
+              static_cast<long>(std::floor(x.z() / r))};
+    }
+  };
+  auto s = std::make_shared<Samples>(Samples{points, displacements, radius_mm, {}});
+  for (Eigen::Index i = 0; i < points.rows(); ++i)
+    if (points.row(i).allFinite()) s->cells[s->cell(points.row(i).transpose())].push_back(i);
+  return [s](const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
+    if (!x.allFinite()) return std::nullopt;
+    const std::array<long, 3> c = s->cell(x);
+    const double r2 = s->r * s->r;
     Eigen::Vector3d sum(0, 0, 0);
     double wsum = 0;
-    for (Eigen::Index i = 0; i < P.rows(); ++i) {
-      const double d2 = (P.row(i).transpose() - x).squaredNorm();
-      if (d2 > r2) continue;
-      if (d2 < 1e-18) return Eigen::Vector3d(U.row(i).transpose());
-      sum += U.row(i).transpose() / d2;
-      wsum += 1.0 / d2;
-    }
+    for (long i = -1; i <= 1; ++i)
+      for (long j = -1; j <= 1; ++j)
+        for (long k = -1; k <= 1; ++k) {
+          const auto it = s->cells.find({c[0] + i, c[1] + j, c[2] + k});
+          if (it == s->cells.end()) continue;
+          for (Eigen::Index n : it->second) {
+            const double d2 = (s->P.row(n).transpose() - x).squaredNorm();
+            if (d2 > r2) continue;
+            if (d2 < 1e-18) return Eigen::Vector3d(s->U.row(n).transpose());
+            sum += s->U.row(n).transpose() / d2;
+            wsum += 1.0 / d2;
+          }
+        }
     if (wsum == 0) return std::nullopt;
     return Eigen::Vector3d(sum / wsum);
   };

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "caps/core/error.hpp"
+#include "caps/core/plane_geometry.hpp"
 #include "caps/core/json_file.hpp"
 #include "caps/core/units.hpp"
 
@@ -17,11 +18,6 @@ namespace {
 
 using nlohmann::json;
 
-double wrap_deg(double t) {
-  t = std::fmod(t + 180.0, 360.0);
-  if (t < 0) t += 360.0;
-  return t - 180.0;
-}
 
 // The vertex offset (in steps, within [-1, 1]) of the parabola through f(-1), f(0), f(1).
 double parabola_offset(double fm, double f0, double fp) {
@@ -88,7 +84,7 @@ Landmark at(const std::string& name, double theta, double z, double confidence,
   Landmark l;
   l.name = name;
   l.found = true;
-  l.theta_deg = wrap_deg(theta);
+  l.theta_deg = wrap_degrees(theta);
   l.z_mm = z;
   l.confidence = std::clamp(confidence, 0.0, 1.0);
   l.note = note;
@@ -324,7 +320,7 @@ Landmarks find_landmarks(const SkinRangeView& view) {
     return out;
   }
   const double tm = (*tip)[0], zp = (*tip)[1];
-  out.midline_theta_deg = wrap_deg(tm);
+  out.midline_theta_deg = wrap_degrees(tm);
   // The midsagittal profile, from 110 mm below the nose tip to 90 mm above it.
   const Profile mid = profile(view, tm, zp - 110.0, zp + 90.0);
   {
@@ -352,7 +348,7 @@ Landmarks find_landmarks(const SkinRangeView& view) {
                 "of: not a nose (the scan may end above the nose tip)");
     if (!why.empty()) {
       const double t = brow_without_nose(view, why, found);
-      if (std::isfinite(t)) out.midline_theta_deg = wrap_deg(t);
+      if (std::isfinite(t)) out.midline_theta_deg = wrap_degrees(t);
       for (const auto& n : landmark_names())
         if (n != "glabella" && n != "nasion")
           put(absent(n, n == "pronasale" ? why
@@ -633,7 +629,7 @@ SkinRangeView skin_range_view(const PatientModel& model) {
     if (!m->has_z(z)) return false;
     const auto& maps = m->maps();
     const auto& gg = maps.grid;
-    const int j = static_cast<int>(std::lround((wrap_deg(t) - gg.theta0_deg) / gg.dtheta_deg())) %
+    const int j = static_cast<int>(std::lround((wrap_degrees(t) - gg.theta0_deg) / gg.dtheta_deg())) %
                   gg.n_theta;
     const int k = std::clamp(static_cast<int>(std::lround((z - gg.z0_mm) / gg.dz_mm)), 0,
                              gg.n_z - 1);

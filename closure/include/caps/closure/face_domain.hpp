@@ -25,6 +25,7 @@
 #include "caps/fem/solve.hpp"
 #include "caps/mesher/continuum_mesher.hpp"
 #include "caps/mesher/tissue_model.hpp"
+#include "caps/surface/feature_lines.hpp"
 
 namespace caps {
 class PatientModel;
@@ -96,27 +97,13 @@ FaceDomain join_face_domain(const mesher::WoundMesh& wound, const PatientModel& 
 /// first `n_elements` elements; the totals (suture forces, energy, counts, timings) as they are.
 fem::SolveResult patch_part(const fem::SolveResult& joined, int n_nodes, int n_elements);
 
-/// The closure's displacement on the skin, anywhere on the face: inverse-distance weights of the
-/// skin nodes within `reach_mm` of a point; nothing farther from every skin node (outside the
-/// modelled region, where the face does not move). The renderer moves the skin outside the patch
-/// with it (the joined mesh's node set kFaceSkinNodes); feature lines are measured on it.
-class SkinDisplacement {
- public:
-  /// @param points         #P×3 skin node positions (LPS mm)
-  /// @param displacements  #P×3 their displacements (mm)
-  SkinDisplacement(Eigen::MatrixX3d points, Eigen::MatrixX3d displacements, double reach_mm = 6.0);
-  /// The nodes of `mesh`'s node set kFaceSkinNodes (and `extra`) with their rows of `u`.
-  static SkinDisplacement of_mesh(const fem::Mesh& mesh, const Eigen::MatrixX3d& u,
-                                  const std::vector<int>& extra = {}, double reach_mm = 6.0);
-  std::optional<Eigen::Vector3d> operator()(const Eigen::Vector3d& p_lps) const;
-  bool empty() const { return points_.rows() == 0; }
-
- private:
-  std::array<int, 3> cell(const Eigen::Vector3d& p) const;
-  double reach_mm_;
-  Eigen::MatrixX3d points_, values_;
-  std::map<std::array<int, 3>, std::vector<int>> grid_;
-};
+/// The closure's displacement on the skin, anywhere on the face: displacement_from_samples
+/// (inverse-distance-squared weights within `reach_mm`) over the mesh's node set kFaceSkinNodes
+/// and the nodes `extra` with their rows of `u`; nothing farther from every one (outside the
+/// modelled region, where the face does not move). The renderer moves the skin outside the
+/// patch with it; feature lines are measured on it.
+DisplacementAt skin_displacement(const fem::Mesh& mesh, const Eigen::MatrixX3d& u,
+                                          const std::vector<int>& extra = {}, double reach_mm = 6.0);
 
 /// The joined mesh's node set of the tissue's skin nodes (fem::Mesh::node_sets, mesh.json).
 inline constexpr const char* kFaceSkinNodes = "face_skin";

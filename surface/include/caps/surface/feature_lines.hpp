@@ -100,8 +100,8 @@ using DisplacementAt = std::function<std::optional<Eigen::Vector3d>(const Eigen:
 /// A displacement field from samples of it (a closure's skin nodes and their displacements): at a
 /// point, the inverse-distance-squared mean of the samples within `radius_mm` (the sample itself
 /// where the point is one), nothing where no sample is that close (the closure's model does not
-/// reach the point). Brute force over the samples: for a few hundred line points and some
-/// ten thousand nodes, well under a second.
+/// reach the point). The samples are binned in cells of the radius, so a query looks at its
+/// neighbourhood only (the renderer asks it for every vertex of the skin).
 /// @param points         #P×3 sample positions (LPS mm)
 /// @param displacements  #P×3 displacements there (mm, LPS)
 /// @param radius_mm      how far a sample speaks for (e.g. twice the mesh size)
