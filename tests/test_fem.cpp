@@ -545,6 +545,53 @@ TEST(FemSolvers, GemmWithOneColumnIsTheReferenceProduct) {
   EXPECT_EQ(c, Eigen::Vector3d(1, 2, 3));
 }
 
+// xTRSM with one right-hand side (MUMPS's solve phase) goes to xTRSV: for each side, triangle,
+// transposition and diagonal, with alpha and leading dimensions larger than the matrices, the
+// solution of the reference definition op(A) X = alpha B or X op(A) = alpha B.
+extern "C" void dtrsm_(const char*, const char*, const char*, const char*, const int*, const int*,
+                       const double*, const double*, const int*, double*, const int*);
+extern "C" void strsm_(const char*, const char*, const char*, const char*, const int*, const int*,
+                       const float*, const float*, const int*, float*, const int*);
+
+TEST(FemSolvers, TrsmWithOneRightHandSideIsTheReferenceSolve) {
+  EXPECT_EQ(dlsym(RTLD_DEFAULT, "dtrsm_"), reinterpret_cast<void*>(&dtrsm_));
+  EXPECT_EQ(dlsym(RTLD_DEFAULT, "strsm_"), reinterpret_cast<void*>(&strsm_));
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> d(-1, 1);
+  const int k = 6, pad = 2;
+  for (const char* side : {"L", "R"})
+    for (const char* uplo : {"U", "L"})
+      for (const char* ta : {"N", "T"})
+        for (const char* diag : {"N", "U"})
+          for (int other : {1, 3}) {  // B's other dimension: 1 is forwarded, 3 is not
+            const bool left = *side == 'L';
+            Eigen::MatrixXd A = Eigen::MatrixXd::NullaryExpr(k + pad, k, [&] { return d(rng); });
+            A.diagonal().array() += 4;  // well conditioned
+            Eigen::MatrixXd T = Eigen::MatrixXd::Zero(k, k);
+            for (int i = 0; i < k; ++i)
+              for (int j = 0; j < k; ++j)
+                if (*uplo == 'U' ? i <= j : i >= j) T(i, j) = i == j && *diag == 'U' ? 1.0 : A(i, j);
+            const Eigen::MatrixXd opT = *ta == 'T' ? Eigen::MatrixXd(T.transpose()) : T;
+            const int m = left ? k : other, n = left ? other : k;
+            const Eigen::MatrixXd B0 = Eigen::MatrixXd::NullaryExpr(m + pad, n, [&] { return d(rng); });
+            const double alpha = -0.8;
+            const Eigen::MatrixXd X = left ? Eigen::MatrixXd(opT.lu().solve(alpha * B0.topRows(m)))
+                                           : Eigen::MatrixXd((opT.transpose().lu().solve(
+                                                                  (alpha * B0.topRows(m)).transpose()))
+                                                                 .transpose());
+            const int lda = k + pad, ldb = m + pad;
+            Eigen::MatrixXd B = B0;
+            dtrsm_(side, uplo, ta, diag, &m, &n, &alpha, A.data(), &lda, B.data(), &ldb);
+            EXPECT_LT((B.topRows(m) - X).cwiseAbs().maxCoeff(), 1e-12) << side << uplo << ta << diag << other;
+            EXPECT_EQ(B.bottomRows(pad), B0.bottomRows(pad));  // beyond m rows: untouched
+            const Eigen::MatrixXf Af = A.cast<float>();
+            Eigen::MatrixXf Bf = B0.cast<float>();
+            const float alpha_f = -0.8f;
+            strsm_(side, uplo, ta, diag, &m, &n, &alpha_f, Af.data(), &lda, Bf.data(), &ldb);
+            EXPECT_LT((Bf.topRows(m).cast<double>() - X).cwiseAbs().maxCoeff(), 1e-4) << side << uplo << ta << diag;
+          }
+}
+
 // Colour-by-colour assembly adds every entry in the same order whatever the thread count.
 TEST(FemSolvers, ResultDoesNotDependOnTheThreadCount) {
   Mesh m = slotted_box(ElementType::Wedge15);
