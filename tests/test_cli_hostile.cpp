@@ -351,6 +351,54 @@ TEST_F(Hostile, NonFiniteSpacingAndVoxelsAreRefused) {
                      out, nan_voxel);
 }
 
+TEST_F(Hostile, NiftiOrientationThatIsNotANumberIsRefused) {
+  // sform_code 0 and a qform whose quaternion or offset is NaN or infinite: nifti2_io replaces
+  // them with 0 and the volume was read "with the orientation from the qform", one it invented.
+  const std::string voxels(128, '\0');
+  auto with_qform = [&](int field, float value) {
+    std::string h = nifti(4, 4, 4, 4, 16, 1.0f, voxels);
+    const std::int16_t qform_code = 1;
+    std::memcpy(&h[252], &qform_code, 2);
+    std::memcpy(&h[256 + 4 * field], &value, 4);  // quatern_b, c, d, qoffset_x, y, z
+    return h;
+  };
+  const fs::path nii = dir / "bad_qform.nii";
+  for (const auto& [field, value, word] : std::vector<std::tuple<int, float, std::string>>{
+           {0, std::nanf(""), "quatern_b"}, {2, INFINITY, "quatern_d"},
+           {3, -INFINITY, "qoffset_x"}, {5, std::nanf(""), "qoffset_z"}}) {
+    write_file(nii, with_qform(field, value));
+    expect_refused_new("volume info " + nii.string(), {"bad_qform.nii", word, "qform"},
+                       dir / "none", nii);
+  }
+  // The same qform with numbers is read from the qform.
+  write_file(nii, with_qform(3, 10.0f));
+  const Outcome ok = run("volume info " + nii.string());
+  EXPECT_EQ(ok.code, 0) << ok.err;
+  EXPECT_NE(ok.out.find("orientation from the qform"), std::string::npos) << ok.out;
+  // A vox_offset of 1e12 was read from byte 352 and exited 0.
+  std::string far = nifti(4, 4, 4, 4, 16, 1.0f, voxels);
+  const float offset = 1e12f;
+  std::memcpy(&far[108], &offset, 4);
+  for (const std::string name : {"far_offset.nii", "far_offset.nii.gz"}) {
+    write_file(dir / name, name.ends_with(".gz") ? gzip(far) : far);
+    expect_refused_new("volume info " + (dir / name).string(), {name, "vox_offset", "1e+12"},
+                       dir / "none", dir / name);
+  }
+}
+
+TEST_F(Hostile, ThePhantomIsFiniteAtEverySpacing) {
+  // At 64 x 64 x 60 (and 64^3) voxels of 4 mm a voxel centre lies on the head's axis above the
+  // vertex, where the phantom's surface ramp was 0/0: a NaN voxel its own reader then flagged.
+  for (const std::string voxels : {"64,64,60", "64,64,64", "63,65,60"}) {
+    const fs::path ct = dir / "phantom_4mm.nii.gz";
+    const Outcome w = run("phantom -q --force --voxels " + voxels + " --spacing 4,4,4 -o " + ct.string());
+    ASSERT_EQ(w.code, 0) << w.err;
+    const Outcome r = run("volume info " + ct.string());
+    EXPECT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(r.out.find("not-a-number"), std::string::npos) << voxels << ":\n" << r.out;
+  }
+}
+
 TEST_F(Hostile, NiftiIsReadFromTheFileGivenNotASameNamedOne) {
   // a.nii.gz holds zeros; a different a.nii beside it holds 5s: the voxels come from a.nii.gz.
   fs::create_directories(dir / "same_name");
