@@ -6,6 +6,7 @@
 
 #include "cli_outcome.hpp"
 #include <nlohmann/json.hpp>
+#include <signal.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -625,6 +626,153 @@ TEST_F(HostileModel, AnOutputThatIsOrHoldsAnInputIsRefusedEvenWithForce) {
   expect_refused("solve " + mesh.string() + "/. -o " + (mesh.parent_path() / "." / "box_mesh").string() +
                      " --force",
                  {"is the input"}, mesh, mesh);
+}
+
+// ---- outputs: what --force may replace, one writer at a time, interrupted runs
+
+// A caps run in the background (its stderr in `err`): its process id.
+pid_t start_caps(const std::string& args, const fs::path& err) {
+  const std::string cmd = "exec " + std::string(CAPS_EXE) + " " + args + " >/dev/null 2>" +
+                          err.string() + " </dev/null";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::execl("/bin/sh", "sh", "-c", cmd.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  return pid;
+}
+
+// Waits up to `seconds` for an entry of `dir` whose name starts with `prefix`.
+bool wait_for_entry(const fs::path& dir, const std::string& prefix, double seconds) {
+  for (int i = 0; i < seconds * 20; ++i) {
+    for (const auto& e : fs::directory_iterator(dir))
+      if (e.path().filename().string().rfind(prefix, 0) == 0) return true;
+    ::usleep(50000);
+  }
+  return false;
+}
+
+int exit_code_of(pid_t pid) {
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::vector<std::string> entries_starting(const fs::path& dir, const std::string& prefix) {
+  std::vector<std::string> found;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().filename().string().rfind(prefix, 0) == 0) found.push_back(e.path().filename());
+  return found;
+}
+
+TEST_F(HostileModel, ForceReplacesOnlyAFileOrAFolderCapsWrote) {
+  // As root, `plan show p.json -o /dev/null --force` replaced /dev/null with a PNG; a FIFO made
+  // here stands for it (the tests do not run as root).
+  const fs::path p = plan();
+  const fs::path fifo = dir / "out_fifo";
+  fs::remove(fifo);
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  expect_refused("plan show " + p.string() + " --model " + model().string() + " -o " +
+                     fifo.string() + " --force",
+                 {"out_fifo", "FIFO", "--force"}, fifo, p);
+  EXPECT_TRUE(fs::is_fifo(fs::symlink_status(fifo))) << "the FIFO was replaced";
+  expect_refused("plan new z-plasty -q --model " + model().string() + " --at 0,60 -o " +
+                     fifo.string() + " --force",
+                 {"out_fifo", "FIFO"}, fifo, p);
+  EXPECT_TRUE(fs::is_fifo(fs::symlink_status(fifo)));
+  // A symbolic link to a file elsewhere: neither the link nor its target is replaced.
+  const fs::path target = dir / "link_target.png", link = dir / "out_link.png";
+  write_file(target, "the user's picture");
+  fs::remove(link);
+  fs::create_symlink(target, link);
+  expect_refused("plan show " + p.string() + " --model " + model().string() + " -o " +
+                     link.string() + " --force",
+                 {"out_link.png", "symbolic link"}, link, target);
+  EXPECT_TRUE(fs::is_symlink(fs::symlink_status(link)));
+  // A folder caps did not write (the user's documents) is not replaced by a folder output.
+  const fs::path docs = dir / "documents";
+  fs::create_directories(docs);
+  write_file(docs / "letter.txt", "keep me");
+  expect_refused("fem box -q -o " + docs.string() + " --cells 2,1,1 --force",
+                 {"documents", "caps did not write"}, docs, docs);
+  // What caps wrote is replaced: a file and a folder.
+  const fs::path png = dir / "replaced.png", box = dir / "replaced_box";
+  write_file(png, "old");
+  EXPECT_EQ(run("plan show -q " + p.string() + " --model " + model().string() + " -o " +
+                png.string() + " --force").code, 0);
+  EXPECT_NE(slurp(png), "old");
+  ASSERT_EQ(run("fem box -q -o " + box.string() + " --cells 2,1,1").code, 0);
+  EXPECT_EQ(run("fem box -q -o " + box.string() + " --cells 3,1,1 --force").code, 0);
+  EXPECT_NE(slurp(box / "mesh.json").find("\"elements\": 3"), std::string::npos);
+}
+
+TEST_F(HostileModel, ASecondWriterOfTheSameOutputIsRefusedNotRaced) {
+  // Two runs writing the same -o without --force both exited 0, the later replacing the earlier.
+  const fs::path out = dir / "claimed_model", err = dir / "claim_first.err";
+  fs::remove_all(out);
+  const std::string args = "model from-volume -q " + phantom().string() + " -o " + out.string() +
+                           " --n-theta 96 --n-z 48";
+  const pid_t first = start_caps(args, err);
+  ASSERT_TRUE(wait_for_entry(dir, "claimed_model.tmp-", 60)) << "the first run never started";
+  const Outcome second = run(args);
+  EXPECT_EQ(second.code, 2) << second.err;
+  EXPECT_NE(second.err.find("another caps run"), std::string::npos) << second.err;
+  EXPECT_NE(second.err.find(std::to_string(first)), std::string::npos) << second.err;
+  // --force does not take it either while the first run writes it.
+  EXPECT_EQ(run(args + " --force").code, 2);
+  EXPECT_EQ(exit_code_of(first), 0) << slurp(err);
+  EXPECT_TRUE(fs::exists(out / "model.json"));
+  EXPECT_TRUE(entries_starting(dir, "claimed_model.").empty());
+  // A folder another program makes while a run writes the same name is left alone (the
+  // finished output is moved into place only if the name is still free).
+  const fs::path out2 = dir / "raced_model";
+  fs::remove_all(out2);
+  const pid_t run2 = start_caps("model from-volume -q " + phantom().string() + " -o " +
+                                    out2.string() + " --n-theta 96 --n-z 48",
+                                err);
+  ASSERT_TRUE(wait_for_entry(dir, "raced_model.tmp-", 60));
+  fs::create_directories(out2);
+  write_file(out2 / "theirs.txt", "made meanwhile");
+  EXPECT_EQ(exit_code_of(run2), 2) << slurp(err);
+  EXPECT_NE(slurp(err).find("appeared while this run was writing it"), std::string::npos)
+      << slurp(err);
+  EXPECT_EQ(slurp(out2 / "theirs.txt"), "made meanwhile");
+  EXPECT_FALSE(fs::exists(out2 / "model.json"));
+  EXPECT_TRUE(entries_starting(dir, "raced_model.").empty()) << entries_starting(dir, "raced_model.")[0];
+}
+
+TEST_F(HostileModel, InterruptedRunsRemoveTheirTemporaryAndSaySo) {
+  // Ctrl-C or SIGTERM during caps simulate (--render too) died without a word and left
+  // OUT.tmp-PID-hex behind.
+  const std::string sim = "simulate -q --model " + model().string() + " --plan " + plan().string();
+  for (const auto& [extra, sig, code, name] :
+       std::vector<std::tuple<std::string, int, int, std::string>>{
+           {"", SIGINT, 130, "SIGINT"},
+           {" --render", SIGTERM, 143, "SIGTERM"},
+           {" --domain patch --render", SIGINT, 130, "SIGINT"}}) {
+    const fs::path out = dir / "interrupted_sim", err = dir / "interrupted.err";
+    fs::remove_all(out);
+    const pid_t pid = start_caps(sim + extra + " -o " + out.string(), err);
+    ASSERT_TRUE(wait_for_entry(dir, "interrupted_sim.tmp-", 60)) << slurp(err);
+    ::usleep(300000);
+    ::kill(pid, sig);
+    EXPECT_EQ(exit_code_of(pid), code) << extra << "\n" << slurp(err);
+    const std::string message = slurp(err);
+    EXPECT_NE(message.find("interrupted by " + name), std::string::npos) << message;
+    EXPECT_NE(message.find("interrupted_sim"), std::string::npos) << message;
+    EXPECT_FALSE(fs::exists(out));
+    EXPECT_TRUE(entries_starting(dir, "interrupted_sim.").empty())
+        << "left behind: " << entries_starting(dir, "interrupted_sim.")[0];
+  }
+  // A single-file output (the phantom) interrupted while it is written.
+  const fs::path ct = dir / "interrupted.nii.gz", err = dir / "interrupted_ct.err";
+  const pid_t pid = start_caps("phantom -q -o " + ct.string() + " --voxels 400,400,400 --spacing 0.6,0.6,0.6", err);
+  ASSERT_TRUE(wait_for_entry(dir, "interrupted.nii.gz.caps-claim", 30));
+  ::usleep(500000);
+  ::kill(pid, SIGTERM);
+  EXPECT_EQ(exit_code_of(pid), 143) << slurp(err);
+  EXPECT_FALSE(fs::exists(ct));
+  EXPECT_TRUE(entries_starting(dir, "interrupted.nii.gz").empty());
 }
 
 TEST_F(HostileModel, PlanErrorsNameTheFileAndTheEntry) {
