@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -713,7 +714,7 @@ TEST_F(HostileModel, ASecondWriterOfTheSameOutputIsRefusedNotRaced) {
   const std::string args = "model from-volume -q " + phantom().string() + " -o " + out.string() +
                            " --n-theta 96 --n-z 48";
   const pid_t first = start_caps(args, err);
-  ASSERT_TRUE(wait_for_entry(dir, "claimed_model.tmp-", 60)) << "the first run never started";
+  ASSERT_TRUE(wait_for_entry(dir, "claimed_model.caps-claim", 60)) << "the first run never started";
   const Outcome second = run(args);
   EXPECT_EQ(second.code, 2) << second.err;
   EXPECT_NE(second.err.find("another caps run"), std::string::npos) << second.err;
@@ -730,12 +731,11 @@ TEST_F(HostileModel, ASecondWriterOfTheSameOutputIsRefusedNotRaced) {
   const pid_t run2 = start_caps("model from-volume -q " + phantom().string() + " -o " +
                                     out2.string() + " --n-theta 96 --n-z 48",
                                 err);
-  ASSERT_TRUE(wait_for_entry(dir, "raced_model.tmp-", 60));
+  ASSERT_TRUE(wait_for_entry(dir, "raced_model.caps-claim", 60));
   fs::create_directories(out2);
   write_file(out2 / "theirs.txt", "made meanwhile");
   EXPECT_EQ(exit_code_of(run2), 2) << slurp(err);
-  EXPECT_NE(slurp(err).find("appeared while this run was writing it"), std::string::npos)
-      << slurp(err);
+  EXPECT_NE(slurp(err).find("raced_model"), std::string::npos) << slurp(err);
   EXPECT_EQ(slurp(out2 / "theirs.txt"), "made meanwhile");
   EXPECT_FALSE(fs::exists(out2 / "model.json"));
   EXPECT_TRUE(entries_starting(dir, "raced_model.").empty()) << entries_starting(dir, "raced_model.")[0];
@@ -773,6 +773,40 @@ TEST_F(HostileModel, InterruptedRunsRemoveTheirTemporaryAndSaySo) {
   EXPECT_EQ(exit_code_of(pid), 143) << slurp(err);
   EXPECT_FALSE(fs::exists(ct));
   EXPECT_TRUE(entries_starting(dir, "interrupted.nii.gz").empty());
+}
+
+TEST_F(HostileModel, SizesThatAskForTooMuchAreRefusedBeforeTheWork) {
+  // --mesh-size 0.01 ran for minutes with growing memory, 1e-10 ended in "internal error:
+  // map::at"; a model grid of 8192 x 8192 asked 9.5 GB and failed after trying.
+  const std::string m = model().string(), p = plan().string();
+  const fs::path out = dir / "budget_mesh";
+  for (const std::string size : {"0.01", "1e-10"}) {
+    const auto start = std::chrono::steady_clock::now();
+    expect_refused_new("mesh --model " + m + " --plan " + p + " -o " + out.string() +
+                           " --mesh-size " + size,
+                       {"--mesh-size " + size, "elements", "--max-elements"}, out, dir / "plan.json");
+    expect_refused_new("simulate --model " + m + " --plan " + p + " -o " + out.string() +
+                           " --mesh-size " + size,
+                       {"--mesh-size " + size, "elements", "--max-elements"}, out, dir / "plan.json");
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 30);
+  }
+  for (const std::string size : {"0", "-1", "nan"})
+    expect_refused_new("mesh --model " + m + " --plan " + p + " -o " + out.string() +
+                           " --mesh-size " + size, {"--mesh-size"}, out, dir / "plan.json");
+  // The budget is an option: the default mesh under a limit of 100 elements.
+  expect_refused_new("mesh --model " + m + " --plan " + p + " -o " + out.string() +
+                         " --max-elements 100", {"--max-elements", "100"}, out, dir / "plan.json");
+  EXPECT_EQ(run("mesh -q --model " + m + " --plan " + p + " -o " + out.string()).code, 0);
+  // The model's grid.
+  const fs::path grid = dir / "budget_model";
+  const auto start = std::chrono::steady_clock::now();
+  expect_refused_new("model from-volume " + phantom().string() + " -o " + grid.string() +
+                         " --n-theta 8192 --n-z 8192",
+                     {"8192", "GB", "max_bytes"}, grid, phantom());
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 10);
+  expect_refused_new("model from-volume " + phantom().string() + " -o " + grid.string() +
+                         " --n-theta 512 --n-z 256 --max-bytes 1e6",
+                     {"512", "max_bytes"}, grid, phantom());
 }
 
 TEST_F(HostileModel, PlanErrorsNameTheFileAndTheEntry) {

@@ -85,6 +85,7 @@ CompareModelsResult run_compare_models(const CompareModelsRequest& r, Reporter* 
   require_utf8(r.plan, "the plan file");
   const plan::Plan plan = plan::read_plan(r.plan);
   const auto ct = loaded_model(r.model);
+  check_mesh_budget(plan::wound_border(plan), *ct, r.meshing);
   std::shared_ptr<const PatientModel> scan, fused;
   std::vector<study::ComparedModel> others;
   if (!r.scan_model.empty()) {

@@ -169,6 +169,12 @@ void set_materials(fem::Mesh& mesh, const SolverFields& s) {
 }  // namespace
 
 closure::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields& s) {
+  if (!(m.mesh_size > 0) || !std::isfinite(m.mesh_size))
+    throw InvalidParameter(cat("{mesh_size} ", m.mesh_size, ": give the mesh size in mm, > 0 "
+                               "(e.g. 2)"));
+  if (!(m.max_elements >= 1) || std::isnan(m.max_elements))
+    throw InvalidParameter(cat("{max_elements} ", m.max_elements, ": give a positive number of "
+                               "elements"));
   closure::SimulateOptions o;
   o.surface.size_mm = m.mesh_size;
   o.surface.extent_mm = m.extent;
@@ -190,6 +196,45 @@ closure::SimulateOptions simulate_options(const MeshingFields& m, const SolverFi
     throw InvalidParameter(cat("{steps} ", s.steps, ": give 1..1000 load steps"));
   o.solve.newton.n_steps = s.steps;
   return o;
+}
+
+double check_mesh_budget(const plan::WoundBorder& border, const PatientModel& model,
+                         const MeshingFields& m) {
+  const auto& loop = border.loop_theta_z;
+  if (loop.size() < 2) return 0;  // the mesher says what is wrong with the loop
+  // The loop unwrapped around its first point, as the surface mesher's tangent plane has it.
+  const double t0 = loop[0].x();
+  double sx = 0, sz = 0;
+  for (const auto& p : loop) {
+    sx += std::remainder(p.x() - t0, 360.0);
+    sz += p.y();
+  }
+  const double n = static_cast<double>(loop.size());
+  const double theta_c = t0 + sx / n, z_c = sz / n;
+  const double radius_mm = model.r_skin(theta_c, z_c);
+  if (!(radius_mm > 0) || !std::isfinite(radius_mm)) return 0;  // the mesher refuses it
+  std::vector<Eigen::Vector2d> L;
+  for (const auto& p : loop)
+    L.emplace_back(std::remainder(p.x() - theta_c, 360.0) * M_PI / 180.0 * radius_mm, p.y() - z_c);
+  double perimeter_mm = 0, size_mm = 0;
+  for (std::size_t i = 0; i < L.size(); ++i) {
+    perimeter_mm += (L[(i + 1) % L.size()] - L[i]).norm();
+    for (std::size_t j = 0; j < i; ++j) size_mm = std::max(size_mm, (L[j] - L[i]).norm());
+  }
+  if (!std::isfinite(perimeter_mm)) return 0;
+  const double extent_mm = m.extent > 0 ? m.extent : 3.0 * size_mm;
+  const double h = m.mesh_size, layers = std::max(1, m.layers);
+  const double estimate =
+      (perimeter_mm * extent_mm + M_PI * extent_mm * extent_mm) / (h * h) * layers;
+  if (!(estimate <= m.max_elements))
+    throw InvalidParameter(cat("{mesh_size} ", h, " mm asks for up to about ",
+                               round_to(estimate, 0), " elements (a wound of ", round_to(size_mm, 1), " mm with a border "
+                               "of ", round_to(perimeter_mm, 1), " mm, meshed ",
+                               round_to(extent_mm, 1), " mm around it in ", layers,
+                               " layers), more than the limit of ", m.max_elements,
+                               " ({max_elements}); give a larger mesh size or a smaller extent, "
+                               "or raise the limit"));
+  return estimate;
 }
 
 std::string set_domain(closure::SimulateOptions& o, const DomainFields& d,
@@ -239,6 +284,7 @@ MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
+  check_mesh_budget(border, model, r.meshing);
   mesher::WoundMesh w = mesher::mesh_wound(border, model, o.surface, o.continuum, reporter);
   const std::string wound = r.plan.empty() ? r.border : r.plan;
   w.continuum.mesh.model = r.model;
@@ -373,6 +419,7 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
+  check_mesh_budget(plan::wound_border(plan), model, r.meshing);
   if (!domain_warning.empty()) warn(reporter, domain_warning);
   closure::Simulation sim = closure::simulate(model, plan, o, reporter);
   if (!domain_warning.empty()) sim.wound.continuum.mesh.warnings.push_back(domain_warning);
@@ -563,6 +610,7 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
+  check_mesh_budget(plan::wound_border(plan), model, r.meshing);
   const study::Comparison c = study::compare_thickness(model, plan, r.thickness, o, reporter);
   const std::string name = fs::path(r.plan).filename().string();
   const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);

@@ -46,9 +46,17 @@ struct Registry {
   std::map<std::string, Claim> claims;  // by the output's absolute path
   std::set<std::string> temporaries;
   bool abandoned = false;
+  pid_t pid = ::getpid();
 };
 Registry& registry() {
   static Registry* r = new Registry;  // never destroyed: used until _exit on an interruption
+  if (r->pid != ::getpid()) {
+    // A forked child holds none of its parent's claims (their locks stay the parent's).
+    for (auto& [key, c] : r->claims) ::close(c.fd);
+    r->claims.clear();
+    r->temporaries.clear();
+    r->pid = ::getpid();
+  }
   return *r;
 }
 
