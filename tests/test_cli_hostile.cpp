@@ -19,6 +19,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -807,6 +808,52 @@ TEST_F(HostileModel, SizesThatAskForTooMuchAreRefusedBeforeTheWork) {
   expect_refused_new("model from-volume " + phantom().string() + " -o " + grid.string() +
                          " --n-theta 512 --n-z 256 --max-bytes 1e6",
                      {"512", "max_bytes"}, grid, phantom());
+}
+
+TEST_F(HostileModel, BadInputsAreInputErrorsNotInternalOnes) {
+  // These ended as "internal error" (exit 1).
+  // An OBJ whose texture (its material's map_Kd, or --texture) is a folder.
+  const fs::path obj = dir / "folder_texture.obj", folder = dir / "texture_folder";
+  fs::create_directories(folder);
+  write_file(obj, "mtllib folder_texture.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\n"
+                  "vt 0 1\nusemtl a\nf 1/1 2/2 3/3\n");
+  write_file(dir / "folder_texture.mtl", "newmtl a\nmap_Kd texture_folder\n");
+  const fs::path out = dir / "bad_input_out";
+  expect_refused_new("model from-scan " + obj.string() + " --thickness 6 -o " + out.string(),
+                     {"texture_folder", "folder"}, out, obj);
+  expect_refused_new("model from-scan " + obj.string() + " --thickness 6 --texture " +
+                         folder.string() + " -o " + out.string(),
+                     {"texture_folder", "folder"}, out, obj);
+  // A model.json whose source lacks its path.
+  const fs::path m = dir / "no_source_path";
+  fs::remove_all(m);
+  fs::copy(model(), m, fs::copy_options::recursive);
+  nlohmann::json j = nlohmann::json::parse(slurp(m / "model.json"));
+  j["source"].erase("path");
+  write_file(m / "model.json", j.dump(1));
+  expect_refused_new("model info " + m.string(), {"model.json", "source.path", "missing"},
+                     dir / "none", m);
+  // A mesh inverted from the start (mirrored through z = 0): a bad file, not a failed solve.
+  const fs::path mesh = dir / "inverted_mesh";
+  fs::remove_all(mesh);
+  ASSERT_EQ(run("fem box -q -o " + mesh.string() + " --cells 2,1,1").code, 0);
+  std::string vtu = slurp(mesh / "mesh.vtu");
+  const auto points = vtu.find('>', vtu.find("Name=\"Points\"")) + 1;
+  const auto end = vtu.find("</DataArray>", points);
+  std::istringstream in(vtu.substr(points, end - points));
+  std::string mirrored = "\n";
+  for (double x, y, z; in >> x >> y >> z;)
+    mirrored += std::to_string(x) + " " + std::to_string(y) + " " + std::to_string(-z) + "\n";
+  vtu.replace(points, end - points, mirrored);
+  write_file(mesh / "mesh.vtu", vtu);
+  expect_refused_new("solve " + mesh.string() + " -o " + (dir / "inverted_result").string(),
+                     {"mesh.vtu", "element 0", "inverted"}, dir / "inverted_result", mesh);
+  // Sizes that would not fit: a box of 1e9 cells, a phantom of 2048^3 voxels (34 GB).
+  expect_refused_new("fem box -o " + out.string() + " --cells 1000,1000,1000", {"--cells", "1e+09"},
+                     out, mesh);
+  expect_refused_new("phantom -o " + (dir / "huge_phantom.nii.gz").string() +
+                         " --voxels 2048,2048,2048",
+                     {"--voxels", "GB"}, dir / "huge_phantom.nii.gz", mesh);
 }
 
 TEST_F(HostileModel, PlanErrorsNameTheFileAndTheEntry) {

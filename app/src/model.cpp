@@ -663,6 +663,12 @@ PhantomResult run_phantom(const PhantomRequest& r, Reporter*) {
     o.dims[a] = static_cast<int>(s[a]);
     o.spacing_mm[a] = h[a];
   }
+  // 2048^3 voxels are allowed per axis but need 34 GB as floats: the whole is checked.
+  const double bytes = o.dims.cast<double>().prod() * sizeof(float);
+  if (!(bytes <= kDefaultMaxBytes))
+    throw InvalidInput(cat("--voxels ", r.voxels, ": the phantom needs about ",
+                           round_to(bytes / 1e9, 1), " GB of memory, more than the limit of ",
+                           round_to(kDefaultMaxBytes / 1e9, 1), " GB; give fewer voxels"));
   o.head_holder = !r.no_holder;
   o.layered = r.layered;
   o.thin_bone = r.thin_bone;

@@ -13,6 +13,7 @@
 #include "caps/core/error.hpp"
 #include "caps/core/json_limits.hpp"
 #include "caps/fem/box.hpp"
+#include "caps/fem/elements.hpp"
 #include "caps/study/compare.hpp"
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/material_registry.hpp"
@@ -267,6 +268,29 @@ plan::WoundBorder border_of(const MeshRequest& r) {
                        "border.json, one of the two");
   return r.plan.empty() ? plan::read_wound_border(r.border)
                         : plan::wound_border(plan::read_plan(r.plan));
+}
+
+// A mesh read from files whose elements are inverted or degenerate before any load is a bad
+// file (nodes in the wrong order, mirrored coordinates), not a failed solve: refused naming the
+// file and the first such element, with the Jacobian determinant at its Gauss point.
+void refuse_inverted_input(const fem::Mesh& mesh, const std::string& dir) {
+  Eigen::VectorXd N;
+  Eigen::MatrixX3d dN;
+  for (int e = 0; e < static_cast<int>(mesh.n_elements()); ++e) {
+    const fem::ElementType type = mesh.elements[e].type;
+    const Eigen::MatrixX3d X = fem::element_coordinates(mesh, e);
+    const auto& rule = fem::quadrature(type);
+    for (std::size_t q = 0; q < rule.size(); ++q) {
+      fem::shape_functions(type, rule[q].xi, N, dN);
+      const double det = (dN.transpose() * X).determinant();
+      if (!(det > 0))
+        throw InvalidInput(cat(dir, "/mesh.vtu: element ", e, " (", fem::element_type_name(type),
+                               ") is inverted or degenerate before any load (Jacobian "
+                               "determinant ", det, " mm^3 at Gauss point ", q, "); the mesh "
+                               "file is damaged: check its node order (mesh.hpp) and that no "
+                               "nodes coincide, or mesh the wound again (caps mesh)"));
+    }
+  }
 }
 
 double max_norm(const Eigen::MatrixX3d& u) { return u.rows() ? u.rowwise().norm().maxCoeff() : 0.0; }
@@ -535,6 +559,7 @@ SolveResult run_solve(const SolveRequest& r, Reporter* reporter) {
     throw InvalidInput(cat("--E ", *r.E, ": give Young's modulus in kPa, > 0"));
   OutputDirectory out(r.output, r.force);
   fem::Mesh mesh = fem::read_mesh_dir(r.mesh);
+  refuse_inverted_input(mesh, r.mesh);
   if (r.E || r.nu)
     for (auto& [layer, m] : mesh.materials) {
       fem::MaterialParameters changes;
@@ -580,6 +605,11 @@ BoxResult run_box(const BoxRequest& r, Reporter*) {
     o.size_mm[k] = s[k];
     o.cells[k] = static_cast<int>(c[k]);
   }
+  // --cells 1000,1000,1000 ran out of memory after trying; a box is a test mesh: up to 1e6 cells.
+  const double n_cells = c[0] * c[1] * c[2];
+  if (!(n_cells <= 1e6))
+    throw InvalidInput(cat("--cells ", r.cells, ": ", n_cells, " cells, more than the limit of "
+                           "1e6 for a test box; give fewer cells"));
   o.slot = r.slot;
   o.wedges = r.wedges;
   OutputDirectory out(r.output, r.force);
