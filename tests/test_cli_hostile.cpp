@@ -798,6 +798,10 @@ TEST_F(HostileModel, SizesThatAskForTooMuchAreRefusedBeforeTheWork) {
   expect_refused_new("mesh --model " + m + " --plan " + p + " -o " + out.string() +
                          " --max-elements 100", {"--max-elements", "100"}, out, dir / "plan.json");
   EXPECT_EQ(run("mesh -q --model " + m + " --plan " + p + " -o " + out.string()).code, 0);
+  // The sensitivity map's closures, from its template's size.
+  expect_refused_new("model sensitivity " + m + " --theta -30,30,30 --z 40,60,20 --mesh-size 0.01 -o " +
+                         out.string() + "_map",
+                     {"--mesh-size 0.01", "--max-elements"}, dir / "budget_mesh_map", dir / "plan.json");
   // The model's grid.
   const fs::path grid = dir / "budget_model";
   const auto start = std::chrono::steady_clock::now();

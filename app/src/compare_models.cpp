@@ -162,6 +162,9 @@ SensitivityResult run_sensitivity(const SensitivityRequest& r, Reporter* reporte
     throw InvalidInput("sensitivity meshes the measured and a constant thickness itself; give the "
                        "constant one with --thickness, not --constant-thickness");
   o.simulate = simulate_options(r.meshing, r.solver);
+  // Every centre's wound is the template's: about its length across, its border twice its
+  // length and width.
+  check_mesh_budget(std::max(r.length, r.width), 2.0 * (r.length + r.width), r.meshing);
   const auto model = loaded_model(r.model);
   if (model->thickness_kind() == "constant")
     throw InvalidInput(cat(r.model, ": its thickness is a constant (a scan-built model); the map needs a "

@@ -223,6 +223,10 @@ double check_mesh_budget(const plan::WoundBorder& border, const PatientModel& mo
     for (std::size_t j = 0; j < i; ++j) size_mm = std::max(size_mm, (L[j] - L[i]).norm());
   }
   if (!std::isfinite(perimeter_mm)) return 0;
+  return check_mesh_budget(size_mm, perimeter_mm, m);
+}
+
+double check_mesh_budget(double size_mm, double perimeter_mm, const MeshingFields& m) {
   const double extent_mm = m.extent > 0 ? m.extent : 3.0 * size_mm;
   const double h = m.mesh_size, layers = std::max(1, m.layers);
   const double estimate =

@@ -71,6 +71,8 @@ struct MeshingFields {
 /// Throws InvalidParameter naming {mesh_size} and {max_elements} when above meshing.max_elements.
 double check_mesh_budget(const plan::WoundBorder& border, const PatientModel& model,
                          const MeshingFields& meshing);
+/// The same for a wound of this size W (its largest extent) and border length P, in mm.
+double check_mesh_budget(double wound_size_mm, double perimeter_mm, const MeshingFields& meshing);
 
 /// Which sparse solver (caps solve, simulate and compare share these).
 struct SolverFields {
