@@ -189,7 +189,8 @@ TEST_F(Cli, CylindricalRangeImageRoundTrip) {
                  "grey", dir / "y");
 }
 
-TEST_F(Cli, SolverErrorNamesTheInvertedElementAndExitsWithOne) {
+TEST_F(Cli, AMeshInvertedBeforeAnyLoadIsABadFileNamingTheElement) {
+  // Inverted before any load: the file is at fault (exit 2), not the solve (exit 1, as it was).
   const fs::path mesh = dir / "inverted_mesh";
   ASSERT_EQ(run("fem box -o " + mesh.string() + " --size 2,2,2 --cells 2,2,2 -q").code, 0);
   // Turn cell 0 inside out: swap its top and bottom faces (Hex20 nodes 0-3 with 4-7, 8-11
@@ -213,8 +214,9 @@ TEST_F(Cli, SolverErrorNamesTheInvertedElementAndExitsWithOne) {
   write_file(mesh / "mesh.vtu", vtu);
   const fs::path out = dir / "inverted_result";
   const Outcome r = run("solve " + mesh.string() + " -o " + out.string() + " -q");
-  EXPECT_EQ(r.code, 1) << r.err;
-  EXPECT_EQ(r.err.rfind("caps: solver error: element 0, Gauss point 0: Jacobian determinant", 0), 0u)
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_EQ(r.err.rfind("caps: error: " + (mesh / "mesh.vtu").string() + ": element 0 (Hex20) is "
+                        "inverted or degenerate before any load (Jacobian determinant", 0), 0u)
       << r.err;
   EXPECT_EQ(r.err.find("internal error"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(out));

@@ -6,17 +6,20 @@
 
 #include "cli_outcome.hpp"
 #include <nlohmann/json.hpp>
+#include <signal.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -351,6 +354,54 @@ TEST_F(Hostile, NonFiniteSpacingAndVoxelsAreRefused) {
                      out, nan_voxel);
 }
 
+TEST_F(Hostile, NiftiOrientationThatIsNotANumberIsRefused) {
+  // sform_code 0 and a qform whose quaternion or offset is NaN or infinite: nifti2_io replaces
+  // them with 0 and the volume was read "with the orientation from the qform", one it invented.
+  const std::string voxels(128, '\0');
+  auto with_qform = [&](int field, float value) {
+    std::string h = nifti(4, 4, 4, 4, 16, 1.0f, voxels);
+    const std::int16_t qform_code = 1;
+    std::memcpy(&h[252], &qform_code, 2);
+    std::memcpy(&h[256 + 4 * field], &value, 4);  // quatern_b, c, d, qoffset_x, y, z
+    return h;
+  };
+  const fs::path nii = dir / "bad_qform.nii";
+  for (const auto& [field, value, word] : std::vector<std::tuple<int, float, std::string>>{
+           {0, std::nanf(""), "quatern_b"}, {2, INFINITY, "quatern_d"},
+           {3, -INFINITY, "qoffset_x"}, {5, std::nanf(""), "qoffset_z"}}) {
+    write_file(nii, with_qform(field, value));
+    expect_refused_new("volume info " + nii.string(), {"bad_qform.nii", word, "qform"},
+                       dir / "none", nii);
+  }
+  // The same qform with numbers is read from the qform.
+  write_file(nii, with_qform(3, 10.0f));
+  const Outcome ok = run("volume info " + nii.string());
+  EXPECT_EQ(ok.code, 0) << ok.err;
+  EXPECT_NE(ok.out.find("orientation from the qform"), std::string::npos) << ok.out;
+  // A vox_offset of 1e12 was read from byte 352 and exited 0.
+  std::string far = nifti(4, 4, 4, 4, 16, 1.0f, voxels);
+  const float offset = 1e12f;
+  std::memcpy(&far[108], &offset, 4);
+  for (const std::string name : {"far_offset.nii", "far_offset.nii.gz"}) {
+    write_file(dir / name, name.ends_with(".gz") ? gzip(far) : far);
+    expect_refused_new("volume info " + (dir / name).string(), {name, "vox_offset", "1e+12"},
+                       dir / "none", dir / name);
+  }
+}
+
+TEST_F(Hostile, ThePhantomIsFiniteAtEverySpacing) {
+  // At 64 x 64 x 60 (and 64^3) voxels of 4 mm a voxel centre lies on the head's axis above the
+  // vertex, where the phantom's surface ramp was 0/0: a NaN voxel its own reader then flagged.
+  for (const std::string voxels : {"64,64,60", "64,64,64", "63,65,60"}) {
+    const fs::path ct = dir / "phantom_4mm.nii.gz";
+    const Outcome w = run("phantom -q --force --voxels " + voxels + " --spacing 4,4,4 -o " + ct.string());
+    ASSERT_EQ(w.code, 0) << w.err;
+    const Outcome r = run("volume info " + ct.string());
+    EXPECT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(r.out.find("not-a-number"), std::string::npos) << voxels << ":\n" << r.out;
+  }
+}
+
 TEST_F(Hostile, NiftiIsReadFromTheFileGivenNotASameNamedOne) {
   // a.nii.gz holds zeros; a different a.nii beside it holds 5s: the voxels come from a.nii.gz.
   fs::create_directories(dir / "same_name");
@@ -577,6 +628,236 @@ TEST_F(HostileModel, AnOutputThatIsOrHoldsAnInputIsRefusedEvenWithForce) {
   expect_refused("solve " + mesh.string() + "/. -o " + (mesh.parent_path() / "." / "box_mesh").string() +
                      " --force",
                  {"is the input"}, mesh, mesh);
+}
+
+// ---- outputs: what --force may replace, one writer at a time, interrupted runs
+
+// A caps run in the background (its stderr in `err`): its process id.
+pid_t start_caps(const std::string& args, const fs::path& err) {
+  const std::string cmd = "exec " + std::string(CAPS_EXE) + " " + args + " >/dev/null 2>" +
+                          err.string() + " </dev/null";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::execl("/bin/sh", "sh", "-c", cmd.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  return pid;
+}
+
+// Waits up to `seconds` for an entry of `dir` whose name starts with `prefix`.
+bool wait_for_entry(const fs::path& dir, const std::string& prefix, double seconds) {
+  for (int i = 0; i < seconds * 20; ++i) {
+    for (const auto& e : fs::directory_iterator(dir))
+      if (e.path().filename().string().rfind(prefix, 0) == 0) return true;
+    ::usleep(50000);
+  }
+  return false;
+}
+
+int exit_code_of(pid_t pid) {
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::vector<std::string> entries_starting(const fs::path& dir, const std::string& prefix) {
+  std::vector<std::string> found;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().filename().string().rfind(prefix, 0) == 0) found.push_back(e.path().filename());
+  return found;
+}
+
+TEST_F(HostileModel, ForceReplacesOnlyAFileOrAFolderCapsWrote) {
+  // As root, `plan show p.json -o /dev/null --force` replaced /dev/null with a PNG; a FIFO made
+  // here stands for it (the tests do not run as root).
+  const fs::path p = plan();
+  const fs::path fifo = dir / "out_fifo";
+  fs::remove(fifo);
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  expect_refused("plan show " + p.string() + " --model " + model().string() + " -o " +
+                     fifo.string() + " --force",
+                 {"out_fifo", "FIFO", "--force"}, fifo, p);
+  EXPECT_TRUE(fs::is_fifo(fs::symlink_status(fifo))) << "the FIFO was replaced";
+  expect_refused("plan new z-plasty -q --model " + model().string() + " --at 0,60 -o " +
+                     fifo.string() + " --force",
+                 {"out_fifo", "FIFO"}, fifo, p);
+  EXPECT_TRUE(fs::is_fifo(fs::symlink_status(fifo)));
+  // A symbolic link to a file elsewhere: neither the link nor its target is replaced.
+  const fs::path target = dir / "link_target.png", link = dir / "out_link.png";
+  write_file(target, "the user's picture");
+  fs::remove(link);
+  fs::create_symlink(target, link);
+  expect_refused("plan show " + p.string() + " --model " + model().string() + " -o " +
+                     link.string() + " --force",
+                 {"out_link.png", "symbolic link"}, link, target);
+  EXPECT_TRUE(fs::is_symlink(fs::symlink_status(link)));
+  // A folder caps did not write (the user's documents) is not replaced by a folder output.
+  const fs::path docs = dir / "documents";
+  fs::create_directories(docs);
+  write_file(docs / "letter.txt", "keep me");
+  expect_refused("fem box -q -o " + docs.string() + " --cells 2,1,1 --force",
+                 {"documents", "caps did not write"}, docs, docs);
+  // What caps wrote is replaced: a file and a folder.
+  const fs::path png = dir / "replaced.png", box = dir / "replaced_box";
+  write_file(png, "old");
+  EXPECT_EQ(run("plan show -q " + p.string() + " --model " + model().string() + " -o " +
+                png.string() + " --force").code, 0);
+  EXPECT_NE(slurp(png), "old");
+  ASSERT_EQ(run("fem box -q -o " + box.string() + " --cells 2,1,1").code, 0);
+  EXPECT_EQ(run("fem box -q -o " + box.string() + " --cells 3,1,1 --force").code, 0);
+  EXPECT_NE(slurp(box / "mesh.json").find("\"elements\": 3"), std::string::npos);
+}
+
+TEST_F(HostileModel, ASecondWriterOfTheSameOutputIsRefusedNotRaced) {
+  // Two runs writing the same -o without --force both exited 0, the later replacing the earlier.
+  const fs::path out = dir / "claimed_model", err = dir / "claim_first.err";
+  fs::remove_all(out);
+  const std::string args = "model from-volume -q " + phantom().string() + " -o " + out.string() +
+                           " --n-theta 96 --n-z 48";
+  const pid_t first = start_caps(args, err);
+  ASSERT_TRUE(wait_for_entry(dir, "claimed_model.caps-claim", 60)) << "the first run never started";
+  const Outcome second = run(args);
+  EXPECT_EQ(second.code, 2) << second.err;
+  EXPECT_NE(second.err.find("another caps run"), std::string::npos) << second.err;
+  EXPECT_NE(second.err.find(std::to_string(first)), std::string::npos) << second.err;
+  // --force does not take it either while the first run writes it.
+  EXPECT_EQ(run(args + " --force").code, 2);
+  EXPECT_EQ(exit_code_of(first), 0) << slurp(err);
+  EXPECT_TRUE(fs::exists(out / "model.json"));
+  EXPECT_TRUE(entries_starting(dir, "claimed_model.").empty());
+  // A folder another program makes while a run writes the same name is left alone (the
+  // finished output is moved into place only if the name is still free).
+  const fs::path out2 = dir / "raced_model";
+  fs::remove_all(out2);
+  const pid_t run2 = start_caps("model from-volume -q " + phantom().string() + " -o " +
+                                    out2.string() + " --n-theta 96 --n-z 48",
+                                err);
+  ASSERT_TRUE(wait_for_entry(dir, "raced_model.caps-claim", 60));
+  fs::create_directories(out2);
+  write_file(out2 / "theirs.txt", "made meanwhile");
+  EXPECT_EQ(exit_code_of(run2), 2) << slurp(err);
+  EXPECT_NE(slurp(err).find("raced_model"), std::string::npos) << slurp(err);
+  EXPECT_EQ(slurp(out2 / "theirs.txt"), "made meanwhile");
+  EXPECT_FALSE(fs::exists(out2 / "model.json"));
+  EXPECT_TRUE(entries_starting(dir, "raced_model.").empty()) << entries_starting(dir, "raced_model.")[0];
+}
+
+TEST_F(HostileModel, InterruptedRunsRemoveTheirTemporaryAndSaySo) {
+  // Ctrl-C or SIGTERM during caps simulate (--render too) died without a word and left
+  // OUT.tmp-PID-hex behind.
+  const std::string sim = "simulate -q --model " + model().string() + " --plan " + plan().string();
+  for (const auto& [extra, sig, code, name] :
+       std::vector<std::tuple<std::string, int, int, std::string>>{
+           {"", SIGINT, 130, "SIGINT"},
+           {" --render", SIGTERM, 143, "SIGTERM"},
+           {" --domain patch --render", SIGINT, 130, "SIGINT"}}) {
+    const fs::path out = dir / "interrupted_sim", err = dir / "interrupted.err";
+    fs::remove_all(out);
+    const pid_t pid = start_caps(sim + extra + " -o " + out.string(), err);
+    ASSERT_TRUE(wait_for_entry(dir, "interrupted_sim.tmp-", 60)) << slurp(err);
+    ::usleep(300000);
+    ::kill(pid, sig);
+    EXPECT_EQ(exit_code_of(pid), code) << extra << "\n" << slurp(err);
+    const std::string message = slurp(err);
+    EXPECT_NE(message.find("interrupted by " + name), std::string::npos) << message;
+    EXPECT_NE(message.find("interrupted_sim"), std::string::npos) << message;
+    EXPECT_FALSE(fs::exists(out));
+    EXPECT_TRUE(entries_starting(dir, "interrupted_sim.").empty())
+        << "left behind: " << entries_starting(dir, "interrupted_sim.")[0];
+  }
+  // A single-file output (the phantom) interrupted while it is written.
+  const fs::path ct = dir / "interrupted.nii.gz", err = dir / "interrupted_ct.err";
+  const pid_t pid = start_caps("phantom -q -o " + ct.string() + " --voxels 400,400,400 --spacing 0.6,0.6,0.6", err);
+  ASSERT_TRUE(wait_for_entry(dir, "interrupted.nii.gz.caps-claim", 30));
+  ::usleep(500000);
+  ::kill(pid, SIGTERM);
+  EXPECT_EQ(exit_code_of(pid), 143) << slurp(err);
+  EXPECT_FALSE(fs::exists(ct));
+  EXPECT_TRUE(entries_starting(dir, "interrupted.nii.gz").empty());
+}
+
+TEST_F(HostileModel, SizesThatAskForTooMuchAreRefusedBeforeTheWork) {
+  // --mesh-size 0.01 ran for minutes with growing memory, 1e-10 ended in "internal error:
+  // map::at"; a model grid of 8192 x 8192 asked 9.5 GB and failed after trying.
+  const std::string m = model().string(), p = plan().string();
+  const fs::path out = dir / "budget_mesh";
+  for (const std::string size : {"0.01", "1e-10"}) {
+    const auto start = std::chrono::steady_clock::now();
+    expect_refused_new("mesh --model " + m + " --plan " + p + " -o " + out.string() +
+                           " --mesh-size " + size,
+                       {"--mesh-size " + size, "elements", "--max-elements"}, out, dir / "plan.json");
+    expect_refused_new("simulate --model " + m + " --plan " + p + " -o " + out.string() +
+                           " --mesh-size " + size,
+                       {"--mesh-size " + size, "elements", "--max-elements"}, out, dir / "plan.json");
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 30);
+  }
+  for (const std::string size : {"0", "-1", "nan"})
+    expect_refused_new("mesh --model " + m + " --plan " + p + " -o " + out.string() +
+                           " --mesh-size " + size, {"--mesh-size"}, out, dir / "plan.json");
+  // The budget is an option: the default mesh under a limit of 100 elements.
+  expect_refused_new("mesh --model " + m + " --plan " + p + " -o " + out.string() +
+                         " --max-elements 100", {"--max-elements", "100"}, out, dir / "plan.json");
+  EXPECT_EQ(run("mesh -q --model " + m + " --plan " + p + " -o " + out.string()).code, 0);
+  // The sensitivity map's closures, from its template's size.
+  expect_refused_new("model sensitivity " + m + " --theta -30,30,30 --z 40,60,20 --mesh-size 0.01 -o " +
+                         out.string() + "_map",
+                     {"--mesh-size 0.01", "--max-elements"}, dir / "budget_mesh_map", dir / "plan.json");
+  // The model's grid.
+  const fs::path grid = dir / "budget_model";
+  const auto start = std::chrono::steady_clock::now();
+  expect_refused_new("model from-volume " + phantom().string() + " -o " + grid.string() +
+                         " --n-theta 8192 --n-z 8192",
+                     {"8192", "GB", "max_bytes"}, grid, phantom());
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 10);
+  expect_refused_new("model from-volume " + phantom().string() + " -o " + grid.string() +
+                         " --n-theta 512 --n-z 256 --max-bytes 1e6",
+                     {"512", "max_bytes"}, grid, phantom());
+}
+
+TEST_F(HostileModel, BadInputsAreInputErrorsNotInternalOnes) {
+  // These ended as "internal error" (exit 1).
+  // An OBJ whose texture (its material's map_Kd, or --texture) is a folder.
+  const fs::path obj = dir / "folder_texture.obj", folder = dir / "texture_folder";
+  fs::create_directories(folder);
+  write_file(obj, "mtllib folder_texture.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\n"
+                  "vt 0 1\nusemtl a\nf 1/1 2/2 3/3\n");
+  write_file(dir / "folder_texture.mtl", "newmtl a\nmap_Kd texture_folder\n");
+  const fs::path out = dir / "bad_input_out";
+  expect_refused_new("model from-scan " + obj.string() + " --thickness 6 -o " + out.string(),
+                     {"texture_folder", "folder"}, out, obj);
+  expect_refused_new("model from-scan " + obj.string() + " --thickness 6 --texture " +
+                         folder.string() + " -o " + out.string(),
+                     {"texture_folder", "folder"}, out, obj);
+  // A model.json whose source lacks its path.
+  const fs::path m = dir / "no_source_path";
+  fs::remove_all(m);
+  fs::copy(model(), m, fs::copy_options::recursive);
+  nlohmann::json j = nlohmann::json::parse(slurp(m / "model.json"));
+  j["source"].erase("path");
+  write_file(m / "model.json", j.dump(1));
+  expect_refused_new("model info " + m.string(), {"model.json", "source.path", "missing"},
+                     dir / "none", m);
+  // A mesh inverted from the start (mirrored through z = 0): a bad file, not a failed solve.
+  const fs::path mesh = dir / "inverted_mesh";
+  fs::remove_all(mesh);
+  ASSERT_EQ(run("fem box -q -o " + mesh.string() + " --cells 2,1,1").code, 0);
+  std::string vtu = slurp(mesh / "mesh.vtu");
+  const auto points = vtu.find('>', vtu.find("Name=\"Points\"")) + 1;
+  const auto end = vtu.find("</DataArray>", points);
+  std::istringstream in(vtu.substr(points, end - points));
+  std::string mirrored = "\n";
+  for (double x, y, z; in >> x >> y >> z;)
+    mirrored += std::to_string(x) + " " + std::to_string(y) + " " + std::to_string(-z) + "\n";
+  vtu.replace(points, end - points, mirrored);
+  write_file(mesh / "mesh.vtu", vtu);
+  expect_refused_new("solve " + mesh.string() + " -o " + (dir / "inverted_result").string(),
+                     {"mesh.vtu", "element 0", "inverted"}, dir / "inverted_result", mesh);
+  // Sizes that would not fit: a box of 1e9 cells, a phantom of 2048^3 voxels (34 GB).
+  expect_refused_new("fem box -o " + out.string() + " --cells 1000,1000,1000", {"--cells", "1e+09"},
+                     out, mesh);
+  expect_refused_new("phantom -o " + (dir / "huge_phantom.nii.gz").string() +
+                         " --voxels 2048,2048,2048",
+                     {"--voxels", "GB"}, dir / "huge_phantom.nii.gz", mesh);
 }
 
 TEST_F(HostileModel, PlanErrorsNameTheFileAndTheEntry) {

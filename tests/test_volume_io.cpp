@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <limits>
 #include <random>
@@ -180,6 +181,7 @@ struct SliceSpec {
   double row_spacing = 0.5, col_spacing = 0.75;  // PixelSpacing = (row, col)
   double slope = 1.0, intercept = -1024.0;
   std::string series_uid = "1.2.3.4.5.1";
+  std::string patient_name = "Doe^Jane", patient_id = "P001", study_uid = "1.2.3.4.5";
   int instance = 1;
   int frames = 1;             // NumberOfFrames written when above 1
   bool rle = false;           // RLE Lossless (encapsulated) instead of native pixel data
@@ -239,8 +241,10 @@ void write_dicom_image(const fs::path& p, const SliceSpec& s, F stored) {
   element(out, 0x0008, 0x0018, "UI", sop_inst);
   element(out, 0x0008, 0x0060, "CS", "CT");
   element(out, 0x0008, 0x103e, "LO", "synthetic");
+  element(out, 0x0010, 0x0010, "PN", s.patient_name);
+  element(out, 0x0010, 0x0020, "LO", s.patient_id);
   out += s.group_0018;
-  element(out, 0x0020, 0x000d, "UI", "1.2.3.4.5");
+  element(out, 0x0020, 0x000d, "UI", s.study_uid);
   element(out, 0x0020, 0x000e, "UI", s.series_uid);
   element(out, 0x0020, 0x0013, "IS", std::to_string(s.instance));
   if (s.geometry) {
@@ -302,12 +306,14 @@ void write_dicom_slice(const fs::path& p, const SliceSpec& s, F stored) {
 }
 
 /// A uniform axial series of n slices 2 mm apart; stored value = 100 * slice + 10 * y + x.
-void write_uniform_series(const fs::path& dir, int n, const std::string& uid = "1.2.3.4.5.1") {
+void write_uniform_series(const fs::path& dir, int n, const std::string& uid = "1.2.3.4.5.1",
+                          const std::function<void(int, SliceSpec&)>& change = nullptr) {
   fs::create_directories(dir);
   for (int k = 0; k < n; ++k) {
     SliceSpec s;
+    if (change) change(k, s);
     s.ipp = Eigen::Vector3d(-10, -20, 30 + 2.0 * k);
-    s.series_uid = uid;
+    if (s.series_uid == SliceSpec{}.series_uid) s.series_uid = uid;
     s.instance = k + 1;
     char name[32];
     std::snprintf(name, sizeof name, "IM%03d.dcm", k);
@@ -745,6 +751,57 @@ TEST(VolumeIo, CraniumInv3IsHuAndFacesAnterior) {
 
 // ---------------------------------------------------------------------------------------------
 // DICOM
+
+TEST(VolumeIo, DicomSlicesOfTwoPatientsAreNeverReadAsOneVolume) {
+  TempDir tmp;
+  // One series whose slices 16 on are another patient's (PatientID and PatientName differ).
+  write_uniform_series(tmp / "mixed", 24, "1.2.3.4.5.1", [](int k, SliceSpec& s) {
+    if (k >= 16) {
+      s.patient_name = "Roe^Richard";
+      s.patient_id = "P002";
+    }
+  });
+  try {
+    caps::read_volume(tmp / "mixed");
+    ADD_FAILURE() << "a series of two patients was read";
+  } catch (const caps::InvalidInput& e) {
+    const std::string m = e.what();
+    for (const std::string w : {"two patients", "Doe^Jane", "P001", "Roe^Richard", "P002"})
+      EXPECT_NE(m.find(w), std::string::npos) << w << ": " << m;
+  }
+  // The same with only the PatientID differing, or the study.
+  write_uniform_series(tmp / "id", 8, "1.2.3.4.5.1",
+                       [](int k, SliceSpec& s) { if (k == 5) s.patient_id = "P003"; });
+  EXPECT_THROW(caps::read_volume(tmp / "id"), caps::InvalidInput);
+  write_uniform_series(tmp / "study", 8, "1.2.3.4.5.1",
+                       [](int k, SliceSpec& s) { if (k == 7) s.study_uid = "1.2.3.4.6"; });
+  EXPECT_THROW(caps::read_volume(tmp / "study"), caps::InvalidInput);
+  // A folder of two patients' series (each whole): refused naming both, unless a series is
+  // chosen with --series (ReadOptions::series_uid).
+  write_uniform_series(tmp / "two", 8, "1.2.3.4.5.1");
+  write_uniform_series(tmp / "two" / "b", 6, "1.2.3.4.5.2", [](int, SliceSpec& s) {
+    s.patient_name = "Roe^Richard";
+    s.patient_id = "P002";
+  });
+  for (const auto& e : fs::directory_iterator(tmp / "two" / "b"))
+    fs::rename(e.path(), tmp / "two" / ("b_" + e.path().filename().string()));
+  fs::remove(tmp / "two" / "b");
+  try {
+    caps::read_volume(tmp / "two");
+    ADD_FAILURE() << "a folder of two patients was read";
+  } catch (const caps::InvalidInput& e) {
+    const std::string m = e.what();
+    for (const std::string w : {"more than one patient", "Doe^Jane", "Roe^Richard", "--series"})
+      EXPECT_NE(m.find(w), std::string::npos) << w << ": " << m;
+  }
+  ReadOptions o;
+  o.series_uid = "1.2.3.4.5.2";
+  const Volume b = caps::read_volume(tmp / "two", o);
+  EXPECT_EQ(b.geom.dims.z(), 6);
+  // One patient throughout is read as before.
+  write_uniform_series(tmp / "one", 8);
+  EXPECT_EQ(caps::read_volume(tmp / "one").geom.dims.z(), 8);
+}
 
 TEST(VolumeIo, DicomUniformSeriesAppliesRescale) {
   TempDir tmp;

@@ -15,6 +15,7 @@
 #include "caps/app/console_reporter.hpp"
 #include "caps/app/fields.hpp"
 #include "caps/app/plan.hpp"
+#include "caps/app/run_guard.hpp"
 
 namespace caps::cli {
 
@@ -86,6 +87,10 @@ CLI::App* add_verb(CLI::App* parent, const std::string& name, const std::string&
   cmd->add_flag("-q,--quiet", common.quiet, "no progress bar or messages on stderr");
   cmd->callback([&common, &action, request, run, print] {
     action = [&common, request, run, print] {
+      // Ctrl-C or a kill removes what this run had begun to write; its output is its own until
+      // it ends (a second run writing it is refused).
+      const app::InterruptCleanup interrupt;
+      const auto claim = app::claim_output(*request);
       app::ConsoleReporter reporter(common.quiet);
       for (const std::string& n : common.notes) reporter.note(n);
       const Result result = run(*request, &reporter);

@@ -85,6 +85,7 @@ CompareModelsResult run_compare_models(const CompareModelsRequest& r, Reporter* 
   require_utf8(r.plan, "the plan file");
   const plan::Plan plan = plan::read_plan(r.plan);
   const auto ct = loaded_model(r.model);
+  check_mesh_budget(plan::wound_border(plan), *ct, r.meshing);
   std::shared_ptr<const PatientModel> scan, fused;
   std::vector<study::ComparedModel> others;
   if (!r.scan_model.empty()) {
@@ -161,6 +162,9 @@ SensitivityResult run_sensitivity(const SensitivityRequest& r, Reporter* reporte
     throw InvalidInput("sensitivity meshes the measured and a constant thickness itself; give the "
                        "constant one with --thickness, not --constant-thickness");
   o.simulate = simulate_options(r.meshing, r.solver);
+  // Every centre's wound is the template's: about its length across, its border twice its
+  // length and width.
+  check_mesh_budget(std::max(r.length, r.width), 2.0 * (r.length + r.width), r.meshing);
   const auto model = loaded_model(r.model);
   if (model->thickness_kind() == "constant")
     throw InvalidInput(cat(r.model, ": its thickness is a constant (a scan-built model); the map needs a "

@@ -13,6 +13,7 @@
 #include "caps/core/error.hpp"
 #include "caps/core/json_limits.hpp"
 #include "caps/fem/box.hpp"
+#include "caps/fem/elements.hpp"
 #include "caps/study/compare.hpp"
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/material_registry.hpp"
@@ -169,6 +170,12 @@ void set_materials(fem::Mesh& mesh, const SolverFields& s) {
 }  // namespace
 
 closure::SimulateOptions simulate_options(const MeshingFields& m, const SolverFields& s) {
+  if (!(m.mesh_size > 0) || !std::isfinite(m.mesh_size))
+    throw InvalidParameter(cat("{mesh_size} ", m.mesh_size, ": give the mesh size in mm, > 0 "
+                               "(e.g. 2)"));
+  if (!(m.max_elements >= 1) || std::isnan(m.max_elements))
+    throw InvalidParameter(cat("{max_elements} ", m.max_elements, ": give a positive number of "
+                               "elements"));
   closure::SimulateOptions o;
   o.surface.size_mm = m.mesh_size;
   o.surface.extent_mm = m.extent;
@@ -190,6 +197,49 @@ closure::SimulateOptions simulate_options(const MeshingFields& m, const SolverFi
     throw InvalidParameter(cat("{steps} ", s.steps, ": give 1..1000 load steps"));
   o.solve.newton.n_steps = s.steps;
   return o;
+}
+
+double check_mesh_budget(const plan::WoundBorder& border, const PatientModel& model,
+                         const MeshingFields& m) {
+  const auto& loop = border.loop_theta_z;
+  if (loop.size() < 2) return 0;  // the mesher says what is wrong with the loop
+  // The loop unwrapped around its first point, as the surface mesher's tangent plane has it.
+  const double t0 = loop[0].x();
+  double sx = 0, sz = 0;
+  for (const auto& p : loop) {
+    sx += std::remainder(p.x() - t0, 360.0);
+    sz += p.y();
+  }
+  const double n = static_cast<double>(loop.size());
+  const double theta_c = t0 + sx / n, z_c = sz / n;
+  const double radius_mm = model.r_skin(theta_c, z_c);
+  if (!(radius_mm > 0) || !std::isfinite(radius_mm)) return 0;  // the mesher refuses it
+  std::vector<Eigen::Vector2d> L;
+  for (const auto& p : loop)
+    L.emplace_back(std::remainder(p.x() - theta_c, 360.0) * M_PI / 180.0 * radius_mm, p.y() - z_c);
+  double perimeter_mm = 0, size_mm = 0;
+  for (std::size_t i = 0; i < L.size(); ++i) {
+    perimeter_mm += (L[(i + 1) % L.size()] - L[i]).norm();
+    for (std::size_t j = 0; j < i; ++j) size_mm = std::max(size_mm, (L[j] - L[i]).norm());
+  }
+  if (!std::isfinite(perimeter_mm)) return 0;
+  return check_mesh_budget(size_mm, perimeter_mm, m);
+}
+
+double check_mesh_budget(double size_mm, double perimeter_mm, const MeshingFields& m) {
+  const double extent_mm = m.extent > 0 ? m.extent : 3.0 * size_mm;
+  const double h = m.mesh_size, layers = std::max(1, m.layers);
+  const double estimate =
+      (perimeter_mm * extent_mm + M_PI * extent_mm * extent_mm) / (h * h) * layers;
+  if (!(estimate <= m.max_elements))
+    throw InvalidParameter(cat("{mesh_size} ", h, " mm asks for up to about ",
+                               round_to(estimate, 0), " elements (a wound of ", round_to(size_mm, 1), " mm with a border "
+                               "of ", round_to(perimeter_mm, 1), " mm, meshed ",
+                               round_to(extent_mm, 1), " mm around it in ", layers,
+                               " layers), more than the limit of ", m.max_elements,
+                               " ({max_elements}); give a larger mesh size or a smaller extent, "
+                               "or raise the limit"));
+  return estimate;
 }
 
 std::string set_domain(closure::SimulateOptions& o, const DomainFields& d,
@@ -224,6 +274,29 @@ plan::WoundBorder border_of(const MeshRequest& r) {
                         : plan::wound_border(plan::read_plan(r.plan));
 }
 
+// A mesh read from files whose elements are inverted or degenerate before any load is a bad
+// file (nodes in the wrong order, mirrored coordinates), not a failed solve: refused naming the
+// file and the first such element, with the Jacobian determinant at its Gauss point.
+void refuse_inverted_input(const fem::Mesh& mesh, const std::string& dir) {
+  Eigen::VectorXd N;
+  Eigen::MatrixX3d dN;
+  for (int e = 0; e < static_cast<int>(mesh.n_elements()); ++e) {
+    const fem::ElementType type = mesh.elements[e].type;
+    const Eigen::MatrixX3d X = fem::element_coordinates(mesh, e);
+    const auto& rule = fem::quadrature(type);
+    for (std::size_t q = 0; q < rule.size(); ++q) {
+      fem::shape_functions(type, rule[q].xi, N, dN);
+      const double det = (dN.transpose() * X).determinant();
+      if (!(det > 0))
+        throw InvalidInput(cat(dir, "/mesh.vtu: element ", e, " (", fem::element_type_name(type),
+                               ") is inverted or degenerate before any load (Jacobian "
+                               "determinant ", det, " mm^3 at Gauss point ", q, "); the mesh "
+                               "file is damaged: check its node order (mesh.hpp) and that no "
+                               "nodes coincide, or mesh the wound again (caps mesh)"));
+    }
+  }
+}
+
 double max_norm(const Eigen::MatrixX3d& u) { return u.rows() ? u.rowwise().norm().maxCoeff() : 0.0; }
 
 }  // namespace
@@ -239,6 +312,7 @@ MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
+  check_mesh_budget(border, model, r.meshing);
   mesher::WoundMesh w = mesher::mesh_wound(border, model, o.surface, o.continuum, reporter);
   const std::string wound = r.plan.empty() ? r.border : r.plan;
   w.continuum.mesh.model = r.model;
@@ -373,6 +447,7 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
+  check_mesh_budget(plan::wound_border(plan), model, r.meshing);
   if (!domain_warning.empty()) warn(reporter, domain_warning);
   closure::Simulation sim = closure::simulate(model, plan, o, reporter);
   if (!domain_warning.empty()) sim.wound.continuum.mesh.warnings.push_back(domain_warning);
@@ -488,6 +563,7 @@ SolveResult run_solve(const SolveRequest& r, Reporter* reporter) {
     throw InvalidInput(cat("--E ", *r.E, ": give Young's modulus in kPa, > 0"));
   OutputDirectory out(r.output, r.force);
   fem::Mesh mesh = fem::read_mesh_dir(r.mesh);
+  refuse_inverted_input(mesh, r.mesh);
   if (r.E || r.nu)
     for (auto& [layer, m] : mesh.materials) {
       fem::MaterialParameters changes;
@@ -533,6 +609,11 @@ BoxResult run_box(const BoxRequest& r, Reporter*) {
     o.size_mm[k] = s[k];
     o.cells[k] = static_cast<int>(c[k]);
   }
+  // --cells 1000,1000,1000 ran out of memory after trying; a box is a test mesh: up to 1e6 cells.
+  const double n_cells = c[0] * c[1] * c[2];
+  if (!(n_cells <= 1e6))
+    throw InvalidInput(cat("--cells ", r.cells, ": ", n_cells, " cells, more than the limit of "
+                           "1e6 for a test box; give fewer cells"));
   o.slot = r.slot;
   o.wedges = r.wedges;
   OutputDirectory out(r.output, r.force);
@@ -563,6 +644,7 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
+  check_mesh_budget(plan::wound_border(plan), model, r.meshing);
   const study::Comparison c = study::compare_thickness(model, plan, r.thickness, o, reporter);
   const std::string name = fs::path(r.plan).filename().string();
   const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);

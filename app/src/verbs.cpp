@@ -1,5 +1,7 @@
 #include "caps/app/verbs.hpp"
 
+#include "caps/app/run_guard.hpp"
+
 #include "caps/core/error.hpp"
 
 namespace caps::app {
@@ -20,7 +22,9 @@ const std::vector<VerbEntry>& verbs() {
       v.push_back({std::string(verb.name), verb_key(verb.name), std::string(verb.help),
                    verb.answer,
                    [run](const std::string& json, const std::string& source, Reporter* reporter) {
-                     return to_json(run(read_request<Request>(json, source), reporter));
+                     const Request request = read_request<Request>(json, source);
+                     const auto claim = claim_output(request);  // held for the run
+                     return to_json(run(request, reporter));
                    },
                    [](const std::string& json, const std::string& source) {
                      read_request<Request>(json, source);

@@ -4,10 +4,16 @@
 #include <iterator>
 
 #include "caps/core/error.hpp"
+#include "caps/core/file_access.hpp"
 
 namespace caps {
 
 RgbImage read_image(const std::filesystem::path& path) {
+  // A folder or a FIFO opens as a stream and fails (or blocks) in the middle of reading.
+  require_readable(path, false, "give a PNG or JPEG image file");
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw IoError(cat(path.string(), ": not a regular file; give a PNG or JPEG image file"));
   std::ifstream in(path, std::ios::binary);
   if (!in) throw IoError(cat(path.string(), ": cannot open the image (missing or unreadable)"));
   const std::vector<unsigned char> bytes{std::istreambuf_iterator<char>(in),

@@ -501,16 +501,24 @@ std::string model_summary(const fs::path& dir) {
   const json seg = parse_object(info.segmentation_json, "segmentation");
   const auto& s = info.stats;
   const auto& g = info.grid;
+  // A key the summary prints: a damaged model.json names it (not "key 'path' not found").
+  const auto text = [&](const json& j, const char* group, const char* key) {
+    const auto it = j.find(key);
+    if (it == j.end() || !it->is_string())
+      throw InvalidInput(cat((dir / model_file::kJson).string(), ": ", group, ".", key, " is ",
+                             it == j.end() ? "missing" : "not a text",
+                             "; the model folder is damaged: rebuild it (caps model from-volume)"));
+    return it->get<std::string>();
+  };
   std::ostringstream os;
   os.precision(3);
   os << "model      " << dir.string() << " (format " << info.format_version << ")\n"
-     << "source     " << source.at("path").get<std::string>() << " ("
-     << source.at("format").get<std::string>() << ", "
-     << source.at("modality").get<std::string>() << ")\n"
+     << "source     " << text(source, "source", "path") << " ("
+     << text(source, "source", "format") << ", " << text(source, "source", "modality") << ")\n"
      << "grid       " << g.n_theta << " x " << g.n_z << " (theta x z), dz " << g.dz_mm
      << " mm, z " << g.z0_mm << " .. " << g.z_mm(g.n_z - 1) << " mm\n"
-     << "skin       " << seg.at("skin_method").get<std::string>() << "\n"
-     << "bone       " << seg.at("bone_method").get<std::string>() << bone_along_rays(info)
+     << "skin       " << text(seg, "segmentation", "skin_method") << "\n"
+     << "bone       " << text(seg, "segmentation", "bone_method") << bone_along_rays(info)
      << "\n"
      << "valid      " << 100.0 * (s.cells ? double(s.valid_cells) / s.cells : 0.0)
      << " % of cells"

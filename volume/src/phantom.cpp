@@ -143,9 +143,13 @@ double HeadPhantom::hu_at(const Eigen::Vector3d& p_scaled, const Eigen::Vector3d
     const Eigen::Vector3d radial(x / rr, y / rr, 0.0);
     const Eigen::Vector3d tangential(-y / rr, x / rr, 0.0);  // direction of increasing theta
     const Eigen::Vector3d n = (radial - tangential * gt - Eigen::Vector3d(0, 0, gz)) / norm;
-    const double width = std::max(min_width, std::abs(n[0]) * voxel_mm[0] +
-                                                 std::abs(n[1]) * voxel_mm[1] +
-                                                 std::abs(n[2]) * voxel_mm[2]);
+    double width = std::max(min_width, std::abs(n[0]) * voxel_mm[0] +
+                                           std::abs(n[1]) * voxel_mm[1] +
+                                           std::abs(n[2]) * voxel_mm[2]);
+    // On the axis above the vertex (r = 0 where R = 0) the level set has no direction: n is 0
+    // and the ramp would be 0/0, a NaN voxel (a 64 x 64 x 60 grid of 4 mm has a voxel centre
+    // there); the voxel's mean size stands in.
+    if (!(width > 0)) width = voxel_mm.mean();
     return clamp01(0.5 + (g / norm) / width);
   };
 

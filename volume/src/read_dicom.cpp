@@ -65,6 +65,7 @@ namespace {
 struct SliceHeader {
   fs::path file;
   std::string series_uid, description, modality, transfer_syntax;
+  std::string patient_id, patient_name, study_uid;
   std::vector<double> ipp, iop, pixel_spacing;
   int rows = 0, cols = 0, frames = 1, instance = 0;
   double slope = 1.0, intercept = 0.0;
@@ -145,6 +146,9 @@ bool read_header(const fs::path& file, SliceHeader& h) {
   h.file = file;
   h.series_uid = str(0x0020, 0x000e);
   if (h.series_uid.empty()) return false;
+  h.patient_name = str(0x0010, 0x0010);
+  h.patient_id = str(0x0010, 0x0020);
+  h.study_uid = str(0x0020, 0x000d);
   h.description = str(0x0008, 0x103e);
   h.modality = str(0x0008, 0x0060);
   h.ipp = split_numbers(str(0x0020, 0x0032));
@@ -231,6 +235,48 @@ std::map<std::string, std::vector<SliceHeader>> group_series(std::vector<SliceHe
   std::map<std::string, std::vector<SliceHeader>> series;
   for (auto& h : headers) series[h.series_uid].push_back(std::move(h));
   return series;
+}
+
+// The patient a slice belongs to, in words: its PatientName and PatientID.
+std::string patient_of(const SliceHeader& h) {
+  return cat("'", h.patient_name.empty() ? std::string("(no PatientName)") : h.patient_name,
+             "' (PatientID '", h.patient_id, "')");
+}
+
+// Slices of one series from more than one patient or study: reading them as one volume would put
+// another patient's slices into this patient's model. Refused naming both and the files.
+void refuse_mixed_patients(const std::string& where, const std::vector<SliceHeader>& files) {
+  for (const SliceHeader& h : files) {
+    const SliceHeader& a = files.front();
+    if (h.patient_id != a.patient_id || h.patient_name != a.patient_name)
+      throw InvalidInput(cat(where, ": the series ", a.series_uid, " holds slices of two patients, ",
+                             patient_of(a), " in ", a.file.filename().string(), " and ",
+                             patient_of(h), " in ", h.file.filename().string(),
+                             "; caps reads one patient's series: separate the files by patient "
+                             "and read each on its own"));
+    if (h.study_uid != a.study_uid)
+      throw InvalidInput(cat(where, ": the series ", a.series_uid, " holds slices of two studies, ",
+                             a.study_uid, " in ", a.file.filename().string(), " and ", h.study_uid,
+                             " in ", h.file.filename().string(),
+                             "; separate the files by study and read each on its own"));
+  }
+}
+
+// A folder whose series belong to more than one patient: refused naming two of them unless a
+// series was chosen (--series), whose own slices are then checked.
+void refuse_several_patients(const std::string& where,
+                             const std::map<std::string, std::vector<SliceHeader>>& series) {
+  const SliceHeader* first = nullptr;
+  for (const auto& [uid, files] : series)
+    if (!files.empty()) {  // each series by its first slice: the chosen one is checked whole
+      const SliceHeader& h = files.front();
+      if (!first) first = &h;
+      if (h.patient_id != first->patient_id || h.patient_name != first->patient_name)
+        throw InvalidInput(cat(where, ": the folder holds more than one patient: ",
+                               patient_of(*first), " (series ", first->series_uid, ") and ",
+                               patient_of(h), " (series ", h.series_uid, "); choose the series "
+                               "to read with --series, or separate the files by patient"));
+    }
 }
 
 std::vector<DicomSeriesInfo> summarize(
@@ -929,6 +975,7 @@ Volume read_dicom(const fs::path& input, const ReadOptions& options) {
                            "files, or give a .nii/.nii.gz/.nrrd/.nhdr/.mha/.mhd/.inv3 file"));
   const auto infos = summarize(series);
   std::string uid = opts.series_uid;
+  if (opts.series_uid.empty()) refuse_several_patients(folder.string(), series);
   if (uid.empty()) {
     uid = infos.front().uid;
     if (infos.size() > 1)
@@ -941,6 +988,7 @@ Volume read_dicom(const fs::path& input, const ReadOptions& options) {
   }
   if (n_skipped > 0) notes.push_back(cat("skipped ", n_skipped, " non-DICOM file(s)"));
   auto& files = series[uid];
+  refuse_mixed_patients(folder.string(), files);
   if (files.size() == 1 && files[0].frames > 1) return read_multiframe(files[0], opts);
   return build_volume(std::move(files), folder.string(), opts, std::move(notes),
                       is_dir ? fs::path() : input);

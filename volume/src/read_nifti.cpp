@@ -62,8 +62,18 @@ T swapped(T v, bool swap) {
   return v;
 }
 
-// pixdim[1..3] as the header stores them: nifti2_io replaces non-finite ones with 1 silently.
-std::array<double, 3> raw_pixdim(const std::string& name) {
+// The header's fields as the file stores them: nifti2_io replaces non-finite pixdim with 1, a
+// non-finite quaternion or offset with 0 and an impossible vox_offset with its own, silently.
+struct RawHeader {
+  std::array<double, 3> pixdim{1, 1, 1};
+  double vox_offset = 0;
+  int qform_code = 0, sform_code = 0;
+  std::array<double, 6> qform{};  ///< quatern_b, c, d, qoffset_x, y, z
+  std::array<double, 12> srow{};  ///< srow_x, srow_y, srow_z
+  bool read = false;              ///< false: neither a NIfTI-1 nor a NIfTI-2 header
+};
+
+RawHeader raw_header(const std::string& name) {
   znzFile f = znzopen(name.c_str(), "rb", nifti_is_gzfile(name.c_str()));
   if (znz_isnull(f)) throw IoError(cat(name, ": cannot open the file for reading (permissions?)"));
   char h[540] = {};
@@ -73,19 +83,74 @@ std::array<double, 3> raw_pixdim(const std::string& name) {
   std::memcpy(&size, h, 4);
   const bool swap = size != 348 && size != 540;
   size = swapped(size, swap);
-  std::array<double, 3> out{1, 1, 1};
-  for (int d = 1; d <= 3; ++d) {
-    if (size == 348 && got >= 348) {
-      float x;
-      std::memcpy(&x, h + 76 + 4 * d, 4);
-      out[d - 1] = swapped(x, swap);
-    } else if (size == 540 && got >= 540) {
-      double x;
-      std::memcpy(&x, h + 104 + 8 * d, 8);
-      out[d - 1] = swapped(x, swap);
-    }
+  RawHeader out;
+  auto f32 = [&](std::size_t at) {
+    float x;
+    std::memcpy(&x, h + at, 4);
+    return static_cast<double>(swapped(x, swap));
+  };
+  auto f64 = [&](std::size_t at) {
+    double x;
+    std::memcpy(&x, h + at, 8);
+    return swapped(x, swap);
+  };
+  if (size == 348 && got >= 348) {
+    out.read = true;
+    for (int d = 1; d <= 3; ++d) out.pixdim[d - 1] = f32(76 + 4 * d);
+    out.vox_offset = f32(108);
+    std::int16_t q, s;
+    std::memcpy(&q, h + 252, 2);
+    std::memcpy(&s, h + 254, 2);
+    out.qform_code = swapped(q, swap);
+    out.sform_code = swapped(s, swap);
+    for (int i = 0; i < 6; ++i) out.qform[i] = f32(256 + 4 * i);
+    for (int i = 0; i < 12; ++i) out.srow[i] = f32(280 + 4 * i);
+  } else if (size == 540 && got >= 540) {
+    out.read = true;
+    for (int d = 1; d <= 3; ++d) out.pixdim[d - 1] = f64(104 + 8 * d);
+    std::int64_t off;
+    std::memcpy(&off, h + 168, 8);
+    out.vox_offset = static_cast<double>(swapped(off, swap));
+    std::int32_t q, s;
+    std::memcpy(&q, h + 344, 4);
+    std::memcpy(&s, h + 348, 4);
+    out.qform_code = swapped(q, swap);
+    out.sform_code = swapped(s, swap);
+    for (int i = 0; i < 6; ++i) out.qform[i] = f64(352 + 8 * i);
+    for (int i = 0; i < 12; ++i) out.srow[i] = f64(400 + 8 * i);
   }
   return out;
+}
+
+// Refuses orientation fields that are not numbers where they decide the orientation (the sform
+// if sform_code > 0, else the qform if qform_code > 0), and a vox_offset other than the one
+// nifti2_io will read from: an orientation invented from zeros, or voxels read from a place the
+// header does not say, would be read without a word.
+void check_raw_header(const std::string& name, const RawHeader& h, double iname_offset) {
+  if (!h.read) return;
+  static constexpr const char* kQ[] = {"quatern_b", "quatern_c", "quatern_d",
+                                       "qoffset_x", "qoffset_y", "qoffset_z"};
+  static constexpr const char* kS[] = {"srow_x", "srow_y", "srow_z"};
+  if (h.sform_code > 0) {
+    for (int i = 0; i < 12; ++i)
+      if (!std::isfinite(h.srow[i]))
+        throw InvalidInput(cat(name, ": header field ", kS[i / 4], "[", i % 4, "] = ", h.srow[i],
+                               " is not a finite number (sform_code ", h.sform_code,
+                               "): the orientation is damaged; re-export the image"));
+  } else if (h.qform_code > 0) {
+    for (int i = 0; i < 6; ++i)
+      if (!std::isfinite(h.qform[i]))
+        throw InvalidInput(cat(name, ": header field ", kQ[i], " = ", h.qform[i],
+                               " is not a finite number (qform_code ", h.qform_code,
+                               ", sform_code 0): the qform, the only orientation the header "
+                               "gives, is damaged; re-export the image"));
+  }
+  // vox_offset below the header is taken as "right after it" (old writers leave 0).
+  if (!std::isfinite(h.vox_offset) || h.vox_offset < 0 ||
+      (h.vox_offset > 352 && std::floor(h.vox_offset) != iname_offset))
+    throw InvalidInput(cat(name, ": header field vox_offset = ", h.vox_offset,
+                           " is not where the voxel data can start (the file would be read from ",
+                           iname_offset, "); the header is damaged"));
 }
 
 // One volume's voxel bytes (`n_bytes` from `skip` bytes past the data offset), read here rather
@@ -222,11 +287,12 @@ Volume read_nifti(const fs::path& file, const ReadOptions& options) {
                            "a mesh or CIFTI data); caps reads CT/MR volumes"));
   // The header file: a pair named by its .img has its header in nim->fname.
   const std::string header_name = nim->fname ? std::string(nim->fname) : name;
-  const auto pixdim = raw_pixdim(header_name);
+  const RawHeader raw = raw_header(header_name);
   for (int d = 1; d <= 3; ++d)
-    if (!std::isfinite(pixdim[d - 1]))
-      throw InvalidInput(cat(name, ": header field pixdim[", d, "] = ", pixdim[d - 1],
+    if (!std::isfinite(raw.pixdim[d - 1]))
+      throw InvalidInput(cat(name, ": header field pixdim[", d, "] = ", raw.pixdim[d - 1],
                              " is not a finite number; the header is damaged"));
+  check_raw_header(name, raw, static_cast<double>(nim->iname_offset));
   Volume v;
   v.source = name;
   v.format = nim->nifti_type >= NIFTI_FTYPE_NIFTI2_1 ? "NIfTI-2" : "NIfTI-1";

@@ -30,6 +30,9 @@ struct MeshingFields {
   double t2 = mesher::SurfaceMeshOptions{}.t2_deg;
   double constant_thickness = mesher::ContinuumMeshOptions{}.constant_thickness_mm;
   std::string tissue = mesher::tissue_layers_name(mesher::ContinuumMeshOptions{}.tissue);
+  /// The budget checked before meshing (check_mesh_budget()): the wound mesh's elements as
+  /// estimated from the wound, the extent, the mesh size and the layers.
+  double max_elements = 1e6;
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
@@ -54,8 +57,22 @@ struct MeshingFields {
     v(r.tissue, {"tissue", "tissue layers: measured (dermis, fat and deep tissue from the model's "
                            "layer maps, each its own material), uniform (one material, the 1992 "
                            "model) or auto (measured where the model has them)"});
+    v(r.max_elements, {"max_elements", "refuse, before meshing, a wound mesh estimated to have "
+                                       "more elements than this (default 1e6)"});
   }
 };
+
+/// The wound mesh's element count estimated before meshing: the border loop in the wound's
+/// tangent plane (mm, at the model's skin radius at its centre), its perimeter P and size W, the
+/// extent E (3 W when 0), the mesh size h and the n element layers: (P E + pi E^2) / h^2 * n
+/// (the surface mesher's layers keep at most the border's edge length h out to the extent): an
+/// upper bound; measured, the meshes had 1/3 to 1/30 of it (Cranium's three demo plans and the
+/// phantom's Z-plasty at h = 0.5, 1 and 2 mm), and it scales with 1/h^2 as they do.
+/// Throws InvalidParameter naming {mesh_size} and {max_elements} when above meshing.max_elements.
+double check_mesh_budget(const plan::WoundBorder& border, const PatientModel& model,
+                         const MeshingFields& meshing);
+/// The same for a wound of this size W (its largest extent) and border length P, in mm.
+double check_mesh_budget(double wound_size_mm, double perimeter_mm, const MeshingFields& meshing);
 
 /// Which sparse solver (caps solve, simulate and compare share these).
 struct SolverFields {
