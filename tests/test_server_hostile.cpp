@@ -465,4 +465,212 @@ TEST_F(HostileTest, TheMemoryStaysFlatOver1000Requests) {
   EXPECT_LT(after - before, 4 * 1024);
 }
 
+// A simulation long enough to be cancelled while it runs: the phantom's V-Y advancement on a
+// 1.2 mm mesh (about a minute on the 2-core machine: the patch's tie into the whole face, then
+// Newton).
+std::string long_simulation(RunningServer& on) {
+  const auto planned = on.client().Post("/api/plan/new", plan_request().dump(), "application/json");
+  if (!planned || planned->status != 200) return "";
+  return json{{"plan", json::parse(planned->body)}, {"options", {{"mesh_size", 1.2}}}}.dump();
+}
+
+// Waits (at most a minute) until the server's simulation has run for `seconds`.
+bool running_for(RunningServer& on, double seconds) {
+  auto c = on.client();
+  const auto t0 = Clock::now();
+  while (seconds_since(t0) < 60) {
+    if (const auto r = c.Get("/api/progress"); r && r->status == 200) {
+      const json p = json::parse(r->body);
+      if (p.at("running").get<bool>() && p.at("elapsed_s").get<double>() >= seconds) return true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return false;
+}
+
+// A simulate request on a thread: its status and when its answer came.
+struct Simulating {
+  int status = 0;
+  std::string body;
+  Clock::time_point answered;
+  std::thread thread;
+  Simulating(RunningServer& on, const std::string& request) {
+    thread = std::thread([this, &on, request] {
+      const auto r = on.client().Post("/api/simulate", request, "application/json");
+      answered = Clock::now();
+      status = r ? r->status : -1;
+      body = r ? r->body : "";
+    });
+  }
+  ~Simulating() {
+    if (thread.joinable()) thread.join();
+  }
+  double seconds_after(Clock::time_point t0) {
+    thread.join();
+    return std::chrono::duration<double>(answered - t0).count();
+  }
+};
+
+TEST_F(HostileTest, DeleteCancelsTheRunningSimulationWithinASecond) {
+  const std::string request = long_simulation(s());
+  ASSERT_FALSE(request.empty());
+  Simulating sim(s(), request);
+  ASSERT_TRUE(running_for(s(), 2.0));
+  const auto t0 = Clock::now();
+  auto c = s().client();
+  const auto cancel = c.Delete("/api/simulate");
+  ASSERT_TRUE(cancel);
+  EXPECT_EQ(cancel->status, 200);
+  EXPECT_EQ(json::parse(cancel->body).at("cancelled"), true);
+  const double took = sim.seconds_after(t0);
+  std::printf("[          ] DELETE /api/simulate: answered 409 after %.3f s\n", took);
+  EXPECT_EQ(sim.status, 409) << sim.body;
+  EXPECT_NE(sim.body.find("cancelled"), std::string::npos);
+  EXPECT_LT(took, 1.0);
+  const auto progress = c.Get("/api/progress");
+  ASSERT_TRUE(progress);
+  EXPECT_EQ(json::parse(progress->body).at("running"), false);
+  const auto again = c.Delete("/api/simulate");
+  ASSERT_TRUE(again);
+  EXPECT_EQ(json::parse(again->body).at("cancelled"), false);
+  // Another site cannot cancel it.
+  EXPECT_EQ(status_of(s().raw(cat("DELETE /api/simulate HTTP/1.1\r\nHost: ", s().host(),
+                                  "\r\nOrigin: http://evil.example\r\nX-Caps-Token: ",
+                                  s()->token(), "\r\nConnection: close\r\n\r\n"))),
+            403);
+}
+
+TEST_F(HostileTest, ANewerSimulationCancelsTheOlderWithinASecond) {
+  const std::string request = long_simulation(s());
+  ASSERT_FALSE(request.empty());
+  Simulating older(s(), request);
+  ASSERT_TRUE(running_for(s(), 2.0));
+  const auto t0 = Clock::now();
+  Simulating newer(s(), request);
+  const double took = older.seconds_after(t0);
+  std::printf("[          ] a newer simulate: the older answered 409 after %.3f s\n", took);
+  EXPECT_EQ(older.status, 409);
+  EXPECT_LT(took, 1.0);
+  ASSERT_TRUE(running_for(s(), 0.5));  // the newer one runs
+  const auto cancel = s().client().Delete("/api/simulate");
+  ASSERT_TRUE(cancel);
+  EXPECT_EQ(newer.seconds_after(Clock::now()) < 1.0, true);
+  EXPECT_EQ(newer.status, 409);
+}
+
+TEST_F(HostileTest, StopCancelsASimulationAndRemovesTheWorkFolder) {
+  auto stopping = std::make_unique<RunningServer>(server::ServerOptions{});
+  const fs::path work = (*stopping)->work_dir();
+  const std::string request = long_simulation(*stopping);
+  ASSERT_FALSE(request.empty());
+  Simulating sim(*stopping, request);
+  ASSERT_TRUE(running_for(*stopping, 2.0));
+  ASSERT_TRUE(fs::is_directory(work));
+  const auto t0 = Clock::now();
+  stopping.reset();  // stop(), listen() returns, the server is destroyed
+  const double took = seconds_since(t0);
+  std::printf("[          ] stop() with a simulation running: %.3f s\n", took);
+  EXPECT_LT(took, 1.5);
+  EXPECT_FALSE(fs::exists(work));
+  sim.thread.join();
+  EXPECT_NE(sim.status, 200);
+}
+
+TEST_F(HostileTest, WorkFoldersOfServersThatDiedAreRemoved) {
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  ::waitpid(child, nullptr, 0);  // a process id no server has any more
+  const fs::path stale = fs::temp_directory_path() / cat("caps-serve-", child, "-3");
+  fs::create_directories(stale / "plans" / "1");
+  std::ofstream(stale / "plans" / "1" / "plan.json") << "{}";
+  const fs::path alive = fs::temp_directory_path() / cat("caps-serve-1-0");  // init's: kept
+  const bool had_alive = fs::exists(alive);
+  server::ServerOptions o;
+  o.model_dir = kModel;
+  o.port = 0;
+  server::PlannerServer fresh(o);
+  EXPECT_FALSE(fs::exists(stale));
+  EXPECT_TRUE(fs::is_directory(fresh.work_dir()));
+  EXPECT_EQ(fs::exists(alive), had_alive);
+}
+
+// `caps serve` as a user runs it: SIGINT (and SIGTERM) during a simulation stops it within a
+// second with a message, and its work folder is gone.
+TEST_F(HostileTest, SigintOrSigtermStopsCapsServeWithinASecond) {
+  for (const int signal : {SIGINT, SIGTERM}) {
+    int err[2];
+    ASSERT_EQ(::pipe(err), 0);
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+      ::dup2(err[1], 2);
+      ::close(err[0]);
+      ::execl(CAPS_EXE, CAPS_EXE, "serve", kModel.c_str(), "--port", "0", "--web-root",
+              (kTmp / "web").c_str(), static_cast<char*>(nullptr));
+      ::_exit(127);
+    }
+    ::close(err[1]);
+    ::fcntl(err[0], F_SETFL, O_NONBLOCK);
+    std::string stderr_text;
+    auto drain = [&] {
+      char b[4096];
+      for (ssize_t n; (n = ::read(err[0], b, sizeof(b))) > 0;) stderr_text.append(b, n);
+    };
+    std::smatch m;
+    const std::regex url("http://127\\.0\\.0\\.1:([0-9]+)/");
+    const auto t_start = Clock::now();
+    while (!std::regex_search(stderr_text, m, url) && seconds_since(t_start) < 60) {
+      drain();
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    ASSERT_TRUE(std::regex_search(stderr_text, m, url)) << stderr_text;
+    const int port = std::stoi(m[1]);
+    // The page's token, from the page.
+    httplib::Client page("127.0.0.1", port);
+    const auto index = page.Get("/");
+    ASSERT_TRUE(index);
+    std::smatch t;
+    ASSERT_TRUE(std::regex_search(index->body, t, std::regex("caps-token\" content=\"([0-9a-f]+)\"")));
+    const std::string token = t[1];
+    page.set_default_headers({{server::kTokenHeader, token}});
+    page.set_read_timeout(300, 0);
+    const auto planned = page.Post("/api/plan/new", plan_request().dump(), "application/json");
+    ASSERT_TRUE(planned);
+    ASSERT_EQ(planned->status, 200);
+    const std::string request =
+        json{{"plan", json::parse(planned->body)}, {"options", {{"mesh_size", 1.2}}}}.dump();
+    std::thread sim([&] { (void)page.Post("/api/simulate", request, "application/json"); });
+    bool running = false;
+    for (int i = 0; i < 600 && !running; ++i) {
+      httplib::Client poll("127.0.0.1", port);
+      poll.set_default_headers({{server::kTokenHeader, token}});
+      if (const auto r = poll.Get("/api/progress"); r && r->status == 200) {
+        const json p = json::parse(r->body);
+        running = p.at("running").get<bool>() && p.at("elapsed_s").get<double>() > 2;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    ASSERT_TRUE(running);
+    const auto t0 = Clock::now();
+    ::kill(pid, signal);
+    int status = 0;
+    while (::waitpid(pid, &status, WNOHANG) == 0 && seconds_since(t0) < 30)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    const double took = seconds_since(t0);
+    sim.join();
+    drain();
+    ::close(err[0]);
+    std::printf("[          ] caps serve stopped %.3f s after %s\n", took,
+                signal == SIGINT ? "SIGINT" : "SIGTERM");
+    EXPECT_LT(took, 1.5);
+    EXPECT_TRUE(WIFEXITED(status)) << stderr_text;
+    EXPECT_NE(stderr_text.find(signal == SIGINT ? "SIGINT: stopping" : "SIGTERM: stopping"),
+              std::string::npos)
+        << stderr_text;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(fs::temp_directory_path(), ec))
+      EXPECT_NE(e.path().filename().string().rfind(cat("caps-serve-", pid, "-"), 0), 0u)
+          << e.path() << " is left";
+  }
+}
+
 }  // namespace

@@ -422,6 +422,7 @@ void FiniteStrainSolver::iterate(StepAttempt& s) {
 // One Newton iteration: a (shifted) solve of the tangent, a line search along its direction,
 // the convergence test and, after the step's last allowed solve, the snap-through test.
 IterationOutcome FiniteStrainSolver::newton_iteration(StepAttempt& s, int it) {
+  if (options_.reporter) options_.reporter->check_cancelled();
   ++res_.newton_iterations;
   NewtonStep& record = s.record;
   record.iterations = it;
