@@ -540,6 +540,39 @@ TEST_F(HostileTest, DeleteCancelsTheRunningSimulationWithinASecond) {
             403);
 }
 
+// Cancelled in Newton (the simulation ran on at 0.0 for minutes): the patch alone on a
+// 0.8 mm mesh, cancelled once it has been closing the wound for a second.
+TEST_F(HostileTest, ASimulationIsCancelledWithinASecondInNewton) {
+  const auto planned = s().client().Post("/api/plan/new", plan_request().dump(), "application/json");
+  ASSERT_TRUE(planned);
+  ASSERT_EQ(planned->status, 200);
+  const std::string request =
+      json{{"plan", json::parse(planned->body)},
+           {"options", {{"mesh_size", 0.8}, {"domain", "patch"}}}}.dump();
+  Simulating sim(s(), request);
+  auto c = s().client();
+  bool in_newton = false;
+  const auto t_start = Clock::now();
+  std::string step;
+  while (!in_newton && seconds_since(t_start) < 240) {
+    if (const auto r = c.Get("/api/progress"); r && r->status == 200) {
+      const json p = json::parse(r->body);
+      step = p.at("step").get<std::string>();
+      in_newton = p.at("running").get<bool>() && step == "closing the wound";
+    }
+    if (!in_newton) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_TRUE(in_newton) << step;
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  const auto t0 = Clock::now();
+  const auto cancel = c.Delete("/api/simulate");
+  ASSERT_TRUE(cancel);
+  const double took = sim.seconds_after(t0);
+  std::printf("[          ] cancelled in Newton: answered 409 after %.3f s\n", took);
+  EXPECT_EQ(sim.status, 409) << sim.body;
+  EXPECT_LT(took, 1.0);
+}
+
 TEST_F(HostileTest, ANewerSimulationCancelsTheOlderWithinASecond) {
   const std::string request = long_simulation(s());
   ASSERT_FALSE(request.empty());
