@@ -255,6 +255,11 @@ GuardedHttpServer::GuardedHttpServer(ConnectionLimits limits) : limits_(limits) 
 
 ConnectionState* GuardedHttpServer::current() { return t_connection; }
 
+void GuardedHttpServer::widen_backlog(int backlog) {
+  const socket_t sock = svr_sock_;
+  if (sock != INVALID_SOCKET) ::listen(sock, backlog);  // a listening socket takes a new backlog
+}
+
 bool GuardedHttpServer::process_and_close_socket(socket_t sock) {
   struct Count {
     std::atomic<int>& n;

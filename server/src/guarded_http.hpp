@@ -45,6 +45,9 @@ class GuardedHttpServer : public httplib::Server {
   bool serve_socket(int sock) { return process_and_close_socket(sock); }
   /// The connection the calling thread is answering (in a handler), or null.
   static ConnectionState* current();
+  /// Lets `backlog` connections wait to be accepted (httplib's listen() lets 5: a sixth client
+  /// connecting at once waits for its SYN to be sent again, a second later). After binding.
+  void widen_backlog(int backlog = 1024);
   /// Connections being served now.
   int n_connections() const { return n_connections_.load(); }
   const ConnectionLimits& limits() const { return limits_; }

@@ -882,6 +882,7 @@ int PlannerServer::bind() {
     throw IoError(cat("cannot listen on ", s.options.host, ":", s.options.port,
                       "; is another server using the port? try --port 0 or another one"));
   }
+  s.http.widen_backlog();
   s.set_allowed_hosts(s.port);
   return s.port;
 }
