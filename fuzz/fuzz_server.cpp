@@ -57,6 +57,12 @@ caps::server::PlannerServer& server() {
 
 }  // namespace
 
+// The model is built before the first input (libFuzzer's time limit is per input).
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  (void)server();
+  return 0;
+}
+
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   caps::server::PlannerServer& s = server();
   std::string request(reinterpret_cast<const char*>(data), size);
