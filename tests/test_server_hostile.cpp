@@ -289,6 +289,18 @@ TEST_F(HostileTest, DeepBodiesAreRefusedBeforeAnythingIsWritten) {
           << r->body;
     }
   }
+  // 99 deep holding 400,000 zeros: under 1 MiB sent, about 80 MB written out indented.
+  const std::string wide = "{\"plan\": {\"a\": " + std::string(98, '[') + "0" +
+                           std::string(1, ',') + [] {
+                             std::string z;
+                             for (int i = 0; i < 400000; ++i) z += "0,";
+                             z.pop_back();
+                             return z;
+                           }() + std::string(98, ']') + "}}";
+  ASSERT_LT(wide.size(), server::kMaxBodyBytes);
+  const auto r = c.Post("/api/simulate", wide, "application/json");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 400) << r->body.substr(0, 200);
   EXPECT_EQ(files_under(s()->work_dir()), before);
   const auto alive = c.Get("/api/templates");
   ASSERT_TRUE(alive);

@@ -510,6 +510,12 @@ struct PlannerServer::Impl {
     if (!options_json.is_object())
       throw InvalidInput(cat(source, ": \"options\" must be an object of simulate options"));
     refuse_server_keys(options_json, {"model", "plan", "output", "force"}, source);
+    // Written indented, a body nested 100 deep holding many small values grows a hundredfold:
+    // refused before anything is written.
+    const std::string plan_text = j["plan"].dump(2) + "\n";
+    if (plan_text.size() > 2 * options.max_body_bytes)
+      throw InvalidInput(cat(source, ": the plan takes ", plan_text.size(),
+                             " bytes written out; a plan file is a few kB"));
     const fs::path plan = request_folder() / "plan.json";
     const int id = ++next_id;
     const std::shared_ptr<const Served> on = current();
@@ -523,7 +529,7 @@ struct PlannerServer::Impl {
     const app::VerbEntry& verb = app::find_verb("simulate");
     const std::string request = options_json.dump();
     verb.check_json(request, source);  // a mistake is answered at once, not after the queue
-    write_text_atomic(plan, j["plan"].dump(2) + "\n");
+    write_text_atomic(plan, plan_text);
 
     // A newer request cancels this one: its ticket is no longer the latest.
     const std::uint64_t ticket = ++latest_simulation;
@@ -541,8 +547,7 @@ struct PlannerServer::Impl {
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     progress->finish();
     // The plan beside its result, for exporting them together.
-    write_text_atomic(work / "results" / std::to_string(id) / "plan.json",
-                      j["plan"].dump(2) + "\n");
+    write_text_atomic(work / "results" / std::to_string(id) / "plan.json", plan_text);
     json out = json::parse(result);
     // Where the time went (not reproducible, so under timings_s): each progress step, and the
     // whole request's simulation, files included.
