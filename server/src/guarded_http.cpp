@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
+#include <cstdint>
 #include <cstring>
 #include <deque>
 #include <functional>
@@ -115,7 +116,8 @@ class DeadlineStream : public httplib::Stream {
                                                          limits_.min_bytes_per_s);
     std::size_t sent = 0;
     while (sent < size) {
-      if (!wait_for(sock_, POLLOUT, deadline, [] { return false; })) return sent ? sent : -1;
+      if (!wait_for(sock_, POLLOUT, deadline, stopping_))
+        return sent ? static_cast<ssize_t>(sent) : -1;
       const ssize_t n = ::send(sock_, ptr + sent, size - sent, MSG_NOSIGNAL);
       if (n < 0 && errno == EINTR) continue;
       if (n <= 0) return sent ? static_cast<ssize_t>(sent) : -1;
