@@ -291,6 +291,35 @@ void json_seeds(const fs::path& tmp) {
       R"({"plan": "p.json", "output": "p.png"})"};
   for (int i = 0; i < 8; ++i)
     seed("fuzz_request", "request" + std::to_string(i), std::string(1, static_cast<char>(i)) + requests[i]);
+  // The server's connections (fuzz_server.cpp: {HOST} and {TOKEN} become the server's), as the
+  // page and a hostile page send them.
+  const auto post = [](const std::string& path, const std::string& body, const std::string& more) {
+    return "POST " + path + " HTTP/1.1\r\nHost: {HOST}\r\nX-Caps-Token: {TOKEN}\r\n" + more +
+           "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) +
+           "\r\n\r\n" + body;
+  };
+  const std::string plan_new =
+      R"({"procedure": "v-y-advancement", "at": "0,60", "orientation": 90,)"
+      R"( "parameters": {"length": 12, "advance": 3}})";
+  const std::string server_requests[] = {
+      "GET / HTTP/1.1\r\nHost: {HOST}\r\n\r\n",
+      "GET /api/model HTTP/1.1\r\nHost: {HOST}\r\nX-Caps-Token: {TOKEN}\r\n\r\n"
+      "GET /api/progress HTTP/1.1\r\nHost: {HOST}\r\nCookie: a=b; caps_token_8765={TOKEN}\r\n\r\n",
+      "GET /api/model/skin.ply HTTP/1.1\r\nHost: evil.example:8765\r\n\r\n",
+      "GET /api/model/%C0%AFmodel.json HTTP/1.1\r\nHost: {HOST}\r\nX-Caps-Token: {TOKEN}\r\n\r\n",
+      "GET /api/results/1/../../x HTTP/1.1\r\nHost: {HOST}\r\nX-Caps-Token: {TOKEN}\r\n\r\n",
+      post("/api/plan/new", plan_new, "Origin: http://{HOST}\r\n"),
+      post("/api/plan/new", plan_new, "Origin: http://evil.example\r\n"),
+      post("/api/plan/check?name=p.json", R"({"version": 1, "incisions": [[0, 1]]})", ""),
+      post("/api/plan/lines", "[[[[[[[[[[[[[[[[]]]]]]]]]]]]]]]]", ""),
+      post("/api/simulate", R"({"plan": {}, "options": {"mesh_size": 0}})", ""),
+      post("/api/chart", R"({"at": "x,y"})", ""),
+      post("/api/plan/new", "{\"procedure\": \"\xc0\xaf\"}", ""),
+      "POST /api/plan/new HTTP/1.1\r\nHost: {HOST}\r\nX-Caps-Token: {TOKEN}\r\n"
+      "Transfer-Encoding: chunked\r\n\r\n4\r\n{\"a\"\r\n3\r\n: 1\r\n1\r\n}\r\n0\r\n\r\n",
+      "DELETE /api/simulate HTTP/1.1\r\nHost: {HOST}\r\nX-Caps-Token: {TOKEN}\r\n\r\n"};
+  int n = 0;
+  for (const std::string& r : server_requests) seed("fuzz_server", "request" + std::to_string(n++), r);
 }
 
 }  // namespace

@@ -109,6 +109,7 @@ class ServerTest : public ::testing::Test {
     httplib::Client c("127.0.0.1", server_->port());
     c.set_read_timeout(300, 0);
     c.set_url_encode(false);  // send the paths exactly as written
+    c.set_default_headers({{server::kTokenHeader, server_->token()}});  // as the page does
     return c;
   }
   static httplib::Result post(const std::string& path, const std::string& body) {
@@ -754,6 +755,7 @@ TEST_F(ServerTest, LandmarksAreTheCliAnswerAndAPlanIsPlacedAtOneAsTheCliPlacesIt
   } join{s, t};
   httplib::Client c("127.0.0.1", s.port());
   c.set_read_timeout(120, 0);
+  c.set_default_headers({{server::kTokenHeader, s.token()}});
 
   const auto marks = c.Get("/api/landmarks");
   ASSERT_TRUE(marks);

@@ -248,7 +248,8 @@ void Join::tie_rim() {
       o_.tie_tolerance_mm > 0 ? o_.tie_tolerance_mm
                               : 3.0 * std::max(tissue_.options.face_size_mm,
                                                tissue_.label_voxel_mm.maxCoeff());
-  const TieSearchResult found = tie_nodes(mesh, slaves, tissue_elements_, tolerance);
+  const TieSearchResult found =
+      tie_nodes(mesh, slaves, tissue_elements_, tolerance, TieMethod::Mortar, o_.reporter);
   for (const TiedNode& t : found.ties) mesh.ties.push_back(t);
   d_.tied_nodes = static_cast<int>(found.ties.size());
   d_.untied_nodes = static_cast<int>(found.unmatched.size());

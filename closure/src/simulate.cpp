@@ -71,8 +71,10 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
   if (face) continuum.rim = RimCondition::Tied;
   sim.wound = mesh_wound(plan::wound_border(plan), model, options.surface, continuum, reporter);
   if (face) {
+    FaceDomainOptions face_options = options.face;
+    if (!face_options.reporter) face_options.reporter = reporter;
     sim.face = join_face_domain(sim.wound, model, *options.tissue, continuum,
-                                options.solve.kinematics, options.face);
+                                options.solve.kinematics, face_options);
     for (const std::string& w : sim.face->mesh.warnings)
       if (std::find(sim.wound.continuum.mesh.warnings.begin(),
                     sim.wound.continuum.mesh.warnings.end(), w) == sim.wound.continuum.mesh.warnings.end()) {

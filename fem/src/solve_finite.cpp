@@ -422,6 +422,7 @@ void FiniteStrainSolver::iterate(StepAttempt& s) {
 // One Newton iteration: a (shifted) solve of the tangent, a line search along its direction,
 // the convergence test and, after the step's last allowed solve, the snap-through test.
 IterationOutcome FiniteStrainSolver::newton_iteration(StepAttempt& s, int it) {
+  if (options_.reporter) options_.reporter->check_cancelled();
   ++res_.newton_iterations;
   NewtonStep& record = s.record;
   record.iterations = it;
@@ -493,6 +494,7 @@ std::optional<Failure> FiniteStrainSolver::line_search(StepAttempt& s, const Eig
   const double pi0 = s.energy - s.lambda_new * f_ext_.dot(q_);
   std::optional<Failure> inverted, first_inverted;
   for (int ls = 0; ls < kMaxLineSearch; ++ls) {
+    if (options_.reporter) options_.reporter->check_cancelled();
     const auto t = Clock::now();
     q_trial_ = q_ + alpha * dq;
     projected_ = problem_.project_on_surface(q_trial_, s.lambda_new);
@@ -667,6 +669,7 @@ std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, do
   for (Eigen::Index j = 0; j < sys_.K.cols(); ++j) kept_diagonal_[j] = values[diagonal_[j]];
   bool solved = false;
   for (double mu = std::max(damping, kFirstShift); mu <= 1.01e2 && !solved; mu *= 10) {
+    if (options_.reporter) options_.reporter->check_cancelled();
     for (Eigen::Index j = 0; j < sys_.K.cols(); ++j)
       values[diagonal_[j]] = kept_diagonal_[j] + mu * std::abs(kept_diagonal_[j]);
     try {

@@ -354,7 +354,7 @@ void mortar_rows(const Mesh& mesh, const std::vector<int>& slaves, const std::ve
 
 TieSearchResult tie_nodes(const Mesh& mesh, const std::vector<int>& slaves,
                           const std::vector<int>& master_elements, double tolerance_mm,
-                          TieMethod method) {
+                          TieMethod method, Reporter* reporter) {
   if (!(tolerance_mm >= 0) || !std::isfinite(tolerance_mm))
     throw InvalidInput(cat("tie: the tolerance ", tolerance_mm, " mm must be finite and >= 0"));
   const Eigen::Index n_nodes = mesh.n_nodes();
@@ -425,6 +425,7 @@ TieSearchResult tie_nodes(const Mesh& mesh, const std::vector<int>& slaves,
   // the grid's candidates first, then, if none is within the tolerance, every element in order
   // of its box's distance until the next box is farther than the best point found.
   const auto locate = [&](const Eigen::Vector3d& p, int exclude, Closest& best) {
+    if (reporter) reporter->check_cancelled();
     best = Closest{};
     int best_i = -1;
     const auto consider = [&](std::size_t i) {

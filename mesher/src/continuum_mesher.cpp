@@ -1146,6 +1146,7 @@ WoundMesh ExtentSearch::run() {
   double across_extent = 0;
   std::string across_cliff;
   for (double extent = full_;; extent *= 0.75) {
+    if (reporter_) reporter_->check_cancelled();  // between extents: each is a whole mesh
     if (extent != full_) {
       o_.extent_mm = extent;
       MeshOutcome<SurfaceMesh> surface = try_mesh_surface(border_, model_, o_);

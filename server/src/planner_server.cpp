@@ -5,25 +5,34 @@
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/json_file.hpp"
+#include "caps/core/json_limits.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/surface/patient_model.hpp"
+#include "guarded_http.hpp"
 #include "skin_views.hpp"
 
 #include <httplib.h>
 #include <nlohmann/json.hpp>
 
+#include <sys/socket.h>
 #include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cctype>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
+#include <csignal>
 #include <cstdint>
+#include <cstring>
 #include <fstream>
 #include <functional>
 #include <future>
 #include <map>
 #include <mutex>
+#include <optional>
+#include <random>
 #include <sstream>
 #include <thread>
 
@@ -112,6 +121,72 @@ void send_json(httplib::Response& res, const std::string& text) {
   res.set_content(text, "application/json");
 }
 
+// {"error": message}; bytes of the message that are not UTF-8 (a request's path or body quoted
+// back) are replaced, so that the refusal itself cannot fail.
+void send_error(httplib::Response& res, int status, const std::string& message) {
+  res.status = status;
+  json body = json::object();
+  body["error"] = message;
+  send_json(res, body.dump(-1, ' ', false, json::error_handler_t::replace));
+}
+
+// 128 random bits as hex: the session's token.
+std::string random_token() {
+  std::random_device device;  // the kernel's random source (getrandom) on Linux
+  std::string token;
+  for (int i = 0; i < 4; ++i) {
+    char part[9];
+    std::snprintf(part, sizeof(part), "%08x", static_cast<unsigned>(device()));
+    token += part;
+  }
+  return token;
+}
+
+// Compares in time independent of where the texts differ (the token).
+bool same_secret(const std::string& a, const std::string& b) {
+  if (a.size() != b.size()) return false;
+  unsigned char d = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) d |= static_cast<unsigned char>(a[i] ^ b[i]);
+  return d == 0;
+}
+
+std::string lower(std::string text) {
+  for (char& c : text) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return text;
+}
+
+// The value of the cookie `name` in the request's Cookie header, or "".
+std::string cookie(const httplib::Request& req, const std::string& name) {
+  const std::string header = req.get_header_value("Cookie");
+  std::size_t at = 0;
+  while (at < header.size()) {
+    std::size_t end = header.find(';', at);
+    if (end == std::string::npos) end = header.size();
+    std::size_t begin = at;
+    while (begin < end && header[begin] == ' ') ++begin;
+    const std::size_t eq = header.find('=', begin);
+    if (eq != std::string::npos && eq < end && header.compare(begin, eq - begin, name) == 0)
+      return header.substr(eq + 1, end - eq - 1);
+    at = end + 1;
+  }
+  return "";
+}
+
+// Work folders of servers that ended without removing theirs (killed, crashed): the temporary
+// directory's caps-serve-<pid>-<n> whose process is gone.
+void remove_stale_work_dirs() {
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(fs::temp_directory_path(), ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind("caps-serve-", 0) != 0) continue;
+    const long pid = std::strtol(name.c_str() + 11, nullptr, 10);
+    if (pid <= 0 || pid == ::getpid()) continue;
+    if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;
+    std::error_code ignored;
+    fs::remove_all(entry.path(), ignored);
+  }
+}
+
 json parse_object(const std::string& body, const std::string& source) {
   const json j = parse_json<json>(body, source);
   if (!j.is_object()) throw InvalidInput(cat(source, ": expected a JSON object"));
@@ -132,9 +207,9 @@ void refuse_server_keys(const json& j, std::initializer_list<const char*> keys,
 class SimulationReporter : public Reporter {
  public:
   SimulationReporter(const std::atomic<std::uint64_t>& latest, std::uint64_t ticket,
-                     Reporter* outer)
-      : latest_(latest), ticket_(ticket), outer_(outer) {}
-  bool is_cancelled() const override { return latest_.load() != ticket_; }
+                     const std::atomic<bool>& stopping, Reporter* outer)
+      : latest_(latest), ticket_(ticket), stopping_(stopping), outer_(outer) {}
+  bool is_cancelled() const override { return latest_.load() != ticket_ || stopping_.load(); }
 
  protected:
   void on_warning(const std::string& m) override { caps::warn(outer_, m); }
@@ -149,6 +224,7 @@ class SimulationReporter : public Reporter {
  private:
   const std::atomic<std::uint64_t>& latest_;  // not owned; the server's, outlives this
   std::uint64_t ticket_;
+  const std::atomic<bool>& stopping_;  // not owned; the server's, outlives this
   Reporter* outer_;  // not owned; may be null
 };
 
@@ -236,7 +312,8 @@ ErrorResponse error_response(const std::exception& e) {
   if (dynamic_cast<const InvalidInput*>(&e) || dynamic_cast<const IoError*>(&e))
     return {400, e.what()};
   if (dynamic_cast<const Cancelled*>(&e))
-    return {409, "this simulation was cancelled by a newer simulate request"};
+    return {409, "this simulation was cancelled by a newer simulate request, DELETE "
+                 "/api/simulate or the server's stop"};
   if (dynamic_cast<const SolverError*>(&e)) return {422, e.what()};
   if (dynamic_cast<const std::bad_alloc*>(&e))
     return {500, "out of memory; the request may be larger than this machine can hold"};
@@ -267,8 +344,10 @@ struct PlannerServer::Impl {
   Reporter* reporter;  // not owned; may be null
   fs::path work, web;
   bool placeholder = false;  // serving web/ itself: only its index.html
-  httplib::Server http;
+  detail::GuardedHttpServer http;
   int port = 0;
+  std::string token = random_token();
+  std::vector<std::string> allowed_hosts;  // lower case, with the port
   std::atomic<bool> listening{false}, stop_requested{false};
   std::atomic<long> n_requests{0};
   std::atomic<int> next_id{0};
@@ -294,7 +373,61 @@ struct PlannerServer::Impl {
   std::mutex export_mutex;  // rendering a result's export (once each)
   std::map<std::string, std::shared_future<void>> tension_files;  // by result id (views_mutex)
 
-  Impl(ServerOptions o, Reporter* r) : options(std::move(o)), reporter(r) {}
+  Impl(ServerOptions o, Reporter* r)
+      : options(std::move(o)), reporter(r), http(limits_of(options)) {}
+
+  static detail::ConnectionLimits limits_of(const ServerOptions& o) {
+    detail::ConnectionLimits l;
+    l.header_timeout_s = o.header_timeout_s;
+    l.min_bytes_per_s = o.min_bytes_per_s;
+    l.max_connections = o.max_connections;
+    l.max_body_bytes = o.max_body_bytes;
+    return l;
+  }
+
+  // The Host values a request may carry: the address bound and the loopback names, with the
+  // port (without it too on port 80, which browsers leave out).
+  void set_allowed_hosts(int on_port) {
+    std::vector<std::string> names = {options.host, "localhost", "127.0.0.1", "[::1]"};
+    if (options.host.find(':') != std::string::npos) names[0] = "[" + options.host + "]";
+    allowed_hosts.clear();
+    for (const std::string& n : names) {
+      allowed_hosts.push_back(lower(cat(n, ":", on_port)));
+      if (on_port == 80) allowed_hosts.push_back(lower(n));
+    }
+  }
+
+  // The refusal of a request that another site may have sent (docs/reliability.md): a Host not
+  // the server's (DNS rebinding), an Origin not the server's on a request that is no GET (a
+  // page elsewhere posting to it), an /api/ request without the session's token; or a path that
+  // is not UTF-8. Checked before the body is read.
+  std::optional<ErrorResponse> screen(const httplib::Request& req) const {
+    const std::string host = lower(req.get_header_value("Host"));
+    if (std::find(allowed_hosts.begin(), allowed_hosts.end(), host) == allowed_hosts.end())
+      return ErrorResponse{403, "this server answers requests for its own address only (Host)"};
+    const bool reads = req.method == "GET" || req.method == "HEAD";
+    if (!reads && req.has_header("Origin")) {
+      const std::string origin = lower(req.get_header_value("Origin"));
+      const bool own = origin.rfind("http://", 0) == 0 &&
+                       std::find(allowed_hosts.begin(), allowed_hosts.end(), origin.substr(7)) !=
+                           allowed_hosts.end();
+      if (!own) return ErrorResponse{403, "requests from other sites are refused (Origin)"};
+    }
+    if (first_invalid_utf8(req.path) != std::string_view::npos)
+      return ErrorResponse{400, "the request's path is not valid UTF-8"};
+    if (req.path.rfind("/api/", 0) == 0) {
+      const std::string given = req.has_header(kTokenHeader) ? req.get_header_value(kTokenHeader)
+                                : reads ? cookie(req, token_cookie())
+                                        : std::string();
+      if (!same_secret(given, token))
+        return ErrorResponse{403, "the request lacks this session's token: reload the page "
+                                  "(the server was restarted?)"};
+    }
+    return std::nullopt;
+  }
+
+  // The cookie of the token, per port: two servers on one machine keep their own.
+  std::string token_cookie() const { return cat("caps_token_", port ? port : options.port); }
 
   using Route = std::function<void(const httplib::Request&, httplib::Response&)>;
 
@@ -303,11 +436,13 @@ struct PlannerServer::Impl {
     return [this, route](const httplib::Request& req, httplib::Response& res) {
       ++n_requests;
       try {
+        // Before anything reads the body or writes it into the work folder.
+        if (const std::size_t bad = first_invalid_utf8(req.body); bad != std::string::npos)
+          throw InvalidInput(cat("the request body is not valid UTF-8 (byte ", bad + 1, ")"));
         route(req, res);
       } catch (const std::exception& e) {
         const ErrorResponse error = error_response(e);
-        res.status = error.status;
-        send_json(res, json{{"error", without_work_dir(error.message)}}.dump());
+        send_error(res, error.status, without_work_dir(error.message));
       }
     };
   }
@@ -375,6 +510,12 @@ struct PlannerServer::Impl {
     if (!options_json.is_object())
       throw InvalidInput(cat(source, ": \"options\" must be an object of simulate options"));
     refuse_server_keys(options_json, {"model", "plan", "output", "force"}, source);
+    // Written indented, a body nested 100 deep holding many small values grows a hundredfold:
+    // refused before anything is written.
+    const std::string plan_text = j["plan"].dump(2) + "\n";
+    if (plan_text.size() > 2 * options.max_body_bytes)
+      throw InvalidInput(cat(source, ": the plan takes ", plan_text.size(),
+                             " bytes written out; a plan file is a few kB"));
     const fs::path plan = request_folder() / "plan.json";
     const int id = ++next_id;
     const std::shared_ptr<const Served> on = current();
@@ -388,11 +529,11 @@ struct PlannerServer::Impl {
     const app::VerbEntry& verb = app::find_verb("simulate");
     const std::string request = options_json.dump();
     verb.check_json(request, source);  // a mistake is answered at once, not after the queue
-    write_text_atomic(plan, j["plan"].dump(2) + "\n");
+    write_text_atomic(plan, plan_text);
 
     // A newer request cancels this one: its ticket is no longer the latest.
     const std::uint64_t ticket = ++latest_simulation;
-    SimulationReporter cancellable(latest_simulation, ticket, progress.get());
+    SimulationReporter cancellable(latest_simulation, ticket, stop_requested, progress.get());
     std::lock_guard<std::mutex> lock(simulation_mutex);
     cancellable.check_cancelled();
     progress->start();
@@ -406,8 +547,7 @@ struct PlannerServer::Impl {
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     progress->finish();
     // The plan beside its result, for exporting them together.
-    write_text_atomic(work / "results" / std::to_string(id) / "plan.json",
-                      j["plan"].dump(2) + "\n");
+    write_text_atomic(work / "results" / std::to_string(id) / "plan.json", plan_text);
     json out = json::parse(result);
     // Where the time went (not reproducible, so under timings_s): each progress step, and the
     // whole request's simulation, files included.
@@ -558,6 +698,10 @@ struct PlannerServer::Impl {
     http.set_error_handler(httplib::Server::HandlerWithResponse(
         [this](const httplib::Request& req, httplib::Response& res) {
           if (!res.body.empty()) return httplib::Server::HandlerResponse::Unhandled;
+          // A chunked body over the limit ends its reading as a malformed one would.
+          const detail::ConnectionState* connection = detail::GuardedHttpServer::current();
+          if (connection && connection->body_too_large) res.status = 413;
+          if (res.status == 413) res.set_header("Connection", "close");
           std::string message;
           if (res.status == 413)
             message = cat("the request body is larger than ", options.max_body_bytes,
@@ -566,9 +710,21 @@ struct PlannerServer::Impl {
             message = cat(req.method, " ", req.path, ": no such route (see docs/planner.md)");
           else
             message = cat("bad request (HTTP ", res.status, ")");
-          send_json(res, json{{"error", message}}.dump());
+          send_error(res, res.status, message);
           return httplib::Server::HandlerResponse::Handled;
         }));
+    // Every request is screened (Host, Origin, token, path) once its headers are in, before
+    // its body is read; a refused one closes its connection (its body is never read).
+    http.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
+      const std::optional<ErrorResponse> refusal = screen(req);
+      if (!refusal) return httplib::Server::HandlerResponse::Unhandled;
+      ++n_requests;
+      send_error(res, refusal->status, refusal->message);
+      res.set_header("Connection", "close");
+      if (detail::ConnectionState* connection = detail::GuardedHttpServer::current())
+        connection->close = true;
+      return httplib::Server::HandlerResponse::Handled;
+    });
 
     // model.json of the served model; a chart made through POST /api/chart also says so
     // ("made_here": the page offers the way back to the started model).
@@ -637,6 +793,14 @@ struct PlannerServer::Impl {
     http.Post("/api/simulate", guarded([this](const httplib::Request& req, httplib::Response& res) {
                 send_json(res, simulate(req.body));
               }));
+    // Cancels the running simulation (the page's Cancel button, a page left): it ends within a
+    // second and its request is answered 409.
+    http.Delete("/api/simulate",
+                guarded([this](const httplib::Request&, httplib::Response& res) {
+                  const bool running = progress->snapshot().value("running", false);
+                  ++latest_simulation;
+                  send_json(res, json{{"cancelled", running}}.dump());
+                }));
     http.Get(R"(/api/results/([0-9]+)/(.+))",
              guarded([this](const httplib::Request& req, httplib::Response& res) {
                send_file(
@@ -651,7 +815,18 @@ struct PlannerServer::Impl {
                if (placeholder && path != "index.html")
                  throw Refusal(404,
                                cat("\"", req.path, "\": no such file (the page is not built yet)"));
-               send_file(res, file_under(web, path));
+               const fs::path file = file_under(web, path);
+               if (file.extension() != ".html") return send_file(res, file);
+               // The page's session token: in a meta element its requests read, and in a cookie
+               // (same site only) that links and loaders send; never cached.
+               std::string html = read_file(file);
+               const std::string meta = cat("<meta name=\"caps-token\" content=\"", token, "\">");
+               const std::size_t head = html.find("<head>");
+               html.insert(head == std::string::npos ? 0 : head + 6, meta);
+               res.set_header("Cache-Control", "no-store");
+               res.set_header("Set-Cookie", cat(token_cookie(), "=", token,
+                                                "; Path=/; SameSite=Strict; HttpOnly"));
+               res.set_content(html, content_type(file).c_str());
              }));
   }
 };
@@ -679,8 +854,16 @@ PlannerServer::PlannerServer(ServerOptions options, Reporter* reporter)
     if (!fs::is_directory(s.web))
       throw IoError(cat("--web-root ", s.options.web_root, ": no such folder"));
   }
+  s.set_allowed_hosts(s.options.port);
+  remove_stale_work_dirs();
   s.work = make_work_dir();
-  s.add_routes();
+  try {
+    s.add_routes();
+  } catch (...) {
+    std::error_code ec;
+    fs::remove_all(s.work, ec);
+    throw;
+  }
 }
 
 PlannerServer::~PlannerServer() {
@@ -704,6 +887,8 @@ int PlannerServer::bind() {
     throw IoError(cat("cannot listen on ", s.options.host, ":", s.options.port,
                       "; is another server using the port? try --port 0 or another one"));
   }
+  s.http.widen_backlog();
+  s.set_allowed_hosts(s.port);
   return s.port;
 }
 
@@ -717,7 +902,7 @@ void PlannerServer::listen() {
 
 void PlannerServer::stop() {
   Impl& s = *impl_;
-  s.stop_requested = true;
+  s.stop_requested = true;  // also cancels a running simulation (SimulationReporter)
   // listen() may not have started its loop yet; httplib's stop() does nothing before it has.
   for (int i = 0; i < 200 && s.listening && !s.http.is_running(); ++i)
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
@@ -735,5 +920,31 @@ std::string PlannerServer::url() const {
 const fs::path& PlannerServer::work_dir() const { return impl_->work; }
 const fs::path& PlannerServer::web_root() const { return impl_->web; }
 long PlannerServer::n_requests() const { return impl_->n_requests.load(); }
+const std::string& PlannerServer::token() const { return impl_->token; }
+const std::vector<std::string>& PlannerServer::allowed_hosts() const {
+  return impl_->allowed_hosts;
+}
+
+std::string PlannerServer::answer(const std::string& request) {
+  int fds[2];
+  if (::socketpair(AF_UNIX, SOCK_STREAM, 0, fds) != 0)
+    throw IoError(cat("cannot make a socket pair: ", std::strerror(errno)));
+  std::thread server([&] { impl_->http.serve_socket(fds[1]); });  // closes fds[1]
+  std::thread writer([&] {
+    for (std::size_t sent = 0; sent < request.size();) {
+      const ssize_t n = ::send(fds[0], request.data() + sent, request.size() - sent, MSG_NOSIGNAL);
+      if (n <= 0) break;
+      sent += static_cast<std::size_t>(n);
+    }
+    ::shutdown(fds[0], SHUT_WR);
+  });
+  std::string out;
+  char buffer[16384];
+  for (ssize_t n; (n = ::recv(fds[0], buffer, sizeof(buffer), 0)) > 0;) out.append(buffer, n);
+  writer.join();
+  server.join();
+  ::close(fds[0]);
+  return out;
+}
 
 }  // namespace caps::server

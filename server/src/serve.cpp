@@ -13,9 +13,13 @@ namespace caps::server {
 
 namespace {
 
-std::atomic<bool> g_signalled{false};
+std::atomic<int> g_signal{0};
 
-extern "C" void on_stop_signal(int) { g_signalled = true; }
+// A second signal while stopping ends the program at once (the default action).
+extern "C" void on_stop_signal(int signal) {
+  g_signal = signal;
+  std::signal(signal, SIG_DFL);
+}
 
 // Installs SIGINT/SIGTERM handlers for its lifetime and restores the previous ones after.
 class StopSignals {
@@ -23,7 +27,7 @@ class StopSignals {
   StopSignals()
       : old_int_(std::signal(SIGINT, on_stop_signal)),
         old_term_(std::signal(SIGTERM, on_stop_signal)) {
-    g_signalled = false;
+    g_signal = 0;
   }
   ~StopSignals() {
     std::signal(SIGINT, old_int_);
@@ -48,14 +52,19 @@ ServeResult run_serve(const ServeRequest& r, Reporter* reporter) {
   note(reporter, cat("the planner for ", r.model, " is at ", server.url(), " (Ctrl-C stops it)"));
   StopSignals signals;
   std::atomic<bool> done{false};
-  // A signal handler may only set a flag; this thread turns the flag into stop().
+  // A signal handler may only set a flag; this thread turns the flag into stop(), which cancels
+  // a running simulation and closes the connections (within a second); the work folder goes
+  // with the server.
   std::thread watcher([&] {
     while (!done) {
-      if (g_signalled || (reporter && reporter->is_cancelled())) {
+      const int signal = g_signal.load();
+      if (signal || (reporter && reporter->is_cancelled())) {
+        note(reporter, cat("caps serve: ", signal == SIGINT ? "SIGINT" : signal == SIGTERM ? "SIGTERM" : "cancelled",
+                           ": stopping (a running simulation is cancelled, the work folder removed)"));
         server.stop();
         return;
       }
-      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
   });
   server.listen();

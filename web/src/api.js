@@ -1,5 +1,14 @@
 // The server's JSON API (docs/planner.md). Every refusal carries {"error": message}: the message
 // the command line prints for the same input; it is thrown as an ApiError with the HTTP status.
+// Every request carries the session's token, which the server put into the page it served
+// (<meta name="caps-token">); the server refuses /api/ requests without it (docs/reliability.md).
+
+const token = document.querySelector('meta[name="caps-token"]')?.content ?? '';
+
+/** fetch() with the session's token. */
+export function apiFetch(path, init = {}) {
+  return fetch(path, { ...init, headers: { ...(init.headers ?? {}), 'X-Caps-Token': token } });
+}
 
 export class ApiError extends Error {
   constructor(status, message) {
@@ -22,13 +31,13 @@ async function answer(response) {
 
 /** GET a JSON route. */
 export async function getJson(path) {
-  return answer(await fetch(path));
+  return answer(await apiFetch(path));
 }
 
 /** POST `body` (an object) as JSON; the parsed JSON answer. */
 export async function postJson(path, body, signal) {
   return answer(
-    await fetch(path, {
+    await apiFetch(path, {
       method: 'POST',
       headers: { 'Content-Type': 'application/json' },
       body: JSON.stringify(body),
@@ -39,7 +48,7 @@ export async function postJson(path, body, signal) {
 
 /** GET a binary file as an ArrayBuffer. */
 export async function getBinary(path) {
-  const response = await fetch(path);
+  const response = await apiFetch(path);
   if (!response.ok) await answer(response);
   return response.arrayBuffer();
 }
@@ -57,6 +66,10 @@ export const api = {
   planLines: (plan, signal) => postJson('/api/plan/lines', plan, signal),
   /** caps simulate: the result JSON with result_id and result_url. */
   simulate: (plan, options) => postJson('/api/simulate', { plan, options }),
+  /** Cancels the running simulation (its request is answered 409); {cancelled: was one running}.
+   * `keepalive`: sent even while the page is being left. */
+  cancelSimulation: async (keepalive = false) =>
+    answer(await apiFetch('/api/simulate', { method: 'DELETE', keepalive })),
   /** The post-operative skin (.glb with the morph target) and the tension map of a result. */
   resultView: (id) => getJson(`/api/results/${id}/view`),
   resultFile: (id, file) => getJson(`/api/results/${id}/${file}`),

@@ -1,6 +1,6 @@
 // The planner page: loads the model's skin and the procedure library, then wires the procedure
 // menu, the parameter sliders, the plan check, Simulate, the alternatives and save/load.
-import { api } from './api.js';
+import { api, apiFetch } from './api.js';
 import { lpsToScene } from './frames.js';
 import { kIncision, Planner } from './planner.js';
 import { showLandmarks } from './landmarks.js';
@@ -281,15 +281,23 @@ async function main() {
     const options = { material: $('material').value };
     if ($('mesh-size').value) options.mesh_size = Number($('mesh-size').value);
     $('simulate').disabled = true;
+    $('cancel-simulation').hidden = false;
     try {
       status('Simulating…');
       await results.simulate(planner.plan, options, { ownSutures: planner.state?.sutures != null });
       status('');
     } catch (e) {
-      status(`The simulation failed: ${e.message}`);
+      status(e.status === 409 ? 'The simulation was cancelled.' : `The simulation failed: ${e.message}`);
     } finally {
       $('simulate').disabled = !planner.plan;
+      $('cancel-simulation').hidden = true;
     }
+  });
+  // Cancel: the server stops the running simulation within a second (DELETE /api/simulate); so
+  // does leaving or reloading the page while one runs.
+  $('cancel-simulation').addEventListener('click', () => api.cancelSimulation().catch(() => {}));
+  window.addEventListener('pagehide', () => {
+    if (document.body.dataset.simulation === 'running') api.cancelSimulation(true).catch(() => {});
   });
   $('morph').addEventListener('input', (e) => results.setMorph(Number(e.target.value)));
   $('play').addEventListener('click', () => results.play());
@@ -322,7 +330,7 @@ async function main() {
   $('export-plan').addEventListener('click', () => results.shown[0] && savePlan(results.shown[0].plan));
   $('export-result').addEventListener('click', async () => {
     const row = results.shown[0];
-    if (row) download(`result-${row.n}.json`, await (await fetch(`${row.result.result_url}result.json`)).text());
+    if (row) download(`result-${row.n}.json`, await (await apiFetch(`${row.result.result_url}result.json`)).text());
   });
   $('export-report').addEventListener('click', async () => {
     const row = results.shown[0];

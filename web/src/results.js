@@ -3,7 +3,7 @@
 // skin as a morph (pre -> post slider, Play), the tension map and the force of each suture. Every
 // simulated plan is kept as a row of the alternatives table; two of them can be shown side by
 // side in two views that move together.
-import { api } from './api.js';
+import { api, apiFetch } from './api.js';
 import { sutureObjects } from './overlays.js';
 import { loadResultSkin } from './skin.js';
 
@@ -147,7 +147,7 @@ export class Results {
     const files = await this.exportFiles(row);
     const pictures = {};
     await Promise.all(files.filter((f) => f.name.endsWith('.png')).map(async (f) => {
-      const blob = await (await fetch(f.url)).blob();
+      const blob = await (await apiFetch(f.url)).blob();
       pictures[f.name] = await new Promise((resolve) => {
         const reader = new FileReader();
         reader.onload = () => resolve(reader.result);

@@ -48,6 +48,8 @@ struct FaceDomainOptions {
   /// A rim node farther than this (mm) from every tetrahedron is left untied (a warning counts
   /// them); 0: 3 x the tissue model's facet size on the face or its label voxel, the larger.
   double tie_tolerance_mm = 0;
+  /// Not owned, may be null: the tie's search stops (Cancelled) when it cancels.
+  Reporter* reporter = nullptr;
 };
 
 /// The automatic region: at least this radius (mm)...

@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 #include <vector>
 
+#include "caps/core/reporter.hpp"
 #include "caps/fem/mesh.hpp"
 
 namespace caps::fem {
@@ -57,9 +58,11 @@ struct TieSearchResult {
 /// @param slaves           node ids (no repeats)
 /// @param master_elements  element ids; an element the slave is a node of is not its master
 /// @param tolerance_mm     >= 0: how far outside the master elements a slave may be
+/// @param reporter         not owned, may be null: its cancellation is checked at every point
+///                         located (Cancelled)
 /// Throws InvalidInput for ids out of range, repeated slaves or a negative tolerance.
 TieSearchResult tie_nodes(const Mesh& mesh, const std::vector<int>& slaves,
                           const std::vector<int>& master_elements, double tolerance_mm,
-                          TieMethod method = TieMethod::Mortar);
+                          TieMethod method = TieMethod::Mortar, Reporter* reporter = nullptr);
 
 }  // namespace caps::fem
