@@ -51,6 +51,7 @@ struct Server {
   httplib::Client client() const {
     httplib::Client c("127.0.0.1", server->port());
     c.set_read_timeout(600, 0);
+    c.set_default_headers({{caps::server::kTokenHeader, server->token()}});  // as the page does
     return c;
   }
 };
