@@ -175,8 +175,9 @@ def test_a_progress_callback_that_raises_stops_the_run(model, work):
     assert not (work / "stopped").exists()
 
 
-def test_a_solver_error_carries_where_it_failed(work, cli):
-    # the box of caps fem box, mirrored in x: every element is inverted
+def test_a_mesh_inverted_before_any_load_is_a_bad_input_naming_the_element(work, cli):
+    # the box of caps fem box, mirrored in x: every element is inverted (a damaged file, not a
+    # failed solve: issue 36)
     box = work / "inverted_box"
     caps.run("fem_box", output=box, cells="2,1,1")
     vtu = (box / "mesh.vtu").read_text()
@@ -190,13 +191,13 @@ def test_a_solver_error_carries_where_it_failed(work, cli):
     (box / "mesh.vtu").write_text(
         head + "<Points>" + opening + ">" + values + "</DataArray>" + closing + "</Points>" + tail)
 
-    with pytest.raises(caps.SolverError) as e:
+    with pytest.raises(caps.InvalidInput) as e:
         caps.run("solve", mesh=box, output=work / "inverted_out")
-    assert isinstance(e.value, RuntimeError)
-    assert (e.value.element, e.value.gauss_point) == (0, 0)
-    assert "Jacobian determinant" in str(e.value)
+    assert isinstance(e.value, ValueError)
+    assert "element 0" in str(e.value) and "Jacobian determinant" in str(e.value)
+    assert not (work / "inverted_out").exists()
     c = cli("solve", box, "-o", work / "inverted_cli")
-    assert c.returncode == 1 and str(e.value) in c.stdout + c.stderr
+    assert c.returncode == 2 and str(e.value) in c.stdout + c.stderr
 
 
 def test_a_local_chart_faces_the_skin_at_its_point(model, work):
