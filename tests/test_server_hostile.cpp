@@ -46,9 +46,10 @@ const std::string kModel = (kTmp / "model").string();
 // How soon a cancellation or a stop must take effect here. Issue 36 asks for a second and it is
 // measured within one on a quiet machine (docs/reliability.md, "The local planner server"); in
 // the suite, beside two other test programs, one factorization or meshing step between two
-// checks takes up to 2 s (1.3-1.8 s seen). The bound still fails a cancellation that is not
-// checked at all, which takes the rest of the simulation (tens of seconds).
-constexpr double kCancelBoundS = 3.0;
+// checks takes up to 2 s (1.3-1.8 s seen here; the CI machine ran the suite 1.6-1.9 times
+// slower). The bound still fails a cancellation that is not checked at all, which takes the rest
+// of the simulation (tens of seconds).
+constexpr double kCancelBoundS = 5.0;
 
 double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
