@@ -93,45 +93,66 @@ bool trsv_instead(Trsv<Real> trsv, Scal<Real> scal, const char* side, const char
   return true;
 }
 
+// The BLAS names of one precision.
+template <class Real>
+struct Names;
+template <>
+struct Names<float> {
+  static constexpr const char *gemm = "sgemm_", *gemv = "sgemv_", *trsm = "strsm_", *trsv = "strsv_",
+                             *scal = "sscal_";
+};
+template <>
+struct Names<double> {
+  static constexpr const char *gemm = "dgemm_", *gemv = "dgemv_", *trsm = "dtrsm_", *trsv = "dtrsv_",
+                             *scal = "dscal_";
+};
+
+// xGEMM and xTRSM of either precision: the forward above, or the library's own.
+template <class Real>
+void gemm(const char* transa, const char* transb, const int* m, const int* n, const int* k,
+          const Real* alpha, const Real* a, const int* lda, const Real* b, const int* ldb,
+          const Real* beta, Real* c, const int* ldc) {
+  static const Gemm<Real> next = blas<Gemm<Real>>(Names<Real>::gemm);
+  static const Gemv<Real> gemv = blas<Gemv<Real>>(Names<Real>::gemv);
+  if (!gemv_instead(gemv, transa, transb, m, n, k, alpha, a, lda, b, ldb, beta, c))
+    next(transa, transb, m, n, k, alpha, a, lda, b, ldb, beta, c, ldc);
+}
+
+template <class Real>
+void trsm(const char* side, const char* uplo, const char* transa, const char* diag, const int* m,
+          const int* n, const Real* alpha, const Real* a, const int* lda, Real* b, const int* ldb) {
+  static const Trsm<Real> next = blas<Trsm<Real>>(Names<Real>::trsm);
+  static const Trsv<Real> trsv = blas<Trsv<Real>>(Names<Real>::trsv);
+  static const Scal<Real> scal = blas<Scal<Real>>(Names<Real>::scal);
+  if (!trsv_instead(trsv, scal, side, uplo, transa, diag, m, n, alpha, a, lda, b, ldb))
+    next(side, uplo, transa, diag, m, n, alpha, a, lda, b, ldb);
+}
+
 }  // namespace
 
 extern "C" {
 
 void strsm_(const char* side, const char* uplo, const char* transa, const char* diag, const int* m,
             const int* n, const float* alpha, const float* a, const int* lda, float* b, const int* ldb) {
-  static const Trsm<float> next = blas<Trsm<float>>("strsm_");
-  static const Trsv<float> trsv = blas<Trsv<float>>("strsv_");
-  static const Scal<float> scal = blas<Scal<float>>("sscal_");
-  if (!trsv_instead(trsv, scal, side, uplo, transa, diag, m, n, alpha, a, lda, b, ldb))
-    next(side, uplo, transa, diag, m, n, alpha, a, lda, b, ldb);
+  trsm(side, uplo, transa, diag, m, n, alpha, a, lda, b, ldb);
 }
 
 void dtrsm_(const char* side, const char* uplo, const char* transa, const char* diag, const int* m,
             const int* n, const double* alpha, const double* a, const int* lda, double* b,
             const int* ldb) {
-  static const Trsm<double> next = blas<Trsm<double>>("dtrsm_");
-  static const Trsv<double> trsv = blas<Trsv<double>>("dtrsv_");
-  static const Scal<double> scal = blas<Scal<double>>("dscal_");
-  if (!trsv_instead(trsv, scal, side, uplo, transa, diag, m, n, alpha, a, lda, b, ldb))
-    next(side, uplo, transa, diag, m, n, alpha, a, lda, b, ldb);
+  trsm(side, uplo, transa, diag, m, n, alpha, a, lda, b, ldb);
 }
 
 void sgemm_(const char* transa, const char* transb, const int* m, const int* n, const int* k,
             const float* alpha, const float* a, const int* lda, const float* b, const int* ldb,
             const float* beta, float* c, const int* ldc) {
-  static const Gemm<float> next = blas<Gemm<float>>("sgemm_");
-  static const Gemv<float> gemv = blas<Gemv<float>>("sgemv_");
-  if (!gemv_instead(gemv, transa, transb, m, n, k, alpha, a, lda, b, ldb, beta, c))
-    next(transa, transb, m, n, k, alpha, a, lda, b, ldb, beta, c, ldc);
+  gemm(transa, transb, m, n, k, alpha, a, lda, b, ldb, beta, c, ldc);
 }
 
 void dgemm_(const char* transa, const char* transb, const int* m, const int* n, const int* k,
             const double* alpha, const double* a, const int* lda, const double* b, const int* ldb,
             const double* beta, double* c, const int* ldc) {
-  static const Gemm<double> next = blas<Gemm<double>>("dgemm_");
-  static const Gemv<double> gemv = blas<Gemv<double>>("dgemv_");
-  if (!gemv_instead(gemv, transa, transb, m, n, k, alpha, a, lda, b, ldb, beta, c))
-    next(transa, transb, m, n, k, alpha, a, lda, b, ldb, beta, c, ldc);
+  gemm(transa, transb, m, n, k, alpha, a, lda, b, ldb, beta, c, ldc);
 }
 
 }  // extern "C"
