@@ -26,11 +26,18 @@ inline Mesh neo_hookean_box(const Eigen::Vector3d& size, const Eigen::Vector3i& 
   return make_box_mesh(o);
 }
 
-/// Finite-strain solve options closing in n_steps load steps at first.
+/// Finite-strain solve options closing in n_steps load steps at first, with the tight
+/// solve's tolerances (1e-8 of the load and of the step's increment at lambda = 1, 1e-5 before):
+/// the closed forms and the Newton solver's mechanics are checked at these. The defaults
+/// (NewtonOptions, looser: what the answer needs) are checked against this tight solve in
+/// test_fem_nonlinear, "TheDefaultTolerancesGiveTheTightSolvesAnswer".
 inline SolveOptions finite_strain(int n_steps) {
   SolveOptions o;
   o.kinematics = Kinematics::Finite;
   o.newton.n_steps = n_steps;
+  o.newton.residual_tolerance = 1e-8;
+  o.newton.displacement_tolerance = 1e-8;
+  o.newton.intermediate_tolerance = 1e-5;
   return o;
 }
 

@@ -234,7 +234,8 @@ TEST_F(Cli, SolvesABoxInEitherPrecisionAndRefusesBadSolverOptions) {
     ASSERT_EQ(r.code, 0) << r.err;
     results[k] = nlohmann::json::parse(slurp(out / "result.json"));
     EXPECT_EQ(results[k]["precision"]["arithmetic"], precision[k]);
-    EXPECT_LT(results[k]["relative_residual"].get<double>(), 1e-10);
+    // The finite-strain closure's tolerance (fem::NewtonOptions::residual_tolerance).
+    EXPECT_LE(results[k]["relative_residual"].get<double>(), 1e-6);
   }
   EXPECT_GT(results[0]["precision"]["refinement_iterations"].get<int>(), 0);
   const double f0 = results[0]["total_suture_force_n"], f1 = results[1]["total_suture_force_n"];

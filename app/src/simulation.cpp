@@ -196,6 +196,10 @@ closure::SimulateOptions simulate_options(const MeshingFields& m, const SolverFi
   if (s.steps < 1 || s.steps > 1000)
     throw InvalidParameter(cat("{steps} ", s.steps, ": give 1..1000 load steps"));
   o.solve.newton.n_steps = s.steps;
+  if (!(s.time_limit >= 0 && s.time_limit <= 86400))
+    throw InvalidParameter(cat("{time_limit} ", s.time_limit, ": give seconds, 0 (no limit) to "
+                               "86400"));
+  o.solve.time_limit_s = s.time_limit;
   return o;
 }
 

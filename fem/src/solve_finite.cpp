@@ -150,6 +150,9 @@ void check_options(const NewtonOptions& o) {
   if (o.snap_iterations < o.max_iterations)
     throw InvalidInput(cat("newton: snap_iterations = ", o.snap_iterations,
                            " must be at least max_iterations = ", o.max_iterations));
+  if (!(o.max_solves >= 1 && o.max_steps >= 1))
+    throw InvalidInput(cat("newton: max_solves = ", o.max_solves, " and max_steps = ", o.max_steps,
+                           " must be >= 1"));
   if (o.max_iterations < 1 || o.max_cutbacks < 0 || o.reuse_iterations < 0 || o.grow_iterations < 0)
     throw InvalidInput(cat("newton: max_iterations = ", o.max_iterations, " must be >= 1 and max_cutbacks = ",
                            o.max_cutbacks, ", reuse_iterations = ", o.reuse_iterations,
@@ -241,6 +244,9 @@ class FiniteStrainSolver {
   // A step still falling through unstable states after `limit` solves is given more.
   void extend_for_snap(StepAttempt& s);
   void accept_step(const StepAttempt& s);
+  // SolverError when the closure has used its budget (NewtonOptions::max_solves, max_steps,
+  // SolveOptions::time_limit_s) before the next solve of s.
+  void check_budget(const StepAttempt& s) const;
   void grow_step(const NewtonStep& record);
   void cut_back_step(StepAttempt& s);
   // One solve of the tangent, shifted where it is not positive definite.
@@ -278,6 +284,7 @@ class FiniteStrainSolver {
   int snap_solves_left_ = 0;
   bool cut_back_ = false;  // a step of this solve was cut back: steps grow only to the nominal size
   std::optional<Failure> inverted_in_step_;  // the first inversion among the attempts of a step
+  Clock::time_point started_ = Clock::now();
 };
 
 FiniteStrainSolver::FiniteStrainSolver(const Mesh& mesh, const SolveOptions& options,
@@ -423,6 +430,7 @@ void FiniteStrainSolver::iterate(StepAttempt& s) {
 // the convergence test and, after the step's last allowed solve, the snap-through test.
 IterationOutcome FiniteStrainSolver::newton_iteration(StepAttempt& s, int it) {
   if (options_.reporter) options_.reporter->check_cancelled();
+  check_budget(s);
   ++res_.newton_iterations;
   NewtonStep& record = s.record;
   record.iterations = it;
@@ -557,6 +565,27 @@ void FiniteStrainSolver::extend_for_snap(StepAttempt& s) {
     s.limit += more;
     snap_solves_left_ -= more;
   }
+}
+
+void FiniteStrainSolver::check_budget(const StepAttempt& s) const {
+  const double elapsed = seconds_since(started_);
+  std::string spent;
+  if (res_.newton_iterations >= no_.max_solves)
+    spent = cat(no_.max_solves, " Newton solves, its budget");
+  else if (step_ >= std::max(no_.max_steps, 2 * no_.n_steps))
+    spent = cat(step_, " load steps, its budget");
+  else if (options_.time_limit_s > 0 && elapsed > options_.time_limit_s)
+    spent = cat("its time limit of ", options_.time_limit_s, " s (--time-limit)");
+  if (spent.empty()) return;
+  throw SolverError(cat("the finite-strain closure stopped after ", spent, ": it had come ",
+                        std::round(1000 * lambda_) / 10, " % of the way in ", step_,
+                        " load steps (", res_.newton_iterations, " solves, ", res_.factorizations,
+                        " factorizations, ", std::round(10 * elapsed) / 10,
+                        " s) and was working towards ", std::round(1000 * s.lambda_new) / 10,
+                        " %, cutting its steps back; Newton cannot follow this closure (tissue "
+                        "buckling or nearly inverted under it). The small-strain answer "
+                        "(--material linear) takes one solve; or undermine more, or refine the mesh"),
+                    -1, -1, s.record.iterations);
 }
 
 void FiniteStrainSolver::accept_step(const StepAttempt& s) {

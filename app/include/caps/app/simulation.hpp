@@ -90,6 +90,7 @@ struct SolverFields {
   std::string material_params;
   int steps = fem::NewtonOptions{}.n_steps;
   double prestretch = fem::SolveOptions{}.prestretch;
+  double time_limit = fem::SolveOptions{}.time_limit_s;
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
@@ -109,6 +110,10 @@ struct SolverFields {
     v(r.prestretch, {"prestretch", "neo-hookean: the skin's in-vivo prestretch in its plane (1 = "
                                    "none; about 1.1-1.2 in vivo): the wound gapes, and the "
                                    "closure and its forces carry the skin's tension"});
+    v(r.time_limit, {"time_limit", "neo-hookean: stop a closure still unsolved after this many "
+                                   "seconds, with an error saying how far it came (the linear "
+                                   "model answers in one solve); 0 = no limit. Newton stops by "
+                                   "itself after 400 solves or 200 load steps"});
     v(r.solver, {"solver", "mumps or cholmod"});
     v(r.precision, {"precision", "mixed (a single-precision factorization refined to double "
                                  "accuracy; falls back to double by itself when that is not "

@@ -69,11 +69,19 @@ struct NewtonOptions {
   /// are not repeated without end.
   int snap_iterations = 200;
   int max_cutbacks = 10;                ///< halvings of a step before giving up (SolverError)
-  double residual_tolerance = 1e-8;     ///< ||r|| / ||r_0|| of the step (r_0: predictor load)
+  /// The closure's budget: Newton solves over the whole solve (every step, attempt and warm
+  /// start), and load steps. Past either the solve stops with a SolverError that says how far
+  /// the closure came and offers the small-strain answer: a closure Newton can only crawl
+  /// through (steps cut back and grown again thousands of times, each converging) would
+  /// otherwise run for minutes. The demo's plans take 9-15 solves in 4-5 steps, the hardest
+  /// measured face closures (Z-plasties turned 90 deg) 40-50 in 11 (docs/fem.md).
+  int max_solves = 400;
+  int max_steps = 200;  ///< (at least twice n_steps)
+  double residual_tolerance = 1e-6;     ///< ||r|| / ||r_0|| of the step (r_0: predictor load)
   /// ||dq|| (or the next correction it predicts) / ||q - q_step_start||
-  double displacement_tolerance = 1e-8;
+  double displacement_tolerance = 1e-5;
   /// Both tolerances for the steps before lambda = 1 (never tighter than the two above).
-  double intermediate_tolerance = 1e-5;
+  double intermediate_tolerance = 1e-4;
   /// A step still short of the tolerances after max_iterations is accepted (marked `stagnated`)
   /// when both its residual and its last correction are below this, in the same relative terms:
   /// near a buckling point Newton slows to linear convergence (5 % a solve at 1e-6 of the load
@@ -127,6 +135,10 @@ struct SolveOptions {
   /// afresh from the reference state in load steps (the failed attempt's solves are counted).
   /// Only the free and suture-group dofs are read: the prescribed values are the problem's.
   Eigen::MatrixX3d initial_displacement_mm;
+  /// Finite strain only: wall-clock seconds the Newton solve may take (0 = no limit). Past it
+  /// the solve stops at its next iteration with a SolverError saying how far the closure came
+  /// and offering the small-strain answer (a closure that would run for minutes says so).
+  double time_limit_s = 0;
   /// Not owned, may be null: a finite-strain solve reports the load factor reached after every
   /// load step as progress of "closing the wound", and stops there (Cancelled) when asked to.
   Reporter* reporter = nullptr;
