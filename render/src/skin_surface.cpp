@@ -967,17 +967,16 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
                     drawn ? drawn->undercut_cells : std::vector<std::uint8_t>{});
     if (drawn) add_undercuts(b, skin, *drawn, fp, theta_c);
   }
-  // The planner's part (SkinExtent::Patch) stays the patch and its seam: the range cells the
-  // whole face moves around it (add_moved_cells()) were drawn darker than the page's own skin,
-  // with the range image's slice terraces (the page draws the smoothed skin), a ring around
-  // the wound; until the page draws the same skin, it shows the patch moved alone.
+  // The planner's part (SkinExtent::Patch) stays the patch and its seam; the page moves its own
+  // range mesh around them with the same face field (the server's skin_moved.bin), so the
+  // seam's range vertices move here as there.
   const double r_ref = skin.r_skin(theta_c, model.to_cylindrical(centre).z_mm);
   add_seam(b, model.grid(), loops[rim], fp, footprint_border(fp), range, r_ref);
 
   const std::vector<int> cap_centres = b.cap_centres;
   const auto given_normals = b.given_normals;
   pack(b, out);
-  if (displacement_mm && whole) move_with_face(mesh, *displacement_mm, n_micro, out);
+  if (displacement_mm) move_with_face(mesh, *displacement_mm, n_micro, out);
   shade_normals(skin, cap_centres, given_normals, out);
   return out;
 }

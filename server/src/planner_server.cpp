@@ -642,8 +642,8 @@ struct PlannerServer::Impl {
       tension_files[id] = std::async(std::launch::async, std::move(view.write_tension)).share();
     }
     json j = json::parse(read_file(info));
-    for (const char* k : {"skin", "tension", "tension_values"})
-      j[k] = cat("/api/results/", id, "/", j[k].get<std::string>());
+    for (const char* k : {"skin", "tension", "tension_values", "moved_skin"})
+      if (j.value(k, json()).is_string()) j[k] = cat("/api/results/", id, "/", j[k].get<std::string>());
     return j;
   }
 

@@ -3,6 +3,7 @@
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "caps/closure/face_domain.hpp"
 #include "caps/fem/mesh.hpp"
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/result_io.hpp"
@@ -18,6 +19,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdint>
 #include <cmath>
 #include <memory>
 #include <vector>
@@ -36,6 +38,8 @@ const Eigen::Vector3d kInvalidGrey(0.55, 0.55, 0.55);
 // The micropolygons per element edge of the post-operative skin shown on the page: at most this
 // many (view_subdivisions()).
 constexpr int kMaxResultSubdivisions = 8;
+// A model skin vertex the closure moves by less than this (mm) is left where it is.
+constexpr double kMovedSkinMm = 1e-3;
 
 json lps_json(const Eigen::Vector3d& p) { return json::array({p.x(), p.y(), p.z()}); }
 
@@ -84,6 +88,40 @@ render::SkinSurfaces mesh_part(const render::SkinSurfaces& s, bool seam,
   part.post.F = part.pre.F;
   if (kept_out) *kept_out = std::move(kept);
   return part;
+}
+
+// What write_moved_model_skin() wrote.
+struct MovedSkin {
+  long vertices = 0;  // model skin vertices moved
+  double max_mm = 0;  // their largest move
+};
+
+// A closure in the whole face moves the skin around the patch as well: the vertices of the
+// model's range mesh (write_model_skin_glb(), which the page draws around the patch) that the
+// tissue's skin nodes move (closure::skin_displacement(), the field the renderer and the
+// feature lines use), as records of a uint32 vertex and its move as three float32 in glTF's
+// frame (metres; render::lps_to_gltf), little endian, at `path`. Nothing is written for a
+// patch-only closure (no face skin nodes) or where nothing moved.
+MovedSkin write_moved_model_skin(const PatientModel& model, const fem::Mesh& mesh,
+                                 const Eigen::MatrixX3d& u, const fs::path& path) {
+  MovedSkin out;
+  if (!mesh.node_sets.count(closure::kFaceSkinNodes)) return out;
+  const DisplacementAt field = closure::skin_displacement(mesh, u);
+  const TriMesh range = range_mesh(model.maps(), RangeSurface::Skin);
+  std::string bytes;
+  for (Eigen::Index v = 0; v < range.n_vertices(); ++v) {
+    const auto d = field(range.V.row(v).transpose());
+    if (!d || d->norm() < kMovedSkinMm) continue;
+    const Eigen::Vector3d g = render::lps_to_gltf(*d);
+    const std::uint32_t index = static_cast<std::uint32_t>(v);
+    const float xyz[3] = {static_cast<float>(g.x()), static_cast<float>(g.y()), static_cast<float>(g.z())};
+    bytes.append(reinterpret_cast<const char*>(&index), sizeof index);
+    bytes.append(reinterpret_cast<const char*>(xyz), sizeof xyz);
+    ++out.vertices;
+    out.max_mm = std::max(out.max_mm, d->norm());
+  }
+  if (out.vertices) write_text_atomic(path, bytes);
+  return out;
 }
 
 }  // namespace
@@ -179,6 +217,7 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
   render::SkinSurfaces part = mesh_part(*skin, true);
   if (!model.has_color()) part.color.rowwise() = kPlainSkin.transpose();  // as the model's skin
   render::write_gltf(part, result_dir / "skin.glb");
+  const MovedSkin moved = write_moved_model_skin(model, mesh, u, result_dir / "skin_moved.bin");
   const auto t3 = Clock::now();
   ResultView view;
   view.json =
@@ -191,6 +230,9 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
            {"tension_scale_max_kpa", tension.max_value},
            {"max_skin_tension_kpa", peak},
            {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},
+           {"moved_skin", moved.vertices ? json("skin_moved.bin") : json(nullptr)},
+           {"moved_skin_vertices", moved.vertices},
+           {"moved_skin_max_mm", moved.max_mm},
            {"timings_s",
             {{"skin", seconds(t0, t1)}, {"tension", seconds(t1, t2)}, {"glb", seconds(t2, t3)}}}}
           .dump();

@@ -54,7 +54,11 @@ struct ResultView {
 /// own skin (write_model_skin_glb()) without the cells listed in "replaced_cells". The JSON:
 /// {"skin", "tension", "tension_values", "replaced_cells" (cells q = k n_theta + j of range_mesh(), faces 2q and
 /// 2q + 1), "subdivisions", "vertices", "tension_scale_max_kpa", "max_skin_tension_kpa",
-/// "wound_area_mm2": {"pre", "post"}, "timings_s": {"skin" (reading the result and building the
+/// "wound_area_mm2": {"pre", "post"}, "moved_skin" (null for a patch-only closure, or
+/// skin_moved.bin: the model's skin vertices the whole-face closure moves around the patch, as
+/// records of a uint32 vertex of write_model_skin_glb()'s mesh and its move as three float32,
+/// glTF metres, little endian), "moved_skin_vertices", "moved_skin_max_mm", "timings_s":
+/// {"skin" (reading the result and building the
 /// skin), "tension" (its values), "glb" (writing skin.glb)}}.
 ResultView write_result_skin_glbs(const PatientModel& model,
                                   const std::filesystem::path& result_dir);

@@ -147,6 +147,16 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   const canvas = page.locator('#view-a canvas');
   const post = await canvas.screenshot();
   assert.ok((await weights()).length > 0 && (await weights()).every((w) => w === 1));
+  // The whole face moves with the patch (issue 34): the model's skin around the patch is a morph
+  // too, moved by the same field as the patch's seam.
+  const moved = await page.evaluate(() => {
+    const v = window.caps.results.rows[0].view;
+    return { vertices: v.moved_skin_vertices, max: v.moved_skin_max_mm };
+  });
+  assert.ok(moved.vertices > 100 && moved.max > 0.05,
+    `the skin around the patch moves: ${moved.vertices} vertices, at most ${moved.max} mm`);
+  assert.ok((await weights()).length >= 2, 'the model skin around the patch has its morph as well');
+  log(`the face around the patch moves: ${moved.vertices} skin vertices, at most ${moved.max.toFixed(2)} mm`);
   const morph = page.locator('#morph');
   await morph.fill('0');
   await morph.dispatchEvent('input');

@@ -72,8 +72,8 @@ export function viridis(t) {
 }
 
 /** A simulation's skin (GET /api/results/ID/view) over the model's (`modelSkin`, a ColouredSkin):
- * the part the simulation moved (morph 0 = pre-operative, 1 = post-operative) and the model's
- * skin without the cells that part replaces. Its mesh faces coloured by the skin tension are
+ * the part the simulation meshed (morph 0 = pre-operative, 1 = post-operative) and the model's
+ * skin without the cells that part replaces, moved around it as the whole face moves. Its mesh faces coloured by the skin tension are
  * read when first shown (show('tension'), which resolves once they are drawn). */
 export async function loadResultSkin(view, modelSkin) {
   const patch = await loadMesh(view.skin);
@@ -85,9 +85,25 @@ export async function loadResultSkin(view, modelSkin) {
   rest.setAttribute('normal', base.getAttribute('normal'));
   rest.setAttribute('color', modelSkin.colours.skin);
   rest.setIndex(new BufferAttribute(index, 1));
+  // A closure in the whole face moves the skin around the patch too: the model's vertices it
+  // moves (skin_moved.bin: uint32 vertex, float32 x y z move in glTF metres) are the rest's
+  // morph target, so the face moves with the patch and the seam between them stays closed.
+  if (view.moved_skin) {
+    const bytes = new DataView(await getBinary(view.moved_skin));
+    const position = base.getAttribute('position');
+    const moved = new Float32Array(position.array);
+    for (let at = 0; at + 16 <= bytes.byteLength; at += 16) {
+      const v = bytes.getUint32(at, true);
+      if (v >= position.count) throw new Error(`${view.moved_skin}: vertex ${v} of ${position.count}`);
+      for (let c = 0; c < 3; ++c) moved[3 * v + c] += bytes.getFloat32(at + 4 + 4 * c, true);
+    }
+    rest.morphAttributes.position = [new BufferAttribute(moved, 3)];
+  }
+  const restMesh = new Mesh(rest, modelSkin.mesh.material);
   const mesh = new Group();
-  mesh.add(new Mesh(rest, modelSkin.mesh.material), patch);
+  mesh.add(restMesh, patch);
   let tension = null, morph = 1, wanted = 'skin';
+  if (restMesh.morphTargetInfluences) restMesh.morphTargetInfluences[0] = morph;
   let scaleMaxKpa = view.tension_scale_max_kpa, values = null;
   // The tension mesh's colours on the scale 0..scaleMaxKpa (viridis; glTF colours are linear).
   const recolour = (t) => {
@@ -137,6 +153,7 @@ export async function loadResultSkin(view, modelSkin) {
     setMorph(t) {
       morph = t;
       patch.morphTargetInfluences[0] = t;
+      if (restMesh.morphTargetInfluences) restMesh.morphTargetInfluences[0] = t;
       if (tension) tension.morphTargetInfluences[0] = t;
     },
   };
