@@ -232,6 +232,8 @@ class FiniteStrainSolver {
   // The predictor's out-of-balance force in sys_, its norm r0 and the tolerances' scale;
   // s.failure if the predictor state inverts an element.
   void predictor(StepAttempt& s);
+  // The secant predictor, when it starts the step closer to equilibrium (see the definition).
+  void extrapolate(StepAttempt& s);
   // Newton iterations until the step converges or fails (s.converged, s.failure).
   void iterate(StepAttempt& s);
   IterationOutcome newton_iteration(StepAttempt& s, int it);
@@ -285,6 +287,9 @@ class FiniteStrainSolver {
   bool cut_back_ = false;  // a step of this solve was cut back: steps grow only to the nominal size
   std::optional<Failure> inverted_in_step_;  // the first inversion among the attempts of a step
   Clock::time_point started_ = Clock::now();
+  // The last accepted step's start and size, for the secant predictor (0: none yet).
+  Eigen::VectorXd q_last_start_;
+  double last_dl_ = 0;
 };
 
 FiniteStrainSolver::FiniteStrainSolver(const Mesh& mesh, const SolveOptions& options,
@@ -416,6 +421,37 @@ void FiniteStrainSolver::predictor(StepAttempt& s) {
   s.scale = std::max(1.0, nominal_ / s.dl);
   s.r_ref = s.scale * s.r0;
   s.r_prev = s.r0;
+  if (!s.failure && s.r0 > 0) extrapolate(s);
+}
+
+// The secant predictor (issue 35: a predictor that follows the last step's solution): the
+// step starts at the last step's increment scaled to this one, q + dl / dl_last (q - q_last),
+// at lambda_new, when its out-of-balance force is smaller than the tangent predictor's load;
+// its Newton iteration then starts there instead of with the tangent predictor's solve. Else
+// the tangent predictor, as without it. r0 stays the tangent predictor's load (the tolerances'
+// reference).
+void FiniteStrainSolver::extrapolate(StepAttempt& s) {
+  if (!no_.secant_predictor || last_dl_ <= 0) return;
+  q_trial_ = q_ + (s.dl / last_dl_) * (q_ - q_last_start_);
+  problem_.project_on_surface(q_trial_, s.lambda_new);
+  double energy = NAN;
+  auto t = Clock::now();
+  const std::optional<Failure> inverted =
+      problem_.evaluate(q_trial_, s.lambda_new, s.lambda_new, no_lift_, sys_, &unit_lift_, &energy);
+  res_.timings.assembly_s += seconds_since(t);
+  const double rn = inverted ? INFINITY : sys_.f.norm();
+  if (std::isfinite(rn) && rn < s.r0) {
+    q_ = q_trial_;
+    s.energy = energy;
+    s.r_prev = rn;
+    ++res_.secant_predictions;
+    return;
+  }
+  // Back to the tangent predictor: its load again.
+  t = Clock::now();
+  s.failure = problem_.evaluate(q_, lambda_, s.lambda_new,
+                                problem_.path().at(s.lambda_new) - problem_.path().at(lambda_), sys_);
+  res_.timings.assembly_s += seconds_since(t);
 }
 
 void FiniteStrainSolver::iterate(StepAttempt& s) {
@@ -589,6 +625,8 @@ void FiniteStrainSolver::check_budget(const StepAttempt& s) const {
 }
 
 void FiniteStrainSolver::accept_step(const StepAttempt& s) {
+  q_last_start_ = s.q_start;
+  last_dl_ = s.dl;
   NewtonStep record = s.record;
   record.residual_norms.insert(record.residual_norms.begin(), 1.0);
   res_.newton_steps.push_back(record);

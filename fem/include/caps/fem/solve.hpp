@@ -96,6 +96,9 @@ struct NewtonOptions {
   /// factorized. 0 = factorize every tangent. The default is the faster of those measured
   /// (docs/benchmarks.md, "factor reuse").
   int reuse_iterations = 16;
+  /// A load step after the first starts from the last step's increment scaled to it (the
+  /// secant predictor) when that is closer to equilibrium than the tangent predictor's load.
+  bool secant_predictor = true;
 };
 
 struct SolveOptions {
@@ -209,6 +212,7 @@ struct SolveResult {
   std::string kinematics = "small-strain";   ///< kinematics_name() of the solve
   double prestretch = 1.0;                   ///< SolveOptions::prestretch of the solve
   std::vector<NewtonStep> newton_steps;      ///< finite strain: the converged load steps
+  int secant_predictions = 0;                ///< finite strain: steps begun by the secant predictor
   int newton_iterations = 0;                 ///< finite strain: total, including cut-back attempts
   int factorizations = 0;                    ///< numerical factorizations (1 for a linear solve)
   /// finite strain: each flap's rotation along its closing path (deg, Mesh::flaps order; a flap
