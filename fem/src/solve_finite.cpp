@@ -618,7 +618,7 @@ void FiniteStrainSolver::check_budget(const StepAttempt& s) const {
                         " load steps (", res_.newton_iterations, " solves, ", res_.factorizations,
                         " factorizations, ", std::round(10 * elapsed) / 10,
                         " s) and was working towards ", std::round(1000 * s.lambda_new) / 10,
-                        " %, cutting its steps back; Newton cannot follow this closure (tissue "
+                        " %; Newton cannot follow this closure within its budget (tissue "
                         "buckling or nearly inverted under it). The small-strain answer "
                         "(--material linear) takes one solve; or undermine more, or refine the mesh"),
                     -1, -1, s.record.iterations);
