@@ -194,6 +194,15 @@ TEST(CylindricalScan, BadInputsAreRefused) {
   EXPECT_THROW(read_cylindrical_sidecar(dir / "c.json"), InvalidInput);
   std::ofstream(dir / "d.json") << R"({"range": "r.png", "r_scale_mm": 0.1, "z_scale_mm": 1})";
   EXPECT_EQ(read_cylindrical_sidecar(dir / "d.json").range, dir / "r.png");
+  // void_value: a whole number a 16-bit image holds, not a huge or fractional number (which would
+  // be cast to unsigned out of range: the fuzzer's find).
+  for (const char* v : {"4.4e78", "-1", "65536", "0.5"}) {
+    std::ofstream(dir / "e.json") << R"({"range": "r.png", "r_scale_mm": 0.1, "z_scale_mm": 1, "void_value": )"
+                                  << v << "}";
+    EXPECT_THROW(read_cylindrical_sidecar(dir / "e.json"), InvalidInput) << v;
+  }
+  std::ofstream(dir / "f.json") << R"({"range": "r.png", "r_scale_mm": 0.1, "z_scale_mm": 1, "void_value": 65535})";
+  EXPECT_EQ(read_cylindrical_sidecar(dir / "f.json").void_value, 65535u);
   fs::remove_all(dir);
 }
 

@@ -714,7 +714,8 @@ std::vector<ProcedureInfo> read_procedure_library(const std::filesystem::path& f
                                       std::size_t(1) << 20);
   std::vector<ProcedureInfo> lib;
   try {
-    if (j.value("format", "") != "caps-procedure-library" || j.value("version", 0) != 1)
+    if (j.value("format", "") != "caps-procedure-library" || !j.contains("version") ||
+        !j.at("version").is_number_integer() || j.at("version").get<long long>() != 1)
       throw InvalidInput(cat(source, ": not a caps procedure library (\"format\": "
                              "\"caps-procedure-library\", \"version\": 1)"));
     for (const auto& e : j.at("procedures")) {

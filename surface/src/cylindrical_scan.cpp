@@ -53,7 +53,15 @@ CylindricalScanSpec read_cylindrical_sidecar(const fs::path& json_path) {
     s.theta_along_rows = axis == "rows";
     s.theta_reverse = j.value("theta_reverse", false);
     s.top_first = j.value("top_first", true);
-    s.void_value = j.value("void_value", 0u);
+    if (j.contains("void_value")) {
+      // A whole number a 16-bit range image can hold; any other JSON number would be cast to
+      // unsigned out of range.
+      const auto& v = j.at("void_value");
+      if (!v.is_number_integer() || v.get<long long>() < 0 || v.get<long long>() > 65535)
+        throw InvalidInput(cat(json_path.string(), ": void_value ", v.dump(), " must be a whole "
+                               "number from 0 to 65535 (the range value of a missing sample)"));
+      s.void_value = static_cast<unsigned>(v.get<long long>());
+    }
     s.top_z_mm = j.value("top_z_mm", 0.0);
   } catch (const nlohmann::json::exception& e) {
     throw InvalidInput(cat(json_path.string(), ": a field has the wrong type (", e.what(), ")"));
