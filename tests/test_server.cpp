@@ -458,6 +458,74 @@ TEST_F(ServerTest, APlanMadeAndSimulatedThroughTheApiEqualsTheAppResult) {
                   .rfind(server_->work_dir().string(), 0) == 0);
 }
 
+// The first answer (docs/planner.md): asked for, a finite-strain simulation is preceded by the
+// linear closure of the same plan, a result of its own that /api/progress carries while the
+// finite-strain one runs and keeps when that one stops at its time limit.
+TEST_F(ServerTest, AFiniteStrainSimulationGivesTheLinearAnswerFirstAndKeepsItWhenItStops) {
+  const auto planned = post("/api/plan/new", plan_body().dump());
+  ASSERT_TRUE(planned);
+  ASSERT_EQ(planned->status, 200);
+  const json plan = json::parse(planned->body);
+  const auto wrong = post("/api/simulate", json{{"plan", plan}, {"first_answer", "yes"}}.dump());
+  ASSERT_TRUE(wrong);
+  EXPECT_EQ(wrong->status, 400);
+  EXPECT_NE(error_of(wrong).find("first_answer"), std::string::npos) << wrong->body;
+
+  const json body = {{"plan", plan}, {"options", {{"mesh_size", 2.5}}}, {"first_answer", true}};
+  const auto simulated = post("/api/simulate", body.dump());
+  ASSERT_TRUE(simulated);
+  ASSERT_EQ(simulated->status, 200) << simulated->body;
+  const json final_answer = json::parse(simulated->body);
+  EXPECT_EQ(final_answer.at("material"), "neo-hookean");
+  const int first_id = final_answer.at("first_answer_id").get<int>();
+  EXPECT_NE(first_id, final_answer.at("result_id").get<int>());
+  EXPECT_GT(final_answer.at("timings_s").at("first_answer").get<double>(), 0);
+  EXPECT_LT(final_answer.at("timings_s").at("first_answer").get<double>(),
+            final_answer.at("timings_s").at("simulate").get<double>());
+  // The first answer is on the progress board: the linear closure, as caps simulate gives it.
+  const json first = json::parse(get("/api/progress")->body).at("first_answer");
+  EXPECT_EQ(first.at("result_id").get<int>(), first_id);
+  EXPECT_EQ(first.at("material"), "linear");
+  const fs::path plan_file = kTmp / "first_answer_plan.json";
+  std::ofstream(plan_file) << planned->body;
+  const auto cli = caps_test::caps("simulate --model " + kModel + " --plan " + plan_file.string() +
+                                   " -o " + (kTmp / "first_answer_linear").string() +
+                                   " --mesh-size 2.5 --material linear --force -q --json");
+  ASSERT_EQ(cli.code, 0) << cli.out;
+  const json linear = json::parse(cli.out);
+  EXPECT_NEAR(first.at("closing_force_n").get<double>(), linear.at("closing_force_n").get<double>(),
+              1e-9 * linear.at("closing_force_n").get<double>());
+  EXPECT_EQ(comparable(first), comparable(linear));
+  EXPECT_GT(std::abs(final_answer.at("closing_force_n").get<double>() -
+                     first.at("closing_force_n").get<double>()), 1e-6);
+  const auto view = get(cat("/api/results/", first_id, "/view"));
+  ASSERT_TRUE(view);
+  EXPECT_EQ(view->status, 200);
+
+  // A finite-strain closure that runs out of its time limit is answered 422 saying so; the first
+  // answer, a new one, stays on the board with its view.
+  json limited = body;
+  limited["options"]["time_limit"] = 1e-6;
+  const auto stopped = post("/api/simulate", limited.dump());
+  ASSERT_TRUE(stopped);
+  EXPECT_EQ(stopped->status, 422) << stopped->body;
+  EXPECT_NE(error_of(stopped).find("time limit"), std::string::npos) << stopped->body;
+  const json kept = json::parse(get("/api/progress")->body);
+  EXPECT_EQ(kept.at("running"), false);
+  const int kept_id = kept.at("first_answer").at("result_id").get<int>();
+  EXPECT_GT(kept_id, first_id);
+  EXPECT_EQ(kept.at("first_answer").at("closing_force_n"), first.at("closing_force_n"));
+  EXPECT_EQ(get(cat("/api/results/", kept_id, "/view"))->status, 200);
+  // A linear simulation has no first answer.
+  const auto plain = post("/api/simulate",
+                          json{{"plan", plan}, {"options", {{"mesh_size", 2.5}, {"material", "linear"}}},
+                               {"first_answer", true}}.dump());
+  ASSERT_TRUE(plain);
+  ASSERT_EQ(plain->status, 200);
+  EXPECT_FALSE(json::parse(plain->body).contains("first_answer_id"));
+  EXPECT_FALSE(json::parse(get("/api/progress")->body).contains("first_answer"));
+}
+
 TEST_F(ServerTest, ANewerSimulationCancelsTheOlderOne) {
   const auto planned = post("/api/plan/new", plan_body().dump());
   ASSERT_TRUE(planned);

@@ -237,6 +237,13 @@ class ProgressBoard : public Reporter {
     std::lock_guard<std::mutex> lock(m_);
     steps_s_ = json::object();
     step_started_ = started_;
+    first_answer_ = nullptr;
+  }
+  /// The running request's first answer (the linear closure's result, with its result_id),
+  /// shown by the page while the finite-strain closure runs; kept until the next start().
+  void set_first_answer(json result) {
+    std::lock_guard<std::mutex> lock(m_);
+    first_answer_ = std::move(result);
   }
   void finish() { set("", 1, false); }
   /// Seconds spent in each progress step of the last simulation ({"meshing and solving": ...}).
@@ -246,11 +253,13 @@ class ProgressBoard : public Reporter {
   }
   json snapshot() const {
     std::lock_guard<std::mutex> lock(m_);
-    return json{{"running", running_}, {"step", step_}, {"fraction", fraction_},
-                {"elapsed_s", running_ ? std::chrono::duration<double>(
-                                             std::chrono::steady_clock::now() - started_)
-                                             .count()
-                                       : 0.0}};
+    json j{{"running", running_}, {"step", step_}, {"fraction", fraction_},
+           {"elapsed_s", running_ ? std::chrono::duration<double>(
+                                        std::chrono::steady_clock::now() - started_)
+                                        .count()
+                                  : 0.0}};
+    if (!first_answer_.is_null()) j["first_answer"] = first_answer_;
+    return j;
   }
 
  protected:
@@ -283,6 +292,7 @@ class ProgressBoard : public Reporter {
   bool running_ = false;
   std::chrono::steady_clock::time_point started_, step_started_;
   json steps_s_ = json::object();
+  json first_answer_;  // null: none
   Reporter* outer_;  // not owned; may be null
 };
 
@@ -501,9 +511,12 @@ struct PlannerServer::Impl {
     const std::string source = "simulate request";
     const json j = parse_object(body, source);
     for (const auto& [key, value] : j.items())
-      if (key != "plan" && key != "options")
-        throw InvalidInput(
-            cat(source, ": unknown key \"", key, "\" (give \"plan\" and \"options\")"));
+      if (key != "plan" && key != "options" && key != "first_answer")
+        throw InvalidInput(cat(source, ": unknown key \"", key,
+                               "\" (give \"plan\", \"options\" and \"first_answer\")"));
+    if (j.contains("first_answer") && !j["first_answer"].is_boolean())
+      throw InvalidInput(cat(source, ": \"first_answer\" must be true or false"));
+    const bool first_answer = j.value("first_answer", false);
     if (!j.contains("plan") || !j["plan"].is_object())
       throw InvalidInput(cat(source, ": \"plan\" must be a plan file's JSON object"));
     json options_json = j.contains("options") ? j["options"] : json::object();
@@ -542,9 +555,20 @@ struct PlannerServer::Impl {
       ~Finish() { board.finish(); }
     } finish{*progress};
     const auto t0 = std::chrono::steady_clock::now();
+    const auto since_t0 = [&] {
+      return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    };
+    // The first answer (docs/planner.md, "First answer"): asked for a finite-strain closure, the
+    // same plan is closed first by the linear model (one solve), its result kept as a result of
+    // its own and put on the progress board, which the page shows while the finite-strain
+    // closure runs, and keeps if that one fails or runs out of its time limit.
+    std::optional<int> first_id;
+    double first_s = 0;
+    if (first_answer && options_json.value("material", std::string()) != "linear")
+      first_id = simulate_first_answer(options_json, on, plan_text, source, cancellable, since_t0);
+    if (first_id) first_s = since_t0();
     const std::string result = verb.run_json(request, source, &cancellable);
-    const double total_s =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double total_s = since_t0();
     progress->finish();
     // The plan beside its result, for exporting them together.
     write_text_atomic(work / "results" / std::to_string(id) / "plan.json", plan_text);
@@ -555,7 +579,45 @@ struct PlannerServer::Impl {
     out["timings_s"]["simulate"] = total_s;
     out["result_id"] = id;
     out["result_url"] = cat("/api/results/", id, "/");
+    if (first_id) {
+      out["first_answer_id"] = *first_id;
+      out["timings_s"]["first_answer"] = first_s;
+    }
     return out.dump(2);
+  }
+
+  // The linear closure of the simulate request `options_json` (a finite-strain one) as a result
+  // of its own, put on the progress board; its id. A request the linear model refuses (an option
+  // of the finite-strain model alone) has no first answer: the finite-strain closure answers.
+  template <class Elapsed>
+  std::optional<int> simulate_first_answer(json options_json, const std::shared_ptr<const Served>& on,
+                                           const std::string& plan_text, const std::string& source,
+                                           Reporter& cancellable, const Elapsed& elapsed_s) {
+    const int id = ++next_id;
+    {
+      std::lock_guard<std::mutex> lock(served_mutex);
+      result_models[id] = on;
+    }
+    const fs::path out_dir = work / "results" / std::to_string(id);
+    options_json["material"] = "linear";
+    options_json.erase("time_limit");
+    options_json["output"] = out_dir.string();
+    json first;
+    try {
+      first = json::parse(
+          app::find_verb("simulate").run_json(options_json.dump(), source, &cancellable));
+    } catch (const Cancelled&) {
+      throw;
+    } catch (const Error& e) {
+      caps::note(reporter, cat("no first answer: the linear closure failed (", e.what(), ")"));
+      return std::nullopt;
+    }
+    write_text_atomic(out_dir / "plan.json", plan_text);
+    first["timings_s"]["simulate"] = elapsed_s();
+    first["result_id"] = id;
+    first["result_url"] = cat("/api/results/", id, "/");
+    progress->set_first_answer(first);
+    return id;
   }
 
   // The plan in the body, read as `caps plan check` reads a plan file (from the work folder).

@@ -20,7 +20,7 @@ const [caps, model, webRoot, out] = process.argv.slice(2);
 mkdirSync(out, { recursive: true });
 const log = logger();
 
-await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
+await withPlanner({ caps, model, webRoot, log }, async ({ page, allow }) => {
   await page.waitForSelector('body[data-ready="true"]', { timeout: 30000 });
   log('page ready, skin shown');
   await page.screenshot({ path: join(out, '1-loaded.png') });
@@ -116,7 +116,10 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   await page.click('[data-view="plan"]');
   await page.screenshot({ path: join(out, '2-placed.png') });
 
-  // Simulate: the result and the forces appear.
+  // Simulate: the result and the forces appear. The time limit is lifted here, so that the
+  // finite-strain answer comes on a slow machine too (the limit's own test is at the end).
+  assert.equal(await page.locator('#time-limit').inputValue(), '10', 'the page limits a closure to 10 s');
+  await page.selectOption('#time-limit', '0');
   await page.selectOption('#mesh-size', '2.5');
   await page.click('#simulate');
   await page.waitForSelector('body[data-simulation="done"]', { timeout: 240000 });
@@ -129,7 +132,12 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   assert.match(await page.locator('#result-summary').innerText(), /Closing force/);
   const sutureRows = await page.locator('#sutures tr').count();
   assert.ok(sutureRows > 1, 'forces per suture listed');
-  log(`simulated: closing force ${closing1} N, largest suture ${largest1} N, ${sutureRows - 1} sutures`);
+  const timing1 = await page.evaluate(() => window.caps.results.rows[0].timing);
+  log(`simulated: closing force ${closing1} N, largest suture ${largest1} N, ${sutureRows - 1} sutures; ` +
+    `first (linear) answer on screen after ${timing1.first_answer_s?.toFixed(1) ?? '–'} s, the ` +
+    `finite-strain one after ${timing1.simulate_s.toFixed(1)} s`);
+  if (timing1.simulate_s > 5)
+    assert.ok(timing1.first_answer_s < timing1.simulate_s, 'a slow closure shows its first answer before');
   await page.screenshot({ path: join(out, '3-simulated.png') });
   await page.check('#show-tension');
   await page.waitForSelector('body[data-tension="shown"]');
@@ -143,8 +151,9 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   await page.waitForFunction(() => window.caps.planner.state.parameters.angle === 45);
   await page.waitForSelector('body[data-check="ok"]');
   await page.click('#simulate');
-  await page.waitForFunction(() => window.caps.results.rows.length === 2, null, { timeout: 240000 });
-  await page.waitForSelector('body[data-simulation="done"]');
+  // The row comes with the first (linear) answer; the finite-strain one takes its place.
+  await page.waitForSelector('body[data-simulation="done"]', { timeout: 240000 });
+  assert.equal(await page.evaluate(() => window.caps.results.rows.length), 2);
   const closing2 = Number(await page.locator('#alternatives tbody tr').nth(1).locator('td.closing').innerText());
   assert.ok(closing2 > 0 && closing2 !== closing1, `two alternatives: ${closing1} N and ${closing2} N`);
   await page.locator('#alternatives tbody tr').nth(0).locator('button[data-show="1"]').click();
@@ -264,8 +273,9 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   await page.waitForSelector('body[data-check="ok"]');
   log('three suture pairs picked beside the cut: the template\'s pairs; moved, removed, undone');
   await page.click('#simulate');
-  await page.waitForFunction(() => window.caps.results.rows.length === 3, null, { timeout: 240000 });
-  await page.waitForSelector('body[data-simulation="done"]');
+  // The row comes with the first (linear) answer; the finite-strain one takes its place.
+  await page.waitForSelector('body[data-simulation="done"]', { timeout: 240000 });
+  assert.equal(await page.evaluate(() => window.caps.results.rows.length), 3);
   const closing3 = await page.evaluate(() => window.caps.results.rows[2].result.closing_force_n);
   assert.ok(closing3 > 0, `the drawn Z closes with ${closing3} N`);
   log(`drawn Z simulated: ${closing3.toFixed(2)} N (the template's ${closing1} N, which also frees its flaps)`);
@@ -304,5 +314,30 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
     `caps simulate on the saved plan: ${cliForce} N, the page: ${closing3} N`);
   log(`caps simulate on the saved drawn plan: ${cliForce.toFixed(4)} N, as on the page`);
 
+  // A finite-strain closure that runs out of its time limit: the first answer (the linear
+  // closure) stays, labelled so, in the view, the summary and the table, and the status says why.
+  allow(/status of 422/);  // the browser logs the refused simulate request
+  await page.evaluate(() => {
+    const limit = document.getElementById('time-limit');
+    limit.add(new Option('1 µs', '0.000001'));
+    limit.value = '0.000001';
+  });
+  await page.click('#simulate');
+  await page.waitForSelector('body[data-simulation="linear"]', { timeout: 240000 });
+  const kept = await page.evaluate(() => {
+    const rows = window.caps.results.rows;
+    return { n: rows.length, last: rows.at(-1).result.material, provisional: rows.at(-1).provisional,
+      shown: window.caps.results.shown[0] === rows.at(-1) };
+  });
+  assert.equal(kept.n, 4, 'the linear answer is a row of its own');
+  assert.equal(kept.last, 'linear');
+  assert.ok(kept.shown, 'and shown in view A');
+  assert.match(kept.provisional, /did not finish .*time limit/);
+  assert.match(await page.locator('#provisional').innerText(), /linear \(small-strain\) closure/);
+  assert.match(await page.locator('#label-a').innerText(), /\(linear\)$/);
+  assert.match(await page.locator('#alternatives tbody tr').nth(3).innerText(), /linear/);
+  assert.match(await page.locator('#status').innerText(), /linear \(small-strain\) answer is shown.*time limit/s);
+  log(`time limit: the finite-strain closure stopped, the linear first answer stays: ${kept.provisional}`);
+  await page.screenshot({ path: join(out, '9-linear-first-answer.png') });
 });
 log('passed');

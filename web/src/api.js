@@ -64,8 +64,10 @@ export const api = {
     postJson(`/api/plan/check${name ? `?name=${encodeURIComponent(name)}` : ''}`, plan, signal),
   /** The plan's cutting lines and points on the skin (LPS mm). */
   planLines: (plan, signal) => postJson('/api/plan/lines', plan, signal),
-  /** caps simulate: the result JSON with result_id and result_url. */
-  simulate: (plan, options) => postJson('/api/simulate', { plan, options }),
+  /** caps simulate: the result JSON with result_id and result_url; `firstAnswer`: the server
+   * closes the plan with the linear model first and puts that result on /api/progress. */
+  simulate: (plan, options, firstAnswer = false) =>
+    postJson('/api/simulate', firstAnswer ? { plan, options, first_answer: true } : { plan, options }),
   /** Cancels the running simulation (its request is answered 409); {cancelled: was one running}.
    * `keepalive`: sent even while the page is being left. */
   cancelSimulation: async (keepalive = false) =>

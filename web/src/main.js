@@ -4,7 +4,7 @@ import { api, apiFetch } from './api.js';
 import { lpsToScene } from './frames.js';
 import { kIncision, Planner } from './planner.js';
 import { showLandmarks } from './landmarks.js';
-import { Results, escapeHtml } from './results.js';
+import { Results, escapeHtml, whyNotFinished } from './results.js';
 import { pairColour, sideText } from './sutures.js';
 import { loadModelSkin } from './skin.js';
 import { Viewer } from './viewer.js';
@@ -280,6 +280,7 @@ async function main() {
     if (!planner.plan) return;
     const options = { material: $('material').value };
     if ($('mesh-size').value) options.mesh_size = Number($('mesh-size').value);
+    if (options.material !== 'linear') options.time_limit = Number($('time-limit').value);
     $('simulate').disabled = true;
     $('cancel-simulation').hidden = false;
     try {
@@ -287,7 +288,11 @@ async function main() {
       await results.simulate(planner.plan, options, { ownSutures: planner.state?.sutures != null });
       status('');
     } catch (e) {
-      status(e.status === 409 ? 'The simulation was cancelled.' : `The simulation failed: ${e.message}`);
+      if (e.linearShown)
+        status(`The finite-strain closure ${whyNotFinished(e)}; the linear (small-strain) answer is shown.` +
+          (/time limit/.test(whyNotFinished(e)) ? ' Choose a longer time limit to wait for it.' : ''));
+      else
+        status(e.status === 409 ? 'The simulation was cancelled.' : `The simulation failed: ${e.message}`);
     } finally {
       $('simulate').disabled = !planner.plan;
       $('cancel-simulation').hidden = true;

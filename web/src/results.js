@@ -35,52 +35,103 @@ export class Results {
     this.morph = 1;
   }
 
-  /** Runs the simulation of `plan` with `options`; adds its row and shows it in view A. */
+  /** Runs the simulation of `plan` with `options`; adds its row and shows it in view A. A
+   * finite-strain closure asks the server for a first answer (the linear closure of the same
+   * plan, docs/planner.md "First answer"): it is shown, labelled, as soon as it is there, and
+   * replaced by the finite-strain result; if that one fails, runs out of its time limit or is
+   * cancelled, the first answer stays, labelled with why. */
   async simulate(plan, options, { ownSutures = false } = {}) {
     const e = this.el;
     e.progress.hidden = false;
     e.progressText.textContent = 'starting…';
     e.progressBar.removeAttribute('value');
     document.body.dataset.simulation = 'running';
+    const t0 = performance.now();
+    const firstAnswer = (options.material ?? 'neo-hookean') !== 'linear';
+    let first = null;         // the first answer's row, once shown
+    let firstLoading = null;  // its loading
+    const showFirst = (result) => {
+      firstLoading ??= (async () => {
+        const row = await this.resultRow(plan, result, ownSutures);
+        row.provisional = 'first answer: the linear (small-strain) closure; the finite-strain one is running';
+        row.seconds = (performance.now() - t0) / 1000;
+        this.rows.push(row);
+        await this.showRow(row, 0);
+        await this.views[0].nextFrame();
+        row.timing = { first_answer_s: (performance.now() - t0) / 1000 };
+        first = row;
+        document.body.dataset.firstAnswer = 'shown';
+      })();
+      return firstLoading;
+    };
     const poll = setInterval(async () => {
       try {
         const p = await api.progress();
+        if (firstAnswer && p.first_answer && !firstLoading) showFirst(p.first_answer).catch(() => {});
         if (!p.running) return;
         e.progressBar.value = p.fraction;
-        e.progressText.textContent = `${p.step} ${Math.round(p.fraction * 100)} % (${p.elapsed_s.toFixed(1)} s)`;
+        e.progressText.textContent = `${first ? 'finite strain: ' : ''}${p.step} ` +
+          `${Math.round(p.fraction * 100)} % (${p.elapsed_s.toFixed(1)} s)`;
       } catch { /* the next poll tries again */ }
     }, kPollMs);
-    const t0 = performance.now();
     try {
-      const result = await api.simulate(plan, options);
+      const result = await api.simulate(plan, options, firstAnswer);
       const t1 = performance.now();
       e.progressText.textContent = 'loading the post-operative skin…';
-      const [view, file] = await Promise.all([api.resultView(result.result_id),
-        api.resultFile(result.result_id, 'result.json')]);
+      const row = await this.resultRow(plan, result, ownSutures);
       const t2 = performance.now();
-      const row = {
-        n: this.rows.length + 1, plan, result, view, ownSutures,
-        sutures: file.sutures_at_spacing?.sutures ?? [],
-        skins: [null, null],
-      };
-      this.rows.push(row);
+      await firstLoading?.catch(() => {});
+      if (first) {  // the final answer takes the first one's place
+        row.n = first.n;
+        row.timing0 = first.timing;
+        this.rows[this.rows.indexOf(first)] = row;
+        this.shown = this.shown.map((r) => (r === first ? null : r));
+      } else {
+        this.rows.push(row);
+      }
       await this.showRow(row, 0);
       await this.views[0].nextFrame();  // on screen once the frame with it is drawn
       const t3 = performance.now();
       row.seconds = (t3 - t0) / 1000;
       // Where the time went, for the latency benchmark (docs/benchmarks.md).
-      row.timing = { simulate_s: (t1 - t0) / 1000, view_s: (t2 - t1) / 1000, draw_s: (t3 - t2) / 1000 };
+      row.timing = { simulate_s: (t1 - t0) / 1000, view_s: (t2 - t1) / 1000, draw_s: (t3 - t2) / 1000,
+        first_answer_s: first?.timing?.first_answer_s };
       this.showSummary(row);
       this.renderTable();
       document.body.dataset.simulation = 'done';
       return row;
     } catch (err) {
-      document.body.dataset.simulation = 'failed';
+      // The finite-strain closure did not finish: the first answer, if there is one, stays.
+      if (firstAnswer && !firstLoading) {
+        const p = await api.progress().catch(() => null);
+        if (p?.first_answer) showFirst(p.first_answer);
+      }
+      await firstLoading?.catch(() => {});
+      if (first) {
+        first.provisional = `the linear (small-strain) closure: the finite-strain one ${whyNotFinished(err)}`;
+        this.showSummary(first);
+        this.renderTable();
+        err.linearShown = true;
+        document.body.dataset.simulation = 'linear';
+      } else {
+        document.body.dataset.simulation = 'failed';
+      }
       throw err;
     } finally {
       clearInterval(poll);
       e.progress.hidden = true;
     }
+  }
+
+  // A row of the alternatives for a simulate result: its view and its result.json.
+  async resultRow(plan, result, ownSutures) {
+    const [view, file] = await Promise.all([api.resultView(result.result_id),
+      api.resultFile(result.result_id, 'result.json')]);
+    return {
+      n: this.rows.length + 1, plan, result, view, ownSutures,
+      sutures: file.sutures_at_spacing?.sutures ?? [],
+      skins: [null, null],
+    };
   }
 
   /** Shows a row's result in view `which` (0: A, 1: B). */
@@ -97,7 +148,7 @@ export class Results {
     viewer.setOverlay(sutureObjects(row.sutures));
     this.shown[which] = row;
     document.getElementById(which ? 'label-b' : 'label-a').textContent =
-      `${which ? 'B' : 'A'}: #${row.n} ${planLabel(row.plan, row.ownSutures)}`;
+      `${which ? 'B' : 'A'}: #${row.n} ${planLabel(row.plan, row.ownSutures)}${row.provisional ? ' (linear)' : ''}`;
     if (which === 0) {
       this.showSummary(row);
       this.onShown?.(row);
@@ -260,6 +311,9 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
         ${fmt(row.view.max_skin_tension_kpa, 1)} kPa at a sutured corner); largest displacement
         ${fmt(r.max_displacement_mm)} mm; ${r.elements} elements, ${r.material}; ${fmt(row.seconds, 1)} s.</p>
       ${warnings ? `<ul class="warnings">${warnings}</ul>` : ''}`;
+    if (row.provisional)
+      this.el.summary.insertAdjacentHTML('afterbegin',
+        `<p class="provisional" id="provisional">Shown: ${escapeHtml(row.provisional)}.</p>`);
     const rows = row.sutures.map((x, i) =>
       `<tr><td>${i + 1}</td><td>${fmt(x.force_n, 3)} N</td><td>${x.pairs}</td></tr>`).join('');
     this.el.sutures.innerHTML = `<tr><th>suture</th><th>force</th><th>node pairs</th></tr>${rows}`;
@@ -275,7 +329,9 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
       tr.dataset.row = row.n;
       if (this.shown[0] === row) tr.classList.add('shown-a');
       if (this.shown[1] === row) tr.classList.add('shown-b');
-      tr.innerHTML = `<td>${row.n}</td><td>${escapeHtml(planLabel(row.plan, row.ownSutures))}</td>
+      if (row.provisional) tr.classList.add('provisional');
+      tr.innerHTML = `<td>${row.n}</td><td>${escapeHtml(planLabel(row.plan, row.ownSutures))}${
+        row.provisional ? ' <i title="the finite-strain closure did not answer (yet)">linear</i>' : ''}</td>
         <td class="closing">${fmt(r.closing_force_n)}</td>
         <td class="largest">${fmt(r.sutures_at_spacing?.max_force_per_suture_n)}</td>
         <td>${fmt(row.view.tension_scale_max_kpa, 1)}</td>
@@ -287,6 +343,16 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
       body.appendChild(tr);
     }
   }
+}
+
+/** Why a finite-strain simulation gave no answer, in a few words: cancelled, its time limit
+ * (with how far it had come) or the solver's message. */
+export function whyNotFinished(err) {
+  if (err.status === 409) return 'was cancelled';
+  const limit = /time limit of ([0-9.e+-]+) s.*?it had come ([0-9.]+) % of the way/s.exec(err.message);
+  if (err.status === 422 && limit)
+    return `did not finish within the time limit of ${+Number(limit[1]).toPrecision(3)} s (it had come ${limit[2]} % of the way)`;
+  return `did not finish (${err.message})`;
 }
 
 export function escapeHtml(s) {
