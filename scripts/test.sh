@@ -13,4 +13,4 @@ if [ "${1:-}" = "--fast" ]; then
   exit 0
 fi
 (cd "$here/build" && ctest --output-on-failure -j"$(nproc)")
-bash "$here/scripts/sanitize.sh" --seconds "${CAPS_FUZZ_SECONDS:-20}"
+bash "$here/scripts/sanitize.sh" --seconds "${CAPS_FUZZ_SECONDS:-10}"
