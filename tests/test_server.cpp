@@ -459,7 +459,7 @@ TEST_F(ServerTest, APlanMadeAndSimulatedThroughTheApiEqualsTheAppResult) {
 }
 
 // The first answer (docs/planner.md): asked for, a finite-strain simulation is preceded by the
-// linear closure of the same plan, a result of its own that /api/progress carries while the
+// linear closure of the same plan on the clamped patch, a result of its own that /api/progress carries while the
 // finite-strain one runs and keeps when that one stops at its time limit.
 TEST_F(ServerTest, AFiniteStrainSimulationGivesTheLinearAnswerFirstAndKeepsItWhenItStops) {
   const auto planned = post("/api/plan/new", plan_body().dump());
@@ -482,7 +482,8 @@ TEST_F(ServerTest, AFiniteStrainSimulationGivesTheLinearAnswerFirstAndKeepsItWhe
   EXPECT_GT(final_answer.at("timings_s").at("first_answer").get<double>(), 0);
   EXPECT_LT(final_answer.at("timings_s").at("first_answer").get<double>(),
             final_answer.at("timings_s").at("simulate").get<double>());
-  // The first answer is on the progress board: the linear closure, as caps simulate gives it.
+  // The first answer is on the progress board: the linear closure on the clamped patch, as caps
+  // simulate gives it.
   const json first = json::parse(get("/api/progress")->body).at("first_answer");
   EXPECT_EQ(first.at("result_id").get<int>(), first_id);
   EXPECT_EQ(first.at("material"), "linear");
@@ -490,7 +491,7 @@ TEST_F(ServerTest, AFiniteStrainSimulationGivesTheLinearAnswerFirstAndKeepsItWhe
   std::ofstream(plan_file) << planned->body;
   const auto cli = caps_test::caps("simulate --model " + kModel + " --plan " + plan_file.string() +
                                    " -o " + (kTmp / "first_answer_linear").string() +
-                                   " --mesh-size 2.5 --material linear --force -q --json");
+                                   " --mesh-size 2.5 --material linear --domain patch --force -q --json");
   ASSERT_EQ(cli.code, 0) << cli.out;
   const json linear = json::parse(cli.out);
   EXPECT_NEAR(first.at("closing_force_n").get<double>(), linear.at("closing_force_n").get<double>(),

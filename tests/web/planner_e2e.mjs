@@ -333,10 +333,10 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, allow }) => {
   assert.equal(kept.last, 'linear');
   assert.ok(kept.shown, 'and shown in view A');
   assert.match(kept.provisional, /did not finish .*time limit/);
-  assert.match(await page.locator('#provisional').innerText(), /linear \(small-strain\) closure/);
+  assert.match(await page.locator('#provisional').innerText(), /linear \(small-strain\) closure of the patch/);
   assert.match(await page.locator('#label-a').innerText(), /\(linear\)$/);
   assert.match(await page.locator('#alternatives tbody tr').nth(3).innerText(), /linear/);
-  assert.match(await page.locator('#status').innerText(), /linear \(small-strain\) answer is shown.*time limit/s);
+  assert.match(await page.locator('#status').innerText(), /linear \(small-strain\) answer of the patch is shown.*time limit/s);
   log(`time limit: the finite-strain closure stopped, the linear first answer stays: ${kept.provisional}`);
   await page.screenshot({ path: join(out, '9-linear-first-answer.png') });
 });

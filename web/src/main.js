@@ -289,7 +289,7 @@ async function main() {
       status('');
     } catch (e) {
       if (e.linearShown)
-        status(`The finite-strain closure ${whyNotFinished(e)}; the linear (small-strain) answer is shown.` +
+        status(`The finite-strain closure ${whyNotFinished(e)}; the linear (small-strain) answer of the patch is shown.` +
           (/time limit/.test(whyNotFinished(e)) ? ' Choose a longer time limit to wait for it.' : ''));
       else
         status(e.status === 409 ? 'The simulation was cancelled.' : `The simulation failed: ${e.message}`);

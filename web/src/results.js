@@ -53,7 +53,8 @@ export class Results {
     const showFirst = (result) => {
       firstLoading ??= (async () => {
         const row = await this.resultRow(plan, result, ownSutures);
-        row.provisional = 'first answer: the linear (small-strain) closure; the finite-strain one is running';
+        row.provisional = 'first answer: the linear (small-strain) closure of the patch around the wound, ' +
+          'clamped at its rim; the finite-strain closure in the whole face is running';
         row.seconds = (performance.now() - t0) / 1000;
         this.rows.push(row);
         await this.showRow(row, 0);
@@ -108,7 +109,8 @@ export class Results {
       }
       await firstLoading?.catch(() => {});
       if (first) {
-        first.provisional = `the linear (small-strain) closure: the finite-strain one ${whyNotFinished(err)}`;
+        first.provisional = `the linear (small-strain) closure of the patch around the wound, clamped at ` +
+          `its rim: the finite-strain one ${whyNotFinished(err)} (Material: linear closes the whole face)`;
         this.showSummary(first);
         this.renderTable();
         err.linearShown = true;
