@@ -7,7 +7,7 @@ import { api, apiFetch } from './api.js';
 import { sutureObjects } from './overlays.js';
 import { loadResultSkin } from './skin.js';
 
-const kPollMs = 250;
+const kPollMs = 100;
 const kPlaySeconds = 2;
 
 const fmt = (v, digits = 2) => (Number.isFinite(v) ? v.toFixed(digits) : '–');
