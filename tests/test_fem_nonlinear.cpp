@@ -643,6 +643,43 @@ TEST(FiniteStrain, AStepStagnatingBelowTheStagnationToleranceIsAcceptedAndMarked
   EXPECT_THROW(solve(m, few), InvalidInput);
 }
 
+// After a cut-back a step grows back only to half the nominal step, and each further cut-back
+// halves that cap again, down to a quarter of the nominal step (issue 35: a nominal step that
+// failed where the flaps buckle was tried again at that size after every cut-back). Newton is
+// held to 2 solves a step (as in the stagnation test above), so that steps are cut back and
+// then grow: here every step at the nominal size fails and its half converges.
+TEST(FiniteStrain, AfterACutBackStepsGrowOnlyToAShrinkingCap) {
+  const Mesh m = slotted_box(6.0);
+  SolveOptions o = finite();
+  o.newton.secant_predictor = false;
+  o.newton.max_iterations = 2;
+  o.newton.stagnation_tolerance = o.newton.residual_tolerance;  // no step accepted early
+  const SolveResult r = solve(m, o);
+  print_history(r, "2 solves a step, never stagnating");
+  const double nominal = 1.0 / o.newton.n_steps;
+  double cap = nominal, lambda = 0;
+  int cut = 0;
+  for (const NewtonStep& s : r.newton_steps) {
+    for (int k = 0; k < s.cutbacks; ++k) cap = std::max(0.5 * cap, 0.25 * nominal);
+    cut += s.cutbacks;
+    // After the first cut-back, a step taken without a cut-back of its own is at most the cap.
+    const double dl = s.lambda - lambda;
+    if (cut > 0 && s.cutbacks == 0)
+      EXPECT_LE(dl, cap * (1 + 1e-9)) << "step " << s.step << " of " << dl << " with the cap at " << cap;
+    lambda = s.lambda;
+  }
+  EXPECT_DOUBLE_EQ(lambda, 1.0);
+  EXPECT_LT(cap, nominal);
+  // The nominal size is not tried again after every step: 3 cut-backs in 22 steps (without the
+  // cap every step but the last was first tried at the nominal size and cut back: 21).
+  EXPECT_GE(cut, 1);
+  EXPECT_LE(cut, 4);
+  // The same answer as Newton without the budget of 2 solves a step.
+  const SolveResult full = solve(m, finite());
+  const double scale = full.displacement_mm.cwiseAbs().maxCoeff();
+  EXPECT_LT((r.displacement_mm - full.displacement_mm).cwiseAbs().maxCoeff(), 1e-5 * scale);
+}
+
 TEST(FiniteStrain, MumpsCholmodAndThreadsAgree) {
   const Mesh m = slotted_box(6.0);
   SolveOptions a = finite(5), b = finite(5), c = finite(5), d = finite(5), e = finite(5);
