@@ -74,7 +74,6 @@ try {
   const rows = [];
   for (let i = 0; i < Number(runs); ++i) {
     const cpu0 = serverCpuS();
-    await page.click('#simulate');
     const tClick = Date.now();
     // A DOM click: Playwright's page.click() retries a click it thinks missed, which here clicked
     // Simulate a second time once the first simulation had re-enabled the button.

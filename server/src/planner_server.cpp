@@ -509,6 +509,9 @@ struct PlannerServer::Impl {
 
   std::string simulate(const std::string& body) {
     const std::string source = "simulate request";
+    // The last request's first answer leaves the board as soon as a new request arrives (the
+    // page polls it while its request waits for the running one to stop).
+    progress->set_first_answer(nullptr);
     const json j = parse_object(body, source);
     for (const auto& [key, value] : j.items())
       if (key != "plan" && key != "options" && key != "first_answer")
@@ -558,11 +561,11 @@ struct PlannerServer::Impl {
     const auto since_t0 = [&] {
       return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     };
-    // The first answer (docs/planner.md, "First answer"): asked for a finite-strain closure, the
-    // same plan is closed first by the linear model on the clamped patch (one small solve), its
-    // result kept as a result of
-    // its own and put on the progress board, which the page shows while the finite-strain
-    // closure runs, and keeps if that one fails or runs out of its time limit.
+    // The first answer (docs/planner.md, "First answer and time limit"): asked for a
+    // finite-strain closure, the same plan is closed first by the linear model on the clamped
+    // patch (one small solve), its result kept as a result of its own and put on the progress
+    // board, which the page shows while the finite-strain closure runs, and keeps if that one
+    // fails or runs out of its time limit.
     std::optional<int> first_id;
     double first_s = 0;
     if (first_answer && options_json.value("material", std::string()) != "linear")
@@ -588,8 +591,9 @@ struct PlannerServer::Impl {
   }
 
   // The linear closure of the simulate request `options_json` (a finite-strain one) on the
-  // clamped patch, as a result of its own, put on the progress board; its id. A request the linear model refuses (an option
-  // of the finite-strain model alone) has no first answer: the finite-strain closure answers.
+  // clamped patch, as a result of its own, put on the progress board; its id. A request the
+  // linear model refuses (an option of the finite-strain model alone) has no first answer: the
+  // finite-strain closure answers.
   template <class Elapsed>
   std::optional<int> simulate_first_answer(json options_json, const std::shared_ptr<const Served>& on,
                                            const std::string& plan_text, const std::string& source,

@@ -33,6 +33,7 @@ export class Results {
     this.modelSkin = null;   // the model's ColouredSkin, shown while no result is
     this.colouring = 'skin';
     this.morph = 1;
+    this.lastResultId = 0;   // the newest result id taken from the server (ids only grow)
   }
 
   /** Runs the simulation of `plan` with `options`; adds its row and shows it in view A. A
@@ -50,7 +51,11 @@ export class Results {
     const firstAnswer = (options.material ?? 'neo-hookean') !== 'linear';
     let first = null;         // the first answer's row, once shown
     let firstLoading = null;  // its loading
+    // The progress board's first answer is this request's only if it is newer than every result
+    // taken so far (until the server starts this request, the board holds the last one's).
+    const ours = (answer) => answer && answer.result_id > this.lastResultId;
     const showFirst = (result) => {
+      this.lastResultId = Math.max(this.lastResultId, result.result_id);
       firstLoading ??= (async () => {
         const row = await this.resultRow(plan, result, ownSutures);
         row.provisional = 'first answer: the linear (small-strain) closure of the patch around the wound, ' +
@@ -68,7 +73,7 @@ export class Results {
     const poll = setInterval(async () => {
       try {
         const p = await api.progress();
-        if (firstAnswer && p.first_answer && !firstLoading) showFirst(p.first_answer).catch(() => {});
+        if (firstAnswer && ours(p.first_answer) && !firstLoading) showFirst(p.first_answer).catch(() => {});
         if (!p.running) return;
         e.progressBar.value = p.fraction;
         e.progressText.textContent = `${first ? 'finite strain: ' : ''}${p.step} ` +
@@ -77,6 +82,7 @@ export class Results {
     }, kPollMs);
     try {
       const result = await api.simulate(plan, options, firstAnswer);
+      this.lastResultId = Math.max(this.lastResultId, result.result_id);
       const t1 = performance.now();
       e.progressText.textContent = 'loading the post-operative skin…';
       const row = await this.resultRow(plan, result, ownSutures);
@@ -84,7 +90,6 @@ export class Results {
       await firstLoading?.catch(() => {});
       if (first) {  // the final answer takes the first one's place
         row.n = first.n;
-        row.timing0 = first.timing;
         this.rows[this.rows.indexOf(first)] = row;
         this.shown = this.shown.map((r) => (r === first ? null : r));
       } else {
@@ -102,10 +107,11 @@ export class Results {
       document.body.dataset.simulation = 'done';
       return row;
     } catch (err) {
-      // The finite-strain closure did not finish: the first answer, if there is one, stays.
-      if (firstAnswer && !firstLoading) {
+      // The finite-strain closure did not finish (422) or was cancelled (409): the first answer,
+      // if there is one, stays. (A refused request, 400, never started.)
+      if (firstAnswer && !firstLoading && (err.status === 422 || err.status === 409)) {
         const p = await api.progress().catch(() => null);
-        if (p?.first_answer) showFirst(p.first_answer);
+        if (ours(p?.first_answer)) showFirst(p.first_answer);
       }
       await firstLoading?.catch(() => {});
       if (first) {
