@@ -517,6 +517,13 @@ TEST_F(ServerTest, AFiniteStrainSimulationGivesTheLinearAnswerFirstAndKeepsItWhe
   EXPECT_GT(kept_id, first_id);
   EXPECT_EQ(kept.at("first_answer").at("closing_force_n"), first.at("closing_force_n"));
   EXPECT_EQ(get(cat("/api/results/", kept_id, "/view"))->status, 200);
+  // The next request clears it as soon as it arrives, even one refused at once (the page polls
+  // the board while its request waits).
+  const auto refused = post("/api/simulate", json{{"plan", plan}, {"options", {{"steps", "ten"}}},
+                                                  {"first_answer", true}}.dump());
+  ASSERT_TRUE(refused);
+  EXPECT_EQ(refused->status, 400);
+  EXPECT_FALSE(json::parse(get("/api/progress")->body).contains("first_answer"));
   // A linear simulation has no first answer.
   const auto plain = post("/api/simulate",
                           json{{"plan", plan}, {"options", {{"mesh_size", 2.5}, {"material", "linear"}}},
