@@ -281,13 +281,13 @@ class FiniteStrainSolver {
   Eigen::VectorXd q_;
   double nominal_ = 1, lambda_ = 0, dlambda_ = 1;
   // The largest step a step grows back to after a cut-back: the nominal step, halved by each
-  // cut-back of this solve down to a quarter of it (grow_step()).
+  // cut-back of this solve down to a quarter of it (grow_step()); below the nominal step once a
+  // step of this solve has been cut back.
   double growth_cap_ = 1;
   int step_ = 0, cutbacks_ = 0;
   // The solves snapping steps may take beyond max_iterations, over the whole solve: a closure
   // whose snaps fail and are cut back does not repeat them without end.
   int snap_solves_left_ = 0;
-  bool cut_back_ = false;  // a step of this solve was cut back: steps grow only to the nominal size
   std::optional<Failure> inverted_in_step_;  // the first inversion among the attempts of a step
   Clock::time_point started_ = Clock::now();
   // The last accepted step's start and size, for the secant predictor (0: none yet).
@@ -388,7 +388,6 @@ bool FiniteStrainSolver::warm_start() {
   dlambda_ = growth_cap_ = nominal_;
   step_ = cutbacks_ = 0;
   snap_solves_left_ = no_.snap_iterations;
-  cut_back_ = false;
   inverted_in_step_.reset();
   at_converged_state_ = false;
   return false;
@@ -655,7 +654,8 @@ void FiniteStrainSolver::accept_step(const StepAttempt& s) {
 // again (Cranium, the page's default Z-plasty at 30,110 on the clamped patch: 5 cut-backs,
 // 81 solves and 101 factorizations; with the cap 3, 59 and 41; docs/fem.md, "Load steps").
 void FiniteStrainSolver::grow_step(const NewtonStep& record) {
-  if (!cut_back_ && record.iterations <= no_.grow_iterations)
+  const bool cut_back = growth_cap_ < nominal_;  // a step of this solve was cut back
+  if (!cut_back && record.iterations <= no_.grow_iterations)
     dlambda_ = 2 * dlambda_;
   else if (record.iterations <= 4)
     dlambda_ = std::max(dlambda_, std::min(2 * dlambda_, growth_cap_));
@@ -678,7 +678,6 @@ void FiniteStrainSolver::cut_back_step(StepAttempt& s) {
   q_ = s.q_start;
   growth_cap_ = std::max(0.5 * growth_cap_, 0.25 * nominal_);
   dlambda_ = 0.5 * s.dl;  // half the step that failed (it may have been clipped to what remained)
-  cut_back_ = true;
   if (++cutbacks_ > no_.max_cutbacks) {
     throw SolverError(
         cat("finite-strain solve failed at load step ", step_ + 1, " (from lambda ", lambda_,
