@@ -569,7 +569,7 @@ struct PlannerServer::Impl {
     std::optional<int> first_id;
     double first_s = 0;
     if (first_answer && options_json.value("material", std::string()) != "linear")
-      first_id = simulate_first_answer(options_json, on, plan_text, source, cancellable, since_t0);
+      first_id = simulate_first_answer(options_json, on, plan_text, source, cancellable, t0);
     if (first_id) first_s = since_t0();
     const std::string result = verb.run_json(request, source, &cancellable);
     const double total_s = since_t0();
@@ -594,10 +594,10 @@ struct PlannerServer::Impl {
   // clamped patch, as a result of its own, put on the progress board; its id. A request the
   // linear model refuses (an option of the finite-strain model alone) has no first answer: the
   // finite-strain closure answers.
-  template <class Elapsed>
   std::optional<int> simulate_first_answer(json options_json, const std::shared_ptr<const Served>& on,
                                            const std::string& plan_text, const std::string& source,
-                                           Reporter& cancellable, const Elapsed& elapsed_s) {
+                                           Reporter& cancellable,
+                                           std::chrono::steady_clock::time_point t0) {
     const int id = ++next_id;
     {
       std::lock_guard<std::mutex> lock(served_mutex);
@@ -623,7 +623,8 @@ struct PlannerServer::Impl {
       return std::nullopt;
     }
     write_text_atomic(out_dir / "plan.json", plan_text);
-    first["timings_s"]["simulate"] = elapsed_s();
+    first["timings_s"]["simulate"] =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     first["result_id"] = id;
     first["result_url"] = cat("/api/results/", id, "/");
     progress->set_first_answer(first);
