@@ -654,6 +654,17 @@ bool wait_for_entry(const fs::path& dir, const std::string& prefix, double secon
   return false;
 }
 
+// Waits for the claim `prefix` of the background run `pid` and stops the run there (SIGSTOP), so
+// that what the test does next happens while the run is writing, however fast the run is.
+bool pause_when_claimed(pid_t pid, const fs::path& dir, const std::string& prefix) {
+  for (int i = 0; i < 30000; ++i) {
+    for (const auto& e : fs::directory_iterator(dir))
+      if (e.path().filename().string().rfind(prefix, 0) == 0) return ::kill(pid, SIGSTOP) == 0;
+    ::usleep(2000);
+  }
+  return false;
+}
+
 int exit_code_of(pid_t pid) {
   int status = 0;
   ::waitpid(pid, &status, 0);
@@ -715,13 +726,16 @@ TEST_F(HostileModel, ASecondWriterOfTheSameOutputIsRefusedNotRaced) {
   const std::string args = "model from-volume -q " + phantom().string() + " -o " + out.string() +
                            " --n-theta 96 --n-z 48";
   const pid_t first = start_caps(args, err);
-  ASSERT_TRUE(wait_for_entry(dir, "claimed_model.caps-claim", 60)) << "the first run never started";
+  ASSERT_TRUE(pause_when_claimed(first, dir, "claimed_model.caps-claim")) << "the first run never started";
+  if (fs::exists(out)) ::kill(first, SIGCONT);
+  ASSERT_FALSE(fs::exists(out)) << "the first run had finished before it was paused";
   const Outcome second = run(args);
   EXPECT_EQ(second.code, 2) << second.err;
   EXPECT_NE(second.err.find("another caps run"), std::string::npos) << second.err;
   EXPECT_NE(second.err.find(std::to_string(first)), std::string::npos) << second.err;
   // --force does not take it either while the first run writes it.
   EXPECT_EQ(run(args + " --force").code, 2);
+  ::kill(first, SIGCONT);
   EXPECT_EQ(exit_code_of(first), 0) << slurp(err);
   EXPECT_TRUE(fs::exists(out / "model.json"));
   EXPECT_TRUE(entries_starting(dir, "claimed_model.").empty());
@@ -732,9 +746,12 @@ TEST_F(HostileModel, ASecondWriterOfTheSameOutputIsRefusedNotRaced) {
   const pid_t run2 = start_caps("model from-volume -q " + phantom().string() + " -o " +
                                     out2.string() + " --n-theta 96 --n-z 48",
                                 err);
-  ASSERT_TRUE(wait_for_entry(dir, "raced_model.caps-claim", 60));
+  ASSERT_TRUE(pause_when_claimed(run2, dir, "raced_model.caps-claim"));
+  if (fs::exists(out2)) ::kill(run2, SIGCONT);
+  ASSERT_FALSE(fs::exists(out2)) << "the run had finished before it was paused";
   fs::create_directories(out2);
   write_file(out2 / "theirs.txt", "made meanwhile");
+  ::kill(run2, SIGCONT);
   EXPECT_EQ(exit_code_of(run2), 2) << slurp(err);
   EXPECT_NE(slurp(err).find("raced_model"), std::string::npos) << slurp(err);
   EXPECT_EQ(slurp(out2 / "theirs.txt"), "made meanwhile");
