@@ -210,6 +210,14 @@ TEST(FemElements, Wedge15IsFullyIntegratedUnlikeCalculixC3D15) {
   // CalculiX's rule under-integrates the same element by ~2 % (measured 1.8 %): the whole
   // difference between ccx and caps on meshes with Wedge15 (docs/mesher.md, CalculiX export).
   EXPECT_GT((wedge_stiffness_with_rule(X, mat, ccx) - Kref).norm(), 1e-2 * Kref.norm());
+  // WedgeRule::CalculiX is that rule, point for point (a mesh.inp of a mesh with it solves in
+  // ccx to the same answer: FaceDomain.CalculixSolvesTheExportedWholeFaceDeck).
+  const auto& nine = quadrature(ElementType::Wedge15, WedgeRule::CalculiX);
+  ASSERT_EQ(nine.size(), ccx.size());
+  for (std::size_t q = 0; q < ccx.size(); ++q) {
+    EXPECT_LT((nine[q].xi - ccx[q].xi).norm(), 1e-15);
+    EXPECT_NEAR(nine[q].weight, ccx[q].weight, 1e-15);
+  }
   // Curved: the mid-edge nodes of the top triangle bulge out, as on the skin of a cylinder.
   for (int a : {6, 7, 8}) X(a, 2) -= 0.15;
   Kref = wedge_stiffness_with_rule(X, mat, ref);

@@ -249,7 +249,7 @@ void Join::tie_rim() {
                               : 3.0 * std::max(tissue_.options.face_size_mm,
                                                tissue_.label_voxel_mm.maxCoeff());
   const TieSearchResult found =
-      tie_nodes(mesh, slaves, tissue_elements_, tolerance, TieMethod::Mortar, o_.reporter);
+      tie_nodes(mesh, slaves, tissue_elements_, tolerance, o_.tie, o_.reporter);
   for (const TiedNode& t : found.ties) mesh.ties.push_back(t);
   d_.tied_nodes = static_cast<int>(found.ties.size());
   d_.untied_nodes = static_cast<int>(found.unmatched.size());

@@ -310,7 +310,7 @@ void assemble_values(const Mesh& mesh, const DofMap& map, Assembly& sys) {
   for_each_coloured_element(mesh, sys, [&](int e, ElementScratch& w) {
     const Element& el = mesh.elements[e];
     const IsotropicElastic& mat = small_strain_material(mesh, el.layer);
-    stiffness_kernel(el.type, w.X, mat.lambda_mpa(), mat.mu_mpa(), e, w.Ke);
+    stiffness_kernel(el.type, w.X, mat.lambda_mpa(), mat.mu_mpa(), e, w.Ke, mesh.wedge_rule);
     const bool has_g = gather_element(el, map, map.g.data(), w.blk, w.eq, w.ge);
     scatter_matrix(sys, map, el.n_nodes(), w.blk, w.eq, w.Ke);
     if (has_g) scatter_lifting(f, 3 * el.n_nodes(), w.eq, w.Ke, w.ge);
@@ -337,7 +337,8 @@ FiniteAssembly assemble_finite(const Mesh& mesh, const DofMap& map,
       w.ue.segment<3>(3 * a) = u.segment<3>(3 * static_cast<Eigen::Index>(el.nodes[a]));
     per_element[e] = finite_kernel(el.type, w.X, *materials.at(el.layer), w.ue, e, w.fe,
                                    with_tangent ? &w.Ke : nullptr,
-                                   el.layer == prestretch.layer ? prestretch.stretch : 1.0);
+                                   el.layer == prestretch.layer ? prestretch.stretch : 1.0,
+                                   mesh.wedge_rule);
     if (per_element[e].inverted_at >= 0) return;
     const bool has_lift = gather_element(el, map, lift.size() ? lift.data() : nullptr, w.blk, w.eq, w.ge);
     for (int p = 0; p < m; ++p)

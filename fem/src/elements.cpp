@@ -126,6 +126,20 @@ std::vector<QuadraturePoint> make_hex_rule() {
   return q;
 }
 
+// CalculiX's C3D15 rule (2.20, e_c3d.f, gauss3d8): the 3-point degree-2 triangle rule ((1/6, 1/6), (2/3, 1/6), (1/6, 2/3),
+// weight 1/6 each) x 3 Gauss points through the thickness. With it caps and ccx 2.20 solve a
+// whole-face closure with 40 wedges to 5e-7 of its largest displacement (tests/test_app_face.cpp).
+std::vector<QuadraturePoint> make_calculix_wedge_rule() {
+  const double tri[3][2] = {{1.0 / 6, 1.0 / 6}, {2.0 / 3, 1.0 / 6}, {1.0 / 6, 2.0 / 3}};
+  const double g = std::sqrt(0.6);
+  const double z[3] = {-g, 0, g}, wz[3] = {5.0 / 9, 8.0 / 9, 5.0 / 9};
+  std::vector<QuadraturePoint> q;
+  for (int k = 0; k < 3; ++k)
+    for (int t = 0; t < 3; ++t)
+      q.push_back({Eigen::Vector3d(tri[t][0], tri[t][1], z[k]), wz[k] / 6.0});
+  return q;
+}
+
 std::vector<QuadraturePoint> make_wedge_rule() {
   // 7-point degree-5 triangle rule (Dunavant 1985, Table "p = 5"; weights sum to 1/2 here).
   const double a1 = 0.059715871789770, b1 = 0.470142064105115;
@@ -169,10 +183,10 @@ Eigen::MatrixX3d gradients_at(ElementType type, const Eigen::MatrixX3d& X, const
 namespace detail {
 
 // Shape functions, derivatives and weights at every Gauss point of the element's rule.
-ShapeTable make_shape_table(ElementType type, int n_nodes) {
+ShapeTable make_shape_table(ElementType type, int n_nodes, WedgeRule wedge = WedgeRule::Full) {
   ShapeTable t;
   t.n = n_nodes;
-  for (const auto& qp : quadrature(type)) {
+  for (const auto& qp : quadrature(type, wedge)) {
     Eigen::VectorXd N;
     Eigen::MatrixX3d dN;
     shape_functions(type, qp.xi, N, dN);
@@ -183,13 +197,14 @@ ShapeTable make_shape_table(ElementType type, int n_nodes) {
   return t;
 }
 
-const ShapeTable& shape_table(ElementType type) {
+const ShapeTable& shape_table(ElementType type, WedgeRule rule) {
   static const ShapeTable hex = make_shape_table(ElementType::Hex20, 20);
   static const ShapeTable wedge = make_shape_table(ElementType::Wedge15, 15);
+  static const ShapeTable wedge9 = make_shape_table(ElementType::Wedge15, 15, WedgeRule::CalculiX);
   static const ShapeTable tet = make_shape_table(ElementType::Tet10, 10);
   switch (type) {
     case ElementType::Hex20: return hex;
-    case ElementType::Wedge15: return wedge;
+    case ElementType::Wedge15: return rule == WedgeRule::CalculiX ? wedge9 : wedge;
     case ElementType::Tet10: return tet;
   }
   throw InvalidInput("shape_table: unknown element type");
@@ -324,12 +339,12 @@ Vector6d finite_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X, const
 FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
                                  const Material& material, const Eigen::VectorXd& u_e,
                                  int element, Eigen::VectorXd& f, Eigen::MatrixXd* K,
-                                 double prestretch) {
+                                 double prestretch, WedgeRule wedge) {
   using Gradients = Eigen::Matrix<double, Eigen::Dynamic, 3, 0, 20, 3>;
   using Matrix9d = Eigen::Matrix<double, 9, 9>;
   // Voigt index of the tensor index pair (K, L): xx yy zz xy yz xz.
   static constexpr int kVoigt[3][3] = {{0, 3, 5}, {3, 1, 4}, {5, 4, 2}};
-  const ShapeTable& t = shape_table(type);
+  const ShapeTable& t = shape_table(type, wedge);
   const int n = t.n, m = 3 * n;
   Eigen::MatrixX3d G(n, 3);
   Gradients FSG(n, 3);
@@ -463,13 +478,14 @@ const char* element_type_name(ElementType type) {
   return "unknown";
 }
 
-const std::vector<QuadraturePoint>& quadrature(ElementType type) {
+const std::vector<QuadraturePoint>& quadrature(ElementType type, WedgeRule rule) {
   static const std::vector<QuadraturePoint> hex = make_hex_rule();
   static const std::vector<QuadraturePoint> wedge = make_wedge_rule();
+  static const std::vector<QuadraturePoint> wedge9 = make_calculix_wedge_rule();
   static const std::vector<QuadraturePoint> tet = make_tet_rule();
   switch (type) {
     case ElementType::Hex20: return hex;
-    case ElementType::Wedge15: return wedge;
+    case ElementType::Wedge15: return rule == WedgeRule::CalculiX ? wedge9 : wedge;
     case ElementType::Tet10: return tet;
   }
   throw InvalidInput("quadrature: unknown element type");

@@ -16,7 +16,7 @@ struct ShapeTable {
   std::vector<Eigen::MatrixX3d> dN;
   std::vector<double> w;
 };
-const ShapeTable& shape_table(ElementType type);
+const ShapeTable& shape_table(ElementType type, WedgeRule wedge = WedgeRule::Full);
 
 /// G = dN/dx (#n×3); returns det J. Throws SolverError naming `element` and `gauss_point`
 /// (-1: evaluated at a node) if det J <= 0.
@@ -69,7 +69,7 @@ struct FiniteKernelResult {
 FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
                                  const Material& material, const Eigen::VectorXd& u_e,
                                  int element, Eigen::VectorXd& f, Eigen::MatrixXd* K,
-                                 double prestretch = 1.0);
+                                 double prestretch = 1.0, WedgeRule wedge = WedgeRule::Full);
 
 /// Cauchy stress (Voigt, MPa) at natural point xi of an element whose tissue is prestretched
 /// (`prestretch` as finite_kernel()); throws SolverError if det F <= 0 there.
@@ -85,8 +85,9 @@ std::string inverted_message(int element, int gauss_point, double det_F);
 /// (the three terms of int B^T D B dV for isotropic D; Hughes 2000, sec. 2.7; the trace of the
 /// 3×3 block A_ab is sum w grad N_a . grad N_b).
 inline void stiffness_kernel(ElementType type, const Eigen::MatrixX3d& X, double lambda,
-                             double mu, int element, Eigen::MatrixXd& K) {
-  const ShapeTable& t = shape_table(type);
+                             double mu, int element, Eigen::MatrixXd& K,
+                             WedgeRule wedge = WedgeRule::Full) {
+  const ShapeTable& t = shape_table(type, wedge);
   const int n = t.n, m = 3 * n;
   Eigen::MatrixXd A = Eigen::MatrixXd::Zero(m, m);
   Eigen::MatrixX3d G(n, 3);

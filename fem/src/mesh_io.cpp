@@ -164,6 +164,7 @@ void write_ties_and_surface(const Mesh& mesh, nlohmann::json& j) {
   const bool on_surface = std::any_of(mesh.sliding.begin(), mesh.sliding.end(),
                                       [](const SlidingNode& s) { return s.on_surface; });
   if (on_surface) j["sliding_surface"] = mesh.sliding_surface_name;
+  if (mesh.wedge_rule == WedgeRule::CalculiX) j["wedge_rule"] = "calculix";
   if (!mesh.node_sets.empty()) {
     j["node_sets"] = nlohmann::json::object();
     for (const auto& [name, ids] : mesh.node_sets) j["node_sets"][name] = ids;
@@ -183,6 +184,12 @@ void read_ties_and_surface(const nlohmann::json& j, const std::string& jw, Mesh&
       tie.masters.push_back(to_int(t[1][k].get<double>(), cat(jw, ": ties[", i, "][1][", k, "]")));
     for (const auto& w : t[2]) tie.weights.push_back(w.get<double>());
     mesh.ties.push_back(std::move(tie));
+  }
+  if (const auto rule = j.find("wedge_rule"); rule != j.end()) {
+    if (*rule == "calculix")
+      mesh.wedge_rule = WedgeRule::CalculiX;
+    else if (*rule != "full")
+      throw InvalidInput(cat(jw, ": wedge_rule must be \"full\" or \"calculix\", not ", rule->dump()));
   }
   const nlohmann::json sets = j.value("node_sets", nlohmann::json::object());
   if (!sets.is_object()) throw InvalidInput(cat(jw, ": node_sets must be an object of id arrays"));

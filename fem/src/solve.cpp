@@ -241,7 +241,7 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
     const Eigen::MatrixX3d X = element_coordinates(mesh, e);
     Eigen::VectorXd ue(3 * nn);
     for (int a = 0; a < nn; ++a) ue.segment<3>(3 * a) = res.displacement_mm.row(el.nodes[a]).transpose();
-    const auto& tab = detail::shape_table(el.type);
+    const auto& tab = detail::shape_table(el.type, mesh.wedge_rule);
     Eigen::MatrixX3d G(nn, 3), F = Eigen::MatrixX3d::Zero(nn, 3);
     out.gauss_stress.resize(static_cast<Eigen::Index>(tab.w.size()), 6);
     double vm = 0, w_sum = 0, en = 0;
@@ -297,7 +297,7 @@ void recover(const Mesh& mesh, const DofMap& map, const ElementRecoveryFn& eleme
   res.gauss_offset[0] = 0;
   for (int e = 0; e < n_el; ++e)
     res.gauss_offset[e + 1] = res.gauss_offset[e] +
-        static_cast<int>(quadrature(mesh.elements[e].type).size());
+        static_cast<int>(quadrature(mesh.elements[e].type, mesh.wedge_rule).size());
   res.gauss_stress_mpa.resize(res.gauss_offset[n_el], 6);
   res.element_von_mises_mpa.resize(n_el);
   Eigen::MatrixXd nodal_sum = Eigen::MatrixXd::Zero(n_nodes, 6);

@@ -797,13 +797,14 @@ void FiniteStrainSolver::recover_element(const Eigen::VectorXd& u, int e,
   for (int a = 0; a < nn; ++a) ue.segment<3>(3 * a) = u.segment<3>(3 * static_cast<Eigen::Index>(el.nodes[a]));
   Eigen::VectorXd fe;
   const double stretch = el.layer == kSkinLayer ? options_.prestretch : 1.0;
-  const FiniteKernelResult k = finite_kernel(el.type, X, mat, ue, e, fe, nullptr, stretch);
+  const FiniteKernelResult k =
+      finite_kernel(el.type, X, mat, ue, e, fe, nullptr, stretch, mesh_.wedge_rule);
   if (k.inverted_at >= 0)  // not after a converged step, which evaluated this very state
     throw SolverError(inverted_message(e, k.inverted_at, k.det_F), e, k.inverted_at);
   out.energy_mj = k.energy_mj;
   out.f_int.resize(nn, 3);
   for (int a = 0; a < nn; ++a) out.f_int.row(a) = fe.segment<3>(3 * a).transpose();
-  const auto& tab = shape_table(el.type);
+  const auto& tab = shape_table(el.type, mesh_.wedge_rule);
   Eigen::MatrixX3d G(nn, 3);
   out.gauss_stress.resize(static_cast<Eigen::Index>(tab.w.size()), 6);
   Vector6d S;
@@ -825,7 +826,7 @@ void FiniteStrainSolver::recover_element(const Eigen::VectorXd& u, int e,
   // At a node the quadratic element's deformation gradient may fold (det F <= 0 at a corner
   // squeezed by the closure) while every Gauss point, where equilibrium is solved and checked,
   // is sound: such a node takes the stress of its nearest Gauss point.
-  const auto& rule = quadrature(el.type);
+  const auto& rule = quadrature(el.type, mesh_.wedge_rule);
   for (int a = 0; a < nn; ++a) {
     const Eigen::Vector3d xi = P.row(a).transpose();
     try {

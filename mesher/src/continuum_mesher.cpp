@@ -718,7 +718,9 @@ std::optional<ContinuumAttempt> ContinuumBuild::check_jacobians() {
 ContinuumAttempt attempt_continuum(const SurfaceMesh& surface, const PatientModel& model,
                                    const ContinuumMeshOptions& o, bool allow_cliffs = false) {
   check_continuum_options(surface, o);
-  return ContinuumBuild(surface, model, o, allow_cliffs).build();
+  ContinuumAttempt attempt = ContinuumBuild(surface, model, o, allow_cliffs).build();
+  if (attempt.mesh) attempt.mesh->mesh.wedge_rule = o.wedge_rule;
+  return attempt;
 }
 
 }  // namespace

@@ -30,6 +30,7 @@ struct MeshingFields {
   double t2 = mesher::SurfaceMeshOptions{}.t2_deg;
   double constant_thickness = mesher::ContinuumMeshOptions{}.constant_thickness_mm;
   std::string tissue = mesher::tissue_layers_name(mesher::ContinuumMeshOptions{}.tissue);
+  std::string wedge_rule = "full";
   /// The budget checked before meshing (check_mesh_budget()): the wound mesh's elements as
   /// estimated from the wound, the extent, the mesh size and the layers.
   double max_elements = 1e6;
@@ -57,6 +58,9 @@ struct MeshingFields {
     v(r.tissue, {"tissue", "tissue layers: measured (dermis, fat and deep tissue from the model's "
                            "layer maps, each its own material), uniform (one material, the 1992 "
                            "model) or auto (measured where the model has them)"});
+    v(r.wedge_rule, {"wedge_rule", "how the wedge elements are integrated: full (21 points, "
+                                   "exact on straight wedges) or calculix (CalculiX's 9 points "
+                                   "for C3D15: mesh.inp then solves in ccx to the same answer)"});
     v(r.max_elements, {"max_elements", "refuse, before meshing, a wound mesh estimated to have "
                                        "more elements than this (default 1e6)"});
   }
@@ -125,6 +129,7 @@ struct SolverFields {
 struct DomainFields {
   std::string domain = "face";
   double face_radius = closure::FaceDomainOptions{}.radius_mm;
+  std::string tie = "mortar";
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
@@ -136,6 +141,9 @@ struct DomainFields {
     v(r.face_radius, {"face_radius", "--domain face: the tissue model is kept within this "
                                      "distance of the wound (mm) and held beyond; 0 = automatic "
                                      "(10 mm beyond the patch's rim, at least 40 mm)"});
+    v(r.tie, {"tie", "--domain face: how the patch's rim is tied to the tissue: mortar (exact "
+                     "for a uniform stress across the join) or node-to-surface (CalculiX's "
+                     "*TIE: the mesh.inp CalculiX solves in minutes, for cross-checks)"});
   }
 };
 

@@ -23,6 +23,7 @@
 
 #include "caps/fem/mesh.hpp"
 #include "caps/fem/solve.hpp"
+#include "caps/fem/tie.hpp"
 #include "caps/mesher/continuum_mesher.hpp"
 #include "caps/mesher/tissue_model.hpp"
 #include "caps/surface/feature_lines.hpp"
@@ -48,6 +49,11 @@ struct FaceDomainOptions {
   /// A rim node farther than this (mm) from every tetrahedron is left untied (a warning counts
   /// them); 0: 3 x the tissue model's facet size on the face or its label voxel, the larger.
   double tie_tolerance_mm = 0;
+  /// How the patch's rim is tied to the tissue: a mortar row (passes the patch test; the
+  /// default) or node to surface (each rim node follows the tetrahedron it lies in: CalculiX's
+  /// *TIE, and an .inp deck CalculiX reads in seconds where the mortar rows' chains of
+  /// *EQUATIONs take it many minutes to resolve).
+  fem::TieMethod tie = fem::TieMethod::Mortar;
   /// Not owned, may be null: the tie's search stops (Cancelled) when it cancels.
   Reporter* reporter = nullptr;
 };

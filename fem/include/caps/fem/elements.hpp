@@ -23,9 +23,9 @@ struct QuadraturePoint {
   double weight;
 };
 
-/// Gauss rule used for the element type: 27 points for Hex20, 21 for Wedge15, 4 for Tet10
-/// (weights sum to the natural volume: 8, 1, 1/6).
-const std::vector<QuadraturePoint>& quadrature(ElementType type);
+/// Gauss rule used for the element type: 27 points for Hex20, 21 (WedgeRule::Full) or 9 for
+/// Wedge15, 4 for Tet10 (weights sum to the natural volume: 8, 1, 1/6).
+const std::vector<QuadraturePoint>& quadrature(ElementType type, WedgeRule wedge = WedgeRule::Full);
 
 /// Natural coordinates of the element's nodes (#n×3).
 Eigen::MatrixX3d natural_nodes(ElementType type);

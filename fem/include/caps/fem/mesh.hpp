@@ -53,6 +53,16 @@ namespace caps::fem {
 
 enum class ElementType : std::uint8_t { Hex20, Wedge15, Tet10 };
 
+/// How Wedge15 is integrated (the other types have one rule).
+enum class WedgeRule {
+  /// 21 points (a 7-point degree-5 triangle rule x 3 Gauss points): exact on affine wedges.
+  Full,
+  /// 9 points (a 3-point degree-2 triangle rule x 3 Gauss points): CalculiX's C3D15, so that
+  /// caps and ccx solve the same discrete problem on meshes with wedges (caps simulate
+  /// --wedge-rule calculix; docs/fem.md, "The whole face").
+  CalculiX
+};
+
 /// 20 for Hex20, 15 for Wedge15, 10 for Tet10.
 int n_element_nodes(ElementType type);
 /// "Hex20" / "Wedge15" / "Tet10".
@@ -144,6 +154,8 @@ struct Mesh {
   /// The elements of each flap the plan raises (transposed, rotated or advanced tissue): the
   /// finite-strain solve swings each flap into place along an arc (docs/fem.md, "Closing path").
   std::vector<std::vector<int>> flaps;
+  /// How the Wedge15 elements are integrated (mesh.json "wedge_rule": "full" or "calculix").
+  WedgeRule wedge_rule = WedgeRule::Full;
   std::string model;                      ///< reference to the patient model, if known
   std::string plan;                       ///< reference to the surgical plan, if known
   std::vector<std::string> warnings;      ///< what the mesher had to give up (e.g. a limited extent)

@@ -111,6 +111,9 @@ struct ContinuumMeshOptions {
   /// uniform model's top element layer), instead of `dermis` or `material`: e.g.
   /// default_goh_skin(), the fibre-reinforced skin over the neo-Hookean tissue (`--material goh`).
   std::shared_ptr<const fem::Material> surface_material;
+  /// How the mesh's Wedge15 elements are integrated (fem::Mesh::wedge_rule): caps's 21 points,
+  /// or CalculiX's 9 for a mesh.inp that ccx solves to the same answer.
+  fem::WedgeRule wedge_rule = fem::WedgeRule::Full;
 };
 
 /// The continuum mesh and where its nodes came from.
