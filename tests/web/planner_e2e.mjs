@@ -20,7 +20,7 @@ const [caps, model, webRoot, out] = process.argv.slice(2);
 mkdirSync(out, { recursive: true });
 const log = logger();
 
-await withPlanner({ caps, model, webRoot, log }, async ({ page, allow }) => {
+await withPlanner({ caps, model, webRoot, log }, async ({ page, url, allow }) => {
   await page.waitForSelector('body[data-ready="true"]', { timeout: 30000 });
   log('page ready, skin shown');
   await page.screenshot({ path: join(out, '1-loaded.png') });
@@ -339,5 +339,52 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, allow }) => {
   assert.match(await page.locator('#status').innerText(), /linear \(small-strain\) answer of the patch is shown.*time limit/s);
   log(`time limit: the finite-strain closure stopped, the linear first answer stays: ${kept.provisional}`);
   await page.screenshot({ path: join(out, '9-linear-first-answer.png') });
+
+  // Cancel, and leaving the page: a finite-strain closure without a time limit (tens of seconds
+  // on this plan) is stopped by the Cancel button, and again by reloading the page; each time
+  // the server says within 5 s that nothing runs (a second on a quiet machine; the bound
+  // allows for a loaded CI machine, where one Newton step can take 2 s).
+  allow(/status of 409/);  // the browser logs the cancelled simulate request
+  // Asked from here, not from the page, which a reload replaces.
+  const token = await page.evaluate(() => document.querySelector('meta[name="caps-token"]').content);
+  const serverProgress = async () =>
+    (await fetch(new URL('/api/progress', url), { headers: { 'X-Caps-Token': token } })).json();
+  // Waits until the server is past the first answer, in the finite-strain closure.
+  const untilClosing = async () => {
+    for (let i = 0; i < 1200; ++i) {
+      const p = await serverProgress();
+      if (p.running && p.first_answer) return p;
+      await new Promise((r) => setTimeout(r, 100));
+    }
+    throw new Error('the finite-strain closure never started');
+  };
+  const secondsUntilIdle = async () => {
+    const t0 = Date.now();
+    while ((await serverProgress()).running) {
+      assert.ok(Date.now() - t0 < 60000, 'the simulation still runs a minute after it was cancelled');
+      await new Promise((r) => setTimeout(r, 50));
+    }
+    return (Date.now() - t0) / 1000;
+  };
+  await page.selectOption('#time-limit', '0');
+  await page.click('#simulate');
+  await untilClosing();
+  assert.ok(await page.locator('#cancel-simulation').isVisible(), 'no Cancel button while it runs');
+  await page.click('#cancel-simulation');
+  const cancelS = await secondsUntilIdle();
+  assert.ok(cancelS <= 5, `Cancel took ${cancelS} s to stop the simulation`);
+  await page.waitForSelector('body[data-simulation="linear"]', { timeout: 30000 });
+  assert.match(await page.locator('#status').innerText(), /was cancelled/);
+  assert.ok(await page.locator('#cancel-simulation').isHidden(), 'the Cancel button stays after the stop');
+  assert.ok(await page.locator('#simulate').isEnabled(), 'Simulate is not enabled again after Cancel');
+  log(`Cancel: the server stopped the closure in ${cancelS.toFixed(2)} s; the page says so`);
+
+  await page.click('#simulate');
+  await untilClosing();
+  await page.reload();
+  const reloadS = await secondsUntilIdle();
+  assert.ok(reloadS <= 5, `a page reload took ${reloadS} s to stop the simulation`);
+  await page.waitForSelector('body[data-ready="true"]', { timeout: 30000 });
+  log(`page reloaded while simulating: the server stopped the closure in ${reloadS.toFixed(2)} s; the page works again`);
 });
 log('passed');
