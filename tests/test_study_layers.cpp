@@ -473,6 +473,39 @@ TEST(MeasuredLayers, CompareStopsShortOfABonyRimInsteadOfMeshingAcrossIt) {
   EXPECT_GT(s.wound.continuum.min_jacobian, 0.0);
 }
 
+TEST(MeasuredLayers, OneMaterialOverThickFatIsSaid) {
+  // The cheek below the eye on Cranium: 8.4 of its 14.5 mm of soft tissue are fat, which one
+  // material (--tissue uniform, the default) makes as stiff as the dermis: the closing force was
+  // 4 x that of the measured layers. The closure says so where the fat under the wound is at
+  // least kThickFatMm and 40 % of the soft tissue; not over thin fat, nor with the layers.
+  const auto warned = [](const Simulation& s) {
+    const auto& w = s.wound.continuum.mesh.warnings;
+    return std::any_of(w.begin(), w.end(), [](const std::string& m) {
+      return m.find("mm of fat") != std::string::npos && m.find("--tissue auto") != std::string::npos;
+    });
+  };
+  const auto cheek = layered_cylinder([](double, double) { return 3.5; },
+                                      [](double, double) { return 8.5; },
+                                      [](double, double) { return 2.5; }, measured);
+  const auto forehead = layered_cylinder([](double, double) { return 2.0; },
+                                         [](double, double) { return 1.0; },
+                                         [](double, double) { return 1.5; }, measured);
+  SimulateOptions o;
+  o.surface.size_mm = 2.0;
+  const auto ellipse = [](const PatientModel& m) {
+    return plan::place_procedure(
+        plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), m, 0, 0, 90);
+  };
+  const Simulation thick = simulate(cheek, ellipse(cheek), o);
+  EXPECT_TRUE(warned(thick));
+  EXPECT_FALSE(warned(simulate(forehead, ellipse(forehead), o)));
+  o.continuum.tissue = TissueLayers::Measured;
+  const Simulation layered = simulate(cheek, ellipse(cheek), o);
+  EXPECT_FALSE(warned(layered));
+  // What the warning is about: one material closes the same wound with several times the force.
+  EXPECT_GT(thick.result.total_suture_force_n, 2.0 * layered.result.total_suture_force_n);
+}
+
 TEST(AutomaticExtent, ShrinksPastOuterSurfaceLayersThatFold) {
   // A C-shaped incision (300 deg of a 10 mm circle, no sutures): the surface mesh's layers grow
   // into the C from both of its arms and collide some 8 mm in, so the full extent (3 x the

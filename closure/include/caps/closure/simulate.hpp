@@ -24,6 +24,11 @@ class PatientModel;
 
 namespace caps::closure {
 
+/// simulate() warns when one material stands for all the soft tissue (`--tissue uniform`) over
+/// at least this much measured fat (mm, along the normal at the wound's centre, and at least
+/// 40 % of the soft tissue there): the fat is modelled as stiff as the dermis.
+inline constexpr double kThickFatMm = 5.0;
+
 struct SimulateOptions {
   mesher::SurfaceMeshOptions surface;
   mesher::ContinuumMeshOptions continuum;
