@@ -208,6 +208,30 @@ TEST_F(HostileTest, AForeignHostGets403AndNoData) {
         << host;
 }
 
+TEST_F(HostileTest, NamesGivenWithAllowHostAreTheServersOwnToo) {
+  // A server other machines reach (--host 0.0.0.0) is opened by a name of the clinic's network:
+  // --allow-host adds it; every other name is still refused.
+  server::ServerOptions o;
+  o.allowed_hosts = {"planner.clinic.example", "192.168.1.20"};
+  RunningServer named(o);
+  const std::string token = named->token();
+  const auto status_for = [&](const std::string& host) {
+    return status_of(named.raw(cat("GET /api/model HTTP/1.1\r\nHost: ", host, "\r\nX-Caps-Token: ",
+                                   token, "\r\nConnection: close\r\n\r\n")));
+  };
+  EXPECT_EQ(status_for(cat("planner.clinic.example:", named->port())), 200);
+  EXPECT_EQ(status_for(cat("192.168.1.20:", named->port())), 200);
+  EXPECT_EQ(status_for(cat("127.0.0.1:", named->port())), 200);
+  EXPECT_EQ(status_for(cat("evil.example:", named->port())), 403);
+  EXPECT_EQ(status_for(cat("planner.clinic.example:", named->port() + 1)), 403);
+  // A name that is no host name is refused when the server is made (exit 2 from caps serve).
+  for (const std::string bad : {"", "evil.example/x", "a b", "[::1]"}) {
+    server::ServerOptions b;
+    b.allowed_hosts = {bad};
+    EXPECT_THROW(server::PlannerServer(b, nullptr), InvalidInput) << bad;
+  }
+}
+
 TEST_F(HostileTest, AnotherSitesPostGets403AndWritesNothing) {
   // A "simple" cross-site request: text/plain, no preflight, the browser's Origin.
   const auto before = files_under(s()->work_dir());

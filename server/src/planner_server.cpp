@@ -400,6 +400,7 @@ struct PlannerServer::Impl {
   void set_allowed_hosts(int on_port) {
     std::vector<std::string> names = {options.host, "localhost", "127.0.0.1", "[::1]"};
     if (options.host.find(':') != std::string::npos) names[0] = "[" + options.host + "]";
+    names.insert(names.end(), options.allowed_hosts.begin(), options.allowed_hosts.end());
     allowed_hosts.clear();
     for (const std::string& n : names) {
       allowed_hosts.push_back(lower(cat(n, ":", on_port)));
@@ -908,6 +909,12 @@ PlannerServer::PlannerServer(ServerOptions options, Reporter* reporter)
     : impl_(std::make_unique<Impl>(std::move(options), reporter)) {
   Impl& s = *impl_;
   if (s.options.host.empty()) throw InvalidInput("--host: give an address to bind, e.g. 127.0.0.1");
+  for (const std::string& name : s.options.allowed_hosts)
+    if (name.empty() || name.size() > 253 ||
+        name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789.-") !=
+            std::string::npos)
+      throw InvalidInput(cat("--allow-host '", name, "': give host names or IPv4 addresses "
+                             "(letters, digits, '.' and '-'), separated by commas"));
   if (s.options.port < 0 || s.options.port > 65535)
     throw InvalidInput(cat("--port ", s.options.port, ": give 1..65535 (0: any free port)"));
   // Loaded once and kept (the CLI's message for a missing or broken model); every request on
@@ -951,7 +958,12 @@ int PlannerServer::bind() {
   if (!is_loopback(s.options.host))
     warn(s.reporter, cat("listening on ", s.options.host,
                          ", not only on this machine (127.0.0.1): "
-                         "anyone who can reach it can use the planner and read the model"));
+                         "anyone who can reach it can use the planner and read the model",
+                         s.options.allowed_hosts.empty()
+                             ? std::string("; it answers requests addressed to this machine's "
+                                           "loopback names only: give the name other machines "
+                                           "use with --allow-host")
+                             : std::string()));
   s.port = s.options.port == 0
                ? s.http.bind_to_any_port(s.options.host)
                : (s.http.bind_to_port(s.options.host, s.options.port) ? s.options.port : -1);

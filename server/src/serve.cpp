@@ -4,6 +4,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -47,6 +48,11 @@ ServeResult run_serve(const ServeRequest& r, Reporter* reporter) {
   o.host = r.host;
   o.port = r.port;
   o.web_root = r.web_root;
+  for (std::size_t start = 0; start <= r.allow_host.size() && !r.allow_host.empty();) {
+    const std::size_t comma = std::min(r.allow_host.find(',', start), r.allow_host.size());
+    o.allowed_hosts.push_back(r.allow_host.substr(start, comma - start));
+    start = comma + 1;
+  }
   PlannerServer server(o, reporter);
   server.bind();
   note(reporter, cat("the planner for ", r.model, " is at ", server.url(), " (Ctrl-C stops it)"));

@@ -33,6 +33,11 @@ constexpr const char* kTokenHeader = "X-Caps-Token";
 struct ServerOptions {
   std::string model_dir;            ///< the patient model every request works on
   std::string host = kDefaultHost;  ///< the address to bind (another than loopback: a warning)
+  /// Other names requests may carry in their Host (with the port): the name or address by which
+  /// other machines reach a server bound to another address than loopback. Host names and IPv4
+  /// addresses only (letters, digits, '.', '-'); the bound address and the loopback names are
+  /// always allowed.
+  std::vector<std::string> allowed_hosts;
   int port = kDefaultPort;          ///< 0: any free port (see PlannerServer::port())
   std::string web_root;             ///< the page's folder; empty: default_web_root()
   std::size_t max_body_bytes = kMaxBodyBytes;

@@ -14,6 +14,7 @@ struct ServeRequest {
   int port = kDefaultPort;
   std::string host = kDefaultHost;
   std::string web_root;
+  std::string allow_host;
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
@@ -26,6 +27,10 @@ struct ServeRequest {
     v(r.web_root, {"web_root",
                    "serve the page from this folder (default: the page the build bundled, "
                    "build/web/dist, else a placeholder page)"});
+    v(r.allow_host, {"allow_host",
+                     "with --host other than 127.0.0.1: the names or addresses other machines "
+                     "open the planner by (comma-separated, e.g. planner.clinic.local,192.168.1.20); "
+                     "a request addressed to any other name is refused (403)"});
   }
 };
 
