@@ -8,7 +8,9 @@
 #include <Eigen/Core>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 
+#include "caps/app/model.hpp"
 #include "caps/app/plan.hpp"
 #include "caps/app/simulation.hpp"
 #include "caps/closure/face_domain.hpp"
@@ -159,6 +161,61 @@ TEST(FaceDomain, CalculixSolvesTheExportedWholeFaceDeckToTheSameAnswer) {
   const double diff = (ccx - u).rowwise().norm().maxCoeff();
   std::cout << "whole face, NLGEOM: max |u_ccx - u_caps| " << diff << " mm of " << scale << " mm\n";
   EXPECT_LT(diff, 1e-5 * scale);
+}
+
+TEST(FaceDomain, APlanOnALocalChartIsSolvedInItsParentsWholeFace) {
+  // A chart (caps model chart) is a piece of its parent's skin in the parent's frame: its patch
+  // is tied into the parent's tissue model as a plan on the parent would be, not clamped. A
+  // chart whose parent has changed since (another content hash) falls back to the clamped patch
+  // and says why.
+  const Case& c = phantom_case();
+  app::ChartRequest cr;
+  cr.model = c.model;
+  cr.at = "0,40";
+  cr.n_theta = 360;
+  cr.n_z = 100;
+  cr.output = (folder() / "chart").string();
+  cr.force = true;
+  app::run_chart(cr);
+  app::PlanNewRequest pn;
+  pn.procedure = "ellipse";
+  pn.model = cr.output;
+  pn.at = "0,0";
+  pn.orientation = 90;
+  pn.parameters = {{"length", 20}, {"width", 7}};
+  pn.output = (folder() / "chart_ellipse.json").string();
+  pn.force = true;
+  app::run_plan_new(pn);
+  app::SimulateRequest r;
+  r.model = cr.output;
+  r.plan = pn.output;
+  r.output = (folder() / "chart_face").string();
+  r.force = true;
+  r.meshing.extent = 8;
+  r.solver.material = "linear";
+  const app::SimulateResult s = app::run_simulate(r);
+  EXPECT_EQ(s.domain, "face");
+  EXPECT_GT(s.tied_nodes, 0);
+  EXPECT_EQ(s.untied_nodes, 0);
+  EXPECT_GT(s.face_tets, 1000);
+  EXPECT_LT(s.max_suture_gap_mm, 1e-6);
+  // The same plan on the parent, tied alike: the forces agree to the charts' resampling.
+  const app::SimulateResult on_parent = simulate("parent_linear", "face", "linear");
+  EXPECT_NEAR(s.closing_force_n, on_parent.closing_force_n, 0.15 * on_parent.closing_force_n);
+  // The parent changed since the chart was made: the chart's own (clamped) patch, said.
+  const fs::path chart_json = fs::path(cr.output) / "model.json";
+  std::string text = caps_test::slurp(chart_json);
+  const std::string hash_key = "\"parent_content_hash\": \"";
+  const std::size_t at = text.find(hash_key);
+  ASSERT_NE(at, std::string::npos);
+  text[at + hash_key.size() + 8] = text[at + hash_key.size() + 8] == '0' ? '1' : '0';
+  std::ofstream(chart_json) << text;
+  r.output = (folder() / "chart_stale").string();
+  const app::SimulateResult stale = app::run_simulate(r);
+  EXPECT_EQ(stale.domain, "patch");
+  bool said = false;
+  for (const std::string& w : stale.warnings) said |= w.find("clamped patch") != std::string::npos;
+  EXPECT_TRUE(said);
 }
 
 TEST(FaceDomain, RefusesAnUnknownDomainAndSaysWhenAModelHasNoTissueModel) {

@@ -25,6 +25,7 @@
 #include "caps/render/simulation_report.hpp"
 #include "caps/app/loaded_model.hpp"
 #include "caps/surface/patient_model.hpp"
+#include "caps/volume/model_dir.hpp"
 #include "json_fields.hpp"
 #include "numbers.hpp"
 #include "output_check.hpp"
@@ -252,6 +253,34 @@ double check_mesh_budget(double size_mm, double perimeter_mm, const MeshingField
   return estimate;
 }
 
+namespace {
+
+// A local chart (caps model chart) is a piece of its parent's skin in the parent's LPS frame: the
+// parent's folder when it is still the model the chart was cut from (model.json's content hash
+// equal to the one the chart recorded), else empty.
+std::string chart_parent(const std::string& model_dir) {
+  const ModelInfo info = read_model_info(model_dir);
+  const json source = json::parse(info.source_json, nullptr, false);
+  if (!source.is_object() || !source.contains("chart") || !source["chart"].is_object()) return {};
+  const json& chart = source["chart"];
+  if (!chart.contains("parent") || !chart["parent"].is_string() ||
+      !chart.contains("parent_content_hash") || !chart["parent_content_hash"].is_string())
+    return {};
+  const std::string parent = chart["parent"].get<std::string>();
+  std::error_code ec;
+  if (parent.empty() || !fs::is_regular_file(fs::path(parent) / model_file::kJson, ec))
+    return {};
+  try {
+    if (read_model_info(parent).content_hash != chart["parent_content_hash"].get<std::string>())
+      return {};
+  } catch (const Error&) {
+    return {};
+  }
+  return parent;
+}
+
+}  // namespace
+
 std::string set_domain(closure::SimulateOptions& o, const DomainFields& d,
                        const std::string& model_dir) {
   o.domain = closure::parse_domain(d.domain);
@@ -267,13 +296,24 @@ std::string set_domain(closure::SimulateOptions& o, const DomainFields& d,
     throw InvalidParameter(cat("{tie} '", d.tie, "': give mortar or node-to-surface"));
   o.features = loaded_feature_lines(model_dir);
   if (o.domain != closure::Domain::Face) return {};
+  // A chart's plan is solved in its parent's whole face (the chart's patch is in the parent's
+  // frame), and reports the parent's feature lines.
+  if (!mesher::has_tissue_model(model_dir)) {
+    const std::string parent = chart_parent(model_dir);
+    if (!parent.empty() && mesher::has_tissue_model(parent)) {
+      o.tissue = loaded_tissue_model(parent);
+      if (!o.features || o.features->items.empty()) o.features = loaded_feature_lines(parent);
+      return {};
+    }
+  }
   if (!mesher::has_tissue_model(model_dir)) {
     // A local chart, a scan-built model or one made before the tissue model existed: the
     // clamped patch, said in every result.
     o.domain = closure::Domain::Patch;
-    return "the model has no whole-face tissue model (a local chart, a surface-scan model, or one "
-           "made before it existed): solved on the 1992 clamped patch, whose rim decides more of "
-           "the answer; build it with `caps model tissue MODEL` (a CT-built model)";
+    return "the model has no whole-face tissue model (a surface-scan model, one made before it "
+           "existed, or a local chart whose parent model is gone, has changed or has none): "
+           "solved on the 1992 clamped patch, whose rim decides more of the answer; build it with "
+           "`caps model tissue MODEL` (a CT-built model; for a chart, its parent)";
   }
   o.tissue = loaded_tissue_model(model_dir);
   return {};
