@@ -126,8 +126,8 @@ std::vector<QuadraturePoint> make_hex_rule() {
   return q;
 }
 
-// CalculiX's C3D15 rule (2.20, e_c3d.f, gauss3d8): the 3-point degree-2 triangle rule ((1/6, 1/6), (2/3, 1/6), (1/6, 2/3),
-// weight 1/6 each) x 3 Gauss points through the thickness. With it caps and ccx 2.20 solve a
+// CalculiX's C3D15 rule (2.20, e_c3d.f, gauss3d8): the 3-point degree-2 triangle rule ((1/6, 1/6),
+// (2/3, 1/6), (1/6, 2/3), weight 1/6 each) x 3 Gauss points through the thickness. With it caps and ccx 2.20 solve a
 // whole-face closure with 40 wedges to 5e-7 of its largest displacement (tests/test_app_face.cpp).
 std::vector<QuadraturePoint> make_calculix_wedge_rule() {
   const double tri[3][2] = {{1.0 / 6, 1.0 / 6}, {2.0 / 3, 1.0 / 6}, {1.0 / 6, 2.0 / 3}};
