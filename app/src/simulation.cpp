@@ -190,12 +190,7 @@ closure::SimulateOptions simulate_options(const MeshingFields& m, const SolverFi
   o.continuum.undermine_mm = m.undermine;
   o.continuum.base = mesher::parse_base_condition(m.base);
   o.continuum.tissue = mesher::parse_tissue_layers(m.tissue);
-  if (m.wedge_rule == "full")
-    o.continuum.wedge_rule = fem::WedgeRule::Full;
-  else if (m.wedge_rule == "calculix")
-    o.continuum.wedge_rule = fem::WedgeRule::CalculiX;
-  else
-    throw InvalidParameter(cat("{wedge_rule} '", m.wedge_rule, "': give full or calculix"));
+  o.continuum.wedge_rule = fem::parse_wedge_rule(m.wedge_rule);
   o.solve.solver = fem::parse_solver(s.solver);
   o.solve.mixed_precision = fem::parse_precision(s.precision);
   set_materials(o, s);
@@ -288,12 +283,7 @@ std::string set_domain(closure::SimulateOptions& o, const DomainFields& d,
     throw InvalidParameter(cat("{face_radius} ", d.face_radius, ": give the region's radius in "
                                "mm, 0 (automatic) or up to 500"));
   o.face.radius_mm = d.face_radius;
-  if (d.tie == "mortar")
-    o.face.tie = fem::TieMethod::Mortar;
-  else if (d.tie == "node-to-surface")
-    o.face.tie = fem::TieMethod::NodeToSurface;
-  else
-    throw InvalidParameter(cat("{tie} '", d.tie, "': give mortar or node-to-surface"));
+  o.face.tie = fem::parse_tie_method(d.tie);
   o.features = loaded_feature_lines(model_dir);
   if (o.domain != closure::Domain::Face) return {};
   // A chart's plan is solved in its parent's whole face (the chart's patch is in the parent's

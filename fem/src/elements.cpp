@@ -469,6 +469,14 @@ int n_element_nodes(ElementType type) {
   return 0;
 }
 
+const char* wedge_rule_name(WedgeRule rule) { return rule == WedgeRule::Full ? "full" : "calculix"; }
+
+WedgeRule parse_wedge_rule(const std::string& name) {
+  if (name == "full") return WedgeRule::Full;
+  if (name == "calculix") return WedgeRule::CalculiX;
+  throw InvalidInput(cat("wedge rule '", name, "' is unknown; use full or calculix"));
+}
+
 const char* element_type_name(ElementType type) {
   switch (type) {
     case ElementType::Hex20: return "Hex20";

@@ -164,7 +164,7 @@ void write_ties_and_surface(const Mesh& mesh, nlohmann::json& j) {
   const bool on_surface = std::any_of(mesh.sliding.begin(), mesh.sliding.end(),
                                       [](const SlidingNode& s) { return s.on_surface; });
   if (on_surface) j["sliding_surface"] = mesh.sliding_surface_name;
-  if (mesh.wedge_rule == WedgeRule::CalculiX) j["wedge_rule"] = "calculix";
+  if (mesh.wedge_rule != WedgeRule::Full) j["wedge_rule"] = wedge_rule_name(mesh.wedge_rule);
   if (!mesh.node_sets.empty()) {
     j["node_sets"] = nlohmann::json::object();
     for (const auto& [name, ids] : mesh.node_sets) j["node_sets"][name] = ids;
@@ -186,10 +186,9 @@ void read_ties_and_surface(const nlohmann::json& j, const std::string& jw, Mesh&
     mesh.ties.push_back(std::move(tie));
   }
   if (const auto rule = j.find("wedge_rule"); rule != j.end()) {
-    if (*rule == "calculix")
-      mesh.wedge_rule = WedgeRule::CalculiX;
-    else if (*rule != "full")
+    if (!rule->is_string() || (*rule != "full" && *rule != "calculix"))
       throw InvalidInput(cat(jw, ": wedge_rule must be \"full\" or \"calculix\", not ", rule->dump()));
+    mesh.wedge_rule = parse_wedge_rule(rule->get<std::string>());
   }
   const nlohmann::json sets = j.value("node_sets", nlohmann::json::object());
   if (!sets.is_object()) throw InvalidInput(cat(jw, ": node_sets must be an object of id arrays"));

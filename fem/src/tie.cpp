@@ -352,6 +352,16 @@ void mortar_rows(const Mesh& mesh, const std::vector<int>& slaves, const std::ve
 
 }  // namespace
 
+const char* tie_method_name(TieMethod method) {
+  return method == TieMethod::Mortar ? "mortar" : "node-to-surface";
+}
+
+TieMethod parse_tie_method(const std::string& name) {
+  if (name == "mortar") return TieMethod::Mortar;
+  if (name == "node-to-surface") return TieMethod::NodeToSurface;
+  throw InvalidInput(cat("tie '", name, "' is unknown; use mortar or node-to-surface"));
+}
+
 TieSearchResult tie_nodes(const Mesh& mesh, const std::vector<int>& slaves,
                           const std::vector<int>& master_elements, double tolerance_mm,
                           TieMethod method, Reporter* reporter) {

@@ -30,7 +30,7 @@ struct MeshingFields {
   double t2 = mesher::SurfaceMeshOptions{}.t2_deg;
   double constant_thickness = mesher::ContinuumMeshOptions{}.constant_thickness_mm;
   std::string tissue = mesher::tissue_layers_name(mesher::ContinuumMeshOptions{}.tissue);
-  std::string wedge_rule = "full";
+  std::string wedge_rule = fem::wedge_rule_name(mesher::ContinuumMeshOptions{}.wedge_rule);
   /// The budget checked before meshing (check_mesh_budget()): the wound mesh's elements as
   /// estimated from the wound, the extent, the mesh size and the layers.
   double max_elements = 1e6;
@@ -129,7 +129,7 @@ struct SolverFields {
 struct DomainFields {
   std::string domain = "face";
   double face_radius = closure::FaceDomainOptions{}.radius_mm;
-  std::string tie = "mortar";
+  std::string tie = fem::tie_method_name(closure::FaceDomainOptions{}.tie);
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {

@@ -63,6 +63,11 @@ enum class WedgeRule {
   CalculiX
 };
 
+/// "full" / "calculix".
+const char* wedge_rule_name(WedgeRule rule);
+/// Parses "full" / "calculix"; throws InvalidInput otherwise.
+WedgeRule parse_wedge_rule(const std::string& name);
+
 /// 20 for Hex20, 15 for Wedge15, 10 for Tet10.
 int n_element_nodes(ElementType type);
 /// "Hex20" / "Wedge15" / "Tet10".

@@ -5,6 +5,7 @@
 /// position.
 
 #include <Eigen/Core>
+#include <string>
 #include <vector>
 
 #include "caps/core/reporter.hpp"
@@ -22,6 +23,11 @@ enum class TieMethod {
   /// quadratic elements): does not pass the patch test on non-matching quadratic faces.
   NodeToSurface
 };
+
+/// "mortar" / "node-to-surface".
+const char* tie_method_name(TieMethod method);
+/// Parses "mortar" / "node-to-surface"; throws InvalidInput otherwise.
+TieMethod parse_tie_method(const std::string& name);
 
 /// What tie_nodes() found.
 struct TieSearchResult {
