@@ -143,7 +143,8 @@ struct DomainFields {
                                      "(10 mm beyond the patch's rim, at least 40 mm)"});
     v(r.tie, {"tie", "--domain face: how the patch's rim is tied to the tissue: mortar (exact "
                      "for a uniform stress across the join) or node-to-surface (CalculiX's "
-                     "*TIE: the mesh.inp CalculiX solves in minutes, for cross-checks)"});
+                     "*TIE: a mesh.inp that ccx solves in seconds, for cross-checks; it takes the mortar "
+                     "rows' equations many minutes to read)"});
   }
 };
 
