@@ -69,11 +69,10 @@ TEST(RealData, Ch2MrWithApproximateBone) {
 }
 
 TEST(RealData, HeadsqSmokeTest) {
-  // VTK's quarter-resolution head: raw values are HU + 1000 and the header has no orientation,
-  // so the thresholds are given as a user would (-400 HU and +250 HU shifted by 1000).
+  // VTK's quarter-resolution head: stored HU + 1024 with no modality field and no orientation.
+  // It is recognised as a CT and shifted (the default thresholds, -400 and +250 HU, then hold);
+  // read as an MR it had been modelled with an assumed bone 6 mm under the skin.
   ModelOptions o;
-  o.segment.skin_threshold = 600.0;
-  o.segment.bone_threshold = 1250.0;
   o.maps.n_theta = 256;
   o.maps.n_z = 128;
   const VolumeModel m = model_of(kShared / "ct" / "vtk-headsq" / "quarter.nhdr", o);

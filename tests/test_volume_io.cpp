@@ -19,6 +19,7 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "caps/volume/phantom.hpp"
 #include "caps/volume/read_volume.hpp"
 
 namespace fs = std::filesystem;
@@ -491,6 +492,39 @@ TEST(VolumeIo, NiftiWriteRejectsWrongExtension) {
   expect_error<caps::InvalidInput>([&] { caps::write_nifti(v, tmp / "out.img"); }, "out.img");
 }
 
+TEST(VolumeIo, ACtStoredUnsignedIsRecognisedAndAnMrIsNot) {
+  // The phantom CT (HU) stored as HU + 1024 in a NIfTI (no modality field): a CT. The same head
+  // with MR-like intensities on the same scale (air 0, fat bright, bone dark, the brain and CSF
+  // spread between): not a CT. Real MRs: Ch2TemplateIsMrSizedAndInMniSpace below.
+  caps::PhantomOptions po;
+  po.dims = {64, 64, 60};
+  po.spacing_mm = {4, 4, 4};
+  const Volume ct = caps::make_phantom(po);
+  const fs::path f = fs::temp_directory_path() / "caps_test_modality.nii.gz";
+  const auto read_back = [&](const Volume& v) {
+    caps::write_nifti(v, f);
+    return caps::read_volume(f);
+  };
+  EXPECT_EQ(read_back(ct).modality, Modality::CT);  // signed HU, as before
+  Volume stored = ct;
+  for (float& x : stored.data) x = std::round(std::max(x, -1024.0f) + 1024.0f);
+  const Volume back = read_back(stored);
+  EXPECT_EQ(back.modality, Modality::CT) << back.notes.back();
+  // An MR on the same scale: the soft tissue spread over 300..1300, fat at 1500, bone at 150.
+  Volume mr = ct;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> spread(300.0f, 1300.0f);
+  for (float& x : mr.data)
+    x = x < -500 ? 0.0f : x < -50 ? 1500.0f : x > 300 ? 150.0f : std::round(spread(rng));
+  const Volume mr_back = read_back(mr);
+  EXPECT_NE(mr_back.modality, Modality::CT) << mr_back.notes.back();
+  // Fractional values are no stored CT either.
+  Volume fractional = stored;
+  for (float& x : fractional.data) x += 0.25f;
+  EXPECT_NE(read_back(fractional).modality, Modality::CT);
+  fs::remove(f);
+}
+
 TEST(VolumeIo, Ch2TemplateIsMrSizedAndInMniSpace) {
   if (!fs::exists(kCh2)) GTEST_SKIP() << "mricron-data not installed";
   const Volume v = caps::read_volume(kCh2);
@@ -652,7 +686,12 @@ TEST(VolumeIo, HeadsqQuarterNhdr) {
   const Volume v = caps::read_volume(p);
   EXPECT_EQ(v.geom.dims, Eigen::Vector3i(64, 64, 93));
   EXPECT_LT((v.geom.spacing_mm - Eigen::Vector3d(3.2, 3.2, 1.5)).norm(), 1e-9);
-  EXPECT_EQ(v.modality, Modality::Unknown);  // raw scanner values, not HU
+  // Stored HU + 1024 without a modality field: recognised from its intensities (air at 0, the
+  // soft tissue's peak at 1024, bone beyond), and said so.
+  EXPECT_EQ(v.modality, Modality::CT);
+  bool said = false;
+  for (const std::string& n : v.notes) said |= n.find("HU + 1024") != std::string::npos;
+  EXPECT_TRUE(said);
   float lo = 1e9f, hi = -1e9f;
   for (float x : v.data) lo = std::min(lo, x), hi = std::max(hi, x);
   EXPECT_GE(lo, 0.0f);

@@ -91,6 +91,40 @@ Modality guess_modality(const std::vector<float>& data, std::vector<std::string>
                         "% of voxels in the air range -1100..-900 HU)"));
     return Modality::CT;
   }
+  // A CT stored unsigned, HU + 1024 (VTK's headsq, the Stanford CThead, many raw exports):
+  // air at 0..200, the soft tissue's peak at 1024 +- 150 (-150..150 HU) holding much of the rest,
+  // bone beyond 1324 (300 HU) up to 2000 or more, and almost nothing between air and fat (324..824:
+  // -700..-200 HU, the skin's partial volume and the sinuses) where an MR has its CSF, muscle and
+  // grey matter. All five together, on whole numbers.
+  if (lo >= -50.0f) {
+    std::size_t n_low = 0, n_tissue = 0, n_soft = 0, n_gap = 0, n_bone = 0, n_fraction = 0;
+    float hi = lo;
+    for (float v : data) {
+      hi = std::max(hi, v);
+      n_fraction += v != std::floor(v);
+      if (v <= 200.0f) {
+        ++n_low;
+        continue;
+      }
+      ++n_tissue;
+      n_soft += (v >= 874.0f && v <= 1174.0f);
+      n_gap += (v >= 324.0f && v <= 824.0f);
+      n_bone += v > 1324.0f;
+    }
+    const double all = static_cast<double>(data.size()), tissue = static_cast<double>(n_tissue);
+    if (n_fraction == 0 && n_tissue > 0 && n_low >= 0.1 * all && n_soft >= 0.25 * tissue &&
+        n_gap <= 0.15 * tissue && n_bone >= 0.02 * tissue && hi >= 2000.0f) {
+      notes.push_back(cat("modality guessed CT stored unsigned (HU + 1024) from the intensities (",
+                          std::round(1000 * n_low / all) / 10, "% of voxels at 0..200, ",
+                          std::round(1000 * n_soft / tissue) / 10,
+                          "% of the rest at 874..1174, the soft tissue's 0 HU; ",
+                          std::round(1000 * n_bone / tissue) / 10, "% above 1324, bone; ",
+                          std::round(1000 * n_gap / tissue) / 10,
+                          "% between air and fat; maximum ", hi,
+                          "); give --modality MR if it is not a CT"));
+      return Modality::CT;
+    }
+  }
   notes.push_back(cat("modality unknown: the format has no modality field and the intensities "
                       "(minimum ", lo, ") do not look like CT in HU"));
   return Modality::Unknown;
