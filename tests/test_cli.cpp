@@ -87,6 +87,20 @@ TEST_F(Cli, PhantomToModelToInfoWithJson) {
   EXPECT_TRUE(fs::exists(phantom()));
 }
 
+TEST_F(Cli, AVolumeThatDoesNotSayItsModalityAndIsNoCtNeedsTheUserToSay) {
+  // ch2 (a T1 MR in a NIfTI, which has no modality field): modelled as an MR, with its bone
+  // assumed under the skin, only when the user says --modality MR; before, any such volume was
+  // (a CT in other units too: issue 37).
+  const fs::path ch2 = "/usr/share/mricron/templates/ch2.nii.gz";
+  if (!fs::exists(ch2)) GTEST_SKIP() << "mricron-data not installed (scripts/setup.sh installs it)";
+  const fs::path out = dir / "ch2_model";
+  expect_refused("model from-volume " + ch2.string() + " -o " + out.string(), "--modality MR", out);
+  const Outcome r = run("model from-volume -q " + ch2.string() + " --modality MR --no-tissue "
+                        "--n-theta 64 --n-z 32 -o " + out.string());
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(slurp(out / "model.json").find("\"modality\": \"MR\""), std::string::npos);
+}
+
 TEST_F(Cli, BadVolumeInputsAreRefusedCleanly) {
   const fs::path out = dir / "out_model";
   auto refuse = [&](const fs::path& input, const std::string& extra = "") {

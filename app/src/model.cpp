@@ -210,6 +210,15 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   if (r.modality == "CT") v.modality = Modality::CT;
   if (r.modality == "MR") v.modality = Modality::MR;
   for (const auto& n : v.notes) note(reporter, cat(r.input, ": ", n));
+  // A volume that does not say what it is and does not look like a CT was modelled as an MR,
+  // with its bone assumed a few mm under the skin everywhere: on a CT in other units that is a
+  // model silently wrong (issue 37). The user says which.
+  if (v.modality == Modality::Unknown)
+    throw InvalidInput(cat(r.input, ": the file does not say its modality and its intensities do "
+                           "not look like a CT's (air at -1000 HU, or at 0 when stored HU + 1024): "
+                           "give --modality MR to model it as an MR (its bone assumed ",
+                           r.mr_scalp, " mm under the skin, or --bone-mask FILE), or --modality "
+                           "CT with --skin-threshold and --bone-threshold in the file's units"));
   Volume bone_mask;
   if (!r.bone_mask.empty()) {
     bone_mask = read_volume(r.bone_mask);
