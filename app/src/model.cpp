@@ -184,6 +184,9 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   o.maps.layers.merge_gap_mm = r.fat_merge_gap;
   o.maps.layers.min_band_mm = r.fat_min_band;
   o.decimate_fraction = r.decimate;
+  if (!(r.min_head_ml >= 0 && r.min_head_ml <= 1e5))
+    throw InvalidInput(cat("--min-head-ml ", r.min_head_ml, ": give ml, 0 (no check) to 100000"));
+  o.min_head_ml = r.min_head_ml;
   if (!r.axis_origin.empty() || !r.axis_dir.empty()) {
     CylinderAxis axis;
     if (!r.axis_origin.empty())

@@ -254,13 +254,13 @@ VolumeModel build_volume_model(const Volume& input, const ModelOptions& o, Repor
   m.notes = v.notes;
   m.segmentation = segment_head(v, o.segment, reporter);
   // A skull-stripped MR (brain extraction) keeps only the brain: its "skin" would be the brain's
-  // surface. An adult head (even cut at the chin) holds well over 2.5 l, a brain about 1.1-1.5 l.
-  constexpr double kBrainOnlyMl = 2000.0;
-  if (v.modality != Modality::CT && m.segmentation.head_volume_ml < kBrainOnlyMl)
-    warn(reporter, cat(v.source, ": the head's volume is only ",
-                       std::lround(m.segmentation.head_volume_ml), " ml, that of a brain: the "
-                       "scan looks skull-stripped, and its \"skin\" would be the brain's surface; "
-                       "use the scan before brain extraction"));
+  // surface, its landmarks on the brain. Refused (it was a warning, and the model was built).
+  if (v.modality != Modality::CT && m.segmentation.head_volume_ml < o.min_head_ml)
+    throw InvalidInput(cat(v.source, ": the head's volume is only ",
+                           std::lround(m.segmentation.head_volume_ml), " ml, that of a brain: the "
+                           "scan looks skull-stripped, and its \"skin\" would be the brain's "
+                           "surface; use the scan before brain extraction (if it is a whole head, "
+                           "a small child's, give --min-head-ml 0)"));
   const CylinderAxis axis = o.axis ? *o.axis : fit_axis(m.segmentation);
   m.maps = cylindrical_maps(v, m.segmentation, axis, o.maps, reporter);
   m.layer_options = o.maps.layers;

@@ -45,6 +45,7 @@ struct FromVolumeRequest {
   double bone_floor = BoneOptions{}.floor_hu;
   double tissue_reach = BoneOptions{}.tissue_reach_mm;
   double decimate = ModelOptions{}.decimate_fraction;
+  double min_head_ml = ModelOptions{}.min_head_ml;
   double mr_scalp = SegmentOptions{}.mr_scalp_mm;
   double fat_level = LayerOptions{}.fat_level_hu;
   double fat_merge_gap = LayerOptions{}.merge_gap_mm;
@@ -85,6 +86,8 @@ struct FromVolumeRequest {
                                        "(free, its depth interpolated) up to this far (mm) from a "
                                        "measured base; 0: leave it no_bone"});
     v(r.decimate, {"decimate", "fraction of mesh faces to keep (0..1]"});
+    v(r.min_head_ml, {"min_head_ml", "an MR whose head holds less (ml) is refused as skull-stripped "
+                                     "(brain only); 0: no check, for a small child's whole head"});
     v(r.fat_level, {"fat_level", "tissue layers (CT): HU level halfway between fat and soft "
                                  "tissue; fat lies below it"});
     v(r.fat_merge_gap, {"fat_merge_gap", "tissue layers: fat bands closer than this (mm) are one"});

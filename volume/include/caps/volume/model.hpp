@@ -21,6 +21,10 @@ struct ModelOptions {
   std::optional<CylinderAxis> axis;  ///< overrides the fitted axis
   int smoothing_iterations = 10;     ///< Taubin iterations on skin.ply and bone.ply
   double decimate_fraction = 1.0;    ///< keep this fraction of the mesh faces (1 = all)
+  /// A volume that is not a CT whose head holds less than this (ml) is refused as skull-stripped
+  /// (brain extraction keeps the brain, 1.1-1.5 l; an adult head, even cut at the chin, holds
+  /// well over 2.5 l); 0: no check (a small child's head).
+  double min_head_ml = 2000.0;
 };
 
 /// Everything built from one volume (the ModelContent, without colour, and how it was made).
