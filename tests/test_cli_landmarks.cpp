@@ -86,7 +86,7 @@ TEST(CliLandmarks, FromVolumeWritesThemAndLandmarksPrintsThem) {
   const V3 p = v3(gl);
   EXPECT_LT(dist(p, analytic_glabella()), 1.0) << p.x << " " << p.y << " " << p.z;
 
-  const auto run = caps("model landmarks " + face_model().string() + " --json");
+  const auto run = caps("model landmarks " + face_model().string() + " --json -q");
   ASSERT_EQ(run.code, 0) << run.out;
   const json j = json::parse(run.out);
   EXPECT_TRUE(j["written"].get<bool>());
@@ -94,6 +94,37 @@ TEST(CliLandmarks, FromVolumeWritesThemAndLandmarksPrintsThem) {
   const auto text = caps("model landmarks " + face_model().string() + " --no-write");
   ASSERT_EQ(text.code, 0) << text.out;
   EXPECT_NE(text.out.find("pogonion"), std::string::npos) << text.out;
+}
+
+TEST(CliLandmarks, AnImplausibleDepthIsMarkedAndCarriedIntoPlansPlacedFromIt) {
+  // The phantom's landmarks have plausible depths: none is marked but the nose's tip, whose 21 mm
+  // are through the nose (cartilage in a head), not a layer over bone.
+  const json m = read_json(face_model() / "model.json");
+  for (const auto& [name, item] : m["landmarks"]["items"].items())
+    EXPECT_EQ(item.contains("doubt"), name == "pronasale") << name << ": " << item.value("doubt", "");
+  // A copy whose glabella reads 14 mm of soft tissue (the adult's is 5.5 +- 1.0 mm; on Cranium
+  // the pronasale read 32 mm, the eye corners 32-39 mm, without a word): the landmark is marked,
+  // and a plan placed from it carries the warning through plan new, plan check and simulate.
+  const fs::path copy = kTmp / "face_doubt";
+  fs::remove_all(copy);
+  fs::copy(face_model(), copy, fs::copy_options::recursive);
+  json edited = read_json(copy / "model.json");
+  edited["landmarks"]["items"]["glabella"]["thickness_mm"] = 14.0;
+  std::ofstream(copy / "model.json") << edited.dump(2);
+  const auto listed = caps("plan new ellipse --model " + copy.string() + " --at glabella+0,15 "
+                           "--orientation 90 -o " + (kTmp / "doubt.json").string() + " --force");
+  ASSERT_EQ(listed.code, 0) << listed.out;
+  EXPECT_NE(listed.out.find("placed from the glabella, whose measured soft tissue is implausible: "
+                            "14 mm"), std::string::npos) << listed.out;
+  const auto checked = caps("plan check " + (kTmp / "doubt.json").string() + " --model " + copy.string());
+  EXPECT_NE(checked.out.find("implausible"), std::string::npos) << checked.out;
+  const auto sim = caps("simulate -q --domain patch --material linear --model " + copy.string() +
+                        " --plan " + (kTmp / "doubt.json").string() + " -o " +
+                        (kTmp / "doubt_sim").string() + " --force");
+  ASSERT_EQ(sim.code, 0) << sim.out;
+  std::ifstream result(kTmp / "doubt_sim" / "result.json");
+  const std::string text((std::istreambuf_iterator<char>(result)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("whose measured soft tissue is implausible"), std::string::npos);
 }
 
 TEST(CliLandmarks, PlanAtGlabellaLandsOnTheAnalyticGlabella) {

@@ -70,7 +70,10 @@ Landmarks add_landmarks(const std::string& dir, Reporter* reporter) {
   const Landmarks l = find_landmarks(model);
   write_model_landmarks(dir, landmarks_to_json(l));
   for (const auto& item : l.items)
-    if (!item.found) note(reporter, cat("landmark ", item.name, " absent: ", item.note));
+    if (!item.found)
+      note(reporter, cat("landmark ", item.name, " absent: ", item.note));
+    else if (!item.doubt.empty())
+      warn(reporter, cat("landmark ", item.name, ": ", item.doubt));
   // The feature lines beside them: a few hundred curvature samples per line, cheap.
   write_model_features(dir, feature_lines_to_json(find_feature_lines(model, l)));
   return l;

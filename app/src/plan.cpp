@@ -181,16 +181,23 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
   p.placement = placement;
   p.model = r.model;
   p.model_hash = model.content_hash();
-  const plan::PlanReport report = plan::check_plan(p, model);
+  plan::PlanReport report = plan::check_plan(p, model);
+  // Placed from a landmark whose depth or layers are implausible: the plan says so.
+  if (const std::string doubt = placement_doubt(r.model, model, placement); !doubt.empty())
+    report.warnings.push_back(doubt);
   plan::write_plan(r.output, p, &report);
   return plan_result(p, report, r.output, reporter);
 }
 
 PlanResult run_plan_check(const PlanCheckRequest& r, Reporter* reporter) {
   const plan::Plan p = plan::read_plan(r.plan);
-  const auto loaded = loaded_model(model_of(r.model, p, r.plan));
+  const std::string model_dir = model_of(r.model, p, r.plan);
+  const auto loaded = loaded_model(model_dir);
   const PatientModel& model = *loaded;
-  return plan_result(p, plan::check_plan(p, model), "", reporter);
+  plan::PlanReport report = plan::check_plan(p, model);
+  if (const std::string doubt = placement_doubt(model_dir, model, p.placement); !doubt.empty())
+    report.warnings.push_back(doubt);
+  return plan_result(p, report, "", reporter);
 }
 
 PlanResult run_plan_show(const PlanShowRequest& r, Reporter* reporter) {

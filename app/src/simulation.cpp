@@ -29,6 +29,7 @@
 #include "json_fields.hpp"
 #include "numbers.hpp"
 #include "output_check.hpp"
+#include "skin_place.hpp"
 
 CAPS_APP_REQUEST_JSON(caps::app::MeshRequest)
 CAPS_APP_REQUEST_JSON(caps::app::SimulateRequest)
@@ -497,6 +498,10 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   if (!domain_warning.empty()) warn(reporter, domain_warning);
   closure::Simulation sim = closure::simulate(model, plan, o, reporter);
   if (!domain_warning.empty()) sim.wound.continuum.mesh.warnings.push_back(domain_warning);
+  if (const std::string doubt = placement_doubt(r.model, model, plan.placement); !doubt.empty()) {
+    warn(reporter, doubt);
+    sim.wound.continuum.mesh.warnings.push_back(doubt);
+  }
   sim.wound.continuum.mesh.model = r.model;
   sim.wound.continuum.mesh.plan = r.plan;
   closure::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string());

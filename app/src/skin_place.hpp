@@ -33,4 +33,15 @@ inline Eigen::Vector2d resolve_at(const std::string& model_dir, const PatientMod
   return {tz[0], tz[1]};
 }
 
+/// The warning of a plan placed from a landmark whose measured soft tissue is implausible
+/// (surface/landmarks.hpp, landmark_doubt()), or empty: plan new, check and simulate carry it.
+inline std::string placement_doubt(const std::string& model_dir, const PatientModel& model,
+                                   const std::optional<plan::LandmarkPlacement>& placement) {
+  if (!placement) return {};
+  const Landmarks landmarks = plan::model_landmarks(model_dir, model);
+  const Landmark* l = landmarks.find(placement->landmark);
+  if (!l || l->doubt.empty()) return {};
+  return cat("placed from the ", l->name, ", whose measured soft tissue is implausible: ", l->doubt);
+}
+
 }  // namespace caps::app

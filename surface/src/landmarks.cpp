@@ -654,6 +654,31 @@ SkinRangeView skin_range_view(const PatientModel& model) {
   return v;
 }
 
+std::string landmark_doubt(const Landmark& l) {
+  if (!l.found) return {};
+  const auto mm = [](double x) { return std::round(10 * x) / 10; };
+  struct Norm {
+    const char* name;
+    double mean, sd;
+  };
+  static constexpr Norm kTTable[] = {{"glabella", 5.5, 1.0}, {"nasion", 6.0, 1.5}};
+  for (const Norm& n : kTTable)
+    if (l.name == n.name && std::abs(l.thickness_mm - n.mean) > 4 * n.sd)
+      return cat(mm(l.thickness_mm), " mm of soft tissue: the adult ", n.name, " has ", n.mean,
+                 " +- ", n.sd, " mm (T-Table); the depth measured here is not this landmark's");
+  if (l.name == "pronasale" && l.thickness_mm > 15.0)
+    return cat(mm(l.thickness_mm), " mm to the bone: the nose's tip stands on cartilage, not on a "
+               "soft-tissue layer over bone; this depth is not one a flap is raised in");
+  if (l.thickness_mm > 20.0)
+    return cat(mm(l.thickness_mm), " mm of soft tissue: deeper than any facial landmark's in the "
+               "T-Table (the philtrum's 11.5 +- 2.5 mm is the deepest); the ray meets the nose's "
+               "cartilage, the orbit or a cavity, not a soft-tissue layer over bone");
+  if (std::isfinite(l.skin_mm) && l.skin_mm > 8.0)
+    return cat("the CT's skin layer reads ", mm(l.skin_mm), " mm (dermis is 1-4 mm): the layers "
+               "here are not the dermis, fat and deep tissue");
+  return {};
+}
+
 Landmarks find_landmarks(const PatientModel& model) {
   Landmarks out = find_landmarks(skin_range_view(model));
   const auto& maps = model.maps();
@@ -667,6 +692,7 @@ Landmarks find_landmarks(const PatientModel& model) {
       l.fat_mm = model.sample(maps.thickness_fat_normal, l.theta_deg, l.z_mm);
       l.deep_mm = model.sample(maps.thickness_deep_normal, l.theta_deg, l.z_mm);
     }
+    l.doubt = landmark_doubt(l);
   }
   return out;
 }
@@ -685,6 +711,7 @@ std::string landmarks_to_json(const Landmarks& landmarks) {
       o["measured"] = l.measured;
       if (std::isfinite(l.skin_mm))
         o["layers_mm"] = {{"skin", r3(l.skin_mm)}, {"fat", r3(l.fat_mm)}, {"deep", r3(l.deep_mm)}};
+      if (!l.doubt.empty()) o["doubt"] = l.doubt;
     }
     items[l.name] = o;
   }
@@ -729,6 +756,7 @@ Landmarks landmarks_from_json(const std::string& text, const std::string& source
           l.fat_mm = o["layers_mm"].at("fat").get<double>();
           l.deep_mm = o["layers_mm"].at("deep").get<double>();
         }
+        l.doubt = landmark_doubt(l);  // models made before the check get it too
       }
       out.items.push_back(l);
     }
@@ -755,6 +783,7 @@ std::string landmarks_table(const Landmarks& landmarks) {
     if (std::isfinite(l.skin_mm))
       s << " (skin " << l.skin_mm << ", fat " << l.fat_mm << ", deep " << l.deep_mm << ")";
     if (!l.measured) s << "  [filled, not measured]";
+    if (!l.doubt.empty()) s << "  [implausible: " << l.doubt << "]";
     s << "\n";
   }
   return s.str();

@@ -37,7 +37,17 @@ struct Landmark {
   double deep_mm = std::numeric_limits<double>::quiet_NaN();
   bool measured = false;       ///< the skin and thickness there were measured, not filled
   std::string note;            ///< how it was found, or why it is absent
+  /// Why its depth or layers are not plausible for this landmark (landmark_doubt()), or empty.
+  std::string doubt;
 };
+
+/// Why a found landmark's soft-tissue depth or layers cannot be this landmark's, or empty: a
+/// depth more than 4 SD from the adult T-Table mean where ../shared/docs/references.md gives one
+/// (glabella 5.5 +- 1.0 mm, nasion 6.0 +- 1.5 mm), deeper than 20 mm anywhere (the T-Table's
+/// deepest facial landmark, the philtrum, is 11.5 +- 2.5 mm: the ray meets the nose's
+/// cartilage, the orbit or a cavity; the pronasale over 15 mm: its depth is through cartilage),
+/// or a CT skin layer over 8 mm (dermis is 1-4 mm).
+std::string landmark_doubt(const Landmark& landmark);
 
 /// The landmarks of one model, in the order of landmark_names().
 struct Landmarks {
