@@ -185,6 +185,12 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
 
   // At a landmark with an offset: 15 mm to the patient's left and 20 mm up from the glabella.
   await page.click('#landmarks summary');
+  // Depths that cannot be the landmark's are marked (docs/landmarks.md, "doubt"): Cranium's nose
+  // tip reads 32 mm to the bone; its glabella's 5.5 mm are the T-Table's.
+  const depthOf = (name) => page.locator(`#landmarks tr:has(button[data-landmark="${name}"]) td`).nth(1);
+  assert.match(await depthOf('pronasale').innerText(), /implausible/);
+  assert.match(await depthOf('pronasale').getAttribute('title'), /cartilage/);
+  assert.doesNotMatch(await depthOf('glabella').innerText(), /implausible/);
   await page.fill('#landmark-left', '15');
   await page.fill('#landmark-up', '20');
   await page.click('#landmarks button[data-landmark="glabella"]');

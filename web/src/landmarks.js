@@ -51,7 +51,13 @@ export async function showLandmarks(planner) {
       row.insertCell().textContent = 'absent';
       continue;
     }
-    row.insertCell().textContent = `${l.thickness_mm.toFixed(1)} mm`;
+    const depth = row.insertCell();
+    depth.textContent = `${l.thickness_mm.toFixed(1)} mm`;
+    if (l.doubt) {  // a depth that cannot be this landmark's (docs/landmarks.md, "doubt")
+      depth.textContent += ' (implausible)';
+      depth.className = 'doubt';
+      depth.title = row.title = l.doubt;
+    }
     const button = document.createElement('button');
     button.textContent = 'Place here';
     button.dataset.landmark = name;
