@@ -69,6 +69,16 @@ std::string model_of(const std::string& given, const plan::Plan& p, const std::s
   return dir;
 }
 
+// The plan's check on the model in `model_dir`, with the warning of a placement from a landmark
+// whose measured soft tissue is implausible (placement_doubt()).
+plan::PlanReport checked_plan(const plan::Plan& p, const std::string& model_dir,
+                              const PatientModel& model) {
+  plan::PlanReport report = plan::check_plan(p, model);
+  if (std::string doubt = placement_doubt(model_dir, model, p.placement); !doubt.empty())
+    report.warnings.push_back(std::move(doubt));
+  return report;
+}
+
 // "a,b;c,d;..." as points of N numbers each (`option`, `meaning` for the message).
 template <std::size_t N>
 std::vector<std::array<double, N>> parse_point_list(const std::string& text,
@@ -181,10 +191,7 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
   p.placement = placement;
   p.model = r.model;
   p.model_hash = model.content_hash();
-  plan::PlanReport report = plan::check_plan(p, model);
-  // Placed from a landmark whose depth or layers are implausible: the plan says so.
-  if (const std::string doubt = placement_doubt(r.model, model, placement); !doubt.empty())
-    report.warnings.push_back(doubt);
+  const plan::PlanReport report = checked_plan(p, r.model, model);
   plan::write_plan(r.output, p, &report);
   return plan_result(p, report, r.output, reporter);
 }
@@ -194,10 +201,7 @@ PlanResult run_plan_check(const PlanCheckRequest& r, Reporter* reporter) {
   const std::string model_dir = model_of(r.model, p, r.plan);
   const auto loaded = loaded_model(model_dir);
   const PatientModel& model = *loaded;
-  plan::PlanReport report = plan::check_plan(p, model);
-  if (const std::string doubt = placement_doubt(model_dir, model, p.placement); !doubt.empty())
-    report.warnings.push_back(doubt);
-  return plan_result(p, report, "", reporter);
+  return plan_result(p, checked_plan(p, model_dir, model), "", reporter);
 }
 
 PlanResult run_plan_show(const PlanShowRequest& r, Reporter* reporter) {

@@ -287,19 +287,17 @@ std::string set_domain(closure::SimulateOptions& o, const DomainFields& d,
   o.face.tie = fem::parse_tie_method(d.tie);
   o.features = loaded_feature_lines(model_dir);
   if (o.domain != closure::Domain::Face) return {};
-  // A chart's plan is solved in its parent's whole face (the chart's patch is in the parent's
-  // frame), and reports the parent's feature lines.
   if (!mesher::has_tissue_model(model_dir)) {
+    // A chart's plan is solved in its parent's whole face (the chart's patch is in the parent's
+    // frame), and reports the parent's feature lines.
     const std::string parent = chart_parent(model_dir);
     if (!parent.empty() && mesher::has_tissue_model(parent)) {
       o.tissue = loaded_tissue_model(parent);
       if (!o.features || o.features->items.empty()) o.features = loaded_feature_lines(parent);
       return {};
     }
-  }
-  if (!mesher::has_tissue_model(model_dir)) {
-    // A local chart, a scan-built model or one made before the tissue model existed: the
-    // clamped patch, said in every result.
+    // A scan-built model, one made before the tissue model existed, or a chart without its
+    // parent: the clamped patch, said in every result.
     o.domain = closure::Domain::Patch;
     return "the model has no whole-face tissue model (a surface-scan model, one made before it "
            "existed, or a local chart whose parent model is gone, has changed or has none): "

@@ -37,19 +37,14 @@ double gape(const Mesh& mesh, SolveOptions options) {
 // a thick fat layer under the wound: the fat is modelled as stiff as the dermis and the closure's
 // forces are overstated (on Cranium's cheek below the eye 3.77 N against 0.94 N with the
 // measured layers; docs/fem.md, "The whole face"). The warning, or empty.
-std::string uniform_over_fat(const PatientModel& model, const plan::Plan& plan,
+std::string uniform_over_fat(const PatientModel& model, const SurfaceMesh& wound,
                              const SimulateOptions& options) {
   const auto& maps = model.maps();
   if (options.continuum.tissue != TissueLayers::Uniform || options.continuum.constant_thickness_mm > 0 ||
       !maps.has_layers() || maps.thickness_fat_normal.empty())
     return {};
-  const std::vector<Eigen::Vector2d> loop = plan::wound_border(plan).loop_theta_z;
-  if (loop.empty()) return {};
-  Eigen::Vector2d c = Eigen::Vector2d::Zero();  // the loop is unwrapped about its first point
-  for (const Eigen::Vector2d& p : loop) c += p;
-  c /= static_cast<double>(loop.size());
-  const double fat = model.sample(maps.thickness_fat_normal, c[0], c[1]);
-  const double all = model.thickness_normal(c[0], c[1]);
+  const double fat = model.sample(maps.thickness_fat_normal, wound.theta_c_deg, wound.z_c_mm);
+  const double all = model.thickness_normal(wound.theta_c_deg, wound.z_c_mm);
   if (!(fat >= kThickFatMm && fat >= 0.4 * all)) return {};
   const auto mm = [](double x) { return std::round(10 * x) / 10; };
   return cat("the CT measured ", mm(fat), " mm of fat in the ", mm(all),
@@ -109,7 +104,7 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
       }
   }
   progress.update(1);
-  if (const std::string w = uniform_over_fat(model, plan, options); !w.empty()) {
+  if (const std::string w = uniform_over_fat(model, sim.wound.surface, options); !w.empty()) {
     warn(reporter, w);
     sim.wound.continuum.mesh.warnings.push_back(w);
   }

@@ -186,9 +186,11 @@ void read_ties_and_surface(const nlohmann::json& j, const std::string& jw, Mesh&
     mesh.ties.push_back(std::move(tie));
   }
   if (const auto rule = j.find("wedge_rule"); rule != j.end()) {
-    if (!rule->is_string() || (*rule != "full" && *rule != "calculix"))
-      throw InvalidInput(cat(jw, ": wedge_rule must be \"full\" or \"calculix\", not ", rule->dump()));
-    mesh.wedge_rule = parse_wedge_rule(rule->get<std::string>());
+    try {
+      mesh.wedge_rule = parse_wedge_rule(rule->is_string() ? rule->get<std::string>() : rule->dump());
+    } catch (const InvalidInput& e) {
+      throw InvalidInput(cat(jw, ": wedge_rule: ", e.what()));
+    }
   }
   const nlohmann::json sets = j.value("node_sets", nlohmann::json::object());
   if (!sets.is_object()) throw InvalidInput(cat(jw, ": node_sets must be an object of id arrays"));

@@ -4,10 +4,10 @@
 
 #include <nlohmann/json.hpp>
 
-#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <csignal>
+#include <sstream>
 #include <thread>
 
 namespace caps::server {
@@ -48,11 +48,8 @@ ServeResult run_serve(const ServeRequest& r, Reporter* reporter) {
   o.host = r.host;
   o.port = r.port;
   o.web_root = r.web_root;
-  for (std::size_t start = 0; start <= r.allow_host.size() && !r.allow_host.empty();) {
-    const std::size_t comma = std::min(r.allow_host.find(',', start), r.allow_host.size());
-    o.allowed_hosts.push_back(r.allow_host.substr(start, comma - start));
-    start = comma + 1;
-  }
+  std::istringstream names(r.allow_host);
+  for (std::string name; std::getline(names, name, ',');) o.allowed_hosts.push_back(name);
   PlannerServer server(o, reporter);
   server.bind();
   note(reporter, cat("the planner for ", r.model, " is at ", server.url(), " (Ctrl-C stops it)"));
