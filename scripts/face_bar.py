@@ -3,8 +3,10 @@
 
 Runs the caps program (plan new, then simulate) on a patient model at the 18 cheek and
 nasal-dorsum points (theta -60/-45/45/60 deg at z 25/35/45 mm, theta -5/0/5 at z 45/55) and over
-a 10 deg x 10 mm grid (theta -60..60, z over the model's rows), with --charts again on a local
-chart where the model cannot represent the skin (as the refusal advises), and prints the counts and the
+a 10 deg x 10 mm grid (theta -60..60, z over the model's rows). Where the model cannot represent
+the skin, caps plan new itself places the plan on a local chart beside it; with --no-auto-chart
+it is asked not to (--no-chart), and with --charts a refused plan is tried again on a chart made
+by hand (caps model chart, as the refusal advises). Prints the counts and the
 reasons for failure as a markdown table; --json writes every outcome, --svg draws them. Every count comes from the
 caps program's exit code and message: nothing is computed here.
 
@@ -20,6 +22,10 @@ import sys
 CRANIUM_FACE = (-1.40625, 41.15)
 POINTS = [(t, z) for t in (-60, -45, 45, 60) for z in (25, 35, 45)] + \
          [(t, z) for t in (-5, 0, 5) for z in (45, 55)]
+
+
+# extra arguments of caps plan new (--no-auto-chart: ["--no-chart"])
+PLAN_NEW_ARGS = []
 
 
 def run(cmd):
@@ -43,12 +49,17 @@ def attempt_on(caps, model, work, tag, at, length, width):
     plan = os.path.join(work, tag + ".json")
     rc, msg = run([caps, "plan", "new", "ellipse", "--model", model, "--at", at,
                    "--length", str(length), "--width", str(width), "-o", plan, "--force",
-                   "--quiet"])
+                   "--quiet"] + PLAN_NEW_ARGS)
     if rc != 0:
         return {"planned": False, "simulated": False, "message": msg}
+    # caps plan new places a plan where the model cannot hold the skin on a local chart it makes
+    # beside the plan (PLAN.chart), which the plan names as its model
+    with open(plan) as f:
+        on_chart = json.load(f).get("model", "").endswith(".chart")
     rc, msg = run([caps, "simulate", "--model", model, "--plan", plan, "-o",
                    os.path.join(work, tag), "--force", "--quiet"])
-    return {"planned": True, "simulated": rc == 0, "message": "" if rc == 0 else msg}
+    return {"planned": True, "simulated": rc == 0, "message": "" if rc == 0 else msg,
+            "chart": on_chart, "chart_made_by_plan_new": on_chart}
 
 
 def attempt(caps, model, work, theta, z, length, width, charts):
@@ -58,7 +69,7 @@ def attempt(caps, model, work, theta, z, length, width, charts):
     tag = f"t{theta}_z{z}".replace("-", "m")
     r = {"theta": theta, "z": z, "chart": False}
     r.update(attempt_on(caps, model, work, tag, f"{theta},{z}", length, width))
-    if r["simulated"] or not charts or "not operable" in r["message"] or not any(
+    if r["simulated"] or r["chart"] or not charts or "not operable" in r["message"] or not any(
             k in r["message"] for k in ("cannot represent", "grazing", "undercut")):
         return r
     chart = os.path.join(work, "chart_" + tag)
@@ -153,9 +164,14 @@ def main():
                     "relative to Cranium's (theta -1.4 deg, z 41.2 mm): for other scans")
     ap.add_argument("--charts", action="store_true", help="where the model cannot represent the "
                     "skin (grazing, undercut), try again on a local chart (caps model chart)")
+    ap.add_argument("--no-auto-chart", action="store_true", help="caps plan new --no-chart: "
+                    "refuse where the model cannot represent the skin instead of planning on a "
+                    "local chart (the head's model alone, as before 5 December 2026)")
     ap.add_argument("--json", default="")
     ap.add_argument("--svg", default="", help="write the outcomes as a picture (SVG)")
     a = ap.parse_args()
+    if a.no_auto_chart:
+        PLAN_NEW_ARGS.append("--no-chart")
     os.makedirs(a.work, exist_ok=True)
     info = json.load(open(os.path.join(a.model, "model.json")))
     g = info["grid"]

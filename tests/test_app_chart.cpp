@@ -2,7 +2,8 @@
 // axis faces the skin at one point. Checked on the analytic face phantom, on the flank of its
 // nose, where the head's own rays meet the skin obliquely: the chart's centre is the same skin
 // point, its ray runs along the skin's normal, and its tissue depth there is the phantom's own
-// depth along that normal; a plan at the chart's centre meshes and closes.
+// depth along that normal; a plan at the chart's centre meshes and closes. caps plan new makes a
+// chart itself where the head's image cannot hold the skin under a plan.
 
 #include <gtest/gtest.h>
 
@@ -15,6 +16,8 @@
 #include "caps/app/plan.hpp"
 #include "caps/app/simulation.hpp"
 #include "caps/core/error.hpp"
+#include "caps/plan/check.hpp"
+#include "caps/plan/plan_io.hpp"
 #include "caps/surface/chart.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "caps/volume/phantom.hpp"
@@ -192,4 +195,79 @@ TEST(Chart, FrameGeometry) {
   EXPECT_NEAR(std::abs(top.axis.direction.y()), 1.0, 1e-12);
   EXPECT_THROW(chart_frame({0, 0, 0}, {0, 0, 0}, {0, 0, 1}, {0, -1, 0}, 40.0), InvalidInput);
   EXPECT_THROW(chart_frame({0, 0, 0}, {1, 0, 0}, {0, 0, 1}, {0, -1, 0}, 0.0), InvalidInput);
+}
+
+TEST(Chart, PlanNewMakesOneWhereTheHeadsImageCannotHoldTheSkin) {
+  // The phantom head's rays graze its vertex (z ~100 mm): a plan there is refused on the head's
+  // model, and caps plan new places it on a local chart facing that skin instead, made beside
+  // the plan; plan check, mesh and simulate given the head's model take the chart.
+  const Fixture& f = fixture();
+  const fs::path dir = f.dir / "auto";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  app::PlanNewRequest pn;
+  pn.procedure = "ellipse";
+  pn.model = f.model;
+  pn.at = "0,99";
+  pn.parameters = {{"length", 12.0}, {"width", 4.0}};
+  pn.output = (dir / "vertex.json").string();
+  const fs::path chart = dir / "vertex.chart";
+
+  // Asked not to: refused as before, with nothing written.
+  pn.no_chart = true;
+  EXPECT_THROW(app::run_plan_new(pn), plan::SkinNotHeld);
+  EXPECT_FALSE(fs::exists(pn.output));
+  EXPECT_FALSE(fs::exists(chart));
+
+  pn.no_chart = false;
+  const app::PlanResult made = app::run_plan_new(pn);
+  EXPECT_EQ(made.chart, chart.string());
+  ASSERT_TRUE(fs::is_regular_file(chart / "model.json"));
+  for (const auto& e : fs::directory_iterator(dir))  // nothing left aside
+    EXPECT_EQ(e.path().filename().string().find(".making"), std::string::npos) << e.path();
+  bool said = false;
+  for (const std::string& w : made.warnings) said |= w.find("local chart") != std::string::npos;
+  EXPECT_TRUE(said);
+  const plan::Plan p = plan::read_plan(pn.output);
+  const PatientModel parent = PatientModel::load(f.model);
+  const PatientModel on = PatientModel::load(chart.string());
+  EXPECT_EQ(fs::path(p.model).filename(), "vertex.chart");
+  EXPECT_EQ(p.model_hash, on.content_hash());
+  const auto source = nlohmann::json::parse(std::ifstream(chart / "model.json")).at("source");
+  EXPECT_EQ(source.at("chart").at("parent_content_hash"), parent.content_hash());
+  EXPECT_TRUE(fs::path(source.at("chart").at("parent").get<std::string>()).is_absolute());
+  // The plan lies at the chart's centre, the head's skin point at (0, 99) seen along its normal;
+  // the chart's image holds the skin all round it.
+  EXPECT_NEAR(p.frame.theta_deg, 0.0, 1e-9);
+  EXPECT_NEAR(p.frame.z_mm, 0.0, 1e-9);
+  EXPECT_LT((on.skin_point(0, 0) - parent.skin_point(0, 99)).norm(), 1.0);
+  EXPECT_TRUE(flags_valid(on.flags_at(0, 0))) << describe_flags(on.flags_at(0, 0));
+
+  // Again without --force: the chart is not replaced and no plan is written over.
+  const auto chart_time = fs::last_write_time(chart / "model.json");
+  fs::remove(pn.output);
+  EXPECT_THROW(app::run_plan_new(pn), InvalidInput);
+  EXPECT_FALSE(fs::exists(pn.output));
+  EXPECT_EQ(fs::last_write_time(chart / "model.json"), chart_time);
+  pn.force = true;
+  app::run_plan_new(pn);
+
+  // The head's model named: the plan is checked and closed on its chart, and says so.
+  app::PlanCheckRequest pc;
+  pc.plan = pn.output;
+  pc.model = f.model;
+  EXPECT_EQ(app::run_plan_check(pc).points, 4);
+  app::SimulateRequest sr;
+  sr.model = f.model;
+  sr.plan = pn.output;
+  sr.output = (dir / "sim").string();
+  sr.domain.domain = "patch";  // the phantom's tissue model stops below the vertex
+  sr.solver.material = "linear";
+  const app::SimulateResult s = app::run_simulate(sr);
+  EXPECT_EQ(s.inverted_elements, 0);
+  EXPECT_GT(s.closing_force_n, 0.0);
+  EXPECT_LT(s.max_suture_gap_mm, 1e-6);
+  said = false;
+  for (const std::string& w : s.warnings) said |= w.find("a local chart of") != std::string::npos;
+  EXPECT_TRUE(said);
 }

@@ -343,6 +343,48 @@ ModelResult run_chart(const ChartRequest& r, Reporter* reporter) {
   return detail::model_result(r.output, r.output);
 }
 
+namespace detail {
+
+std::string chart_parent(const std::string& model_dir) {
+  const ModelInfo info = read_model_info(model_dir);
+  const json source = json::parse(info.source_json, nullptr, false);
+  if (!source.is_object() || !source.contains("chart") || !source["chart"].is_object()) return {};
+  const json& chart = source["chart"];
+  if (!chart.contains("parent") || !chart["parent"].is_string() ||
+      !chart.contains("parent_content_hash") || !chart["parent_content_hash"].is_string())
+    return {};
+  const std::string parent = chart["parent"].get<std::string>();
+  std::error_code ec;
+  if (parent.empty() || !fs::is_regular_file(fs::path(parent) / model_file::kJson, ec))
+    return {};
+  try {
+    if (read_model_info(parent).content_hash != chart["parent_content_hash"].get<std::string>())
+      return {};
+  } catch (const Error&) {
+    return {};
+  }
+  return parent;
+}
+
+
+std::string plan_model_dir(const std::string& given, const std::string& plan_model,
+                           const std::string& plan_model_hash) {
+  if (plan_model.empty() || plan_model_hash.empty() || plan_model == given) return given;
+  try {
+    const std::string given_hash = read_model_info(given).content_hash;
+    if (given_hash == plan_model_hash) return given;
+    const std::string parent = chart_parent(plan_model);
+    if (parent.empty() || read_model_info(plan_model).content_hash != plan_model_hash ||
+        read_model_info(parent).content_hash != given_hash)
+      return given;
+    return plan_model;
+  } catch (const Error&) {
+    return given;  // no model there: the given one's check names the plan's model
+  }
+}
+
+}  // namespace detail
+
 // ---- from-scan ----------------------------------------------------------------------------
 
 namespace {

@@ -7,9 +7,14 @@
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
+#include <unistd.h>
 #include <vector>
 
 #include "caps/app/loaded_model.hpp"
+#include "caps/app/model.hpp"
+#include "caps/app/simulation.hpp"
+#include "caps/closure/simulate.hpp"
+#include "caps/mesher/continuum_mesher.hpp"
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/json_file.hpp"
@@ -20,7 +25,9 @@
 #include "caps/plan/plan_io.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/surface/patient_model.hpp"
+#include "caps/volume/model_dir.hpp"
 #include "json_fields.hpp"
+#include "model_result.hpp"
 #include "numbers.hpp"
 #include "output_check.hpp"
 #include "skin_place.hpp"
@@ -63,10 +70,11 @@ PlanResult plan_result(const plan::Plan& p, const plan::PlanReport& r, const std
 }
 
 // The model a plan is checked on: the one given, else the one the plan names.
+// A plan on a local chart of the model given is checked on that chart (detail::plan_model_dir).
 std::string model_of(const std::string& given, const plan::Plan& p, const std::string& plan_path) {
   const std::string dir = !given.empty() ? given : p.model;
   if (dir.empty()) throw InvalidInput(cat(plan_path, ": names no model; give --model MODEL_DIR"));
-  return dir;
+  return detail::plan_model_dir(dir, p.model, p.model_hash);
 }
 
 // The plan's check on the model in `model_dir`, with the warning of a placement from a landmark
@@ -144,13 +152,107 @@ plan::Plan free_incision(const PlanNewRequest& r, const PatientModel& model) {
   return p;
 }
 
+// The plan's points are on cells the model can hold, but the wound's patch with the simulation's
+// defaults may not stand (its first ring of elements on grazing cells beside the nose): then
+// plan::SkinNotHeld, when the cells it cannot stand on are ones a local chart facing that skin
+// would hold. Any other refusal is left to caps simulate to report with its own options.
+void check_patch_stands(const plan::Plan& p, const PatientModel& model) {
+  try {
+    const closure::SimulateOptions o = simulate_options(MeshingFields{}, SolverFields{});
+    mesher::mesh_wound(plan::wound_border(p), model, o.surface, o.continuum);
+  } catch (const mesher::OffModelError& e) {
+    if (std::isfinite(e.theta_deg) && flags_chart_would_hold(model.flags_at(e.theta_deg, e.z_mm)))
+      throw plan::SkinNotHeld(e.what());
+  } catch (const Error&) {
+  }
+}
+
+// Whether caps model chart can measure a local chart of the model in `dir`: a model built from a
+// volume that is still there, not itself a chart, whose bone was not given as a separate mask.
+bool chartable(const std::string& dir) {
+  try {
+    const json info = json::parse(read_model_json(dir));
+    const json& source = info.at("source");
+    const json& seg = info.at("segmentation");
+    const std::string volume = source.value("path", "");
+    return source.value("kind", "volume") == "volume" && !source.contains("chart") &&
+           !volume.empty() && fs::exists(volume) &&
+           seg.value("bone_method", "").rfind("mask ", 0) != 0;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+// The plan on a local chart facing the skin at `tz` of the model, where the model's own image
+// cannot hold it (`why`, check_plan's refusal): the chart is made aside (PLAN.chart.making-PID)
+// and moved beside the plan (PLAN.chart) just before the plan is written, so a refusal leaves
+// neither; the procedure lies at the chart's centre with the request's orientation (both from
+// superior towards the patient's left, the chart keeping superior up).
+PlanResult plan_on_chart(const PlanNewRequest& r, const plan::LocalProcedure& proc,
+                         const Eigen::Vector2d& tz,
+                         const std::optional<plan::LandmarkPlacement>& placement,
+                         const std::string& why, Reporter* reporter) {
+  const fs::path chart = fs::path(r.output).replace_extension(".chart");
+  if (fs::exists(chart) && !r.force)
+    throw InvalidInput(cat(why, ". caps would plan it on a local chart facing this skin, in ",
+                           chart.string(), ", which exists: use --force to replace it"));
+  const fs::path aside = cat(chart.string(), ".making-", ::getpid());
+  struct Aside {
+    fs::path path;
+    ~Aside() {
+      std::error_code ec;
+      fs::remove_all(path, ec);
+    }
+  } cleanup{aside};
+  ChartRequest cr;
+  cr.model = fs::absolute(r.model).lexically_normal().string();  // found from anywhere
+  cr.at = cat(round_to(tz[0], 3), ",", round_to(tz[1], 3));
+  cr.output = aside.string();
+  cr.force = true;
+  run_chart(cr, reporter);
+  const PatientModel chart_model = PatientModel::load(aside.string());
+  plan::Plan p = plan::place_procedure(proc, chart_model, 0, 0, r.orientation);
+  p.placement = placement;
+  p.model = chart.string();
+  p.model_hash = chart_model.content_hash();
+  plan::PlanReport report;
+  try {
+    report = plan::check_plan(p, chart_model);
+  } catch (const InvalidInput& e) {
+    throw InvalidInput(cat(why, ". On a local chart facing this skin it cannot be operated "
+                           "either: ", e.what()));
+  }
+  report.warnings.insert(
+      report.warnings.begin(),
+      cat("the model's cylindrical image cannot hold the skin at theta ", round_to(tz[0], 1),
+          " deg, z ", round_to(tz[1], 1), " mm (its rays meet that skin edge-on or behind other "
+          "skin): planned on a local chart facing it, made in ", chart.string(),
+          " (as caps model chart ", r.model, " --at ", cr.at, "); its closure is solved in ",
+          r.model, "'s whole face"));
+  if (std::string doubt = placement_doubt(r.model, *loaded_model(r.model), placement);
+      !doubt.empty())
+    report.warnings.push_back(std::move(doubt));
+  if (fs::exists(chart)) fs::remove_all(chart);
+  fs::rename(aside, chart);
+  try {
+    plan::write_plan(r.output, p, &report);
+  } catch (...) {
+    std::error_code ec;
+    fs::remove_all(chart, ec);
+    throw;
+  }
+  PlanResult result = plan_result(p, report, r.output, reporter);
+  result.chart = chart.string();
+  return result;
+}
+
 }  // namespace
 
 std::string summary(const PlanResult& r) {
   return cat(r.output.empty() ? "plan" : r.output, ": ", r.procedure, ", ", r.points,
              " points, border loop of ", r.loop_nodes, " nodes, ", r.suture_pairs,
-             " suture pairs, cut ", round_to(r.cut_length_mm, 1),
-             " mm on the skin; can be operated");
+             " suture pairs, cut ", round_to(r.cut_length_mm, 1), " mm on the skin; can be operated",
+             r.chart.empty() ? "" : cat(" (on the local chart ", r.chart, ")"));
 }
 
 PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
@@ -191,7 +293,14 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
   p.placement = placement;
   p.model = r.model;
   p.model_hash = model.content_hash();
-  const plan::PlanReport report = checked_plan(p, r.model, model);
+  plan::PlanReport report;
+  try {
+    report = checked_plan(p, r.model, model);
+    if (!r.no_chart) check_patch_stands(p, model);
+  } catch (const plan::SkinNotHeld& e) {
+    if (r.no_chart || !chartable(r.model)) throw;
+    return plan_on_chart(r, proc, tz, placement, e.what(), reporter);
+  }
   plan::write_plan(r.output, p, &report);
   return plan_result(p, report, r.output, reporter);
 }

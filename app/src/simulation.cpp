@@ -24,6 +24,7 @@
 #include "caps/render/drawn_skin.hpp"
 #include "caps/render/simulation_report.hpp"
 #include "caps/app/loaded_model.hpp"
+#include "model_result.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "caps/volume/model_dir.hpp"
 #include "json_fields.hpp"
@@ -249,34 +250,6 @@ double check_mesh_budget(double size_mm, double perimeter_mm, const MeshingField
   return estimate;
 }
 
-namespace {
-
-// A local chart (caps model chart) is a piece of its parent's skin in the parent's LPS frame: the
-// parent's folder when it is still the model the chart was cut from (model.json's content hash
-// equal to the one the chart recorded), else empty.
-std::string chart_parent(const std::string& model_dir) {
-  const ModelInfo info = read_model_info(model_dir);
-  const json source = json::parse(info.source_json, nullptr, false);
-  if (!source.is_object() || !source.contains("chart") || !source["chart"].is_object()) return {};
-  const json& chart = source["chart"];
-  if (!chart.contains("parent") || !chart["parent"].is_string() ||
-      !chart.contains("parent_content_hash") || !chart["parent_content_hash"].is_string())
-    return {};
-  const std::string parent = chart["parent"].get<std::string>();
-  std::error_code ec;
-  if (parent.empty() || !fs::is_regular_file(fs::path(parent) / model_file::kJson, ec))
-    return {};
-  try {
-    if (read_model_info(parent).content_hash != chart["parent_content_hash"].get<std::string>())
-      return {};
-  } catch (const Error&) {
-    return {};
-  }
-  return parent;
-}
-
-}  // namespace
-
 std::string set_domain(closure::SimulateOptions& o, const DomainFields& d,
                        const std::string& model_dir) {
   o.domain = closure::parse_domain(d.domain);
@@ -290,7 +263,7 @@ std::string set_domain(closure::SimulateOptions& o, const DomainFields& d,
   if (!mesher::has_tissue_model(model_dir)) {
     // A chart's plan is solved in its parent's whole face (the chart's patch is in the parent's
     // frame), and reports the parent's feature lines.
-    const std::string parent = chart_parent(model_dir);
+    const std::string parent = detail::chart_parent(model_dir);
     if (!parent.empty() && mesher::has_tissue_model(parent)) {
       o.tissue = loaded_tissue_model(parent);
       if (!o.features || o.features->items.empty()) o.features = loaded_feature_lines(parent);
@@ -342,6 +315,17 @@ void refuse_inverted_input(const fem::Mesh& mesh, const std::string& dir) {
   }
 }
 
+// The model a plan is meshed and solved on when the request names `model`: that one, or the
+// local chart of it the plan lies on (detail::plan_model_dir); `note` then says so.
+std::string model_for_plan(const std::string& model, const plan::Plan& plan, std::string* note) {
+  const std::string dir = detail::plan_model_dir(model, plan.model, plan.model_hash);
+  if (dir != model && note)
+    *note = cat("the plan lies on ", dir, ", a local chart of ", model, " facing skin that ",
+                model, "'s cylindrical image cannot hold (caps plan new made it): meshed on the "
+                "chart, closed in the whole face");
+  return dir;
+}
+
 double max_norm(const Eigen::MatrixX3d& u) { return u.rows() ? u.rowwise().norm().maxCoeff() : 0.0; }
 
 }  // namespace
@@ -354,13 +338,17 @@ MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   const closure::SimulateOptions o = simulate_options(r.meshing, {});
   const mesher::WoundBorder border = border_of(r);
+  std::string chart_note;
+  const std::string model_dir =
+      r.plan.empty() ? r.model : model_for_plan(r.model, plan::read_plan(r.plan), &chart_note);
+  if (!chart_note.empty()) warn(reporter, chart_note);
   OutputDirectory out(r.output, r.force);
-  const auto loaded = loaded_model(r.model);
+  const auto loaded = loaded_model(model_dir);
   const PatientModel& model = *loaded;
   check_mesh_budget(border, model, r.meshing);
   mesher::WoundMesh w = mesher::mesh_wound(border, model, o.surface, o.continuum, reporter);
   const std::string wound = r.plan.empty() ? r.border : r.plan;
-  w.continuum.mesh.model = r.model;
+  w.continuum.mesh.model = model_dir;
   w.continuum.mesh.plan = wound;
   fem::write_mesh_dir(w.continuum.mesh, out.path());
   fem::write_inp(w.continuum.mesh, out.path() / "mesh.inp");
@@ -478,34 +466,37 @@ AxisLengthening plan_lengthening(const closure::Simulation& sim, const plan::Pla
 SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   closure::SimulateOptions o = simulate_options(r.meshing, r.solver);
-  const std::string domain_warning = set_domain(o, r.domain, r.model);
+  // Both names are recorded in result.json (JSON is UTF-8).
+  require_utf8(r.model, "the model folder");
+  require_utf8(r.plan, "the plan file");
+  const plan::Plan plan = plan::read_plan(r.plan);
+  std::string chart_note;
+  const std::string model_dir = model_for_plan(r.model, plan, &chart_note);
+  const std::string domain_warning = set_domain(o, r.domain, model_dir);
   if (!(r.suture_spacing > 0) || !std::isfinite(r.suture_spacing))
     throw InvalidParameter(cat("{suture_spacing} ", r.suture_spacing, ": give the distance "
                                "between sutures in mm, > 0 (e.g. 5)"));
   o.suture_spacing_mm = r.suture_spacing;
   if (r.tension_map && !r.render)
     throw InvalidInput("--tension-map draws on the rendered images; add --render");
-  // Both names are recorded in result.json (JSON is UTF-8).
-  require_utf8(r.model, "the model folder");
-  require_utf8(r.plan, "the plan file");
-  const plan::Plan plan = plan::read_plan(r.plan);
   OutputDirectory out(r.output, r.force);
-  const auto loaded = loaded_model(r.model);
+  const auto loaded = loaded_model(model_dir);
   const PatientModel& model = *loaded;
   check_mesh_budget(plan::wound_border(plan), model, r.meshing);
   if (!domain_warning.empty()) warn(reporter, domain_warning);
   closure::Simulation sim = closure::simulate(model, plan, o, reporter);
+  if (!chart_note.empty()) sim.wound.continuum.mesh.warnings.push_back(chart_note);
   if (!domain_warning.empty()) sim.wound.continuum.mesh.warnings.push_back(domain_warning);
-  if (const std::string doubt = placement_doubt(r.model, model, plan.placement); !doubt.empty()) {
+  if (const std::string doubt = placement_doubt(model_dir, model, plan.placement); !doubt.empty()) {
     warn(reporter, doubt);
     sim.wound.continuum.mesh.warnings.push_back(doubt);
   }
-  sim.wound.continuum.mesh.model = r.model;
+  sim.wound.continuum.mesh.model = model_dir;
   sim.wound.continuum.mesh.plan = r.plan;
   closure::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string());
   SimulateResult s;
   if (r.render) {
-    const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);
+    const render::DrawnSkin drawn = render::load_drawn_skin(model, model_dir, reporter);
     render::SimulationPictures pictures;
     pictures.tension_map = r.tension_map;
     pictures.drawn = &drawn;
@@ -686,17 +677,20 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
     throw InvalidInput("compare meshes the measured and a constant thickness itself; give the "
                        "constant one with --thickness, not --constant-thickness");
   closure::SimulateOptions o = simulate_options(r.meshing, r.solver);
-  if (const std::string w = set_domain(o, r.domain, r.model); !w.empty()) warn(reporter, w);
   require_utf8(r.model, "the model folder");
   require_utf8(r.plan, "the plan file");
   const plan::Plan plan = plan::read_plan(r.plan);
+  std::string chart_note;
+  const std::string model_dir = model_for_plan(r.model, plan, &chart_note);
+  if (!chart_note.empty()) warn(reporter, chart_note);
+  if (const std::string w = set_domain(o, r.domain, model_dir); !w.empty()) warn(reporter, w);
   OutputDirectory out(r.output, r.force);
-  const auto loaded = loaded_model(r.model);
+  const auto loaded = loaded_model(model_dir);
   const PatientModel& model = *loaded;
   check_mesh_budget(plan::wound_border(plan), model, r.meshing);
   const study::Comparison c = study::compare_thickness(model, plan, r.thickness, o, reporter);
   const std::string name = fs::path(r.plan).filename().string();
-  const render::DrawnSkin drawn = render::load_drawn_skin(model, r.model, reporter);
+  const render::DrawnSkin drawn = render::load_drawn_skin(model, model_dir, reporter);
   render::SimulationPictures pictures;
   pictures.drawn = &drawn;
   pictures.plan = &plan;

@@ -7,8 +7,10 @@
 #include <optional>
 #include <string>
 
+#include "caps/app/loaded_model.hpp"
 #include "caps/plan/placement.hpp"
 #include "caps/surface/patient_model.hpp"
+#include "model_result.hpp"
 #include "numbers.hpp"
 
 namespace caps::app {
@@ -38,7 +40,11 @@ inline Eigen::Vector2d resolve_at(const std::string& model_dir, const PatientMod
 inline std::string placement_doubt(const std::string& model_dir, const PatientModel& model,
                                    const std::optional<plan::LandmarkPlacement>& placement) {
   if (!placement) return {};
-  const Landmarks landmarks = plan::model_landmarks(model_dir, model);
+  // A plan on a local chart was placed from its parent's landmarks (caps plan new).
+  const std::string parent = detail::chart_parent(model_dir);
+  const Landmarks landmarks = parent.empty()
+                                  ? plan::model_landmarks(model_dir, model)
+                                  : plan::model_landmarks(parent, *loaded_model(parent));
   const Landmark* l = landmarks.find(placement->landmark);
   if (!l || l->doubt.empty()) return {};
   return cat("placed from the ", l->name, ", whose measured soft tissue is implausible: ", l->doubt);

@@ -726,7 +726,8 @@ ContinuumAttempt attempt_continuum(const SurfaceMesh& surface, const PatientMode
 }  // namespace
 
 void throw_refusal(const MeshRefusal& refusal) {
-  if (refusal.kind == MeshRefusal::Kind::OffModel) throw OffModelError(refusal.message);
+  if (refusal.kind == MeshRefusal::Kind::OffModel)
+    throw OffModelError(refusal.message, refusal.theta_deg, refusal.z_mm);
   throw InvalidParameter(refusal.message);
 }
 

@@ -248,13 +248,14 @@ PlanReport on_model(const Plan& plan, const PatientModel& model) {
     const auto f = model.flags_at(tz[0], tz[1]);
     if (flags_valid(f)) return;
     // Where the model cannot represent the skin, the chart to make, for this plan's centre.
-    std::string chart;
-    if ((f & (kUndercut | kGrazing)) && !(f & (kNoSkin | kTruncated | kEye)))
-      chart = cat(" (here: caps model chart ", plan.model.empty() ? "MODEL" : plan.model,
-                  " --at ", std::round(plan.frame.theta_deg * 10) / 10, ",",
-                  std::round(plan.frame.z_mm * 10) / 10, " -o CHART)");
-    throw InvalidInput(cat(what, " at (theta ", tz[0], " deg, z ", tz[1], " mm) ",
-                           invalid_flags_advice(f), chart));
+    const std::string message = cat(what, " at (theta ", tz[0], " deg, z ", tz[1], " mm) ",
+                                    invalid_flags_advice(f));
+    if (flags_chart_would_hold(f))
+      throw SkinNotHeld(cat(message, " (here: caps model chart ",
+                            plan.model.empty() ? "MODEL" : plan.model, " --at ",
+                            std::round(plan.frame.theta_deg * 10) / 10, ",",
+                            std::round(plan.frame.z_mm * 10) / 10, " -o CHART)"));
+    throw InvalidInput(message);
   };
   for (int i = 0; i < n; ++i)
     check_at(loop.theta_z[i], cat("loop node ", i, " (point ", loop.point[i], "), /points/", loop.point[i]));

@@ -496,6 +496,9 @@ struct PlannerServer::Impl {
     j["model"] = current()->dir;
     j["output"] = (request_folder() / "plan.json").string();
     j["force"] = true;
+    // The page makes its local charts itself (POST /api/chart, offered under the refusal) and
+    // serves them as the model: a plan placed on a chart of its own would not be drawn where it is.
+    j["no_chart"] = true;
     return app::find_verb("plan new").run_json(j.dump(), source, nullptr);
   }
 

@@ -232,15 +232,20 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
     `z ${cli.at.z_mm.toFixed(2)} mm, as caps plan new; saved with the landmark, loaded back`);
 });
 
-// The side of the nose (issue 16), where the head's model meets the skin edge-on: the plan is
-// refused there with the advice to make a local chart (the command line's message names the
-// command); on the page the refusal offers "Make a local chart here", the server makes the chart
-// and serves it, and an ellipse placed by clicking on the nose closes; then back to the head.
-const refused = spawnSync(caps, ['plan', 'new', 'ellipse', '--model', model, '--at', '-5,55',
-  '--length', '12', '--width', '4', '-o', join(out, 'refused.json'), '--force', '-q'],
-{ encoding: 'utf8' });
+// The side of the nose (issue 16), where the head's model meets the skin edge-on: caps plan new
+// places the plan on a local chart it makes beside the plan file, or (--no-chart) refuses with
+// the advice to make one (the command line's message names the command); on the page the
+// refusal offers "Make a local chart here", the server makes the chart and serves it, and an
+// ellipse placed by clicking on the nose closes; then back to the head.
+const noseArgs = ['plan', 'new', 'ellipse', '--model', model, '--at', '-5,55', '--length', '12',
+  '--width', '4', '--force', '-q'];
+const refused = spawnSync(caps, [...noseArgs, '--no-chart', '-o', join(out, 'refused.json')],
+  { encoding: 'utf8' });
 assert.equal(refused.status, 2, refused.stderr);
 assert.match(refused.stderr, /cannot represent[\s\S]*caps model chart/);
+const charted = spawnSync(caps, [...noseArgs, '-o', join(out, 'nose.json')], { encoding: 'utf8' });
+assert.equal(charted.status, 0, charted.stderr);
+assert.equal(JSON.parse(readFileSync(join(out, 'nose.json'), 'utf8')).model, join(out, 'nose.chart'));
 const nose = capsJson(['model', 'site', model, '--at', '-5,55']);
 await withPlanner({ caps, model, webRoot, log }, async ({ page, allow }) => {
   await page.waitForSelector('body[data-ready="true"]', { timeout: 120000 });

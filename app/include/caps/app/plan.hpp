@@ -18,6 +18,7 @@ struct PlanResult {
   std::string procedure;
   int points = 0, loop_nodes = 0, suture_pairs = 0;
   double cut_length_mm = 0;
+  std::string chart;  ///< the local chart plan new made for the plan (empty: on the model given)
   std::vector<std::string> warnings;
 
   /// The JSON is the plan with its check.
@@ -40,6 +41,9 @@ struct PlanNewRequest {
   std::string points, points_xyz;
   double orientation = 0;
   std::map<std::string, double> parameters;  ///< the template's, by name (caps plan templates)
+  /// Refuse a plan where the model's cylindrical image cannot hold the skin, instead of placing
+  /// it on a local chart made for it beside the plan file (run_plan_new).
+  bool no_chart = false;
   bool force = false;
 
   template <class Self, class V>
@@ -58,7 +62,10 @@ struct PlanNewRequest {
     v(r.parameters, {"parameters", "template parameter (see caps plan templates)",
                      FieldKind::Parameters});
     v(r.output, {"output", "the plan file to write", FieldKind::Required, "-o,--output"});
-    v(r.force, {"force", "replace an existing output", FieldKind::Flag});
+    v(r.no_chart, {"no_chart", "where the model cannot hold the skin (the side of the nose), "
+                               "refuse instead of planning on a local chart beside the plan",
+                   FieldKind::Flag});
+    v(r.force, {"force", "replace an existing output (and its chart)", FieldKind::Flag});
   }
 };
 
@@ -67,6 +74,15 @@ struct PlanNewRequest {
 /// straight between them in (theta, z) as every plan's segments, with no sutures (the user adds
 /// them to the file: docs/plan-format.md); its frame is centred at the points' mean and oriented
 /// from the first point towards the last.
+///
+/// Where the model's cylindrical image cannot hold the skin under a template's plan (undercut or
+/// grazing cells: the side of the nose, the alae; plan::SkinNotHeld) and the model is a CT- or
+/// MR-built head model, the plan is placed on a local chart facing that skin instead (as caps
+/// model chart --at the plan's centre), made beside the plan file (PLAN.chart/ for PLAN.json),
+/// at the chart's centre with the same orientation (both from superior towards the patient's
+/// left: the chart keeps superior up). The chart is in the head's frame, so the plan is closed
+/// in the head's whole face, and simulate, mesh, compare and plan check take the head model for
+/// it. The plan's warnings say so; `no_chart` refuses instead.
 PlanResult run_plan_new(const PlanNewRequest& request, Reporter* reporter = nullptr);
 
 struct PlanCheckRequest {

@@ -25,6 +25,7 @@
 /// `undermine_mm` of the wound's border and not under a flap the plan raises; with RimCondition::Fixed also every node on the outer rim
 /// (the far field is clamped), with Free the rim is traction free.
 
+#include <cmath>
 #include <Eigen/Core>
 #include <string>
 #include <vector>
@@ -196,7 +197,9 @@ struct WoundMesh {
 /// z range, or tissue thinner than the minimum). The message names theta and z.
 class OffModelError : public InvalidParameter {
  public:
-  using InvalidParameter::InvalidParameter;
+  explicit OffModelError(const std::string& message, double theta_deg = NAN, double z_mm = NAN)
+      : InvalidParameter(message), theta_deg(theta_deg), z_mm(z_mm) {}
+  double theta_deg, z_mm;  ///< the column that could not stand (NAN where not known)
 };
 
 /// Throws a mesher's refusal as mesh_surface() and mesh_continuum() do: OffModel as

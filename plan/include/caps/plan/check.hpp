@@ -26,6 +26,14 @@ struct PlanReport {
   std::vector<std::string> warnings;         ///< e.g. sutured edges of very different lengths
 };
 
+/// check_plan()'s refusal where the model's cylindrical image cannot hold the skin under the
+/// plan (undercut or grazing cells, and nothing worse: not the eye, not beyond the scan), which
+/// a local chart facing that skin can (surface/chart.hpp; caps plan new makes one).
+class SkinNotHeld : public InvalidInput {
+ public:
+  using InvalidInput::InvalidInput;
+};
+
 /// Sutured edges whose lengths differ by more than this factor get a warning.
 inline constexpr double kSutureRatioWarning = 1.5;
 
@@ -37,7 +45,8 @@ PlanReport check_plan_structure(const Plan& plan);
 
 /// check_plan_structure(), then on the model: every loop point inside the model's z range and on
 /// cells with flags 0, and every loop edge sampled every 0.25 mm likewise (the message names the
-/// point or edge and the flags); the lengths of sutured edges on the skin. Throws InvalidInput.
+/// point or edge and the flags); the lengths of sutured edges on the skin. Throws InvalidInput
+/// (SkinNotHeld where a local chart would hold the skin).
 PlanReport check_plan(const Plan& plan, const PatientModel& model);
 
 }  // namespace caps::plan

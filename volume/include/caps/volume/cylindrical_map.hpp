@@ -95,6 +95,13 @@ inline constexpr double kEyeMarginMm = 3.0;
 /// bone, (kBaseCavity) over an air cavity or (kBaseTissue) on deeper tissue.
 constexpr bool flags_valid(std::uint8_t flags) { return (flags & kInvalidFlags) == 0; }
 
+/// True when the cell is invalid only because the cylindrical image cannot hold its skin
+/// (undercut or grazing, and nothing worse: not the eye, not beyond the scan), which a local
+/// chart facing that skin can (surface/chart.hpp).
+constexpr bool flags_chart_would_hold(std::uint8_t flags) {
+  return (flags & (kUndercut | kGrazing)) && !(flags & (kNoSkin | kTruncated | kEye));
+}
+
 /// Short names of the flags, e.g. "no_bone|undercut", "base_cavity"; "valid" for 0.
 std::string describe_flags(std::uint8_t flags);
 
