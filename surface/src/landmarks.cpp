@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <iomanip>
 #include <optional>
 #include <sstream>
@@ -228,12 +229,29 @@ double brow_without_nose(const SkinRangeView& view, const std::string& why,
   }
   if (best >= 0) {
     const double zn = refine_z(mid, best);
+    int g = brow_above(mid, zn, 40.0);
+    if (g >= 0 && !(mid.ok[g - 1] && mid.ok[g + 1])) g = -1;  // at the scan's edge
+    // A brow stands a few millimetres in front of the nasion (Cranium 2.3 mm, the face phantom
+    // 5 mm); a nose tip stands 15-20 mm in front of the subnasale. A "brow" more than
+    // kMaxBrowMm in front is a nose over the concavity under it: on a head tilted forward in
+    // the scanner the nasal root is no concavity along the axis, the tip was refused as a nose,
+    // and the tip and the subnasale would be taken for the glabella and the nasion (issue 37).
+    constexpr double kMaxBrowMm = 10.0;
+    if (g >= 0 && mid.v[g] - view.r_mm(tm, zn) > kMaxBrowMm) {
+      const std::string nose =
+          cat("the most prominent midline point above the deepest concavity (z ",
+              std::round(mid.z[g]), " mm) stands ", mm(mid.v[g] - view.r_mm(tm, zn)),
+              " in front of it (z ", std::round(zn), " mm): a nose over the skin under it, not "
+              "a brow over the nasion (a brow stands at most ", kMaxBrowMm,
+              " mm in front); is the head tilted in the scanner?");
+      put.push_back(absent("nasion", lost + nose));
+      put.push_back(absent("glabella", lost + nose));
+      return tm;
+    }
     put.push_back(at("nasion", tm, zn,
                      0.5 * std::min(1.0, depth / 2.0) * measured_factor(view, tm, zn),
                      cat("without the pronasale: the deepest midline point below the brow, ",
                          mm(depth), " below it, the nasal root measured below; ", how)));
-    int g = brow_above(mid, zn, 40.0);
-    if (g >= 0 && !(mid.ok[g - 1] && mid.ok[g + 1])) g = -1;  // at the scan's edge
     std::optional<double> cut;  // the lowest unmeasured height within the window
     for (int i = 0; i < mid.size() && !cut; ++i)
       if (!mid.ok[i] && mid.z[i] > zn && mid.z[i] <= zn + 40.0) cut = mid.z[i];
@@ -679,8 +697,47 @@ std::string landmark_doubt(const Landmark& l) {
   return {};
 }
 
+const std::vector<LandmarkOrder>& landmark_orders() {
+  static const std::vector<LandmarkOrder> orders = {
+      {"glabella", "nasion", 5, 35},           {"nasion", "pronasale", 15, 60},
+      {"nasion", "subnasale", 30, 70},         {"pronasale", "subnasale", 5, 35},
+      {"subnasale", "pogonion", 25, 90},       {"nasion", "exocanthion_left", -10, 30},
+      {"nasion", "exocanthion_right", -10, 30}};
+  return orders;
+}
+
+int withdraw_contradicted(Landmarks& landmarks) {
+  std::string broken;  // the first relation the found landmarks break
+  for (const LandmarkOrder& o : landmark_orders()) {
+    const Landmark* up = landmarks.find(o.upper);
+    const Landmark* low = landmarks.find(o.lower);
+    if (!up || !low || !up->found || !low->found) continue;
+    const double above = up->z_mm - low->z_mm;
+    if (above >= o.min_mm && above <= o.max_mm) continue;
+    broken = cat("the ", o.upper, " lies ", std::round(above * 10) / 10, " mm above the ",
+                 o.lower, " along the head's axis, where a face has ", o.min_mm, "..", o.max_mm,
+                 " mm");
+    break;
+  }
+  if (broken.empty()) return 0;
+  // Every landmark is found from the midline profile and from each other: one out of place
+  // leaves none to trust.
+  int n = 0;
+  for (Landmark& l : landmarks.items)
+    if (l.found) {
+      const std::string was = cat(" (found at theta ", std::round(l.theta_deg * 10) / 10,
+                                  " deg, z ", std::round(l.z_mm * 10) / 10, " mm)");
+      l = absent(l.name, cat("withdrawn: the landmarks contradict each other (", broken,
+                             "; docs/landmarks.md), so some are not where their names say; is "
+                             "the head tilted in the scanner?", was));
+      ++n;
+    }
+  return n;
+}
+
 Landmarks find_landmarks(const PatientModel& model) {
   Landmarks out = find_landmarks(skin_range_view(model));
+  withdraw_contradicted(out);
   const auto& maps = model.maps();
   for (auto& l : out.items) {
     if (!l.found) continue;
@@ -764,6 +821,7 @@ Landmarks landmarks_from_json(const std::string& text, const std::string& source
     throw InvalidInput(cat(source, ": landmarks: ", e.what(),
                            "; recompute them with `caps model landmarks MODEL_DIR`"));
   }
+  withdraw_contradicted(out);  // models made before the check get it too
   return out;
 }
 

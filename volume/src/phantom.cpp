@@ -231,7 +231,19 @@ Volume make_phantom(const PhantomOptions& options) {
   v.source = "phantom";
   v.format = "phantom";
   v.data.resize(v.geom.n_voxels());
+  if (!(std::abs(options.pitch_deg) <= 45) || !(std::abs(options.yaw_deg) <= 45))
+    throw InvalidInput(cat("phantom: pitch ", options.pitch_deg, " and yaw ", options.yaw_deg,
+                           " deg must be between -45 and 45"));
   const HeadPhantom head(options.layered, options.thin_bone, options.face, options.scale);
+  // The posed head at p is the upright head at pose^T (p - a) + a. Forward: the vertex towards
+  // anterior (-P) about +L; to the left: the face (-P) towards +L about +S.
+  const double kDeg = 3.14159265358979323846 / 180.0;
+  const Eigen::Matrix3d pose =
+      (Eigen::AngleAxisd(options.yaw_deg * kDeg, Eigen::Vector3d::UnitZ()) *
+       Eigen::AngleAxisd(options.pitch_deg * kDeg, Eigen::Vector3d::UnitX()))
+          .toRotationMatrix();
+  const bool posed = options.pitch_deg != 0 || options.yaw_deg != 0;
+  const Eigen::Vector3d a = head.axis_point();
   const auto& d = v.geom.dims;
   tbb::parallel_for(0, d[2], [&](int k) {
     for (int j = 0; j < d[1]; ++j)
@@ -239,8 +251,15 @@ Volume make_phantom(const PhantomOptions& options) {
         const Eigen::Vector3d p = v.index_to_lps(Eigen::Vector3d(i, j, k));
         // Whole Hounsfield units, as a CT stores them (the rounding is far below the noise of
         // any measurement here: 0.5 HU of a 1040 HU skin edge is 0.0005 voxel).
-        v.data[v.geom.linear(i, j, k)] =
-            static_cast<float>(std::round(head.hu_at(p, options.spacing_mm, options.head_holder)));
+        float hu = static_cast<float>(std::round(head.hu_at(
+            posed ? Eigen::Vector3d(pose.transpose() * (p - a) + a) : p, options.spacing_mm, false)));
+        // The holder stays in the scanner's frame: where the posed head leaves air, the holder
+        // where the upright head would leave air too (the holder alone).
+        constexpr float kAir = static_cast<float>(HeadPhantom::kAirHu);
+        if (options.head_holder && (!posed || hu == kAir) &&
+            (!posed || std::round(head.hu_at(p, options.spacing_mm, false)) == kAir))
+          hu = static_cast<float>(std::round(head.hu_at(p, options.spacing_mm, true)));
+        v.data[v.geom.linear(i, j, k)] = hu;
       }
   });
   v.notes.push_back(options.layered ? "analytic layered head phantom (caps phantom --layered)"
@@ -249,6 +268,9 @@ Volume make_phantom(const PhantomOptions& options) {
     v.notes.push_back("with a thin bone plate (0.5 .. 1.5 mm) under the right cheek");
   if (options.face) v.notes.push_back("with a face of analytic landmarks (caps phantom --face)");
   if (options.scale != 1.0) v.notes.push_back(cat("head scaled by ", options.scale));
+  if (posed)
+    v.notes.push_back(cat("head tilted forward ", options.pitch_deg, " deg and turned left ",
+                          options.yaw_deg, " deg"));
   return v;
 }
 

@@ -505,6 +505,7 @@ struct PhantomRequest {
   std::string output, voxels = "256,256,240", spacing = "1,1,1";
   bool no_holder = false, layered = false, thin_bone = false, face = false, force = false;
   double scale = PhantomOptions{}.scale;
+  double pitch = 0, yaw = 0;
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
     v(r.output, {"output", "output .nii or .nii.gz", FieldKind::Required, "-o,--output"});
@@ -518,6 +519,9 @@ struct PhantomRequest {
     v(r.face, {"face", "a face of analytic landmarks (brow, nose, lips, chin, eyes, cheeks, "
                        "ears) instead of the plain nose", FieldKind::Flag});
     v(r.scale, {"scale", "the head's size: every length of the head times this (0.7..1.3)"});
+    v(r.pitch, {"pitch", "the head tilted forward in the scanner, chin towards the chest (deg, "
+                         "-45..45)"});
+    v(r.yaw, {"yaw", "the head turned towards the patient's left in the scanner (deg, -45..45)"});
     v(r.force, {"force", "replace an existing output", FieldKind::Flag});
   }
 };

@@ -12,7 +12,6 @@
 /// returned with found = false and the reason, never guessed.
 
 #include <Eigen/Core>
-#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
@@ -49,6 +48,22 @@ struct Landmark {
 /// or a CT skin layer over 8 mm (dermis is 1-4 mm).
 std::string landmark_doubt(const Landmark& landmark);
 
+/// One relation of the midline's landmarks along the head's axis that an adult or a child's
+/// face keeps (withdraw_contradicted()): `upper` lies `min_mm`..`max_mm` above `lower`.
+struct LandmarkOrder {
+  const char* upper;
+  const char* lower;
+  double min_mm, max_mm;
+};
+
+/// The relations withdraw_contradicted() checks: glabella 5..35 mm above the nasion, the nasion
+/// 15..60 mm above the pronasale and 30..70 mm above the subnasale (the nose's height n-sn, 50-53
+/// +- 3 mm in Farkas' adults, about 40 mm at five years), the pronasale 5..35 mm above the
+/// subnasale, the subnasale 25..90 mm above the pogonion, the exocanthions -10..30 mm below the
+/// nasion. Wide enough for children and a head tilted 30 deg in the scanner; a feature taken for
+/// its neighbour (a nose tip for the glabella) breaks them.
+const std::vector<LandmarkOrder>& landmark_orders();
+
 /// The landmarks of one model, in the order of landmark_names().
 struct Landmarks {
   std::vector<Landmark> items;
@@ -80,6 +95,13 @@ struct SkinRangeView {
 /// thicknesses are left for the caller). Never throws for a head without a feature: that
 /// landmark is absent.
 Landmarks find_landmarks(const SkinRangeView& view);
+
+/// Withdraws every found landmark when two contradict each other (landmark_orders(): a pair out
+/// of order or out of distance along the head's axis): each is found from the midline profile
+/// and from the others, so one out of place leaves none to trust. A withdrawn landmark is absent
+/// (found false) and its note says why: nothing is placed from it. find_landmarks() and
+/// landmarks_from_json() apply it. Returns how many were withdrawn.
+int withdraw_contradicted(Landmarks& landmarks);
 
 /// The model's range view: bilinear r_skin, measured where every blended cell is valid and its
 /// skin measured, undercut from the cells' flags; the grid's steps and extent.

@@ -44,6 +44,10 @@ struct PhantomOptions {
   bool thin_bone = false;  ///< a thin bone plate under the right cheek (HeadPhantom)
   bool face = false;       ///< a face of analytic landmarks instead of the plain nose (HeadPhantom)
   double scale = 1.0;      ///< the head's size: every length of the head times this (0.7 .. 1.3)
+  /// The head's pose in the scanner, about HeadPhantom::axis_point(): tilted forward (chin
+  /// towards the chest) by `pitch_deg`, then turned towards the patient's left by `yaw_deg`
+  /// (both -45 .. 45 deg; the head holder stays where it is).
+  double pitch_deg = 0, yaw_deg = 0;
 };
 
 /// Analytic description of the phantom head (all lengths in mm, angles in radians).
