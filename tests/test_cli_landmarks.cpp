@@ -185,3 +185,30 @@ TEST(CliLandmarks, AnAbsentOrUnknownLandmarkIsInvalidInput) {
   EXPECT_EQ(caps("plan new ellipse --model " + model.string() + " --at 0,60 -o " +
                  (kTmp / "y.json").string() + " --force -q").code, 0);
 }
+
+TEST(CliLandmarks, ASiteOrAWoundOverImplausibleTissueIsMarked) {
+  // caps model site at the phantom's nose tip (21 mm through its nose to the bone: no layer a
+  // flap is raised in) marks it; on the forehead it says nothing. A closure whose wound's centre
+  // lies on the nose tip carries the same warning into result.json.
+  const auto tip = caps("model site " + face_model().string() + " --at pronasale --json");
+  ASSERT_EQ(tip.code, 0) << tip.out;
+  const json t = json::parse(tip.out.substr(tip.out.find('{')));
+  EXPECT_GT(t["thickness_mm"].get<double>(), 20.0);  // surface/landmarks.hpp, kMaxFacialTissueMm
+  EXPECT_NE(t.value("doubt", "").find("deeper than any facial landmark's"), std::string::npos) << tip.out;
+  const auto brow = caps("model site " + face_model().string() + " --at glabella+0,15 --json");
+  ASSERT_EQ(brow.code, 0) << brow.out;
+  EXPECT_FALSE(json::parse(brow.out.substr(brow.out.find('{'))).contains("doubt")) << brow.out;
+
+  const fs::path plan = kTmp / "on_tip.json";
+  const auto placed = caps("plan new ellipse --model " + face_model().string() +
+                           " --at pronasale --length 8 --width 3 -o " + plan.string() + " --force -q");
+  ASSERT_EQ(placed.code, 0) << placed.out;
+  const auto sim = caps("simulate -q --domain patch --material linear --model " +
+                        face_model().string() + " --plan " + plan.string() + " -o " +
+                        (kTmp / "on_tip_sim").string() + " --force");
+  ASSERT_EQ(sim.code, 0) << sim.out;
+  const json r = read_json(kTmp / "on_tip_sim" / "result.json");
+  bool said = false;
+  for (const auto& w : r["warnings"]) said |= w.get<std::string>().find("under the wound's centre") != std::string::npos;
+  EXPECT_TRUE(said) << r["warnings"].dump();
+}

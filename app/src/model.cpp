@@ -571,6 +571,8 @@ SiteResult run_model_site(const SiteRequest& r, Reporter*) {
     out.deep_mm = model.sample(maps.thickness_deep_normal, out.theta_deg, out.z_mm);
   }
   out.flags = describe_flags(model.flags_at(out.theta_deg, out.z_mm));
+  out.doubt = tissue_doubt(out.thickness_mm, out.has_layers ? out.skin_mm : NAN);
+  if (!out.doubt.empty()) out.warnings.push_back(cat("implausible here: ", out.doubt));
   return out;
 }
 
@@ -580,7 +582,9 @@ std::string summary(const SiteResult& r) {
   if (r.has_layers)
     s += cat(" (skin ", round_to(r.skin_mm, 2), ", fat ", round_to(r.fat_mm, 2), ", deep ",
              round_to(r.deep_mm, 2), ")");
-  return s + cat(", ", r.flags);
+  s += cat(", ", r.flags);
+  if (!r.doubt.empty()) s += cat(" [implausible: ", r.doubt, "]");
+  return s;
 }
 
 PickResult run_pick(const PickRequest& r, Reporter*) {

@@ -10,6 +10,7 @@
 #include "caps/mesher/mesh_pictures.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/plan/check.hpp"
+#include "caps/surface/landmarks.hpp"
 #include "caps/surface/patient_model.hpp"
 
 namespace caps::closure {
@@ -51,6 +52,23 @@ std::string uniform_over_fat(const PatientModel& model, const SurfaceMesh& wound
              " mm of soft tissue under the wound; one material (--tissue uniform, the default) "
              "makes it as stiff as the dermis and overstates the closure's forces (several times "
              "on a thick cheek): --tissue auto models the measured dermis, fat and deep tissue");
+}
+
+// The soft tissue the CT measured under the wound's centre where it cannot be a layer over bone
+// (surface/landmarks.hpp, tissue_doubt(): the nose's cartilage, the orbit, a cavity): the
+// closure meshes it as tissue all the same, so its result says so. The warning, or empty.
+std::string implausible_tissue(const PatientModel& model, const SurfaceMesh& wound,
+                               const SimulateOptions& options) {
+  if (options.continuum.constant_thickness_mm > 0) return {};
+  const auto& maps = model.maps();
+  const double skin = maps.has_layers() && !maps.thickness_skin_normal.empty()
+                          ? model.sample(maps.thickness_skin_normal, wound.theta_c_deg, wound.z_c_mm)
+                          : NAN;
+  const std::string doubt =
+      tissue_doubt(model.thickness_normal(wound.theta_c_deg, wound.z_c_mm), skin);
+  if (doubt.empty()) return {};
+  return cat("under the wound's centre the CT measured ", doubt, "; the closure meshes it as "
+             "soft tissue over bone all the same, so its forces there are not the skin's");
 }
 
 // The first layer material CalculiX has no form of under the solve's kinematics (mesh.inp:
@@ -104,10 +122,12 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
       }
   }
   progress.update(1);
-  if (const std::string w = uniform_over_fat(model, sim.wound.surface, options); !w.empty()) {
-    warn(reporter, w);
-    sim.wound.continuum.mesh.warnings.push_back(w);
-  }
+  for (const std::string& w : {uniform_over_fat(model, sim.wound.surface, options),
+                                implausible_tissue(model, sim.wound.surface, options)})
+    if (!w.empty()) {
+      warn(reporter, w);
+      sim.wound.continuum.mesh.warnings.push_back(w);
+    }
   if (const Material* m = without_calculix_form(sim.wound.continuum.mesh, options))
     sim.wound.continuum.mesh.warnings.push_back(
         cat("mesh.inp is not written: CalculiX has no form of the '", m->name(),

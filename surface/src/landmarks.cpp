@@ -687,12 +687,17 @@ std::string landmark_doubt(const Landmark& l) {
   if (l.name == "pronasale" && l.thickness_mm > 15.0)
     return cat(mm(l.thickness_mm), " mm to the bone: the nose's tip stands on cartilage, not on a "
                "soft-tissue layer over bone; this depth is not one a flap is raised in");
-  if (l.thickness_mm > 20.0)
-    return cat(mm(l.thickness_mm), " mm of soft tissue: deeper than any facial landmark's in the "
+  return tissue_doubt(l.thickness_mm, l.skin_mm);
+}
+
+std::string tissue_doubt(double thickness_mm, double skin_mm) {
+  const auto mm = [](double x) { return std::round(10 * x) / 10; };
+  if (thickness_mm > kMaxFacialTissueMm)
+    return cat(mm(thickness_mm), " mm of soft tissue: deeper than any facial landmark's in the "
                "T-Table (the philtrum's 11.5 +- 2.5 mm is the deepest); the ray meets the nose's "
                "cartilage, the orbit or a cavity, not a soft-tissue layer over bone");
-  if (std::isfinite(l.skin_mm) && l.skin_mm > 8.0)
-    return cat("the CT's skin layer reads ", mm(l.skin_mm), " mm (dermis is 1-4 mm): the layers "
+  if (std::isfinite(skin_mm) && skin_mm > kMaxSkinLayerMm)
+    return cat("the CT's skin layer reads ", mm(skin_mm), " mm (dermis is 1-4 mm): the layers "
                "here are not the dermis, fat and deep tissue");
   return {};
 }

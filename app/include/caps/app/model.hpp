@@ -442,6 +442,7 @@ struct SiteResult {
   bool has_layers = false;               ///< the model has measured tissue layers
   double skin_mm = 0, fat_mm = 0, deep_mm = 0;  ///< the layers along the normal (has_layers)
   std::string flags;                     ///< describe_flags() of the cells there ("valid")
+  std::string doubt;                     ///< why the tissue measured there is implausible (tissue_doubt())
   std::vector<std::string> warnings;
 
   template <class Self, class V>
@@ -454,6 +455,9 @@ struct SiteResult {
     v(r.thickness_mm, {"thickness_mm", "soft tissue along the skin normal"});
     v(r.thickness_radial_mm, {"thickness_radial_mm", "soft tissue along the ray from the axis"});
     v(r.flags, {"flags"});
+    v.when(!r.doubt.empty(), [&] {
+      v(r.doubt, {"doubt", "why the tissue measured here is implausible for a layer over bone"});
+    });
     v(r.warnings, {"warnings"});
     v.when(r.has_layers, [&] {
       v.group({"layers_mm", "the measured layers along the normal"}, [&] {

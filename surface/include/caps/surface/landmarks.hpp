@@ -64,6 +64,15 @@ struct LandmarkOrder {
 /// its neighbour (a nose tip for the glabella) breaks them.
 const std::vector<LandmarkOrder>& landmark_orders();
 
+/// Why the soft tissue the CT measured at a point of the face cannot be the layer a flap is
+/// raised in, or empty: deeper than `kMaxFacialTissueMm` (the T-Table's deepest facial landmark,
+/// the philtrum, is 11.5 +- 2.5 mm: the normal meets the nose's cartilage, the orbit or a
+/// cavity), or a skin layer over `kMaxSkinLayerMm` (dermis is 1-4 mm). `skin_mm` NaN: no
+/// layers. landmark_doubt(), caps model site and a closure's warnings use it.
+inline constexpr double kMaxFacialTissueMm = 20.0;
+inline constexpr double kMaxSkinLayerMm = 8.0;
+std::string tissue_doubt(double thickness_mm, double skin_mm);
+
 /// The landmarks of one model, in the order of landmark_names().
 struct Landmarks {
   std::vector<Landmark> items;
