@@ -366,7 +366,6 @@ std::string chart_parent(const std::string& model_dir) {
   return parent;
 }
 
-
 std::string plan_model_dir(const std::string& given, const std::string& plan_model,
                            const std::string& plan_model_hash) {
   if (plan_model.empty() || plan_model_hash.empty() || plan_model == given) return given;

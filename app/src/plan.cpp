@@ -296,7 +296,7 @@ PlanResult run_plan_new(const PlanNewRequest& r, Reporter* reporter) {
   plan::PlanReport report;
   try {
     report = checked_plan(p, r.model, model);
-    if (!r.no_chart) check_patch_stands(p, model);
+    if (!r.no_chart && chartable(r.model)) check_patch_stands(p, model);
   } catch (const plan::SkinNotHeld& e) {
     if (r.no_chart || !chartable(r.model)) throw;
     return plan_on_chart(r, proc, tz, placement, e.what(), reporter);
