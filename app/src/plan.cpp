@@ -193,6 +193,10 @@ PlanResult plan_on_chart(const PlanNewRequest& r, const plan::LocalProcedure& pr
                          const std::optional<plan::LandmarkPlacement>& placement,
                          const std::string& why, Reporter* reporter) {
   const fs::path chart = fs::path(r.output).replace_extension(".chart");
+  if (chart == fs::path(r.output))
+    throw InvalidInput(cat(why, ". caps would plan it on a local chart facing this skin, made "
+                           "beside the plan as PLAN.chart: name the plan file otherwise than ",
+                           r.output, " (plan.json)"));
   if (fs::exists(chart) && !r.force)
     throw InvalidInput(cat(why, ". caps would plan it on a local chart facing this skin, in ",
                            chart.string(), ", which exists: use --force to replace it"));

@@ -246,6 +246,16 @@ assert.match(refused.stderr, /cannot represent[\s\S]*caps model chart/);
 const charted = spawnSync(caps, [...noseArgs, '-o', join(out, 'nose.json')], { encoding: 'utf8' });
 assert.equal(charted.status, 0, charted.stderr);
 assert.equal(JSON.parse(readFileSync(join(out, 'nose.json'), 'utf8')).model, join(out, 'nose.chart'));
+// At 5,45 the plan's own points lie on cells the head's image holds, but its patch's first ring
+// of elements does not (the mesher's refusal at its smallest extent): a chart too.
+const ringArgs = ['plan', 'new', 'ellipse', '--model', model, '--at', '5,45', '--length', '12',
+  '--width', '4', '--force', '-q'];
+const ring = spawnSync(caps, [...ringArgs, '-o', join(out, 'ring.json')], { encoding: 'utf8' });
+assert.equal(ring.status, 0, ring.stderr);
+assert.equal(JSON.parse(readFileSync(join(out, 'ring.json'), 'utf8')).model, join(out, 'ring.chart'));
+const ringOnHead = spawnSync(caps, [...ringArgs, '--no-chart', '-o', join(out, 'ring-head.json')],
+  { encoding: 'utf8' });
+assert.equal(ringOnHead.status, 0, ringOnHead.stderr);  // --no-chart: simulate would refuse it
 const nose = capsJson(['model', 'site', model, '--at', '-5,55']);
 await withPlanner({ caps, model, webRoot, log }, async ({ page, allow }) => {
   await page.waitForSelector('body[data-ready="true"]', { timeout: 120000 });
