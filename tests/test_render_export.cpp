@@ -246,6 +246,27 @@ TEST(GltfExport, MeshMorphTargetAndAnimationReadBack) {
   fs::remove_all(path.parent_path());
 }
 
+TEST(GltfExport, ASkinBeforeAnyPlanHasNoMorphTarget) {
+  // A model's skin (the planner's GET /api/skin, before any plan) is written without the
+  // post-operative morph target, its weights and its animation (issue 38); its positions,
+  // normals and colours are the same as with them.
+  const SkinSurfaces& s = closed_skin();
+  const fs::path with = scratch("with.glb"), without = scratch("without.glb");
+  write_gltf(s, with);
+  write_gltf(s, without, false);
+  const tinygltf::Model a = load_glb(with), b = load_glb(without);
+  const tinygltf::Primitive& pb = b.meshes.at(0).primitives.at(0);
+  EXPECT_TRUE(pb.targets.empty());
+  EXPECT_TRUE(b.meshes[0].weights.empty());
+  EXPECT_FALSE(b.meshes[0].extras.Has("targetNames"));
+  EXPECT_TRUE(b.animations.empty());
+  const tinygltf::Primitive& pa = a.meshes.at(0).primitives.at(0);
+  for (const char* attr : {"POSITION", "NORMAL", "COLOR_0"})
+    EXPECT_EQ(floats(a, pa.attributes.at(attr)), floats(b, pb.attributes.at(attr))) << attr;
+  EXPECT_LT(fs::file_size(without), fs::file_size(with));
+  fs::remove_all(with.parent_path());
+}
+
 TEST(GltfExport, FaceLooksAlongPlusZWithYUp) {
   // A synthetic face: a square in the coronal plane 80 mm anterior (LPS y = -80), its outward
   // normal anterior (-y), counter-clockwise seen from the front.

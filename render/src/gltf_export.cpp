@@ -127,7 +127,7 @@ Eigen::Vector3d lps_to_gltf(const Eigen::Vector3d& p) {
   return 1e-3 * Eigen::Vector3d(p.x(), p.z(), -p.y());
 }
 
-void write_gltf(const SkinSurfaces& s, const std::filesystem::path& path) {
+void write_gltf(const SkinSurfaces& s, const std::filesystem::path& path, bool post_operative) {
   check_skin(s, path);
   const Eigen::Index nv = s.pre.V.rows();
 
@@ -163,17 +163,20 @@ void write_gltf(const SkinSurfaces& s, const std::filesystem::path& path) {
   prim.attributes["COLOR_0"] = b.add_float(col, 3, kArray, false);
   prim.indices = b.add_indices(idx);
   // glTF requires min/max on every POSITION accessor, morph targets included
-  prim.targets.push_back({{"POSITION", b.add_float(dpos, 3, kArray, true)},
-                          {"NORMAL", b.add_float(dnrm, 3, kArray, false)}});
+  if (post_operative)
+    prim.targets.push_back({{"POSITION", b.add_float(dpos, 3, kArray, true)},
+                            {"NORMAL", b.add_float(dnrm, 3, kArray, false)}});
   prim.material = 0;
 
   tinygltf::Mesh mesh;
   mesh.name = "skin";
   mesh.primitives.push_back(std::move(prim));
-  mesh.weights = {0.0};
-  mesh.extras = tinygltf::Value(tinygltf::Value::Object{
-      {"targetNames", tinygltf::Value(tinygltf::Value::Array{
-                          tinygltf::Value(std::string(kGltfMorphTargetName))})}});
+  if (post_operative) {
+    mesh.weights = {0.0};
+    mesh.extras = tinygltf::Value(tinygltf::Value::Object{
+        {"targetNames", tinygltf::Value(tinygltf::Value::Array{
+                            tinygltf::Value(std::string(kGltfMorphTargetName))})}});
+  }
   model.meshes.push_back(std::move(mesh));
 
   tinygltf::Material mat;
@@ -193,19 +196,21 @@ void write_gltf(const SkinSurfaces& s, const std::filesystem::path& path) {
   model.scenes.push_back(std::move(scene));
   model.defaultScene = 0;
 
-  tinygltf::AnimationSampler sampler;
-  sampler.input = b.add_float({0.0f, static_cast<float>(kGltfTransitionSeconds)}, 1, 0, true);
-  sampler.output = b.add_float({0.0f, 1.0f}, 1, 0, false);
-  sampler.interpolation = "LINEAR";
-  tinygltf::AnimationChannel channel;
-  channel.sampler = 0;
-  channel.target_node = 0;
-  channel.target_path = "weights";
-  tinygltf::Animation anim;
-  anim.name = "pre-to-post";
-  anim.samplers.push_back(sampler);
-  anim.channels.push_back(channel);
-  model.animations.push_back(std::move(anim));
+  if (post_operative) {
+    tinygltf::AnimationSampler sampler;
+    sampler.input = b.add_float({0.0f, static_cast<float>(kGltfTransitionSeconds)}, 1, 0, true);
+    sampler.output = b.add_float({0.0f, 1.0f}, 1, 0, false);
+    sampler.interpolation = "LINEAR";
+    tinygltf::AnimationChannel channel;
+    channel.sampler = 0;
+    channel.target_node = 0;
+    channel.target_path = "weights";
+    tinygltf::Animation anim;
+    anim.name = "pre-to-post";
+    anim.samplers.push_back(sampler);
+    anim.channels.push_back(channel);
+    model.animations.push_back(std::move(anim));
+  }
 
   // WriteGltfSceneToStream is WriteGltfSceneToFile's binary path without its unchecked ofstream:
   // the bytes go through write_file_atomic with a checked write.

@@ -166,7 +166,7 @@ std::string write_model_skin_glb(const PatientModel& model, SkinColouring colour
       if (!ok[static_cast<std::size_t>(v)]) s.color.row(v) = kInvalidGrey;
     info["scale_max_mm"] = top;
   }
-  render::write_gltf(s, path);
+  render::write_gltf(s, path, false);  // the skin before any plan: no post-operative morph
   return info.dump();
 }
 

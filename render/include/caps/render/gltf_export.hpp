@@ -43,6 +43,9 @@ Eigen::Vector3d lps_to_gltf(const Eigen::Vector3d& lps_mm);
 /// @param path  the .glb to write
 /// Throws InvalidInput for an empty or inconsistent skin or non-finite positions, IoError if
 /// the file cannot be written.
-void write_gltf(const SkinSurfaces& s, const std::filesystem::path& path);
+/// With `post_operative` false (a model's skin before any plan) the file holds the pre-operative
+/// skin alone: no morph target, weights or animation (s.post must still match s.pre's shape).
+void write_gltf(const SkinSurfaces& s, const std::filesystem::path& path,
+                bool post_operative = true);
 
 }  // namespace caps::render
