@@ -257,19 +257,10 @@ ModelResult run_chart(const ChartRequest& r, Reporter* reporter) {
     throw InvalidInput(cat("--radius ", r.radius, " mm: give a distance in (0, 500] mm"));
   const PatientModel parent = PatientModel::load(r.model);
   const json info = json::parse(read_model_json(r.model));
+  detail::refuse_unchartable(r.model);
   const json& source = info.at("source");
-  if (source.value("kind", "volume") != "volume")
-    throw InvalidInput(cat(r.model, ": a chart measures the CT or MR again, and this model was "
-                           "built from a surface scan; build the chart from a volume model"));
-  if (source.contains("chart"))
-    throw InvalidInput(cat(r.model, " is itself a chart; make the chart from the whole-head "
-                           "model it came from"));
   const std::string volume_path = source.value("path", "");
   const json& seg = info.at("segmentation");
-  if (seg.value("bone_method", "").rfind("mask ", 0) == 0)
-    throw InvalidInput(cat(r.model, ": its bone came from a separate mask (--bone-mask), which a "
-                           "chart cannot reuse yet; build the chart's model with caps model "
-                           "from-volume --axis-origin/--axis-dir and the mask"));
   if (r.at.empty() == r.at_xyz.empty())
     throw InvalidInput("give the point with --at THETA,Z, --at LANDMARK+LEFT,UP or --at-xyz X,Y,Z");
   Eigen::Vector2d tz = resolve_at(r.model, parent, r.at, r.at_xyz);
@@ -318,9 +309,6 @@ ModelResult run_chart(const ChartRequest& r, Reporter* reporter) {
 
   ReadOptions ro;
   ro.series_uid = r.series;
-  if (volume_path.empty() || !fs::exists(volume_path))
-    throw IoError(cat(r.model, ": the volume it was built from (", volume_path, ") is not there; "
-                      "a chart measures that volume again: put it back or rebuild the model"));
   Volume v = read_volume(volume_path, ro);
   const std::string modality = source.value("modality", "");
   if (modality == "CT") v.modality = Modality::CT;
@@ -344,6 +332,25 @@ ModelResult run_chart(const ChartRequest& r, Reporter* reporter) {
 }
 
 namespace detail {
+
+void refuse_unchartable(const std::string& model) {
+  const json info = json::parse(read_model_json(model));
+  const json& source = info.at("source");
+  if (source.value("kind", "volume") != "volume")
+    throw InvalidInput(cat(model, ": a chart measures the CT or MR again, and this model was "
+                           "built from a surface scan; build the chart from a volume model"));
+  if (source.contains("chart"))
+    throw InvalidInput(cat(model, " is itself a chart; make the chart from the whole-head "
+                           "model it came from"));
+  if (info.at("segmentation").value("bone_method", "").rfind("mask ", 0) == 0)
+    throw InvalidInput(cat(model, ": its bone came from a separate mask (--bone-mask), which a "
+                           "chart cannot reuse yet; build the chart's model with caps model "
+                           "from-volume --axis-origin/--axis-dir and the mask"));
+  const std::string volume_path = source.value("path", "");
+  if (volume_path.empty() || !fs::exists(volume_path))
+    throw IoError(cat(model, ": the volume it was built from (", volume_path, ") is not there; "
+                      "a chart measures that volume again: put it back or rebuild the model"));
+}
 
 std::string chart_parent(const std::string& model_dir) {
   const ModelInfo info = read_model_info(model_dir);

@@ -25,7 +25,6 @@
 #include "caps/plan/plan_io.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/surface/patient_model.hpp"
-#include "caps/volume/model_dir.hpp"
 #include "json_fields.hpp"
 #include "model_result.hpp"
 #include "numbers.hpp"
@@ -167,17 +166,12 @@ void check_patch_stands(const plan::Plan& p, const PatientModel& model) {
   }
 }
 
-// Whether caps model chart can measure a local chart of the model in `dir`: a model built from a
-// volume that is still there, not itself a chart, whose bone was not given as a separate mask.
+// Whether caps model chart can measure a local chart of the model in `dir`
+// (detail::refuse_unchartable()).
 bool chartable(const std::string& dir) {
   try {
-    const json info = json::parse(read_model_json(dir));
-    const json& source = info.at("source");
-    const json& seg = info.at("segmentation");
-    const std::string volume = source.value("path", "");
-    return source.value("kind", "volume") == "volume" && !source.contains("chart") &&
-           !volume.empty() && fs::exists(volume) &&
-           seg.value("bone_method", "").rfind("mask ", 0) != 0;
+    detail::refuse_unchartable(dir);
+    return true;
   } catch (const std::exception&) {
     return false;
   }

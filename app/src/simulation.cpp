@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 
 #include "caps/core/atomic_output.hpp"
@@ -283,13 +284,14 @@ std::string set_domain(closure::SimulateOptions& o, const DomainFields& d,
 
 namespace {
 
-// The plan's (or the bare border's) wound border.
-plan::WoundBorder border_of(const MeshRequest& r) {
+// The request's plan, read once (empty for a bare border), after checking that it gives one of
+// the two.
+std::optional<plan::Plan> plan_of(const MeshRequest& r) {
   if (r.plan.empty() == r.border.empty())
     throw InvalidInput("give the wound as --plan plan.json (from caps plan new) or as --border "
                        "border.json, one of the two");
-  return r.plan.empty() ? plan::read_wound_border(r.border)
-                        : plan::wound_border(plan::read_plan(r.plan));
+  if (r.plan.empty()) return std::nullopt;
+  return plan::read_plan(r.plan);
 }
 
 // A mesh read from files whose elements are inverted or degenerate before any load is a bad
@@ -337,10 +339,11 @@ MeshResult run_mesh(const MeshRequest& r, Reporter* reporter) {
   require_utf8(r.plan.empty() ? r.border : r.plan, "the wound's file");
   detail::refuse_output_over_inputs(r);
   const closure::SimulateOptions o = simulate_options(r.meshing, {});
-  const mesher::WoundBorder border = border_of(r);
+  const std::optional<plan::Plan> plan = plan_of(r);
+  const mesher::WoundBorder border =
+      plan ? plan::wound_border(*plan) : plan::read_wound_border(r.border);
   std::string chart_note;
-  const std::string model_dir =
-      r.plan.empty() ? r.model : model_for_plan(r.model, plan::read_plan(r.plan), &chart_note);
+  const std::string model_dir = plan ? model_for_plan(r.model, *plan, &chart_note) : r.model;
   if (!chart_note.empty()) warn(reporter, chart_note);
   OutputDirectory out(r.output, r.force);
   const auto loaded = loaded_model(model_dir);
