@@ -215,6 +215,9 @@ Volume make_phantom(const PhantomOptions& options) {
   if (!(options.spacing_mm.minCoeff() >= 0.1) || options.spacing_mm.maxCoeff() > 10.0)
     throw InvalidInput(cat("phantom: spacing (", options.spacing_mm.transpose(),
                            ") mm must be between 0.1 and 10 mm"));
+  if (!(std::abs(options.pitch_deg) <= 45) || !(std::abs(options.yaw_deg) <= 45))
+    throw InvalidInput(cat("phantom: pitch ", options.pitch_deg, " and yaw ", options.yaw_deg,
+                           " deg must be between -45 and 45"));
   Volume v;
   v.geom.dims = options.dims;
   v.geom.spacing_mm = options.spacing_mm;
@@ -231,9 +234,6 @@ Volume make_phantom(const PhantomOptions& options) {
   v.source = "phantom";
   v.format = "phantom";
   v.data.resize(v.geom.n_voxels());
-  if (!(std::abs(options.pitch_deg) <= 45) || !(std::abs(options.yaw_deg) <= 45))
-    throw InvalidInput(cat("phantom: pitch ", options.pitch_deg, " and yaw ", options.yaw_deg,
-                           " deg must be between -45 and 45"));
   const HeadPhantom head(options.layered, options.thin_bone, options.face, options.scale);
   // The posed head at p is the upright head at pose^T (p - a) + a. Forward: the vertex towards
   // anterior (-P) about +L; to the left: the face (-P) towards +L about +S.
