@@ -255,7 +255,7 @@ void draw_suture_lines(RgbImage& image, const Camera& camera,
                  hits, "draw_suture_lines");
 }
 
-std::vector<std::vector<Eigen::Vector3d>> suture_lines(const SkinSurfaces& skin) {
+std::vector<std::vector<int>> suture_loops(const SkinSurfaces& skin) {
   // directed edges of the micropolygons without their opposite: the rim and the lips
   std::set<std::pair<int, int>> directed;
   for (Eigen::Index f = 0; f < skin.pre.F.rows(); ++f) {
@@ -291,11 +291,15 @@ std::vector<std::vector<Eigen::Vector3d>> suture_lines(const SkinSurfaces& skin)
       rim = l;
     }
   }
+  if (rim < loops.size()) loops.erase(loops.begin() + static_cast<std::ptrdiff_t>(rim));
+  return loops;
+}
+
+std::vector<std::vector<Eigen::Vector3d>> suture_lines(const SkinSurfaces& skin) {
   std::vector<std::vector<Eigen::Vector3d>> out;
-  for (std::size_t l = 0; l < loops.size(); ++l) {
-    if (l == rim) continue;
+  for (const std::vector<int>& loop : suture_loops(skin)) {
     std::vector<Eigen::Vector3d> line;
-    for (int v : loops[l]) line.push_back(skin.post.V.row(v).transpose());
+    for (int v : loop) line.push_back(skin.post.V.row(v).transpose());
     line.push_back(line.front());
     out.push_back(std::move(line));
   }

@@ -218,6 +218,17 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
   if (!model.has_color()) part.color.rowwise() = kPlainSkin.transpose();  // as the model's skin
   render::write_gltf(part, result_dir / "skin.glb");
   const MovedSkin moved = write_moved_model_skin(model, mesh, u, result_dir / "skin_moved.bin");
+  // The wound's and incisions' lips (the incision lines before, the scar after the closure): the
+  // page draws them on the skin and moves them with its pre-to-post slider.
+  json scars = json::array();
+  for (const std::vector<int>& loop : render::suture_loops(*skin)) {
+    json pre = json::array(), post = json::array();
+    for (int v : loop) {
+      pre.push_back({skin->pre.V(v, 0), skin->pre.V(v, 1), skin->pre.V(v, 2)});
+      post.push_back({skin->post.V(v, 0), skin->post.V(v, 1), skin->post.V(v, 2)});
+    }
+    scars.push_back({{"pre_lps", std::move(pre)}, {"post_lps", std::move(post)}});
+  }
   const auto t3 = Clock::now();
   ResultView view;
   view.json =
@@ -233,6 +244,7 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
            {"moved_skin", moved.vertices ? json("skin_moved.bin") : json(nullptr)},
            {"moved_skin_vertices", moved.vertices},
            {"moved_skin_max_mm", moved.max_mm},
+           {"scar_lines", std::move(scars)},
            {"timings_s",
             {{"skin", seconds(t0, t1)}, {"tension", seconds(t1, t2)}, {"glb", seconds(t2, t3)}}}}
           .dump();

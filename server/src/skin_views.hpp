@@ -57,7 +57,9 @@ struct ResultView {
 /// "wound_area_mm2": {"pre", "post"}, "moved_skin" (null for a patch-only closure, or
 /// skin_moved.bin: the model's skin vertices the whole-face closure moves around the patch, as
 /// records of a uint32 vertex of write_model_skin_glb()'s mesh and its move as three float32,
-/// glTF metres, little endian), "moved_skin_vertices", "moved_skin_max_mm", "timings_s":
+/// glTF metres, little endian), "moved_skin_vertices", "moved_skin_max_mm", "scar_lines" (the
+/// lips of each wound and incision, render::suture_loops(): [{"pre_lps", "post_lps"}], each a
+/// closed loop of points, LPS mm, before and after the closure), "timings_s":
 /// {"skin" (reading the result and building the
 /// skin), "tension" (its values), "glb" (writing skin.glb)}}.
 ResultView write_result_skin_glbs(const PatientModel& model,

@@ -139,6 +139,58 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, url, allow }) =>
   if (timing1.simulate_s > 5)
     assert.ok(timing1.first_answer_s < timing1.simulate_s, 'a slow closure shows its first answer before');
   await page.screenshot({ path: join(out, '3-simulated.png') });
+  // The scar line is drawn on the post-operative skin: the lips of the Z's cuts, brought together
+  // by the closure, in dark red where the result puts them; with the slider at Pre the same
+  // lines lie on the open wound's edges, in the plan's blue, and the sutures are not shown.
+  const scarColourAt = async (which) => {
+    await page.evaluate(() => window.caps.viewA.nextFrame());
+    return page.evaluate((w) => {
+      const { viewA, results } = window.caps;
+      const scar = results.rows[0].view.scar_lines;
+      const line = w === 'post' ? scar[0].post_lps : scar[0].pre_lps;
+      const gl = viewA.renderer.getContext();
+      const canvas = viewA.renderer.domElement;
+      const ratio = canvas.width / canvas.clientWidth;
+      // The pixel under each point of the first line (drawing-buffer pixels, origin lower left);
+      // a point may lie behind the skin's curve from this view, so the reddest of them is taken.
+      let best = null;
+      for (const p of line) {
+        const v = viewA.camera.position.clone().set(p[0] / 1000, p[2] / 1000, -p[1] / 1000).project(viewA.camera);
+        if (Math.abs(v.x) > 0.95 || Math.abs(v.y) > 0.95) continue;
+        const x = Math.round(((v.x + 1) / 2) * canvas.clientWidth * ratio);
+        const y = Math.round(((v.y + 1) / 2) * canvas.clientHeight * ratio);
+        const px = new Uint8Array(4);
+        gl.readPixels(x, y, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+        // post: the reddest pixel (the scar); pre: the bluest (the plan's line colour)
+        const score = w === 'post' ? px[0] - Math.max(px[1], px[2]) : px[2] - Math.max(px[0], px[1]);
+        if (!best || score > best.score) best = { rgb: [px[0], px[1], px[2]], score };
+      }
+      const objects = viewA.overlay.children;
+      return { best, lines: scar.length, points: line.length,
+        scars: objects.filter((o) => o.name === 'scar').length,
+        suturesShown: objects.filter((o) => o.name !== 'scar' && o.visible).length };
+    }, which);
+  };
+  const scarPost = await scarColourAt('post');
+  assert.ok(scarPost.lines >= 1 && scarPost.scars === scarPost.lines && scarPost.points > 10,
+    `scar lines in the result's view and on the skin: ${JSON.stringify(scarPost)}`);
+  // caps render's scar colour, sRGB (140, 20, 26): red well above green and blue.
+  assert.ok(scarPost.best && scarPost.best.rgb[0] > 90 && scarPost.best.score > 60,
+    `the scar is drawn in dark red on the post-operative skin: ${JSON.stringify(scarPost.best)}`);
+  assert.ok(scarPost.suturesShown > 0, 'the sutures are shown on the closed skin');
+  await page.locator('#morph').fill('0');
+  await page.locator('#morph').dispatchEvent('input');
+  await page.waitForFunction(() => window.caps.results.morph === 0);
+  const scarPre = await scarColourAt('pre');
+  assert.ok(scarPre.best && scarPre.best.score > 40,
+    `at Pre the lines are the plan's blue, on the open wound: ${JSON.stringify(scarPre.best)}`);
+  assert.equal(scarPre.suturesShown, 0, 'no suture on the open wound');
+  await page.screenshot({ path: join(out, '3-pre.png') });
+  await page.locator('#morph').fill('1');
+  await page.locator('#morph').dispatchEvent('input');
+  await page.waitForFunction(() => window.caps.results.morph === 1);
+  log(`scar line: ${scarPost.lines} line(s) of ${scarPost.points} points, drawn rgb(${scarPost.best.rgb}) ` +
+    `on the post-operative skin, rgb(${scarPre.best.rgb}) at Pre; sutures hidden at Pre`);
   await page.check('#show-tension');
   await page.waitForSelector('body[data-tension="shown"]');
   await page.screenshot({ path: join(out, '4-tension.png') });

@@ -71,6 +71,42 @@ export function pointHandles(points) {
   });
 }
 
+// The scar: dark red, as `caps render` draws the suture lines over its post-operative pictures.
+const kScarColour = new Color(0x8c141a);  // sRGB (140, 20, 26) = (0.55, 0.08, 0.1)
+
+/** Tubes along each wound's and incision's lips ({pre_lps, post_lps} of a result's view, closed
+ * loops, LPS mm), named 'scar': the pre-operative lines as a morph of the post-operative scar, so
+ * setScarMorph() moves them with the skin's pre-to-post slider. */
+export function scarObjects(lines) {
+  return lines.filter((l) => l.pre_lps.length >= 3).map(({ pre_lps, post_lps }) => {
+    const segments = Math.max(16, pre_lps.length * 2);
+    const tube = (points) => new TubeGeometry(
+      new CatmullRomCurve3(points.map(lpsToScene), true, 'centripetal'), segments, kLineRadius, 6, true);
+    const geometry = tube(pre_lps);
+    const post = tube(post_lps);
+    geometry.morphAttributes.position = [post.getAttribute('position')];
+    geometry.morphAttributes.normal = [post.getAttribute('normal')];
+    post.dispose();
+    const m = new Mesh(geometry, new MeshBasicMaterial({ color: kScarColour.clone() }));
+    m.name = 'scar';
+    return m;
+  });
+}
+
+/** Moves scarObjects() to the skin's morph `t` (0 pre, 1 post) and colours them from the plan's
+ * line colour (the incision marked on the skin) to the scar's; the sutures (any other object)
+ * show only on the closed skin. */
+export function setScarMorph(objects, t) {
+  for (const o of objects) {
+    if (o.name === 'scar') {
+      o.morphTargetInfluences[0] = t;
+      o.material.color.copy(lineMaterial.color).lerp(kScarColour, t);
+    } else {
+      o.visible = t >= 1;
+    }
+  }
+}
+
 /** A colour from blue (0) to red (1) for a force relative to the largest. */
 export function forceColour(fraction) {
   return new Color().setHSL((1 - Math.min(1, Math.max(0, fraction))) * 0.66, 0.85, 0.5);

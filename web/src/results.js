@@ -4,7 +4,7 @@
 // simulated plan is kept as a row of the alternatives table; two of them can be shown side by
 // side in two views that move together.
 import { api, apiFetch } from './api.js';
-import { sutureObjects } from './overlays.js';
+import { scarObjects, setScarMorph, sutureObjects } from './overlays.js';
 import { loadResultSkin } from './skin.js';
 
 const kPollMs = 100;
@@ -153,7 +153,10 @@ export class Results {
     viewer.setSkin(skin.mesh);
     // View B's first skin frames B alone; the views move together, so B takes A's camera.
     if (which === 1) viewer.copyCamera(this.views[0]);
-    viewer.setOverlay(sutureObjects(row.sutures));
+    // The scar line on the closed skin (the incision's lines on the open one) and the sutures.
+    const overlay = [...scarObjects(row.view.scar_lines ?? []), ...sutureObjects(row.sutures)];
+    setScarMorph(overlay, this.morph);
+    viewer.setOverlay(overlay);
     this.shown[which] = row;
     document.getElementById(which ? 'label-b' : 'label-a').textContent =
       `${which ? 'B' : 'A'}: #${row.n} ${planLabel(row.plan, row.ownSutures)}${row.provisional ? ' (linear)' : ''}`;
@@ -257,6 +260,7 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
     this.shown.forEach((row, i) => {
       if (!row) return;
       row.skins[i].setMorph(t);
+      setScarMorph(this.views[i].overlay.children, t);
       this.views[i].requestRender();
     });
   }
@@ -313,8 +317,8 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
     this.el.summary.innerHTML = `
       <p>Closing force <b id="closing-force">${fmt(r.closing_force_n)} N</b>; ${s.sutures ?? 0}
         sutures every ${fmt(s.spacing_mm, 1)} mm, the largest <b>${fmt(s.max_force_per_suture_n)} N</b>
-        (${fmt(s.force_per_mm_n, 3)} N per mm of wound; the dots on the skin are the sutures,
-        blue the smallest force, red the largest).</p>
+        (${fmt(s.force_per_mm_n, 3)} N per mm of wound; the dark red line on the skin is the
+        scar, the dots are the sutures, blue the smallest force, red the largest).</p>
       <p>Skin tension ${fmt(row.view.tension_scale_max_kpa, 1)} kPa (99th percentile; peak
         ${fmt(row.view.max_skin_tension_kpa, 1)} kPa at a sutured corner); largest displacement
         ${fmt(r.max_displacement_mm)} mm; ${r.elements} elements, ${r.material}; ${fmt(row.seconds, 1)} s.</p>

@@ -88,9 +88,13 @@ void draw_suture_lines(RgbImage& image, const Camera& camera,
                        const std::vector<std::vector<Eigen::Vector3d>>& lines,
                        const PixelHits* hits = nullptr);
 
-/// The suture lines of the closed skin: the post-operative positions (LPS mm) of the
-/// micropolygons' border loops other than the outer rim (each wound's and incision's lips, which
-/// the closure brings together), each loop closed.
+/// The micropolygons' border loops other than the outer rim, as vertex indices of `skin` (each
+/// wound's and incision's lips, which the closure brings together), in order around each loop
+/// (not repeating its first vertex).
+std::vector<std::vector<int>> suture_loops(const SkinSurfaces& skin);
+
+/// The suture lines of the closed skin: the post-operative positions (LPS mm) of suture_loops(),
+/// each loop closed.
 std::vector<std::vector<Eigen::Vector3d>> suture_lines(const SkinSurfaces& skin);
 
 /// The length (mm) of a scale bar for an image `width_mm` wide: the largest of 1, 2, 5, 10, 20,
