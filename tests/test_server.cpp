@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cstring>
 #include <chrono>
 #include <cmath>
@@ -772,6 +773,24 @@ TEST_F(ServerTest, ASimulationsSkinAndTensionAreServedAsGlb) {
   EXPECT_NE(std::find(cells.begin(), cells.end(), json(k * 128 + j)), cells.end()) << j << ", " << k;
   // A V-Y advancement excises nothing: no wound to fill before the closure.
   EXPECT_NEAR(v.at("wound_area_mm2").at("pre").get<double>(), 0.0, 1e-9);
+  // The scar lines: each lip loop of the cut before and after, point for point; the closure
+  // moves them (the V's flap advances) by no more than the result's largest displacement.
+  const json& scars = v.at("scar_lines");
+  ASSERT_FALSE(scars.empty()) << v.dump().substr(0, 400);
+  const double max_u = json::parse(simulated->body).at("max_displacement_mm").get<double>();
+  double moved_most = 0;
+  for (const json& loop : scars) {
+    ASSERT_EQ(loop.at("pre_lps").size(), loop.at("post_lps").size());
+    ASSERT_GE(loop.at("pre_lps").size(), 3u);
+    for (std::size_t i = 0; i < loop.at("pre_lps").size(); ++i) {
+      const auto a = loop["pre_lps"][i].get<std::array<double, 3>>();
+      const auto b = loop["post_lps"][i].get<std::array<double, 3>>();
+      const double d = std::hypot(a[0] - b[0], a[1] - b[1], a[2] - b[2]);
+      EXPECT_LE(d, max_u + 1e-6);
+      moved_most = std::max(moved_most, d);
+    }
+  }
+  EXPECT_GT(moved_most, 0.1);
   for (const char* k : {"skin", "tension"}) {
     const auto glb = get(v.at(k).get<std::string>());
     ASSERT_TRUE(glb);
