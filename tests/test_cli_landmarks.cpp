@@ -163,6 +163,43 @@ TEST(CliLandmarks, PlanAtGlabellaLandsOnTheAnalyticGlabella) {
   EXPECT_NEAR(q["frame"]["z_mm"].get<double>() - p["frame"]["z_mm"].get<double>(), 20.0, 3.0);
 }
 
+TEST(CliLandmarks, APlanPlacedByThetaAndZIsSaidFromItsNearestLandmark) {
+  // Placed from the glabella 12 mm left and 8 mm up, then placed again by the (theta, z) that
+  // gave: the check finds the glabella nearest and the same offsets back (the inverse of the
+  // walk on the skin), and the summary says it in words, without theta or z.
+  const fs::path from = kTmp / "near_from.json", again = kTmp / "near_again.json";
+  ASSERT_EQ(caps("plan new ellipse --model " + face_model().string() +
+                 " --at glabella+12,8 --orientation 90 -o " + from.string() + " --force -q")
+                .code,
+            0);
+  const json p = read_json(from);
+  std::ostringstream at;
+  at.precision(17);
+  at << p["frame"]["theta_deg"].get<double>() << "," << p["frame"]["z_mm"].get<double>();
+  const auto run = caps("plan new ellipse --model " + face_model().string() + " --at=" + at.str() +
+                        " --orientation 90 -o " + again.string() + " --force");
+  ASSERT_EQ(run.code, 0) << run.out;
+  const json q = read_json(again);
+  EXPECT_FALSE(q.contains("at") && q["at"].contains("landmark"));  // placed by theta, z
+  ASSERT_TRUE(q["check"].contains("near")) << q["check"].dump();
+  EXPECT_EQ(q["check"]["near"]["landmark"], "glabella");
+  EXPECT_NEAR(q["check"]["near"]["left_mm"].get<double>(), 12.0, 0.1);
+  EXPECT_NEAR(q["check"]["near"]["up_mm"].get<double>(), 8.0, 0.1);
+  EXPECT_NE(run.out.find("centre 12 mm to the patient's left and 8 mm up from the glabella"),
+            std::string::npos) << run.out;
+  // Beside the right eye: the nearest landmark is that eye's outer corner, said in words.
+  const json m = read_json(face_model() / "model.json");
+  const json& ex = m["landmarks"]["items"]["exocanthion_right"];
+  std::ostringstream eye;
+  eye.precision(17);
+  eye << ex["theta_deg"].get<double>() << "," << ex["z_mm"].get<double>() - 12;
+  const auto below = caps("plan new ellipse --model " + face_model().string() + " --at=" + eye.str() +
+                          " --orientation 90 --length 8 --width 3 -o " + again.string() + " --force");
+  ASSERT_EQ(below.code, 0) << below.out;
+  EXPECT_NE(below.out.find("down from the right outer eye corner (exocanthion)"), std::string::npos)
+      << below.out;
+}
+
 TEST(CliLandmarks, AnAbsentOrUnknownLandmarkIsInvalidInput) {
   // The plain phantom has a nose but no brow: no nasion, no glabella.
   const fs::path ct = kTmp / "plain.nii.gz", model = kTmp / "plain";

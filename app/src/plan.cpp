@@ -57,13 +57,22 @@ PlanResult plan_result(const plan::Plan& p, const plan::PlanReport& r, const std
   s.output = output;
   json j = json::parse(plan::plan_to_json(p, &r));
   j["ok"] = true;
-  s.plan_json = j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
   s.procedure = p.procedure;
   s.points = r.n_points;
   s.loop_nodes = r.n_loop;
   s.suture_pairs = r.n_sutures;
   s.cut_length_mm = r.cut_length_mm;
   s.warnings = r.warnings;
+  if (r.near) {
+    const auto mm = [](double v, const char* pos, const char* neg) {
+      return cat(round_to(std::abs(v), 0), " mm ", v < 0 ? neg : pos);
+    };
+    s.near = cat(mm(r.near->left_mm, "to the patient's left", "to the patient's right"), " and ",
+                 mm(r.near->up_mm, "up", "down"), " from the ",
+                 landmark_in_words(r.near->landmark));
+    j["check"]["near"]["words"] = s.near;  // the planner page says it so
+  }
+  s.plan_json = j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
   for (const auto& w : r.warnings) warn(reporter, w);
   return s;
 }
@@ -83,6 +92,17 @@ plan::PlanReport checked_plan(const plan::Plan& p, const std::string& model_dir,
   plan::PlanReport report = plan::check_plan(p, model);
   if (std::string doubt = placement_doubt(model_dir, model, p.placement); !doubt.empty())
     report.warnings.push_back(std::move(doubt));
+  // Where the centre is from the nearest landmark (a chart's theta and z are not its parent's:
+  // not said there).
+  // Only the landmarks model.json keeps: finding them anew would cost every check (the page
+  // checks on each drag) more than the check itself.
+  if (detail::chart_parent(model_dir).empty()) {
+    const std::string stored = read_model_info(model_dir).landmarks_json;
+    if (!stored.empty())
+      report.near = plan::nearest_landmark_placement(
+          model, landmarks_from_json(stored, (fs::path(model_dir) / model_file::kJson).string()),
+          p.frame.theta_deg, p.frame.z_mm);
+  }
   return report;
 }
 
@@ -249,7 +269,8 @@ PlanResult plan_on_chart(const PlanNewRequest& r, const plan::LocalProcedure& pr
 std::string summary(const PlanResult& r) {
   return cat(r.output.empty() ? "plan" : r.output, ": ", r.procedure, ", ", r.points,
              " points, border loop of ", r.loop_nodes, " nodes, ", r.suture_pairs,
-             " suture pairs, cut ", round_to(r.cut_length_mm, 1), " mm on the skin; can be operated",
+             " suture pairs, cut ", round_to(r.cut_length_mm, 1), " mm on the skin",
+             r.near.empty() ? "" : cat(", centre ", r.near), "; can be operated",
              r.chart.empty() ? "" : cat(" (on the local chart ", r.chart, ")"));
 }
 

@@ -81,4 +81,41 @@ Eigen::Vector2d resolve_placement(const PatientModel& model, const Landmarks& la
   return tz;
 }
 
+std::optional<LandmarkPlacement> nearest_landmark_placement(const PatientModel& model,
+                                                            const Landmarks& landmarks,
+                                                            double theta_deg, double z_mm,
+                                                            double max_mm) {
+  if (!std::isfinite(theta_deg) || !std::isfinite(z_mm) || !model.has_z(z_mm)) return std::nullopt;
+  const Eigen::Vector3d target = model.skin_point(theta_deg, z_mm);
+  const Landmark* nearest = nullptr;
+  double best = max_mm;
+  for (const Landmark& l : landmarks.items) {
+    if (!l.found) continue;
+    const double d = (model.skin_point(l.theta_deg, l.z_mm) - target).norm();
+    if (d <= best) {
+      best = d;
+      nearest = &l;
+    }
+  }
+  if (!nearest) return std::nullopt;
+  // The offsets (left, up) whose walk from the landmark (resolve_placement()) ends on the point:
+  // start from the chord in the landmark's tangent frame, then correct by the miss, measured in
+  // the frame the walk arrives with (fixed-point; the walk is a geodesic on a cylinder, so a few
+  // steps reach 0.05 mm on a head).
+  const SkinFrame start = skin_frame(model, nearest->theta_deg, nearest->z_mm, 90.0);
+  const Eigen::Vector3d chord = target - model.skin_point(nearest->theta_deg, nearest->z_mm);
+  Eigen::Vector2d step(chord.dot(start.ex), chord.dot(start.ey));
+  for (int k = 0; k < 12 && step.norm() > 0; ++k) {
+    const SkinFrame end = walk_on_skin(model, start, step);
+    const Eigen::Vector3d miss = target - model.skin_point(end.theta_z[0], end.theta_z[1]);
+    if (miss.norm() < 0.05) break;
+    step += Eigen::Vector2d(miss.dot(end.ex), miss.dot(end.ey));
+  }
+  LandmarkPlacement p;
+  p.landmark = nearest->name;
+  p.left_mm = step.x();
+  p.up_mm = step.y();
+  return p;
+}
+
 }  // namespace caps::plan

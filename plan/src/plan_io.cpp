@@ -68,6 +68,10 @@ std::string plan_to_json(const Plan& plan, const PlanReport* report) {
     for (const auto& s : report->suture_lengths)
       r["suture_lengths_mm"].push_back({s.first_mm, s.second_mm});
     r["warnings"] = report->warnings;
+    if (report->near)
+      r["near"] = {{"landmark", report->near->landmark},
+                   {"left_mm", report->near->left_mm},
+                   {"up_mm", report->near->up_mm}};
     j["check"] = r;
   }
   j["notes"] = plan.notes;

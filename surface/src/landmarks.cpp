@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <iomanip>
 #include <optional>
@@ -314,6 +315,30 @@ const std::vector<std::string>& landmark_names() {
       "pogonion",    "zygion_left",      "zygion_right",      "exocanthion_left",
       "exocanthion_right", "tragion_left", "tragion_right"};
   return names;
+}
+
+std::string landmark_in_words(const std::string& name) {
+  static const std::pair<const char*, const char*> kWords[] = {
+      {"glabella", "glabella"},
+      {"nasion", "nasion"},
+      {"pronasale", "nose tip (pronasale)"},
+      {"subnasale", "base of the nose (subnasale)"},
+      {"pogonion", "chin point (pogonion)"},
+      {"zygion", "cheekbone (zygion)"},
+      {"exocanthion", "outer eye corner (exocanthion)"},
+      {"tragion", "tragus (tragion)"},
+  };
+  std::string base = name, side;
+  for (const char* s : {"_left", "_right"})
+    if (base.size() > std::strlen(s) && base.ends_with(s)) {
+      side = std::string(s + 1) + " ";
+      base.resize(base.size() - std::strlen(s));
+    }
+  for (const auto& [n, words] : kWords)
+    if (base == n) return side + words;
+  std::string out = name;
+  std::replace(out.begin(), out.end(), '_', ' ');
+  return out;
 }
 
 const Landmark* Landmarks::find(const std::string& name) const {

@@ -95,3 +95,27 @@ export async function downloadOf(page, selector, path) {
   await download.saveAs(path);
   return path;
 }
+
+// Engineer's words a surgeon should not meet on the page (issue 38): a node number ("node 5",
+// "5–0 ↔ 5–4"), the model's cylindrical coordinate "theta", or a command line ("caps model
+// chart ...", "--extent"): the page's own controls stand for those.
+const kEngineersWords = [
+  [/\bnodes? \d/i, 'a node number'],
+  [/\d+\s*[–-]\s*\d+\s*↔/, 'a suture pair as loop nodes'],
+  [/\btheta\b/i, '"theta"'],
+  [/\bcaps (model|plan|simulate|render|serve|mesh|solve|compare)\b/, 'a caps command'],
+  [/(^|\s)--[a-z]/m, 'a command-line option'],
+];
+
+/** Fails if the text the page shows (its visible text: not tooltips or hidden panels) holds
+ * engineer's words; `where` names the moment for the message. */
+export async function assertSurgeonWords(page, where) {
+  const text = await page.evaluate(() => document.body.innerText);
+  for (const [re, what] of kEngineersWords) {
+    const m = re.exec(text);
+    if (m) {
+      const at = Math.max(0, m.index - 120);
+      throw new Error(`${where}: the page shows ${what}: "…${text.slice(at, m.index + 120)}…"`);
+    }
+  }
+}

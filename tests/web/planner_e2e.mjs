@@ -14,7 +14,7 @@ import assert from 'node:assert/strict';
 import { spawnSync } from 'node:child_process';
 import { mkdirSync, readFileSync } from 'node:fs';
 import { join } from 'node:path';
-import { downloadOf, logger, screenOf as screenOfOn, withPlanner } from './e2e_common.mjs';
+import { assertSurgeonWords, downloadOf, logger, screenOf as screenOfOn, withPlanner } from './e2e_common.mjs';
 
 const [caps, model, webRoot, out] = process.argv.slice(2);
 mkdirSync(out, { recursive: true });
@@ -34,6 +34,7 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, url, allow }) =>
   await page.waitForSelector('body[data-check="ok"]', { timeout: 15000 });
   const check = await page.locator('#check').innerText();
   assert.match(check, /Can be operated/, check);
+  await assertSurgeonWords(page, 'placed');
   log(`placed: ${check.split('\n')[0]}`);
   // Keys: rotate by 5 degrees, then undo it.
   await page.locator('#view-a canvas').focus();
@@ -139,6 +140,7 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, url, allow }) =>
   if (timing1.simulate_s > 5)
     assert.ok(timing1.first_answer_s < timing1.simulate_s, 'a slow closure shows its first answer before');
   await page.screenshot({ path: join(out, '3-simulated.png') });
+  await assertSurgeonWords(page, 'simulated');
   // The scar line is drawn on the post-operative skin: the lips of the Z's cuts, brought together
   // by the closure, in dark red where the result puts them; with the slider at Pre the same
   // lines lie on the open wound's edges, in the plan's blue, and the sutures are not shown.
@@ -332,6 +334,7 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, url, allow }) =>
   assert.ok(closing3 > 0, `the drawn Z closes with ${closing3} N`);
   log(`drawn Z simulated: ${closing3.toFixed(2)} N (the template's ${closing1} N, which also frees its flaps)`);
   await page.screenshot({ path: join(out, '7-incision-simulated.png') });
+  await assertSurgeonWords(page, 'drawn cut simulated');
 
   // Export: result.json, the report, caps render's pictures and .glb.
   assert.equal(await page.locator('#export').isVisible(), true);
@@ -391,6 +394,7 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, url, allow }) =>
   assert.match(await page.locator('#status').innerText(), /linear \(small-strain\) answer of the patch is shown.*time limit/s);
   log(`time limit: the finite-strain closure stopped, the linear first answer stays: ${kept.provisional}`);
   await page.screenshot({ path: join(out, '9-linear-first-answer.png') });
+  await assertSurgeonWords(page, 'the linear first answer kept');
 
   // Cancel, and leaving the page: a finite-strain closure without a time limit (tens of seconds
   // on this plan) is stopped by the Cancel button, and again by reloading the page; each time

@@ -76,15 +76,18 @@ function showCheck(plan, message, state) {
   const warnings = c.warnings ?? [];
   const pairs = plan.suture_quadruples?.length ?? plan.sutures?.length ?? 0;
   el.className = warnings.length ? 'check warn' : 'check ok';
+  // Where it is as the surgeon finds it: from the landmark it was placed from, else from the
+  // nearest one the model has (the check's "near"); a model without landmarks says nothing.
+  const where = plan.at?.landmark ? `, centre${atLandmark(plan.at).replace(/^,/, '')}`
+    : c.near?.words ? `, centre ${escapeHtml(c.near.words)}` : '';
   el.innerHTML = `<b>Can be operated.</b> Cut ${(c.cut_length_mm ?? 0).toFixed(1)} mm on the skin,
-    ${pairs} suture pair${pairs === 1 ? '' : 's'}, centre at theta ${plan.frame.theta_deg.toFixed(1)}°,
-    z ${plan.frame.z_mm.toFixed(1)} mm${atLandmark(plan.at)}.` +
+    ${pairs} suture pair${pairs === 1 ? '' : 's'}${where}.` +
     (pairs ? '' : ' <b>No sutures yet</b>: nothing closes this cut; add pairs below.') +
     (warnings.length ? `<ul>${warnings.map((w) => `<li>${escapeHtml(w)}</li>`).join('')}</ul>` : '');
 }
 
-// The plan's suture pairs, each with its colour on the skin, its two sides (loop nodes), their
-// lengths on the skin, and buttons to move (choose its two sides again) or remove it.
+// The plan's suture pairs, each with its colour on the skin (where its two sides are drawn), the
+// lengths of its two sides on the skin (the loop nodes only in the tooltip), and buttons to move (choose its two sides again) or remove it.
 function showSutures(planner) {
   const plan = planner.plan;
   const table = $('suture-pairs');
@@ -95,7 +98,7 @@ function showSutures(planner) {
   table.innerHTML = (plan?.sutures ?? []).map((pair, k) => {
     const len = lengths[k] ? ` ${lengths[k].map((v) => v.toFixed(1)).join(' / ')} mm` : '';
     return `<tr><td><span class="swatch" style="background:#${pairColour(k).getHexString()}"></span></td>
-      <td>${sideText(pair[0])} ↔ ${sideText(pair[1])}</td><td>${len}</td>
+      <td title="loop edges ${sideText(pair[0])} and ${sideText(pair[1])}, as the plan file writes them">pair ${k + 1}</td><td>${len}</td>
       <td><button data-move="${k}" title="Click its two sides again">Move</button>
       <button data-remove="${k}" title="Remove this pair">✕</button></td></tr>`;
   }).join('');

@@ -238,7 +238,7 @@ export class Results {
 table{border-collapse:collapse}th,td{border:1px solid #ccd;padding:3px 8px;text-align:left}
 .row{display:flex;gap:10px;flex-wrap:wrap}figure{margin:0;flex:1 1 30%}img{width:100%;border:1px solid #ddd}</style></head>
 <body><h1>${escapeHtml(planLabel(p, row.ownSutures))}</h1>
-<p>Planned on ${escapeHtml(p.model ?? '')}; centre at theta ${fmt(p.frame.theta_deg, 1)}°, z ${fmt(p.frame.z_mm, 1)} mm;
+<p>Planned on ${escapeHtml(p.model ?? '')}${p.check?.near?.words ? `; centre ${escapeHtml(p.check.near.words)}` : ''};
 cut ${fmt(p.check?.cut_length_mm, 1)} mm on the skin; ${p.sutures?.length ?? 0} suture pairs. Simulated with caps
 (${new Date().toISOString().slice(0, 10)}).</p>
 <table>${rows}</table>
@@ -327,8 +327,8 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
       this.el.summary.insertAdjacentHTML('afterbegin',
         `<p class="provisional" id="provisional">Shown: ${escapeHtml(row.provisional)}.</p>`);
     const rows = row.sutures.map((x, i) =>
-      `<tr><td>${i + 1}</td><td>${fmt(x.force_n, 3)} N</td><td>${x.pairs}</td></tr>`).join('');
-    this.el.sutures.innerHTML = `<tr><th>suture</th><th>force</th><th>node pairs</th></tr>${rows}`;
+      `<tr><td>${i + 1}</td><td>${fmt(x.force_n, 3)} N</td></tr>`).join('');
+    this.el.sutures.innerHTML = `<tr><th>suture</th><th>force</th></tr>${rows}`;
     this.setTension(this.colouring === 'tension');
   }
 

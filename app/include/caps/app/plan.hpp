@@ -19,6 +19,9 @@ struct PlanResult {
   int points = 0, loop_nodes = 0, suture_pairs = 0;
   double cut_length_mm = 0;
   std::string chart;  ///< the local chart plan new made for the plan (empty: on the model given)
+  /// Where its centre is from the nearest landmark the model keeps, in words ("12 mm to the
+  /// patient's left and 20 mm up from the glabella"); empty without landmarks.
+  std::string near;
   std::vector<std::string> warnings;
 
   /// The JSON is the plan with its check.

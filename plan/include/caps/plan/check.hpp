@@ -3,6 +3,7 @@
 /// geometry (no crossing or overlapping cuts), and its place on the patient model (every loop
 /// point and a dense sampling of every loop edge on valid cells).
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -24,6 +25,9 @@ struct PlanReport {
   double cut_length_mm = 0;                  ///< the cutting paths' length on the skin
   std::vector<SutureLength> suture_lengths;
   std::vector<std::string> warnings;         ///< e.g. sutured edges of very different lengths
+  /// The plan's centre from the nearest found landmark (nearest_landmark_placement()), where the
+  /// caller knows the model's landmarks: how a surgeon finds the spot on the patient.
+  std::optional<LandmarkPlacement> near;
 };
 
 /// check_plan()'s refusal where the model's cylindrical image cannot hold the skin under the

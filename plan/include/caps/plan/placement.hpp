@@ -31,4 +31,14 @@ Landmarks model_landmarks(const std::filesystem::path& dir, const PatientModel& 
 Eigen::Vector2d resolve_placement(const PatientModel& model, const Landmarks& landmarks,
                                   const LandmarkPlacement& placement);
 
+/// The point (theta deg, z mm) as the surgeon finds it: the found landmark nearest to it on
+/// `model` (straight-line distance between the skin points, at most `max_mm`) and the offsets
+/// to the patient's left and up along the skin from it, so that resolve_placement() of the
+/// answer gives the point back (to 0.05 mm where the walk converges; the offsets are rounded
+/// by the caller, not here). nullopt when no landmark is found within `max_mm`.
+std::optional<LandmarkPlacement> nearest_landmark_placement(const PatientModel& model,
+                                                            const Landmarks& landmarks,
+                                                            double theta_deg, double z_mm,
+                                                            double max_mm = 80.0);
+
 }  // namespace caps::plan

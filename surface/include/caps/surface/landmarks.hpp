@@ -87,6 +87,11 @@ struct Landmarks {
 /// zygion_left, zygion_right, exocanthion_left, exocanthion_right, tragion_left, tragion_right.
 const std::vector<std::string>& landmark_names();
 
+/// A landmark's name as a surgeon says it, for messages: "glabella", "nasion", "nose tip
+/// (pronasale)", "left outer eye corner (exocanthion)", "right tragus (tragion)"; a name that
+/// is not a landmark is returned with its underscores as spaces.
+std::string landmark_in_words(const std::string& name);
+
 /// What the detector reads: the skin radius r(theta deg, z mm) in mm about the model's axis, where
 /// it was measured, and the sampling steps and z extent of the range image.
 struct SkinRangeView {
