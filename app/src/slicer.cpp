@@ -18,6 +18,7 @@
 #include "caps/core/error.hpp"
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/result_io.hpp"
+#include "caps/plan/plan.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/render/drawn_skin.hpp"
 #include "caps/render/overlay.hpp"
@@ -604,6 +605,28 @@ ExportSlicerResult run_export_slicer(const ExportSlicerRequest& r, Reporter* rep
       const std::string file = cat("plan/incision_", ++i, ".mrk.json");
       write_markups(d / file, markup("Curve", cat(plan->procedure, " incision ", i), pts));
       out.files.push_back(file);
+      ++out.curves;
+    }
+    // An excision's wound border (the border loop with its offsets applied), a closed curve
+    // sampled on the skin about every millimetre, across the seam the short way.
+    if (!plan->excisions.empty()) {
+      const plan::BorderLoop loop = plan::border_loop(*plan);
+      std::vector<MarkupPoint> pts;
+      for (int a = 0; a < loop.size(); ++a) {
+        const Eigen::Vector2d p0 = loop.theta_z[a], p1 = loop.theta_z[(a + 1) % loop.size()];
+        double dt = p1[0] - p0[0];
+        dt -= 360.0 * std::round(dt / 360.0);
+        const double len = (model.skin_point(p1[0], p1[1]) - model.skin_point(p0[0], p0[1])).norm();
+        const int n = std::max(1, static_cast<int>(std::ceil(len / 1.0)));
+        for (int k = 0; k < n; ++k) {
+          const double t = static_cast<double>(k) / n;
+          pts.push_back({cat("border-", pts.size() + 1), "",
+                         model.skin_point(p0[0] + t * dt, p0[1] + t * (p1[1] - p0[1]))});
+        }
+      }
+      write_markups(d / "plan/wound_border.mrk.json",
+                    markup("ClosedCurve", cat(plan->procedure, " wound border"), pts));
+      out.files.push_back("plan/wound_border.mrk.json");
       ++out.curves;
     }
   }
