@@ -290,11 +290,12 @@ std::optional<Volume> source_volume(const std::string& model_dir, const json& so
 
 // ---- the segmentation ----------------------------------------------------------------------
 
-// The labelmap on the volume's grid: bone where segment_head()'s bone mask is (its working grid,
-// nearest voxel); elsewhere, between the skin and the soft tissue's base along the model's
-// radial ray at a voxel's (theta, z) (valid cells only: measured skin and base), dermis, fat and
-// deep tissue split at the model's measured layer depths along that ray (without layers: one
-// soft-tissue label). 0 elsewhere.
+// The labelmap on the volume's grid: between the skin and the soft tissue's base along the
+// model's radial ray at a voxel's (theta, z) (valid cells only: measured skin and base), dermis,
+// fat and deep tissue split at the model's measured layer depths along that ray (without layers:
+// one soft-tissue label), so that the segmentation agrees with the thickness the surfaces carry;
+// elsewhere bone where segment_head()'s bone mask is (its working grid, nearest voxel: coarser
+// than the model's sub-voxel base, which is why the soft tissue is labelled first). 0 elsewhere.
 std::vector<std::uint8_t> tissue_labels(const Volume& v, const Segmentation& seg,
                                         const PatientModel& model, bool layers, bool bone) {
   const VolumeGeometry& g = v.geom;
@@ -305,38 +306,37 @@ std::vector<std::uint8_t> tissue_labels(const Volume& v, const Segmentation& seg
   const Eigen::Matrix3d to_bone =
       (bg.direction * bg.spacing_mm.asDiagonal()).inverse();
   const double r_max = *std::max_element(maps.r_skin.begin(), maps.r_skin.end()) + 1.0;
+  // The soft tissue's label at p: 1..3 (or 1 without layers) between the skin and the base along
+  // the model's ray, else 0.
+  auto soft_tissue_label = [&](const Eigen::Vector3d& p) -> std::uint8_t {
+    const CylindricalPoint c = model.to_cylindrical(p);
+    if (c.r_mm > r_max || !model.has_z(c.z_mm)) return 0;
+    // the nearest cell must be valid (measured skin and base)
+    int jj = static_cast<int>(std::lround((c.theta_deg - grid.theta0_deg) / grid.dtheta_deg()));
+    jj = ((jj % grid.n_theta) + grid.n_theta) % grid.n_theta;
+    const int kk = std::clamp(static_cast<int>(std::lround((c.z_mm - grid.z0_mm) / grid.dz_mm)),
+                              0, grid.n_z - 1);
+    if (!maps.is_valid(jj, kk)) return 0;
+    const double depth = model.r_skin(c.theta_deg, c.z_mm) - c.r_mm;
+    const double t = model.thickness(c.theta_deg, c.z_mm);
+    if (depth < 0 || depth > t) return 0;
+    if (!layers) return 1;
+    const double ts = model.thickness_skin(c.theta_deg, c.z_mm);
+    const double tf = model.thickness_fat(c.theta_deg, c.z_mm);
+    return depth < ts ? 1 : depth < ts + tf ? 2 : 3;
+  };
   for (int k = 0; k < g.dims[2]; ++k)
     for (int j = 0; j < g.dims[1]; ++j)
       for (int i = 0; i < g.dims[0]; ++i) {
         const Eigen::Vector3d p = g.index_to_lps(Eigen::Vector3d(i, j, k));
         const std::size_t at = g.linear(i, j, k);
-        if (bone) {
+        labels[at] = soft_tissue_label(p);
+        if (labels[at] == 0 && bone) {
           const Eigen::Vector3d b = to_bone * (p - bg.origin_lps);
           const int bi = static_cast<int>(std::lround(b[0])), bj = static_cast<int>(std::lround(b[1])),
                     bk = static_cast<int>(std::lround(b[2]));
-          if (bg.contains(bi, bj, bk) && seg.bone.at(bi, bj, bk)) {
-            labels[at] = 4;
-            continue;
-          }
+          if (bg.contains(bi, bj, bk) && seg.bone.at(bi, bj, bk)) labels[at] = 4;
         }
-        const CylindricalPoint c = model.to_cylindrical(p);
-        if (c.r_mm > r_max || !model.has_z(c.z_mm)) continue;
-        // the nearest cell must be valid (measured skin and base)
-        int jj = static_cast<int>(std::lround((c.theta_deg - grid.theta0_deg) / grid.dtheta_deg()));
-        jj = ((jj % grid.n_theta) + grid.n_theta) % grid.n_theta;
-        const int kk = std::clamp(static_cast<int>(std::lround((c.z_mm - grid.z0_mm) / grid.dz_mm)),
-                                  0, grid.n_z - 1);
-        if (!maps.is_valid(jj, kk)) continue;
-        const double depth = model.r_skin(c.theta_deg, c.z_mm) - c.r_mm;
-        const double t = model.thickness(c.theta_deg, c.z_mm);
-        if (depth < 0 || depth > t) continue;
-        if (!layers) {
-          labels[at] = 1;
-          continue;
-        }
-        const double ts = model.thickness_skin(c.theta_deg, c.z_mm);
-        const double tf = model.thickness_fat(c.theta_deg, c.z_mm);
-        labels[at] = depth < ts ? 1 : depth < ts + tf ? 2 : 3;
       }
   return labels;
 }
