@@ -501,8 +501,8 @@ ExportSlicerResult run_export_slicer(const ExportSlicerRequest& r, Reporter* rep
     out.files.push_back(out.volume_file);
     if (!volume->acquired.empty())
       out.warnings.push_back(cat(out.volume_file, ": the reader filled in voxels the scanner did "
-                                 "not acquire (a tilted gantry's slab resampled): they hold its "
-                                 "fill value"));
+                                 "not acquire (outside a tilted gantry's slab, resampled onto a "
+                                 "regular grid): they hold the reader's fill value"));
     // The segmentation as the model was made: the recorded thresholds.
     SegmentOptions so;
     const json seg_json = mj.value("segmentation", json::object());
@@ -513,10 +513,13 @@ ExportSlicerResult run_export_slicer(const ExportSlicerRequest& r, Reporter* rep
     const bool bone_from_mask = seg_json.value("bone_method", "").rfind("mask ", 0) == 0;
     const Segmentation seg = segment_head(*volume, so, reporter);
     const bool layers = model.has_layers();
-    const bool bone = !bone_from_mask;
+    const bool bone = !bone_from_mask && !seg.bone_is_approximate;
     if (bone_from_mask)
       out.warnings.push_back("the model's bone came from a separate mask (--bone-mask): the "
                              "segmentation has no bone segment");
+    if (seg.bone_is_approximate)
+      out.warnings.push_back(cat("the volume shows no bone caps can threshold (", seg.bone_method,
+                                 "): the segmentation has no bone segment"));
     if (!layers)
       out.warnings.push_back("the model has no tissue layers (not a CT): the soft tissue is one "
                              "segment");
@@ -529,7 +532,7 @@ ExportSlicerResult run_export_slicer(const ExportSlicerRequest& r, Reporter* rep
       defs.push_back({"soft_tissue", "soft tissue", 1, {177 / 255.0, 122 / 255.0, 101 / 255.0}});
     }
     if (bone)
-      defs.push_back({"bone", seg.bone_is_approximate ? "bone (approximate)" : "bone", 4,
+      defs.push_back({"bone", "bone", 4,
                       {241 / 255.0, 214 / 255.0, 145 / 255.0}});
     const std::vector<std::uint8_t> labels = tissue_labels(*volume, seg, model, layers, bone);
     out.segments_text = write_segmentation(d / "tissue.seg.nrrd", *volume, labels, defs);
