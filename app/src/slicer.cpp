@@ -463,9 +463,17 @@ ExportSlicerResult run_export_slicer(const ExportSlicerRequest& r, Reporter* rep
   Eigen::MatrixX3d u;
   Eigen::VectorXd max_principal;
   if (!r.result.empty()) {
-    fe_mesh = fem::read_mesh_dir(r.result);
-    u = fem::read_result_displacement(r.result, fe_mesh->n_nodes());
-    max_principal = fem::read_result_max_principal(r.result, fe_mesh->n_nodes());
+    // A folder of `caps simulate` (the mesh and its solution); the readers' errors name the file.
+    const std::string what = cat("--result ", r.result, " (a folder of caps simulate): ");
+    try {
+      fe_mesh = fem::read_mesh_dir(r.result);
+      u = fem::read_result_displacement(r.result, fe_mesh->n_nodes());
+      max_principal = fem::read_result_max_principal(r.result, fe_mesh->n_nodes());
+    } catch (const IoError& e) {
+      throw IoError(what + e.what());
+    } catch (const InvalidInput& e) {
+      throw InvalidInput(what + e.what());
+    }
   }
 
   ExportSlicerResult out;
