@@ -343,11 +343,13 @@ std::vector<std::uint8_t> tissue_labels(const Volume& v, const Segmentation& seg
 
 // Slicer's segmentation file: one labelmap layer (3-D, unsigned char) on the volume's grid, with
 // the Segment<N>_* and Segmentation_* key/value fields its storage node reads.
-std::string write_segmentation(const fs::path& path, const Volume& v,
-                               const std::vector<std::uint8_t>& labels,
-                               const std::vector<SegmentDef>& segments) {
+// Returns each segment's voxel count.
+std::vector<long long> write_segmentation(const fs::path& path, const Volume& v,
+                                          const std::vector<std::uint8_t>& labels,
+                                          const std::vector<SegmentDef>& segments) {
   const VolumeGeometry& g = v.geom;
-  std::ostringstream h, counts;
+  std::ostringstream h;
+  std::vector<long long> counts;
   h << "NRRD0004\n"
     << "# caps tissue segmentation on the grid of the volume the model was built from\n"
     << "# frame: patient LPS, mm (caps's frame: volume/volume.hpp)\n"
@@ -385,10 +387,10 @@ std::string write_segmentation(const fs::path& path, const Volume& v,
         << lo[2] << " " << hi[2] << "\n";
     else
       h << key << "Extent:=0 -1 0 -1 0 -1\n";
-    counts << (counts.tellp() > 0 ? ", " : "") << s.id << " " << n;
+    counts.push_back(n);
   }
   write_nrrd(path, h.str(), labels.data(), labels.size());
-  return counts.str();
+  return counts;
 }
 
 // ---- surfaces ------------------------------------------------------------------------------
@@ -543,10 +545,16 @@ ExportSlicerResult run_export_slicer(const ExportSlicerRequest& r, Reporter* rep
       defs.push_back({"bone", "bone", 4,
                       {241 / 255.0, 214 / 255.0, 145 / 255.0}});
     const std::vector<std::uint8_t> labels = tissue_labels(*volume, seg, model, layers, bone);
-    out.segments_text = write_segmentation(d / "tissue.seg.nrrd", *volume, labels, defs);
+    const std::vector<long long> counts =
+        write_segmentation(d / "tissue.seg.nrrd", *volume, labels, defs);
     out.files.push_back("tissue.seg.nrrd");
-    for (const SegmentDef& s : defs)
-      segments_json.push_back({{"id", s.id}, {"name", s.name}, {"label", s.label}});
+    for (std::size_t i = 0; i < defs.size(); ++i) {
+      out.segments_text += cat(i ? ", " : "", defs[i].id, " ", counts[i]);
+      segments_json.push_back({{"id", defs[i].id},
+                               {"name", defs[i].name},
+                               {"label", defs[i].label},
+                               {"voxels", counts[i]}});
+    }
   }
   progress.update(2);
 

@@ -203,10 +203,12 @@ def test_segmentation_follows_slicers_conventions_and_the_tissue(work):
     _, ct = vtk_image(d / "s" / "ct.nrrd")
     assert set(np.unique(lab)) <= {0} | {s["label"] for s in segs.values()}
     summary = json.loads(open(d / "s" / "summary.json").read())
-    counts = dict(x.split() for x in summary["segments"].split(", "))
+    listed = {s["id"]: s for s in summary["segmentation"]}
+    assert summary["frame"] == "LPS"
     for sid, s in segs.items():
         k, j, i = np.nonzero(lab == s["label"])
-        assert len(i) == int(counts[sid]) > 0, sid
+        assert listed[sid]["label"] == s["label"] and listed[sid]["name"] == s["name"]
+        assert len(i) == listed[sid]["voxels"] > 0, sid
         assert s["extent"] == [i.min(), i.max(), j.min(), j.max(), k.min(), k.max()], sid
     # The tissue under each label, in the CT: bone is bone (the model's 250 HU threshold on
     # block means), and the layered phantom's fat (-100 HU) is below caps's fat level (-30 HU)
