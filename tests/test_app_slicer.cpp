@@ -86,10 +86,14 @@ TEST(AppSlicer, SegmentationLabelsTheLayeredPhantomsTissue) {
         if (std::abs(rs - ph.head_radius(theta, z)) > 0.01) continue;  // on a bump
         int truth = 0;
         double margin = 0;
-        if (r < rs && r > ft) truth = 1, margin = std::min(rs - r, r - ft);
-        else if (r < ft && r > fb) truth = 2, margin = std::min(ft - r, r - fb);
-        else if (r < fb && r > rb) truth = 3, margin = std::min(fb - r, r - rb);
-        else continue;
+        if (r < rs && r > ft)
+          truth = 1, margin = std::min(rs - r, r - ft);
+        else if (r < ft && r > fb)
+          truth = 2, margin = std::min(ft - r, r - fb);
+        else if (r < fb && r > rb)
+          truth = 3, margin = std::min(fb - r, r - rb);
+        else
+          continue;
         if (margin < 0.3) continue;
         ++total[truth];
         if (labels.at(i, j, k) == truth) ++agree[truth];
@@ -97,9 +101,9 @@ TEST(AppSlicer, SegmentationLabelsTheLayeredPhantomsTissue) {
       }
   for (int c = 1; c <= 3; ++c) {
     ASSERT_GT(total[c], 1000) << "class " << c;
-    const std::string row = cat("class ", c, " labelled 0: ", confusion[c][0], ", 1: ", confusion[c][1],
-                                ", 2: ", confusion[c][2], ", 3: ", confusion[c][3], ", 4: ",
-                                confusion[c][4]);
+    const std::string row =
+        cat("class ", c, " labelled 0: ", confusion[c][0], ", 1: ", confusion[c][1],
+            ", 2: ", confusion[c][2], ", 3: ", confusion[c][3], ", 4: ", confusion[c][4]);
     // The layers' depths are measured to about 0.3 mm (tests/test_volume_layers.cpp); a few
     // per cent are left unlabelled (cells that are not valid: grazing rays near the vertex).
     EXPECT_GT(static_cast<double>(agree[c]) / total[c], 0.9) << row;
@@ -113,7 +117,8 @@ TEST(AppSlicer, IsOneVerbOfTheList) {
   const app::VerbEntry& v = app::find_verb("model export-slicer");
   EXPECT_EQ(v.key, "model_export_slicer");
   const nlohmann::json d = nlohmann::json::parse(v.defaults_json());
-  for (const char* k : {"model", "output", "plan", "result", "force"}) EXPECT_TRUE(d.contains(k)) << k;
+  for (const char* k : {"model", "output", "plan", "result", "force"})
+    EXPECT_TRUE(d.contains(k)) << k;
 }
 
 // A finite-element result that is not on the model's skin (a box) is refused before anything is

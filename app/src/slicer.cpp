@@ -1,5 +1,7 @@
 #include "caps/app/slicer.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -109,8 +111,7 @@ void write_volume_nrrd(const fs::path& path, const Volume& v) {
     << ": " << v.source << ")\n"
     << "# frame: patient LPS, mm (caps's frame: volume/volume.hpp)\n"
     << "type: " << (whole ? "short" : "float") << "\n"
-    << nrrd_geometry(v.geom)
-    << "space units: \"mm\" \"mm\" \"mm\"\n";
+    << nrrd_geometry(v.geom) << "space units: \"mm\" \"mm\" \"mm\"\n";
   if (whole) {
     std::vector<std::int16_t> s(v.data.size());
     for (std::size_t i = 0; i < s.size(); ++i) s[i] = static_cast<std::int16_t>(v.data[i]);
@@ -169,9 +170,12 @@ void write_vtk(const fs::path& path, const TriMesh& mesh, const std::string& tit
   std::vector<const PointArray*> others;
   for (const PointArray& a : arrays) {
     if (a.values.rows() != n) throw InvalidInput(cat(a.name, ": not one value per point"));
-    if (a.values.cols() == 1 && !scalars) scalars = &a;
-    else if (a.values.cols() == 3 && !vectors) vectors = &a;
-    else others.push_back(&a);
+    if (a.values.cols() == 1 && !scalars)
+      scalars = &a;
+    else if (a.values.cols() == 3 && !vectors)
+      vectors = &a;
+    else
+      others.push_back(&a);
   }
   auto put_values = [&](const PointArray& a) {
     for (Eigen::Index i = 0; i < n; ++i)
@@ -256,8 +260,9 @@ std::string safe_name(const std::string& s) {
 std::optional<Volume> source_volume(const std::string& model_dir, const json& source,
                                     std::vector<std::string>& warnings) {
   if (source.value("kind", "volume") != "volume") {
-    warnings.push_back("the model was built from a surface scan: there is no CT or MR to write, "
-                       "and no segmentation");
+    warnings.push_back(
+        "the model was built from a surface scan: there is no CT or MR to write, "
+        "and no segmentation");
     return std::nullopt;
   }
   std::string path = source.value("path", "");
@@ -303,8 +308,7 @@ std::vector<std::uint8_t> tissue_labels(const Volume& v, const Segmentation& seg
   const CylinderGrid& grid = maps.grid;
   std::vector<std::uint8_t> labels(g.n_voxels(), 0);
   const VolumeGeometry& bg = seg.bone.geom;
-  const Eigen::Matrix3d to_bone =
-      (bg.direction * bg.spacing_mm.asDiagonal()).inverse();
+  const Eigen::Matrix3d to_bone = (bg.direction * bg.spacing_mm.asDiagonal()).inverse();
   const double r_max = *std::max_element(maps.r_skin.begin(), maps.r_skin.end()) + 1.0;
   // The soft tissue's label at p: 1..3 (or 1 without layers) between the skin and the base along
   // the model's ray, else 0.
@@ -314,8 +318,8 @@ std::vector<std::uint8_t> tissue_labels(const Volume& v, const Segmentation& seg
     // the nearest cell must be valid (measured skin and base)
     int jj = static_cast<int>(std::lround((c.theta_deg - grid.theta0_deg) / grid.dtheta_deg()));
     jj = ((jj % grid.n_theta) + grid.n_theta) % grid.n_theta;
-    const int kk = std::clamp(static_cast<int>(std::lround((c.z_mm - grid.z0_mm) / grid.dz_mm)),
-                              0, grid.n_z - 1);
+    const int kk = std::clamp(static_cast<int>(std::lround((c.z_mm - grid.z0_mm) / grid.dz_mm)), 0,
+                              grid.n_z - 1);
     if (!maps.is_valid(jj, kk)) return 0;
     const double depth = model.r_skin(c.theta_deg, c.z_mm) - c.r_mm;
     const double t = model.thickness(c.theta_deg, c.z_mm);
@@ -325,19 +329,23 @@ std::vector<std::uint8_t> tissue_labels(const Volume& v, const Segmentation& seg
     const double tf = model.thickness_fat(c.theta_deg, c.z_mm);
     return depth < ts ? 1 : depth < ts + tf ? 2 : 3;
   };
-  for (int k = 0; k < g.dims[2]; ++k)
-    for (int j = 0; j < g.dims[1]; ++j)
-      for (int i = 0; i < g.dims[0]; ++i) {
-        const Eigen::Vector3d p = g.index_to_lps(Eigen::Vector3d(i, j, k));
-        const std::size_t at = g.linear(i, j, k);
-        labels[at] = soft_tissue_label(p);
-        if (labels[at] == 0 && bone) {
-          const Eigen::Vector3d b = to_bone * (p - bg.origin_lps);
-          const int bi = static_cast<int>(std::lround(b[0])), bj = static_cast<int>(std::lround(b[1])),
-                    bk = static_cast<int>(std::lround(b[2]));
-          if (bg.contains(bi, bj, bk) && seg.bone.at(bi, bj, bk)) labels[at] = 4;
+  // Slices in parallel (each voxel is labelled on its own; the model's samplers are const).
+  tbb::parallel_for(tbb::blocked_range<int>(0, g.dims[2]), [&](const tbb::blocked_range<int>& ks) {
+    for (int k = ks.begin(); k < ks.end(); ++k)
+      for (int j = 0; j < g.dims[1]; ++j)
+        for (int i = 0; i < g.dims[0]; ++i) {
+          const Eigen::Vector3d p = g.index_to_lps(Eigen::Vector3d(i, j, k));
+          const std::size_t at = g.linear(i, j, k);
+          labels[at] = soft_tissue_label(p);
+          if (labels[at] == 0 && bone) {
+            const Eigen::Vector3d b = to_bone * (p - bg.origin_lps);
+            const int bi = static_cast<int>(std::lround(b[0])),
+                      bj = static_cast<int>(std::lround(b[1])),
+                      bk = static_cast<int>(std::lround(b[2]));
+            if (bg.contains(bi, bj, bk) && seg.bone.at(bi, bj, bk)) labels[at] = 4;
+          }
         }
-      }
+  });
   return labels;
 }
 
@@ -354,8 +362,7 @@ std::vector<long long> write_segmentation(const fs::path& path, const Volume& v,
     << "# caps tissue segmentation on the grid of the volume the model was built from\n"
     << "# frame: patient LPS, mm (caps's frame: volume/volume.hpp)\n"
     << "type: unsigned char\n"
-    << nrrd_geometry(g)
-    << "space units: \"mm\" \"mm\" \"mm\"\n"
+    << nrrd_geometry(g) << "space units: \"mm\" \"mm\" \"mm\"\n"
     << "Segmentation_MasterRepresentation:=Binary labelmap\n"
     << "Segmentation_ContainedRepresentationNames:=Binary labelmap|\n"
     << "Segmentation_ReferenceImageExtentOffset:=0 0 0\n";
@@ -414,9 +421,8 @@ std::vector<PointArray> skin_arrays(const PatientModel& model, const TriMesh& sk
       dd[i] = model.sample(m.thickness_deep_normal, c.theta_deg, c.z_mm);
     }
   }
-  std::vector<PointArray> a = {{"thickness_normal_mm", tn},
-                               {"thickness_radial_mm", tr},
-                               {"thickness_measured", ok}};
+  std::vector<PointArray> a = {
+      {"thickness_normal_mm", tn}, {"thickness_radial_mm", tr}, {"thickness_measured", ok}};
   if (layers) {
     a.push_back({"dermis_normal_mm", ds});
     a.push_back({"fat_normal_mm", df});
@@ -504,13 +510,15 @@ ExportSlicerResult run_export_slicer(const ExportSlicerRequest& r, Reporter* rep
   const fs::path d = dir.path();
   json segments_json = json::array();
   if (volume) {
-    const std::string name =
-        volume->modality == Modality::CT ? "ct" : volume->modality == Modality::MR ? "mr" : "volume";
+    const std::string name = volume->modality == Modality::CT   ? "ct"
+                             : volume->modality == Modality::MR ? "mr"
+                                                                : "volume";
     out.volume_file = name + ".nrrd";
     write_volume_nrrd(d / out.volume_file, *volume);
     out.files.push_back(out.volume_file);
     if (!volume->acquired.empty())
-      out.warnings.push_back(cat(out.volume_file, ": the reader filled in voxels the scanner did "
+      out.warnings.push_back(cat(out.volume_file,
+                                 ": the reader filled in voxels the scanner did "
                                  "not acquire (outside a tilted gantry's slab, resampled onto a "
                                  "regular grid): they hold the reader's fill value"));
     // The segmentation as the model was made: the recorded thresholds.
@@ -525,14 +533,16 @@ ExportSlicerResult run_export_slicer(const ExportSlicerRequest& r, Reporter* rep
     const bool layers = model.has_layers();
     const bool bone = !bone_from_mask && !seg.bone_is_approximate;
     if (bone_from_mask)
-      out.warnings.push_back("the model's bone came from a separate mask (--bone-mask): the "
-                             "segmentation has no bone segment");
+      out.warnings.push_back(
+          "the model's bone came from a separate mask (--bone-mask): the "
+          "segmentation has no bone segment");
     if (seg.bone_is_approximate)
       out.warnings.push_back(cat("the volume shows no bone caps can threshold (", seg.bone_method,
                                  "): the segmentation has no bone segment"));
     if (!layers)
-      out.warnings.push_back("the model has no tissue layers (not a CT): the soft tissue is one "
-                             "segment");
+      out.warnings.push_back(
+          "the model has no tissue layers (not a CT): the soft tissue is one "
+          "segment");
     std::vector<SegmentDef> defs;
     if (layers) {
       defs.push_back({"dermis", "skin (dermis)", 1, {177 / 255.0, 122 / 255.0, 101 / 255.0}});
@@ -541,9 +551,7 @@ ExportSlicerResult run_export_slicer(const ExportSlicerRequest& r, Reporter* rep
     } else {
       defs.push_back({"soft_tissue", "soft tissue", 1, {177 / 255.0, 122 / 255.0, 101 / 255.0}});
     }
-    if (bone)
-      defs.push_back({"bone", "bone", 4,
-                      {241 / 255.0, 214 / 255.0, 145 / 255.0}});
+    if (bone) defs.push_back({"bone", "bone", 4, {241 / 255.0, 214 / 255.0, 145 / 255.0}});
     const std::vector<std::uint8_t> labels = tissue_labels(*volume, seg, model, layers, bone);
     const std::vector<long long> counts =
         write_segmentation(d / "tissue.seg.nrrd", *volume, labels, defs);
@@ -600,7 +608,8 @@ ExportSlicerResult run_export_slicer(const ExportSlicerRequest& r, Reporter* rep
         continue;
       }
       std::vector<MarkupPoint> pts;
-      for (std::size_t i = 0; i < f.lps.size(); ++i) pts.push_back({cat(f.name, "-", i + 1), "", f.lps[i]});
+      for (std::size_t i = 0; i < f.lps.size(); ++i)
+        pts.push_back({cat(f.name, "-", i + 1), "", f.lps[i]});
       const std::string file = cat("features/", safe_name(f.name), ".mrk.json");
       write_markups(d / file, markup("Curve", f.name, pts));
       out.files.push_back(file);
@@ -620,7 +629,8 @@ ExportSlicerResult run_export_slicer(const ExportSlicerRequest& r, Reporter* rep
     int i = 0;
     for (const auto& line : lines) {
       std::vector<MarkupPoint> pts;
-      for (std::size_t p = 0; p < line.size(); ++p) pts.push_back({cat("cut", i + 1, "-", p + 1), "", line[p]});
+      for (std::size_t p = 0; p < line.size(); ++p)
+        pts.push_back({cat("cut", i + 1, "-", p + 1), "", line[p]});
       const std::string file = cat("plan/incision_", ++i, ".mrk.json");
       write_markups(d / file, markup("Curve", cat(plan->procedure, " incision ", i), pts));
       out.files.push_back(file);
@@ -684,8 +694,8 @@ ExportSlicerResult run_export_slicer(const ExportSlicerRequest& r, Reporter* rep
 
 std::string summary(const ExportSlicerResult& r) {
   return cat("caps model export-slicer: ", r.files.size(), " files in ", r.output,
-             r.volume_file.empty() ? " (no volume)" : cat(" (", r.volume_file, ", segments ",
-                                                          r.segments_text, ")"),
+             r.volume_file.empty() ? " (no volume)"
+                                   : cat(" (", r.volume_file, ", segments ", r.segments_text, ")"),
              ", ", r.landmarks, " landmark points, ", r.curves, " curves");
 }
 

@@ -31,18 +31,19 @@ struct ExportSlicerRequest {
     v(r.model, {"model", "a model directory", FieldKind::Positional, "MODEL_DIR"});
     v(r.output, {"output", "the folder to create", FieldKind::Required, "-o,--output"});
     v(r.plan, {"plan", "a plan on this model: its cutting paths as markups curves"});
-    v(r.result, {"result", "a simulation folder (caps simulate) of a plan on this model: the "
-                           "post-operative skin with displacement and tension"});
+    v(r.result, {"result",
+                 "a simulation folder (caps simulate) of a plan on this model: the "
+                 "post-operative skin with displacement and tension"});
     v(r.force, {"force", "replace an existing output", FieldKind::Flag});
   }
 };
 
 struct ExportSlicerResult {
   std::string output;
-  std::vector<std::string> files;     ///< relative to `output`, in the order written
-  std::string volume_file;            ///< "" when the source volume could not be written
-  std::string segments_text;          ///< "dermis 1234, fat 567, ..." (summary)
-  int landmarks = 0, curves = 0;      ///< landmark points and curves (features, plan) written
+  std::vector<std::string> files;  ///< relative to `output`, in the order written
+  std::string volume_file;         ///< "" when the source volume could not be written
+  std::string segments_text;       ///< "dermis 1234, fat 567, ..." (summary)
+  int landmarks = 0, curves = 0;   ///< landmark points and curves (features, plan) written
   double max_displacement_mm = 0, max_tension_kpa = 0;  ///< with --result
   std::vector<std::string> warnings;
 
