@@ -265,12 +265,27 @@ std::optional<Volume> source_volume(const std::string& model_dir, const json& so
         "and no segmentation");
     return std::nullopt;
   }
-  std::string path = source.value("path", "");
-  if (!path.empty() && fs::path(path).is_relative() && !fs::exists(path) &&
-      fs::exists(fs::path(model_dir) / path))
-    path = (fs::path(model_dir) / path).string();
-  if (path.empty() || !fs::exists(path)) {
-    warnings.push_back(cat("the volume the model was built from (", path.empty() ? "?" : path,
+  // The path as model.json records it: as given to from-volume, so a relative one is relative to
+  // where that ran, usually the folder that holds the model (`caps model from-volume ct.nii.gz -o
+  // m`); tried as it is, then beside the model.
+  const std::string recorded = source.value("path", "");
+  std::string path;
+  if (!recorded.empty()) {
+    std::vector<fs::path> candidates = {recorded};
+    if (fs::path(recorded).is_relative()) {
+      const fs::path dir = fs::absolute(model_dir).lexically_normal();
+      candidates.push_back(dir.parent_path() / recorded);
+      candidates.push_back(dir / recorded);
+    }
+    for (const fs::path& c : candidates)
+      if (fs::exists(c)) {
+        path = c.string();
+        break;
+      }
+  }
+  if (path.empty()) {
+    warnings.push_back(cat("the volume the model was built from (",
+                           recorded.empty() ? "?" : recorded,
                            ") is not there: no CT/MR and no segmentation written; put it back "
                            "and export again to have them"));
     return std::nullopt;
@@ -278,12 +293,20 @@ std::optional<Volume> source_volume(const std::string& model_dir, const json& so
   Volume v = read_volume(path);
   if (source.contains("dims") && source.at("dims").is_array() && source.at("dims").size() == 3) {
     const auto& d = source.at("dims");
-    if (d[0] != v.geom.dims[0] || d[1] != v.geom.dims[1] || d[2] != v.geom.dims[2]) {
+    bool same_spacing = true;
+    if (source.contains("spacing_mm") && source.at("spacing_mm").is_array() &&
+        source.at("spacing_mm").size() == 3)
+      for (int a = 0; a < 3; ++a)
+        same_spacing = same_spacing &&
+                       std::abs(source.at("spacing_mm")[a].get<double>() - v.geom.spacing_mm[a]) <=
+                           1e-4 * v.geom.spacing_mm[a];
+    if (d[0] != v.geom.dims[0] || d[1] != v.geom.dims[1] || d[2] != v.geom.dims[2] ||
+        !same_spacing) {
       warnings.push_back(cat("the volume at ", path, " has ", v.geom.dims[0], "x", v.geom.dims[1],
-                             "x", v.geom.dims[2], " voxels, not the ", d[0].get<int>(), "x",
-                             d[1].get<int>(), "x", d[2].get<int>(),
-                             " the model was built from: it was replaced; no CT/MR and no "
-                             "segmentation written"));
+                             "x", v.geom.dims[2], " voxels of ", v.geom.spacing_mm[0], "x",
+                             v.geom.spacing_mm[1], "x", v.geom.spacing_mm[2],
+                             " mm, not the grid model.json records: it is not the volume the "
+                             "model was built from; no CT/MR and no segmentation written"));
       return std::nullopt;
     }
   }

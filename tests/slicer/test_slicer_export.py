@@ -444,3 +444,15 @@ def test_a_model_whose_volume_is_gone_gives_the_rest_with_a_warning(work):
     assert "ct.nrrd" not in files and "tissue.seg.nrrd" not in files
     assert "skin.vtk" in files and "landmarks.mrk.json" in files
     assert json.load(open(d / "sg" / "summary.json"))["warnings"]
+
+
+def test_a_relative_source_is_found_beside_the_model(work):
+    # model.json records the CT as given ("ct.nii.gz", relative to where from-volume ran); run
+    # from elsewhere, the export finds it beside the model folder.
+    d = work["dir"]
+    os.makedirs(d / "elsewhere", exist_ok=True)
+    p = run("model", "export-slicer", "../m", "-o", "out", "--json", "-q", cwd=d / "elsewhere")
+    assert json.loads(p.stdout)["volume_file"] == "ct.nrrd"
+    assert nrrd_header(d / "elsewhere" / "out" / "ct.nrrd") == nrrd_header(d / "s" / "ct.nrrd")
+    with open(d / "elsewhere" / "out" / "ct.nrrd", "rb") as a, open(d / "s" / "ct.nrrd", "rb") as b:
+        assert a.read().split(b"\n\n", 1)[1] == b.read().split(b"\n\n", 1)[1]  # the voxels
