@@ -105,7 +105,7 @@ TEST(AppSlicer, SegmentationLabelsTheLayeredPhantomsTissue) {
         cat("class ", c, " labelled 0: ", confusion[c][0], ", 1: ", confusion[c][1],
             ", 2: ", confusion[c][2], ", 3: ", confusion[c][3], ", 4: ", confusion[c][4]);
     // The layers' depths are measured to about 0.3 mm (tests/test_volume_layers.cpp); a few
-    // per cent are left unlabelled (cells that are not valid: grazing rays near the vertex).
+    // per cent are left unlabelled (in cells the model does not hold as valid).
     EXPECT_GT(static_cast<double>(agree[c]) / total[c], 0.9) << row;
     // and no tissue is taken for another
     const int wrong = total[c] - agree[c] - confusion[c][0];
