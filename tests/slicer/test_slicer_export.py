@@ -279,7 +279,7 @@ def test_skin_and_bone_are_the_models_surfaces_with_its_thickness(work):
     assert len(picked) == 10
     for i in picked:
         theta, z = cylindrical(mj, p[i])
-        site = json.loads(run("model", "site", "m", f"--at={theta!r},{z!r}", "--json",
+        site = json.loads(run("model", "site", "m", f"--at={float(theta)!r},{float(z)!r}", "--json",
                               cwd=d).stdout)
         assert tn[i] == pytest.approx(site["thickness_mm"], abs=2e-3)
         assert tr[i] == pytest.approx(site["thickness_radial_mm"], abs=2e-3)
