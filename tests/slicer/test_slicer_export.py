@@ -353,7 +353,8 @@ def test_markups_are_valid_and_where_caps_finds_them(work):
     assert "plan/wound_border.mrk.json" in mk and mk["plan/wound_border.mrk.json"]["type"] == \
         "ClosedCurve"
     lm = json.loads(run("model", "landmarks", "m", "--no-write", "--json", cwd=d).stdout)["items"]
-    pts = {cp["label"]: np.array(cp["position"]) for cp in mk["landmarks.mrk.json"]["controlPoints"]}
+    pts = {cp["label"]: np.array(cp["position"])
+           for cp in mk["landmarks.mrk.json"]["controlPoints"]}
     found = [k for k, v in lm.items() if v["found"]]
     assert len(found) >= 5
     for name in found:
@@ -408,8 +409,9 @@ def test_postoperative_skin_carries_caps_tension_and_displacement(work):
     pd = r.GetOutput().GetPointData()
     u = None
     for i in range(pd.GetNumberOfArrays()):
-        if "displacement" in pd.GetArrayName(i).lower() and pd.GetArray(i).GetNumberOfComponents() == 3:
-            u = vtk_to_numpy(pd.GetArray(i))
+        a = pd.GetArray(i)
+        if "displacement" in pd.GetArrayName(i).lower() and a.GetNumberOfComponents() == 3:
+            u = vtk_to_numpy(a)
     assert u is not None
     umax = np.linalg.norm(u, axis=1).max()
     assert 0.3 * umax < mag.max() <= umax + 1e-3
