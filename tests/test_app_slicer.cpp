@@ -2,6 +2,7 @@
 // the analytic layered phantom, the verb in the one list, and refusals that write nothing. The
 // files are read back by independent readers in tests/slicer/ (VTK, nibabel, jsonschema).
 #include <gtest/gtest.h>
+#include <teem/nrrd.h>
 
 #include <cmath>
 #include <filesystem>
@@ -111,6 +112,47 @@ TEST(AppSlicer, SegmentationLabelsTheLayeredPhantomsTissue) {
     const int wrong = total[c] - agree[c] - confusion[c][0];
     EXPECT_LT(static_cast<double>(wrong) / total[c], 0.005) << row;
   }
+}
+
+// teem's nrrdLoad (ITK's NrrdImageIO, through which 3D Slicer reads .nrrd and .seg.nrrd, embeds
+// NrrdIO, a subset of teem) parses the export's header: LPS space, the grid, and every segment's
+// key/value fields.
+TEST(AppSlicer, TeemReadsTheSegmentationsFieldsAsSlicersReaderWould) {
+  const fs::path folder = caps_test::program_folder("caps_app_slicer");
+  app::ExportSlicerRequest r;
+  r.model = layered_model();
+  r.output = (folder / "export_teem").string();
+  app::run_export_slicer(r);
+  const Volume source = read_volume(folder / "ct.nii.gz");
+  Nrrd* n = nrrdNew();
+  ASSERT_EQ(nrrdLoad(n, (folder / "export_teem" / "tissue.seg.nrrd").c_str(), nullptr), 0);
+  EXPECT_EQ(n->space, nrrdSpaceLeftPosteriorSuperior);
+  EXPECT_EQ(n->type, nrrdTypeUChar);
+  ASSERT_EQ(n->dim, 3u);
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_EQ(static_cast<int>(n->axis[a].size), source.geom.dims[a]);
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(n->axis[a].spaceDirection[c],
+                  source.geom.direction(c, a) * source.geom.spacing_mm[a], 1e-12);
+    EXPECT_NEAR(n->spaceOrigin[a], source.geom.origin_lps[a], 1e-12);
+  }
+  auto value = [&](const std::string& key) {
+    char* v = nrrdKeyValueGet(n, key.c_str());
+    const std::string s = v ? v : "<absent>";
+    free(v);
+    return s;
+  };
+  EXPECT_EQ(value("Segmentation_MasterRepresentation"), "Binary labelmap");
+  const char* names[] = {"skin (dermis)", "subcutaneous fat", "deep tissue", "bone"};
+  for (int i = 0; i < 4; ++i) {
+    const std::string k = cat("Segment", i, "_");
+    EXPECT_EQ(value(k + "Name"), names[i]);
+    EXPECT_EQ(value(k + "LabelValue"), std::to_string(i + 1));
+    EXPECT_EQ(value(k + "Layer"), "0");
+    EXPECT_NE(value(k + "Extent"), "<absent>");
+  }
+  EXPECT_EQ(value("Segment4_ID"), "<absent>");
+  nrrdNuke(n);
 }
 
 TEST(AppSlicer, IsOneVerbOfTheList) {
