@@ -17,6 +17,7 @@ packages=(
   clang libclang-rt-14-dev
   python3-dev python3-pybind11 python3-numpy python3-pytest snakemake python3-matplotlib
   python3-pydicom python3-nibabel
+  python3-vtk9 python3-jsonschema
 )
 # node and npm bundle the planner page (web/); Debian's only when no node is installed already.
 if ! command -v node >/dev/null 2>&1; then packages+=(nodejs npm); fi

@@ -19,6 +19,7 @@
 #include "caps/app/register.hpp"
 #include "caps/app/render.hpp"
 #include "caps/app/simulation.hpp"
+#include "caps/app/slicer.hpp"
 #include "caps/core/reporter.hpp"
 
 namespace caps::app {
@@ -116,6 +117,14 @@ void for_each_verb(F&& f) {
          "grey),\ncolor.png and the sidecar range.json that from-scan reads.\n"
          "Example: caps model export-range cranium -o cranium_range",
          &run_export_range});
+  f(Verb{"model export-slicer",
+         "Write a folder that 3D Slicer opens: the CT (or MR) the model was built from (NRRD,\n"
+         "patient LPS), a segmentation (tissue.seg.nrrd: dermis, fat, deep tissue, bone), the skin\n"
+         "and bone surfaces with the soft-tissue thickness (skin.vtk, bone.vtk), the landmarks and\n"
+         "feature lines as markups (.mrk.json); with --plan the plan's cutting paths, with --result\n"
+         "the post-operative skin with displacement and tension (docs/slicer.md).\n"
+         "Example: caps model export-slicer cranium --plan z.json --result z -o cranium_slicer",
+         &run_export_slicer});
   f(Verb{"model pick",
          "Pick the first point of a ray on a model's skin.\n"
          "Example: caps model pick head --ray 0,-400,0,0,1,0",
