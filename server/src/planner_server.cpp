@@ -9,6 +9,7 @@
 #include "caps/plan/plan_io.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "guarded_http.hpp"
+#include "page_words.hpp"
 #include "skin_views.hpp"
 
 #include <httplib.h>
@@ -453,9 +454,24 @@ struct PlannerServer::Impl {
         route(req, res);
       } catch (const std::exception& e) {
         const ErrorResponse error = error_response(e);
-        send_error(res, error.status, without_work_dir(error.message));
+        send_error(res, error.status, page_words(without_work_dir(error.message)));
       }
     };
+  }
+
+  // `message` in the page's words (detail::page_words()) on the model served now.
+  std::string page_words(const std::string& message) {
+    const std::shared_ptr<const Served> on = current();
+    return on ? detail::page_words(message, *on->model, on->dir) : message;
+  }
+
+  // A verb's JSON answer with its warnings in the page's words (detail::page_words_json()).
+  std::string in_page_words(const std::string& answer) {
+    const std::shared_ptr<const Served> on = current();
+    if (!on) return answer;
+    json j = json::parse(answer);
+    detail::page_words_json(j, *on->model, on->dir);
+    return j.dump(2);
   }
 
   // A message as the command line gives it for the user's own file: the server's copies of request
@@ -499,7 +515,7 @@ struct PlannerServer::Impl {
     // The page makes its local charts itself (POST /api/chart, offered under the refusal) and
     // serves them as the model: a plan placed on a chart of its own would not be drawn where it is.
     j["no_chart"] = true;
-    return app::find_verb("plan new").run_json(j.dump(), source, nullptr);
+    return in_page_words(app::find_verb("plan new").run_json(j.dump(), source, nullptr));
   }
 
   // `name`: what the user calls the plan (the page sends its file's name), for the messages.
@@ -508,7 +524,8 @@ struct PlannerServer::Impl {
     const fs::path plan = request_folder() / name;
     write_text_atomic(plan, body);
     const json request{{"plan", plan.string()}, {"model", current()->dir}};
-    return app::find_verb("plan check").run_json(request.dump(), "plan check request", nullptr);
+    return in_page_words(
+        app::find_verb("plan check").run_json(request.dump(), "plan check request", nullptr));
   }
 
   std::string simulate(const std::string& body) {
@@ -591,6 +608,7 @@ struct PlannerServer::Impl {
       out["first_answer_id"] = *first_id;
       out["timings_s"]["first_answer"] = first_s;
     }
+    detail::page_words_json(out, *on->model, on->dir);
     return out.dump(2);
   }
 
@@ -631,6 +649,7 @@ struct PlannerServer::Impl {
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     first["result_id"] = id;
     first["result_url"] = cat("/api/results/", id, "/");
+    detail::page_words_json(first, *on->model, on->dir);
     progress->set_first_answer(first);
     return id;
   }

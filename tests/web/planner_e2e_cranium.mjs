@@ -14,7 +14,7 @@ import assert from 'node:assert/strict';
 import { spawnSync } from 'node:child_process';
 import { mkdirSync, readFileSync } from 'node:fs';
 import { join } from 'node:path';
-import { downloadOf, logger, screenOf, withPlanner } from './e2e_common.mjs';
+import { assertSurgeonWords, downloadOf, logger, screenOf, withPlanner } from './e2e_common.mjs';
 
 const [caps, model, webRoot, out] = process.argv.slice(2);
 mkdirSync(out, { recursive: true });
@@ -53,6 +53,9 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   assert.ok(Math.abs(p.frame.theta_deg - 30) < 1 && Math.abs(p.frame.z_mm - 105) < 1,
     `placed where clicked: theta ${p.frame.theta_deg}, z ${p.frame.z_mm}`);
   assert.match(await page.locator('#check').innerText(), /Can be operated/);
+  // Said from the nearest landmark, as the surgeon finds the spot on the patient.
+  assert.match(await page.locator('#check').innerText(), /centre \d+ mm to the patient's (left|right) and \d+ mm (up|down) from the /);
+  await assertSurgeonWords(page, 'placed on the forehead');
   const length = page.locator('#param-length');
   await length.fill('15');
   await length.dispatchEvent('change');
@@ -136,6 +139,7 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
     `${progress.steps.length} progress steps shown${progress.steps.length ? `, last "${progress.steps.at(-1)}"` : ''}): ` +
     `closing force ${closing} N, largest suture ${largest} N, ${sutureRows - 1} sutures`);
   await page.screenshot({ path: join(out, '3-simulated.png') });
+  await assertSurgeonWords(page, 'simulated on the forehead');
 
   // The pre-to-post slider: at 0 the skin is the pre-operative one (the morph's weight 0 and
   // other pixels than post); Play runs it back to post.
@@ -282,6 +286,7 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, allow }) => {
   assert.match(await page.locator('#check').innerText(), /cannot represent/);
   assert.equal(await page.locator('#chart-offer').isVisible(), true, 'a local chart is offered');
   await page.screenshot({ path: join(out, '6-nose-refused.png') });
+  await assertSurgeonWords(page, 'refused on the side of the nose');
   // The chart: the server measures the CT again facing the skin there and serves it; the page
   // reloads on it.
   await Promise.all([page.waitForEvent('load', { timeout: 120000 }), page.click('#chart-here')]);

@@ -69,7 +69,8 @@ function showCheck(plan, message, state) {
   }
   if (!plan) {
     el.className = 'check refused';
-    el.innerHTML = `<b>Cannot be operated here.</b> ${escapeHtml(message ?? '')}`;
+    const text = message ?? '';
+    el.innerHTML = `<b>Cannot be operated here.</b> ${escapeHtml(text.charAt(0).toUpperCase() + text.slice(1))}`;
     return;
   }
   const c = plan.check ?? {};
