@@ -61,6 +61,10 @@ constexpr PageSetting kPageSettings[] = {
     {"time-limit", "the Time limit setting"},
     {"extent", "a smaller procedure (its length and width)"},
     {"at", "a click on the skin"},
+    {"tissue uniform", "the Tissue setting's one material"},
+    {"tissue auto", "the Tissue setting's measured layers"},
+    {"tissue measured", "the Tissue setting's measured layers"},
+    {"tissue", "the Tissue setting"},
 };
 
 }  // namespace
@@ -102,8 +106,11 @@ std::string page_words(const std::string& message, const PatientModel& model,
     return words ? cat("(", *words, ")") : std::string("(there)");
   });
   s = replace_each(s, option, [](const std::smatch& m) -> std::string {
+    const std::string with_value = m[2].matched ? m[1].str() + m[2].str() : std::string();
     for (const PageSetting& p : kPageSettings)
-      if (m[1].str() == p.option) return p.words;
+      if (with_value == p.option) return p.words;
+    for (const PageSetting& p : kPageSettings)
+      if (m[1].str() == p.option) return std::string(p.words);
     return cat("a setting of the command line (", m[1].str(), ")");
   });
   return s;

@@ -282,7 +282,7 @@ async function main() {
   // Simulate.
   $('simulate').addEventListener('click', async () => {
     if (!planner.plan) return;
-    const options = { material: $('material').value };
+    const options = { material: $('material').value, tissue: $('tissue').value };
     if ($('mesh-size').value) options.mesh_size = Number($('mesh-size').value);
     if (options.material !== 'linear') options.time_limit = Number($('time-limit').value);
     $('simulate').disabled = true;

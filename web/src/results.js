@@ -24,6 +24,14 @@ export function planLabel(plan, ownSutures = false) {
     `${ownSutures ? `; your ${pairs} suture pair${pairs === 1 ? '' : 's'}` : ''})`;
 }
 
+/** The settings a row was simulated with, so that alternatives of one plan can be told apart:
+ * the material, the tissue, the mesh size. */
+export function settingsLabel(result, options = {}) {
+  const tissue = options.tissue === 'auto' || options.tissue === 'measured' ? 'measured layers' : 'one tissue';
+  const mesh = options.mesh_size ? `${options.mesh_size} mm mesh` : 'default mesh';
+  return `${result.material ?? options.material ?? ''}, ${tissue}, ${mesh}`;
+}
+
 export class Results {
   constructor(viewA, viewB, el) {
     this.views = [viewA, viewB];
@@ -57,7 +65,7 @@ export class Results {
     const showFirst = (result) => {
       this.lastResultId = Math.max(this.lastResultId, result.result_id);
       firstLoading ??= (async () => {
-        const row = await this.resultRow(plan, result, ownSutures);
+        const row = await this.resultRow(plan, result, ownSutures, options);
         row.provisional = 'first answer: the linear (small-strain) closure of the patch around the wound, ' +
           'clamped at its rim; the finite-strain closure in the whole face is running';
         row.seconds = (performance.now() - t0) / 1000;
@@ -85,7 +93,7 @@ export class Results {
       this.lastResultId = Math.max(this.lastResultId, result.result_id);
       const t1 = performance.now();
       e.progressText.textContent = 'loading the post-operative skin…';
-      const row = await this.resultRow(plan, result, ownSutures);
+      const row = await this.resultRow(plan, result, ownSutures, options);
       const t2 = performance.now();
       await firstLoading?.catch(() => {});
       if (first) {  // the final answer takes the first one's place
@@ -132,11 +140,11 @@ export class Results {
   }
 
   // A row of the alternatives for a simulate result: its view and its result.json.
-  async resultRow(plan, result, ownSutures) {
+  async resultRow(plan, result, ownSutures, options = {}) {
     const [view, file] = await Promise.all([api.resultView(result.result_id),
       api.resultFile(result.result_id, 'result.json')]);
     return {
-      n: this.rows.length + 1, plan, result, view, ownSutures,
+      n: this.rows.length + 1, plan, result, view, ownSutures, options,
       sutures: file.sutures_at_spacing?.sutures ?? [],
       skins: [null, null],
     };
@@ -343,7 +351,8 @@ ${warnings ? `<h2>Warnings</h2><ul>${warnings}</ul>` : ''}
       if (this.shown[1] === row) tr.classList.add('shown-b');
       if (row.provisional) tr.classList.add('provisional');
       tr.innerHTML = `<td>${row.n}</td><td>${escapeHtml(planLabel(row.plan, row.ownSutures))}${
-        row.provisional ? ' <i title="the finite-strain closure did not answer (yet)">linear</i>' : ''}</td>
+        row.provisional ? ' <i title="the finite-strain closure did not answer (yet)">linear</i>' : ''}<br>
+        <small class="settings">${escapeHtml(settingsLabel(r, row.options))}</small></td>
         <td class="closing">${fmt(r.closing_force_n)}</td>
         <td class="largest">${fmt(r.sutures_at_spacing?.max_force_per_suture_n)}</td>
         <td>${fmt(row.view.tension_scale_max_kpa, 1)}</td>
