@@ -508,6 +508,9 @@ void draw_sheet(Canvas& c, const Sheet& s, const Flat& flat, const RgbImage& ski
   std::vector<V2> border(s.loop.size());
   for (const KeyPoint& k : s.points)
     for (int node : k.loop_nodes) border[node] = page(k.paper);
+  // The key points' dots under the line, so that the line runs to its ends.
+  for (const auto& k : s.points)
+    if (k.kind != "centre") c.fill_circle(page(k.paper), 0.45, kInk);
   c.polyline(border, {.colour = kCut, .width_px = 0.3, .round_joins = true}, true);
   V2 mid = V2::Zero();
   for (const auto& k : s.points) mid += k.paper;
@@ -521,7 +524,6 @@ void draw_sheet(Canvas& c, const Sheet& s, const Flat& flat, const RgbImage& ski
       text(p.x() + 1.6, p.y() + 3.2, k.label, 2.8, kInk, 0, true);
       continue;
     }
-    c.fill_circle(p, 0.45, kInk);
     V2 out = k.paper - mid;
     out = out.norm() > 1e-6 ? V2(out.normalized()) : V2(1, 0);
     const V2 q = p + 2.8 * V2(out.x(), -out.y());
