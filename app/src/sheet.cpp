@@ -173,12 +173,16 @@ std::vector<KeyPoint> key_points(const plan::Plan& p, const plan::BorderLoop& lo
     k.loop_nodes = {i};
     out.push_back(k);
   }
+  // The centre, unless a point of the cut is there already (a V-Y's stem).
   KeyPoint c;
   c.kind = "centre";
   c.theta_z = {p.frame.theta_deg, p.frame.z_mm};
   c.lps = model.skin_point(c.theta_z[0], c.theta_z[1]);
   c.paper = c.flat = flat.to_paper(c.theta_z);
-  out.push_back(c);
+  auto at_centre = std::find_if(out.begin(), out.end(),
+                                [&](const KeyPoint& k) { return (k.paper - c.paper).norm() < 0.5; });
+  if (at_centre != out.end()) at_centre->kind += ", centre";
+  else out.push_back(c);
   for (std::size_t i = 0; i < out.size(); ++i) out[i].label = std::string(1, char('A' + i % 26));
   return out;
 }
@@ -500,6 +504,21 @@ void draw_sheet(Canvas& c, const Sheet& s, const Flat& flat, const RgbImage& ski
       if ((k.flat - xy).norm() < (near->flat - xy).norm()) near = &k;
     return xy + near->paper - near->flat;
   };
+  // The labels first: the lines are drawn over their white boxes.
+  V2 mid = V2::Zero();
+  for (const auto& k : s.points) mid += k.paper;
+  mid /= static_cast<double>(s.points.size());
+  for (const auto& k : s.points) {
+    const V2 p = page(k.paper);
+    if (k.kind == "centre") {
+      text(p.x() + 1.6, p.y() + 3.6, k.label, 2.8, kInk, 0, true);
+      continue;
+    }
+    V2 out = k.paper - mid;
+    out = out.norm() > 1e-6 ? V2(out.normalized()) : V2(1, 0);
+    const V2 q = p + 3.4 * V2(out.x(), -out.y());
+    text(q.x(), q.y() + 1.0, k.label, 2.8, kInk, 0.5, true);
+  }
   for (const auto& path : s.plan.paths) {
     std::vector<V2> line;
     for (int k : path) line.push_back(page(on_sheet({s.plan.points[k].theta_deg, s.plan.points[k].z_mm})));
@@ -512,26 +531,15 @@ void draw_sheet(Canvas& c, const Sheet& s, const Flat& flat, const RgbImage& ski
   for (const auto& k : s.points)
     if (k.kind != "centre") c.fill_circle(page(k.paper), 0.45, kInk);
   c.polyline(border, {.colour = kCut, .width_px = 0.3, .round_joins = true}, true);
-  V2 mid = V2::Zero();
-  for (const auto& k : s.points) mid += k.paper;
-  mid /= static_cast<double>(s.points.size());
-  for (const auto& k : s.points) {
-    const V2 p = page(k.paper);
+  for (const auto& k : s.points)
     if (k.kind == "centre") {
+      const V2 p = page(k.paper);
       c.stroke_circle(p, 0.9, {.colour = kInk, .width_px = 0.2});
       c.line(p - V2(1.6, 0), p + V2(1.6, 0), {.colour = kInk, .width_px = 0.15});
       c.line(p - V2(0, 1.6), p + V2(0, 1.6), {.colour = kInk, .width_px = 0.15});
-      text(p.x() + 1.6, p.y() + 3.2, k.label, 2.8, kInk, 0, true);
-      continue;
     }
-    V2 out = k.paper - mid;
-    out = out.norm() > 1e-6 ? V2(out.normalized()) : V2(1, 0);
-    const V2 q = p + 2.8 * V2(out.x(), -out.y());
-    text(q.x(), q.y() + 1.0, k.label, 2.8, kInk, 0.5, true);
-  }
   // Orientation.
   text(vx + size.x() / 2, vy + 4, "\u2191 superior", 2.8, kInk, 0.5, true);
-  text(vx + size.x() / 2, vy + size.y() - 2, "inferior \u2193", 2.8, kInk, 0.5, true);
   text(vx + size.x() - 2, vy + size.y() / 2, "patient's left \u2192", 2.8, kInk, 1, true);
   text(vx + 2, vy + size.y() / 2, "\u2190 patient's right", 2.8, kInk, 0, true);
   c.pop_clip();
@@ -550,9 +558,11 @@ void draw_sheet(Canvas& c, const Sheet& s, const Flat& flat, const RgbImage& ski
     c.line({vx + mm, ry}, {vx + mm, ry + len}, {.colour = kInk, .width_px = 0.1});
     if (mm % 10 == 0) text(vx + mm, ry + 5, std::to_string(mm), 2.0, kInk, 0.5);
   }
-  text(vx + ruler + 3, ry + 2.2, cat(static_cast<int>(ruler), " mm: print at 100 % (actual size,"), 2.4);
-  text(vx + ruler + 3, ry + 5.2, "no fit to page) and check this ruler", 2.4);
-  y = ry + 10;
+  text(vx + ruler + 3, ry + 2.2, cat(static_cast<int>(ruler), " mm"), 2.4);
+  y = ry + 9.5;
+  text(left, y, cat("Print at 100 % (actual size, no fit to page) and check the ruler: ",
+                    static_cast<int>(ruler), " mm."), 2.6);
+  y += 3.6;
   for (const std::string& l :
        wrap(c, cat("The drawing: the skin around the plan laid flat from its centre as caps walks "
                    "on it; up is superior, right the patient's left (facing the patient). Each "
@@ -634,8 +644,14 @@ void draw_sheet(Canvas& c, const Sheet& s, const Flat& flat, const RgbImage& ski
       y += 3.6;
     } else {
       int shown = 0;
+      std::string still;  // the lines the closure moves less than 0.05 mm
       for (const json& f : s.closure.features) {
         if (!f.value("has_value", false)) continue;
+        if (f.contains("max_mm") && f["max_mm"].is_number() && f["max_mm"].get<double>() < 0.05) {
+          still += cat(still.empty() ? "" : ", ", spoken(f.value("name", std::string())));
+          ++shown;
+          continue;
+        }
         const std::string sentence = f.value("sentence", std::string());
         const std::string warning = f.contains("warning") && f["warning"].is_string()
                                         ? f["warning"].get<std::string>()
@@ -651,6 +667,11 @@ void draw_sheet(Canvas& c, const Sheet& s, const Flat& flat, const RgbImage& ski
           }
         ++shown;
       }
+      if (!still.empty())
+        for (const std::string& l : wrap(c, cat("\u2022 moved less than 0.05 mm: ", still), 2.6, width)) {
+          text(left, y, l, 2.6);
+          y += 3.4;
+        }
       if (shown == 0) {
         text(left, y, "feature distortions: the closure reaches no feature line (brows, eyelid "
                       "margins, lips, alae)", 2.6);
