@@ -9,8 +9,8 @@
 #include <ctime>
 #include <filesystem>
 #include <map>
-#include <optional>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 
 #include "caps/app/loaded_model.hpp"
