@@ -108,6 +108,43 @@ class Flat {
   plan::SkinTangent tangent_;
 };
 
+// The shortest path on the skin between a and b (theta deg, z mm; b's theta unwrapped next to
+// a's), its length in mm: what a tape held to the skin reads where the skin is convex. The line
+// straight in (theta, z) relaxed on the skin: each point moved in the skin's tangent plane to the
+// midpoint of its neighbours until none moves 1e-5 mm (a discrete geodesic), on 8, 16, then 32
+// segments.
+double skin_geodesic_mm(const PatientModel& model, const V2& a, const V2& b) {
+  std::vector<V2> q{a, b};
+  std::vector<V3> p;
+  for (int level = 0; level < 3; ++level) {
+    // Each segment split in 4, then 2, then 2: 8, 16, 32.
+    const int split = level == 0 ? 8 : 2;
+    std::vector<V2> finer;
+    for (std::size_t i = 0; i + 1 < q.size(); ++i)
+      for (int k = 0; k < split; ++k) finer.push_back(q[i] + (q[i + 1] - q[i]) * (double(k) / split));
+    finer.push_back(q.back());
+    q = std::move(finer);
+    const int n = static_cast<int>(q.size()) - 1;
+    p.resize(q.size());
+    for (int i = 0; i <= n; ++i) p[i] = model.skin_point(q[i][0], q[i][1]);
+    for (int it = 0; it < 4 * n * n; ++it) {
+      double moved = 0;
+      for (int i = 1; i < n; ++i) {
+        const V3 d = 0.5 * (p[i - 1] + p[i + 1]) - p[i];
+        const plan::SkinTangent t = plan::skin_tangent(model, q[i][0], q[i][1]);
+        q[i] += t.to_theta_z(d - d.dot(t.normal) * t.normal);
+        const V3 next = model.skin_point(q[i][0], q[i][1]);
+        moved = std::max(moved, (next - p[i]).norm());
+        p[i] = next;
+      }
+      if (moved < 1e-5) break;
+    }
+  }
+  double length = 0;
+  for (std::size_t i = 0; i + 1 < p.size(); ++i) length += (p[i + 1] - p[i]).norm();
+  return length;
+}
+
 // A landmark a surgeon can palpate, on the model.
 struct Palpable {
   std::string name;  // as caps names it: "exocanthion_left"
@@ -614,10 +651,10 @@ void draw_sheet(Canvas& c, const Sheet& s, const Flat& flat, const RgbImage& ski
   }
   y += 3.5;
   std::string how =
-      "skin: along the skin from the landmark as caps walks it (straight in the head's cylinder "
-      "coordinates; a tape laid on the skin reads at most this); straight: a caliper's straight "
-      "line; L/R, U/D: that walk's components towards the patient's left or right and up or down "
-      "along the skin (the placement caps plan new --at LANDMARK+L,U makes).";
+      "skin: the shortest path on the skin (a tape held to the skin; where it bridges a hollow, "
+      "such as the nasion, it reads less); straight: a caliper's straight line; L/R, U/D: from "
+      "the landmark, mm towards the patient's left or right, then up or down along the skin: the "
+      "walk caps plan new --at LANDMARK+L,U makes to the point.";
   bool low = false;
   for (const Palpable& l : s.landmarks) low = low || l.confidence < kLowConfidence;
   if (low) how += " *: found with low confidence on this model: confirm by palpation.";
@@ -761,10 +798,14 @@ SheetResult run_plan_sheet(const SheetRequest& r, Reporter* reporter) {
   s.landmarks = palpable_landmarks(s.model_dir, model, model.skin_point(centre[0], centre[1]), notes);
   s.distance.assign(s.points.size(), std::vector<Sheet::Distance>(s.landmarks.size()));
   for (std::size_t j = 0; j < s.landmarks.size(); ++j) {
-    const Flat from(model, s.landmarks[j].theta_z);
+    const V2 l = s.landmarks[j].theta_z;
+    const Flat from(model, l);
     for (std::size_t i = 0; i < s.points.size(); ++i) {
       const V2 lu = from.to_paper(s.points[i].theta_z);
-      s.distance[i][j] = {lu.norm(), (s.points[i].lps - s.landmarks[j].lps).norm(), lu.x(), lu.y()};
+      const V2 to(l[0] + std::remainder(s.points[i].theta_z[0] - l[0], 360.0), s.points[i].theta_z[1]);
+      // The geodesic, never longer than the walk it starts from (round-off aside).
+      const double skin = std::min(skin_geodesic_mm(model, l, to), lu.norm());
+      s.distance[i][j] = {skin, (s.points[i].lps - s.landmarks[j].lps).norm(), lu.x(), lu.y()};
     }
   }
   // The cut on paper keeps its skin lengths; how far that moves it over the skin picture.
@@ -901,6 +942,7 @@ SheetResult run_plan_sheet(const SheetRequest& r, Reporter* reporter) {
       d.push_back({{"name", s.landmarks[j].name},
                    {"skin_mm", s.distance[i][j].skin_mm},
                    {"straight_mm", s.distance[i][j].straight_mm},
+                   {"walk_mm", std::hypot(s.distance[i][j].left_mm, s.distance[i][j].up_mm)},
                    {"left_mm", s.distance[i][j].left_mm},
                    {"up_mm", s.distance[i][j].up_mm}});
     points.push_back({{"label", k.label},

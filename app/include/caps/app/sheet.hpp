@@ -56,9 +56,11 @@ struct SheetResult {
   /// The 10 mm scale bar: its left end and the height of its centre line on the page (mm).
   double scale_bar_x_mm = 0, scale_bar_y_mm = 0, scale_bar_mm = 10;
   /// The key points [{label, kind, theta_deg, z_mm, lps, paper_mm, landmarks: [{name, skin_mm,
-  /// straight_mm, left_mm, up_mm}]}]: skin_mm along the skin as caps walks it from the landmark
-  /// (the --at LANDMARK+LEFT,UP walk), straight_mm in a straight line (a caliper's), left_mm and
-  /// up_mm that walk's components (the patient's left, superior along the skin).
+  /// straight_mm, walk_mm, left_mm, up_mm}]}]: skin_mm the shortest path on the skin from the
+  /// landmark (a geodesic; a tape held to the skin), straight_mm a straight line (a caliper's),
+  /// walk_mm the walk caps plan new --at LANDMARK+LEFT,UP makes to the point (straight in the
+  /// head's cylinder coordinates; at least skin_mm), left_mm and up_mm its components (the
+  /// patient's left, superior along the skin).
   std::string points_json = "[]";
   std::vector<std::string> landmarks;  ///< the landmarks the distances are from, nearest first
   /// The largest difference between a line of the cut on paper and on the skin (mm), and how
