@@ -371,3 +371,48 @@ TEST(Sheet, BadInputExitsTwoAndWritesNothing) {
   EXPECT_EQ(forced.code, 0) << forced.out;
   EXPECT_EQ(read_file(d / "sheet.pdf").rfind("%PDF-", 0), 0u);
 }
+
+TEST(Sheet, APlanOnALocalChartIsMeasuredFromTheHeadsLandmarks) {
+  // The phantom's vertex, where the head's rays graze the skin: caps plan new places the plan on
+  // a local chart beside it. The sheet measures from the head's landmarks: the straight
+  // distances are the analytic skin's; along the skin where the head's image holds the point,
+  // else the sheet says so and gives the straight distance only.
+  const fs::path d = folder() / "vertex";
+  fs::create_directories(d);
+  const std::string plan = (d / "vertex.json").string();
+  const auto made = caps_test::caps("plan new ellipse --model " + fixture().model +
+                                    " --at 0,99 --length 12 --width 4 -o " + plan + " -q");
+  ASSERT_EQ(made.code, 0) << made.out;
+  ASSERT_TRUE(fs::is_directory(d / "vertex.chart"));
+  caps::app::SheetRequest r;
+  r.plan = plan;
+  r.output = (d / "sheet.pdf").string();
+  const caps::app::SheetResult s = caps::app::run_plan_sheet(r);
+  ASSERT_FALSE(s.landmarks.empty());
+  EXPECT_EQ(s.landmarks.front(), "glabella");
+  const auto model = caps::app::loaded_model(fixture().model);
+  const caps::Landmarks landmarks = caps::plan::model_landmarks(fixture().model, *model);
+  const caps::HeadPhantom ph(false, false, true);
+  bool unheld = false;
+  for (const json& k : json::parse(s.points_json)) {
+    const Eigen::Vector3d p(k["lps"][0].get<double>(), k["lps"][1].get<double>(), k["lps"][2].get<double>());
+    for (const json& dist : k["landmarks"]) {
+      const caps::Landmark* l = landmarks.find(dist["name"].get<std::string>());
+      ASSERT_NE(l, nullptr);
+      // The head's landmark (model.json keeps its LPS point rounded to 1e-3 mm).
+      EXPECT_NEAR(dist["straight_mm"].get<double>(), (p - l->lps).norm(), 0.01);
+      EXPECT_NEAR(dist["straight_mm"].get<double>(),
+                  (analytic_skin(ph, p) - analytic_skin(ph, l->lps)).norm(), 0.5);
+      if (dist["skin_mm"].is_null()) {
+        unheld = true;
+        continue;
+      }
+      EXPECT_GE(dist["skin_mm"].get<double>() + 1e-6, dist["straight_mm"].get<double>());
+      EXPECT_LE(dist["skin_mm"].get<double>(), dist["walk_mm"].get<double>() + 1e-9);
+    }
+  }
+  bool said = false;
+  for (const std::string& w : s.warnings) said |= w.find("only the straight") != std::string::npos;
+  EXPECT_EQ(said, unheld);
+  EXPECT_EQ(read_file(s.output).rfind("%PDF-", 0), 0u);
+}

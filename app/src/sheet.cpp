@@ -8,6 +8,7 @@
 #include <cmath>
 #include <ctime>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -286,28 +287,16 @@ double embed_key_points(std::vector<KeyPoint>& points, const PatientModel& model
   return worst;
 }
 
-// The palpable landmarks the model has (glabella, nasion, exocanthions, tragions; the oral
-// commissures from its feature lines), in the model's (theta, z), nearest the centre first,
-// within kMaxLandmarkMm; at most kMaxLandmarks.
-std::vector<Palpable> palpable_landmarks(const std::string& model_dir, const PatientModel& model,
+// The palpable landmarks the model in `dir` has (glabella, nasion, exocanthions, tragions; the
+// oral commissures from its feature lines), in its (theta, z), nearest the centre first, within
+// kMaxLandmarkMm; at most kMaxLandmarks.
+std::vector<Palpable> palpable_landmarks(const std::string& dir, const PatientModel& model,
                                          const V3& centre_lps, std::vector<std::string>& notes) {
   std::vector<Palpable> all;
-  // A local chart's landmarks are its parent's (caps plan new places from them), in the
-  // parent's cylinder: taken to the chart's through their LPS points.
-  const std::string parent = detail::chart_parent(model_dir);
-  const std::string dir = parent.empty() ? model_dir : parent;
-  std::shared_ptr<const PatientModel> parent_model = parent.empty() ? nullptr : loaded_model(parent);
-  const PatientModel& source = parent_model ? *parent_model : model;
-  auto add = [&](const std::string& name, const V2& tz_source, double confidence) {
-    V2 tz = tz_source;
-    if (parent_model) {
-      const CylindricalPoint c = model.to_cylindrical(source.skin_point(tz[0], tz[1]));
-      tz = {c.theta_deg, c.z_mm};
-      if (!model.has_z(tz[1])) return;
-    }
+  auto add = [&](const std::string& name, const V2& tz, double confidence) {
     all.push_back({name, tz, model.skin_point(tz[0], tz[1]), confidence});
   };
-  const Landmarks landmarks = plan::model_landmarks(dir, source);
+  const Landmarks landmarks = plan::model_landmarks(dir, model);
   for (const char* name : {"glabella", "nasion", "exocanthion_left", "exocanthion_right",
                            "tragion_left", "tragion_right"})
     if (const Landmark* l = landmarks.find(name); l && l->found)
@@ -636,11 +625,15 @@ void draw_sheet(Canvas& c, const Sheet& s, const Flat& flat, const RgbImage& ski
     text(left + 5, y, k.kind, 2.4, kGrey);
     for (int j = 0; j < nl; ++j) {
       const Sheet::Distance& d = s.distance[i][j];
-      text(left + col0 + j * colw, y, cat(fixed(d.skin_mm), " | ", fixed(d.straight_mm)), 2.8);
+      text(left + col0 + j * colw, y,
+           cat(std::isfinite(d.skin_mm) ? fixed(d.skin_mm) : std::string("\u2013"), " | ",
+               fixed(d.straight_mm)),
+           2.8);
     }
     y += 3.3;
     for (int j = 0; j < nl; ++j) {
       const Sheet::Distance& d = s.distance[i][j];
+      if (!std::isfinite(d.left_mm)) continue;
       text(left + col0 + j * colw, y,
            cat(fixed(std::abs(d.left_mm)), d.left_mm >= 0 ? " L, " : " R, ", fixed(std::abs(d.up_mm)),
                d.up_mm >= 0 ? " U" : " D"),
@@ -795,18 +788,47 @@ SheetResult run_plan_sheet(const SheetRequest& r, Reporter* reporter) {
   const Flat flat(model, centre);
   s.points = key_points(p, s.loop, model, flat);
   std::vector<std::string> notes;
-  s.landmarks = palpable_landmarks(s.model_dir, model, model.skin_point(centre[0], centre[1]), notes);
+  // A plan on a local chart (caps plan new beside the plan) is measured from its parent's
+  // landmarks on the parent, the head, where they were found: the chart holds the skin around the
+  // plan only. A point the head's image does not hold (undercut) gets its straight distance only.
+  const std::string parent = detail::chart_parent(s.model_dir);
+  const std::string landmark_dir = parent.empty() ? s.model_dir : parent;
+  const std::shared_ptr<const PatientModel> parent_model = parent.empty() ? nullptr : loaded_model(parent);
+  const PatientModel& measure = parent_model ? *parent_model : model;
+  s.landmarks = palpable_landmarks(landmark_dir, measure, model.skin_point(centre[0], centre[1]), notes);
   s.distance.assign(s.points.size(), std::vector<Sheet::Distance>(s.landmarks.size()));
-  for (std::size_t j = 0; j < s.landmarks.size(); ++j) {
-    const V2 l = s.landmarks[j].theta_z;
-    const Flat from(model, l);
-    for (std::size_t i = 0; i < s.points.size(); ++i) {
-      const V2 lu = from.to_paper(s.points[i].theta_z);
-      const V2 to(l[0] + std::remainder(s.points[i].theta_z[0] - l[0], 360.0), s.points[i].theta_z[1]);
-      // The geodesic, never longer than the walk it starts from (round-off aside).
-      const double skin = std::min(skin_geodesic_mm(model, l, to), lu.norm());
-      s.distance[i][j] = {skin, (s.points[i].lps - s.landmarks[j].lps).norm(), lu.x(), lu.y()};
+  std::vector<std::string> unheld;
+  for (std::size_t i = 0; i < s.points.size(); ++i) {
+    V2 tz = s.points[i].theta_z;
+    bool held = true;
+    if (parent_model) {
+      const CylindricalPoint c = measure.to_cylindrical(s.points[i].lps);
+      tz = {c.theta_deg, c.z_mm};
+      held = measure.has_z(tz[1]) && (measure.skin_point(tz[0], tz[1]) - s.points[i].lps).norm() < 1.0;
+      if (!held) unheld.push_back(s.points[i].label);
     }
+    for (std::size_t j = 0; j < s.landmarks.size(); ++j) {
+      Sheet::Distance& d = s.distance[i][j];
+      d.straight_mm = (s.points[i].lps - s.landmarks[j].lps).norm();
+      if (!held) {
+        d.skin_mm = d.left_mm = d.up_mm = std::numeric_limits<double>::quiet_NaN();
+        continue;
+      }
+      const V2 l = s.landmarks[j].theta_z;
+      const V2 lu = Flat(measure, l).to_paper(tz);
+      const V2 to(l[0] + std::remainder(tz[0] - l[0], 360.0), tz[1]);
+      // The geodesic, never longer than the walk it starts from (round-off aside).
+      d.skin_mm = std::min(skin_geodesic_mm(measure, l, to), lu.norm());
+      d.left_mm = lu.x();
+      d.up_mm = lu.y();
+    }
+  }
+  if (!unheld.empty() && !s.landmarks.empty()) {
+    std::string labels;
+    for (const std::string& l : unheld) labels += cat(labels.empty() ? "" : ", ", l);
+    notes.push_back(cat("point", unheld.size() > 1 ? "s " : " ", labels, ": the head's image does "
+                        "not hold the skin there (the plan is on a local chart); only the straight "
+                        "distances are given"));
   }
   // The cut on paper keeps its skin lengths; how far that moves it over the skin picture.
   s.max_segment_error_mm = embed_key_points(s.points, model);
@@ -814,17 +836,17 @@ SheetResult run_plan_sheet(const SheetRequest& r, Reporter* reporter) {
     s.max_offset_mm = std::max(s.max_offset_mm, (k.paper - k.flat).norm());
 
   // Every found landmark and feature line is drawn where it falls in the view.
-  {
-    const std::string parent = detail::chart_parent(s.model_dir);
-    const std::string dir = parent.empty() ? s.model_dir : parent;
-    if (parent.empty()) {
-      s.features = loaded_feature_lines(dir);
-      const Landmarks all = plan::model_landmarks(dir, model);
-      for (const Landmark& l : all.items)
-        if (l.found) s.all_landmarks.push_back({l.name, {l.theta_deg, l.z_mm}, l.lps, l.confidence});
-    } else {
-      s.all_landmarks = s.landmarks;
+  // On a chart, a landmark is drawn where the chart holds its skin point.
+  if (parent.empty()) s.features = loaded_feature_lines(landmark_dir);
+  for (const Landmark& l : plan::model_landmarks(landmark_dir, measure).items) {
+    if (!l.found) continue;
+    V2 tz(l.theta_deg, l.z_mm);
+    if (parent_model) {
+      const CylindricalPoint c = model.to_cylindrical(l.lps);
+      tz = {c.theta_deg, c.z_mm};
+      if (!model.has_z(tz[1]) || (model.skin_point(tz[0], tz[1]) - l.lps).norm() > 1.0) continue;
     }
+    s.all_landmarks.push_back({l.name, tz, l.lps, l.confidence});
   }
 
   // Identity.
@@ -832,6 +854,9 @@ SheetResult run_plan_sheet(const SheetRequest& r, Reporter* reporter) {
   const json source = json::parse(info.source_json, nullptr, false);
   s.model_name = fs::path(s.model_dir).lexically_normal().filename().string();
   if (s.model_name.empty()) s.model_name = fs::path(s.model_dir).lexically_normal().parent_path().filename().string();
+  if (!parent.empty())
+    s.model_name = cat(fs::path(parent).lexically_normal().filename().string(), " (its local chart ",
+                       s.model_name, ")");
   s.credit = source.is_object() ? source.value("credit", std::string()) : std::string();
   std::string source_line;
   if (source.is_object()) {
