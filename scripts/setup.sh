@@ -13,6 +13,7 @@ packages=(
   libcpp-httplib-dev libopen3d-dev
   invesalius-examples mricron-data
   calculix-ccx
+  poppler-utils
   chromium
   clang libclang-rt-14-dev
   python3-dev python3-pybind11 python3-numpy python3-pytest snakemake python3-matplotlib

@@ -510,7 +510,6 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
              {}, out.path(), pictures, reporter))
       s.images.push_back(p.filename().string());
   }
-  out.commit();
   const auto& res = sim.result;
   s.output = r.output;
   s.elements = static_cast<int>(sim.wound.continuum.mesh.n_elements());
@@ -568,6 +567,10 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
     s.corner_length_after_mm = s.axis_length_after_mm;
   }
   s.solve_s = res.timings.total_s;
+  // What --json prints, kept with the result: the feature lines' displacements and the forces
+  // per suture are not in result.json (caps plan sheet --result reads them here).
+  write_text_atomic(out.path() / "summary.json", to_json(s) + "\n");
+  out.commit();
   return s;
 }
 

@@ -1,5 +1,6 @@
 #include "caps/image/canvas.hpp"
 
+#include <cairo-pdf.h>
 #include <cairo.h>
 
 #include <algorithm>
@@ -16,6 +17,32 @@ struct Canvas::Impl {
   cairo_surface_t* surface = nullptr;  // owned
   cairo_t* cr = nullptr;               // owned
   int width = 0, height = 0;
+  bool vector = false;    // a PDF page: no pixels
+  bool finished = false;  // the PDF page was finished (pdf())
+  bool scaled = false;    // scale() was called: draw_image() cannot copy pixels
+  std::string pdf;        // the PDF surface's output so far
+
+  static cairo_status_t append(void* closure, const unsigned char* data, unsigned int length) {
+    static_cast<Impl*>(closure)->pdf.append(reinterpret_cast<const char*>(data), length);
+    return CAIRO_STATUS_SUCCESS;
+  }
+
+  // A PDF page (the Impl must not move: cairo keeps `this` as the stream's closure).
+  Impl(double w_pt, double h_pt)
+      : width(static_cast<int>(std::ceil(w_pt))), height(static_cast<int>(std::ceil(h_pt))),
+        vector(true) {
+    if (!(w_pt > 0 && h_pt > 0 && std::isfinite(w_pt) && std::isfinite(h_pt)))
+      throw InvalidInput(cat("canvas: a ", w_pt, " x ", h_pt, " pt page; both sizes must be positive"));
+    surface = cairo_pdf_surface_create_for_stream(&Impl::append, this, w_pt, h_pt);
+    cr = cairo_create(surface);
+    if (cairo_status(cr) != CAIRO_STATUS_SUCCESS) {
+      cairo_destroy(cr);
+      cairo_surface_destroy(surface);
+      throw Error(cat("canvas: cannot create a ", w_pt, " x ", h_pt, " pt PDF page"));
+    }
+    cairo_pdf_surface_set_metadata(surface, CAIRO_PDF_METADATA_CREATOR, "caps");
+    cairo_select_font_face(cr, "DejaVu Sans", CAIRO_FONT_SLANT_NORMAL, CAIRO_FONT_WEIGHT_NORMAL);
+  }
 
   Impl(int w, int h) : width(w), height(h) {
     if (w < 1 || h < 1)
@@ -55,6 +82,7 @@ struct Canvas::Impl {
   // Runs f on the raw pixels (0x00RRGGBB words, `stride` bytes a row), keeping cairo in step.
   template <typename F>
   void pixels(F&& f) const {
+    if (vector) throw Error("canvas: a PDF page has no pixels; use pdf()");
     cairo_surface_flush(surface);
     unsigned char* data = cairo_image_surface_get_data(surface);
     f(data, cairo_image_surface_get_stride(surface));
@@ -70,6 +98,34 @@ Canvas::Canvas(int width, int height, const Eigen::Vector3d& background)
 
 Canvas::Canvas(const RgbImage& image) : Canvas(image.width, image.height) {
   draw_image(image, 0, 0);
+}
+
+Canvas Canvas::pdf_page(double width_pt, double height_pt) {
+  Canvas c(1, 1);
+  c.impl_ = std::make_unique<Impl>(width_pt, height_pt);
+  c.impl_->source({1, 1, 1});
+  cairo_paint(c.impl_->cr);
+  return c;
+}
+
+void Canvas::scale(double factor) {
+  if (!(factor > 0 && std::isfinite(factor)))
+    throw InvalidInput(cat("canvas: scale ", factor, " must be positive"));
+  cairo_scale(impl_->cr, factor, factor);
+  impl_->scaled = true;
+}
+
+std::string Canvas::pdf() {
+  if (!impl_->vector) throw Error("canvas: pdf() of a raster canvas; use image() or write_png()");
+  if (!impl_->finished) {
+    cairo_show_page(impl_->cr);
+    cairo_surface_finish(impl_->surface);
+    impl_->finished = true;
+  }
+  if (cairo_surface_status(impl_->surface) != CAIRO_STATUS_SUCCESS)
+    throw Error(cat("canvas: cairo could not write the PDF page: ",
+                    cairo_status_to_string(cairo_surface_status(impl_->surface))));
+  return impl_->pdf;
 }
 
 Canvas::~Canvas() = default;
@@ -156,6 +212,10 @@ void Canvas::text(double x, double y, const std::string& s, const TextStyle& sty
 
 void Canvas::draw_image(const RgbImage& image, int x0, int y0, int scale) {
   if (scale < 1) throw InvalidInput(cat("canvas: image scale ", scale, " must be at least 1"));
+  if (impl_->vector || impl_->scaled) {
+    draw_image_in(image, x0, y0, double(image.width) * scale, double(image.height) * scale);
+    return;
+  }
   const int W = impl_->width, H = impl_->height;
   impl_->pixels([&](unsigned char* data, int stride) {
     for (int y = 0; y < image.height * scale; ++y) {
@@ -170,6 +230,33 @@ void Canvas::draw_image(const RgbImage& image, int x0, int y0, int scale) {
       }
     }
   });
+}
+
+void Canvas::draw_image_in(const RgbImage& image, double x, double y, double w, double h) {
+  if (image.width < 1 || image.height < 1) return;
+  cairo_surface_t* img = cairo_image_surface_create(CAIRO_FORMAT_RGB24, image.width, image.height);
+  cairo_surface_flush(img);
+  unsigned char* data = cairo_image_surface_get_data(img);
+  const int stride = cairo_image_surface_get_stride(img);
+  for (int r = 0; r < image.height; ++r) {
+    auto* row = reinterpret_cast<std::uint32_t*>(data + std::size_t(r) * stride);
+    for (int c = 0; c < image.width; ++c) {
+      const std::uint8_t* p = &image.rgb[(std::size_t(r) * image.width + c) * 3];
+      row[c] = (std::uint32_t(p[0]) << 16) | (std::uint32_t(p[1]) << 8) | p[2];
+    }
+  }
+  cairo_surface_mark_dirty(img);
+  cairo_t* cr = impl_->cr;
+  cairo_save(cr);
+  cairo_translate(cr, x, y);
+  cairo_scale(cr, w / image.width, h / image.height);
+  cairo_set_source_surface(cr, img, 0, 0);
+  cairo_pattern_set_filter(cairo_get_source(cr), CAIRO_FILTER_BILINEAR);
+  cairo_new_path(cr);
+  cairo_rectangle(cr, 0, 0, image.width, image.height);
+  cairo_fill(cr);
+  cairo_restore(cr);
+  cairo_surface_destroy(img);
 }
 
 void Canvas::colour_bar(double x, double y, double w, double h,

@@ -18,6 +18,7 @@
 #include "caps/app/plan.hpp"
 #include "caps/app/register.hpp"
 #include "caps/app/render.hpp"
+#include "caps/app/sheet.hpp"
 #include "caps/app/simulation.hpp"
 #include "caps/app/slicer.hpp"
 #include "caps/core/reporter.hpp"
@@ -176,6 +177,12 @@ void for_each_verb(F&& f) {
          "Draw the plan over the model: loop numbered, sutures marked.\n"
          "Example: caps plan show z.json -o z.png",
          &run_plan_show});
+  f(Verb{"plan sheet",
+         "Write a plan's operating-room sheet: one page (PDF; --png also a PNG) with the incision "
+         "drawn 1:1\non the skin around it laid flat, its key points measured from palpable "
+         "landmarks, and with\n--result the closure's predicted forces and feature distortions.\n"
+         "Example: caps plan sheet z.json --result z -o z-sheet.pdf --png",
+         &run_plan_sheet});
   f(Verb{"plan save-procedure",
          "Save a plan's procedure (points, paths, excisions, sutures) to reuse elsewhere with "
          "caps plan new FILE.json",

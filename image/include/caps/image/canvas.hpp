@@ -1,6 +1,7 @@
 #pragma once
 /// @brief The drawing surface of every figure: lines, polylines, filled polygons, circles, text
-/// in DejaVu Sans, RGB images drawn in, and a colour bar, on an RGB raster written as PNG.
+/// in DejaVu Sans, RGB images drawn in, and a colour bar, on an RGB raster written as PNG, or on
+/// a vector page written as PDF (pdf_page(): the same calls, in points).
 ///
 /// Coordinates are pixels, x to the right and y downwards, with (0, 0) the top-left corner of the
 /// top-left pixel: a 1-pixel line along y = 10.5 covers row 10 exactly. Colours are RGB in [0, 1].
@@ -44,6 +45,11 @@ class Canvas {
   Canvas(int width, int height, const Eigen::Vector3d& background = {1, 1, 1});
   /// A canvas that starts as a copy of `image`.
   explicit Canvas(const RgbImage& image);
+  /// A white vector page of width_pt × height_pt points (1/72 inch; A4 is 595.28 × 841.89)
+  /// drawn into a PDF by cairo's PDF surface: coordinates are points, text stays text. image()
+  /// and write_png() refuse it; pdf() gives the file. Throws InvalidInput unless both sizes are
+  /// positive and finite.
+  static Canvas pdf_page(double width_pt, double height_pt);
   ~Canvas();
   Canvas(Canvas&&) noexcept;
   Canvas& operator=(Canvas&&) noexcept;
@@ -77,18 +83,28 @@ class Canvas {
   /// Copies `image` in with its top-left corner at pixel (x, y), each pixel enlarged to a
   /// scale × scale block (nearest neighbour, no smoothing). Parts outside the canvas are cut.
   void draw_image(const RgbImage& image, int x, int y, int scale = 1);
+  /// Draws `image` stretched over the rectangle with top-left corner (x, y), w × h (in the
+  /// canvas's units: pixels, or points on a PDF page), interpolated bilinearly.
+  void draw_image_in(const RgbImage& image, double x, double y, double w, double h);
 
   /// A vertical colour bar with top-left corner (x, y), w × h pixels: `map(1)` at the top row,
   /// `map(0)` at the bottom row, one colour per row.
   void colour_bar(double x, double y, double w, double h,
                   const std::function<Eigen::Vector3d(double)>& map = viridis);
 
+  /// Scales everything drawn from now on by `factor` (> 0) about the top-left corner: a page
+  /// drawn in points onto a raster of dpi / 72 pixels per point. Pen widths and text scale too.
+  void scale(double factor);
+
   /// Limits drawing to a rectangle until pop_clip().
   void push_clip(double x, double y, double w, double h);
   void pop_clip();
 
-  /// The pixels drawn so far.
+  /// The pixels drawn so far. Throws Error for a PDF page.
   RgbImage image() const;
+  /// A PDF page's file (one page): finishes the page, after which nothing more may be drawn.
+  /// Throws Error for a raster canvas or when cairo failed to write the page.
+  std::string pdf();
   /// Writes the pixels as an RGB PNG, atomically (write_png()). Throws IoError.
   void write_png(const std::filesystem::path& path) const;
 
