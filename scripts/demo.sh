@@ -9,6 +9,8 @@
 #   *-compare/             measured versus constant thickness (report.html)
 #   *-sheet.pdf, *-sheet.png   each plan's operating-room sheet (caps plan sheet: the incision 1:1,
 #                          its points from palpable landmarks, the predicted forces)
+#   slicer/                for 3D Slicer: the CT, the segmentation, surfaces, landmarks and the
+#                          Z-plasty as markups, its post-operative skin (caps model export-slicer)
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$here/scripts/build.sh"
@@ -33,7 +35,13 @@ for p in ellipse z-plasty v-y-advancement; do
   pdftoppm -r 60 -png -singlefile "$out/$p-sheet.pdf" "$out/$p-sheet-preview"
 done
 
-# The index: each plan's forces and feature distortions (result.json, summary.json) and its sheet.
+# For 3D Slicer: the CT in patient space, the segmentation, the surfaces with their thickness,
+# the landmarks and the Z-plasty's lines as markups, its post-operative skin (docs/slicer.md).
+"$caps" model export-slicer "$out/cranium" --plan "$out/z-plasty.json" --result "$out/z-plasty" \
+  -o "$out/slicer" --force
+
+# The index: each plan's forces and feature distortions (result.json, summary.json), its sheet
+# and the Slicer folder.
 python3 "$here/scripts/demo_index.py" "$out" ellipse z-plasty v-y-advancement
 echo "caps demo: open $out/index.html"
 echo "caps demo: to plan on this patient in the browser, run"
