@@ -16,6 +16,7 @@
 #include "caps/surface/patient_model.hpp"
 #include "cli_run.hpp"
 #include "phantom_model.hpp"
+#include "../server/src/page_words.hpp"  // the page's words, tested directly
 
 #include <httplib.h>
 #include <nlohmann/json.hpp>
@@ -943,6 +944,41 @@ TEST_F(ServerTest, LandmarksAreTheCliAnswerAndAPlanIsPlacedAtOneAsTheCliPlacesIt
   EXPECT_EQ(page_message.find("--"), std::string::npos) << page_message;
   EXPECT_EQ(page_message.find("theta"), std::string::npos) << page_message;
   expect_still_serving();
+}
+
+TEST_F(ServerTest, TheLibrarysMessagesAreSaidInThePagesWords) {
+  // The phantom model keeps no found landmark: a place is said as "(there)". (Where the model
+  // has landmarks, the nearest one's offsets: planner_e2e_cranium and CliLandmarks.)
+  const auto model = app::loaded_model(kModel);
+  const auto words = [&](const std::string& m) { return server::detail::page_words(m, *model, kModel); };
+  const std::string refused = words(
+      "loop node 0 (point 2), /points/2 at (theta -6.12987 deg, z 55 mm) lies where the model "
+      "cannot represent the skin yet (grazing): the ray from the head's axis crosses the skin "
+      "twice (undercut: nostrils, under the nose and the chin, ears) or meets it edge-on "
+      "(grazing), so its cylindrical image does not hold this skin; move the plan onto skin that "
+      "faces the axis, or make a local chart that faces this skin (caps model chart MODEL --at "
+      "THETA,Z) and plan on it at --at 0,0 (docs/mesher.md, \"Local charts\") (here: caps model "
+      "chart cranium --at -6.1,55 -o CHART)");
+  EXPECT_EQ(refused.rfind("the cut's point 3 at (there) lies where the model cannot represent", 0), 0u)
+      << refused;
+  EXPECT_NE(refused.find("or make a local chart here (the button below)"), std::string::npos) << refused;
+  for (const char* engineers : {"theta", "loop node", "/points", "caps model", "--", "CHART", "docs/"})
+    EXPECT_EQ(refused.find(engineers), std::string::npos) << engineers << " in: " << refused;
+  EXPECT_EQ(words("suture 1 ((2,1),(2,3)): sides of 3.0 and 6.0 mm, ratio 2.00; expect puckering"),
+            "suture pair 2: sides of 3.0 and 6.0 mm, ratio 2.00; expect puckering");
+  EXPECT_EQ(words("border edges not sutured (the wound stays open there): (0,1), (3,4)"),
+            "some of the wound's edges are not sutured (the wound stays open there)");
+  EXPECT_EQ(words("one material (`--tissue uniform`, the default) overstates it: `--tissue auto` "
+                  "models the measured fat"),
+            "one material (the Tissue setting's one material, the default) overstates it: the "
+            "Tissue setting's measured layers models the measured fat");
+  EXPECT_EQ(words("rebuild the model with a deeper --bone-cap"),
+            "rebuild the model with a deeper a setting of the command line (bone-cap)");
+  // Nothing to reword, and text too long to reword, stay as they are.
+  const std::string plain = "angle = 20 deg is outside its clinical range (30..90 deg)";
+  EXPECT_EQ(words(plain), plain);
+  const std::string echoed = "unknown key \"" + std::string(5000, 'x') + " loop node 1\"";
+  EXPECT_EQ(words(echoed), echoed);
 }
 
 TEST(LoadedModel, IsReadOnceAndAgainWhenItsFilesChange) {

@@ -87,15 +87,20 @@ std::optional<LandmarkPlacement> nearest_landmark_placement(const PatientModel& 
                                                             double max_mm) {
   if (!std::isfinite(theta_deg) || !std::isfinite(z_mm) || !model.has_z(z_mm)) return std::nullopt;
   const Eigen::Vector3d target = model.skin_point(theta_deg, z_mm);
+  // The nearest of the landmarks found clearly (confidence at least 0.5, no doubt about their
+  // depth), else of all found: a spot is better said from a landmark the surgeon finds surely.
   const Landmark* nearest = nullptr;
-  double best = max_mm;
-  for (const Landmark& l : landmarks.items) {
-    if (!l.found) continue;
-    const double d = (model.skin_point(l.theta_deg, l.z_mm) - target).norm();
-    if (d <= best) {
-      best = d;
-      nearest = &l;
+  for (const bool clear_only : {true, false}) {
+    double best = max_mm;
+    for (const Landmark& l : landmarks.items) {
+      if (!l.found || (clear_only && (l.confidence < 0.5 || !l.doubt.empty()))) continue;
+      const double d = (model.skin_point(l.theta_deg, l.z_mm) - target).norm();
+      if (d <= best) {
+        best = d;
+        nearest = &l;
+      }
     }
+    if (nearest) break;
   }
   if (!nearest) return std::nullopt;
   // The offsets (left, up) whose walk from the landmark (resolve_placement()) ends on the point:

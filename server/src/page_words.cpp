@@ -67,6 +67,8 @@ constexpr PageSetting kPageSettings[] = {
     {"tissue", "the Tissue setting"},
 };
 
+constexpr std::size_t kMaxReworded = 2000;
+
 }  // namespace
 
 std::string page_words(const std::string& message, const PatientModel& model,
@@ -85,24 +87,41 @@ std::string page_words(const std::string& message, const PatientModel& model,
   static const std::regex theta_z(
       R"(\(?theta (-?[0-9.eE+-]+) deg,? z (-?[0-9.eE+-]+) mm\)?)");
   static const std::regex option(R"(`?--([a-z][a-z-]*)( [A-Za-z0-9.,=+-]+)?`?)");
+  // std::regex matches recursively: a message that echoes a long piece of a request is left as
+  // it is rather than risk the stack (the library's own messages are a few hundred characters).
+  if (message.size() > kMaxReworded) return message;
   std::string s = message;
   s = std::regex_replace(s, chart_advice, ", or make a local chart here (the button below)");
   // Said once: the advice above names the button already.
   s = std::regex_replace(s, chart_here, "");
   s = std::regex_replace(s, chart_any, "a local chart (the button below)");
-  s = replace_each(s, node_point, [](const std::smatch& m) {
-    return cat("the cut's point ", std::stoi(m[1].str()) + 1);
+  const auto plus_one = [](const std::string& digits) {
+    try {
+      return std::to_string(std::stoll(digits) + 1);
+    } catch (const std::exception&) {
+      return digits;  // too many digits for a number: said as it was
+    }
+  };
+  s = replace_each(s, node_point, [&](const std::smatch& m) {
+    return cat("the cut's point ", plus_one(m[1].str()));
   });
   s = std::regex_replace(s, node_alone, "a corner of the wound");
   s = std::regex_replace(s, edge, "a stretch of the wound's edge");
   s = std::regex_replace(s, border_edges, "some of the wound's edges are not sutured (the wound stays open there)");
-  s = replace_each(s, suture, [](const std::smatch& m) {
-    return cat("suture pair ", std::stoi(m[1].str()) + 1, ":");
+  s = replace_each(s, suture, [&](const std::smatch& m) {
+    return cat("suture pair ", plus_one(m[1].str()), ":");
   });
   s = std::regex_replace(s, edge_alone, "an edge of the wound");
   s = std::regex_replace(s, pointer, "");
   s = replace_each(s, theta_z, [&](const std::smatch& m) -> std::string {
-    const auto words = near_words(model, model_dir, std::stod(m[1].str()), std::stod(m[2].str()));
+    double theta = 0, z = 0;
+    try {
+      theta = std::stod(m[1].str());
+      z = std::stod(m[2].str());
+    } catch (const std::exception&) {
+      return "(there)";  // not numbers after all ("theta - deg"): the place is not said
+    }
+    const auto words = near_words(model, model_dir, theta, z);
     return words ? cat("(", *words, ")") : std::string("(there)");
   });
   s = replace_each(s, option, [](const std::smatch& m) -> std::string {

@@ -20,7 +20,7 @@ namespace caps::server::detail {
 /// without them); the advice to make a local chart ("caps model chart ...") the page's button;
 /// the command line's simulation options the page's settings of the same name, and the other
 /// options "(a setting of the command line, caps simulate)" without the option's spelling.
-/// Text without such words is returned unchanged.
+/// Text without such words, and text over 2000 characters, is returned unchanged.
 std::string page_words(const std::string& message, const PatientModel& model,
                        const std::string& model_dir);
 

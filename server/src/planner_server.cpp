@@ -460,9 +460,14 @@ struct PlannerServer::Impl {
   }
 
   // `message` in the page's words (detail::page_words()) on the model served now.
+  // An error's message is answered whatever happens to its rewording.
   std::string page_words(const std::string& message) {
     const std::shared_ptr<const Served> on = current();
-    return on ? detail::page_words(message, *on->model, on->dir) : message;
+    try {
+      return on ? detail::page_words(message, *on->model, on->dir) : message;
+    } catch (const std::exception&) {
+      return message;
+    }
   }
 
   // A verb's JSON answer with its warnings in the page's words (detail::page_words_json()).
