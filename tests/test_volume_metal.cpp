@@ -1,0 +1,223 @@
+// Metal in a CT (volume/metal.hpp; docs/volume.md, "Metal"): the face phantom with a dental metal
+// block in the upper jaw and its streak artefacts (caps phantom --metal) gives the skin, the
+// thickness and the landmarks of the same phantom without metal, outside the cells marked for it;
+// the metal is found where it was put, its cells are marked, and heads without metal are left
+// alone.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+
+#include "caps/surface/landmarks.hpp"
+#include "caps/surface/patient_model.hpp"
+#include "caps/volume/metal.hpp"
+#include "caps/volume/model.hpp"
+#include "caps/volume/phantom.hpp"
+
+using namespace caps;
+
+namespace {
+
+// The face phantom in 1.5 mm voxels without the head holder, with or without the metal, and its
+// model on a 512 x 256 grid (what the landmark tests use); made once each.
+PhantomOptions face_options(bool metal) {
+  PhantomOptions o;
+  o.dims = {160, 160, 150};
+  o.spacing_mm = {1.5, 1.5, 1.5};
+  o.face = true;
+  o.head_holder = false;
+  o.metal = metal;
+  return o;
+}
+
+ModelOptions model_options() {
+  ModelOptions mo;
+  mo.maps.n_theta = 512;
+  mo.maps.n_z = 256;
+  mo.smoothing_iterations = 0;
+  return mo;
+}
+
+const VolumeModel& face_model(bool metal) {
+  static std::unique_ptr<VolumeModel> made[2];
+  auto& m = made[metal ? 1 : 0];
+  if (!m) m = std::make_unique<VolumeModel>(build_volume_model(make_phantom(face_options(metal)),
+                                                               model_options()));
+  return *m;
+}
+
+// The cells compared: valid in both models and not marked for metal.
+bool compared(const VolumeModel& with, const VolumeModel& without, std::size_t c) {
+  return flags_valid(with.maps.flags[c]) && flags_valid(without.maps.flags[c]) &&
+         (with.maps.metal.empty() || !with.maps.metal[c]);
+}
+
+}  // namespace
+
+// The phantom's metal is there, clipped as a CT without its extended scale stores it, and its
+// streaks cross the skin: in the slice through it the air in front of the face is raised above
+// the skin threshold and soft tissue is dropped below it.
+TEST(MetalPhantom, StreaksCrossTheSkinInTheSlicesThroughTheMetal) {
+  const Volume ct = make_phantom(face_options(true));
+  const Volume clean = make_phantom(face_options(false));
+  const HeadPhantom head(false, false, true);
+  const Eigen::Vector3d m = head.metal_centre();
+  const Eigen::Vector3d ijk = ct.lps_to_index(m).array().round();
+  EXPECT_EQ(ct.at(ijk[0], ijk[1], ijk[2]), HeadPhantom::kStoredMaxHu);
+  int raised_air = 0, dropped_tissue = 0;
+  for (std::size_t i = 0; i < ct.data.size(); ++i) {
+    const double lps_z = ct.index_to_lps(Eigen::Vector3d(0, 0, i / (160 * 160)))[2];
+    if (std::abs(lps_z - m[2]) > 1.0) continue;
+    raised_air += clean.data[i] < -900 && ct.data[i] > -400;
+    dropped_tissue += clean.data[i] > -100 && clean.data[i] < 100 && ct.data[i] < -400;
+  }
+  EXPECT_GT(raised_air, 500);
+  EXPECT_GT(dropped_tissue, 100);
+  // Slices 6 mm away from the metal are untouched.
+  for (std::size_t i = 0; i < ct.data.size(); ++i) {
+    const double lps_z = ct.index_to_lps(Eigen::Vector3d(0, 0, i / (160 * 160)))[2];
+    if (std::abs(lps_z - m[2]) > 6.0) ASSERT_EQ(ct.data[i], clean.data[i]) << i;
+  }
+}
+
+TEST(Metal, FoundWhereItWasPutAndItsCellsMarked) {
+  const VolumeModel& vm = face_model(true);
+  const HeadPhantom head(false, false, true);
+  ASSERT_TRUE(vm.metal.checked);
+  ASSERT_TRUE(vm.metal.found);
+  EXPECT_EQ(vm.metal.components, 1);
+  EXPECT_LT((vm.metal.centre_lps - head.metal_centre()).norm(), 1.5);
+  // The block is 4 mm tall about S -40 mm: the repaired slabs hold it and at most 4 mm more on
+  // either side.
+  EXPECT_LE(vm.metal.z_min_mm, head.metal_centre()[2] - HeadPhantom::kMetalHalfMm[2]);
+  EXPECT_GE(vm.metal.z_max_mm, head.metal_centre()[2] + HeadPhantom::kMetalHalfMm[2]);
+  EXPECT_GT(vm.metal.z_min_mm, head.metal_centre()[2] - 6.0);
+  EXPECT_LT(vm.metal.z_max_mm, head.metal_centre()[2] + 6.0);
+  // Every cell whose skin lies in the slices through the metal is marked kTruncated and filled;
+  // none farther than 1 mm from the repaired slabs is (the model's axis is vertical).
+  const auto& maps = vm.maps;
+  const auto& g = maps.grid;
+  ASSERT_EQ(maps.metal.size(), g.size());
+  const double z_axis = maps.axis.origin_lps[2];
+  std::size_t marked = 0;
+  for (int k = 0; k < g.n_z; ++k)
+    for (int j = 0; j < g.n_theta; ++j) {
+      const std::size_t c = g.index(j, k);
+      const double s = z_axis + g.z_mm(k);
+      if (maps.metal[c]) {
+        ++marked;
+        EXPECT_TRUE(maps.flags[c] & kTruncated);
+        EXPECT_FALSE(maps.measured_skin[c]);
+        EXPECT_GT(s, vm.metal.z_min_mm - 1.0);
+        EXPECT_LT(s, vm.metal.z_max_mm + 1.0);
+      } else if (s > vm.metal.z_min_mm + 0.5 && s < vm.metal.z_max_mm - 0.5) {
+        EXPECT_FALSE(maps.measured_skin[c]) << "cell " << j << "," << k << " not marked";
+      }
+    }
+  EXPECT_GT(marked, static_cast<std::size_t>(g.n_theta));
+  EXPECT_EQ(metal_cells(maps).count, marked);
+}
+
+// Outside the marked cells the skin, the thickness and the validity are those of the phantom
+// without metal.
+TEST(Metal, SkinAndThicknessAsWithoutMetal) {
+  const VolumeModel& with = face_model(true);
+  const VolumeModel& without = face_model(false);
+  ASSERT_EQ(with.maps.grid.size(), without.maps.grid.size());
+  double sum2 = 0, worst = 0, sum2_t = 0, worst_t = 0;
+  std::size_t n = 0, flags_differ = 0;
+  for (std::size_t c = 0; c < with.maps.grid.size(); ++c) {
+    if (!with.maps.metal.empty() && with.maps.metal[c]) continue;
+    flags_differ += with.maps.flags[c] != without.maps.flags[c];
+    if (!compared(with, without, c)) continue;
+    const double d = with.maps.r_skin[c] - without.maps.r_skin[c];
+    const double t = with.maps.thickness[c] - without.maps.thickness[c];
+    sum2 += d * d;
+    sum2_t += t * t;
+    worst = std::max(worst, std::abs(d));
+    worst_t = std::max(worst_t, std::abs(t));
+    ++n;
+  }
+  ASSERT_GT(n, with.maps.grid.size() / 2);
+  EXPECT_LT(std::sqrt(sum2 / n), 0.1);
+  EXPECT_LT(worst, 1.0);
+  EXPECT_LT(std::sqrt(sum2_t / n), 0.1);
+  EXPECT_LT(worst_t, 1.0);
+  EXPECT_LT(flags_differ, with.maps.grid.size() / 1000) << "cells whose validity changed";
+  // The skin surface has no spikes: its extent is that of the phantom without metal.
+  ASSERT_GT(with.skin.n_vertices(), 0);
+  const Eigen::RowVector3d lo_a = with.skin.V.colwise().minCoeff(),
+                           hi_a = with.skin.V.colwise().maxCoeff(),
+                           lo_b = without.skin.V.colwise().minCoeff(),
+                           hi_b = without.skin.V.colwise().maxCoeff();
+  EXPECT_LT((lo_a - lo_b).cwiseAbs().maxCoeff(), 1.0);
+  EXPECT_LT((hi_a - hi_b).cwiseAbs().maxCoeff(), 1.0);
+}
+
+// Each landmark is found where it is without metal (within 1 mm) or, in the marked cells,
+// absent: never displaced.
+TEST(Metal, LandmarksAsWithoutMetalOrAbsent) {
+  const PatientModel with(face_model(true).maps), without(face_model(false).maps);
+  const Landmarks a = find_landmarks(with), b = find_landmarks(without);
+  int same = 0;
+  for (const Landmark& lb : b.items) {
+    ASSERT_TRUE(lb.found) << lb.name << ": " << lb.note;
+    const Landmark* la = a.find(lb.name);
+    ASSERT_TRUE(la);
+    if (!la->found) {
+      EXPECT_TRUE(with.flags_at(lb.theta_deg, lb.z_mm) & kTruncated)
+          << lb.name << " absent away from the metal: " << la->note;
+      continue;
+    }
+    EXPECT_LT((la->lps - lb.lps).norm(), 1.0) << lb.name;
+    EXPECT_LT(std::abs(la->thickness_mm - lb.thickness_mm), 1.0) << lb.name;
+    ++same;
+  }
+  EXPECT_GE(same, 9);
+}
+
+// Heads without metal: nothing found, nothing marked, the model unchanged (the plain phantom,
+// the layered one with its thin bone plate, whose bone is far below the threshold).
+TEST(Metal, NoMetalNoDetection) {
+  const VolumeModel& without = face_model(false);
+  EXPECT_TRUE(without.metal.checked);
+  EXPECT_FALSE(without.metal.found);
+  EXPECT_TRUE(without.maps.metal.empty());
+  PhantomOptions o;
+  o.dims = {96, 96, 90};
+  o.spacing_mm = {2.5, 2.5, 2.5};
+  o.layered = true;
+  o.thin_bone = true;
+  const MetalRegion none = detect_metal(make_phantom(o));
+  EXPECT_TRUE(none.checked);
+  EXPECT_FALSE(none.found);
+  // An MR is not examined, whatever its values.
+  Volume mr = make_phantom(face_options(true));
+  mr.modality = Modality::MR;
+  EXPECT_FALSE(detect_metal(mr).checked);
+}
+
+// model.json says where the metal was found and which cells were marked.
+TEST(Metal, ModelJsonSaysWhere) {
+  const VolumeModel& vm = face_model(true);
+  const auto dir = std::filesystem::temp_directory_path() / ("caps_metal_" + std::to_string(::getpid()));
+  write_model(vm, dir, true);
+  std::ifstream in(dir / "model.json");
+  const auto j = nlohmann::json::parse(in);
+  const auto& m = j.at("segmentation").at("metal");
+  EXPECT_TRUE(m.at("found").get<bool>());
+  EXPECT_EQ(m.at("cells").at("count").get<std::size_t>(), metal_cells(vm.maps).count);
+  EXPECT_EQ(m.at("cells").at("flag"), "truncated");
+  EXPECT_NEAR(m.at("centre_lps_mm")[2].get<double>(), HeadPhantom(false, false, true).metal_centre()[2], 1.0);
+  bool warned = false;
+  for (const auto& w : j.at("warnings")) warned = warned || w.get<std::string>().find("metal") != std::string::npos;
+  EXPECT_TRUE(warned);
+  std::filesystem::remove_all(dir);
+}
