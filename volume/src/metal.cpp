@@ -39,12 +39,14 @@ MetalRegion detect_metal(const Volume& v, const MetalOptions& o) {
   const int n = static_cast<int>(sizes.size());
   const double voxel_mm3 = v.geom.spacing_mm.prod();
   std::vector<Eigen::Vector3i> lo(n, v.geom.dims), hi(n, Eigen::Vector3i::Constant(-1));
+  std::vector<float> peak(n, -1e30f);
   const auto& d = v.geom.dims;
   for (int k = 0; k < d[2]; ++k)
     for (int j = 0; j < d[1]; ++j)
       for (int i = 0; i < d[0]; ++i) {
         const auto l = labels[v.geom.linear(i, j, k)];
         if (l <= 0) continue;
+        peak[l] = std::max(peak[l], v.data[v.geom.linear(i, j, k)]);
         lo[l] = lo[l].cwiseMin(Eigen::Vector3i(i, j, k));
         hi[l] = hi[l].cwiseMax(Eigen::Vector3i(i, j, k));
       }
@@ -56,7 +58,9 @@ MetalRegion detect_metal(const Volume& v, const MetalOptions& o) {
     const double mm3 = sizes[l] * voxel_mm3;
     const Eigen::Vector3d extent =
         (hi[l] - lo[l] + Eigen::Vector3i::Ones()).cast<double>().cwiseProduct(v.geom.spacing_mm);
-    if (mm3 < o.min_mm3 || mm3 > o.max_ml * 1000.0 || extent.maxCoeff() > o.max_extent_mm) continue;
+    if (peak[l] < o.peak_hu || mm3 < o.min_mm3 || mm3 > o.max_ml * 1000.0 ||
+        extent.maxCoeff() > o.max_extent_mm)
+      continue;
     keep[l] = 1;
     ++m.components;
     m.voxels += static_cast<std::size_t>(sizes[l]);

@@ -24,6 +24,10 @@ struct MetalOptions {
   /// 2500-3000 HU at partial volume, dental alloys and amalgam 8000-30000 HU, stored clipped at
   /// 3071 HU (12 bits) or 32767 (16 bits).
   double threshold_hu = 3000.0;
+  /// ... and a component is metal only when it reaches this somewhere: metal saturates a 12-bit
+  /// CT (3071 HU) or lies far above it; bone and enamel stay below (Cranium's densest voxel,
+  /// 2986 HU, is below both).
+  double peak_hu = 3050.0;
   double min_mm3 = 4.0;          ///< a component smaller than this is noise, not metal
   /// A component larger than this (ml) or wider than max_extent_mm is not a dental or implant
   /// metal piece (the volume's scale is wrong); it is left alone.
@@ -55,7 +59,7 @@ struct MetalRegion {
 };
 
 /// Finds metal in a CT: the connected components (6-connected) of voxels at or above
-/// options.threshold_hu whose volume lies between min_mm3 and max_ml and whose extent is at most
+/// options.threshold_hu that reach options.peak_hu and whose volume lies between min_mm3 and max_ml and whose extent is at most
 /// max_extent_mm. Non-CT volumes are not examined (checked = false).
 MetalRegion detect_metal(const Volume& v, const MetalOptions& options = {});
 
