@@ -228,5 +228,13 @@ TEST(Metal, ModelJsonSaysWhere) {
   bool warned = false;
   for (const auto& w : j.at("warnings")) warned = warned || w.get<std::string>().find("metal") != std::string::npos;
   EXPECT_TRUE(warned);
+  // The summary (caps model from-volume, caps model info) says it too.
+  const std::string summary = model_summary(dir);
+  EXPECT_NE(summary.find("metal      found"), std::string::npos) << summary;
+  std::filesystem::remove_all(dir);
+  // And without metal: none found.
+  write_model(face_model(false), dir, true);
+  const std::string clean = model_summary(dir);
+  EXPECT_NE(clean.find("metal      none"), std::string::npos) << clean;
   std::filesystem::remove_all(dir);
 }
