@@ -218,6 +218,9 @@ Volume make_phantom(const PhantomOptions& options) {
   if (!(std::abs(options.pitch_deg) <= 45) || !(std::abs(options.yaw_deg) <= 45))
     throw InvalidInput(cat("phantom: pitch ", options.pitch_deg, " and yaw ", options.yaw_deg,
                            " deg must be between -45 and 45"));
+  if (options.metal && !(options.metal_z_mm >= -90 && options.metal_z_mm <= 60))
+    throw InvalidInput(cat("phantom: the metal's height ", options.metal_z_mm,
+                           " mm must be between -90 and 60"));
   Volume v;
   v.geom.dims = options.dims;
   v.geom.spacing_mm = options.spacing_mm;
@@ -247,14 +250,14 @@ Volume make_phantom(const PhantomOptions& options) {
   // metal: the block of dental metal, posed and scaled with the head, and its streaks in the
   // scanner's axial slices (the caricature of HeadPhantom::kStreak*; docs/volume.md, "Metal").
   const double s = options.scale;
-  const Eigen::Vector3d metal_scanner = a + s * (pose * (head.metal_centre() - a));
+  const Eigen::Vector3d metal_scanner = a + s * (pose * (head.metal_centre(options.metal_z_mm) - a));
   const double* half = HeadPhantom::kMetalHalfMm;
   const double metal_half_z = s * (std::abs(pose(2, 0)) * half[0] + std::abs(pose(2, 1)) * half[1] +
                                    std::abs(pose(2, 2)) * half[2]);
   auto with_metal = [&](const Eigen::Vector3d& p, double hu) {
     // The block, in the upright head at scale 1: (left, anterior, superior) from its centre.
     const Eigen::Vector3d q = posed ? Eigen::Vector3d(pose.transpose() * (p - a) + a) : p;
-    const Eigen::Vector3d u = a + (q - a) / s - head.metal_centre();
+    const Eigen::Vector3d u = a + (q - a) / s - head.metal_centre(options.metal_z_mm);
     const Eigen::Vector3d local(u[0], -u[1], u[2]);
     double f_metal = 1.0;
     for (int axis = 0; axis < 3; ++axis)
