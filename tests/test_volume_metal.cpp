@@ -49,6 +49,14 @@ ModelOptions model_options() {
   return mo;
 }
 
+// The two phantoms at the teeth' height, made once each.
+const Volume& face_ct(bool metal) {
+  static std::unique_ptr<Volume> made[2];
+  auto& v = made[metal ? 1 : 0];
+  if (!v) v = std::make_unique<Volume>(make_phantom(face_options(metal)));
+  return *v;
+}
+
 // What building it warned about is in `reporter` (model.json's warnings).
 const VolumeModel& face_model(bool metal, Reporter** reporter = nullptr) {
   static Reporter reporters[2];
@@ -57,7 +65,7 @@ const VolumeModel& face_model(bool metal, Reporter** reporter = nullptr) {
   Reporter* r = &reporters[metal ? 1 : 0];
   if (!m)
     m = std::make_unique<VolumeModel>(
-        build_volume_model(make_phantom(face_options(metal)), model_options(), r));
+        build_volume_model(face_ct(metal), model_options(), r));
   if (reporter) *reporter = r;
   return *m;
 }
@@ -74,8 +82,8 @@ bool compared(const VolumeModel& with, const VolumeModel& without, std::size_t c
 // streaks cross the skin: in the slice through it the air in front of the face is raised above
 // the skin threshold and soft tissue is dropped below it.
 TEST(MetalPhantom, StreaksCrossTheSkinInTheSlicesThroughTheMetal) {
-  const Volume ct = make_phantom(face_options(true));
-  const Volume clean = make_phantom(face_options(false));
+  const Volume& ct = face_ct(true);
+  const Volume& clean = face_ct(false);
   const HeadPhantom head(false, false, true);
   const Eigen::Vector3d m = head.metal_centre();
   const Eigen::Vector3d ijk = ct.lps_to_index(m).array().round();
@@ -246,7 +254,7 @@ TEST(Metal, NoMetalNoDetection) {
   EXPECT_TRUE(none.checked);
   EXPECT_FALSE(none.found);
   // An MR is not examined, whatever its values.
-  Volume mr = make_phantom(face_options(true));
+  Volume mr = face_ct(true);
   mr.modality = Modality::MR;
   EXPECT_FALSE(detect_metal(mr).checked);
 }
