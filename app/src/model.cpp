@@ -741,6 +741,7 @@ PhantomResult run_phantom(const PhantomRequest& r, Reporter*) {
   o.thin_bone = r.thin_bone;
   o.face = r.face;
   o.metal = r.metal;
+  o.metal_z_mm = r.metal_z;
   o.scale = r.scale;
   o.pitch_deg = r.pitch;
   o.yaw_deg = r.yaw;

@@ -534,13 +534,13 @@ std::string model_summary(const fs::path& dir) {
   if (const auto m = seg.find("metal"); m != seg.end() && m->is_object() &&
                                         m->value("checked", false)) {
     if (!m->value("found", false)) {
-      os << "metal      none (no voxel group at or above " << m->value("threshold_hu", 0.0)
-         << " HU)\n";
+      os << "metal      none (no voxel group at or above "
+         << std::lround(m->value("threshold_hu", 0.0)) << " HU)\n";
     } else {
       const json cells = m->value("cells", json::object());
       const json z = cells.value("z_mm", json::array());
       os << "metal      found: " << m->value("pieces", 0) << " piece(s), "
-         << m->value("volume_mm3", 0.0) << " mm3; its streaks removed, "
+         << std::lround(m->value("volume_mm3", 0.0)) << " mm3; its streaks removed, "
          << cells.value("count", 0) << " cells marked not valid (truncated)";
       if (z.is_array() && z.size() == 2 && z[0].is_number() && z[1].is_number())
         os << " at z " << z[0].get<double>() << " .. " << z[1].get<double>() << " mm";

@@ -509,6 +509,7 @@ struct PhantomRequest {
   std::string output, voxels = "256,256,240", spacing = "1,1,1";
   bool no_holder = false, layered = false, thin_bone = false, face = false, force = false;
   bool metal = false;
+  double metal_z = PhantomOptions{}.metal_z_mm;
   double scale = PhantomOptions{}.scale;
   double pitch = 0, yaw = 0;
   template <class Self, class V>
@@ -526,6 +527,8 @@ struct PhantomRequest {
     v(r.metal, {"metal", "a dental metal block in the upper jaw with the streak artefacts it "
                          "makes in the axial slices through it (values clipped to -1024..3071 HU)",
                 FieldKind::Flag});
+    v(r.metal_z, {"metal_z", "with --metal: the metal's height on the head's axis (mm, -90..60; "
+                             "-40 the upper teeth, -68 the chin)"});
     v(r.scale, {"scale", "the head's size: every length of the head times this (0.7..1.3)"});
     v(r.pitch, {"pitch", "the head tilted forward in the scanner, chin towards the chest (deg, "
                          "-45..45)"});
