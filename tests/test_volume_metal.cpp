@@ -236,6 +236,35 @@ TEST(Metal, ALandmarkInTheBandIsAbsentNotDisplaced) {
 }
 
 
+// Whoever segments (caps model tissue segments the CT again) gets masks without the metal and its
+// streaks: the skin and bone masks of the phantom with metal differ from those without it only
+// in the repaired slices, by a few voxels there, and the bone holds no metal.
+TEST(Metal, SegmentationHoldsNeitherTheMetalNorItsStreaks) {
+  const Segmentation with = segment_head(face_ct(true)), without = segment_head(face_ct(false));
+  ASSERT_TRUE(with.metal.found);
+  EXPECT_FALSE(without.metal.found);
+  ASSERT_EQ(with.skin.geom.dims, without.skin.geom.dims);
+  std::size_t skin_differ = 0, bone_differ = 0, outside = 0;
+  for (std::size_t i = 0; i < with.skin.data.size(); ++i) {
+    const bool ds = with.skin.data[i] != without.skin.data[i];
+    const bool db = with.bone.data[i] != without.bone.data[i];
+    skin_differ += ds;
+    bone_differ += db;
+    if (ds || db) {
+      const auto& g = with.skin.geom;
+      const int k = static_cast<int>(i / (static_cast<std::size_t>(g.dims[0]) * g.dims[1]));
+      const double s = g.index_to_lps(Eigen::Vector3d(0, 0, k))[2];
+      outside += s < with.metal.z_min_mm - 1.5 || s > with.metal.z_max_mm + 1.5;
+    }
+  }
+  EXPECT_EQ(outside, 0u);
+  EXPECT_LT(skin_differ, without.skin.count() / 1000) << "of " << without.skin.count();
+  EXPECT_LT(bone_differ, without.bone.count() / 100) << "of " << without.bone.count();
+  const Eigen::Vector3d m = with.bone.geom.lps_to_index(HeadPhantom(false, false, true).metal_centre());
+  const Eigen::Vector3i n = m.array().round().cast<int>();
+  EXPECT_EQ(with.bone.at(n[0], n[1], n[2]), without.bone.at(n[0], n[1], n[2]));
+}
+
 // Heads without metal: nothing found, nothing marked, the model unchanged (the plain phantom,
 // the layered one with its thin bone plate, whose bone is far below the threshold).
 TEST(Metal, NoMetalNoDetection) {

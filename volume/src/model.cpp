@@ -247,7 +247,7 @@ VolumeModel build_volume_model(const Volume& input, const ModelOptions& o, Repor
   const Volume& read = shifted.data.empty() ? input : shifted;
   // Metal (CT): its streaks are removed from the slices through it before anything is measured;
   // the cells whose skin lies there are marked by cylindrical_maps().
-  const MetalRegion metal = detect_metal(read, o.metal);
+  const MetalRegion metal = detect_metal(read, o.segment.metal);
   Volume repaired;
   if (metal.found) repaired = repair_metal_slices(read, metal);
   const Volume& v = metal.found ? repaired : read;

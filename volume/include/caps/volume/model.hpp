@@ -26,9 +26,6 @@ struct ModelOptions {
   /// (brain extraction keeps the brain, 1.1-1.5 l; an adult head, even cut at the chin, holds
   /// well over 2.5 l); 0: no check (a small child's head).
   double min_head_ml = 2000.0;
-  /// Metal in a CT (dental fillings, implants): its streaks removed from the slices through it
-  /// before segmenting, the cells there marked (metal.hpp; docs/volume.md, "Metal").
-  MetalOptions metal;
 };
 
 /// Everything built from one volume (the ModelContent, without colour, and how it was made).
