@@ -740,12 +740,15 @@ PhantomResult run_phantom(const PhantomRequest& r, Reporter*) {
   o.layered = r.layered;
   o.thin_bone = r.thin_bone;
   o.face = r.face;
+  o.metal = r.metal;
+  o.metal_z_mm = r.metal_z;
   o.scale = r.scale;
   o.pitch_deg = r.pitch;
   o.yaw_deg = r.yaw;
   const Volume v = make_phantom(o);
   write_nifti(v, path);
-  return {r.output, o.dims, o.spacing_mm, o.head_holder, o.layered, o.thin_bone, o.face, o.scale};
+  return {r.output, o.dims,  o.spacing_mm, o.head_holder, o.layered,
+          o.thin_bone, o.face, o.scale,      o.metal};
 }
 
 std::string summary(const PhantomResult& p) {

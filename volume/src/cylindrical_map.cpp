@@ -133,8 +133,9 @@ std::string invalid_flags_advice(std::uint8_t flags) {
                "which is no tissue to close a wound on); move the plan off the eye");
   if (flags & (kNoSkin | kTruncated))
     return cat("is not operable here: the scan does not cover the skin there (", names,
-               "; the scan's field of view ends or cuts the head); move the plan onto scanned "
-               "skin, or build the model from a scan that covers this region");
+               "; the scan's field of view ends or cuts the head, or metal streaks hide the "
+               "slices: model.json segmentation.metal); move the plan onto scanned skin, or build "
+               "the model from a scan that covers this region");
   if (flags & (kUndercut | kGrazing))
     return cat("lies where the model cannot represent the skin yet (", names, "): the ray from "
                "the head's axis crosses the skin twice (undercut: nostrils, under the nose and "
@@ -1093,6 +1094,32 @@ void base_on_tissue(CylindricalMaps& maps, double reach_mm) {
     if (maps.flags[i] == kNoBone && dist[i] <= reach_mm) maps.flags[i] = kBaseTissue;
 }
 
+// Metal (MapOptions::metal): a measured cell whose column, from its base (or the bone cap when
+// none was found) to 2 mm above its skin, passes through a repaired slab is kTruncated and not
+// measured; its skin and thickness are filled like every invalid cell's.
+void mark_metal(CylindricalMaps& maps, const MetalRegion& metal, double bone_cap_mm) {
+  const auto& g = maps.grid;
+  maps.metal.assign(g.size(), 0);
+  tbb::parallel_for(0, g.n_z, [&](int k) {
+    for (int j = 0; j < g.n_theta; ++j) {
+      const std::size_t c = g.index(j, k);
+      if (!maps.measured_skin[c]) continue;
+      const double theta = deg_to_rad(g.theta_deg(j)), z = g.z_mm(k);
+      const double r_hi = maps.r_skin[c] + 2.0;
+      const double r_lo = std::max(0.0, maps.measured_bone[c] ? maps.r_bone[c] - 1.0
+                                                              : maps.r_skin[c] - bone_cap_mm);
+      bool hit = false;
+      for (double r = r_hi; r >= r_lo && !hit; r -= 0.5)
+        hit = metal.in_slab(maps.axis.to_lps(theta, z, r));
+      if (!hit) continue;
+      maps.metal[c] = 1;
+      maps.flags[c] |= kTruncated;
+      maps.measured_skin[c] = 0;
+      maps.measured_bone[c] = 0;
+    }
+  });
+}
+
 }  // namespace
 
 CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const CylinderAxis& axis,
@@ -1117,6 +1144,7 @@ CylindricalMaps cylindrical_maps(const Volume& v, const Segmentation& seg, const
     for (int j = 0; j < grid.n_theta; ++j) caster.cast(j, k, samples);
   });
   progress.update(0.8);
+  if (o.metal.found) mark_metal(maps, o.metal, o.bone_cap_mm);
 
   flag_grazing(maps, o.grazing_deg);
   confirm_eyes(maps);

@@ -244,8 +244,15 @@ VolumeModel build_volume_model(const Volume& input, const ModelOptions& o, Repor
                        "unsigned values (HU + 1024) and shifted by -1024 HU; check the file's "
                        "rescale intercept"));
   }
-  const Volume& v = shifted.data.empty() ? input : shifted;
+  const Volume& read = shifted.data.empty() ? input : shifted;
+  // Metal (CT): its streaks are removed from the slices through it before anything is measured;
+  // the cells whose skin lies there are marked by cylindrical_maps().
+  const MetalRegion metal = detect_metal(read, o.segment.metal);
+  Volume repaired;
+  if (metal.found) repaired = repair_metal_slices(read, metal);
+  const Volume& v = metal.found ? repaired : read;
   VolumeModel m;
+  m.metal = metal;
   m.source = v.source;
   m.source_format = v.format;
   m.modality = v.modality;
@@ -262,7 +269,13 @@ VolumeModel build_volume_model(const Volume& input, const ModelOptions& o, Repor
                            "surface; use the scan before brain extraction (if it is a whole head, "
                            "a small child's, give --min-head-ml 0)"));
   const CylinderAxis axis = o.axis ? *o.axis : fit_axis(m.segmentation);
-  m.maps = cylindrical_maps(v, m.segmentation, axis, o.maps, reporter);
+  if (metal.found) {
+    MapOptions mo = o.maps;
+    mo.metal = metal;
+    m.maps = cylindrical_maps(v, m.segmentation, axis, mo, reporter);
+  } else {
+    m.maps = cylindrical_maps(v, m.segmentation, axis, o.maps, reporter);
+  }
   m.layer_options = o.maps.layers;
   m.bone_options = o.maps.bone;
   m.bone_cap_mm = o.maps.bone_cap_mm;
@@ -277,11 +290,82 @@ VolumeModel build_volume_model(const Volume& input, const ModelOptions& o, Repor
                         bone_by_threshold, o);
   }
   for (const auto& n : m.segmentation.notes) m.notes.push_back(n);
+  if (metal.found) {
+    const MetalCells cells = metal_cells(m.maps);
+    const auto mm = [](double x) { return std::round(10 * x) / 10; };
+    std::size_t slices = 0;
+    for (const auto& [first, last] : metal.slabs) slices += static_cast<std::size_t>(last - first + 1);
+    warn(reporter, cat(v.source, ": metal in the CT (", metal.components, " piece(s), ",
+                       mm(metal.volume_mm3), " mm3 at or above ", metal.threshold_hu,
+                       " HU, the largest at LPS (", mm(metal.centre_lps[0]), ", ", mm(metal.centre_lps[1]), ", ",
+                       mm(metal.centre_lps[2]), ") mm): its streaks were removed from the ", slices,
+                       " slices through it (S ", mm(metal.z_min_mm), " .. ", mm(metal.z_max_mm),
+                       " mm, bridged from the slices on either side), and the ", cells.count,
+                       " cells whose skin lies there (z ", mm(cells.z_min_mm), " .. ",
+                       mm(cells.z_max_mm), " mm) are marked not valid (truncated): a plan there is "
+                       "refused; model.json segmentation.metal"));
+  }
   if (m.stats.valid_cells < m.stats.cells / 20)
     warn(reporter, cat(v.source, ": only ", m.stats.valid_cells, " of ", m.stats.cells,
              " cells have a valid thickness; check the thresholds and the bone segmentation"));
   return m;
 }
+
+MetalCells metal_cells(const CylindricalMaps& maps) {
+  MetalCells out;
+  const auto& g = maps.grid;
+  if (maps.metal.size() != g.size()) return out;
+  out.z_min_mm = std::numeric_limits<double>::infinity();
+  out.z_max_mm = -out.z_min_mm;
+  for (int k = 0; k < g.n_z; ++k)
+    for (int j = 0; j < g.n_theta; ++j)
+      if (maps.metal[g.index(j, k)]) {
+        ++out.count;
+        out.z_min_mm = std::min(out.z_min_mm, g.z_mm(k));
+        out.z_max_mm = std::max(out.z_max_mm, g.z_mm(k));
+        out.row_first = out.count == 1 ? k : std::min(out.row_first, k);
+        out.row_last = std::max(out.row_last, k);
+      }
+  if (out.count == 0) out.z_min_mm = out.z_max_mm = 0;
+  return out;
+}
+
+namespace {
+
+// model.json's segmentation.metal: whether metal was looked for and found, where, and which
+// cells it made not valid.
+json metal_json(const VolumeModel& m) {
+  const MetalRegion& metal = m.metal;
+  if (!metal.checked)
+    return {{"checked", false},
+            {"reason", m.modality == Modality::CT ? "not requested"
+                                                  : "metal is found by its CT number (CT only)"}};
+  json j = {{"checked", true}, {"found", metal.found}, {"threshold_hu", metal.threshold_hu}};
+  if (!metal.found) return j;
+  const MetalCells cells = metal_cells(m.maps);
+  json slabs = json::array();
+  for (const auto& [first, last] : metal.slabs) slabs.push_back({first, last});
+  j["pieces"] = metal.components;
+  j["voxels"] = metal.voxels;
+  j["volume_mm3"] = metal.volume_mm3;
+  j["max_hu"] = metal.max_hu;
+  j["centre_lps_mm"] = detail::vec_json(metal.centre_lps);
+  j["slice_axis"] = metal.slice_axis;
+  j["slices"] = slabs;
+  j["s_range_mm"] = {metal.z_min_mm, metal.z_max_mm};
+  j["repair"] = "the slices holding metal and 1.5 mm (at least one slice) on either side are "
+                "replaced by the linear interpolation between the clean slices around them, "
+                "before segmenting; see docs/volume.md, \"Metal\"";
+  j["cells"] = {{"count", cells.count},
+                {"flag", "truncated"},
+                {"rows", {cells.row_first, cells.row_last}},
+                {"z_mm", {cells.z_min_mm, cells.z_max_mm}},
+                {"rule", "cells whose column (base - 1 mm to skin + 2 mm) crosses a repaired "
+                         "slice: skin and thickness not measured, filled"}};
+  return j;
+}
+
+}  // namespace
 
 void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter* reporter) {
   const auto& seg = m.segmentation;
@@ -307,7 +391,8 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter
                              {"head_volume_ml", seg.head_volume_ml},
                              {"bone_volume_ml", seg.bone_volume_ml},
                              {"detached_pieces", seg.detached_pieces},
-                             {"detached_volume_ml", seg.detached_volume_ml}}
+                             {"detached_volume_ml", seg.detached_volume_ml},
+                             {"metal", metal_json(m)}}
                             .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   c.thickness_json = json{{"kind", seg.bone_is_approximate ? "approximate" : "measured"},
                           {"radial", "r_skin - r_bone along the ray from the axis"},

@@ -530,6 +530,23 @@ std::string model_summary(const fs::path& dir) {
      << "thickness  median " << s.thickness_median_mm << " mm (5-95%: " << s.thickness_p5_mm
      << " - " << s.thickness_p95_mm << " mm), forehead " << s.forehead_thickness_mm << " mm\n"
      << "face       theta " << s.face_theta_deg << " deg, z " << s.face_z_mm << " mm\n";
+  // Metal (models built since 5 December; older ones were not examined and say nothing).
+  if (const auto m = seg.find("metal"); m != seg.end() && m->is_object() &&
+                                        m->value("checked", false)) {
+    if (!m->value("found", false)) {
+      os << "metal      none (no voxel group at or above "
+         << std::lround(m->value("threshold_hu", 0.0)) << " HU)\n";
+    } else {
+      const json cells = m->value("cells", json::object());
+      const json z = cells.value("z_mm", json::array());
+      os << "metal      found: " << m->value("pieces", 0) << " piece(s), "
+         << std::lround(m->value("volume_mm3", 0.0)) << " mm3; its streaks removed, "
+         << cells.value("count", 0) << " cells marked not valid (truncated)";
+      if (z.is_array() && z.size() == 2 && z[0].is_number() && z[1].is_number())
+        os << " at z " << z[0].get<double>() << " .. " << z[1].get<double>() << " mm";
+      os << "\n";
+    }
+  }
   if (info.has_layers)
     os << "layers     median skin " << s.skin_layer_median_mm << " mm, fat " << s.fat_median_mm
        << " mm, deep " << s.deep_median_mm << " mm over " << s.layer_cells << " cells (no fat "

@@ -218,6 +218,9 @@ Volume make_phantom(const PhantomOptions& options) {
   if (!(std::abs(options.pitch_deg) <= 45) || !(std::abs(options.yaw_deg) <= 45))
     throw InvalidInput(cat("phantom: pitch ", options.pitch_deg, " and yaw ", options.yaw_deg,
                            " deg must be between -45 and 45"));
+  if (options.metal && !(options.metal_z_mm >= -90 && options.metal_z_mm <= 60))
+    throw InvalidInput(cat("phantom: the metal's height ", options.metal_z_mm,
+                           " mm must be between -90 and 60"));
   Volume v;
   v.geom.dims = options.dims;
   v.geom.spacing_mm = options.spacing_mm;
@@ -244,6 +247,44 @@ Volume make_phantom(const PhantomOptions& options) {
           .toRotationMatrix();
   const bool posed = options.pitch_deg != 0 || options.yaw_deg != 0;
   const Eigen::Vector3d a = head.axis_point();
+  // metal: the block of dental metal, posed and scaled with the head, and its streaks in the
+  // scanner's axial slices (the caricature of HeadPhantom::kStreak*; docs/volume.md, "Metal").
+  const double s = options.scale;
+  const Eigen::Vector3d metal_scanner = a + s * (pose * (head.metal_centre(options.metal_z_mm) - a));
+  const double* half = HeadPhantom::kMetalHalfMm;
+  const double metal_half_z = s * (std::abs(pose(2, 0)) * half[0] + std::abs(pose(2, 1)) * half[1] +
+                                   std::abs(pose(2, 2)) * half[2]);
+  auto with_metal = [&](const Eigen::Vector3d& p, double hu) {
+    // The block, in the upright head at scale 1: (left, anterior, superior) from its centre.
+    const Eigen::Vector3d q = posed ? Eigen::Vector3d(pose.transpose() * (p - a) + a) : p;
+    const Eigen::Vector3d u = a + (q - a) / s - head.metal_centre(options.metal_z_mm);
+    const Eigen::Vector3d local(u[0], -u[1], u[2]);
+    double f_metal = 1.0;
+    for (int axis = 0; axis < 3; ++axis)
+      f_metal *= clamp01(0.5 + (half[axis] - std::abs(local[axis])) /
+                                   (options.spacing_mm[axis] / s));
+    hu += f_metal * (HeadPhantom::kMetalHu - hu);
+    // The streaks: only in the slices through the metal, as strong as the part of the slice the
+    // metal fills.
+    const double dz = options.spacing_mm[2];
+    const double overlap = std::min(p[2] + 0.5 * dz, metal_scanner[2] + metal_half_z) -
+                           std::max(p[2] - 0.5 * dz, metal_scanner[2] - metal_half_z);
+    if (overlap > 0) {
+      const double f_z = std::min(1.0, overlap / std::min(dz, 2.0 * metal_half_z));
+      const double dx = p[0] - metal_scanner[0], dy = p[1] - metal_scanner[1];
+      const double rho = std::hypot(dx, dy), phi = std::atan2(dy, dx);
+      const double width = 1.2 + 0.01 * rho;
+      double lines = 0;
+      for (int line = 0; line < HeadPhantom::kStreakLines; ++line) {
+        const double phi_line = 7.0 * kDeg + line * kPi / HeadPhantom::kStreakLines;
+        const double across = rho * std::sin(phi - phi_line) / width;
+        lines += (line % 2 == 0 ? 1.0 : -1.0) * std::exp(-across * across);
+      }
+      hu += f_z * lines * HeadPhantom::kStreakHu * HeadPhantom::kStreakDecayMm /
+            (HeadPhantom::kStreakDecayMm + rho);
+    }
+    return std::clamp(hu, HeadPhantom::kStoredMinHu, HeadPhantom::kStoredMaxHu);
+  };
   const auto& d = v.geom.dims;
   tbb::parallel_for(0, d[2], [&](int k) {
     for (int j = 0; j < d[1]; ++j)
@@ -259,6 +300,7 @@ Volume make_phantom(const PhantomOptions& options) {
         if (options.head_holder && (!posed || hu == kAir) &&
             (!posed || std::round(head.hu_at(p, options.spacing_mm, false)) == kAir))
           hu = static_cast<float>(std::round(head.hu_at(p, options.spacing_mm, true)));
+        if (options.metal) hu = static_cast<float>(std::round(with_metal(p, hu)));
         v.data[v.geom.linear(i, j, k)] = hu;
       }
   });
@@ -267,6 +309,10 @@ Volume make_phantom(const PhantomOptions& options) {
   if (options.thin_bone)
     v.notes.push_back("with a thin bone plate (0.5 .. 1.5 mm) under the right cheek");
   if (options.face) v.notes.push_back("with a face of analytic landmarks (caps phantom --face)");
+  if (options.metal)
+    v.notes.push_back(cat("with a dental metal block in the upper jaw and its streak artefacts "
+                          "(caps phantom --metal), values clipped to ", HeadPhantom::kStoredMinHu,
+                          " .. ", HeadPhantom::kStoredMaxHu, " HU"));
   if (options.scale != 1.0) v.notes.push_back(cat("head scaled by ", options.scale));
   if (posed)
     v.notes.push_back(cat("head tilted forward ", options.pitch_deg, " deg and turned left ",

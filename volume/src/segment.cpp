@@ -267,7 +267,17 @@ Segmentation segment_head(const Volume& v, const SegmentOptions& o, Reporter* re
   Eigen::Vector3i factor;
   for (int a = 0; a < 3; ++a)
     factor[a] = std::max(1, static_cast<int>(std::floor(o.working_voxel_mm / v.geom.spacing_mm[a] + 0.25)));
-  seg.working = downsample(v, factor);
+  // Metal (CT): the slices through it are bridged from the clean slices around, so the masks
+  // carry neither the metal nor its streaks (metal.hpp).
+  seg.metal = detect_metal(v, o.metal);
+  Volume repaired;
+  if (seg.metal.found) {
+    repaired = repair_metal_slices(v, seg.metal);
+    seg.notes.push_back(cat("metal streaks removed from the slices at S ",
+                            std::round(seg.metal.z_min_mm * 10) / 10, " .. ",
+                            std::round(seg.metal.z_max_mm * 10) / 10, " mm before segmenting"));
+  }
+  seg.working = downsample(seg.metal.found ? repaired : v, factor);
   if (factor != Eigen::Vector3i::Ones())
     seg.notes.push_back(cat("segmented on ", factor[0], "x", factor[1], "x", factor[2],
                             " voxel blocks (", seg.working.geom.spacing_mm.transpose(), " mm)"));

@@ -508,6 +508,8 @@ std::string summary(const VolumeInfoResult& result);
 struct PhantomRequest {
   std::string output, voxels = "256,256,240", spacing = "1,1,1";
   bool no_holder = false, layered = false, thin_bone = false, face = false, force = false;
+  bool metal = false;
+  double metal_z = PhantomOptions{}.metal_z_mm;
   double scale = PhantomOptions{}.scale;
   double pitch = 0, yaw = 0;
   template <class Self, class V>
@@ -522,6 +524,11 @@ struct PhantomRequest {
                                  "cheek", FieldKind::Flag});
     v(r.face, {"face", "a face of analytic landmarks (brow, nose, lips, chin, eyes, cheeks, "
                        "ears) instead of the plain nose", FieldKind::Flag});
+    v(r.metal, {"metal", "a dental metal block in the upper jaw with the streak artefacts it "
+                         "makes in the axial slices through it (values clipped to -1024..3071 HU)",
+                FieldKind::Flag});
+    v(r.metal_z, {"metal_z", "with --metal: the metal's height on the head's axis (mm, -90..60; "
+                             "-40 the upper teeth, -68 the chin)"});
     v(r.scale, {"scale", "the head's size: every length of the head times this (0.7..1.3)"});
     v(r.pitch, {"pitch", "the head tilted forward in the scanner, chin towards the chest (deg, "
                          "-45..45)"});
@@ -539,6 +546,7 @@ struct PhantomResult {
   bool thin_bone = false;
   bool face = false;
   double scale = 1.0;
+  bool metal = false;
 
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
@@ -550,6 +558,7 @@ struct PhantomResult {
     v(r.thin_bone, {"thin_bone"});
     v(r.face, {"face"});
     v(r.scale, {"scale"});
+    v(r.metal, {"metal"});
   }
 };
 PhantomResult run_phantom(const PhantomRequest& request, Reporter* reporter = nullptr);

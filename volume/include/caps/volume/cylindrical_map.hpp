@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "caps/core/reporter.hpp"
+#include "caps/volume/metal.hpp"
 #include "caps/volume/segment.hpp"
 #include "caps/volume/volume.hpp"
 
@@ -58,7 +59,10 @@ enum CellFlag : std::uint8_t {
   kNoBone = 2,     ///< no bone within MapOptions::bone_cap_mm under the skin (nose, lips, neck)
   kUndercut = 4,   ///< the ray crosses the skin more than once (ears, under the nose or chin)
   kGrazing = 8,    ///< the ray meets the skin at a grazing angle (near the vertex)
-  kTruncated = 16, ///< the head touches the edge of the scanned volume along this ray
+  /// The head touches the edge of the scanned volume along this ray; or (CT with metal) the
+  /// ray's skin or tissue lies in the slices whose metal streaks were removed
+  /// (CylindricalMaps::metal, model.json segmentation.metal): the scan does not show it.
+  kTruncated = 16,
   /// Valid, with no bone under the skin: the base is the soft tissue's deep boundary on an air
   /// cavity (nasal cavity, mouth, sinus) and carries no support (free; docs/volume.md).
   kBaseCavity = 32,
@@ -187,6 +191,10 @@ struct MapOptions {
   LayerOptions layers;
   /// The z range of the grid (mm along the axis); by default the head's extent.
   std::optional<double> z_min_mm, z_max_mm;
+  /// Metal found in the CT (detect_metal(); the volume given is the one repaired by
+  /// repair_metal_slices()): cells whose skin or tissue lies in its slabs are marked kTruncated,
+  /// not measured, and filled.
+  MetalRegion metal;
 };
 
 /// The maps. Images hold grid.size() values, theta fastest. Lengths in mm.
@@ -212,6 +220,9 @@ struct CylindricalMaps {
   std::vector<float> thickness_skin, thickness_fat, thickness_deep;
   std::vector<float> thickness_skin_normal, thickness_fat_normal, thickness_deep_normal;
   std::vector<std::uint8_t> layer_flags, layer_flags_normal;
+  /// 1 where the cell was marked kTruncated for metal streaks (MapOptions::metal); empty when
+  /// no metal was found. Not a file of the model: model.json's segmentation.metal says where.
+  std::vector<std::uint8_t> metal;
 
   bool is_valid(int j, int k) const { return flags_valid(flags[grid.index(j, k)]); }
   bool has_layers() const { return !thickness_skin.empty(); }

@@ -9,6 +9,7 @@
 #include "caps/core/reporter.hpp"
 #include "caps/core/mesh.hpp"
 #include "caps/volume/cylindrical_map.hpp"
+#include "caps/volume/metal.hpp"
 #include "caps/volume/model_dir.hpp"
 #include "caps/volume/segment.hpp"
 #include "caps/volume/volume.hpp"
@@ -39,6 +40,8 @@ struct VolumeModel : ModelContent {
   LayerOptions layer_options;  ///< how the tissue layers were measured (model.json)
   BoneOptions bone_options;    ///< how the base (bone, cavity) was found (model.json)
   double bone_cap_mm = MapOptions{}.bone_cap_mm;  ///< the bone cap used (model.json)
+  /// The metal found (model.json segmentation.metal); maps.metal marks its cells.
+  MetalRegion metal;
   /// For a local chart (a model whose axis faces one region of the skin, surface/chart.hpp):
   /// model.json's source.chart object as JSON text; empty for a whole-head model.
   std::string chart_json;
@@ -50,6 +53,14 @@ VolumeModel build_volume_model(const Volume& v, const ModelOptions& options = {}
 
 /// Statistics of the maps (done by build_volume_model; exposed for tests and other sources).
 ModelStatistics model_statistics(const CylindricalMaps& maps);
+
+/// The cells maps.metal marks: how many, the rows (k) and z (mm) they span.
+struct MetalCells {
+  std::size_t count = 0;
+  int row_first = 0, row_last = -1;
+  double z_min_mm = 0, z_max_mm = 0;
+};
+MetalCells metal_cells(const CylindricalMaps& maps);
 
 /// Writes the model directory atomically (built under a temporary name, then renamed).
 /// An existing `dir` is replaced only with `force`; otherwise InvalidInput.

@@ -43,6 +43,11 @@ struct PhantomOptions {
   bool layered = false;  ///< dermis, fat and muscle instead of one soft tissue (HeadPhantom)
   bool thin_bone = false;  ///< a thin bone plate under the right cheek (HeadPhantom)
   bool face = false;       ///< a face of analytic landmarks instead of the plain nose (HeadPhantom)
+  /// A dental metal block (a crown or filling) in the upper jaw in front, with the streak
+  /// artefacts it makes in the axial slices through it (HeadPhantom::metal_*; docs/volume.md,
+  /// "Metal"): values clipped to the 12-bit range a CT stores without its extended scale.
+  bool metal = false;
+  double metal_z_mm = -40.0;  ///< metal: the block's height on the head's axis (mm, -90 .. 60)
   double scale = 1.0;      ///< the head's size: every length of the head times this (0.7 .. 1.3)
   /// The head's pose in the scanner, about HeadPhantom::axis_point(): tilted forward (chin
   /// towards the chest) by `pitch_deg`, then turned towards the patient's left by `yaw_deg`
@@ -116,6 +121,28 @@ class HeadPhantom {
   /// Hounsfield value at an LPS point for a voxel of the given size (partial volume).
   double hu_at(const Eigen::Vector3d& p, const Eigen::Vector3d& voxel_mm,
                bool head_holder = true) const;
+
+  /// metal: a block of dental metal (a crown) in the front of the upper jaw, inside the 6 mm
+  /// skull shell that stands for the alveolar bone: centred on the midline (theta = 0) at
+  /// z = kMetalZ (PhantomOptions::metal_z_mm), 3 mm inside the bone's outer surface (85 mm from
+  /// the axis at z = -40), kMetalHalfMm half-sizes (tangential, radial, axial).
+  /// Its attenuation is that of kMetalHu; a scanner without its extended CT scale stores it,
+  /// and every value, clipped to [kStoredMinHu, kStoredMaxHu] (12 bits).
+  static constexpr double kMetalZ = -40.0;
+  static constexpr double kMetalHalfMm[3] = {3.0, 2.5, 2.0};
+  static constexpr double kMetalHu = 20000.0;
+  static constexpr double kStoredMinHu = -1024.0, kStoredMaxHu = 3071.0;
+  /// The streaks' caricature (docs/volume.md, "Metal"): in a slice through the metal, kStreakLines
+  /// straight lines through the metal's centre, kPi / kStreakLines apart, alternately bright and
+  /// dark, of amplitude kStreakHu * kStreakDecayMm / (kStreakDecayMm + rho) at distance rho (mm)
+  /// from the metal, Gaussian across the line (half-width 1.2 mm + 1 % of rho), times the part
+  /// of the slice the metal fills.
+  static constexpr int kStreakLines = 12;
+  static constexpr double kStreakHu = 3000.0, kStreakDecayMm = 50.0;
+  /// The metal's centre at height z (LPS mm, upright head at scale 1).
+  Eigen::Vector3d metal_centre(double z = kMetalZ) const {
+    return axis_point() + Eigen::Vector3d(0.0, -(bone_radius(0.0, z) - 3.0), z);
+  }
 
   /// theta and z of the nose tip and of the marker centre.
   static constexpr double kNoseZ = -20.0;

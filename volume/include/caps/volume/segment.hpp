@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "caps/core/reporter.hpp"
+#include "caps/volume/metal.hpp"
 #include "caps/volume/volume.hpp"
 
 namespace caps {
@@ -30,6 +31,10 @@ struct SegmentOptions {
   const Volume* bone_mask = nullptr;
   /// MR without a bone mask: bone is approximated as the skin envelope moved inward this far.
   double mr_scalp_mm = 6.0;
+  /// Metal in a CT: the slices through it are repaired (repair_metal_slices()) before the
+  /// working grid is made, so the masks hold neither the metal nor its streaks, whoever segments
+  /// (build_volume_model() repairs the volume itself first, for the rays, and marks the cells).
+  MetalOptions metal;
 };
 
 /// Result of segment_head(); masks are on the working grid.
@@ -47,6 +52,7 @@ struct Segmentation {
   double detached_volume_ml = 0;     ///< what was cut away (table, head holder, wrapping)
   int detached_pieces = 0;
   std::vector<std::string> notes;
+  MetalRegion metal;                 ///< the metal segment_head() found and repaired
 };
 
 /// Segments skin and bone. Throws InvalidInput when no head is found (nothing above the skin
