@@ -88,20 +88,24 @@ std::optional<LandmarkPlacement> nearest_landmark_placement(const PatientModel& 
   if (!std::isfinite(theta_deg) || !std::isfinite(z_mm) || !model.has_z(z_mm)) return std::nullopt;
   const Eigen::Vector3d target = model.skin_point(theta_deg, z_mm);
   // The nearest of the landmarks found clearly (confidence at least 0.5, no doubt about their
-  // depth), else of all found: a spot is better said from a landmark the surgeon finds surely.
-  const Landmark* nearest = nullptr;
-  for (const bool clear_only : {true, false}) {
-    double best = max_mm;
-    for (const Landmark& l : landmarks.items) {
-      if (!l.found || (clear_only && (l.confidence < 0.5 || !l.doubt.empty()))) continue;
-      const double d = (model.skin_point(l.theta_deg, l.z_mm) - target).norm();
-      if (d <= best) {
-        best = d;
-        nearest = &l;
-      }
+  // depth), unless one found less clearly lies at less than half its distance (the outer eye
+  // corner beside the eye, rather than the nasion): a spot is better said from a landmark the
+  // surgeon finds surely, but not from across the face.
+  const Landmark *clear = nullptr, *any = nullptr;
+  double d_clear = max_mm, d_any = max_mm;
+  for (const Landmark& l : landmarks.items) {
+    if (!l.found) continue;
+    const double d = (model.skin_point(l.theta_deg, l.z_mm) - target).norm();
+    if (d <= d_any) {
+      d_any = d;
+      any = &l;
     }
-    if (nearest) break;
+    if (l.confidence >= 0.5 && l.doubt.empty() && d <= d_clear) {
+      d_clear = d;
+      clear = &l;
+    }
   }
+  const Landmark* nearest = clear && !(any && d_any < 0.5 * d_clear) ? clear : any;
   if (!nearest) return std::nullopt;
   // The offsets (left, up) whose walk from the landmark (resolve_placement()) ends on the point:
   // start from the chord in the landmark's tangent frame, then correct by the miss, measured in

@@ -33,7 +33,8 @@ Eigen::Vector2d resolve_placement(const PatientModel& model, const Landmarks& la
 
 /// The point (theta deg, z mm) as the surgeon finds it: the found landmark nearest to it on
 /// `model` (straight-line distance between the skin points, at most `max_mm`; among those found
-/// with confidence >= 0.5 and no doubt about their depth if one is that near) and the offsets
+/// with confidence >= 0.5 and no doubt about their depth, unless another lies at less than half
+/// that distance) and the offsets
 /// to the patient's left and up along the skin from it, so that resolve_placement() of the
 /// answer gives the point back (to 0.05 mm where the walk converges; the offsets are rounded
 /// by the caller, not here). nullopt when no landmark is found within `max_mm`.
