@@ -357,6 +357,18 @@ TEST(Sheet, BadInputExitsTwoAndWritesNothing) {
     EXPECT_NE(run.out.find(c.says), std::string::npos) << c.args << "\n" << run.out;
     EXPECT_TRUE(fs::is_empty(d)) << c.args;
   }
+  // Another plan's result: its forces would be read as this plan's. Refused (the result folder
+  // keeps the plan it closed).
+  const std::string other = (folder() / "other.json").string();
+  ASSERT_EQ(caps_test::caps("plan new ellipse --model " + fixture().model + " --at glabella+25,36 "
+                            "--length 30 --width 10 -o " + other + " --force -q")
+                .code,
+            0);
+  const auto foreign = caps_test::caps("plan sheet " + other + " --result " + fixture().result +
+                                       " -o " + (d / "sheet.pdf").string());
+  EXPECT_EQ(foreign.code, 2) << foreign.out;
+  EXPECT_NE(foreign.out.find("that result closed another plan"), std::string::npos) << foreign.out;
+  EXPECT_TRUE(fs::is_empty(d));
   const auto missing = caps_test::caps("plan sheet " + (d / "none.json").string() + " -o " + (d / "s.pdf").string());
   EXPECT_EQ(missing.code, 2) << missing.out;
   EXPECT_TRUE(fs::is_empty(d));

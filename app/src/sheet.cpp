@@ -352,7 +352,16 @@ struct Closure {
   std::vector<std::string> warnings;
 };
 
-Closure read_closure(const std::string& dir) {
+// The parts of a plan that decide its closure, as the plan file writes them.
+json closure_defining(const plan::Plan& p) {
+  const json j = json::parse(plan::plan_to_json(p, nullptr));
+  json out = json::object();
+  for (const char* k : {"procedure", "frame", "points", "paths", "excisions", "sutures"})
+    if (j.contains(k)) out[k] = j[k];
+  return out;
+}
+
+Closure read_closure(const std::string& dir, const plan::Plan& plan) {
   Closure c;
   if (dir.empty()) return c;
   std::error_code ec;
@@ -366,6 +375,19 @@ Closure read_closure(const std::string& dir) {
   const json r = read_json_file<json>(rj, "is this the folder caps simulate wrote?");
   if (!r.is_object() || !r.contains("total_suture_force_n") || !r["total_suture_force_n"].is_number())
     throw InvalidInput(cat(rj.string(), ": no total_suture_force_n; is this a caps result?"));
+  // The plan the result closed (caps simulate keeps it beside the result): another plan's
+  // forces on this plan's sheet would be read as this plan's.
+  const fs::path closed = fs::path(dir) / "plan.json";
+  if (fs::is_regular_file(closed, ec)) {
+    if (closure_defining(plan::read_plan(closed)) != closure_defining(plan))
+      throw InvalidInput(cat("--result ", dir, ": that result closed another plan (its plan.json "
+                             "differs from this plan's procedure, place or sutures); give the "
+                             "folder caps simulate wrote for this plan, or simulate it again"));
+  } else {
+    c.warnings.push_back(cat("the result folder ", dir, " does not say which plan it closed (made "
+                             "before caps simulate kept the plan beside its result): make sure "
+                             "its forces are this plan's"));
+  }
   c.present = true;
   c.dir = dir;
   c.closing_force_n = r["total_suture_force_n"].get<double>();
@@ -781,7 +803,7 @@ SheetResult run_plan_sheet(const SheetRequest& r, Reporter* reporter) {
   plan::PlanReport report = plan::check_plan(p, model);
   if (std::string doubt = placement_doubt(s.model_dir, model, p.placement); !doubt.empty())
     report.warnings.push_back(std::move(doubt));
-  s.closure = read_closure(r.result);
+  s.closure = read_closure(r.result, s.plan);
   s.loop = plan::border_loop(p);
 
   const V2 centre(p.frame.theta_deg, p.frame.z_mm);

@@ -496,7 +496,13 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
   }
   sim.wound.continuum.mesh.model = model_dir;
   sim.wound.continuum.mesh.plan = r.plan;
+  if (sim.face) {  // the whole face's mesh is the one written: it names them too
+    sim.face->mesh.model = model_dir;
+    sim.face->mesh.plan = r.plan;
+  }
   closure::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string());
+  // The plan closed, beside its result: caps plan sheet --result refuses another plan's result.
+  plan::write_plan(out.path() / "plan.json", plan);
   SimulateResult s;
   if (r.render) {
     const render::DrawnSkin drawn = render::load_drawn_skin(model, model_dir, reporter);
