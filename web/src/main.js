@@ -88,7 +88,8 @@ function showCheck(plan, message, state) {
 }
 
 // The plan's suture pairs, each with its colour on the skin (where its two sides are drawn), the
-// lengths of its two sides on the skin (the loop nodes only in the tooltip), and buttons to move (choose its two sides again) or remove it.
+// lengths of its two sides on the skin (the loop nodes only in the tooltip), and buttons to move
+// (choose its two sides again) or remove it.
 function showSutures(planner) {
   const plan = planner.plan;
   const table = $('suture-pairs');
