@@ -64,12 +64,7 @@ PlanResult plan_result(const plan::Plan& p, const plan::PlanReport& r, const std
   s.cut_length_mm = r.cut_length_mm;
   s.warnings = r.warnings;
   if (r.near) {
-    const auto mm = [](double v, const char* pos, const char* neg) {
-      return cat(round_to(std::abs(v), 0), " mm ", v < 0 ? neg : pos);
-    };
-    s.near = cat(mm(r.near->left_mm, "to the patient's left", "to the patient's right"), " and ",
-                 mm(r.near->up_mm, "up", "down"), " from the ",
-                 landmark_in_words(r.near->landmark));
+    s.near = plan::placement_in_words(*r.near);
     j["check"]["near"]["words"] = s.near;  // the planner page says it so
   }
   s.plan_json = j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
@@ -96,13 +91,9 @@ plan::PlanReport checked_plan(const plan::Plan& p, const std::string& model_dir,
   // not said there).
   // Only the landmarks model.json keeps: finding them anew would cost every check (the page
   // checks on each drag) more than the check itself.
-  if (detail::chart_parent(model_dir).empty()) {
-    const std::string stored = read_model_info(model_dir).landmarks_json;
-    if (!stored.empty())
-      report.near = plan::nearest_landmark_placement(
-          model, landmarks_from_json(stored, (fs::path(model_dir) / model_file::kJson).string()),
-          p.frame.theta_deg, p.frame.z_mm);
-  }
+  if (detail::chart_parent(model_dir).empty())
+    report.near =
+        plan::nearest_kept_landmark_placement(model_dir, model, p.frame.theta_deg, p.frame.z_mm);
   return report;
 }
 

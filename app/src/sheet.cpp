@@ -82,19 +82,9 @@ Paper paper_of(const std::string& s) {
 class Flat {
  public:
   Flat(const PatientModel& model, const V2& centre)
-      : model_(model),
-        centre_(centre),
-        frame_(plan::skin_frame(model, centre[0], centre[1], 90.0)),
-        tangent_(plan::skin_tangent(model, centre[0], centre[1])) {}
+      : model_(model), centre_(centre), frame_(plan::skin_frame(model, centre[0], centre[1], 90.0)) {}
 
-  V2 to_paper(const V2& tz) const {
-    const V2 d(std::remainder(tz[0] - centre_[0], 360.0), tz[1] - centre_[1]);
-    const V3 v = tangent_.d_theta * d[0] + tangent_.d_z * d[1];
-    if (v.norm() < 1e-12) return V2::Zero();
-    const double length = plan::segment_length_on_skin(model_, centre_, centre_ + d);
-    const V3 u = v.normalized();
-    return length * V2(u.dot(frame_.ex), u.dot(frame_.ey)).normalized();
-  }
+  V2 to_paper(const V2& tz) const { return plan::step_on_skin(model_, frame_, tz); }
   V2 to_skin(const V2& xy) const {
     if (xy.norm() < 1e-9) return centre_;
     const V2 tz = plan::walk_on_skin(model_, frame_, xy).theta_z;
@@ -106,7 +96,6 @@ class Flat {
   const PatientModel& model_;  // not owned; outlives the Flat
   V2 centre_;
   plan::SkinFrame frame_;
-  plan::SkinTangent tangent_;
 };
 
 // The shortest path on the skin between a and b (theta deg, z mm; b's theta unwrapped next to

@@ -107,24 +107,32 @@ std::optional<LandmarkPlacement> nearest_landmark_placement(const PatientModel& 
   }
   const Landmark* nearest = clear && !(any && d_any < 0.5 * d_clear) ? clear : any;
   if (!nearest) return std::nullopt;
-  // The offsets (left, up) whose walk from the landmark (resolve_placement()) ends on the point:
-  // start from the chord in the landmark's tangent frame, then correct by the miss, measured in
-  // the frame the walk arrives with (fixed-point; the walk is a geodesic on a cylinder, so a few
-  // steps reach 0.05 mm on a head).
-  const SkinFrame start = skin_frame(model, nearest->theta_deg, nearest->z_mm, 90.0);
-  const Eigen::Vector3d chord = target - model.skin_point(nearest->theta_deg, nearest->z_mm);
-  Eigen::Vector2d step(chord.dot(start.ex), chord.dot(start.ey));
-  for (int k = 0; k < 12 && step.norm() > 0; ++k) {
-    const SkinFrame end = walk_on_skin(model, start, step);
-    const Eigen::Vector3d miss = target - model.skin_point(end.theta_z[0], end.theta_z[1]);
-    if (miss.norm() < 0.05) break;
-    step += Eigen::Vector2d(miss.dot(end.ex), miss.dot(end.ey));
-  }
+  // The offsets (left, up) whose walk from the landmark (resolve_placement()) ends on the point.
+  const Eigen::Vector2d step = step_on_skin(
+      model, skin_frame(model, nearest->theta_deg, nearest->z_mm, 90.0), {theta_deg, z_mm});
   LandmarkPlacement p;
   p.landmark = nearest->name;
   p.left_mm = step.x();
   p.up_mm = step.y();
   return p;
+}
+
+std::optional<LandmarkPlacement> nearest_kept_landmark_placement(
+    const std::filesystem::path& model_dir, const PatientModel& model, double theta_deg,
+    double z_mm) {
+  const std::string kept = read_model_info(model_dir).landmarks_json;
+  if (kept.empty()) return std::nullopt;
+  return nearest_landmark_placement(
+      model, landmarks_from_json(kept, (model_dir / model_file::kJson).string()), theta_deg, z_mm);
+}
+
+std::string placement_in_words(const LandmarkPlacement& placement) {
+  const auto mm = [](double v, const char* pos, const char* neg) {
+    return cat(std::lround(std::abs(v)), " mm ", v < 0 ? neg : pos);
+  };
+  return cat(mm(placement.left_mm, "to the patient's left", "to the patient's right"), " and ",
+             mm(placement.up_mm, "up", "down"), " from the ",
+             landmark_in_words(placement.landmark));
 }
 
 }  // namespace caps::plan

@@ -89,6 +89,18 @@ SkinFrame walk_on_skin(const PatientModel& model, const SkinFrame& start,
   return f;
 }
 
+Eigen::Vector2d step_on_skin(const PatientModel& model, const SkinFrame& start,
+                             const Eigen::Vector2d& to) {
+  const Eigen::Vector2d u0 = start.theta_z;
+  const Eigen::Vector2d d(std::remainder(to[0] - u0[0], 360.0), to[1] - u0[1]);
+  const SkinTangent t = skin_tangent(model, u0[0], u0[1]);
+  const Eigen::Vector3d v = t.d_theta * d[0] + t.d_z * d[1];
+  if (v.norm() < 1e-12) return Eigen::Vector2d::Zero();
+  const double length = segment_length_on_skin(model, u0, u0 + d);
+  const Eigen::Vector3d u = v.normalized();
+  return length * Eigen::Vector2d(u.dot(start.ex), u.dot(start.ey)).normalized();
+}
+
 double segment_length_on_skin(const PatientModel& model, const Eigen::Vector2d& a,
                               const Eigen::Vector2d& b_in) {
   Eigen::Vector2d b = b_in;

@@ -6,15 +6,11 @@
 
 #include "caps/core/error.hpp"
 #include "caps/plan/placement.hpp"
-#include "caps/surface/landmarks.hpp"
 #include "caps/surface/patient_model.hpp"
-#include "caps/volume/model_dir.hpp"
 
 namespace caps::server::detail {
 
 namespace {
-
-namespace fs = std::filesystem;
 
 // Replaces every match of `re` in `text` by what `f` makes of it.
 template <class F>
@@ -34,17 +30,9 @@ std::string replace_each(const std::string& text, const std::regex& re, F f) {
 std::optional<std::string> near_words(const PatientModel& model, const std::string& model_dir,
                                       double theta_deg, double z_mm) {
   try {
-    const std::string stored = read_model_info(model_dir).landmarks_json;
-    if (stored.empty()) return std::nullopt;
-    const auto near = plan::nearest_landmark_placement(
-        model, landmarks_from_json(stored, (fs::path(model_dir) / model_file::kJson).string()),
-        theta_deg, z_mm);
+    const auto near = plan::nearest_kept_landmark_placement(model_dir, model, theta_deg, z_mm);
     if (!near) return std::nullopt;
-    const auto mm = [](double v, const char* pos, const char* neg) {
-      return cat(std::lround(std::abs(v)), " mm ", v < 0 ? neg : pos);
-    };
-    return cat(mm(near->left_mm, "to the patient's left", "to the patient's right"), " and ",
-               mm(near->up_mm, "up", "down"), " from the ", landmark_in_words(near->landmark));
+    return plan::placement_in_words(*near);
   } catch (const std::exception&) {
     return std::nullopt;  // a message is still shown, without the place
   }

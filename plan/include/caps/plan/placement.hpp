@@ -36,11 +36,21 @@ Eigen::Vector2d resolve_placement(const PatientModel& model, const Landmarks& la
 /// with confidence >= 0.5 and no doubt about their depth, unless another lies at less than half
 /// that distance) and the offsets
 /// to the patient's left and up along the skin from it, so that resolve_placement() of the
-/// answer gives the point back (to 0.05 mm where the walk converges; the offsets are rounded
-/// by the caller, not here). nullopt when no landmark is found within `max_mm`.
+/// answer gives the point back (step_on_skin(), the walk's inverse; the offsets are not
+/// rounded here). nullopt when no landmark is found within `max_mm`.
 std::optional<LandmarkPlacement> nearest_landmark_placement(const PatientModel& model,
                                                             const Landmarks& landmarks,
                                                             double theta_deg, double z_mm,
                                                             double max_mm = 80.0);
+
+/// nearest_landmark_placement() from the landmarks model.json of `model_dir` keeps (nullopt
+/// when it keeps none: finding them anew would cost more than a plan check).
+std::optional<LandmarkPlacement> nearest_kept_landmark_placement(
+    const std::filesystem::path& model_dir, const PatientModel& model, double theta_deg,
+    double z_mm);
+
+/// The placement as a surgeon reads it, offsets rounded to the millimetre: "12 mm to the
+/// patient's left and 8 mm up from the glabella" (landmark_in_words()).
+std::string placement_in_words(const LandmarkPlacement& placement);
 
 }  // namespace caps::plan

@@ -49,6 +49,13 @@ SkinFrame skin_frame(const PatientModel& model, double theta_deg, double z_mm,
 SkinFrame walk_on_skin(const PatientModel& model, const SkinFrame& start,
                        const Eigen::Vector2d& step_mm);
 
+/// The inverse of walk_on_skin(): the step_mm (mm along `start`'s ex and ey) whose walk from
+/// `start` ends at `to` (theta deg, z mm; theta taken the short way round): the direction in
+/// which the line straight in (theta, z) to `to` leaves the start, and that segment's length on
+/// the skin (segment_length_on_skin()). Zero when `to` is the start.
+Eigen::Vector2d step_on_skin(const PatientModel& model, const SkinFrame& start,
+                             const Eigen::Vector2d& to);
+
 /// The skin length (mm) of the segment from a to b (theta deg, z mm; b's theta unwrapped next
 /// to a's) drawn straight in (theta, z), as plans draw it: the 3-D polyline through skin_point()
 /// in steps of at most about 0.1 mm.
