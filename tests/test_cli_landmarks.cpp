@@ -249,3 +249,37 @@ TEST(CliLandmarks, ASiteOrAWoundOverImplausibleTissueIsMarked) {
   for (const auto& w : r["warnings"]) said |= w.get<std::string>().find("under the wound's centre") != std::string::npos;
   EXPECT_TRUE(said) << r["warnings"].dump();
 }
+
+// Dental metal at the chin (issue 37): the pogonion in its band of unmeasured cells is absent,
+// and its note says that metal was found and where the band lies (the detector alone would say
+// only that no chin prominence was measured, as where the CT ends above the chin); the
+// landmarks away from the band keep notes without it.
+TEST(CliLandmarks, ALandmarkLostToMetalSaysSo) {
+  const fs::path dir = kTmp / "metal";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const auto ph = caps("phantom --face --metal --metal-z -68 --voxels 170,170,160 "
+                       "--spacing 1.5,1.5,1.5 -o " + (dir / "ct.nii.gz").string() + " -q");
+  ASSERT_EQ(ph.code, 0) << ph.out;
+  const auto m = caps("model from-volume " + (dir / "ct.nii.gz").string() + " -o " +
+                      (dir / "model").string() + " --no-tissue --n-theta 128 --n-z 64");
+  ASSERT_EQ(m.code, 0) << m.out;
+  const json j = read_json(dir / "model" / "model.json");
+  const json& metal = j.at("segmentation").at("metal");
+  ASSERT_TRUE(metal.at("found").get<bool>());
+  const json& items = j.at("landmarks").at("items");
+  const json& pogonion = items.at("pogonion");
+  EXPECT_FALSE(pogonion.at("found").get<bool>());
+  const std::string note = pogonion.at("note");
+  EXPECT_NE(note.find("metal was found in this CT"), std::string::npos) << note;
+  const double z0 = metal.at("cells").at("z_mm")[0], z1 = metal.at("cells").at("z_mm")[1];
+  std::ostringstream band;
+  band << "from z " << std::round(z0 * 10) / 10 << " to " << std::round(z1 * 10) / 10 << " mm";
+  EXPECT_NE(note.find(band.str()), std::string::npos) << note;
+  // The CLI says it where the user reads it.
+  EXPECT_NE(m.out.find("landmark pogonion absent"), std::string::npos) << m.out;
+  EXPECT_NE(m.out.find("metal was found"), std::string::npos) << m.out;
+  for (const auto& [name, item] : items.items())
+    if (item.at("found").get<bool>())
+      EXPECT_EQ(item.at("note").get<std::string>().find("metal"), std::string::npos) << name;
+}

@@ -63,11 +63,34 @@ Eigen::Vector3d triple(const std::string& s, const std::string& option, const st
   return {t[0], t[1], t[2]};
 }
 
+// "metal was found ..." with the band of cells it left unmeasured, from the model.json in `dir`
+// (segmentation.metal); empty without metal or in a model made before metal was looked for.
+std::string metal_band(const std::string& dir) {
+  const json j = json::parse(read_model_json(dir), nullptr, false);
+  const json* metal = j.is_object() && j.contains("segmentation") && j["segmentation"].is_object() &&
+                              j["segmentation"].contains("metal")
+                          ? &j["segmentation"]["metal"]
+                          : nullptr;
+  if (!metal || !metal->is_object() || !metal->value("found", false)) return "";
+  const json cells = metal->value("cells", json::object());
+  const json z = cells.is_object() ? cells.value("z_mm", json::array()) : json::array();
+  if (!z.is_array() || z.size() != 2 || !z[0].is_number() || !z[1].is_number()) return "";
+  return cat("metal was found in this CT and the skin is not measured from z ",
+             round_to(z[0].get<double>(), 1), " to ", round_to(z[1].get<double>(), 1),
+             " mm, around its streaks: a landmark there cannot be found");
+}
+
 // Finds the landmarks of the model in `dir` and writes them into its model.json; an absent
 // landmark is a note (the model.json entry says why).
 Landmarks add_landmarks(const std::string& dir, Reporter* reporter) {
   const PatientModel model = PatientModel::load(dir);
-  const Landmarks l = find_landmarks(model);
+  Landmarks l = find_landmarks(model);
+  // Dental metal's band of cells is not measured (docs/volume.md, "Metal"): a landmark absent
+  // says that the band may be why, and where it lies; the detector sees only unmeasured cells
+  // there, which it cannot tell from the end of the CT (issue 37).
+  if (const std::string band = metal_band(dir); !band.empty())
+    for (auto& item : l.items)
+      if (!item.found) item.note += cat("; ", band);
   write_model_landmarks(dir, landmarks_to_json(l));
   for (const auto& item : l.items)
     if (!item.found)
