@@ -638,7 +638,7 @@ TEST_F(AppWithModel, A90DegreeZPlastyReportsItsCornerToCornerGain) {
   s.output = (kTmp / "z90").string();
   s.meshing.mesh_size = 2.5;
   // What is checked here is that the report reads the corners of the whole face's mesh as the
-  // files hold them, for any material: the linear closure takes 5 s, the finite-strain one of a
+  // files hold them, for any material: the linear closure takes 3 s, the finite-strain one of a
   // 90 degree Z-plasty 50 s (docs/benchmarks.md, "Build and test time").
   s.solver.material = "linear";
   s.force = true;
