@@ -9,6 +9,8 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <memory>
+#include <set>
 
 #include "caps/app/model.hpp"
 #include "caps/app/plan.hpp"
@@ -238,4 +240,50 @@ TEST(FaceDomain, RefusesAnUnknownDomainAndSaysWhenAModelHasNoTissueModel) {
   bool said = false;
   for (const std::string& w : s.warnings) said |= w.find("caps model tissue") != std::string::npos;
   EXPECT_TRUE(said) << "the fallback to the clamped patch is not in the result's warnings";
+}
+
+// Where the tissue model stops short of the patch's rim (under the phantom's nose the soft
+// tissue is deeper than the tissue model's 30 mm depth limit), the rim is held, as the tissue is
+// where the region ends: no node of the rim is left free, which would cut the tissue around the
+// patch. Every rim node is tied, held, or keeps its own condition (sutured, sliding).
+TEST(FaceDomain, RimNodesTheTissueModelDoesNotReachAreHeldNotFree) {
+  const Case& c = phantom_case();
+  app::PlanNewRequest pn;
+  pn.procedure = "z-plasty";
+  pn.model = c.model;
+  pn.at = "0,0";
+  pn.output = (folder() / "z_nose.json").string();
+  pn.force = true;
+  app::run_plan_new(pn);
+  const PatientModel model = PatientModel::load(c.model);
+  closure::SimulateOptions o;
+  o.domain = closure::Domain::Face;
+  o.tissue = std::make_shared<const mesher::TissueModel>(mesher::read_tissue_model(c.model));
+  o.surface.size_mm = 2.5;
+  o.solve.kinematics = fem::Kinematics::Linear;
+  const closure::Simulation sim = closure::simulate(model, plan::read_plan(pn.output), o);
+  ASSERT_TRUE(sim.face);
+  EXPECT_GT(sim.face->untied_nodes, 0);
+  const fem::Mesh& mesh = sim.face->mesh;
+  std::set<int> constrained(mesh.fixed_nodes.begin(), mesh.fixed_nodes.end());
+  for (const auto& t : mesh.ties) constrained.insert(t.node);
+  for (const auto& s : mesh.sutures) constrained.insert({s.a, s.b});
+  for (const auto& s : mesh.sliding) constrained.insert(s.node);
+  for (const auto& f : mesh.fixed_dofs) constrained.insert(f.node);
+  int free = 0;
+  for (int n : sim.wound.continuum.rim_nodes) free += constrained.count(n) ? 0 : 1;
+  EXPECT_EQ(free, 0);
+  const std::set<int> held(mesh.fixed_nodes.begin(), mesh.fixed_nodes.end());
+  int held_rim = 0;
+  for (int n : sim.wound.continuum.rim_nodes)
+    if (held.count(n)) {
+      ++held_rim;
+      EXPECT_EQ(sim.face_result.displacement_mm.row(n).norm(), 0.0) << n;
+    }
+  EXPECT_GE(held_rim, sim.face->untied_nodes);
+  bool said = false;
+  for (const std::string& w : sim.wound.continuum.mesh.warnings)
+    said = said || w.find("are held, as where the region ends") != std::string::npos;
+  EXPECT_TRUE(said);
+  EXPECT_LT(sim.max_suture_gap_mm, 1e-6);
 }

@@ -251,6 +251,10 @@ void Join::tie_rim() {
   const TieSearchResult found =
       tie_nodes(mesh, slaves, tissue_elements_, tolerance, o_.tie, o_.reporter);
   for (const TiedNode& t : found.ties) mesh.ties.push_back(t);
+  // Where the tissue model stops short of the rim (its depth limit under a deep face, the CT's
+  // end) the rim is held, as the tissue is where the region or the CT ends: a free rim there
+  // would be a cut through the tissue around the patch.
+  for (int n : found.unmatched) mesh.fixed_nodes.push_back(n);
   d_.tied_nodes = static_cast<int>(found.ties.size());
   d_.untied_nodes = static_cast<int>(found.unmatched.size());
   for (double dist : found.distance_mm) d_.max_tie_distance_mm = std::max(d_.max_tie_distance_mm, dist);
@@ -263,7 +267,7 @@ void Join::tie_rim() {
     d_.mesh.warnings.push_back(
         cat("whole face: ", d_.untied_nodes, " of ", slaves.size(), " rim nodes of the patch lie "
             "farther than ", std::round(tolerance * 10) / 10, " mm from the tissue model and are "
-            "left free (the tissue model stops short of the patch there)"));
+            "held, as where the region ends (the tissue model stops short of the patch there)"));
 }
 
 FaceDomain Join::run() {
