@@ -834,6 +834,27 @@ TEST_F(ServerTest, ASimulationsSkinAndTensionAreServedAsGlb) {
   }
   EXPECT_NEAR(largest_mm, v.at("moved_skin_max_mm").get<double>(), 1e-4);
   EXPECT_GE(largest_mm, 1e-3);  // a vertex moved less is left out (a V-Y on the phantom: 4 um)
+  // The tension of the model's skin around the patch (records of a uint32 vertex and its float32
+  // kPa): the map goes on across the patch's rim. Not all 0, and below the patch's peak (this
+  // closure's patch reaches far: the tissue beyond it carries at most 0.1 kPa of the 33).
+  ASSERT_TRUE(v.at("moved_skin_tension").is_string()) << v.dump();
+  const auto rest = get(v.at("moved_skin_tension").get<std::string>());
+  ASSERT_TRUE(rest);
+  ASSERT_EQ(rest->status, 200);
+  ASSERT_EQ(rest->body.size() % 8, 0u);
+  ASSERT_GT(rest->body.size(), 0u);
+  double rest_most = 0;
+  for (std::size_t at = 0; at < rest->body.size(); at += 8) {
+    std::uint32_t vertex = 0;
+    float value = 0;
+    std::memcpy(&vertex, rest->body.data() + at, 4);
+    std::memcpy(&value, rest->body.data() + at + 4, 4);
+    EXPECT_LT(static_cast<long>(vertex), skin_vertices);
+    ASSERT_TRUE(std::isfinite(value));
+    rest_most = std::max(rest_most, std::abs(double(value)));
+  }
+  EXPECT_GT(rest_most, 0.0);
+  EXPECT_LT(rest_most, v.at("max_skin_tension_kpa").get<double>());
   // Asked again: the same answer, from the files written the first time.
   const auto again = get("/api/results/" + std::to_string(id) + "/view");
   ASSERT_TRUE(again);

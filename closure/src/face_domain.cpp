@@ -338,4 +338,23 @@ DisplacementAt skin_displacement(const Mesh& mesh, const Eigen::MatrixX3d& u,
   return displacement_from_samples(points, values, reach_mm);
 }
 
+std::function<std::optional<double>(const Eigen::Vector3d&)> skin_scalar(
+    const Mesh& mesh, const Eigen::VectorXd& nodal, double reach_mm) {
+  if (nodal.size() != mesh.n_nodes())
+    throw InvalidInput(cat("skin_scalar: ", nodal.size(), " values for ", mesh.n_nodes(), " nodes"));
+  const auto it = mesh.node_sets.find(kFaceSkinNodes);
+  if (it == mesh.node_sets.end()) return [](const Eigen::Vector3d&) { return std::optional<double>(); };
+  // The field's value in the first column of displacement_from_samples()'s (one interpolation).
+  Eigen::MatrixX3d points(static_cast<Eigen::Index>(it->second.size()), 3);
+  Eigen::MatrixX3d values = Eigen::MatrixX3d::Zero(points.rows(), 3);
+  for (std::size_t i = 0; i < it->second.size(); ++i) {
+    points.row(static_cast<Eigen::Index>(i)) = mesh.nodes.row(it->second[i]);
+    values(static_cast<Eigen::Index>(i), 0) = nodal[it->second[i]];
+  }
+  return [at = displacement_from_samples(points, values, reach_mm)](const Eigen::Vector3d& x) {
+    const auto v = at(x);
+    return v ? std::optional<double>(v->x()) : std::nullopt;
+  };
+}
+
 }  // namespace caps::closure

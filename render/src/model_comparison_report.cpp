@@ -76,7 +76,7 @@ double percentile(std::vector<double> v, double q) {
 
 // The skin's tension at its vertices (kPa), as the tension map shows it.
 Eigen::VectorXd skin_tension_kpa(const SkinSurfaces& skin, const closure::Simulation& sim) {
-  return tension_map(skin, sim.wound.continuum.mesh, sim.result.max_principal_mpa).value;
+  return simulated_tension_map(skin, sim).value;
 }
 
 }  // namespace

@@ -54,6 +54,11 @@ SkinSurfaces simulated_skin(const PatientModel& model, const closure::Simulation
                         full_resolution_subdivisions(model, sim.wound.continuum.mesh), drawn);
 }
 
+ScalarMap simulated_tension_map(const SkinSurfaces& skin, const closure::Simulation& sim) {
+  return sim.face ? tension_map(skin, sim.face->mesh, sim.face_result.max_principal_mpa)
+                  : tension_map(skin, sim.wound.continuum.mesh, sim.result.max_principal_mpa);
+}
+
 namespace {
 
 Overlays simulation_overlays(const PatientModel& model, const SimulationPictures& pictures) {
@@ -75,8 +80,7 @@ std::vector<fs::path> render_simulation(const PatientModel& model, const closure
   progress.update(1);
   Overlays overlays = simulation_overlays(model, pictures);
   if (pictures.tension_map)
-    overlays.scalar_maps.push_back(
-        tension_map(skin, sim.wound.continuum.mesh, sim.result.max_principal_mpa));
+    overlays.scalar_maps.push_back(simulated_tension_map(skin, sim));
   return render_views_with_overlays(model, skin, views, options, overlays, dir, reporter);
 }
 

@@ -1012,6 +1012,19 @@ Eigen::VectorXd nodal_field_on_skin(const SkinSurfaces& skin, const fem::Mesh& m
     for (int a = 0; a < el.n_nodes(); ++a) f += N[a] * nodal[el.nodes[a]];
     out[v] = f;
   }
+  // A closure in the whole face: the skin around the patch (the range mesh, the seam, the
+  // undercuts, as move_with_face() moves them) takes the field of the tissue model's skin nodes,
+  // so the map goes on across the patch's rim. A wound fill's own vertices keep off_mesh_value.
+  if (mesh.node_sets.count(closure::kFaceSkinNodes)) {
+    const auto field = closure::skin_scalar(mesh, nodal);
+    std::vector<char> on_skin(static_cast<std::size_t>(nv), 0);
+    for (Eigen::Index f = 0; f < skin.pre.F.rows(); ++f)
+      if (skin.face_part[static_cast<std::size_t>(f)] != SkinPart::WoundFill)
+        for (int c = 0; c < 3; ++c) on_skin[static_cast<std::size_t>(skin.pre.F(f, c))] = 1;
+    for (Eigen::Index v = skin.n_micropolygon_vertices; v < nv; ++v)
+      if (skin.vertex_element[v] < 0 && on_skin[static_cast<std::size_t>(v)])
+        if (const auto f = field(skin.pre.V.row(v).transpose())) out[v] = *f;
+  }
   return out;
 }
 

@@ -743,7 +743,7 @@ struct PlannerServer::Impl {
       tension_files[id] = std::async(std::launch::async, std::move(view.write_tension)).share();
     }
     json j = json::parse(read_file(info));
-    for (const char* k : {"skin", "tension", "tension_values", "moved_skin"})
+    for (const char* k : {"skin", "tension", "tension_values", "moved_skin", "moved_skin_tension"})
       if (j.value(k, json()).is_string()) j[k] = cat("/api/results/", id, "/", j[k].get<std::string>());
     return j;
   }
@@ -779,8 +779,8 @@ struct PlannerServer::Impl {
     return json{{"files", files}, {"render", rendered}};
   }
 
-  // A result's tension.glb or tension_kpa.f32 (`name`), once result_view() has started writing
-  // them.
+  // A result's tension.glb, tension_kpa.f32 or tension_moved_skin_kpa.bin (`name`), once
+  // result_view() has started writing them.
   fs::path tension_file(const std::string& id, const std::string& name) {
     std::shared_future<void> job;
     {
@@ -873,7 +873,7 @@ struct PlannerServer::Impl {
              guarded([this](const httplib::Request& req, httplib::Response& res) {
                send_json(res, result_view(req.matches[1]).dump());
              }));
-    http.Get(R"(/api/results/([0-9]+)/(tension\.glb|tension_kpa\.f32))",
+    http.Get(R"(/api/results/([0-9]+)/(tension\.glb|tension_kpa\.f32|tension_moved_skin_kpa\.bin))",
              guarded([this](const httplib::Request& req, httplib::Response& res) {
                send_file(res, tension_file(req.matches[1], req.matches[2]));
              }));

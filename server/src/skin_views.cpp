@@ -94,6 +94,10 @@ render::SkinSurfaces mesh_part(const render::SkinSurfaces& s, bool seam,
 struct MovedSkin {
   long vertices = 0;  // model skin vertices moved
   double max_mm = 0;  // their largest move
+  // The skin tension at the model skin's vertices the closure reaches: records of a uint32 vertex
+  // and its maximum principal stress as a float32 (kPa), little endian; empty for a patch-only
+  // closure. The page colours the skin around the patch with it, so the map has no patch outline.
+  std::string tension_records;
 };
 
 // A closure in the whole face moves the skin around the patch as well: the vertices of the
@@ -101,15 +105,24 @@ struct MovedSkin {
 // tissue's skin nodes move (closure::skin_displacement(), the field the renderer and the
 // feature lines use), as records of a uint32 vertex and its move as three float32 in glTF's
 // frame (metres; render::lps_to_gltf), little endian, at `path`. Nothing is written for a
-// patch-only closure (no face skin nodes) or where nothing moved.
+// patch-only closure (no face skin nodes) or where nothing moved. `max_principal_mpa` (one
+// value a node of `mesh`) gives MovedSkin::tension_records.
 MovedSkin write_moved_model_skin(const PatientModel& model, const fem::Mesh& mesh,
-                                 const Eigen::MatrixX3d& u, const fs::path& path) {
+                                 const Eigen::MatrixX3d& u, const Eigen::VectorXd& max_principal_mpa,
+                                 const fs::path& path) {
   MovedSkin out;
   if (!mesh.node_sets.count(closure::kFaceSkinNodes)) return out;
   const DisplacementAt field = closure::skin_displacement(mesh, u);
+  const auto tension = closure::skin_scalar(mesh, max_principal_mpa);
   const TriMesh range = range_mesh(model.maps(), RangeSurface::Skin);
   std::string bytes;
   for (Eigen::Index v = 0; v < range.n_vertices(); ++v) {
+    if (const auto t = tension(range.V.row(v).transpose())) {
+      const std::uint32_t index = static_cast<std::uint32_t>(v);
+      const float kpa = static_cast<float>(1e3 * *t);
+      out.tension_records.append(reinterpret_cast<const char*>(&index), sizeof index);
+      out.tension_records.append(reinterpret_cast<const char*>(&kpa), sizeof kpa);
+    }
     const auto d = field(range.V.row(v).transpose());
     if (!d || d->norm() < kMovedSkinMm) continue;
     const Eigen::Vector3d g = render::lps_to_gltf(*d);
@@ -206,8 +219,8 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
   auto skin = std::make_shared<render::SkinSurfaces>(
       render::displaced_skin(model, mesh, &u, n, nullptr, render::SkinExtent::Patch));
   const auto t1 = Clock::now();
-  const render::ScalarMap tension = render::tension_map(
-      *skin, mesh, fem::read_result_max_principal(result_dir, mesh.n_nodes()), 0);
+  const Eigen::VectorXd max_principal = fem::read_result_max_principal(result_dir, mesh.n_nodes());
+  const render::ScalarMap tension = render::tension_map(*skin, mesh, max_principal, 0);
   const auto [fill_pre_mm2, fill_post_mm2] = render::wound_fill_area_mm2(*skin);
   const Eigen::Index n_micro = skin->n_micropolygon_vertices;
   const double peak = n_micro ? tension.value.head(n_micro).maxCoeff() : 0.0;
@@ -217,7 +230,8 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
   render::SkinSurfaces part = mesh_part(*skin, true);
   if (!model.has_color()) part.color.rowwise() = kPlainSkin.transpose();  // as the model's skin
   render::write_gltf(part, result_dir / "skin.glb");
-  const MovedSkin moved = write_moved_model_skin(model, mesh, u, result_dir / "skin_moved.bin");
+  MovedSkin moved =
+      write_moved_model_skin(model, mesh, u, max_principal, result_dir / "skin_moved.bin");
   // The wound's and incisions' lips (the incision lines before, the scar after the closure): the
   // page draws them on the skin and moves them with its pre-to-post slider.
   json scars = json::array();
@@ -244,18 +258,24 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
            {"moved_skin", moved.vertices ? json("skin_moved.bin") : json(nullptr)},
            {"moved_skin_vertices", moved.vertices},
            {"moved_skin_max_mm", moved.max_mm},
+           {"moved_skin_tension",
+            moved.tension_records.empty() ? json(nullptr) : json("tension_moved_skin_kpa.bin")},
            {"scar_lines", std::move(scars)},
            {"timings_s",
             {{"skin", seconds(t0, t1)}, {"tension", seconds(t1, t2)}, {"glb", seconds(t2, t3)}}}}
           .dump();
   // The mesh faces coloured by the tension: shown only when asked for, so written afterwards.
   view.write_tension = [skin, tension, path = result_dir / "tension.glb",
-                        values_path = result_dir / "tension_kpa.f32"] {
+                        values_path = result_dir / "tension_kpa.f32",
+                        moved_path = result_dir / "tension_moved_skin_kpa.bin",
+                        moved_records = std::move(moved.tension_records)] {
     render::SkinSurfaces by_tension = *skin;
     by_tension.color = render::scalar_colors(tension.value, tension.max_value);
-    // Off the finite-element mesh the tension is 0 by definition: only the mesh's part is written.
+    // The mesh's part and the seam around it: the seam's outer vertices carry the tension of the
+    // tissue around the patch where the closure is in the whole face (0 on a clamped patch, where
+    // nothing beyond it moves), as the page's model skin does around them.
     std::vector<Eigen::Index> kept;
-    render::write_gltf(mesh_part(by_tension, false, &kept), path);
+    render::write_gltf(mesh_part(by_tension, true, &kept), path);
     // Its values, so that a viewer can colour several results on one scale: a float32 (little
     // endian, as every machine this runs on) per vertex of tension.glb, in its order, kPa.
     std::vector<float> kpa(kept.size());
@@ -263,6 +283,7 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
       kpa[v] = static_cast<float>(tension.value[kept[v]]);
     write_text_atomic(values_path, std::string(reinterpret_cast<const char*>(kpa.data()),
                                                kpa.size() * sizeof(float)));
+    if (!moved_records.empty()) write_text_atomic(moved_path, moved_records);
   };
   return view;
 }

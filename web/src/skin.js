@@ -73,8 +73,9 @@ export function viridis(t) {
 
 /** A simulation's skin (GET /api/results/ID/view) over the model's (`modelSkin`, a ColouredSkin):
  * the part the simulation meshed (morph 0 = pre-operative, 1 = post-operative) and the model's
- * skin without the cells that part replaces, moved around it as the whole face moves. Its mesh faces coloured by the skin tension are
- * read when first shown (show('tension'), which resolves once they are drawn). */
+ * skin without the cells that part replaces, moved around it as the whole face moves. Its skin
+ * coloured by the tension (the mesh's faces, and the skin around them a closure in the whole
+ * face reaches) is read when first shown (show('tension'), which resolves once it is drawn). */
 export async function loadResultSkin(view, modelSkin) {
   const patch = await loadMesh(view.skin);
   const base = modelSkin.mesh.geometry;
@@ -115,9 +116,38 @@ export async function loadResultSkin(view, modelSkin) {
     }
     colour.needsUpdate = true;
   };
+  // A closure in the whole face: the tension of the skin around the patch too (records of a
+  // uint32 vertex of the model's skin and its float32 kPa), so the map goes on across the patch's
+  // rim; the rest of the head is at 0 (nothing moved there).
+  let restTension = null;
+  const restColours = () => {
+    const colour = restTension.colour, zero = viridis(0).map(srgbToLinear);
+    for (let v = 0; v < colour.count; ++v) colour.setXYZ(v, zero[0], zero[1], zero[2]);
+    for (let i = 0; i < restTension.vertex.length; ++i) {
+      const c = viridis(restTension.kpa[i] / scaleMaxKpa);
+      colour.setXYZ(restTension.vertex[i], srgbToLinear(c[0]), srgbToLinear(c[1]), srgbToLinear(c[2]));
+    }
+    colour.needsUpdate = true;
+  };
+  const loadRestTension = async () => {
+    const bytes = new DataView(await getBinary(view.moved_skin_tension));
+    const count = base.getAttribute('position').count, n = Math.floor(bytes.byteLength / 8);
+    const vertex = new Uint32Array(n), kpa = new Float32Array(n);
+    for (let i = 0; i < n; ++i) {
+      vertex[i] = bytes.getUint32(8 * i, true);
+      kpa[i] = bytes.getFloat32(8 * i + 4, true);
+      if (vertex[i] >= count) throw new Error(`${view.moved_skin_tension}: vertex ${vertex[i]} of ${count}`);
+    }
+    restTension = { vertex, kpa, colour: new BufferAttribute(new Float32Array(3 * count), 3) };
+    restColours();
+  };
+  const showRest = () => {
+    if (restTension) rest.setAttribute('color', wanted === 'tension' ? restTension.colour : modelSkin.colours.skin);
+  };
   const loadTension = async () => {
     const [t, kpa] = await Promise.all([loadMesh(view.tension),
-      view.tension_values ? getBinary(view.tension_values) : null]);
+      view.tension_values ? getBinary(view.tension_values) : null,
+      view.moved_skin_tension ? loadRestTension() : null]);
     if (kpa) {
       values = new Float32Array(kpa);
       if (values.length !== t.geometry.getAttribute('position').count)
@@ -143,12 +173,14 @@ export async function loadResultSkin(view, modelSkin) {
         tension = await loading;
       }
       if (tension) tension.visible = wanted === 'tension';
+      showRest();
     },
     /** Colours the tension from 0 to `kpa` (several results on one scale). */
     setTensionScale(kpa) {
       if (!(kpa > 0) || kpa === scaleMaxKpa) return;
       scaleMaxKpa = kpa;
       if (tension) recolour(tension);
+      if (restTension) restColours();
     },
     setMorph(t) {
       morph = t;

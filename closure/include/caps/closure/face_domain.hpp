@@ -15,6 +15,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <functional>
 #include <map>
 #include <memory>
 #include <optional>
@@ -112,6 +113,14 @@ fem::SolveResult patch_part(const fem::SolveResult& joined, int n_nodes, int n_e
 /// patch with it; feature lines are measured on it.
 DisplacementAt skin_displacement(const fem::Mesh& mesh, const Eigen::MatrixX3d& u,
                                           const std::vector<int>& extra = {}, double reach_mm = 6.0);
+
+/// A nodal scalar of the closure (the maximum principal stress, MPa) on the skin, anywhere on the
+/// face: as skin_displacement(), from the node set kFaceSkinNodes, so that a map of it goes on
+/// across the patch's rim into the tissue around it instead of stopping there; nothing farther
+/// than `reach_mm` from every one of those nodes (outside the modelled region), nor on a mesh
+/// without them (a patch-only closure). Throws InvalidInput if `nodal` is not one value a node.
+std::function<std::optional<double>(const Eigen::Vector3d&)> skin_scalar(
+    const fem::Mesh& mesh, const Eigen::VectorXd& nodal, double reach_mm = 6.0);
 
 /// The joined mesh's node set of the tissue's skin nodes (fem::Mesh::node_sets, mesh.json).
 inline constexpr const char* kFaceSkinNodes = "face_skin";

@@ -11,6 +11,7 @@
 #include "caps/closure/simulate.hpp"
 #include "caps/plan/plan.hpp"
 #include "caps/render/drawn_skin.hpp"
+#include "caps/render/overlay.hpp"
 #include "caps/render/render.hpp"
 #include "caps/render/skin_surface.hpp"
 
@@ -24,6 +25,10 @@ std::pair<double, double> wound_fill_area_mm2(const SkinSurfaces& skin);
 /// model's range image; see displaced_skin()).
 SkinSurfaces simulated_skin(const PatientModel& model, const closure::Simulation& sim,
                             const DrawnSkin* drawn = nullptr);
+
+/// The skin tension map of a simulation on simulated_skin(): where it was solved in the whole
+/// face, the tissue model's skin carries it on beyond the patch (nodal_field_on_skin()).
+ScalarMap simulated_tension_map(const SkinSurfaces& skin, const closure::Simulation& sim);
 
 /// What the pictures of a simulation show besides the skin.
 struct SimulationPictures {

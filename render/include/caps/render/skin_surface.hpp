@@ -140,7 +140,9 @@ Eigen::MatrixX3d shading_normals(const SkinSurfaces& skin, double t);
 
 /// A nodal field carried to the skin's vertices by the same shape functions that place the
 /// micropolygons: f(v) = sum_a N_a(xi_v, eta_v, -1) f_a over the nodes of vertex v's element.
-/// Vertices off the mesh (the range mesh, the end caps) get `off_mesh_value`.
+/// Vertices off the mesh (the range mesh, the end caps) get `off_mesh_value`, except where a
+/// closure in the whole face reaches them: there the field of the tissue model's skin nodes
+/// (closure::skin_scalar()), so that a map of the whole face has no edge at the patch's rim.
 /// @param skin     displaced_skin() of `mesh`
 /// @param nodal    #N values, one per mesh node (any unit; the result has the same)
 /// @return         #V values
