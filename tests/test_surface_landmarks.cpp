@@ -382,3 +382,30 @@ TEST(Landmarks, TwoThatContradictEachOtherWithdrawThemAll) {
   EXPECT_FALSE(read.find("nasion")->found);
   EXPECT_FALSE(read.find("glabella")->found);
 }
+
+TEST(Landmarks, OuterEyeCornersCloserThanAnyFacesAreWithdrawn) {
+  // The phantom's outer eye corners lie about 72 mm apart and are kept. Moved to 43 mm apart (as
+  // the detector finds them on Cranium, within the eyes) both are withdrawn, saying why; the
+  // other landmarks stay. A model.json written before the check is read the same way.
+  Landmarks l = find_landmarks(*face().model);
+  const Landmark* left = l.find("exocanthion_left");
+  const Landmark* right = l.find("exocanthion_right");
+  ASSERT_TRUE(left->found && right->found);
+  const double apart = (left->lps - right->lps).norm();
+  EXPECT_GT(apart, kMinBiocularWidthMm);
+  EXPECT_EQ(withdraw_narrow_eyes(l), 0);
+  nlohmann::json j = nlohmann::json::parse(landmarks_to_json(l));
+  auto& jl = j["items"]["exocanthion_left"]["lps"];
+  auto& jr = j["items"]["exocanthion_right"]["lps"];
+  const Eigen::Vector3d mid = 0.5 * (left->lps + right->lps), half = 0.5 * (left->lps - right->lps);
+  const Eigen::Vector3d nl = mid + half * (43.0 / apart), nr = mid - half * (43.0 / apart);
+  jl = {nl.x(), nl.y(), nl.z()};
+  jr = {nr.x(), nr.y(), nr.z()};
+  const Landmarks read = landmarks_from_json(j.dump(), "test");
+  for (const char* n : {"exocanthion_left", "exocanthion_right"}) {
+    EXPECT_FALSE(read.find(n)->found) << n;
+    EXPECT_NE(read.find(n)->note.find("lie 43 mm apart"), std::string::npos) << read.find(n)->note;
+  }
+  EXPECT_TRUE(read.find("nasion")->found);
+  EXPECT_TRUE(read.find("glabella")->found);
+}

@@ -765,6 +765,27 @@ int withdraw_contradicted(Landmarks& landmarks) {
   return n;
 }
 
+int withdraw_narrow_eyes(Landmarks& landmarks) {
+  Landmark* left = nullptr;
+  Landmark* right = nullptr;
+  for (Landmark& l : landmarks.items) {
+    if (l.name == "exocanthion_left") left = &l;
+    if (l.name == "exocanthion_right") right = &l;
+  }
+  if (!left || !right || !left->found || !right->found) return 0;
+  const double apart = (left->lps - right->lps).norm();
+  if (!(apart < kMinBiocularWidthMm)) return 0;
+  for (Landmark* l : {left, right}) {
+    const std::string was = cat(" (found at theta ", std::round(l->theta_deg * 10) / 10, " deg, z ",
+                                std::round(l->z_mm * 10) / 10, " mm)");
+    *l = absent(l->name, cat("withdrawn: the two outer eye corners found lie ",
+                             std::round(apart * 10) / 10, " mm apart, where a face's are more than ",
+                             kMinBiocularWidthMm, " mm apart (an adult's 85-95 mm; docs/landmarks.md): "
+                             "the depressions found are not the eyes' outer ends", was));
+  }
+  return 2;
+}
+
 Landmarks find_landmarks(const PatientModel& model) {
   Landmarks out = find_landmarks(skin_range_view(model));
   withdraw_contradicted(out);
@@ -781,6 +802,7 @@ Landmarks find_landmarks(const PatientModel& model) {
     }
     l.doubt = landmark_doubt(l);
   }
+  withdraw_narrow_eyes(out);  // on their LPS points
   return out;
 }
 
@@ -851,7 +873,8 @@ Landmarks landmarks_from_json(const std::string& text, const std::string& source
     throw InvalidInput(cat(source, ": landmarks: ", e.what(),
                            "; recompute them with `caps model landmarks MODEL_DIR`"));
   }
-  withdraw_contradicted(out);  // models made before the check get it too
+  withdraw_contradicted(out);  // models made before the checks get them too
+  withdraw_narrow_eyes(out);
   return out;
 }
 

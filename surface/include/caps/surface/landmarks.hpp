@@ -117,6 +117,18 @@ Landmarks find_landmarks(const SkinRangeView& view);
 /// landmarks_from_json() apply it. Returns how many were withdrawn.
 int withdraw_contradicted(Landmarks& landmarks);
 
+/// The least distance (mm) between the two outer eye corners of a face: an adult's are 85-95 mm
+/// apart and a child's more than 60 mm (biocular width ex-ex; Farkas, Anthropometry of the Head
+/// and Face, 1994; docs/landmarks.md).
+inline constexpr double kMinBiocularWidthMm = 60.0;
+
+/// Withdraws both exocanthions when they lie closer than kMinBiocularWidthMm to each other (LPS,
+/// filled in): the depressions found are not the eyes' outer ends (on Cranium they lie 43 mm
+/// apart), and a sheet or a plan said from them would be measured from the wrong place.
+/// find_landmarks() and landmarks_from_json() apply it after withdraw_contradicted(); returns how
+/// many were withdrawn (0 or 2).
+int withdraw_narrow_eyes(Landmarks& landmarks);
+
 /// The model's range view: bilinear r_skin, measured where every blended cell is valid and its
 /// skin measured, undercut from the cells' flags; the grid's steps and extent.
 SkinRangeView skin_range_view(const PatientModel& model);
