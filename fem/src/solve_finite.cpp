@@ -37,9 +37,10 @@ constexpr double kFirstShift = 1e-6;
 constexpr double kPoorStep = 0.25;
 // The forcing term of the inexact Newton iteration: each correction is solved to a relative
 // residual eta = kForcing r_k (r_k: the Newton residual relative to the step's load), at most
-// kMaxForcing. Full Newton takes r_k to about c r_k^2 (measured on the slab: 1, 0.02, 2e-5,
-// 3e-10, so c = 0.02-1); the linear solve adds about eta r_k = kForcing r_k^2, below that.
-constexpr double kForcing = 1e-2, kMaxForcing = 1e-3;
+// NewtonOptions::max_forcing. Full Newton takes r_k to about c r_k^2 (measured on the slab: 1,
+// 0.02, 2e-5, 3e-10, so c = 0.02-1); the linear solve adds about eta r_k = kForcing r_k^2, below
+// that.
+constexpr double kForcing = 1e-2;
 // CG iterations on a tangent with its own new factor (single precision: about two digits an
 // iteration) before its direct solve is used instead.
 constexpr int kMaxFreshIterations = 20;
@@ -163,6 +164,8 @@ void check_options(const NewtonOptions& o) {
     throw InvalidInput(cat("newton: tolerances (", o.residual_tolerance, ", ",
                            o.displacement_tolerance, ", ", o.intermediate_tolerance,
                            ") must be in (0, 1)"));
+  if (!(o.max_forcing >= 1e-12 && o.max_forcing < 1))
+    throw InvalidInput(cat("newton: max_forcing = ", o.max_forcing, " must be in [1e-12, 1)"));
   if (!(o.stagnation_tolerance >= o.residual_tolerance && o.stagnation_tolerance < 1))
     throw InvalidInput(cat("newton: stagnation_tolerance = ", o.stagnation_tolerance,
                            " must be in [residual_tolerance, 1)"));
@@ -479,9 +482,9 @@ IterationOutcome FiniteStrainSolver::newton_iteration(StepAttempt& s, int it) {
   Eigen::VectorXd dq;
   double shift = 0;
   // Inexact Newton (Dembo, Eisenstat & Steihaug 1982): a correction solved to a relative
-  // residual eta_k = kForcing ||r_k|| / ||r_ref|| (at most kMaxForcing) converges as fast as
+  // residual eta_k = kForcing ||r_k|| / ||r_ref|| (at most max_forcing) converges as fast as
   // an exact one (quadratically), and a reused factor gets there in fewer CG iterations.
-  const double eta = std::min(kMaxForcing, kForcing * s.r_prev / s.r_ref);
+  const double eta = std::min(no_.max_forcing, kForcing * s.r_prev / s.r_ref);
   if ((s.failure = solve_shifted(dq, shift, eta, s.damping))) {
     s.failure->iteration = it;
     return IterationOutcome::Failed;

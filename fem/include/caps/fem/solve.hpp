@@ -92,10 +92,17 @@ struct NewtonOptions {
   /// A new tangent is first solved by conjugate gradients preconditioned with the last
   /// factorization (of an earlier tangent; any solver and precision), which is kept if that
   /// converges within this many iterations (to the accuracy an inexact Newton step needs, a
-  /// relative residual of 1e-2 ||r|| / ||r_0||, at most 1e-3); otherwise the tangent is
-  /// factorized. 0 = factorize every tangent. The default is the faster of those measured
+  /// relative residual of 1e-2 ||r|| / ||r_0||, at most `max_forcing`); otherwise the tangent
+  /// is factorized. 0 = factorize every tangent. The default is the faster of those measured
   /// (docs/benchmarks.md, "factor reuse").
   int reuse_iterations = 16;
+  /// The loosest relative residual a Newton correction is solved to (the inexact Newton step's
+  /// forcing term is min(max_forcing, 1e-2 ||r|| / ||r_0||)): the first corrections of a step,
+  /// where ||r|| is still near ||r_0||. 1e-3 until 6 December 2026; where flaps turn (a
+  /// Z-plasty's closing path) a correction solved only to 1e-3 left each step about 1e-3 short
+  /// and Newton converged linearly from there: the Cranium demo Z-plasty took 15 solves instead
+  /// of 7, the page's default one 49 instead of 24 (docs/fem.md, "Finite strain").
+  double max_forcing = 1e-5;
   /// A load step after the first starts from the last step's increment scaled to it (the
   /// secant predictor) when that is closer to equilibrium than the tangent predictor's load.
   bool secant_predictor = true;
