@@ -55,6 +55,22 @@ WoundBorder z_plasty(double L = 20) {
   return b;
 }
 
+// The library's Z-plasty with limbs of `length` mm placed on the constant-thickness cylinder's
+// front at z = 40 mm (orientation 0), and the options that mesh it `size_mm` fine within 40 mm.
+struct CylinderPlan {
+  PatientModel model;
+  plan::Plan plan;
+  SimulateOptions options;
+};
+CylinderPlan cylinder_z_plasty(double length, double size_mm) {
+  CylinderPlan c{constant_cylinder(), {}, {}};
+  c.plan = plan::place_procedure(plan::layout_procedure("z-plasty", {{"length", length}}), c.model,
+                                 0.0, 40.0, 0.0);
+  c.options.surface.size_mm = size_mm;
+  c.options.surface.extent_mm = 40;
+  return c;
+}
+
 // An elliptical excision (paper Figure 1): tips 0 and 3, lips 1 2 and 5 4.
 WoundBorder lens(double half_length = 12, double half_width = 3) {
   const double a = half_length, w = half_width;
@@ -783,14 +799,9 @@ int skin_of(const ContinuumMesh& c, int n) {
 // node up by (theta, z) and took the other lip's for half the pairs, which a Z sews elsewhere:
 // on Cranium's forehead (15 mm limbs) 3 sutures over 14.4 mm of a 45 mm cut.
 TEST(SutureSpacing, AZPlastysSuturesCoverItsWholeSuturedLength) {
-  const PatientModel model = constant_cylinder();
   const double L = 20;
-  const plan::Plan p = plan::place_procedure(
-      plan::layout_procedure("z-plasty", {{"length", L}}), model, 0.0, 40.0, 0.0);
-  SimulateOptions o;
-  o.surface.size_mm = 2.5;
-  o.surface.extent_mm = 40;
-  const Simulation sim = simulate(model, p, o);
+  const CylinderPlan z = cylinder_z_plasty(L, 2.5);
+  const Simulation sim = simulate(z.model, z.plan, z.options);
   const SutureSpacing& s = sim.sutures;
   const ContinuumMesh& c = sim.wound.continuum;
   const auto x = [&](int n) -> Eigen::Vector3d {
@@ -825,14 +836,9 @@ TEST(SutureSpacing, AZPlastysSuturesCoverItsWholeSuturedLength) {
 // reported apart and are in no total, maximum, mean or force per mm; with the tensile sutures
 // they add up to the solver's net force across the wound.
 TEST(SutureSpacing, CompressiveSuturesAreReportedApartAndInNoTotal) {
-  const PatientModel model = constant_cylinder();
-  const plan::Plan p = plan::place_procedure(
-      plan::layout_procedure("z-plasty", {{"length", 20.0}}), model, 0.0, 40.0, 0.0);
-  SimulateOptions o;
-  o.surface.size_mm = 2.5;
-  o.surface.extent_mm = 40;
-  o.suture_spacing_mm = 1.0;
-  const Simulation sim = simulate(model, p, o);
+  CylinderPlan z = cylinder_z_plasty(20.0, 2.5);
+  z.options.suture_spacing_mm = 1.0;
+  const Simulation sim = simulate(z.model, z.plan, z.options);
   const SutureSpacing& s = sim.sutures;
   ASSERT_FALSE(s.compressive.empty());
   double tensile = 0, pushing = 0, max = 0;
@@ -867,14 +873,10 @@ TEST(SutureSpacing, CompressiveSuturesAreReportedApartAndInNoTotal) {
 // lengthening: geometric sqrt(5 - 4 cos 60) - 1 = 73 % of the central limb with rigid flaps and
 // free surroundings) and the skin beyond the limb ends is stretched, not pulled in.
 TEST(Simulate, ZPlastyTransposesItsFlapsAndLengthensTheCentralLimb) {
-  const PatientModel model = constant_cylinder();
   const double L = 20;
-  const plan::Plan p = plan::place_procedure(
-      plan::layout_procedure("z-plasty", {{"length", L}}), model, 0.0, 40.0, 0.0);
-  SimulateOptions o;
-  o.surface.size_mm = 3.0;
-  o.surface.extent_mm = 40;
-  const WoundMesh w = mesh_wound(plan::wound_border(p), model, o.surface, o.continuum);
+  const CylinderPlan z = cylinder_z_plasty(L, 3.0);
+  const WoundMesh w = mesh_wound(plan::wound_border(z.plan), z.model, z.options.surface,
+                                 z.options.continuum);
   const Mesh& m = w.continuum.mesh;
   ASSERT_EQ(m.flaps.size(), 2u);
   // A node's side: the flap all its elements lie in, or -1 (skin, or a flap's base).
@@ -941,13 +943,9 @@ TEST(Simulate, ZPlastyTransposesItsFlapsAndLengthensTheCentralLimb) {
 // converges linearly: the default cap (1e-5) reaches the same closure in fewer solves. On
 // Cranium's demo Z-plasty in the whole face: 7 solves against 15 (docs/fem.md).
 TEST(Simulate, ATurnedFlapsNewtonSolvesEachCorrectionToTheQuadraticBasin) {
-  const PatientModel model = constant_cylinder();
-  const plan::Plan p = plan::place_procedure(
-      plan::layout_procedure("z-plasty", {{"length", 20.0}}), model, 0.0, 40.0, 0.0);
-  SimulateOptions o;
-  o.surface.size_mm = 3.0;
-  o.surface.extent_mm = 40;
-  const WoundMesh w = mesh_wound(plan::wound_border(p), model, o.surface, o.continuum);
+  const CylinderPlan z = cylinder_z_plasty(20.0, 3.0);
+  const WoundMesh w = mesh_wound(plan::wound_border(z.plan), z.model, z.options.surface,
+                                 z.options.continuum);
   SolveOptions tight, loose;
   tight.kinematics = loose.kinematics = Kinematics::Finite;
   loose.newton.max_forcing = 1e-3;
