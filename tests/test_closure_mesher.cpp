@@ -954,6 +954,10 @@ TEST(Simulate, ATurnedFlapsNewtonSolvesEachCorrectionToTheQuadraticBasin) {
             << " (" << a.factorizations << " factorizations), 1e-3 " << b.newton_iterations << " ("
             << b.factorizations << ")\n";
   EXPECT_LT(a.newton_iterations, b.newton_iterations);
+  // No tangent of this closure is indefinite (no snap-through): no factorization is wasted.
+  EXPECT_EQ(a.indefinite_factorizations, 0);
+  EXPECT_GT(a.timings.factorization_s, 0.0);
+  EXPECT_LE(a.timings.factorization_s, a.timings.total_s);
   const double scale = a.displacement_mm.cwiseAbs().maxCoeff();
   EXPECT_LT((a.displacement_mm - b.displacement_mm).cwiseAbs().maxCoeff(), 1e-5 * scale);
   EXPECT_NEAR(a.total_suture_force_n, b.total_suture_force_n, 1e-5 * b.total_suture_force_n);

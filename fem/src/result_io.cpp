@@ -67,6 +67,7 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
                        {"line_search", s.line_search}, {"shifts", s.shifts},
                        {"stagnated", s.stagnated}});
     j["newton"] = {{"iterations", r.newton_iterations}, {"factorizations", r.factorizations},
+                   {"indefinite_factorizations", r.indefinite_factorizations},
                    {"secant_predictions", r.secant_predictions},
                    {"steps", steps}, {"flap_rotations_deg", r.flap_rotations_deg}};
   }

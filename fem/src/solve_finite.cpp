@@ -697,8 +697,16 @@ void FiniteStrainSolver::cut_back_step(StepAttempt& s) {
 void FiniteStrainSolver::factorize_and_solve(Eigen::VectorXd& dq, double tolerance) {
   auto t0 = Clock::now();
   ++res_.factorizations;
-  solver_->factorize(sys_.K);
-  res_.timings.factorization_s += seconds_since(t0);
+  // A factorization that finds the tangent not positive definite (it throws) took its time too.
+  struct Timed {
+    double& total;
+    Clock::time_point from;
+    ~Timed() { total += seconds_since(from); }
+  };
+  {
+    const Timed timed{res_.timings.factorization_s, t0};
+    solver_->factorize(sys_.K);
+  }
   t0 = Clock::now();
   std::optional<Eigen::VectorXd> x =
       solver_->solve_reusing_factor(sys_.K, sys_.f, kMaxFreshIterations, tolerance);
@@ -742,6 +750,7 @@ std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, do
       factorize_and_solve(dq, tolerance);
       return finite();
     } catch (const SingularMatrix& e) {
+      ++res_.indefinite_factorizations;
       unshifted = e.what();
     }
   }
@@ -757,6 +766,7 @@ std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, do
       solved = true;
       shift = mu;
     } catch (const SingularMatrix& e) {
+      ++res_.indefinite_factorizations;
       if (unshifted.empty()) unshifted = e.what();
     }
   }

@@ -222,6 +222,9 @@ struct SolveResult {
   int secant_predictions = 0;                ///< finite strain: steps begun by the secant predictor
   int newton_iterations = 0;                 ///< finite strain: total, including cut-back attempts
   int factorizations = 0;                    ///< numerical factorizations (1 for a linear solve)
+  /// Of those, the ones that found the (finite-strain, shifted or not) tangent not positive
+  /// definite: the snap-through's cost (their time is in SolveTimings::factorization_s).
+  int indefinite_factorizations = 0;
   /// finite strain: each flap's rotation along its closing path (deg, Mesh::flaps order; a flap
   /// turned by less than 3 deg closes straight)
   std::vector<double> flap_rotations_deg;
