@@ -117,16 +117,16 @@ MovedSkin write_moved_model_skin(const PatientModel& model, const fem::Mesh& mes
   const TriMesh range = range_mesh(model.maps(), RangeSurface::Skin);
   std::string bytes;
   for (Eigen::Index v = 0; v < range.n_vertices(); ++v) {
-    if (const auto t = tension(range.V.row(v).transpose())) {
-      const std::uint32_t index = static_cast<std::uint32_t>(v);
-      const float kpa = static_cast<float>(1e3 * *t);
-      out.tension_records.append(reinterpret_cast<const char*>(&index), sizeof index);
-      out.tension_records.append(reinterpret_cast<const char*>(&kpa), sizeof kpa);
-    }
+    // Both fields come from the same nodes within the same reach: a vertex the displacement
+    // does not reach has no tension either, and most of the head's vertices are such.
     const auto d = field(range.V.row(v).transpose());
-    if (!d || d->norm() < kMovedSkinMm) continue;
-    const Eigen::Vector3d g = render::lps_to_gltf(*d);
+    if (!d) continue;
     const std::uint32_t index = static_cast<std::uint32_t>(v);
+    const float kpa = static_cast<float>(1e3 * tension(range.V.row(v).transpose()).value_or(0.0));
+    out.tension_records.append(reinterpret_cast<const char*>(&index), sizeof index);
+    out.tension_records.append(reinterpret_cast<const char*>(&kpa), sizeof kpa);
+    if (d->norm() < kMovedSkinMm) continue;
+    const Eigen::Vector3d g = render::lps_to_gltf(*d);
     const float xyz[3] = {static_cast<float>(g.x()), static_cast<float>(g.y()), static_cast<float>(g.z())};
     bytes.append(reinterpret_cast<const char*>(&index), sizeof index);
     bytes.append(reinterpret_cast<const char*>(xyz), sizeof xyz);
@@ -216,18 +216,20 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
   const Eigen::MatrixX3d u = fem::read_result_displacement(result_dir, mesh.n_nodes());
   const int n = view_subdivisions(model, mesh);
   // Only the part the simulation moved: the page draws the model's own skin around it.
-  auto skin = std::make_shared<render::SkinSurfaces>(
-      render::displaced_skin(model, mesh, &u, n, nullptr, render::SkinExtent::Patch));
+  const render::SkinSurfaces skin =
+      render::displaced_skin(model, mesh, &u, n, nullptr, render::SkinExtent::Patch);
   const auto t1 = Clock::now();
   const Eigen::VectorXd max_principal = fem::read_result_max_principal(result_dir, mesh.n_nodes());
-  const render::ScalarMap tension = render::tension_map(*skin, mesh, max_principal, 0);
-  const auto [fill_pre_mm2, fill_post_mm2] = render::wound_fill_area_mm2(*skin);
-  const Eigen::Index n_micro = skin->n_micropolygon_vertices;
+  const render::ScalarMap tension = render::tension_map(skin, mesh, max_principal, 0);
+  const auto [fill_pre_mm2, fill_post_mm2] = render::wound_fill_area_mm2(skin);
+  const Eigen::Index n_micro = skin.n_micropolygon_vertices;
   const double peak = n_micro ? tension.value.head(n_micro).maxCoeff() : 0.0;
   const auto t2 = Clock::now();
   // The part of the skin the simulation moved, coloured as the model (the rest is the model's
   // own skin): what the page draws first.
-  render::SkinSurfaces part = mesh_part(*skin, true);
+  // Its vertices (`kept`: which of the skin's each is) are those of tension.glb as well.
+  std::vector<Eigen::Index> kept;
+  render::SkinSurfaces part = mesh_part(skin, true, &kept);
   if (!model.has_color()) part.color.rowwise() = kPlainSkin.transpose();  // as the model's skin
   render::write_gltf(part, result_dir / "skin.glb");
   MovedSkin moved =
@@ -235,11 +237,11 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
   // The wound's and incisions' lips (the incision lines before, the scar after the closure): the
   // page draws them on the skin and moves them with its pre-to-post slider.
   json scars = json::array();
-  for (const std::vector<int>& loop : render::suture_loops(*skin)) {
+  for (const std::vector<int>& loop : render::suture_loops(skin)) {
     json pre = json::array(), post = json::array();
     for (int v : loop) {
-      pre.push_back({skin->pre.V(v, 0), skin->pre.V(v, 1), skin->pre.V(v, 2)});
-      post.push_back({skin->post.V(v, 0), skin->post.V(v, 1), skin->post.V(v, 2)});
+      pre.push_back({skin.pre.V(v, 0), skin.pre.V(v, 1), skin.pre.V(v, 2)});
+      post.push_back({skin.post.V(v, 0), skin.post.V(v, 1), skin.post.V(v, 2)});
     }
     scars.push_back({{"pre_lps", std::move(pre)}, {"post_lps", std::move(post)}});
   }
@@ -250,8 +252,8 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
            {"tension", "tension.glb"},
            {"tension_values", "tension_kpa.f32"},
            {"subdivisions", n},
-           {"vertices", skin->pre.n_vertices()},
-           {"replaced_cells", skin->replaced_cells},
+           {"vertices", skin.pre.n_vertices()},
+           {"replaced_cells", skin.replaced_cells},
            {"tension_scale_max_kpa", tension.max_value},
            {"max_skin_tension_kpa", peak},
            {"wound_area_mm2", {{"pre", fill_pre_mm2}, {"post", fill_post_mm2}}},
@@ -265,22 +267,23 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
             {{"skin", seconds(t0, t1)}, {"tension", seconds(t1, t2)}, {"glb", seconds(t2, t3)}}}}
           .dump();
   // The mesh faces coloured by the tension: shown only when asked for, so written afterwards.
-  view.write_tension = [skin, tension, path = result_dir / "tension.glb",
+  view.write_tension = [part = std::move(part), kept = std::move(kept), tension,
+                        path = result_dir / "tension.glb",
                         values_path = result_dir / "tension_kpa.f32",
                         moved_path = result_dir / "tension_moved_skin_kpa.bin",
                         moved_records = std::move(moved.tension_records)] {
-    render::SkinSurfaces by_tension = *skin;
-    by_tension.color = render::scalar_colors(tension.value, tension.max_value);
     // The mesh's part and the seam around it: the seam's outer vertices carry the tension of the
     // tissue around the patch where the closure is in the whole face (0 on a clamped patch, where
     // nothing beyond it moves), as the page's model skin does around them.
-    std::vector<Eigen::Index> kept;
-    render::write_gltf(mesh_part(by_tension, true, &kept), path);
+    Eigen::VectorXd values(static_cast<Eigen::Index>(kept.size()));
+    for (std::size_t v = 0; v < kept.size(); ++v)
+      values[static_cast<Eigen::Index>(v)] = tension.value[kept[v]];
+    render::SkinSurfaces by_tension = part;
+    by_tension.color = render::scalar_colors(values, tension.max_value);
+    render::write_gltf(by_tension, path);
     // Its values, so that a viewer can colour several results on one scale: a float32 (little
     // endian, as every machine this runs on) per vertex of tension.glb, in its order, kPa.
-    std::vector<float> kpa(kept.size());
-    for (std::size_t v = 0; v < kept.size(); ++v)
-      kpa[v] = static_cast<float>(tension.value[kept[v]]);
+    const std::vector<float> kpa(values.data(), values.data() + values.size());
     write_text_atomic(values_path, std::string(reinterpret_cast<const char*>(kpa.data()),
                                                kpa.size() * sizeof(float)));
     if (!moved_records.empty()) write_text_atomic(moved_path, moved_records);

@@ -47,8 +47,9 @@ struct ResultView {
 /// on `model`, with the post-operative skin as the morph target (render::write_gltf): skin.glb,
 /// written now, the part of render::displaced_skin() the simulation moved (the micropolygons at
 /// view_subdivisions(), the wound fill and the seam) coloured as the model, and tension.glb,
-/// written by the returned write_tension, its micropolygons and wound fill coloured by the skin
-/// tension (render::tension_map, viridis from 0 to the 99th percentile), and beside it
+/// written by the returned write_tension, the same part coloured by the skin tension
+/// (render::tension_map, viridis from 0 to the 99th percentile; the seam's outer vertices carry
+/// the tissue model's tension in a whole-face closure), and beside it
 /// tension_kpa.f32, the tension at each of its vertices (float32, little endian, kPa), for
 /// colouring several results on one scale. The rest is the model's
 /// own skin (write_model_skin_glb()) without the cells listed in "replaced_cells". The JSON:
@@ -57,7 +58,10 @@ struct ResultView {
 /// "wound_area_mm2": {"pre", "post"}, "moved_skin" (null for a patch-only closure, or
 /// skin_moved.bin: the model's skin vertices the whole-face closure moves around the patch, as
 /// records of a uint32 vertex of write_model_skin_glb()'s mesh and its move as three float32,
-/// glTF metres, little endian), "moved_skin_vertices", "moved_skin_max_mm", "scar_lines" (the
+/// glTF metres, little endian), "moved_skin_vertices", "moved_skin_max_mm", "moved_skin_tension"
+/// (null for a patch-only closure, or tension_moved_skin_kpa.bin, written with tension.glb: the
+/// model's skin vertices the closure reaches, as records of a uint32 vertex and its tension as a
+/// float32, kPa, little endian), "scar_lines" (the
 /// lips of each wound and incision, render::suture_loops(): [{"pre_lps", "post_lps"}], each a
 /// closed loop of points, LPS mm, before and after the closure), "timings_s":
 /// {"skin" (reading the result and building the
