@@ -641,6 +641,9 @@ TEST(FiniteStrain, AStepStagnatingBelowTheStagnationToleranceIsAcceptedAndMarked
   EXPECT_LE(strict.newton_steps.back().residual_norms.back(), 1e-6);
   few.newton.stagnation_tolerance = 1e-9;  // below the residual tolerance
   EXPECT_THROW(solve(m, few), InvalidInput);
+  SolveOptions loose = finite();
+  loose.newton.max_forcing = 1.0;  // a correction solved to nothing
+  EXPECT_THROW(solve(m, loose), InvalidInput);
 }
 
 // After a cut-back a step grows back only to half the nominal step, and each further cut-back
