@@ -1021,3 +1021,44 @@ TEST(FiniteStrain, AWarmStartNeedsTheFiniteStrainSolveAndOneDisplacementPerNode)
   short_rows.initial_displacement_mm = Eigen::MatrixX3d::Zero(m.n_nodes() - 1, 3);
   EXPECT_THROW(solve(m, short_rows), InvalidInput);
 }
+
+// A step cut back starts again from the converged state's tangent: where that tangent is
+// indefinite, its first solve starts at the shift the first attempt found and reuses that
+// factor, instead of factorizing the same tangent again at every rung of the shift ladder (issue
+// 35: on Cranium the page's default Z-plasty factorized one indefinite tangent five times in each
+// of four attempts at a step, 20 of its 37 factorizations). The 8 x 8 x 4 mm slab of the test
+// above, its top pushed 4 mm down and free to move sideways, buckles; with one solve an attempt
+// (no secant predictor), each attempt's only solve is the start tangent's, so a step's
+// factorizations are the ladder's rungs up to its first shift, however often it was cut back.
+TEST(FiniteStrain, AStepCutBackReusesItsIndefiniteStartTangentsShiftAndFactor) {
+  Mesh m = unit_box({8, 8, 4}, {2, 2, 1});
+  for (int i = 0; i < m.n_nodes(); ++i) {
+    if (std::abs(m.nodes(i, 2)) < 1e-9) m.fixed_nodes.push_back(i);
+    if (std::abs(m.nodes(i, 2) - 4) < 1e-9) m.fixed_dofs.push_back({i, 2, -4.0});
+  }
+  SolveOptions o = finite(4);
+  o.newton.secant_predictor = false;
+  o.newton.max_iterations = 1;
+  o.newton.stagnation_tolerance = 1e-2;
+  o.newton.max_solves = 100000;
+  o.newton.max_steps = 10000;
+  const SolveResult r = solve(m, o);
+  int checked = 0;
+  for (const NewtonStep& s : r.newton_steps) {
+    ASSERT_EQ(s.shifts.size(), 1u);
+    // The rungs: the tangent itself, then 1e-6, 1e-5, ... up to the shift that worked.
+    const int rungs =
+        s.shifts[0] > 0 ? 2 + static_cast<int>(std::lround(std::log10(s.shifts[0] / 1e-6))) : 1;
+    EXPECT_LE(s.factorizations, rungs) << "step " << s.step << ", " << s.cutbacks << " cut-backs";
+    if (s.cutbacks > 0 && s.shifts[0] > 0) ++checked;
+  }
+  std::cout << r.newton_steps.size() << " steps, " << checked
+            << " of them cut back from an indefinite start tangent; " << r.factorizations
+            << " factorizations, " << r.newton_iterations << " solves\n";
+  EXPECT_GT(checked, 10);
+  // The same buckled slab as Newton's own tolerances give.
+  o = finite(4);
+  const SolveResult full = solve(m, o);
+  const double scale = full.displacement_mm.cwiseAbs().maxCoeff();
+  EXPECT_LT((r.displacement_mm - full.displacement_mm).cwiseAbs().maxCoeff(), 1e-3 * scale);
+}

@@ -63,7 +63,8 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
     nlohmann::json steps = nlohmann::json::array();
     for (const NewtonStep& s : r.newton_steps)
       steps.push_back({{"step", s.step}, {"lambda", s.lambda}, {"iterations", s.iterations},
-                       {"cutbacks", s.cutbacks}, {"relative_residuals", s.residual_norms},
+                       {"cutbacks", s.cutbacks},
+                       {"factorizations", s.factorizations}, {"relative_residuals", s.residual_norms},
                        {"line_search", s.line_search}, {"shifts", s.shifts},
                        {"stagnated", s.stagnated}});
     j["newton"] = {{"iterations", r.newton_iterations}, {"factorizations", r.factorizations},

@@ -190,6 +190,9 @@ struct StepAttempt {
   // whose direction also moves the prescribed values (its step is judged by the slope alone).
   double energy = NAN;
   double r_prev = 0;  // the residual before the current correction
+  // The first solve is the tangent predictor's: the tangent of the converged state the step
+  // starts from (no secant trial taken), the same in every attempt at this step.
+  bool tangent_predictor = false;
   // The shift the next solve starts from (Levenberg-Marquardt with memory: Nocedal & Wright
   // 2006, sec. 10.3; Nielsen 1999). Where the tangent is positive definite but its Newton step
   // is far too long (near a limit point the soft mode's stiffness tends to zero: measured on
@@ -256,7 +259,7 @@ class FiniteStrainSolver {
   void cut_back_step(StepAttempt& s);
   // One solve of the tangent, shifted where it is not positive definite.
   std::optional<Failure> solve_shifted(Eigen::VectorXd& dq, double& shift, double tolerance,
-                                       double damping);
+                                       double damping, bool factor_is_shifted_tangent = false);
   void factorize_and_solve(Eigen::VectorXd& dq, double tolerance);
   void finish_report();
   void recover_result();
@@ -288,6 +291,7 @@ class FiniteStrainSolver {
   // step of this solve has been cut back.
   double growth_cap_ = 1;
   int step_ = 0, cutbacks_ = 0;
+  int step_factorizations_from_ = 0;  // res_.factorizations when the current step began
   // The solves snapping steps may take beyond max_iterations, over the whole solve: a closure
   // whose snaps fail and are cut back does not repeat them without end.
   int snap_solves_left_ = 0;
@@ -297,6 +301,17 @@ class FiniteStrainSolver {
   Eigen::VectorXd q_last_start_;
   double last_dl_ = 0;
   Eigen::VectorXd predicted_f_, predicted_values_;  // the tangent predictor's f and K (extrapolate())
+  // The shift the tangent of the converged state needed in a step's first solve, after step_
+  // accepted steps, and res_.factorizations after it. A step cut back starts again from that
+  // tangent: its first solve starts at that shift instead of climbing the ladder again, and
+  // reuses the factor while it is the solver's last (Cranium, the page's default Z-plasty on
+  // the forehead: the same indefinite tangent was factorized five times, shifts 0 to 1e-3, in
+  // each of four attempts at one step; docs/fem.md, "Load steps").
+  struct StartTangent {
+    int step = -1;
+    double shift = 0;
+    int factorizations = -1;
+  } start_tangent_;
 };
 
 FiniteStrainSolver::FiniteStrainSolver(const Mesh& mesh, const SolveOptions& options,
@@ -438,6 +453,7 @@ void FiniteStrainSolver::predictor(StepAttempt& s) {
 // the tangent predictor, as without it. r0 stays the tangent predictor's load (the tolerances'
 // reference).
 void FiniteStrainSolver::extrapolate(StepAttempt& s) {
+  s.tangent_predictor = true;
   if (!no_.secant_predictor || last_dl_ <= 0) return;
   q_trial_ = q_ + (s.dl / last_dl_) * (q_ - q_last_start_);
   problem_.project_on_surface(q_trial_, s.lambda_new);
@@ -451,6 +467,7 @@ void FiniteStrainSolver::extrapolate(StepAttempt& s) {
   res_.timings.assembly_s += seconds_since(t);
   const double rn = inverted ? INFINITY : sys_.f.norm();
   if (std::isfinite(rn) && rn < s.r0) {
+    s.tangent_predictor = false;
     q_ = q_trial_;
     s.energy = energy;
     s.r_prev = rn;
@@ -485,10 +502,16 @@ IterationOutcome FiniteStrainSolver::newton_iteration(StepAttempt& s, int it) {
   // residual eta_k = kForcing ||r_k|| / ||r_ref|| (at most max_forcing) converges as fast as
   // an exact one (quadratically), and a reused factor gets there in fewer CG iterations.
   const double eta = std::min(no_.max_forcing, kForcing * s.r_prev / s.r_ref);
-  if ((s.failure = solve_shifted(dq, shift, eta, s.damping))) {
+  const bool start_tangent = it == 1 && s.tangent_predictor;
+  const bool known_start = start_tangent && start_tangent_.step == step_;
+  if (known_start) s.damping = start_tangent_.shift;
+  const bool reuse_start = known_start && start_tangent_.shift > 0 && no_.reuse_iterations > 0 &&
+                           start_tangent_.factorizations == res_.factorizations;
+  if ((s.failure = solve_shifted(dq, shift, eta, s.damping, reuse_start))) {
     s.failure->iteration = it;
     return IterationOutcome::Failed;
   }
+  if (start_tangent) start_tangent_ = {step_, shift, res_.factorizations};
   // A shifted direction is long along the soft (buckling) mode: it is first cut to move no
   // dof by more than kShiftedStepMm.
   const double dq_max = dq.lpNorm<Eigen::Infinity>();
@@ -637,6 +660,8 @@ void FiniteStrainSolver::accept_step(const StepAttempt& s) {
   last_dl_ = s.dl;
   NewtonStep record = s.record;
   record.residual_norms.insert(record.residual_norms.begin(), 1.0);
+  record.factorizations = res_.factorizations - step_factorizations_from_;
+  step_factorizations_from_ = res_.factorizations;
   res_.newton_steps.push_back(record);
   ++step_;
   lambda_ = s.lambda_new;
@@ -726,9 +751,13 @@ void FiniteStrainSolver::factorize_and_solve(Eigen::VectorXd& dq, double toleran
 // the soft mode so much that Newton creeps away from the unstable state micrometres a solve
 // (docs/fem.md, the forehead 75 deg Z-plasty with measured layers: over 15 minutes at 1e-4,
 // 188 s at 1e-6). `damping` > 0 starts at that shift without trying the tangent itself (the
-// Newton loop's Levenberg-Marquardt memory, StepAttempt::damping).
+// Newton loop's Levenberg-Marquardt memory, StepAttempt::damping). `factor_is_shifted_tangent`:
+// the solver's factor is of this tangent shifted by `damping` (a step cut back, start_tangent_),
+// so conjugate gradients preconditioned by it solve the shifted tangent in an iteration or two
+// instead of a new factorization.
 std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, double& shift,
-                                                         double tolerance, double damping) {
+                                                         double tolerance, double damping,
+                                                         bool factor_is_shifted_tangent) {
   shift = 0;
   const auto finite = [&]() -> std::optional<Failure> {
     if (dq.allFinite()) return std::nullopt;
@@ -761,6 +790,18 @@ std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, do
     if (options_.reporter) options_.reporter->check_cancelled();
     for (Eigen::Index j = 0; j < sys_.K.cols(); ++j)
       values[diagonal_[j]] = kept_diagonal_[j] + mu * std::abs(kept_diagonal_[j]);
+    if (factor_is_shifted_tangent && mu == damping) {
+      const auto t0 = Clock::now();
+      std::optional<Eigen::VectorXd> x =
+          solver_->solve_reusing_factor(sys_.K, sys_.f, kMaxFreshIterations, tolerance);
+      res_.timings.solve_s += seconds_since(t0);
+      if (x) {
+        dq = std::move(*x);
+        solved = true;
+        shift = mu;
+        break;
+      }
+    }
     try {
       factorize_and_solve(dq, tolerance);
       solved = true;

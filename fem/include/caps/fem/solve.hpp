@@ -167,6 +167,7 @@ struct NewtonStep {
   double lambda = 0;                   ///< load factor reached (0..1]
   int iterations = 0;                  ///< Newton iterations (solves) of the converged attempt
   int cutbacks = 0;                    ///< failed attempts of this step before it converged
+  int factorizations = 0;              ///< numerical factorizations of all its attempts
   /// ||r|| after each solve relative to the step's predictor load ||r_0|| (first entry 1).
   std::vector<double> residual_norms;
   std::vector<double> line_search;     ///< accepted step length alpha of each iteration
