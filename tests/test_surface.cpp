@@ -11,11 +11,15 @@
 #include <fstream>
 #include <random>
 
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "caps/surface/picking.hpp"
 #include "caps/surface/range_mesh.hpp"
+#include "caps/surface/scan_io.hpp"
 #include "caps/surface/scan_model.hpp"
 #include "caps/volume/isosurface.hpp"
 #include "caps/volume/model.hpp"
@@ -391,3 +395,41 @@ TEST(ScanModel, LeePerrySmithIsUprightAndFacesThetaZero) {
   bad.texture = dir / "no-such-texture.jpg";
   EXPECT_THROW(read_scan_mesh(dir / "LeePerrySmith.glb", bad), IoError);
 }
+
+// A .gltf's external buffer is read from the file it names beside it; a name that is a folder
+// (fuzz_gltf: tinygltf's own reader sized the buffer from tellg()'s -1, an allocation of 2^63
+// bytes) or a FIFO (its reader would wait for a writer) is refused with the file named.
+TEST(ScanIo, AGltfsExternalBufferIsReadOnlyFromAFile) {
+  const fs::path dir = fs::temp_directory_path() / ("caps_gltf_uri_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  // One triangle: (0,0,0), (0.01,0,0), (0,0.02,0) m.
+  const float xyz[9] = {0, 0, 0, 0.01f, 0, 0, 0, 0.02f, 0};
+  std::ofstream(dir / "tri.bin", std::ios::binary)
+      .write(reinterpret_cast<const char*>(xyz), sizeof xyz);
+  auto gltf = [&](const std::string& uri) {
+    const fs::path p = dir / "scan.gltf";
+    std::ofstream(p) << "{\"asset\": {\"version\": \"2.0\"}, \"scene\": 0, \"scenes\": [{\"nodes\": [0]}],"
+                        " \"nodes\": [{\"mesh\": 0}], \"meshes\": [{\"primitives\": [{\"attributes\": "
+                        "{\"POSITION\": 0}}]}], \"accessors\": [{\"bufferView\": 0, \"componentType\": 5126, "
+                        "\"count\": 3, \"type\": \"VEC3\"}], \"bufferViews\": [{\"buffer\": 0, "
+                        "\"byteLength\": 36}], \"buffers\": [{\"byteLength\": 36, \"uri\": \""
+                     << uri << "\"}]}";
+    return p;
+  };
+  const ScanMesh scan = read_scan_mesh(gltf("tri.bin"));
+  ASSERT_EQ(scan.mesh.n_vertices(), 3);
+  EXPECT_NEAR((scan.mesh.V.row(2) * scan.mm_per_unit).norm(), 20.0, 1e-4);  // mm
+  fs::create_directories(dir / "data");
+  ASSERT_EQ(::mkfifo((dir / "pipe").c_str(), 0600), 0);
+  for (const std::string uri : {"data", "pipe", "missing.bin"}) {
+    try {
+      (void)read_scan_mesh(gltf(uri));
+      ADD_FAILURE() << uri << " was read";
+    } catch (const IoError& e) {
+      EXPECT_NE(std::string(e.what()).find(uri), std::string::npos) << e.what();
+    }
+  }
+  fs::remove_all(dir);
+}
+

@@ -71,6 +71,52 @@ void finish(ScanMesh& s, const ScanReadOptions& o) {
 
 // The most vertices a glTF scene may add up to over all its mesh instances (24 bytes each).
 constexpr std::size_t kMaxGltfVertices = 10'000'000;
+// The largest external buffer or image file a .gltf may name (its vertices, at most
+// kMaxGltfVertices, and a texture fit in far less).
+constexpr std::uintmax_t kMaxGltfExternalBytes = std::uintmax_t(2) << 30;
+
+// tinygltf's access to the files a .gltf names (its external buffers and images), instead of
+// its own: only regular files, at most kMaxGltfExternalBytes, and paths taken as they are. Its
+// own reader sized a buffer named "data" that was a folder from tellg()'s -1 (an allocation of
+// 2^63 bytes: fuzz_gltf, kept in fuzz/regressions/fuzz_gltf) and would block on a FIFO or a
+// device; its own path expansion runs wordexp on the name.
+bool gltf_file_exists(const std::string& path, void*) {
+  std::error_code ec;
+  return fs::is_regular_file(path, ec);
+}
+
+std::string gltf_expand_path(const std::string& path, void*) { return path; }
+
+bool gltf_read_file(std::vector<unsigned char>* out, std::string* err, const std::string& path,
+                    void*) {
+  std::error_code ec;
+  const bool regular = fs::is_regular_file(path, ec);
+  const std::uintmax_t bytes = regular ? fs::file_size(path, ec) : 0;
+  if (!regular || ec) {
+    if (err)
+      *err += cat("'", path, "' is not a file (a glTF's buffers and images must be files)\n");
+    return false;
+  }
+  if (bytes > kMaxGltfExternalBytes) {
+    if (err)
+      *err += cat("'", path, "' has ", bytes, " bytes, more than a scan's buffer or image may (",
+                  kMaxGltfExternalBytes, ")\n");
+    return false;
+  }
+  std::ifstream in(path, std::ios::binary);
+  out->resize(static_cast<std::size_t>(bytes));
+  if (!in || !in.read(reinterpret_cast<char*>(out->data()), static_cast<std::streamsize>(bytes))) {
+    if (err) *err += cat("'", path, "' could not be read\n");
+    return false;
+  }
+  return true;
+}
+
+bool gltf_refuse_write(std::string* err, const std::string& path,
+                       const std::vector<unsigned char>&, void*) {
+  if (err) *err += cat("'", path, "': reading a scan writes no file\n");
+  return false;
+}
 Eigen::Matrix4d node_matrix(const tinygltf::Node& n) {
   Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
   if (n.matrix.size() == 16) {
@@ -156,6 +202,8 @@ RgbImage to_rgb(const tinygltf::Image& im, const std::string& where) {
 
 ScanMesh read_gltf(const fs::path& path, const ScanReadOptions& o) {
   tinygltf::TinyGLTF loader;
+  loader.SetFsCallbacks(
+      {gltf_file_exists, gltf_expand_path, gltf_read_file, gltf_refuse_write, nullptr});
   tinygltf::Model model;
   std::string err, warn;
   const bool binary = lower(path.extension().string()) == ".glb";
