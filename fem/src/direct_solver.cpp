@@ -504,6 +504,7 @@ bool gemv_forwarding_linked();  // blas_gemv_forward.cpp
 std::unique_ptr<DirectSolver> make_direct_solver(SolverKind kind, int mumps_ordering,
                                                  bool mixed_precision) {
   [[maybe_unused]] static const bool gemv_forwarding = gemv_forwarding_linked();
+  // (SolverKind::Auto is resolved by the caller: resolved_solver().)
   if (kind == SolverKind::Cholmod) return std::make_unique<CholmodSolver>();
   if (mixed_precision) return std::make_unique<MixedMumpsSolver>(mumps_ordering);
   return std::make_unique<MumpsSolver>(mumps_ordering);

@@ -104,12 +104,25 @@ void check_initial_displacement(const Mesh& mesh, const SolveOptions& options) {
 
 }  // namespace
 
-const char* solver_name(SolverKind kind) { return kind == SolverKind::Mumps ? "mumps" : "cholmod"; }
+const char* solver_name(SolverKind kind) {
+  switch (kind) {
+    case SolverKind::Mumps: return "mumps";
+    case SolverKind::Cholmod: return "cholmod";
+    case SolverKind::Auto: break;
+  }
+  return "auto";
+}
 
 SolverKind parse_solver(const std::string& name) {
   if (name == "mumps") return SolverKind::Mumps;
   if (name == "cholmod") return SolverKind::Cholmod;
-  throw InvalidInput(cat("solver '", name, "' is unknown; use mumps or cholmod"));
+  if (name == "auto") return SolverKind::Auto;
+  throw InvalidInput(cat("solver '", name, "' is unknown; use auto, mumps or cholmod"));
+}
+
+SolverKind resolved_solver(SolverKind kind, Kinematics kinematics, bool tied) {
+  if (kind != SolverKind::Auto) return kind;
+  return kinematics == Kinematics::Finite && tied ? SolverKind::Cholmod : SolverKind::Mumps;
 }
 
 const char* kinematics_name(Kinematics kinematics) {
@@ -147,7 +160,8 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   check_initial_displacement(mesh, options);
   check_materials(mesh, options);
   SolveResult res;
-  res.solver = solver_name(options.solver);
+  res.solver =
+      solver_name(resolved_solver(options.solver, options.kinematics, !mesh.ties.empty()));
   auto t = Clock::now();
   const detail::DofMap map = detail::build_dof_map(mesh);
   res.timings.constraints_s = seconds_since(t);
@@ -173,8 +187,9 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   {
     // Ties' penalties leave single precision too few digits (docs/fem.md, "Ties and sliding on
     // the bone"): a tied mesh is factored in double precision from the start.
-    auto solver = detail::make_direct_solver(options.solver, options.mumps_ordering,
-                                             options.mixed_precision && mesh.ties.empty());
+    auto solver = detail::make_direct_solver(
+        resolved_solver(options.solver, Kinematics::Linear, !mesh.ties.empty()),
+        options.mumps_ordering, options.mixed_precision && mesh.ties.empty());
     try {
       auto analysis = std::async(options.threads == 1 ? std::launch::deferred : std::launch::async,
                                  [&] {

@@ -324,8 +324,9 @@ FiniteStrainSolver::FiniteStrainSolver(const Mesh& mesh, const SolveOptions& opt
   res_.n_nonzeros = sys_.K.nonZeros();
   res_.timings.assembly_s += seconds_since(t);
   // A tied mesh in double precision from the start (as the linear solve, solve.cpp).
-  solver_ = make_direct_solver(options.solver, options.mumps_ordering,
-                               options.mixed_precision && mesh.ties.empty());
+  solver_ = make_direct_solver(
+      resolved_solver(options.solver, Kinematics::Finite, !mesh.ties.empty()),
+      options.mumps_ordering, options.mixed_precision && mesh.ties.empty());
   t = Clock::now();
   solver_->analyze(sys_.K, map.block_start);  // once: every tangent has this structure
   res_.timings.analysis_s = seconds_since(t);

@@ -97,7 +97,7 @@ SensitivityMap thickness_sensitivity(const PatientModel& model, const Sensitivit
   map.options = options;
   // The sequential MUMPS build keeps global state and fails when two factorizations run at
   // once; CHOLMOD's are independent, and the two direct solvers agree to round-off.
-  if (options.threads > 1 && map.options.simulate.solve.solver == SolverKind::Mumps)
+  if (options.threads > 1 && map.options.simulate.solve.solver != SolverKind::Cholmod)
     map.options.simulate.solve.solver = SolverKind::Cholmod;
   const CylinderGrid& g = model.grid();
   const double z_first = g.z0_mm, z_last = g.z0_mm + (g.n_z - 1) * g.dz_mm;

@@ -16,11 +16,17 @@
 
 namespace caps::fem {
 
-enum class SolverKind { Mumps, Cholmod };
+/// The direct solver. Auto (the default): MUMPS, except for the finite-strain solve of a mesh
+/// with ties (the whole face), which CHOLMOD factors. Such a mesh is factored in double
+/// precision (the ties' penalties), its Newton tangents are often indefinite where flaps buckle,
+/// and CHOLMOD's supernodal Cholesky stops at the first non-positive pivot where MUMPS completes
+/// the factorization: the Cranium page's default Z-plasty took 29.7 s of factorizations instead
+/// of 43.3 s, a positive definite tangent as long with either (docs/fem.md, "Inexact Newton").
+enum class SolverKind { Mumps, Cholmod, Auto };
 
-/// "mumps" / "cholmod".
+/// "mumps" / "cholmod" / "auto".
 const char* solver_name(SolverKind kind);
-/// Parses "mumps" / "cholmod"; throws InvalidInput otherwise.
+/// Parses "mumps" / "cholmod" / "auto"; throws InvalidInput otherwise.
 SolverKind parse_solver(const std::string& name);
 
 /// Parses a precision name: "mixed" -> true, "double" -> false (SolveOptions::mixed_precision);
@@ -32,6 +38,8 @@ enum class Kinematics {
   Linear,  ///< small strain (the 1992 model): each material's small_strain() constants; one linear solve
   Finite   ///< finite strain: each layer's hyperelastic material (linear is refused)
 };
+/// The solver `kind` stands for in a solve (Auto resolved as described there).
+SolverKind resolved_solver(SolverKind kind, Kinematics kinematics, bool tied);
 
 /// "small-strain" / "finite-strain".
 const char* kinematics_name(Kinematics kinematics);
@@ -112,7 +120,7 @@ struct SolveOptions {
   /// Linear (default) or Finite; the finite-strain controls are in `newton`.
   Kinematics kinematics = Kinematics::Linear;
   NewtonOptions newton;
-  SolverKind solver = SolverKind::Mumps;
+  SolverKind solver = SolverKind::Auto;
   /// MUMPS ICNTL(7) ordering: 0 AMD, 2 AMF, 3 SCOTCH (if built), 4 PORD, 5 METIS (if built),
   /// 6 QAMD, 7 automatic. The default is the fastest measured (docs/benchmarks.md).
   int mumps_ordering = 4;
