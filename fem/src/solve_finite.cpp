@@ -306,7 +306,7 @@ class FiniteStrainSolver {
   // tangent: its first solve starts at that shift instead of climbing the ladder again, and
   // reuses the factor while it is the solver's last (Cranium, the page's default Z-plasty on
   // the forehead: the same indefinite tangent was factorized five times, shifts 0 to 1e-3, in
-  // each of four attempts at one step; docs/fem.md, "Load steps").
+  // each of four attempts at one step; docs/fem.md, "Inexact Newton").
   struct StartTangent {
     int step = -1;
     double shift = 0;

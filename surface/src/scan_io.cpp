@@ -117,6 +117,7 @@ bool gltf_refuse_write(std::string* err, const std::string& path,
   if (err) *err += cat("'", path, "': reading a scan writes no file\n");
   return false;
 }
+
 Eigen::Matrix4d node_matrix(const tinygltf::Node& n) {
   Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
   if (n.matrix.size() == 16) {

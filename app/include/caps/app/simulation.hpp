@@ -118,7 +118,8 @@ struct SolverFields {
                                    "seconds, with an error saying how far it came (the linear "
                                    "model answers in one solve); 0 = no limit. Newton stops by "
                                    "itself after 400 solves or 200 load steps"});
-    v(r.solver, {"solver", "auto (MUMPS; CHOLMOD for a finite-strain closure in the whole face), mumps or cholmod"});
+    v(r.solver, {"solver", "auto (MUMPS; CHOLMOD for a finite-strain closure in the whole "
+                           "face), mumps or cholmod"});
     v(r.precision, {"precision", "mixed (a single-precision factorization refined to double "
                                  "accuracy; falls back to double by itself when that is not "
                                  "enough) or double; MUMPS only"});
