@@ -160,8 +160,9 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   check_initial_displacement(mesh, options);
   check_materials(mesh, options);
   SolveResult res;
-  res.solver =
-      solver_name(resolved_solver(options.solver, options.kinematics, !mesh.ties.empty()));
+  const SolverKind solver_kind =
+      resolved_solver(options.solver, options.kinematics, !mesh.ties.empty());
+  res.solver = solver_name(solver_kind);
   auto t = Clock::now();
   const detail::DofMap map = detail::build_dof_map(mesh);
   res.timings.constraints_s = seconds_since(t);
@@ -187,9 +188,8 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   {
     // Ties' penalties leave single precision too few digits (docs/fem.md, "Ties and sliding on
     // the bone"): a tied mesh is factored in double precision from the start.
-    auto solver = detail::make_direct_solver(
-        resolved_solver(options.solver, Kinematics::Linear, !mesh.ties.empty()),
-        options.mumps_ordering, options.mixed_precision && mesh.ties.empty());
+    auto solver = detail::make_direct_solver(solver_kind, options.mumps_ordering,
+                                             options.mixed_precision && mesh.ties.empty());
     try {
       auto analysis = std::async(options.threads == 1 ? std::launch::deferred : std::launch::async,
                                  [&] {

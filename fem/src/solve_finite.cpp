@@ -261,6 +261,9 @@ class FiniteStrainSolver {
   std::optional<Failure> solve_shifted(Eigen::VectorXd& dq, double& shift, double tolerance,
                                        double damping, bool factor_is_shifted_tangent = false);
   void factorize_and_solve(Eigen::VectorXd& dq, double tolerance);
+  // K dq = f by conjugate gradients preconditioned with the solver's last factor, in at most
+  // max_iterations (timed as a solve); false, dq untouched, if they did not get there.
+  bool solve_with_last_factor(Eigen::VectorXd& dq, int max_iterations, double tolerance);
   void finish_report();
   void recover_result();
   void recover_element(const Eigen::VectorXd& u, int e, ElementRecovery& out) const;
@@ -733,11 +736,20 @@ void FiniteStrainSolver::factorize_and_solve(Eigen::VectorXd& dq, double toleran
     const Timed timed{res_.timings.factorization_s, t0};
     solver_->factorize(sys_.K);
   }
+  if (solve_with_last_factor(dq, kMaxFreshIterations, tolerance)) return;
   t0 = Clock::now();
-  std::optional<Eigen::VectorXd> x =
-      solver_->solve_reusing_factor(sys_.K, sys_.f, kMaxFreshIterations, tolerance);
-  dq = x ? std::move(*x) : solver_->solve(sys_.f);
+  dq = solver_->solve(sys_.f);
   res_.timings.solve_s += seconds_since(t0);
+}
+
+bool FiniteStrainSolver::solve_with_last_factor(Eigen::VectorXd& dq, int max_iterations,
+                                                double tolerance) {
+  const auto t0 = Clock::now();
+  std::optional<Eigen::VectorXd> x =
+      solver_->solve_reusing_factor(sys_.K, sys_.f, max_iterations, tolerance);
+  res_.timings.solve_s += seconds_since(t0);
+  if (x) dq = std::move(*x);
+  return x.has_value();
 }
 
 // One solve of K dq = f. Past a buckling point (the free flaps pucker under the closure's
@@ -766,16 +778,8 @@ std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, do
   };
   std::string unshifted;  // why the tangent itself could not be factorized
   if (damping == 0) {
-    if (no_.reuse_iterations > 0) {
-      const auto t0 = Clock::now();
-      std::optional<Eigen::VectorXd> x =
-          solver_->solve_reusing_factor(sys_.K, sys_.f, no_.reuse_iterations, tolerance);
-      res_.timings.solve_s += seconds_since(t0);
-      if (x) {
-        dq = std::move(*x);
-        return finite();
-      }
-    }
+    if (no_.reuse_iterations > 0 && solve_with_last_factor(dq, no_.reuse_iterations, tolerance))
+      return finite();
     try {
       factorize_and_solve(dq, tolerance);
       return finite();
@@ -791,17 +795,11 @@ std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, do
     if (options_.reporter) options_.reporter->check_cancelled();
     for (Eigen::Index j = 0; j < sys_.K.cols(); ++j)
       values[diagonal_[j]] = kept_diagonal_[j] + mu * std::abs(kept_diagonal_[j]);
-    if (factor_is_shifted_tangent && mu == damping) {
-      const auto t0 = Clock::now();
-      std::optional<Eigen::VectorXd> x =
-          solver_->solve_reusing_factor(sys_.K, sys_.f, kMaxFreshIterations, tolerance);
-      res_.timings.solve_s += seconds_since(t0);
-      if (x) {
-        dq = std::move(*x);
-        solved = true;
-        shift = mu;
-        break;
-      }
+    if (factor_is_shifted_tangent && mu == damping &&
+        solve_with_last_factor(dq, kMaxFreshIterations, tolerance)) {
+      solved = true;
+      shift = mu;
+      break;
     }
     try {
       factorize_and_solve(dq, tolerance);
