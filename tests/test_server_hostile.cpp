@@ -739,7 +739,8 @@ TEST_F(HostileTest, SigintOrSigtermStopsCapsServeWithinASecond) {
     std::printf("[          ] caps serve stopped %.3f s after %s\n", took,
                 signal == SIGINT ? "SIGINT" : "SIGTERM");
     EXPECT_LT(took, kCancelBoundS);
-    EXPECT_TRUE(WIFEXITED(status)) << stderr_text;
+    EXPECT_TRUE(WIFEXITED(status)) << "ended by signal " << (WIFSIGNALED(status) ? WTERMSIG(status) : 0)
+                                   << "\n" << stderr_text;
     EXPECT_NE(stderr_text.find(signal == SIGINT ? "SIGINT: stopping" : "SIGTERM: stopping"),
               std::string::npos)
         << stderr_text;
