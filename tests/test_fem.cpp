@@ -10,12 +10,12 @@
 #include <dlfcn.h>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
-#include <optional>
-#include <random>
 #include <atomic>
 #include <chrono>
 #include <csignal>
+#include <fstream>
+#include <optional>
+#include <random>
 #include <thread>
 
 #include "caps/core/error.hpp"
@@ -505,8 +505,8 @@ TEST(FemSolvers, MixedPrecisionAfterItsFallBackRefusesASingularTangent) {
   EXPECT_THROW(solver->factorize(K1), SolverError);
 }
 
-// CHOLMOD's solver leaves the process's SIGTERM handler alone while it orders and factors: CHOLMOD's
-// own ordering choice would call METIS, whose GKlib swaps in a handler that longjmps to a
+// CHOLMOD's solver leaves the process's SIGTERM handler alone while it orders and factors:
+// CHOLMOD's own ordering choice would call METIS, whose GKlib swaps in a handler that longjmps to a
 // thread-local buffer for as long as it runs, so that `caps serve` stopped by SIGTERM then
 // crashed (the signal lands on another thread). A watcher thread reads the handler throughout
 // the analysis of a 3-D grid Laplacian (large enough that CHOLMOD's default would try METIS);
@@ -571,7 +571,8 @@ TEST(FemSolvers, DenseAndDisjointDenseBlocksAreOrderedWithoutEndingTheProcess) {
       std::vector<Eigen::Triplet<double>> t;
       for (int b = 0; b < blocks; ++b)
         for (int i = 0; i < size; ++i)
-          for (int j = i; j < size; ++j) t.emplace_back(b * size + i, b * size + j, i == j ? size + 1.0 : -1.0);
+          for (int j = i; j < size; ++j)
+            t.emplace_back(b * size + i, b * size + j, i == j ? size + 1.0 : -1.0);
       Eigen::SparseMatrix<double> K(n, n);
       K.setFromTriplets(t.begin(), t.end());
       K.makeCompressed();
@@ -587,7 +588,8 @@ TEST(FemSolvers, DenseAndDisjointDenseBlocksAreOrderedWithoutEndingTheProcess) {
           solver->analyze(K, starts);
           solver->factorize(K);
           EXPECT_LT((solver->solve(b) - x_true).cwiseAbs().maxCoeff(), 1e-9)
-              << blocks << " blocks of " << size << ", " << solver_name(kind) << (mixed ? " mixed" : "");
+              << blocks << " blocks of " << size << ", " << solver_name(kind)
+              << (mixed ? " mixed" : "");
         }
     }
 }
