@@ -250,17 +250,19 @@ def test_a_malformed_sweep_stops_the_workflow_before_any_job(tmp_path):
 
 
 def test_two_undermining_values_give_two_forces_each_that_of_caps_simulate(tmp_path, caps):
-    """A real run (about 15 s on 2 cores): the small face phantom, a Z-plasty undermined 5 and
-    15 mm, closed on the clamped patch (domain=patch: quicker than the whole face, and a second
-    option beside the sweep). results.tsv has the undermine column and two closing forces,
-    different, each equal to `caps simulate --undermine X --domain patch` run by hand on the
+    """A real run: the small face phantom, a Z-plasty undermined 5 and 15 mm, closed by the
+    linear model on the clamped patch (material=linear;domain=patch: one solve each, and two
+    options beside the sweep; the finite-strain closures took 34 s of this test's 37 s).
+    results.tsv has the undermine column and two closing forces, different, each equal to
+    `caps simulate --undermine X --material linear --domain patch` run by hand on the
     workflow's model and plan."""
     (tmp_path / "patients.tsv").write_text(
         "patient\tsource\tinput\toptions\n"
         "phantom\tphantom\t\t--face --scale 0.9 --voxels 88,88,84 --spacing 2.5,2.5,2.5\n")
     (tmp_path / "plans.tsv").write_text(
         "plan\ttemplate\tat\torientation\tparameters\tmesh_size\tsimulate\n"
-        "zu\tz-plasty\tglabella+0,25\t90\tlength=15;angle=45\t2.5\tundermine=5,15;domain=patch\n")
+        "zu\tz-plasty\tglabella+0,25\t90\tlength=15;angle=45\t2.5\t"
+        "undermine=5,15;material=linear;domain=patch\n")
     work = tmp_path / "work"
     run = snakemake("--config", f"caps={caps}", f"patients={tmp_path / 'patients.tsv'}",
                     f"plans={tmp_path / 'plans.tsv'}", "--directory", str(work), "--cores", "2",
@@ -274,12 +276,13 @@ def test_two_undermining_values_give_two_forces_each_that_of_caps_simulate(tmp_p
     for plan, row in rows.items():
         assert row["status"] == "ok", row
         assert (row["undermine"], row["simulate"]) == (plan[len("zu_undermine"):],
-                                                       f"undermine={row['undermine']};domain=patch")
+                                                       f"undermine={row['undermine']};"
+                                                       "material=linear;domain=patch")
         out = tmp_path / "direct" / plan
         subprocess.run([caps, "simulate", "--model", str(work / "models" / "phantom"),
                         "--plan", str(work / "plans" / "phantom" / f"{plan}.json"), "-o", str(out),
-                        "--mesh-size", "2.5", "--undermine", row["undermine"], "--domain", "patch",
-                        "-q"], check=True)
+                        "--mesh-size", "2.5", "--undermine", row["undermine"], "--material",
+                        "linear", "--domain", "patch", "-q"], check=True)
         with open(out / "result.json") as f:
             direct[plan] = json.load(f)["total_suture_force_n"]
         assert float(row["closing_force_n"]) == pytest.approx(direct[plan], rel=1e-9), plan
