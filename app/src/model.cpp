@@ -11,6 +11,7 @@
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
 #include "caps/mesher/tissue_model.hpp"
 #include "caps/surface/chart.hpp"
 #include "caps/surface/color_picture.hpp"
@@ -184,6 +185,74 @@ void check_grid_budget(int n_theta, int n_z, double max_bytes, const char* limit
 
 // ---- from-volume --------------------------------------------------------------------------
 
+namespace {
+
+// Whether the landmarks show the face's midline profile: the glabella, the nasion, the nose tip,
+// the subnasale and the chin all found (none withdrawn as out of the face's order).
+bool midline_found(const Landmarks& l) {
+  for (const char* name : {"glabella", "nasion", "pronasale", "subnasale", "pogonion"}) {
+    const Landmark* x = l.find(name);
+    if (!x || !x->found) return false;
+  }
+  return true;
+}
+bool midline_found(const CylindricalMaps& maps) {
+  return midline_found(find_landmarks(PatientModel(maps)));
+}
+
+// The head's pitch in the scanner (issue 37; docs/landmarks.md, "A head tilted or turned in the
+// scanner"). Along the scanner's axis the profile of a head tilted 20 deg or more is not a face's
+// and its landmarks are withdrawn. The axis is then tilted about the head's left-right direction
+// (square to the axis and to the face's midline, `midline_theta_deg`: a head also turned is
+// tilted about its own left-right axis), through the head's middle, by -30 .. 30 deg in 10 deg steps; each trial's skin (maps without
+// layers or surfaces) is searched for the midline landmarks, and the middle of the tilts that
+// find them all is taken as the head's pitch: a face is found within about 10-15 deg of upright
+// either way (docs/landmarks.md's table), so the middle of that range is the upright one.
+// nullopt when no tilt finds the profile (the scanner's axis stays, its landmarks absent).
+struct Pitch {
+  CylinderAxis axis;
+  double deg = 0;
+  std::vector<double> found_at;  // the tilts that found the midline profile
+};
+std::optional<Pitch> head_pitch(const Volume& v, const VolumeModel& upright,
+                                double midline_theta_deg, ModelOptions o, Reporter* reporter) {
+  const CylinderAxis& a = upright.maps.axis;
+  const CylinderGrid& g = upright.maps.grid;
+  const Eigen::Vector3d centre = a.to_lps(0, g.z_mm(g.n_z / 2), 0);
+  const Eigen::Vector3d left = a.direction.cross(a.ray(deg_to_rad(midline_theta_deg))).normalized();
+  o.surfaces = false;
+  o.maps.layers.measure = false;
+  std::vector<double> found_at;
+  std::vector<CylinderAxis> axes;
+  for (const double deg : {-30.0, -20.0, -10.0, 10.0, 20.0, 30.0}) {
+    const Eigen::AngleAxisd turn(deg_to_rad(deg), left);
+    CylinderAxis t;
+    t.direction = (turn * a.direction).normalized();
+    t.front = (turn * a.front).normalized();
+    // The axis through the head's middle: z = 0 there.
+    t.origin_lps = centre;
+    o.axis = t;
+    note(reporter, cat("the head's pose: trying its axis tilted ", deg, " deg"));
+    if (midline_found(build_volume_model(v, o, nullptr).maps)) {
+      found_at.push_back(deg);
+      axes.push_back(t);
+    }
+  }
+  if (found_at.empty()) return std::nullopt;
+  const std::size_t mid = found_at.size() / 2;
+  double deg = found_at.size() % 2 ? found_at[mid] : 0.5 * (found_at[mid - 1] + found_at[mid]);
+  Pitch p;
+  p.deg = deg;
+  p.found_at = found_at;
+  const Eigen::AngleAxisd turn(deg_to_rad(deg), left);
+  p.axis.direction = (turn * a.direction).normalized();
+  p.axis.front = (turn * a.front).normalized();
+  p.axis.origin_lps = centre;
+  return p;
+}
+
+}  // namespace
+
 ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   // Check the output and the options before the slow work, so a mistake fails at once.
@@ -253,7 +322,24 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
     bone_mask = read_volume(r.bone_mask);
     o.segment.bone_mask = &bone_mask;
   }
-  const VolumeModel m = build_volume_model(v, o, reporter);
+  VolumeModel m = build_volume_model(v, o, reporter);
+  if (const Landmarks upright = find_landmarks(PatientModel(m.maps));
+      !o.axis && !midline_found(upright)) {
+    if (const std::optional<Pitch> pitch =
+            head_pitch(v, m, upright.midline_theta_deg, o, reporter)) {
+      o.axis = pitch->axis;
+      m = build_volume_model(v, o, reporter);
+      std::string tried;
+      for (double d : pitch->found_at) tried += cat(tried.empty() ? "" : ", ", d);
+      const std::string why =
+          cat("the head lies tilted in the scanner: along the scanner's axis its profile is not "
+              "a face's, and the face's midline landmarks were found with the axis tilted ", tried,
+              " deg about the left-right direction; the model's axis is tilted ", pitch->deg,
+              " deg, the middle of those (model.json axis; docs/landmarks.md)");
+      note(reporter, why);
+      m.notes.push_back(why);
+    }
+  }
   write_model(m, r.output, r.force, reporter);
   add_landmarks(r.output, reporter);
   // The whole-face tissue model; a volume it cannot be made of (no bone, no soft tissue) still

@@ -280,7 +280,7 @@ VolumeModel build_volume_model(const Volume& input, const ModelOptions& o, Repor
   m.bone_options = o.maps.bone;
   m.bone_cap_mm = o.maps.bone_cap_mm;
   m.stats = model_statistics(m.maps);
-  {
+  if (o.surfaces) {
     Progress progress(reporter, "extracting skin and bone surfaces", 2);
     const auto& seg = m.segmentation;
     m.skin = surface_of(seg.working, seg.skin, seg.skin_threshold, true, o);

@@ -26,6 +26,9 @@ struct ModelOptions {
   /// (brain extraction keeps the brain, 1.1-1.5 l; an adult head, even cut at the chin, holds
   /// well over 2.5 l); 0: no check (a small child's head).
   double min_head_ml = 2000.0;
+  /// false: the maps only, no skin.ply and bone.ply surfaces (a trial of an axis, whose maps
+  /// are looked at and thrown away: the head's pose, docs/landmarks.md).
+  bool surfaces = true;
 };
 
 /// Everything built from one volume (the ModelContent, without colour, and how it was made).
