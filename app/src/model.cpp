@@ -187,10 +187,11 @@ void check_grid_budget(int n_theta, int n_z, double max_bytes, const char* limit
 
 namespace {
 
-// Whether the landmarks show the face's midline profile: the glabella, the nasion, the nose tip,
-// the subnasale and the chin all found (none withdrawn as out of the face's order).
+// Whether the landmarks show the face's midline profile: the glabella, the nasion, the nose tip
+// and the subnasale all found (none withdrawn as out of the face's order). Not the chin, which
+// many head CTs leave out (Cranium's ends above it).
 bool midline_found(const Landmarks& l) {
-  for (const char* name : {"glabella", "nasion", "pronasale", "subnasale", "pogonion"}) {
+  for (const char* name : {"glabella", "nasion", "pronasale", "subnasale"}) {
     const Landmark* x = l.find(name);
     if (!x || !x->found) return false;
   }
@@ -204,11 +205,12 @@ bool midline_found(const CylindricalMaps& maps) {
 // scanner"). Along the scanner's axis the profile of a head tilted 20 deg or more is not a face's
 // and its landmarks are withdrawn. The axis is then tilted about the head's left-right direction
 // (square to the axis and to the face's midline, `midline_theta_deg`: a head also turned is
-// tilted about its own left-right axis), through the head's middle, by -30 .. 30 deg in 10 deg steps; each trial's skin (maps without
-// layers or surfaces) is searched for the midline landmarks, and the middle of the tilts that
-// find them all is taken as the head's pitch: a face is found within about 10-15 deg of upright
-// either way (docs/landmarks.md's table), so the middle of that range is the upright one.
-// nullopt when no tilt finds the profile (the scanner's axis stays, its landmarks absent).
+// tilted about its own left-right axis), through the head's middle, by -30 .. 30 deg in 10 deg
+// steps; each trial's skin (maps without layers or surfaces) is searched for the midline
+// landmarks, and the middle of the neighbouring tilts that find them all is taken as the head's
+// pitch: a face is found within about 10-15 deg of upright either way (docs/landmarks.md's
+// table), so the middle of that range is the upright one.
+// nullopt when no two neighbouring tilts find it (the scanner's axis stays, its landmarks absent).
 struct Pitch {
   CylinderAxis axis;
   double deg = 0;
@@ -223,7 +225,6 @@ std::optional<Pitch> head_pitch(const Volume& v, const VolumeModel& upright,
   o.surfaces = false;
   o.maps.layers.measure = false;
   std::vector<double> found_at;
-  std::vector<CylinderAxis> axes;
   for (const double deg : {-30.0, -20.0, -10.0, 10.0, 20.0, 30.0}) {
     const Eigen::AngleAxisd turn(deg_to_rad(deg), left);
     CylinderAxis t;
@@ -233,14 +234,23 @@ std::optional<Pitch> head_pitch(const Volume& v, const VolumeModel& upright,
     t.origin_lps = centre;
     o.axis = t;
     note(reporter, cat("the head's pose: trying its axis tilted ", deg, " deg"));
-    if (midline_found(build_volume_model(v, o, nullptr).maps)) {
-      found_at.push_back(deg);
-      axes.push_back(t);
-    }
+    if (midline_found(build_volume_model(v, o, nullptr).maps)) found_at.push_back(deg);
   }
-  if (found_at.empty()) return std::nullopt;
+  // The longest run of neighbouring tilts (10 deg apart) that found it; one tilt alone is not
+  // taken (on VTK's headsq, whose upright profile lacks a landmark, only -10 deg found all four).
+  std::size_t best_first = 0, best_n = 0;
+  for (std::size_t i = 0; i < found_at.size();) {
+    std::size_t j = i + 1;
+    while (j < found_at.size() && found_at[j] - found_at[j - 1] < 10.5) ++j;
+    if (j - i > best_n) best_first = i, best_n = j - i;
+    i = j;
+  }
+  if (best_n < 2) return std::nullopt;
+  found_at = std::vector<double>(found_at.begin() + static_cast<std::ptrdiff_t>(best_first),
+                                 found_at.begin() + static_cast<std::ptrdiff_t>(best_first + best_n));
   const std::size_t mid = found_at.size() / 2;
-  double deg = found_at.size() % 2 ? found_at[mid] : 0.5 * (found_at[mid - 1] + found_at[mid]);
+  const double deg =
+      found_at.size() % 2 ? found_at[mid] : 0.5 * (found_at[mid - 1] + found_at[mid]);
   Pitch p;
   p.deg = deg;
   p.found_at = found_at;
