@@ -197,6 +197,14 @@ bool midline_found(const Landmarks& l) {
   }
   return true;
 }
+// Whether the landmark detector asked whether the head is tilted: a nose where the brow should
+// be, or landmarks out of the face's order (docs/landmarks.md). A head without a face (the plain
+// phantom) or a CT cut above the nose is not searched for a pose.
+bool suspects_tilt(const Landmarks& l) {
+  for (const Landmark& x : l.items)
+    if (!x.found && x.note.find("tilted in the scanner?") != std::string::npos) return true;
+  return false;
+}
 bool midline_found(const CylindricalMaps& maps) {
   return midline_found(find_landmarks(PatientModel(maps)));
 }
@@ -246,8 +254,8 @@ std::optional<Pitch> head_pitch(const Volume& v, const VolumeModel& upright,
     i = j;
   }
   if (best_n < 2) return std::nullopt;
-  found_at = std::vector<double>(found_at.begin() + static_cast<std::ptrdiff_t>(best_first),
-                                 found_at.begin() + static_cast<std::ptrdiff_t>(best_first + best_n));
+  const auto first = found_at.begin() + static_cast<std::ptrdiff_t>(best_first);
+  found_at = std::vector<double>(first, first + static_cast<std::ptrdiff_t>(best_n));
   const std::size_t mid = found_at.size() / 2;
   const double deg =
       found_at.size() % 2 ? found_at[mid] : 0.5 * (found_at[mid - 1] + found_at[mid]);
@@ -334,7 +342,7 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   }
   VolumeModel m = build_volume_model(v, o, reporter);
   if (const Landmarks upright = find_landmarks(PatientModel(m.maps));
-      !o.axis && !midline_found(upright)) {
+      !o.axis && !midline_found(upright) && suspects_tilt(upright)) {
     if (const std::optional<Pitch> pitch =
             head_pitch(v, m, upright.midline_theta_deg, o, reporter)) {
       o.axis = pitch->axis;
