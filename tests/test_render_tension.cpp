@@ -163,8 +163,8 @@ TEST(TensionMap, CompressionAndZeroStressAreTheBottomColour) {
 }
 
 TEST(TensionMap, ImagesShowTheFieldWhereItIs) {
-  // Plan view. With zero stress every skin pixel (not at the silhouette, left of the colour bar's
-  // panel) is a shade of the bottom colour. With a constant stress on the mesh the inner half of
+  // Plan view. With zero stress every skin pixel (not at the silhouette) is a shade of the bottom
+  // colour: the colour bar's panel lies in a margin right of the view, over no skin. With a constant stress on the mesh the inner half of
   // the mesh's footprint is a shade of the top colour and the skin outside it (range mesh) a
   // shade of the bottom colour.
   const std::filesystem::path dir =
@@ -172,7 +172,6 @@ TEST(TensionMap, ImagesShowTheFieldWhereItIs) {
   std::filesystem::create_directories(dir);
   RenderOptions o;
   o.width = o.height = 400;
-  const int panel_left = 250;  // the panel starts near x = 277 on a 400 px image
   Overlays zero, constant;
   zero.scalar_maps.push_back(tension_map(skin(), mesh(), Eigen::VectorXd::Zero(mesh().n_nodes())));
   constant.scalar_maps.push_back(
@@ -183,6 +182,11 @@ TEST(TensionMap, ImagesShowTheFieldWhereItIs) {
   const RgbImage post = read_png(files[1]), z = read_png(files[2]);
   const RgbImage c =
       read_png(render_views_with_overlays(round_cylinder(), skin(), {View::Plan}, o, constant, dir)[2]);
+  // The view as large as pre_ and post_, the panel in a margin to its right.
+  EXPECT_EQ(post.width, o.width);
+  EXPECT_EQ(z.height, o.height);
+  EXPECT_EQ(z.width, o.width + 120);
+  EXPECT_EQ(c.width, z.width);
   // In the image: r_mesh, the largest distance of a projected micropolygon vertex from the
   // projected mesh centre, and r_seam, that of any vertex of a seam triangle (the strip that
   // blends the rim's values into the range mesh's 0).
@@ -208,9 +212,9 @@ TEST(TensionMap, ImagesShowTheFieldWhereItIs) {
   double worst_zero = 0, worst_top = 0, worst_bottom = 0;
   int n_zero = 0, n_top = 0, n_bottom = 0;
   for (int y = 1; y + 1 < o.height; ++y)
-    for (int x = 1; x < panel_left; ++x) {
+    for (int x = 1; x + 1 < o.width; ++x) {
       if (!skin_px(x, y)) continue;
-      const std::size_t i = (std::size_t(y) * o.width + x) * 3;
+      const std::size_t i = (std::size_t(y) * z.width + x) * 3;
       worst_zero = std::max(worst_zero, hue_error(&z.rgb[i], bottom));
       ++n_zero;
       const double r = (Eigen::Vector2d(x, y) - centre).norm();

@@ -195,6 +195,23 @@ void draw_signed_color_bar(RgbImage& image, double max_value, const std::string&
 
 namespace {
 
+// The width of a scalar map's margin for its colour bar, in units of the view's width.
+constexpr double kLegendMargin = 0.3;
+
+// `image` with `margin` columns of `colour` added on its right.
+RgbImage with_right_margin(const RgbImage& image, int margin, const Eigen::Vector3d& colour) {
+  RgbImage out;
+  out.width = image.width + margin;
+  out.height = image.height;
+  out.rgb.resize(static_cast<std::size_t>(out.width) * out.height * 3);
+  for (int y = 0; y < out.height; ++y) {
+    std::copy_n(image.rgb.begin() + static_cast<std::ptrdiff_t>(y) * image.width * 3,
+                image.width * 3, out.rgb.begin() + static_cast<std::ptrdiff_t>(y) * out.width * 3);
+    for (int x = image.width; x < out.width; ++x) out.set(x, y, colour);
+  }
+  return out;
+}
+
 // Polylines in LPS mm drawn with `pen` at their pixels camera.project(p); with `hits`, only the
 // runs of points not hidden by the surface (no deeper than the surface met through their pixel,
 // plus kLineDepthToleranceMm).
@@ -401,9 +418,13 @@ std::vector<std::filesystem::path> render_views_with_overlays(const PatientModel
     write_png(written.back(), post);
     for (std::size_t i = 0; i < overlays.scalar_maps.size(); ++i) {
       const ScalarMap& m = overlays.scalar_maps[i];
-      RgbImage map = render_skin(skin, 1.0, colors[i], cam, options);
+      // The colour bar's panel in a margin to the right of the view, not over the face (it
+      // covered the cheek's side of a front view): the view itself as in pre_ and post_.
+      RgbImage view = render_skin(skin, 1.0, colors[i], cam, options);
+      if (bar) draw_scale_bar(view, cam);
+      RgbImage map = with_right_margin(
+          view, static_cast<int>(std::lround(kLegendMargin * options.width)), options.background);
       draw_color_bar(map, m.max_value, m.unit, m.title, m.note);
-      if (bar) draw_scale_bar(map, cam);
       written.push_back(dir / cat(m.name, "_", view_name(v), ".png"));
       write_png(written.back(), map);
     }
