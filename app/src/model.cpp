@@ -341,8 +341,10 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
     o.segment.bone_mask = &bone_mask;
   }
   VolumeModel m = build_volume_model(v, o, reporter);
-  if (const Landmarks upright = find_landmarks(PatientModel(m.maps));
-      !o.axis && !midline_found(upright) && suspects_tilt(upright)) {
+  // The head's pose when the scanner's axis does not show a face's profile (an axis given with
+  // --axis-dir is kept as it is).
+  const Landmarks upright = o.axis ? Landmarks{} : find_landmarks(PatientModel(m.maps));
+  if (!o.axis && !midline_found(upright) && suspects_tilt(upright)) {
     if (const std::optional<Pitch> pitch =
             head_pitch(v, m, upright.midline_theta_deg, o, reporter)) {
       o.axis = pitch->axis;
