@@ -127,6 +127,7 @@ TEST(CliLandmarks, AHeadTiltedInTheScannerIsPutUprightAndItsLandmarksFound) {
   const json upright = posed_face(0, 0, "pose_upright");
   const json& axis0 = upright["axis"]["direction"];
   EXPECT_NEAR(axis0[2].get<double>(), 1.0, 1e-12) << "an upright head keeps the scanner's axis";
+  EXPECT_FALSE(upright["source"].contains("pose"));
   struct Pose {
     double pitch, yaw, axis_deg;
   };
@@ -136,6 +137,8 @@ TEST(CliLandmarks, AHeadTiltedInTheScannerIsPutUprightAndItsLandmarksFound) {
     const json m = posed_face(p.pitch, p.yaw, cat_args("pose_", p.pitch, "_", p.yaw));
     const double cos_tilt = m["axis"]["direction"][2].get<double>();
     EXPECT_NEAR(std::acos(cos_tilt) * 180 / M_PI, p.axis_deg, 1e-6) << "pitch " << p.pitch;
+    EXPECT_NEAR(m["source"]["pose"]["pitch_deg"].get<double>(), p.axis_deg, 1e-9)
+        << m["source"].dump();
     bool said = false;
     for (const auto& n : m["source"]["notes"])
       said = said || n.get<std::string>().find("tilted in the scanner") != std::string::npos;

@@ -358,6 +358,13 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
               " deg, the middle of those (model.json axis; docs/landmarks.md)");
       note(reporter, why);
       m.notes.push_back(why);
+      m.pose_json = json{{"pitch_deg", pitch->deg},
+                         {"found_at_deg", pitch->found_at},
+                         {"about", "the head's left-right direction, through the head's middle"},
+                         {"method", "the middle of the neighbouring axis tilts (10 deg steps) "
+                                    "whose skin shows the glabella, nasion, nose tip and "
+                                    "subnasale (docs/landmarks.md, \"The head's pitch\")"}}
+                        .dump();
     }
   }
   write_model(m, r.output, r.force, reporter);

@@ -379,6 +379,7 @@ void write_model(const VolumeModel& m, const fs::path& dir, bool force, Reporter
                  {"spacing_mm", detail::vec_json(m.source_spacing_mm)},
                  {"notes", m.notes}};
   if (!m.chart_json.empty()) source["chart"] = json::parse(m.chart_json);
+  if (!m.pose_json.empty()) source["pose"] = json::parse(m.pose_json);
   c.source_json = source.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   c.segmentation_json = json{{"skin_method", seg.skin_method},
                              {"skin_threshold", seg.skin_threshold},

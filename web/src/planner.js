@@ -265,15 +265,19 @@ export class Planner {
         this.show(null, this.lines, e.message);
       }
     })();
-    this.settled = this.inFlight.then(() => {
+    const settled = this.inFlight.then(() => {
       this.inFlight = null;
       if (this.queued) {
         this.queued = false;
-        return this.update();
+        // With nothing to lay (a free incision back to one point) update() returns this very
+        // promise: resolving a promise with itself is a chaining cycle, an error on the page.
+        const next = this.update();
+        return next === settled ? undefined : next;
       }
       document.body.dataset.check = this.plan ? 'ok' : 'refused';
     });
-    return this.settled;
+    this.settled = settled;
+    return settled;
   }
 
   /** Shows a plan (or a refusal, keeping the last lines drawn in red). */

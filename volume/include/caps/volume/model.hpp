@@ -48,6 +48,9 @@ struct VolumeModel : ModelContent {
   /// For a local chart (a model whose axis faces one region of the skin, surface/chart.hpp):
   /// model.json's source.chart object as JSON text; empty for a whole-head model.
   std::string chart_json;
+  /// For a head whose axis was tilted with it (the head's pitch, docs/landmarks.md): model.json's
+  /// source.pose object as JSON text; empty when the axis is the scanner's or was given.
+  std::string pose_json;
 };
 
 /// Segments the volume, fits the axis, measures the maps, extracts the surfaces.
