@@ -230,17 +230,20 @@ std::optional<Pitch> head_pitch(const Volume& v, const VolumeModel& upright,
   const CylinderGrid& g = upright.maps.grid;
   const Eigen::Vector3d centre = a.to_lps(0, g.z_mm(g.n_z / 2), 0);
   const Eigen::Vector3d left = a.direction.cross(a.ray(deg_to_rad(midline_theta_deg))).normalized();
-  o.surfaces = false;
-  o.maps.layers.measure = false;
-  std::vector<double> found_at;
-  for (const double deg : {-30.0, -20.0, -10.0, 10.0, 20.0, 30.0}) {
+  // The scanner's axis tilted by `deg` about `left`, through the head's middle (z = 0 there).
+  const auto tilted = [&](double deg) {
     const Eigen::AngleAxisd turn(deg_to_rad(deg), left);
     CylinderAxis t;
     t.direction = (turn * a.direction).normalized();
     t.front = (turn * a.front).normalized();
-    // The axis through the head's middle: z = 0 there.
     t.origin_lps = centre;
-    o.axis = t;
+    return t;
+  };
+  o.surfaces = false;
+  o.maps.layers.measure = false;
+  std::vector<double> found_at;
+  for (const double deg : {-30.0, -20.0, -10.0, 10.0, 20.0, 30.0}) {
+    o.axis = tilted(deg);
     note(reporter, cat("the head's pose: trying its axis tilted ", deg, " deg"));
     if (midline_found(build_volume_model(v, o, nullptr).maps)) found_at.push_back(deg);
   }
@@ -259,14 +262,7 @@ std::optional<Pitch> head_pitch(const Volume& v, const VolumeModel& upright,
   const std::size_t mid = found_at.size() / 2;
   const double deg =
       found_at.size() % 2 ? found_at[mid] : 0.5 * (found_at[mid - 1] + found_at[mid]);
-  Pitch p;
-  p.deg = deg;
-  p.found_at = found_at;
-  const Eigen::AngleAxisd turn(deg_to_rad(deg), left);
-  p.axis.direction = (turn * a.direction).normalized();
-  p.axis.front = (turn * a.front).normalized();
-  p.axis.origin_lps = centre;
-  return p;
+  return Pitch{tilted(deg), deg, found_at};
 }
 
 }  // namespace
