@@ -70,6 +70,7 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
     j["newton"] = {{"iterations", r.newton_iterations}, {"factorizations", r.factorizations},
                    {"indefinite_factorizations", r.indefinite_factorizations},
                    {"secant_predictions", r.secant_predictions},
+                   {"assemblies", r.assemblies},
                    {"steps", steps}, {"flap_rotations_deg", r.flap_rotations_deg}};
   }
   j["peak_memory_mb"] = r.peak_memory_mb;

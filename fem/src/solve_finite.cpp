@@ -246,6 +246,12 @@ class FiniteStrainSolver {
   // The step length along dq the line search accepts (its state assembled in sys_), or a failure.
   std::optional<Failure> line_search(StepAttempt& s, const Eigen::VectorXd& dq, double& alpha,
                                      double& energy_at);
+  // problem_.evaluate, timed and counted (SolveResult::assemblies).
+  std::optional<Failure> assemble(const Eigen::VectorXd& q, double lambda, double load_lambda,
+                                  const Eigen::VectorXd& dpath, Eigen::VectorXd* unit_lift = nullptr,
+                                  double* energy = nullptr);
+  // Whether the state the step's first solve started from, at lambda_new, inverts `element`.
+  bool lift_inverts(StepAttempt& s, int element);
   // Convergence of the iteration that moved q by du (alpha dq) to residual rn.
   bool converged(const StepAttempt& s, double rn, double du, double du_next,
                  double step_norm) const;
@@ -379,9 +385,7 @@ bool FiniteStrainSolver::warm_start() {
   s.record.lambda = 1.0;
   s.limit = no_.max_iterations;
   // The reference load: the predictor load of the whole closure from the reference state.
-  const auto t = Clock::now();
-  s.failure = problem_.evaluate(s.q_start, 0.0, 1.0, problem_.path().at(1.0) - problem_.path().at(0.0),
-                                sys_);
+  s.failure = assemble(s.q_start, 0.0, 1.0, problem_.path().at(1.0) - problem_.path().at(0.0));
   s.r0 = s.failure ? 0.0 : sys_.f.norm();
   // The given state's unknowns: u = T q + u_p(1).
   const Eigen::VectorXd u_p = problem_.path().at(1.0);
@@ -390,8 +394,7 @@ bool FiniteStrainSolver::warm_start() {
     if (map_.eq[d] >= 0)
       q0[map_.eq[d]] = u0(static_cast<Eigen::Index>(d / 3), static_cast<Eigen::Index>(d % 3)) -
                        u_p[static_cast<Eigen::Index>(d)];
-  if (s.r0 > 0) s.failure = problem_.evaluate(q0, 1.0, 1.0, no_lift_, sys_, &unit_lift_, &s.energy);
-  res_.timings.assembly_s += seconds_since(t);
+  if (s.r0 > 0) s.failure = assemble(q0, 1.0, 1.0, no_lift_, &unit_lift_, &s.energy);
   if (s.r0 > 0 && !s.failure) {
     s.scale = std::max(1.0, nominal_ / s.dl);
     s.r_ref = s.scale * s.r0;
@@ -433,10 +436,8 @@ void FiniteStrainSolver::predictor(StepAttempt& s) {
   if (at_converged_state_ && problem_.path().straight() && !problem_.prestretched()) {
     sys_.f += s.dl * (f_ext_ + unit_lift_);
   } else {
-    const auto t = Clock::now();
-    s.failure = problem_.evaluate(q_, lambda_, s.lambda_new,
-                                  problem_.path().at(s.lambda_new) - problem_.path().at(lambda_), sys_);
-    res_.timings.assembly_s += seconds_since(t);
+    s.failure = assemble(q_, lambda_, s.lambda_new,
+                         problem_.path().at(s.lambda_new) - problem_.path().at(lambda_));
   }
   at_converged_state_ = false;
   s.r0 = s.failure ? 0.0 : sys_.f.norm();
@@ -465,10 +466,8 @@ void FiniteStrainSolver::extrapolate(StepAttempt& s) {
   predicted_f_ = sys_.f;
   predicted_values_ = Eigen::Map<const Eigen::VectorXd>(sys_.K.valuePtr(), sys_.K.nonZeros());
   double energy = NAN;
-  const auto t = Clock::now();
   const std::optional<Failure> inverted =
-      problem_.evaluate(q_trial_, s.lambda_new, s.lambda_new, no_lift_, sys_, &unit_lift_, &energy);
-  res_.timings.assembly_s += seconds_since(t);
+      assemble(q_trial_, s.lambda_new, s.lambda_new, no_lift_, &unit_lift_, &energy);
   const double rn = inverted ? INFINITY : sys_.f.norm();
   if (std::isfinite(rn) && rn < s.r0) {
     s.tangent_predictor = false;
@@ -577,11 +576,13 @@ std::optional<Failure> FiniteStrainSolver::line_search(StepAttempt& s, const Eig
     const auto t = Clock::now();
     q_trial_ = q_ + alpha * dq;
     projected_ = problem_.project_on_surface(q_trial_, s.lambda_new);
-    inverted = problem_.evaluate(q_trial_, s.lambda_new, s.lambda_new, no_lift_, sys_,
-                                 &unit_lift_, &energy_at);
     res_.timings.assembly_s += seconds_since(t);
+    inverted = assemble(q_trial_, s.lambda_new, s.lambda_new, no_lift_, &unit_lift_, &energy_at);
     if (inverted) {
-      if (!first_inverted) first_inverted = inverted;
+      if (!first_inverted) {
+        first_inverted = inverted;
+        if (lift_inverts(s, inverted->element)) return first_inverted;
+      }
       alpha *= 0.5;
       continue;
     }
@@ -603,6 +604,35 @@ std::optional<Failure> FiniteStrainSolver::line_search(StepAttempt& s, const Eig
   }
   return first_inverted ? *first_inverted
                         : Failure{"the line search found no step that lowers the energy"};
+}
+
+// The tangent predictor's first solve starts from the converged state q with the prescribed
+// values still at the last step's lambda: at lambda_new the sutures' helper nodes and the flaps'
+// arcs move (the lift) with every other dof held. Where the line search's first trial inverts
+// an element and that state, alpha = 0, inverts the same element, no shorter step along the
+// correction can help (the halvings only approach it; det F at a Gauss point is a cubic in alpha,
+// negative at both ends): the attempt fails now and is cut back, instead of after
+// kMaxLineSearch assemblies (Cranium, the page's default Z-plasty on the forehead: four
+// attempts at its snap-through, each 12 inverted trials, 1.6 s, the last det F -0.08 to -4.3).
+// Any later solve starts from a state the line search accepted, which inverts nothing.
+bool FiniteStrainSolver::lift_inverts(StepAttempt& s, int element) {
+  if (!(s.tangent_predictor && s.record.iterations == 1)) return false;
+  q_trial_ = q_;
+  projected_ = problem_.project_on_surface(q_trial_, s.lambda_new);
+  double energy = NAN;
+  const std::optional<Failure> inverted =
+      assemble(q_trial_, s.lambda_new, s.lambda_new, no_lift_, &unit_lift_, &energy);
+  return inverted && inverted->element == element;
+}
+
+std::optional<Failure> FiniteStrainSolver::assemble(const Eigen::VectorXd& q, double lambda,
+                                                    double load_lambda, const Eigen::VectorXd& dpath,
+                                                    Eigen::VectorXd* unit_lift, double* energy) {
+  const auto t = Clock::now();
+  ++res_.assemblies;
+  std::optional<Failure> failure = problem_.evaluate(q, lambda, load_lambda, dpath, sys_, unit_lift, energy);
+  res_.timings.assembly_s += seconds_since(t);
+  return failure;
 }
 
 // Converged; or at the round-off floor: a correction a thousand times below the tolerance

@@ -230,6 +230,9 @@ struct SolveResult {
   std::vector<NewtonStep> newton_steps;      ///< finite strain: the converged load steps
   int secant_predictions = 0;                ///< finite strain: steps begun by the secant predictor
   int newton_iterations = 0;                 ///< finite strain: total, including cut-back attempts
+  /// finite strain: evaluations of the element forces and tangent (predictors, line-search
+  /// trials), including cut-back attempts; each costs about what a CG solve on a reused factor does
+  int assemblies = 0;
   int factorizations = 0;                    ///< numerical factorizations (1 for a linear solve)
   /// Of those, the ones that found the (finite-strain, shifted or not) tangent not positive
   /// definite: the snap-through's cost (their time is in SolveTimings::factorization_s).
