@@ -243,6 +243,29 @@ TEST(FemElements, CollapsedHexahedronMapsToWedge15) {
   EXPECT_NE(error_of([&] { wedge_from_collapsed_hex(h, 0); }).find("2, 10, 3"), std::string::npos);
 }
 
+TEST(FemElements, NodalStressIsFittedFromTheGaussPointsExactlyForLinearFields) {
+  // gauss_to_nodes(): the Gauss-point values' least-squares corner-linear fit, at every node. A
+  // linear field comes back exactly, at corners and mid-edge nodes alike; a constant keeps its
+  // value (rows sum to 1).
+  const std::vector<std::pair<ElementType, WedgeRule>> cases = {
+      {ElementType::Hex20, WedgeRule::Full}, {ElementType::Wedge15, WedgeRule::Full},
+      {ElementType::Wedge15, WedgeRule::CalculiX}, {ElementType::Tet10, WedgeRule::Full}};
+  for (const auto& [type, rule] : cases) {
+    SCOPED_TRACE(static_cast<int>(type) * 10 + static_cast<int>(rule));
+    const Eigen::MatrixXd& M = gauss_to_nodes(type, rule);
+    const auto& q = quadrature(type, rule);
+    const Eigen::MatrixX3d P = natural_nodes(type);
+    ASSERT_EQ(M.rows(), P.rows());
+    ASSERT_EQ(M.cols(), static_cast<Eigen::Index>(q.size()));
+    const auto f = [](const Eigen::Vector3d& x) { return 0.7 - 1.3 * x[0] + 2.1 * x[1] + 0.4 * x[2]; };
+    Eigen::VectorXd at_gauss(M.cols());
+    for (std::size_t g = 0; g < q.size(); ++g) at_gauss[static_cast<Eigen::Index>(g)] = f(q[g].xi);
+    const Eigen::VectorXd at_nodes = M * at_gauss;
+    for (Eigen::Index a = 0; a < P.rows(); ++a) EXPECT_NEAR(at_nodes[a], f(P.row(a).transpose()), 1e-12);
+    EXPECT_LT((M.rowwise().sum().array() - 1.0).abs().maxCoeff(), 1e-12);
+  }
+}
+
 TEST(FemPatch, LinearFieldIsExactOnDistortedMeshesBothSolvers) {
   Eigen::Matrix3d A;
   A << 1e-3, 2e-3, -1e-3, 0.5e-3, -2e-3, 1.5e-3, 3e-3, 1e-3, 2.5e-3;

@@ -510,6 +510,55 @@ Eigen::MatrixX3d natural_nodes(ElementType type) {
   return P;
 }
 
+namespace {
+
+// The corner-linear shape function of corner c (natural coordinates pc) at natural point p.
+double corner_linear(ElementType type, const Eigen::Vector3d& pc, const Eigen::Vector3d& p) {
+  switch (type) {
+    case ElementType::Hex20:
+      return 0.125 * (1 + p[0] * pc[0]) * (1 + p[1] * pc[1]) * (1 + p[2] * pc[2]);
+    case ElementType::Wedge15: {
+      const double tri = pc[0] > 0.5 ? p[0] : pc[1] > 0.5 ? p[1] : 1 - p[0] - p[1];
+      return tri * 0.5 * (1 + p[2] * pc[2]);
+    }
+    case ElementType::Tet10:
+      for (int i = 0; i < 3; ++i)
+        if (pc[i] > 0.5) return p[i];
+      return 1 - p[0] - p[1] - p[2];
+  }
+  return 0;
+}
+
+Eigen::MatrixXd make_gauss_to_nodes(ElementType type, WedgeRule wedge) {
+  const int n_corners = type == ElementType::Hex20 ? 8 : type == ElementType::Wedge15 ? 6 : 4;
+  const Eigen::MatrixX3d P = natural_nodes(type);
+  const auto& rule = quadrature(type, wedge);
+  Eigen::MatrixXd A(static_cast<Eigen::Index>(rule.size()), n_corners), L(P.rows(), n_corners);
+  for (int c = 0; c < n_corners; ++c) {
+    const Eigen::Vector3d pc = P.row(c).transpose();
+    for (std::size_t g = 0; g < rule.size(); ++g)
+      A(static_cast<Eigen::Index>(g), c) = corner_linear(type, pc, rule[g].xi);
+    for (Eigen::Index a = 0; a < P.rows(); ++a) L(a, c) = corner_linear(type, pc, P.row(a).transpose());
+  }
+  // corner values = (A^T A)^-1 A^T gauss; nodal = L corner values
+  return L * (A.transpose() * A).ldlt().solve(A.transpose());
+}
+
+}  // namespace
+
+const Eigen::MatrixXd& gauss_to_nodes(ElementType type, WedgeRule wedge) {
+  static const Eigen::MatrixXd hex = make_gauss_to_nodes(ElementType::Hex20, WedgeRule::Full);
+  static const Eigen::MatrixXd wedge21 = make_gauss_to_nodes(ElementType::Wedge15, WedgeRule::Full);
+  static const Eigen::MatrixXd wedge9 = make_gauss_to_nodes(ElementType::Wedge15, WedgeRule::CalculiX);
+  static const Eigen::MatrixXd tet = make_gauss_to_nodes(ElementType::Tet10, WedgeRule::Full);
+  switch (type) {
+    case ElementType::Hex20: return hex;
+    case ElementType::Wedge15: return wedge == WedgeRule::CalculiX ? wedge9 : wedge21;
+    case ElementType::Tet10: return tet;
+  }
+  return hex;
+}
+
 void shape_functions(ElementType type, const Eigen::Vector3d& xi, Eigen::VectorXd& N,
                      Eigen::MatrixX3d& dN_dxi) {
   double n[20], d[20][3];

@@ -275,15 +275,6 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
     }
     out.von_mises_mean = vm / w_sum;
     out.energy_mj = en;
-    const Eigen::MatrixX3d P = natural_nodes(el.type);
-    out.nodal_stress.resize(nn, 6);
-    Eigen::VectorXd N;
-    Eigen::MatrixX3d dN;
-    for (int a = 0; a < nn; ++a) {
-      shape_functions(el.type, P.row(a).transpose(), N, dN);
-      detail::gradients(dN, X, G, e, -1);
-      out.nodal_stress.row(a) = detail::stress_from_strain(detail::strain_tensor(G, ue), lam, mu).transpose();
-    }
     out.f_int = F;
   }, res);
   res.timings.recovery_s = seconds_since(t);
@@ -332,7 +323,7 @@ void recover(const Mesh& mesh, const DofMap& map, const ElementRecoveryFn& eleme
       res.gauss_stress_mpa.middleRows(res.gauss_offset[e], out.gauss_stress.rows()) = out.gauss_stress;
       res.element_von_mises_mpa[e] = out.von_mises_mean;
       energy[e] = out.energy_mj;
-      elem_nodal[e] = out.nodal_stress;
+      elem_nodal[e] = gauss_to_nodes(el.type, mesh.wedge_rule) * out.gauss_stress;
       for (int a = 0; a < el.n_nodes(); ++a)
         if (held[el.nodes[a]])
           for (int c = 0; c < 3; ++c)

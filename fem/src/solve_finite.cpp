@@ -904,23 +904,6 @@ void FiniteStrainSolver::recover_element(const Eigen::VectorXd& u, int e,
     w_sum += w;
   }
   out.von_mises_mean = vm / w_sum;
-  const Eigen::MatrixX3d P = natural_nodes(el.type);
-  out.nodal_stress.resize(nn, 6);
-  // At a node the quadratic element's deformation gradient may fold (det F <= 0 at a corner
-  // squeezed by the closure) while every Gauss point, where equilibrium is solved and checked,
-  // is sound: such a node takes the stress of its nearest Gauss point.
-  const auto& rule = quadrature(el.type, mesh_.wedge_rule);
-  for (int a = 0; a < nn; ++a) {
-    const Eigen::Vector3d xi = P.row(a).transpose();
-    try {
-      out.nodal_stress.row(a) = finite_cauchy_stress(el.type, X, mat, ue, xi, e, stretch).transpose();
-    } catch (const SolverError&) {
-      std::size_t nearest = 0;
-      for (std::size_t g = 1; g < rule.size(); ++g)
-        if ((rule[g].xi - xi).squaredNorm() < (rule[nearest].xi - xi).squaredNorm()) nearest = g;
-      out.nodal_stress.row(a) = out.gauss_stress.row(static_cast<Eigen::Index>(nearest));
-    }
-  }
 }
 
 }  // namespace

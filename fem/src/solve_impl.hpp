@@ -19,14 +19,13 @@ double peak_rss_mb();
 /// What the recovery needs from one element.
 struct ElementRecovery {
   Eigen::MatrixXd gauss_stress;  ///< #GP×6 Voigt (MPa), rule order
-  Eigen::MatrixXd nodal_stress;  ///< #n×6 Voigt (MPa) evaluated at the element's nodes
   Eigen::MatrixX3d f_int;        ///< #n×3 internal force (N)
   double energy_mj = 0;          ///< strain energy of the element
   double von_mises_mean = 0;     ///< volume mean of the Gauss von Mises stress (MPa)
 };
 using ElementRecoveryFn = std::function<void(int element, ElementRecovery& out)>;
 
-/// Fills res's Gauss, nodal and element stresses, strain energy, reactions (f_int - f_ext on
+/// Fills res's Gauss, nodal (gauss_to_nodes(), averaged over the elements at a node) and element stresses, strain energy, reactions (f_int - f_ext on
 /// constrained nodes) and suture forces from `element_recovery`, run in parallel over elements.
 /// res.displacement_mm must be set.
 void recover(const Mesh& mesh, const DofMap& map, const ElementRecoveryFn& element_recovery,

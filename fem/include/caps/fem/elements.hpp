@@ -30,6 +30,13 @@ const std::vector<QuadraturePoint>& quadrature(ElementType type, WedgeRule wedge
 /// Natural coordinates of the element's nodes (#n×3).
 Eigen::MatrixX3d natural_nodes(ElementType type);
 
+/// Stress recovery at the nodes (#n × #points of quadrature(type, wedge)): the least-squares fit
+/// of the Gauss-point values by the element's corner-linear field (trilinear, linear wedge,
+/// linear tet), evaluated at every node; as Abaqus and CalculiX extrapolate integration-point
+/// values to the nodes. Exact for linear fields; a quadratic element's own stress at its nodes
+/// is where it is least accurate (Zienkiewicz, Taylor & Zhu 2005, sec. 6.12; docs/fem.md).
+const Eigen::MatrixXd& gauss_to_nodes(ElementType type, WedgeRule wedge = WedgeRule::Full);
+
 /// Shape functions N (#n) and derivatives dN/dxi (#n×3) at natural point xi.
 void shape_functions(ElementType type, const Eigen::Vector3d& xi, Eigen::VectorXd& N,
                      Eigen::MatrixX3d& dN_dxi);
