@@ -141,7 +141,7 @@ struct DomainFields {
                            "face\")"});
     v(r.face_radius, {"face_radius", "--domain face: the tissue model is kept within this "
                                      "distance of the wound (mm) and held beyond; 0 = automatic "
-                                     "(10 mm beyond the patch's rim, at least 40 mm)"});
+                                     "(5 mm beyond the patch's rim, at least 40 mm)"});
     v(r.tie, {"tie", "--domain face: how the patch's rim is tied to the tissue: mortar (exact "
                      "for a uniform stress across the join) or node-to-surface (CalculiX's "
                      "*TIE: a mesh.inp that ccx solves in seconds, for cross-checks; it takes the mortar "
