@@ -25,8 +25,9 @@ struct ElementRecovery {
 };
 using ElementRecoveryFn = std::function<void(int element, ElementRecovery& out)>;
 
-/// Fills res's Gauss, nodal (gauss_to_nodes(), averaged over the elements at a node) and element stresses, strain energy, reactions (f_int - f_ext on
-/// constrained nodes) and suture forces from `element_recovery`, run in parallel over elements.
+/// Fills res's Gauss, nodal (gauss_to_nodes(), averaged over the elements at a node) and
+/// element stresses, strain energy, reactions (f_int - f_ext on constrained nodes) and suture
+/// forces from `element_recovery`, run in parallel over elements.
 /// res.displacement_mm must be set.
 void recover(const Mesh& mesh, const DofMap& map, const ElementRecoveryFn& element_recovery,
              SolveResult& res);
