@@ -608,11 +608,11 @@ std::optional<Failure> FiniteStrainSolver::line_search(StepAttempt& s, const Eig
 
 // The tangent predictor's first solve starts from the converged state q with the prescribed
 // values still at the last step's lambda: at lambda_new the sutures' helper nodes and the flaps'
-// arcs move (the lift) with every other dof held. Where the line search's first trial inverts
-// an element and that state, alpha = 0, inverts the same element, no shorter step along the
-// correction can help (the halvings only approach it; det F at a Gauss point is a cubic in alpha,
-// negative at both ends): the attempt fails now and is cut back, instead of after
-// kMaxLineSearch assemblies (Cranium, the page's default Z-plasty on the forehead: four
+// arcs move (the lift) with every other dof held. Where a trial of the line search inverts an
+// element and that state, alpha = 0, inverts the same element, the halvings only close in on an
+// inverted state (det F at a Gauss point is a cubic in alpha, negative at both ends; it could
+// turn positive in between, which was not seen): the attempt fails now and is cut back, instead
+// of after kMaxLineSearch assemblies (Cranium, the page's default Z-plasty on the forehead: four
 // attempts at its snap-through, each 12 inverted trials, 1.6 s, the last det F -0.08 to -4.3).
 // Any later solve starts from a state the line search accepted, which inverts nothing.
 bool FiniteStrainSolver::lift_inverts(StepAttempt& s, int element) {
