@@ -539,6 +539,7 @@ struct CompareResult {
   std::string layers_tissue;  ///< "measured", or "uniform" where the model has no layers
   double constant_thickness_mm = 0;
   std::vector<std::string> warnings;
+  std::string domain = "patch";  ///< where the three closures were solved (--domain)
 
   /// The JSON is comparison.json (the table, warnings included) and the output folder.
   template <class Self, class V>
