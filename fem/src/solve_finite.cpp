@@ -619,9 +619,7 @@ bool FiniteStrainSolver::lift_inverts(StepAttempt& s, int element) {
   if (!(s.tangent_predictor && s.record.iterations == 1)) return false;
   q_trial_ = q_;
   projected_ = problem_.project_on_surface(q_trial_, s.lambda_new);
-  double energy = NAN;
-  const std::optional<Failure> inverted =
-      assemble(q_trial_, s.lambda_new, s.lambda_new, no_lift_, &unit_lift_, &energy);
+  const std::optional<Failure> inverted = assemble(q_trial_, s.lambda_new, s.lambda_new, no_lift_);
   return inverted && inverted->element == element;
 }
 
