@@ -268,6 +268,8 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, url, allow }) =>
   const template = await page.evaluate(() => window.caps.results.rows[0].plan);
   await page.selectOption('#procedure', 'incision');
   await page.waitForFunction(() => window.caps.planner.state?.procedure === 'incision');
+  // A check still on its way for the loaded Z-plasty does not show over the empty incision.
+  await page.waitForSelector('body[data-check="none"]');
   assert.match(await page.locator('#check').innerText(), /Click on the skin to draw the cut/);
   await page.click('[data-view="front"]');
   const screenOf = (lps) => screenOfOn(page, lps);

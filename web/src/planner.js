@@ -257,12 +257,15 @@ export class Planner {
           plan = await api.planCheck({ ...plan, sutures: s.sutures ?? plan.sutures });
         const lines = await api.planLines(plan);
         this.lastLatencyMs = performance.now() - t0;
+        // A state changed (or a plan loaded) while this one was on its way: its answer is stale,
+        // and the newer state shows its own (a queued update, or the load itself).
+        if (this.state !== s) return;
         // Later moves and keys start from the plan's own (theta, z).
-        if (this.state === s && s.at === '')
+        if (s.at === '')
           s.at = `${plan.frame.theta_deg.toFixed(3)},${plan.frame.z_mm.toFixed(3)}`;
         this.show(plan, lines, null);
       } catch (e) {
-        this.show(null, this.lines, e.message);
+        if (this.state === s) this.show(null, this.lines, e.message);
       }
     })();
     const settled = this.inFlight.then(() => {
