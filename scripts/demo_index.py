@@ -148,8 +148,8 @@ measured from landmarks a surgeon can palpate, the predicted forces (PDF to prin
             if os.path.isdir(os.path.join(out, slicer)):
                 w(f'<p>3D Slicer: <a href="{html.escape(slicer)}/">{html.escape(slicer)}/</a></p>\n')
                 break
-        w(f"""<p><a href="{e}-compare/report.html">Measured versus constant thickness</a> (on the clamped 1992
-patch, so its forces are not those above) &middot;
+        w(f"""<p><a href="{e}-compare/report.html">Measured versus constant thickness</a> (in the whole face: the
+thickness under the wound's patch differs, the face around it is the same) &middot;
 <code>{e}/result.vtu</code> (ParaView) &middot; <code>{e}/mesh.inp</code> (CalculiX) &middot;
 <code>{e}/result.json</code> (closing force, stresses, timings) &middot;
 <code>{e}/summary.json</code> (the closure in short: forces per suture, feature lines)</p>

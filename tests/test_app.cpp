@@ -385,7 +385,7 @@ TEST_F(AppWithModel, WarningsReachResultJsonSummaryJsonAndTheReport) {
   s.model = kModel;
   s.plan = plan;
   s.output = (kTmp / "top_sim").string();
-  s.domain.domain = "patch";  // the clamped patch's warning, as compare's (the whole face has none)
+  s.domain.domain = "patch";  // the clamped patch's warning (the whole face has none)
   const app::SimulateResult sim = app::run_simulate(s);
   EXPECT_EQ(sim.warnings, mesh.warnings);
   EXPECT_EQ(json::parse(slurp(kTmp / "top_sim" / "result.json"))["warnings"], json(mesh.warnings));
@@ -394,6 +394,7 @@ TEST_F(AppWithModel, WarningsReachResultJsonSummaryJsonAndTheReport) {
   c.model = kModel;
   c.plan = plan;
   c.output = (kTmp / "top_compare").string();
+  c.domain.domain = "patch";  // the whole face (compare's default too) has no such warning
   const app::CompareResult cmp = app::run_compare(c);
   ASSERT_FALSE(cmp.warnings.empty());
   EXPECT_EQ(cmp.warnings[0], "measured: " + mesh.warnings[0]);

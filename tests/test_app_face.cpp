@@ -133,6 +133,32 @@ TEST(FaceDomain, TheAnswerDoesNotDependOnWhereTheModelStops) {
   EXPECT_NEAR(far.max_suture_force_n, near.max_suture_force_n, 0.05 * near.max_suture_force_n);
 }
 
+// caps compare closes the plan in the whole face by default, as simulate: its measured column
+// is simulate's answer, and no clamped rim warns; the constant thickness changes only the patch.
+TEST(FaceDomain, CompareHoldsTheConstantThicknessInTheWholeFace) {
+  const Case& c = phantom_case();
+  const app::SimulateResult sim = simulate("compare_sim", "face", "linear");
+  app::CompareRequest r;
+  r.model = c.model;
+  r.plan = c.plan;
+  r.output = (folder() / "compare").string();
+  r.force = true;
+  r.meshing.extent = 8;
+  r.solver.material = "linear";
+  const app::CompareResult cmp = app::run_compare(r);
+  EXPECT_EQ(cmp.domain, "face");
+  EXPECT_NEAR(cmp.measured_closing_force_n, sim.closing_force_n, 1e-9 * sim.closing_force_n);
+  EXPECT_NEAR(cmp.measured_max_displacement_mm, sim.max_displacement_mm, 1e-9 * sim.max_displacement_mm);
+  for (const std::string& w : cmp.warnings)
+    EXPECT_EQ(w.find("extent was limited"), std::string::npos) << w;
+  // The constant column's patch is tied into the same face: its mesh has the tissue model's
+  // tetrahedra beside its own columns, and a different thickness gives a different force.
+  const fem::Mesh constant = fem::read_mesh_dir((folder() / "compare" / "constant").string());
+  EXPECT_FALSE(constant.ties.empty());
+  EXPECT_GT(cmp.constant_thickness_mm, 0);
+  EXPECT_NE(cmp.constant_closing_force_n, cmp.measured_closing_force_n);
+}
+
 TEST(FaceDomain, CalculixSolvesTheExportedWholeFaceDeckToTheSameAnswer) {
   // The whole-face closure (patch of Hex20 and Wedge15 tied into the Tet10 tissue, sutures,
   // sliding base, bone attachment), neo-Hookean, exported as mesh.inp and solved by ccx with

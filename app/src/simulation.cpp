@@ -725,9 +725,8 @@ CompareResult run_compare(const CompareRequest& r, Reporter* reporter) {
 }
 
 std::string summary(const CompareResult& s) {
-  // Named, as simulate's line names its domain: compare's default is the clamped patch, whose
-  // forces differ from simulate's whole face for the same plan (Cranium's demo ellipse: 3.71
-  // against 3.00 N).
+  // Named, as simulate's line names its domain: on the clamped patch (--domain patch) the forces
+  // differ from the whole face's for the same plan (Cranium's demo ellipse: 3.71 against 3.00 N).
   return cat("caps compare (", s.domain == "face" ? "the whole face" : "the clamped 1992 patch",
              "): closing force ", round_to(s.measured_closing_force_n, 2),
              " N (measured) vs ", round_to(s.constant_closing_force_n, 2), " N (constant ",

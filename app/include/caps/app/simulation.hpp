@@ -510,9 +510,11 @@ struct CompareRequest {
   double thickness = 0;
   MeshingFields meshing;
   SolverFields solver;
-  /// The 1992 patch by default: what the constant-thickness assumption is held against is the
-  /// patch's own thickness (in the whole face the CT's tissue around it would stay measured).
-  DomainFields domain{"patch"};
+  /// The whole face by default, as simulate: the three closures differ only in the tissue under
+  /// the wound's patch (the constant thickness, or the measured layers), and the CT's tissue
+  /// around it is the same in all three, so no clamped rim decides the comparison. `patch`:
+  /// the 1992 clamped patch, where the constant thickness is the whole model's.
+  DomainFields domain;
   bool force = false;
 
   template <class Self, class V>
@@ -539,7 +541,7 @@ struct CompareResult {
   std::string layers_tissue;  ///< "measured", or "uniform" where the model has no layers
   double constant_thickness_mm = 0;
   std::vector<std::string> warnings;
-  std::string domain = "patch";  ///< where the three closures were solved (--domain)
+  std::string domain = "face";  ///< where the three closures were solved (--domain)
 
   /// The JSON is comparison.json (the table, warnings included) and the output folder.
   template <class Self, class V>

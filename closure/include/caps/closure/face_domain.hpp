@@ -36,8 +36,7 @@ class PatientModel;
 namespace caps::closure {
 
 /// Where the closure is solved: Face, the patch tied into the whole-face model (the default);
-/// Patch, the 1992 patch clamped at its rim (what `compare` holds the constant-thickness
-/// assumption against).
+/// Patch, the 1992 patch clamped at its rim.
 enum class Domain { Face, Patch };
 const char* domain_name(Domain domain);
 /// "face" or "patch"; InvalidInput naming the value otherwise.
