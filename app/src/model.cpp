@@ -265,6 +265,129 @@ std::optional<Pitch> head_pitch(const Volume& v, const VolumeModel& upright,
   return Pitch{tilted(deg), deg, found_at};
 }
 
+// The head's roll in the scanner (issue 37; docs/landmarks.md, "A head leaning to one side"):
+// the vertex leaning towards a shoulder. The face's left and right landmarks (the outer eye
+// corners, the zygia, the tragia) lie at one height on an upright head; leaning by `deg` (the
+// vertex towards the patient's left), the left one lies lower by sin(deg) times their distance.
+// The pairs found give the roll, each weighted by its width (the tragia's 150-170 mm weigh more
+// than the eye corners' 70-100 mm); nullopt without a pair.
+struct Roll {
+  double deg = 0;
+  std::vector<std::pair<std::string, double>> pairs;  // each pair's own roll (deg)
+};
+std::optional<Roll> head_roll(const CylinderAxis& a, const Landmarks& l) {
+  Roll r;
+  double sum = 0, weight = 0;
+  for (const char* base : {"exocanthion", "zygion", "tragion"}) {
+    const Landmark* left = l.find(cat(base, "_left"));
+    const Landmark* right = l.find(cat(base, "_right"));
+    if (!left || !right || !left->found || !right->found) continue;
+    const Eigen::Vector3d d = left->lps - right->lps;
+    const Eigen::Vector3d lr = a.direction.cross(a.ray(deg_to_rad(l.midline_theta_deg)));
+    const double deg = -std::atan2(d.dot(a.direction), d.dot(lr)) * 180.0 / M_PI;
+    r.pairs.emplace_back(base, deg);
+    sum += d.norm() * deg;
+    weight += d.norm();
+  }
+  if (weight == 0) return std::nullopt;
+  r.deg = sum / weight;
+  return r;
+}
+
+// `a` turned by `deg` about the face's front (anterior at `midline_theta_deg`) through the
+// head's middle, as a head leaning by `deg` towards its left turns its own axis.
+CylinderAxis leaned(const CylinderAxis& a, const CylinderGrid& g, double midline_theta_deg,
+                    double deg) {
+  const Eigen::Vector3d centre = a.to_lps(0, g.z_mm(g.n_z / 2), 0);
+  const Eigen::AngleAxisd turn(-deg_to_rad(deg), a.ray(deg_to_rad(midline_theta_deg)));
+  CylinderAxis t;
+  t.direction = (turn * a.direction).normalized();
+  t.front = (turn * a.front).normalized();
+  t.origin_lps = centre;
+  return t;
+}
+
+// Whether the detector asked whether the head is turned or leaning (the skin most symmetric at
+// the edge of the midline's search).
+bool leaning_suspected(const Landmarks& l) {
+  for (const Landmark& x : l.items)
+    if (!x.found && x.note.find("leaning in the scanner?") != std::string::npos) return true;
+  return false;
+}
+
+// The roll (deg) whose axis shows the face's midline landmarks: 15, -15, 30, -30 in turn, each
+// a model without layers or surfaces; nullopt if none.
+std::optional<double> roll_search(const Volume& v, const VolumeModel& m, ModelOptions o,
+                                  Reporter* reporter) {
+  o.surfaces = false;
+  o.maps.layers.measure = false;
+  for (const double deg : {15.0, -15.0, 30.0, -30.0}) {
+    o.axis = fit_axis(m.segmentation, leaned(m.maps.axis, m.maps.grid, 0.0, deg));
+    note(reporter, cat("the head's pose: trying its axis turned ", deg, " deg about the front"));
+    if (midline_found(build_volume_model(v, o, nullptr).maps)) return deg;
+  }
+  return std::nullopt;
+}
+
+// A head leaning kMinRollDeg or more towards a shoulder is put upright: the model is rebuilt on
+// its axis turned with the head about the face's front, and once more if the pairs still say
+// more than kRollToleranceDeg. A turn that loses the face's midline landmarks is not taken.
+// model.json's source.pose gets the roll and each pair's, source.notes a sentence.
+constexpr double kMinRollDeg = 3.0, kRollToleranceDeg = 0.5;
+void lean_upright(const Volume& v, ModelOptions& o, VolumeModel& m, double searched,
+                  Reporter* reporter) {
+  double total = searched;
+  std::vector<std::pair<std::string, double>> first;
+  for (int pass = 0; pass < 2; ++pass) {
+    const Landmarks l = find_landmarks(PatientModel(m.maps));
+    const std::optional<Roll> roll = head_roll(m.maps.axis, l);
+    const double least = pass == 0 && searched == 0 ? kMinRollDeg : kRollToleranceDeg;
+    if (!roll || !(std::abs(roll->deg) >= least)) break;
+    if (pass == 0) first = roll->pairs;
+    note(reporter, cat("the head's pose: leaning ", round_to(roll->deg, 1), " deg; turning the "
+                       "model's axis with it"));
+    ModelOptions turned = o;
+    // Through the centre of the head's sections square to the turned axis: turned about a
+    // point off the head's own axis (the scanner's centres lie on a slant), the model's rays
+    // would start a few mm aside and the ears and cheeks stand out otherwise.
+    turned.axis =
+        fit_axis(m.segmentation, leaned(m.maps.axis, m.maps.grid, l.midline_theta_deg, roll->deg));
+    VolumeModel again = build_volume_model(v, turned, reporter);
+    if (midline_found(l) && !midline_found(find_landmarks(PatientModel(again.maps)))) break;
+    o = turned;
+    m = std::move(again);
+    total += roll->deg;
+  }
+  if (total == 0) return;
+  std::string pairs;
+  for (const auto& [name, deg] : first)
+    pairs += cat(pairs.empty() ? "" : ", ", name, "s ", round_to(deg, 1));
+  const std::string how =
+      searched != 0
+          ? cat("its face's midline found with the axis turned ", searched, " deg, then its left "
+                "and right landmarks at different heights: ", pairs.empty() ? "none" : pairs,
+                " deg more")
+          : cat("its left and right landmarks at different heights: ", pairs, " deg");
+  const std::string why =
+      cat("the head leans ", round_to(std::abs(total), 1), " deg towards its ",
+          total > 0 ? "left" : "right", " shoulder in the scanner (", how, "); the model's axis "
+          "is turned with it, so up and left are the head's own (model.json axis; "
+          "docs/landmarks.md)");
+  note(reporter, why);
+  m.notes.push_back(why);
+  json pose = m.pose_json.empty() ? json::object() : json::parse(m.pose_json);
+  pose["roll_deg"] = total;
+  if (searched != 0) pose["roll_searched_deg"] = searched;
+  json each = json::object();
+  for (const auto& [name, deg] : first) each[name] = deg;
+  pose["roll_pairs_deg"] = each;
+  pose["roll_method"] = "the left and right landmarks' heights (outer eye corners, zygia, "
+                        "tragia; weighted by their width), the axis turned about the face's "
+                        "front through the head's middle (docs/landmarks.md, \"A head leaning "
+                        "to one side\")";
+  m.pose_json = pose.dump();
+}
+
 }  // namespace
 
 ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
@@ -339,6 +462,7 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
   VolumeModel m = build_volume_model(v, o, reporter);
   // The head's pose when the scanner's axis does not show a face's profile (an axis given with
   // --axis-dir is kept as it is).
+  const bool axis_given = o.axis.has_value();
   const Landmarks upright = o.axis ? Landmarks{} : find_landmarks(PatientModel(m.maps));
   if (!o.axis && !midline_found(upright) && suspects_tilt(upright)) {
     if (const std::optional<Pitch> pitch =
@@ -363,6 +487,20 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
                         .dump();
     }
   }
+  double searched_roll = 0;
+  if (!axis_given && !o.axis) {
+    // A head leaning so far that its skin is most symmetric at the edge of the midline's search
+    // (25 deg or more on the face phantom): the axis turned with it by 15 and 30 deg either way,
+    // the first that shows the face's midline landmarks taken, and refined below.
+    const Landmarks now = find_landmarks(PatientModel(m.maps));
+    if (!midline_found(now) && leaning_suspected(now))
+      if (const std::optional<double> deg = roll_search(v, m, o, reporter)) {
+        o.axis = fit_axis(m.segmentation, leaned(m.maps.axis, m.maps.grid, 0.0, *deg));
+        m = build_volume_model(v, o, reporter);
+        searched_roll = *deg;
+      }
+  }
+  if (!axis_given) lean_upright(v, o, m, searched_roll, reporter);
   write_model(m, r.output, r.force, reporter);
   add_landmarks(r.output, reporter);
   // The whole-face tissue model; a volume it cannot be made of (no bone, no soft tissue) still
@@ -877,6 +1015,7 @@ PhantomResult run_phantom(const PhantomRequest& r, Reporter*) {
   o.scale = r.scale;
   o.pitch_deg = r.pitch;
   o.yaw_deg = r.yaw;
+  o.roll_deg = r.roll;
   const Volume v = make_phantom(o);
   write_nifti(v, path);
   return {r.output, o.dims,  o.spacing_mm, o.head_holder, o.layered,

@@ -203,6 +203,18 @@ double brow_without_nose(const SkinRangeView& view, const std::string& why,
     return std::numeric_limits<double>::quiet_NaN();
   }
   const double tm = sym->first;
+  // The search's edge: a face turned that far has its nose tip in view, and a skin most
+  // symmetric there is not a face's (a head leaning 25 deg in the scanner was most symmetric at
+  // 45 deg and its "glabella" lay on the temple; issue 37).
+  if (std::abs(tm) >= 45.0 - std::max(view.dtheta_deg, 0.5)) {
+    const std::string edge =
+        cat(lost, "the skin is most left-right symmetric at the edge of the search (theta ",
+            std::round(tm), " deg, 45 deg off the front), where no face's midline lies: is the "
+            "head turned or leaning in the scanner?");
+    put.push_back(absent("glabella", edge));
+    put.push_back(absent("nasion", edge));
+    return std::numeric_limits<double>::quiet_NaN();
+  }
   const std::string how = cat("midline theta ", std::round(tm * 10.0) / 10.0,
                               " deg from the left-right symmetry of the skin (rms asymmetry ",
                               mm(sym->second), ")");

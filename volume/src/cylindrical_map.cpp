@@ -159,24 +159,23 @@ BoneMethod parse_bone_method(const std::string& name) {
   throw InvalidInput(cat("bone method '", name, "': expected edge or threshold"));
 }
 
-CylinderAxis fit_axis(const Segmentation& seg) {
+CylinderAxis fit_axis(const Segmentation& seg, const CylinderAxis& oriented) {
   const Mask& m = seg.skin;
   const auto& g = m.geom;
-  // Area-weighted centre of the head's cross-sections in 2 mm bands of LPS z.
+  const Eigen::Vector3d& d = oriented.direction;
+  const Eigen::Vector3d e1 = oriented.front, e2 = d.cross(e1);
+  // Area-weighted centre of the head's cross-sections square to the axis, in 2 mm bands along it.
   constexpr double kBand = 2.0;
   struct Band { double n = 0, x = 0, y = 0; };
   std::vector<Band> bands;
-  double zmin = std::numeric_limits<double>::max();
-  std::vector<Eigen::Vector3d> pts;
   for (int k = 0; k < g.dims[2]; ++k)
     for (int j = 0; j < g.dims[1]; ++j)
       for (int i = 0; i < g.dims[0]; ++i)
         if (m.at(i, j, k)) {
-          const Eigen::Vector3d p = g.index_to_lps(Eigen::Vector3d(i, j, k));
-          zmin = std::min(zmin, p[2]);
-          const auto b = static_cast<std::size_t>(std::max(0.0, (p[2] + 1000.0) / kBand));
+          const Eigen::Vector3d p = g.index_to_lps(Eigen::Vector3d(i, j, k)) - oriented.origin_lps;
+          const auto b = static_cast<std::size_t>(std::max(0.0, (p.dot(d) + 1000.0) / kBand));
           if (b >= bands.size()) bands.resize(b + 1);
-          bands[b].n += 1; bands[b].x += p[0]; bands[b].y += p[1];
+          bands[b].n += 1; bands[b].x += p.dot(e1); bands[b].y += p.dot(e2);
         }
   double max_n = 0;
   for (const auto& b : bands) max_n = std::max(max_n, b.n);
@@ -184,8 +183,8 @@ CylinderAxis fit_axis(const Segmentation& seg) {
   double w = 0, cx = 0, cy = 0;
   for (const auto& b : bands)
     if (b.n >= 0.3 * max_n) { w += b.n; cx += b.x; cy += b.y; }
-  CylinderAxis axis;
-  axis.origin_lps = {cx / w, cy / w, 0.0};
+  CylinderAxis axis = oriented;
+  axis.origin_lps = oriented.origin_lps + (cx / w) * e1 + (cy / w) * e2;
   return axis;
 }
 

@@ -215,9 +215,10 @@ Volume make_phantom(const PhantomOptions& options) {
   if (!(options.spacing_mm.minCoeff() >= 0.1) || options.spacing_mm.maxCoeff() > 10.0)
     throw InvalidInput(cat("phantom: spacing (", options.spacing_mm.transpose(),
                            ") mm must be between 0.1 and 10 mm"));
-  if (!(std::abs(options.pitch_deg) <= 45) || !(std::abs(options.yaw_deg) <= 45))
-    throw InvalidInput(cat("phantom: pitch ", options.pitch_deg, " and yaw ", options.yaw_deg,
-                           " deg must be between -45 and 45"));
+  if (!(std::abs(options.pitch_deg) <= 45) || !(std::abs(options.yaw_deg) <= 45) ||
+      !(std::abs(options.roll_deg) <= 45))
+    throw InvalidInput(cat("phantom: pitch ", options.pitch_deg, ", yaw ", options.yaw_deg,
+                           " and roll ", options.roll_deg, " deg must be between -45 and 45"));
   if (options.metal && !(options.metal_z_mm >= -90 && options.metal_z_mm <= 60))
     throw InvalidInput(cat("phantom: the metal's height ", options.metal_z_mm,
                            " mm must be between -90 and 60"));
@@ -238,14 +239,16 @@ Volume make_phantom(const PhantomOptions& options) {
   v.format = "phantom";
   v.data.resize(v.geom.n_voxels());
   const HeadPhantom head(options.layered, options.thin_bone, options.face, options.scale);
-  // The posed head at p is the upright head at pose^T (p - a) + a. Forward: the vertex towards
-  // anterior (-P) about +L; to the left: the face (-P) towards +L about +S.
+  // The posed head at p is the upright head at pose^T (p - a) + a. Leaning left: the vertex
+  // (+S) towards +L about +P; forward: the vertex towards anterior (-P) about +L; to the left:
+  // the face (-P) towards +L about +S.
   const double kDeg = 3.14159265358979323846 / 180.0;
   const Eigen::Matrix3d pose =
       (Eigen::AngleAxisd(options.yaw_deg * kDeg, Eigen::Vector3d::UnitZ()) *
-       Eigen::AngleAxisd(options.pitch_deg * kDeg, Eigen::Vector3d::UnitX()))
+       Eigen::AngleAxisd(options.pitch_deg * kDeg, Eigen::Vector3d::UnitX()) *
+       Eigen::AngleAxisd(options.roll_deg * kDeg, Eigen::Vector3d::UnitY()))
           .toRotationMatrix();
-  const bool posed = options.pitch_deg != 0 || options.yaw_deg != 0;
+  const bool posed = options.pitch_deg != 0 || options.yaw_deg != 0 || options.roll_deg != 0;
   const Eigen::Vector3d a = head.axis_point();
   // metal: the block of dental metal, posed and scaled with the head, and its streaks in the
   // scanner's axial slices (the caricature of HeadPhantom::kStreak*; docs/volume.md, "Metal").
@@ -315,8 +318,8 @@ Volume make_phantom(const PhantomOptions& options) {
                           " .. ", HeadPhantom::kStoredMaxHu, " HU"));
   if (options.scale != 1.0) v.notes.push_back(cat("head scaled by ", options.scale));
   if (posed)
-    v.notes.push_back(cat("head tilted forward ", options.pitch_deg, " deg and turned left ",
-                          options.yaw_deg, " deg"));
+    v.notes.push_back(cat("head leaning left ", options.roll_deg, " deg, tilted forward ",
+                          options.pitch_deg, " deg and turned left ", options.yaw_deg, " deg"));
   return v;
 }
 

@@ -511,7 +511,7 @@ struct PhantomRequest {
   bool metal = false;
   double metal_z = PhantomOptions{}.metal_z_mm;
   double scale = PhantomOptions{}.scale;
-  double pitch = 0, yaw = 0;
+  double pitch = 0, yaw = 0, roll = 0;
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
     v(r.output, {"output", "output .nii or .nii.gz", FieldKind::Required, "-o,--output"});
@@ -533,6 +533,8 @@ struct PhantomRequest {
     v(r.pitch, {"pitch", "the head tilted forward in the scanner, chin towards the chest (deg, "
                          "-45..45)"});
     v(r.yaw, {"yaw", "the head turned towards the patient's left in the scanner (deg, -45..45)"});
+    v(r.roll, {"roll", "the head leaning towards the patient's left shoulder in the scanner, the "
+                       "vertex towards the left (deg, -45..45; applied before the pitch and yaw)"});
     v(r.force, {"force", "replace an existing output", FieldKind::Flag});
   }
 };

@@ -243,9 +243,11 @@ void harmonic_fill(std::vector<float>& img, const std::vector<std::uint8_t>& kno
 /// measured, one-sided otherwise). Used by volume and scan models alike.
 void flag_grazing(CylindricalMaps& maps, double limit_deg);
 
-/// Fits the axis to the segmented head: parallel to patient superior (LPS +z), through the
-/// area-weighted centre of the head's axial cross-sections; front = anterior (LPS -y).
-CylinderAxis fit_axis(const Segmentation& seg);
+/// Fits the axis to the segmented head: parallel to `oriented.direction` (by default patient
+/// superior, LPS +z), through the area-weighted centre of the head's cross-sections square to
+/// it; front `oriented.front` (by default anterior, LPS -y). A head leaning in the scanner gets
+/// its own direction and this centre (app's from-volume).
+CylinderAxis fit_axis(const Segmentation& seg, const CylinderAxis& oriented = CylinderAxis{});
 
 /// One profile split into layers: depths (mm) along it, skin + fat + deep = its length.
 struct LayerSplit {

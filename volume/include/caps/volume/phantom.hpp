@@ -49,10 +49,11 @@ struct PhantomOptions {
   bool metal = false;
   double metal_z_mm = -40.0;  ///< metal: the block's height on the head's axis (mm, -90 .. 60)
   double scale = 1.0;      ///< the head's size: every length of the head times this (0.7 .. 1.3)
-  /// The head's pose in the scanner, about HeadPhantom::axis_point(): tilted forward (chin
-  /// towards the chest) by `pitch_deg`, then turned towards the patient's left by `yaw_deg`
-  /// (both -45 .. 45 deg; the head holder stays where it is).
-  double pitch_deg = 0, yaw_deg = 0;
+  /// The head's pose in the scanner, about HeadPhantom::axis_point(): leaning towards the
+  /// patient's left shoulder (the vertex towards the left) by `roll_deg`, then tilted forward
+  /// (chin towards the chest) by `pitch_deg`, then turned towards the patient's left by
+  /// `yaw_deg` (each -45 .. 45 deg; the head holder stays where it is).
+  double pitch_deg = 0, yaw_deg = 0, roll_deg = 0;
 };
 
 /// Analytic description of the phantom head (all lengths in mm, angles in radians).
