@@ -295,7 +295,8 @@ std::optional<Roll> head_roll(const CylinderAxis& a, const Landmarks& l) {
 }
 
 // `a` turned by `deg` about the face's front (anterior at `midline_theta_deg`) through the
-// head's middle, as a head leaning by `deg` towards its left turns its own axis.
+// head's middle, as a head leaning by `deg` towards its left turns its own axis (fit_axis() then
+// moves it onto the centre of the head's sections square to it).
 CylinderAxis leaned(const CylinderAxis& a, const CylinderGrid& g, double midline_theta_deg,
                     double deg) {
   const Eigen::Vector3d centre = a.to_lps(0, g.z_mm(g.n_z / 2), 0);
@@ -383,7 +384,8 @@ void lean_upright(const Volume& v, ModelOptions& o, VolumeModel& m, double searc
   pose["roll_pairs_deg"] = each;
   pose["roll_method"] = "the left and right landmarks' heights (outer eye corners, zygia, "
                         "tragia; weighted by their width), the axis turned about the face's "
-                        "front through the head's middle (docs/landmarks.md, \"A head leaning "
+                        "front and refitted through the centre of the head's sections square to "
+                        "it (docs/landmarks.md, \"A head leaning "
                         "to one side\")";
   m.pose_json = pose.dump();
 }
