@@ -37,11 +37,13 @@ inline std::filesystem::path fresh_temp_dir(const std::string& prefix) {
   return d;
 }
 
-/// Runs `caps args`, its stdout and stderr captured in files under `dir`.
-inline Outcome run_caps(const std::filesystem::path& dir, const std::string& args) {
+/// Runs `caps args`, its stdout and stderr captured in files under `dir`; `env`: variable
+/// assignments for the shell to put before the program ("NAME=value ...").
+inline Outcome run_caps(const std::filesystem::path& dir, const std::string& args,
+                        const std::string& env = "") {
   const std::filesystem::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string cmd = std::string(CAPS_EXE) + " " + args + " >" + out.string() + " 2>" +
-                          err.string() + " </dev/null";
+  const std::string cmd = (env.empty() ? "" : env + " ") + std::string(CAPS_EXE) + " " + args +
+                          " >" + out.string() + " 2>" + err.string() + " </dev/null";
   const int status = std::system(cmd.c_str());
   return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(out), slurp(err)};
 }

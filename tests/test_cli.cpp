@@ -236,6 +236,31 @@ TEST_F(Cli, AMeshInvertedBeforeAnyLoadIsABadFileNamingTheElement) {
   EXPECT_FALSE(fs::exists(out));
 }
 
+TEST_F(Cli, RunsTheCpusOwnBlasKernelsAndKeepsTheUsers) {
+  // OpenBLAS falls back to its generic SSE3 kernels (Prescott) on a CPU newer than it knows;
+  // the caps program then starts itself again with the kernels the CPU runs (fem/blas.hpp), and
+  // result.json names them. A kernel set the user gives in OPENBLAS_CORETYPE stays, and the
+  // answer is the same to round-off either way.
+  const fs::path mesh = dir / "blas_box";
+  ASSERT_EQ(run("fem box -o " + mesh.string() + " --size 30,20,6 --cells 5,6,2 --slot -q").code, 0);
+  const fs::path own = dir / "blas_own", given = dir / "blas_given";
+  ASSERT_EQ(run("solve " + mesh.string() + " -o " + own.string() + " -q").code, 0);
+  const Outcome r = caps_test::run_caps(
+      dir, "solve " + mesh.string() + " -o " + given.string() + " -q", "OPENBLAS_CORETYPE=Prescott");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto a = nlohmann::json::parse(slurp(own / "result.json"));
+  const auto b = nlohmann::json::parse(slurp(given / "result.json"));
+  const std::string kernels = a["blas_kernels"];
+  if (kernels.empty()) GTEST_SKIP() << "the BLAS is not OpenBLAS";
+  EXPECT_EQ(b["blas_kernels"], "Prescott");
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
+    for (const char* older : {"Prescott", "Core2", "Penryn", "Nehalem", "Sandybridge", "Barcelona"})
+      EXPECT_NE(kernels, older) << "an AVX2 CPU runs OpenBLAS's generic kernels";
+  const double fa = a["total_suture_force_n"], fb = b["total_suture_force_n"];
+  EXPECT_NEAR(fa, fb, 1e-9 * std::abs(fb));
+}
+
 TEST_F(Cli, SolvesABoxInEitherPrecisionAndRefusesBadSolverOptions) {
   const fs::path mesh = dir / "box_mesh";
   ASSERT_EQ(run("fem box -o " + mesh.string() + " --size 30,20,6 --cells 5,6,2 --slot -q").code, 0);

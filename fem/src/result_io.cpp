@@ -1,5 +1,7 @@
 #include "caps/fem/result_io.hpp"
 
+#include "caps/fem/blas.hpp"
+
 #include <nlohmann/json.hpp>
 
 #include "caps/core/atomic_output.hpp"
@@ -44,6 +46,8 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
   j["solver"] = r.solver;
   j["precision"] = {{"arithmetic", r.precision}, {"refinement_iterations", r.refinement_iterations},
                     {"fell_back_to_double", r.fell_back_to_double}};
+  // The dense kernels the factorizations ran on (fem/blas.hpp): timings depend on them.
+  j["blas_kernels"] = blas_core();
   j["sizes"] = {{"nodes", n}, {"elements", mesh.elements.size()}, {"dofs", r.n_dofs},
                 {"equations", r.n_equations}, {"matrix_nonzeros_upper", r.n_nonzeros},
                 {"factor_nonzeros", r.factor_nonzeros}};

@@ -1,0 +1,24 @@
+#pragma once
+// The dense kernels under the sparse direct solvers. MUMPS and CHOLMOD factorize their fronts and
+// supernodes with the system's BLAS (Debian's libblas.so.3, OpenBLAS by the project's setup), and
+// OpenBLAS picks its kernels for the CPU when it loads. A CPU newer than the OpenBLAS build
+// knows (OpenBLAS 0.3.21, Debian 12, on an Intel Emerald Rapids: family 6, model 207) gets its
+// generic SSE3 kernels (Prescott), and every factorization takes about twice as long as with the
+// AVX2 or AVX-512 kernels the CPU runs (docs/benchmarks.md, "The BLAS kernels").
+
+#include <string>
+
+namespace caps::fem {
+
+/// The kernels OpenBLAS chose in this process ("Prescott", "Haswell", "SkylakeX", ...); "" when
+/// the BLAS is not OpenBLAS.
+std::string blas_core();
+
+/// The OPENBLAS_CORETYPE this process should have been started with: "SkylakeX" (AVX-512 F, BW,
+/// DQ, VL) or "Haswell" (AVX2 and FMA) when OpenBLAS chose kernels older than the CPU's (a CPU it
+/// does not know); "" when its choice stands, OPENBLAS_CORETYPE is set already, or the BLAS is
+/// not OpenBLAS. OpenBLAS reads the variable once, when it loads: a program sets it and starts
+/// itself again (the caps program does, tools/main.cpp).
+std::string blas_core_to_force();
+
+}  // namespace caps::fem

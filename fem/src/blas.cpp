@@ -1,0 +1,44 @@
+#include "caps/fem/blas.hpp"
+
+#include <dlfcn.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <cstdlib>
+#include <string_view>
+
+namespace caps::fem {
+
+std::string blas_core() {
+  using CoreName = char* (*)();
+  const auto name = reinterpret_cast<CoreName>(dlsym(RTLD_DEFAULT, "openblas_get_corename"));
+  const char* core = name ? name() : nullptr;
+  return core ? std::string(core) : std::string();
+}
+
+std::string blas_core_to_force() {
+  if (std::getenv("OPENBLAS_CORETYPE")) return {};
+  const std::string core = blas_core();
+  // OpenBLAS's kernels for CPUs without AVX2: what it falls back to on a CPU it does not know.
+  constexpr std::array<std::string_view, 16> kOlder{
+      "Katmai",  "Coppermine", "Northwood",   "Prescott",  "Banias",    "Atom",
+      "Core2",   "Penryn",     "Dunnington",  "Nehalem",   "Sandybridge", "Opteron",
+      "Opteron_SSE3", "Barcelona", "Bulldozer", "Piledriver"};
+  const auto is_older = std::any_of(kOlder.begin(), kOlder.end(), [&](std::string_view k) {
+    return core.size() == k.size() &&
+           std::equal(core.begin(), core.end(), k.begin(), [](char a, char b) {
+             return std::tolower(static_cast<unsigned char>(a)) ==
+                    std::tolower(static_cast<unsigned char>(b));
+           });
+  });
+  if (core.empty() || !is_older) return {};
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
+      __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512vl"))
+    return "SkylakeX";
+  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) return "Haswell";
+  return {};
+}
+
+}  // namespace caps::fem
