@@ -1,6 +1,7 @@
 #include "caps/fem/blas.hpp"
 
 #include <dlfcn.h>
+#include <stdlib.h>
 
 #include <algorithm>
 #include <array>
@@ -22,9 +23,9 @@ std::string blas_core_to_force() {
   const std::string core = blas_core();
   // OpenBLAS's kernels for CPUs without AVX2: what it falls back to on a CPU it does not know.
   constexpr std::array<std::string_view, 16> kOlder{
-      "Katmai",  "Coppermine", "Northwood",   "Prescott",  "Banias",    "Atom",
-      "Core2",   "Penryn",     "Dunnington",  "Nehalem",   "Sandybridge", "Opteron",
-      "Opteron_SSE3", "Barcelona", "Bulldozer", "Piledriver"};
+      "Katmai",       "Coppermine", "Northwood",  "Prescott",  "Banias",      "Atom",
+      "Core2",        "Penryn",     "Dunnington", "Nehalem",   "Sandybridge", "Opteron",
+      "Opteron_SSE3", "Barcelona",  "Bulldozer",  "Piledriver"};
   const auto is_older = std::any_of(kOlder.begin(), kOlder.end(), [&](std::string_view k) {
     return core.size() == k.size() &&
            std::equal(core.begin(), core.end(), k.begin(), [](char a, char b) {
@@ -39,6 +40,19 @@ std::string blas_core_to_force() {
     return "SkylakeX";
   if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) return "Haswell";
   return {};
+}
+
+std::string use_the_cpus_blas_kernels() {
+  const std::string core = blas_core_to_force();
+  if (core.empty()) return {};
+  using Call = void (*)();
+  const auto quit = reinterpret_cast<Call>(dlsym(RTLD_DEFAULT, "gotoblas_dynamic_quit"));
+  const auto init = reinterpret_cast<Call>(dlsym(RTLD_DEFAULT, "gotoblas_dynamic_init"));
+  if (!quit || !init) return {};  // not a DYNAMIC_ARCH build: its kernels are fixed
+  ::setenv("OPENBLAS_CORETYPE", core.c_str(), 1);
+  quit();
+  init();
+  return blas_core();
 }
 
 }  // namespace caps::fem

@@ -19,30 +19,7 @@ Units are those of the command line: millimetres, degrees, newtons, MPa; positio
 import json as _json
 import os as _os
 
-
-def _blas_kernels():
-    """OpenBLAS reads OPENBLAS_CORETYPE once, when it loads with the native module below, and on a
-    CPU newer than it knows it falls back to its generic SSE3 kernels (Debian 12's OpenBLAS 0.3.21
-    on an Intel Emerald Rapids), with factorizations twice as slow (docs/benchmarks.md, "The BLAS
-    kernels"). The caps program starts itself again with the kernels the CPU runs
-    (fem/blas.hpp); here the variable is set before the load, from the CPU's flags, unless it is
-    set already. A process that loaded OpenBLAS before (numpy on the system BLAS) keeps its own."""
-    if "OPENBLAS_CORETYPE" in _os.environ:
-        return
-    try:
-        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
-            flags = next((line.split(":", 1)[1].split() for line in f if line.startswith("flags")), [])
-    except OSError:
-        return
-    if {"avx512f", "avx512bw", "avx512dq", "avx512vl"} <= set(flags):
-        _os.environ["OPENBLAS_CORETYPE"] = "SkylakeX"
-    elif {"avx2", "fma"} <= set(flags):
-        _os.environ["OPENBLAS_CORETYPE"] = "Haswell"
-
-
-_blas_kernels()
-
-from . import _caps  # noqa: E402  (after the BLAS kernels are chosen)
+from . import _caps
 
 __all__ = [
     "Error", "InvalidInput", "InvalidParameter", "IoError", "SolverError", "Cancelled",

@@ -26,6 +26,7 @@
 #include "caps/app/verbs.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/reporter.hpp"
+#include "caps/fem/blas.hpp"
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/volume/model_dir.hpp"
@@ -240,6 +241,9 @@ py::dict read_result(const std::string& dir) {
 
 PYBIND11_MODULE(_caps, m) {
   m.doc() = "caps: the app:: requests and results (see docs/python.md); use the package caps.";
+  // OpenBLAS's generic kernels on a CPU it does not know: the CPU's own (fem/blas.hpp), as the
+  // caps program does at its start.
+  caps::fem::use_the_cpus_blas_kernels();
 
   py::register_exception_translator(&translate);
 

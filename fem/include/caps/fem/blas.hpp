@@ -17,8 +17,15 @@ std::string blas_core();
 /// The OPENBLAS_CORETYPE this process should have been started with: "SkylakeX" (AVX-512 F, BW,
 /// DQ, VL) or "Haswell" (AVX2 and FMA) when OpenBLAS chose kernels older than the CPU's (a CPU it
 /// does not know); "" when its choice stands, OPENBLAS_CORETYPE is set already, or the BLAS is
-/// not OpenBLAS. OpenBLAS reads the variable once, when it loads: a program sets it and starts
-/// itself again (the caps program does, tools/main.cpp).
+/// not OpenBLAS.
 std::string blas_core_to_force();
+
+/// Switches OpenBLAS to blas_core_to_force()'s kernels, if any: sets OPENBLAS_CORETYPE (for this
+/// process and the programs it starts, such as ccx) and has OpenBLAS choose again, as it does
+/// when it loads (gotoblas_dynamic_quit() and gotoblas_dynamic_init(), which a DYNAMIC_ARCH
+/// build exports). Call it before any BLAS work and before other threads start (the caps
+/// program's main(), the Python module's import). Returns the kernels now in use when it
+/// switched, "" otherwise.
+std::string use_the_cpus_blas_kernels();
 
 }  // namespace caps::fem
