@@ -333,6 +333,17 @@ TEST_F(AppWithModel, SimulateThroughAppAndThroughTheCliGivesTheSameResultJson) {
                                    s.output + " --size 2.5 --undermine 4 --force --json");
   ASSERT_EQ(old.code, 0) << old.out;
   EXPECT_NE(old.out.find("--size is now --mesh-size"), std::string::npos) << old.out;
+  // Without the meshing pictures (the planner's first answer): the same result, no surface.png
+  // or section.png.
+  EXPECT_TRUE(fs::exists(fs::path(s.output) / "surface.png"));
+  const auto bare = caps_test::caps("simulate --model " + kModel + " --plan " + pn.output +
+                                    " -o " + s.output + " --mesh-size 2.5 --undermine 4 "
+                                    "--no-mesh-pictures --force -q --json");
+  ASSERT_EQ(bare.code, 0) << bare.out;
+  EXPECT_EQ(comparable(json::parse(bare.out)), comparable(json::parse(app::to_json(direct))));
+  EXPECT_FALSE(fs::exists(fs::path(s.output) / "surface.png"));
+  EXPECT_FALSE(fs::exists(fs::path(s.output) / "section.png"));
+  EXPECT_TRUE(fs::exists(fs::path(s.output) / "result.vtu"));
 }
 
 TEST_F(AppWithModel, TheCliNamesTemplateOptionsAsTyped) {

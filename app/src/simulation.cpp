@@ -500,7 +500,8 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
     sim.face->mesh.model = model_dir;
     sim.face->mesh.plan = r.plan;
   }
-  closure::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string());
+  closure::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string(),
+                            !r.no_mesh_pictures);
   // The plan closed, beside its result: caps plan sheet --result refuses another plan's result.
   plan::write_plan(out.path() / "plan.json", plan);
   SimulateResult s;

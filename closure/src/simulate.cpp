@@ -171,7 +171,7 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
 
 void write_simulation(const Simulation& sim, const PatientModel& model,
                       const SimulateOptions& options, const std::filesystem::path& dir,
-                      const std::string& name) {
+                      const std::string& name, bool mesh_pictures) {
   // The whole face's mesh and result where it was solved (ParaView and CalculiX see all of it).
   const Mesh& mesh = sim.face ? sim.face->mesh : sim.wound.continuum.mesh;
   write_mesh_dir(mesh, dir);
@@ -181,6 +181,7 @@ void write_simulation(const Simulation& sim, const PatientModel& model,
   inp.grow_increments = options.solve.newton.grow_iterations > 0;
   if (!without_calculix_form(mesh, options)) write_inp(mesh, dir / "mesh.inp", inp);
   write_result_dir(mesh, sim.face ? sim.face_result : sim.result, dir, &sim.sutures);
+  if (!mesh_pictures) return;
   write_surface_mesh_png(dir / "surface.png", sim.wound.surface, cat("surface mesh of ", name));
   write_cross_section_png(dir / "section.png", sim.wound.surface, model, options.continuum,
                           cat("cross-section of ", name));

@@ -636,6 +636,7 @@ struct PlannerServer::Impl {
     // face: docs/planner.md). A preview, labelled so; the finite-strain closure is in the face.
     options_json["material"] = "linear";
     options_json["domain"] = "patch";
+    options_json["no_mesh_pictures"] = true;  // not shown by the page; a tenth of its time
     options_json.erase("face_radius");
     options_json.erase("time_limit");
     options_json["output"] = out_dir.string();

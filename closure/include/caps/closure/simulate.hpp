@@ -75,9 +75,9 @@ Simulation simulate(const PatientModel& model, const plan::Plan& plan,
                     const SimulateOptions& options = {}, Reporter* reporter = nullptr);
 
 /// Writes a simulation into an existing directory: mesh.vtu, mesh.json, mesh.inp, result.vtu,
-/// result.json, surface.png and section.png (titled with `name`).
+/// result.json and, with `mesh_pictures`, surface.png and section.png (titled with `name`).
 void write_simulation(const Simulation& sim, const PatientModel& model,
                       const SimulateOptions& options, const std::filesystem::path& dir,
-                      const std::string& name);
+                      const std::string& name, bool mesh_pictures = true);
 
 }  // namespace caps::closure
