@@ -814,7 +814,8 @@ TEST(FemMeshIo, DirectoryRoundTripsBothElementTypes) {
     write_result_dir(back, solved, dir);
     EXPECT_TRUE(std::filesystem::exists(dir / "result.vtu"));
     EXPECT_TRUE(std::filesystem::exists(dir / "result.json"));
-    // The nodal fields read back exactly (17 digits), and a wrong node count is refused.
+    // The nodal fields read back exactly (the shortest text of each double), and a wrong node
+    // count is refused.
     EXPECT_EQ(read_result_displacement(dir, back.n_nodes()), solved.displacement_mm);
     EXPECT_EQ(read_result_max_principal(dir, back.n_nodes()), solved.max_principal_mpa);
     EXPECT_GT(solved.max_principal_mpa.cwiseAbs().maxCoeff(), 0.0);

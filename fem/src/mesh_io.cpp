@@ -1,6 +1,7 @@
 #include "caps/fem/mesh_io.hpp"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -68,10 +69,16 @@ void write_vtu(const fs::path& path, const Eigen::MatrixX3d& points,
         << "\" NumberOfComponents=\"" << a.values.cols() << "\" format=\"ascii\">\n";
       for (Eigen::Index i = 0; i < a.values.rows(); ++i) {
         for (Eigen::Index c = 0; c < a.values.cols(); ++c) {
-          if (a.integer)
+          if (a.integer) {
             o << static_cast<long>(std::lround(a.values(i, c)));
-          else
-            o << a.values(i, c);
+          } else {
+            // The shortest text that reads back as the same double (std::to_chars): exact, and
+            // several times faster than the stream's 17 digits, which took a tenth of a small
+            // closure's time in the planner's first answer.
+            char text[32];
+            const auto end = std::to_chars(text, text + sizeof text, a.values(i, c)).ptr;
+            o.write(text, end - text);
+          }
           o << (c + 1 < a.values.cols() ? ' ' : '\n');
         }
       }
