@@ -1,11 +1,10 @@
 #include "caps/fem/result_io.hpp"
 
-#include "caps/fem/blas.hpp"
-
 #include <nlohmann/json.hpp>
 
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/fem/blas.hpp"
 #include "caps/fem/material_registry.hpp"
 #include "vtu.hpp"
 
