@@ -7,11 +7,11 @@
 
 #include <cmath>
 
-#include "caps/fem/blas.hpp"
 #include "caps/fem/box.hpp"
 #include "caps/fem/elements.hpp"
 #include "caps/fem/material.hpp"
 #include "caps/fem/solve.hpp"
+#include "blas_context.hpp"
 
 namespace {
 
@@ -117,12 +117,5 @@ BENCHMARK(SlabFinite)->ArgsProduct({{23, 38}, {0, 1}, {4}})->Unit(benchmark::kMi
 BENCHMARK(ElementFinite)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
 BENCHMARK(Cube)->ArgsProduct({{8, 13, 16}, {0, 1, 2}, {4}})->Unit(benchmark::kMillisecond)->Iterations(1);
-
-// The CPU's own BLAS kernels, as the caps program runs (fem/blas.hpp), named in the output.
-const bool kBlasKernels = [] {
-  caps::fem::use_the_cpus_blas_kernels();
-  benchmark::AddCustomContext("blas_kernels", caps::fem::blas_core());
-  return true;
-}();
 
 BENCHMARK_MAIN();

@@ -17,11 +17,11 @@
 #include <sstream>
 #include <string>
 
-#include "caps/fem/blas.hpp"
 #include "caps/fem/box.hpp"
 #include "caps/fem/inp_io.hpp"
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/solve.hpp"
+#include "blas_context.hpp"
 
 namespace {
 
@@ -122,12 +122,5 @@ void FiniteAgainstCalculix(benchmark::State& state) {
 
 // range(0) = initial load steps (caps) = initial increments (ccx); both grow after easy steps.
 BENCHMARK(FiniteAgainstCalculix)->Arg(10)->Unit(benchmark::kSecond)->Iterations(1);
-
-// The CPU's own BLAS kernels, as the caps program runs (fem/blas.hpp), named in the output.
-const bool kBlasKernels = [] {
-  caps::fem::use_the_cpus_blas_kernels();
-  benchmark::AddCustomContext("blas_kernels", caps::fem::blas_core());
-  return true;
-}();
 
 BENCHMARK_MAIN();

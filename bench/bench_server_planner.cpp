@@ -11,9 +11,9 @@
 #include <benchmark/benchmark.h>
 
 #include "caps/core/error.hpp"
-#include "caps/fem/blas.hpp"
 #include "caps/server/planner_server.hpp"
 #include "caps/surface/patient_model.hpp"
+#include "blas_context.hpp"
 
 #include <httplib.h>
 #include <nlohmann/json.hpp>
@@ -195,12 +195,5 @@ BENCHMARK(BM_PageZPlastyToPostOperativeSkin_BesideTheEye)
     ->Unit(benchmark::kMillisecond)->UseRealTime()->MeasureProcessCPUTime()->Iterations(2);
 
 }  // namespace
-
-// The CPU's own BLAS kernels, as the caps program runs (fem/blas.hpp), named in the output.
-const bool kBlasKernels = [] {
-  caps::fem::use_the_cpus_blas_kernels();
-  benchmark::AddCustomContext("blas_kernels", caps::fem::blas_core());
-  return true;
-}();
 
 BENCHMARK_MAIN();

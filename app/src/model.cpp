@@ -209,6 +209,18 @@ bool midline_found(const CylindricalMaps& maps) {
   return midline_found(find_landmarks(PatientModel(maps)));
 }
 
+// `a` turned by `deg` about `about` through the head's middle (z = 0 there): the axis turned
+// with a head tilted or leaning in the scanner.
+CylinderAxis turned_axis(const CylinderAxis& a, const CylinderGrid& g, const Eigen::Vector3d& about,
+                         double deg) {
+  const Eigen::AngleAxisd turn(deg_to_rad(deg), about);
+  CylinderAxis t;
+  t.direction = (turn * a.direction).normalized();
+  t.front = (turn * a.front).normalized();
+  t.origin_lps = a.to_lps(0, g.z_mm(g.n_z / 2), 0);
+  return t;
+}
+
 // The head's pitch in the scanner (issue 37; docs/landmarks.md, "A head tilted or turned in the
 // scanner"). Along the scanner's axis the profile of a head tilted 20 deg or more is not a face's
 // and its landmarks are withdrawn. The axis is then tilted about the head's left-right direction
@@ -227,18 +239,9 @@ struct Pitch {
 std::optional<Pitch> head_pitch(const Volume& v, const VolumeModel& upright,
                                 double midline_theta_deg, ModelOptions o, Reporter* reporter) {
   const CylinderAxis& a = upright.maps.axis;
-  const CylinderGrid& g = upright.maps.grid;
-  const Eigen::Vector3d centre = a.to_lps(0, g.z_mm(g.n_z / 2), 0);
   const Eigen::Vector3d left = a.direction.cross(a.ray(deg_to_rad(midline_theta_deg))).normalized();
-  // The scanner's axis tilted by `deg` about `left`, through the head's middle (z = 0 there).
-  const auto tilted = [&](double deg) {
-    const Eigen::AngleAxisd turn(deg_to_rad(deg), left);
-    CylinderAxis t;
-    t.direction = (turn * a.direction).normalized();
-    t.front = (turn * a.front).normalized();
-    t.origin_lps = centre;
-    return t;
-  };
+  // The scanner's axis tilted by `deg` about `left`, through the head's middle.
+  const auto tilted = [&](double deg) { return turned_axis(a, upright.maps.grid, left, deg); };
   o.surfaces = false;
   o.maps.layers.measure = false;
   std::vector<double> found_at;
@@ -299,13 +302,7 @@ std::optional<Roll> head_roll(const CylinderAxis& a, const Landmarks& l) {
 // moves it onto the centre of the head's sections square to it).
 CylinderAxis leaned(const CylinderAxis& a, const CylinderGrid& g, double midline_theta_deg,
                     double deg) {
-  const Eigen::Vector3d centre = a.to_lps(0, g.z_mm(g.n_z / 2), 0);
-  const Eigen::AngleAxisd turn(-deg_to_rad(deg), a.ray(deg_to_rad(midline_theta_deg)));
-  CylinderAxis t;
-  t.direction = (turn * a.direction).normalized();
-  t.front = (turn * a.front).normalized();
-  t.origin_lps = centre;
-  return t;
+  return turned_axis(a, g, a.ray(deg_to_rad(midline_theta_deg)), -deg);
 }
 
 // Whether the detector asked whether the head is turned or leaning (the skin most symmetric at
@@ -335,12 +332,11 @@ std::optional<double> roll_search(const Volume& v, const VolumeModel& m, ModelOp
 // more than kRollToleranceDeg. A turn that loses the face's midline landmarks is not taken.
 // model.json's source.pose gets the roll and each pair's, source.notes a sentence.
 constexpr double kMinRollDeg = 3.0, kRollToleranceDeg = 0.5;
-void lean_upright(const Volume& v, ModelOptions& o, VolumeModel& m, double searched,
+void lean_upright(const Volume& v, ModelOptions& o, VolumeModel& m, Landmarks l, double searched,
                   Reporter* reporter) {
   double total = searched;
   std::vector<std::pair<std::string, double>> first;
   for (int pass = 0; pass < 2; ++pass) {
-    const Landmarks l = find_landmarks(PatientModel(m.maps));
     const std::optional<Roll> roll = head_roll(m.maps.axis, l);
     const double least = pass == 0 && searched == 0 ? kMinRollDeg : kRollToleranceDeg;
     if (!roll || !(std::abs(roll->deg) >= least)) break;
@@ -354,9 +350,11 @@ void lean_upright(const Volume& v, ModelOptions& o, VolumeModel& m, double searc
     turned.axis =
         fit_axis(m.segmentation, leaned(m.maps.axis, m.maps.grid, l.midline_theta_deg, roll->deg));
     VolumeModel again = build_volume_model(v, turned, reporter);
-    if (midline_found(l) && !midline_found(find_landmarks(PatientModel(again.maps)))) break;
+    Landmarks after = find_landmarks(PatientModel(again.maps));
+    if (midline_found(l) && !midline_found(after)) break;
     o = turned;
     m = std::move(again);
+    l = std::move(after);
     total += roll->deg;
   }
   if (total == 0) return;
@@ -489,20 +487,22 @@ ModelResult run_from_volume(const FromVolumeRequest& r, Reporter* reporter) {
                         .dump();
     }
   }
-  double searched_roll = 0;
-  if (!axis_given && !o.axis) {
+  if (!axis_given) {
+    // The landmarks of the model as it stands: the upright one's unless the pitch rebuilt it.
+    Landmarks now = o.axis ? find_landmarks(PatientModel(m.maps)) : upright;
+    double searched_roll = 0;
     // A head leaning so far that its skin is most symmetric at the edge of the midline's search
     // (25 deg or more on the face phantom): the axis turned with it by 15 and 30 deg either way,
     // the first that shows the face's midline landmarks taken, and refined below.
-    const Landmarks now = find_landmarks(PatientModel(m.maps));
-    if (!midline_found(now) && leaning_suspected(now))
+    if (!o.axis && !midline_found(now) && leaning_suspected(now))
       if (const std::optional<double> deg = roll_search(v, m, o, reporter)) {
         o.axis = fit_axis(m.segmentation, leaned(m.maps.axis, m.maps.grid, 0.0, *deg));
         m = build_volume_model(v, o, reporter);
+        now = find_landmarks(PatientModel(m.maps));
         searched_roll = *deg;
       }
+    lean_upright(v, o, m, std::move(now), searched_roll, reporter);
   }
-  if (!axis_given) lean_upright(v, o, m, searched_roll, reporter);
   write_model(m, r.output, r.force, reporter);
   add_landmarks(r.output, reporter);
   // The whole-face tissue model; a volume it cannot be made of (no bone, no soft tissue) still

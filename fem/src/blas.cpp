@@ -5,7 +5,6 @@
 
 #include <algorithm>
 #include <array>
-#include <cctype>
 #include <cstdlib>
 #include <string_view>
 
@@ -21,19 +20,13 @@ std::string blas_core() {
 std::string blas_core_to_force() {
   if (std::getenv("OPENBLAS_CORETYPE")) return {};
   const std::string core = blas_core();
-  // OpenBLAS's kernels for CPUs without AVX2: what it falls back to on a CPU it does not know.
+  // OpenBLAS's kernels for CPUs without AVX2 (gotoblas_corename()'s spelling): what it falls
+  // back to on a CPU it does not know.
   constexpr std::array<std::string_view, 16> kOlder{
       "Katmai",       "Coppermine", "Northwood",  "Prescott",  "Banias",      "Atom",
       "Core2",        "Penryn",     "Dunnington", "Nehalem",   "Sandybridge", "Opteron",
       "Opteron_SSE3", "Barcelona",  "Bulldozer",  "Piledriver"};
-  const auto is_older = std::any_of(kOlder.begin(), kOlder.end(), [&](std::string_view k) {
-    return core.size() == k.size() &&
-           std::equal(core.begin(), core.end(), k.begin(), [](char a, char b) {
-             return std::tolower(static_cast<unsigned char>(a)) ==
-                    std::tolower(static_cast<unsigned char>(b));
-           });
-  });
-  if (core.empty() || !is_older) return {};
+  if (std::find(kOlder.begin(), kOlder.end(), core) == kOlder.end()) return {};
   __builtin_cpu_init();
   if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
       __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512vl"))
