@@ -1,6 +1,7 @@
 // caps::fem: element checks (patch, tangent, convergence, MUMPS = CHOLMOD), analytic benchmarks
 // (cantilever, Lame cylinder), suture closure, mesh directory IO and the bad-input catalogue.
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include "error_of.hpp"
 #include "fem_test_support.hpp"
@@ -26,7 +27,10 @@
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/fem/solve.hpp"
+#include "../fem/src/assemble.hpp"       // the finite-strain assembly, tested directly
+#include "../fem/src/constraints.hpp"
 #include "../fem/src/direct_solver.hpp"  // the mixed-precision solver's fall-back, tested directly
+#include "../fem/src/elements_impl.hpp"
 
 using namespace caps;
 using namespace caps::fem;
@@ -980,4 +984,65 @@ TEST(FemBadInput, EachErrorIsInvalidInputNamingTheItem) {
   }
   // Missing directory / files.
   EXPECT_THROW(read_mesh_dir("/nonexistent/caps"), IoError);
+}
+
+TEST(FemFiniteAssembly, AnInvertedStateReportsTheLowestInvertedElementAsTheFullAssemblyDoes) {
+  // Once an element is found inverted, the assembly only looks for a lower one (the others'
+  // forces and tangents are of no use: the step is cut back). What it reports must be what the
+  // kernel run on every element in id order finds, with one thread or two.
+  for (const bool wedges : {false, true}) {
+    BoxOptions bo;
+    bo.size_mm = {24, 24, 6};
+    bo.cells = {6, 6, 2};
+    bo.wedges = wedges;
+    const Mesh mesh = make_box_mesh(bo);
+    const fem::detail::DofMap map = fem::detail::build_dof_map(mesh);
+    fem::detail::FiniteMaterials materials;
+    for (const auto& [layer, m] : mesh.materials) materials[layer] = m.get();
+    // A smooth field and three nodes pushed through their elements (the last element's node
+    // too, so that inverted elements lie at both ends of the numbering).
+    Eigen::VectorXd u(3 * mesh.n_nodes());
+    for (Eigen::Index i = 0; i < u.size(); ++i) u[i] = 0.05 * std::sin(0.37 * static_cast<double>(i));
+    const std::vector<int> pushed = {mesh.elements[17].nodes[0], mesh.elements[40].nodes[6],
+                                     mesh.elements.back().nodes[1]};
+    for (const int node : pushed) u.segment<3>(3 * node) += Eigen::Vector3d(9, -7, 8);
+    // The kernel on every element, in id order.
+    int lowest = -1, gauss_point = -1;
+    double det_F = 0;
+    int n_inverted = 0;
+    for (int e = 0; e < mesh.n_elements(); ++e) {
+      const Element& el = mesh.elements[e];
+      Eigen::MatrixX3d X(el.n_nodes(), 3);
+      Eigen::VectorXd ue(3 * el.n_nodes()), fe;
+      Eigen::MatrixXd Ke;
+      for (int a = 0; a < el.n_nodes(); ++a) {
+        X.row(a) = mesh.nodes.row(el.nodes[a]);
+        ue.segment<3>(3 * a) = u.segment<3>(3 * el.nodes[a]);
+      }
+      const fem::detail::FiniteKernelResult r = fem::detail::finite_kernel(
+          el.type, X, *materials.at(el.layer), ue, e, fe, &Ke, 1.0, mesh.wedge_rule);
+      if (r.inverted_at < 0) continue;
+      ++n_inverted;
+      if (lowest < 0) {
+        lowest = e;
+        gauss_point = r.inverted_at;
+        det_F = r.det_F;
+      }
+      // the check alone finds the same point
+      const fem::detail::FiniteKernelResult c = fem::detail::first_inversion(el.type, X, ue, e, mesh.wedge_rule);
+      EXPECT_EQ(c.inverted_at, r.inverted_at) << "element " << e;
+      EXPECT_EQ(c.det_F, r.det_F) << "element " << e;
+    }
+    ASSERT_GE(n_inverted, 3) << (wedges ? "Wedge15" : "Hex20");
+    ASSERT_GE(lowest, 0);
+    for (const int threads : {1, 2}) {
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+      fem::detail::Assembly sys = fem::detail::assemble_structure(mesh, map);
+      const fem::detail::FiniteAssembly a =
+          fem::detail::assemble_finite(mesh, map, materials, u, 1.0, Eigen::VectorXd(), true, sys);
+      EXPECT_EQ(a.inverted_element, lowest) << threads << " threads";
+      EXPECT_EQ(a.inverted_gauss_point, gauss_point) << threads << " threads";
+      EXPECT_EQ(a.det_F, det_F) << threads << " threads";
+    }
+  }
 }

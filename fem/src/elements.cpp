@@ -336,6 +336,25 @@ Vector6d finite_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X, const
   return cauchy_from_pk2(H + Eigen::Matrix3d::Identity(), S);
 }
 
+FiniteKernelResult first_inversion(ElementType type, const Eigen::MatrixX3d& X,
+                                   const Eigen::VectorXd& u_e, int element, WedgeRule wedge) {
+  // finite_kernel()'s own steps up to its test of det F, so that both find the same point.
+  const ShapeTable& t = shape_table(type, wedge);
+  Eigen::MatrixX3d G(t.n, 3);
+  FiniteKernelResult out;
+  for (std::size_t q = 0; q < t.w.size(); ++q) {
+    const int gp = static_cast<int>(q);
+    gradients(t.dN[q], X, G, element, gp);
+    const Eigen::Matrix3d H = displacement_gradient(G, u_e);
+    if (const double J = 1 + volume_change(H); !(J > 0) || !std::isfinite(J)) {
+      out.inverted_at = gp;
+      out.det_F = J;
+      return out;
+    }
+  }
+  return out;
+}
+
 FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
                                  const Material& material, const Eigen::VectorXd& u_e,
                                  int element, Eigen::VectorXd& f, Eigen::MatrixXd* K,

@@ -71,6 +71,13 @@ FiniteKernelResult finite_kernel(ElementType type, const Eigen::MatrixX3d& X,
                                  int element, Eigen::VectorXd& f, Eigen::MatrixXd* K,
                                  double prestretch = 1.0, WedgeRule wedge = WedgeRule::Full);
 
+/// The first Gauss point (in finite_kernel()'s order) where the element inverts at u_e, and
+/// det F there, as finite_kernel() reports it; no energy, force or tangent (what an assembly
+/// that has already met an inverted element still needs of the elements before it).
+FiniteKernelResult first_inversion(ElementType type, const Eigen::MatrixX3d& X,
+                                   const Eigen::VectorXd& u_e, int element,
+                                   WedgeRule wedge = WedgeRule::Full);
+
 /// Cauchy stress (Voigt, MPa) at natural point xi of an element whose tissue is prestretched
 /// (`prestretch` as finite_kernel()); throws SolverError if det F <= 0 there.
 Vector6d finite_cauchy_stress(ElementType type, const Eigen::MatrixX3d& X, const Material& material,
