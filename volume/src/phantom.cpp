@@ -295,13 +295,15 @@ Volume make_phantom(const PhantomOptions& options) {
         const Eigen::Vector3d p = v.index_to_lps(Eigen::Vector3d(i, j, k));
         // Whole Hounsfield units, as a CT stores them (the rounding is far below the noise of
         // any measurement here: 0.5 HU of a 1040 HU skin edge is 0.0005 voxel).
+        // Upright, the head and its holder in one evaluation.
         float hu = static_cast<float>(std::round(head.hu_at(
-            posed ? Eigen::Vector3d(pose.transpose() * (p - a) + a) : p, options.spacing_mm, false)));
-        // The holder stays in the scanner's frame: where the posed head leaves air, the holder
-        // where the upright head would leave air too (the holder alone).
+            posed ? Eigen::Vector3d(pose.transpose() * (p - a) + a) : p, options.spacing_mm,
+            options.head_holder && !posed)));
+        // Posed, the holder stays in the scanner's frame: where the posed head leaves air, the
+        // holder where the upright head would leave air too (the holder alone).
         constexpr float kAir = static_cast<float>(HeadPhantom::kAirHu);
-        if (options.head_holder && (!posed || hu == kAir) &&
-            (!posed || std::round(head.hu_at(p, options.spacing_mm, false)) == kAir))
+        if (options.head_holder && posed && hu == kAir &&
+            std::round(head.hu_at(p, options.spacing_mm, false)) == kAir)
           hu = static_cast<float>(std::round(head.hu_at(p, options.spacing_mm, true)));
         if (options.metal) hu = static_cast<float>(std::round(with_metal(p, hu)));
         v.data[v.geom.linear(i, j, k)] = hu;
