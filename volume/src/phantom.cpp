@@ -186,24 +186,33 @@ double HeadPhantom::hu_at(const Eigen::Vector3d& p_scaled, const Eigen::Vector3d
     const double f_cavity = clamp01(0.5 - d / voxel_mm.mean());
     hu += f_cavity * (kAirHu - kBrainHu) * f_inner;
   }
-  if (head_holder) {
-    // A 5 mm plastic arc behind the head about a vertical line 6.5 mm anterior of the axis: its
-    // inner face (radius 103 mm) stays 1.5 mm (a foam pad) from the back of the head, and a thin
-    // strap (4 mm tall, 6 mm wide) bridges that gap at z = -40: it touches only thinly.
-    const double hx = x, hy = y + 6.5;
-    const double rh = std::hypot(hx, hy);
-    const double back = std::abs(dtheta(std::atan2(hx, -hy), kPi));
-    const double w = voxel_mm.mean();
-    if (back < 0.9 && z > -100 && z < 20) {
-      const double f = clamp01(0.5 + (rh - 103.0) / w) * clamp01(0.5 + (108.0 - rh) / w);
-      hu = std::max(hu, kAirHu + f * (kHolderHu - kAirHu));
-    }
-    const double lateral = std::abs(x);  // distance from the mid-sagittal plane at the back
-    if (y > 0 && rh < 104.0 && r > head_radius(theta, z) - 1.0) {
-      const double f =
-          clamp01(0.5 + (2.0 - std::abs(z + 40.0)) / w) * clamp01(0.5 + (3.0 - lateral) / w);
-      hu = std::max(hu, kAirHu + f * (kHolderHu - kAirHu));
-    }
+  return head_holder ? holder_over(p_scaled, voxel_scaled, hu) : hu;
+}
+
+double HeadPhantom::holder_over(const Eigen::Vector3d& p_scaled, const Eigen::Vector3d& voxel_scaled,
+                                double hu) const {
+  const Eigen::Vector3d a = axis_point();
+  const Eigen::Vector3d p = a + (p_scaled - a) / scale_;
+  const Eigen::Vector3d voxel_mm = voxel_scaled / scale_;
+  const double x = p[0] - a[0], y = p[1] - a[1], z = p[2] - a[2];
+  const double r = std::hypot(x, y);
+  const double theta = std::atan2(x, -y);
+  // A 5 mm plastic arc behind the head about a vertical line 6.5 mm anterior of the axis: its
+  // inner face (radius 103 mm) stays 1.5 mm (a foam pad) from the back of the head, and a thin
+  // strap (4 mm tall, 6 mm wide) bridges that gap at z = -40: it touches only thinly.
+  const double hx = x, hy = y + 6.5;
+  const double rh = std::hypot(hx, hy);
+  const double back = std::abs(dtheta(std::atan2(hx, -hy), kPi));
+  const double w = voxel_mm.mean();
+  if (back < 0.9 && z > -100 && z < 20) {
+    const double f = clamp01(0.5 + (rh - 103.0) / w) * clamp01(0.5 + (108.0 - rh) / w);
+    hu = std::max(hu, kAirHu + f * (kHolderHu - kAirHu));
+  }
+  const double lateral = std::abs(x);  // distance from the mid-sagittal plane at the back
+  if (y > 0 && rh < 104.0 && r > head_radius(theta, z) - 1.0) {
+    const double f =
+        clamp01(0.5 + (2.0 - std::abs(z + 40.0)) / w) * clamp01(0.5 + (3.0 - lateral) / w);
+    hu = std::max(hu, kAirHu + f * (kHolderHu - kAirHu));
   }
   return hu;
 }
@@ -302,9 +311,11 @@ Volume make_phantom(const PhantomOptions& options) {
         // Posed, the holder stays in the scanner's frame: where the posed head leaves air, the
         // holder where the upright head would leave air too (the holder alone).
         constexpr float kAir = static_cast<float>(HeadPhantom::kAirHu);
-        if (options.head_holder && posed && hu == kAir &&
-            std::round(head.hu_at(p, options.spacing_mm, false)) == kAir)
-          hu = static_cast<float>(std::round(head.hu_at(p, options.spacing_mm, true)));
+        if (options.head_holder && posed && hu == kAir) {
+          const double upright = head.hu_at(p, options.spacing_mm, false);
+          if (std::round(upright) == kAir)
+            hu = static_cast<float>(std::round(head.holder_over(p, options.spacing_mm, upright)));
+        }
         if (options.metal) hu = static_cast<float>(std::round(with_metal(p, hu)));
         v.data[v.geom.linear(i, j, k)] = hu;
       }

@@ -122,6 +122,9 @@ class HeadPhantom {
   /// Hounsfield value at an LPS point for a voxel of the given size (partial volume).
   double hu_at(const Eigen::Vector3d& p, const Eigen::Vector3d& voxel_mm,
                bool head_holder = true) const;
+  /// The value at p of the head holder laid over `hu` (the head's value there without it):
+  /// hu_at(p, voxel_mm, true) is holder_over(p, voxel_mm, hu_at(p, voxel_mm, false)).
+  double holder_over(const Eigen::Vector3d& p, const Eigen::Vector3d& voxel_mm, double hu) const;
 
   /// metal: a block of dental metal (a crown) in the front of the upper jaw, inside the 6 mm
   /// skull shell that stands for the alveolar bone: centred on the midline (theta = 0) at
