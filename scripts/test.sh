@@ -54,6 +54,9 @@ fi
 # The tests' files (each program's folders under the temporary directory) go into one folder
 # of this run, removed when it ends: runs here used to leave them behind (14 GB over a few days).
 tests_tmp="$(mktemp -d "${TMPDIR:-/tmp}/caps-tests.XXXXXX")"
+# Searchable by other users, as /tmp is: the hostile-input tests run caps as an unprivileged user
+# on files in their folders (mktemp makes it the owner's alone).
+chmod 755 "$tests_tmp"
 trap 'rm -rf "$tests_tmp"; summary' EXIT
 begin ctest
 (cd "$here/build" && TMPDIR="$tests_tmp" ctest --output-on-failure -j"$(nproc)")
