@@ -28,6 +28,17 @@ double dtheta(double a, double b) {
 
 double clamp01(double x) { return x < 0 ? 0 : (x > 1 ? 1 : x); }
 
+// A point of the scaled head in the head's own lengths (scale 1) about its axis point a: the
+// point, the voxel's size, the offsets from a, and the cylindrical radius and angle.
+struct HeadPoint {
+  Eigen::Vector3d p, voxel_mm;
+  double x, y, z, r, theta;
+  HeadPoint(const Eigen::Vector3d& a, double scale, const Eigen::Vector3d& p_scaled,
+            const Eigen::Vector3d& voxel_scaled)
+      : p(a + (p_scaled - a) / scale), voxel_mm(voxel_scaled / scale), x(p[0] - a[0]),
+        y(p[1] - a[1]), z(p[2] - a[2]), r(std::hypot(x, y)), theta(std::atan2(x, -y)) {}
+};
+
 }  // namespace
 
 Eigen::Vector3d HeadPhantom::ray_direction(double theta) {
@@ -123,11 +134,10 @@ double HeadPhantom::hu_at(const Eigen::Vector3d& p_scaled, const Eigen::Vector3d
                           bool head_holder) const {
   const Eigen::Vector3d a = axis_point();
   // The head at scale 1: the point and the voxel in its lengths.
-  const Eigen::Vector3d p = a + (p_scaled - a) / scale_;
-  const Eigen::Vector3d voxel_mm = voxel_scaled / scale_;
-  const double x = p[0] - a[0], y = p[1] - a[1], z = p[2] - a[2];
-  const double r = std::hypot(x, y);
-  const double theta = std::atan2(x, -y);
+  const HeadPoint h(a, scale_, p_scaled, voxel_scaled);
+  const Eigen::Vector3d& p = h.p;
+  const Eigen::Vector3d& voxel_mm = h.voxel_mm;
+  const double x = h.x, y = h.y, z = h.z, r = h.r, theta = h.theta;
 
   // Fraction of a voxel inside the surface r = R(theta, z): a linear ramp across the interface,
   // as wide as the voxel is along the surface normal. Distances come from the level set
@@ -191,25 +201,21 @@ double HeadPhantom::hu_at(const Eigen::Vector3d& p_scaled, const Eigen::Vector3d
 
 double HeadPhantom::holder_over(const Eigen::Vector3d& p_scaled, const Eigen::Vector3d& voxel_scaled,
                                 double hu) const {
-  const Eigen::Vector3d a = axis_point();
-  const Eigen::Vector3d p = a + (p_scaled - a) / scale_;
-  const Eigen::Vector3d voxel_mm = voxel_scaled / scale_;
-  const double x = p[0] - a[0], y = p[1] - a[1], z = p[2] - a[2];
-  const double r = std::hypot(x, y);
-  const double theta = std::atan2(x, -y);
+  const HeadPoint h(axis_point(), scale_, p_scaled, voxel_scaled);
+  const double x = h.x, y = h.y, z = h.z;
   // A 5 mm plastic arc behind the head about a vertical line 6.5 mm anterior of the axis: its
   // inner face (radius 103 mm) stays 1.5 mm (a foam pad) from the back of the head, and a thin
   // strap (4 mm tall, 6 mm wide) bridges that gap at z = -40: it touches only thinly.
   const double hx = x, hy = y + 6.5;
   const double rh = std::hypot(hx, hy);
   const double back = std::abs(dtheta(std::atan2(hx, -hy), kPi));
-  const double w = voxel_mm.mean();
+  const double w = h.voxel_mm.mean();
   if (back < 0.9 && z > -100 && z < 20) {
     const double f = clamp01(0.5 + (rh - 103.0) / w) * clamp01(0.5 + (108.0 - rh) / w);
     hu = std::max(hu, kAirHu + f * (kHolderHu - kAirHu));
   }
   const double lateral = std::abs(x);  // distance from the mid-sagittal plane at the back
-  if (y > 0 && rh < 104.0 && r > head_radius(theta, z) - 1.0) {
+  if (y > 0 && rh < 104.0 && h.r > head_radius(h.theta, z) - 1.0) {
     const double f =
         clamp01(0.5 + (2.0 - std::abs(z + 40.0)) / w) * clamp01(0.5 + (3.0 - lateral) / w);
     hu = std::max(hu, kAirHu + f * (kHolderHu - kAirHu));
