@@ -333,9 +333,9 @@ FiniteAssembly assemble_finite(const Mesh& mesh, const DofMap& map,
   std::vector<FiniteKernelResult> per_element(n_el);
   // The lowest id of an element found inverted so far. The assembly has then failed and only
   // that id is reported (the line search halves its step, the step is cut back): an element
-  // with a higher id is skipped, one with a lower id only checked for an inversion (a quarter
-  // of the Newton iterations of the page's default Z-plasty on Cranium's forehead meet one;
-  // their full assembly cost as much as any other). The reported element, Gauss point and
+  // with a higher id is skipped, one with a lower id only checked for an inversion (24 of the 85
+  // assemblies of the page's default Z-plasty on Cranium's forehead meet one, line-search trials
+  // and cut-back attempts; in full they cost as much as any other). The reported element, Gauss point and
   // det F are those of the full assembly, whatever the thread count.
   std::atomic<int> lowest_inverted{std::numeric_limits<int>::max()};
   for_each_coloured_element(mesh, sys, [&](int e, ElementScratch& w) {
