@@ -134,10 +134,11 @@ struct SolveOptions {
   int threads = 0;
   /// Threads of the BLAS inside the sparse factorization and solves (OpenBLAS; another BLAS is
   /// left alone) during the solve, restored afterwards; 0 = as the BLAS is configured
-  /// (OPENBLAS_NUM_THREADS). One by default: OpenBLAS's idle threads spin next to the parallel
-  /// assembly, and the finite-strain solve's many factorizations and triangular solves are
-  /// faster without them (docs/benchmarks.md).
-  int blas_threads = 1;
+  /// (OPENBLAS_NUM_THREADS). Two by default: with OpenBLAS on the CPU's own kernels
+  /// (fem/blas.hpp) the finite-strain closures on the whole face take 5-23 % less time than with
+  /// one, the same answers to 1e-12 and no slower with a second closure beside them; more than
+  /// two was not measured (docs/benchmarks.md, "BLAS threads").
+  int blas_threads = 2;
   /// In-vivo prestretch of the skin (layer 0, the element layer under the surface), in its
   /// plane, 1 = none, valid 1..1.5 (skin in vivo: about 1.1-1.2; docs/fem.md). The stress-free
   /// skin is its reference shrunk by this factor in the plane and thickened along the normal
