@@ -135,7 +135,7 @@ struct SolveOptions {
   /// Threads of the BLAS inside the sparse factorization and solves (OpenBLAS; another BLAS is
   /// left alone) during the solve, restored afterwards; 0 = as the BLAS is configured
   /// (OPENBLAS_NUM_THREADS). Two by default: with OpenBLAS on the CPU's own kernels
-  /// (fem/blas.hpp) the finite-strain closures on the whole face take 5-23 % less time than with
+  /// (fem/blas.hpp) the finite-strain closures on the whole face take 8-23 % less time than with
   /// one, the same answers to 1e-12 and no slower with a second closure beside them; more than
   /// two was not measured (docs/benchmarks.md, "BLAS threads").
   int blas_threads = 2;
