@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <set>
 
 #include "caps/core/units.hpp"
 #include "caps/closure/simulate.hpp"
@@ -31,6 +32,7 @@ struct PhantomCase {
   PatientModel model;
   DrawnSkin drawn;
   PatientModel analytic;
+  TriMesh iso;  // the volume model's skin isosurface
 };
 
 // The analytic skin's outermost crossing along each of the model's rays (bisection to 1e-6 mm).
@@ -77,7 +79,7 @@ const PhantomCase& phantom() {
     PatientModel model(vm.maps, {}, "volume");
     DrawnSkin drawn = drawn_skin(model, &vm.skin, {.slice_spacing_mm = kSliceMm});
     PatientModel analytic = analytic_range(head, model);
-    return PhantomCase{head, std::move(model), std::move(drawn), std::move(analytic)};
+    return PhantomCase{head, std::move(model), std::move(drawn), std::move(analytic), vm.skin};
   }();
   return c;
 }
@@ -281,6 +283,81 @@ TEST(DrawnSkin, NoPatchOutlineBeforeTheOperation) {
               compared, patch, worst);
   EXPECT_GT(patch, 5000);
   EXPECT_LE(worst, 2);
+}
+
+// A patch beside undercuts (a local chart's on the side of the nose, where the chart's rays cross
+// the nose twice): the seam joins the patch's rim to the range mesh, so around the footprint the
+// range mesh is drawn and the isosurface keeps clear of it. Until 6 December the isosurface's
+// triangles reached over the footprint's border cells there: the render showed a ring of shards
+// around the patch (issue 34). Here every cell within 12 cells of the phantom ellipse's footprint
+// is made an undercut cell, drawn by the isosurface's triangles as DrawnSkin draws undercuts.
+TEST(DrawnSkin, APatchAmongUndercutsHasNoIsosurfaceOverItsSeam) {
+  const PhantomCase& c = phantom();
+  const CylinderGrid& g = c.model.grid();
+  const fem::Mesh& mesh = phantom_ellipse().wound.continuum.mesh;
+  // The footprint's box (the patch as drawn without undercuts), grown by 12 cells: all undercut.
+  const SkinSurfaces plain =
+      displaced_skin(c.model, mesh, &phantom_ellipse().result.displacement_mm, 2, &c.drawn);
+  int j_lo = g.n_theta, j_hi = -1, k_lo = g.n_z, k_hi = -1;
+  for (int q : plain.replaced_cells) {
+    j_lo = std::min(j_lo, q % g.n_theta);
+    j_hi = std::max(j_hi, q % g.n_theta);
+    k_lo = std::min(k_lo, q / g.n_theta);
+    k_hi = std::max(k_hi, q / g.n_theta);
+  }
+  ASSERT_LT(j_hi - j_lo, g.n_theta / 2);  // the patch does not wrap around theta's seam
+  DrawnSkin drawn = c.drawn;
+  drawn.undercut_cells.assign(g.size(), 0);
+  for (int k = std::max(k_lo - 12, 0); k <= std::min(k_hi + 12, g.n_z - 2); ++k)
+    for (int j = j_lo - 12; j <= j_hi + 12; ++j)
+      drawn.undercut_cells[g.index((j + g.n_theta) % g.n_theta, k)] = 1;
+  // The isosurface's triangles whose centroid lies in those cells (as drawn_skin() selects them).
+  const auto cell_of = [&](const Eigen::Vector3d& p) {
+    const CylindricalPoint cp = c.model.to_cylindrical(p);
+    double u = (cp.theta_deg - g.theta0_deg) / g.dtheta_deg();
+    u -= g.n_theta * std::floor(u / g.n_theta);
+    const int j = std::min(static_cast<int>(std::floor(u)), g.n_theta - 1);
+    const int k = static_cast<int>(std::floor((cp.z_mm - g.z0_mm) / g.dz_mm));
+    return k < 0 || k + 1 >= g.n_z ? -1 : static_cast<int>(g.index(j, k));
+  };
+  std::vector<Eigen::Vector3i> faces;
+  for (Eigen::Index f = 0; f < c.iso.F.rows(); ++f) {
+    const int q = cell_of((c.iso.V.row(c.iso.F(f, 0)) + c.iso.V.row(c.iso.F(f, 1)) +
+                           c.iso.V.row(c.iso.F(f, 2))).transpose() / 3.0);
+    if (q >= 0 && drawn.undercut_cells[static_cast<std::size_t>(q)]) faces.push_back(c.iso.F.row(f));
+  }
+  ASSERT_GT(faces.size(), 1000u);
+  drawn.undercuts.V = c.iso.V;
+  drawn.undercuts.F.resize(static_cast<Eigen::Index>(faces.size()), 3);
+  for (std::size_t f = 0; f < faces.size(); ++f)
+    drawn.undercuts.F.row(static_cast<Eigen::Index>(f)) = faces[f].transpose();
+  drawn.undercut_normals = Eigen::MatrixX3d::Zero(c.iso.V.rows(), 3);
+  drawn.undercut_normals.col(2).setOnes();
+
+  const SkinSurfaces s =
+      displaced_skin(c.model, mesh, &phantom_ellipse().result.displacement_mm, 2, &drawn);
+  const std::set<int> footprint(s.replaced_cells.begin(), s.replaced_cells.end());
+  int iso_faces = 0, over_footprint = 0, range_faces = 0;
+  for (Eigen::Index f = 0; f < s.pre.F.rows(); ++f) {
+    const SkinPart part = s.face_part[static_cast<std::size_t>(f)];
+    if (part == SkinPart::Isosurface) {
+      ++iso_faces;
+      bool over = false;
+      for (int a = 0; a < 3; ++a) over = over || footprint.count(cell_of(s.pre.V.row(s.pre.F(f, a)).transpose()));
+      over_footprint += over;
+    }
+    // range cells among the undercuts (the ring around the footprint)
+    if (part == SkinPart::Range) {
+      const int q = cell_of((s.pre.V.row(s.pre.F(f, 0)) + s.pre.V.row(s.pre.F(f, 1)) +
+                             s.pre.V.row(s.pre.F(f, 2))).transpose() / 3.0);
+      range_faces += q >= 0 && drawn.undercut_cells[static_cast<std::size_t>(q)];
+    }
+  }
+  std::printf("isosurface faces %d, with a corner over the footprint %d; range faces among the "
+              "undercuts %d\n", iso_faces, over_footprint, range_faces);
+  EXPECT_GT(iso_faces, 1000);
+  EXPECT_EQ(over_footprint, 0);
+  EXPECT_GT(range_faces, 100);
 }
 
 // The suture line after the closure: one loop for the ellipse (its two lips), closed up: the area

@@ -663,6 +663,44 @@ Footprint footprint_cells(const CylinderGrid& g, const std::vector<Eigen::Vector
   return fp;
 }
 
+// Cells this close to the footprint are drawn by the range mesh, not by the drawn skin's
+// isosurface, unless the range image sees them grazing (see range_around_footprint()).
+constexpr long kRangeAroundFootprint = 3;
+
+// The undercut cells (`undercut`, as DrawnSkin::undercut_cells: the undercuts dilated by two
+// cells) within kRangeAroundFootprint cells of the footprint are cleared, so that the range
+// mesh draws them, but where a corner's ray grazes the skin (kGrazing: a silhouette the range
+// image draws as a staircase). Returns the cells within one cell less whose isosurface is then
+// left out: the range mesh and the isosurface overlap by one cell, as elsewhere. Without this
+// the seam, which joins the patch's rim to range vertices, lay under isosurface triangles: a
+// patch beside undercuts (a local chart's on the side of the nose) showed a ring of shards
+// around it (issue 34).
+std::vector<char> range_around_footprint(const PatientModel& skin, const Footprint& fp,
+                                         std::vector<std::uint8_t>& undercut) {
+  const CylinderGrid& g = skin.grid();
+  const auto& flags = skin.maps().flags;
+  std::vector<char> ranged(g.size(), 0);
+  const long nt = g.n_theta, by = kRangeAroundFootprint;
+  for (long k = fp.k0 - by; k <= fp.k1 + by; ++k) {
+    if (k < 0 || k + 1 >= g.n_z) continue;
+    for (long j = fp.j0 - by; j <= fp.j1 + by; ++j) {
+      long d = by + 1;  // the distance in cells (Chebyshev) to the footprint, up to by
+      for (long dk = -by; dk <= by; ++dk)
+        for (long dj = -by; dj <= by; ++dj)
+          if (fp.removed(j + dj, k + dk, nt)) d = std::min(d, std::max(std::abs(dj), std::abs(dk)));
+      if (d > by || d == 0) continue;
+      const int jw = static_cast<int>(((j % nt) + nt) % nt), j1 = static_cast<int>((jw + 1) % nt);
+      const int kk = static_cast<int>(k);
+      const std::uint8_t corners = flags[g.index(jw, kk)] | flags[g.index(j1, kk)] |
+                                   flags[g.index(jw, kk + 1)] | flags[g.index(j1, kk + 1)];
+      if (corners & kGrazing) continue;
+      undercut[g.index(jw, kk)] = 0;
+      if (d < by) ranged[g.index(jw, kk)] = 1;
+    }
+  }
+  return ranged;
+}
+
 // The footprint's cells as q = k n_theta + j (j wrapped), sorted.
 std::vector<int> footprint_cell_indices(const CylinderGrid& g, const Footprint& fp) {
   std::vector<int> cells;
@@ -732,9 +770,10 @@ std::vector<std::pair<long, long>> footprint_border(const Footprint& fp) {
   return stair;
 }
 
-// The drawn skin's isosurface triangles in the undercuts, but those over the mesh's footprint.
+// The drawn skin's isosurface triangles in the undercuts, but those over the mesh's footprint
+// and over the cells `ranged` (grid.size() flags) marks as drawn by the range mesh instead.
 void add_undercuts(Builder& b, const PatientModel& skin, const DrawnSkin& drawn, const Footprint& fp,
-                   double theta_c) {
+                   const std::vector<char>& ranged, double theta_c) {
   const CylinderGrid& g = skin.grid();
   const TriMesh& iso = drawn.undercuts;
   std::vector<int> index(static_cast<std::size_t>(iso.V.rows()), -1);
@@ -746,6 +785,9 @@ void add_undercuts(Builder& b, const PatientModel& skin, const DrawnSkin& drawn,
     const long j = static_cast<long>(std::floor((th - g.theta0_deg) / g.dtheta_deg()));
     const long k = static_cast<long>(std::floor((cp.z_mm - g.z0_mm) / g.dz_mm));
     if (fp.removed(j, k, g.n_theta)) continue;
+    if (k >= 0 && k < g.n_z &&
+        ranged[g.index(static_cast<int>(((j % g.n_theta) + g.n_theta) % g.n_theta), static_cast<int>(k))])
+      continue;
     int t[3];
     for (int a = 0; a < 3; ++a) {
       int& id = index[static_cast<std::size_t>(iso.F(f, a))];
@@ -963,9 +1005,12 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
   const Footprint fp = footprint_cells(model.grid(), loop_theta_z(b, loops[rim]));
   out.replaced_cells = footprint_cell_indices(model.grid(), fp);
   if (whole) {
-    add_range_cells(b, skin, fp, range,
-                    drawn ? drawn->undercut_cells : std::vector<std::uint8_t>{});
-    if (drawn) add_undercuts(b, skin, *drawn, fp, theta_c);
+    std::vector<std::uint8_t> undercut = drawn ? drawn->undercut_cells : std::vector<std::uint8_t>{};
+    const std::vector<char> ranged =
+        undercut.empty() ? std::vector<char>(skin.grid().size(), 0)
+                         : range_around_footprint(skin, fp, undercut);
+    add_range_cells(b, skin, fp, range, undercut);
+    if (drawn) add_undercuts(b, skin, *drawn, fp, ranged, theta_c);
   }
   // The planner's part (SkinExtent::Patch) stays the patch and its seam; the page moves its own
   // range mesh around them with the same face field (the server's skin_moved.bin), so the

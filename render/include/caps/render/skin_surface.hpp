@@ -110,6 +110,8 @@ int full_resolution_subdivisions(const PatientModel& model, const fem::Mesh& mes
 /// the smoothed isosurface, slice terraces filtered), and the isosurface's triangles that replace
 /// the range cells in undercuts (outside the mesh's footprint; SkinPart::Isosurface, not stitched
 /// to the range cells but overlapping them, so the skin is then no longer one closed manifold).
+/// Within 3 cells of the footprint the range mesh is drawn instead (the seam joins the patch to
+/// range vertices), but where the range image's rays graze the skin.
 /// The skin faces are still found on `model`. `extent` Patch builds the part around the mesh
 /// only (no SkinPart::Range or Isosurface faces; the seam's range vertices are the model's
 /// samples, as in WholeHead, so the patch fits the range mesh without its replaced_cells).
