@@ -213,9 +213,15 @@ DrawnSkin drawn_skin(const PatientModel& model, const TriMesh* isosurface,
     for (std::size_t c = 0; c < g.size(); ++c)
       maps.flags[c] = static_cast<std::uint8_t>(undercut[c] ? (maps.flags[c] | kUndercut)
                                                             : (maps.flags[c] & ~kUndercut));
-    if (std::any_of(undercut.begin(), undercut.end(), [](char u) { return u != 0; })) {
-      out.undercut_cells = undercut_cells(g, undercut, 2);
-      undercut_triangles(model, *isosurface, undercut_cells(g, undercut, 3), out);
+    // The isosurface is drawn where the range image cannot show the skin: the undercuts, and
+    // the samples whose ray grazes the skin (kGrazing: the top of the head, the sides of a
+    // local chart's band), which a range image draws as a staircase of streaks.
+    std::vector<char> by_isosurface = undercut;
+    for (std::size_t c = 0; c < g.size(); ++c)
+      if (model.maps().flags[c] & kGrazing) by_isosurface[c] = 1;
+    if (std::any_of(by_isosurface.begin(), by_isosurface.end(), [](char u) { return u != 0; })) {
+      out.undercut_cells = undercut_cells(g, by_isosurface, 2);
+      undercut_triangles(model, *isosurface, undercut_cells(g, by_isosurface, 3), out);
     }
   } else if (o.slice_spacing_mm > 0 && g.n_z > 1) {
     maps.r_skin = box_filter_z(maps.r_skin, g, o.slice_spacing_mm);

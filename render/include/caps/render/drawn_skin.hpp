@@ -24,9 +24,12 @@
 /// kUndercutMinGapMm (ears, under the nose and the chin), the range image cannot show the skin
 /// (a ray meeting the surface more than 75 degrees from its normal is grazing it, as over the top
 /// of the head, and is not taken for an undercut).
-/// Those cells, dilated by two, are not drawn from the range image: the isosurface's own
-/// triangles are (those whose centroid falls in the cells dilated by three, so that they overlap
-/// the range cells' border rather than leave a gap), with the isosurface's vertex normals.
+/// Those cells, and those of the model's samples whose ray grazes the skin (kGrazing: the top of
+/// the head, the nose's flanks, the sides of a local chart's band, which a range image draws as
+/// a staircase of streaks), dilated by two, are not drawn from the range image: the isosurface's
+/// own triangles are (those whose centroid falls in the cells dilated by three, so that they
+/// overlap the range cells' border rather than leave a gap), with the isosurface's vertex
+/// normals. The range flags' kUndercut stays the undercuts' alone.
 
 #include <Eigen/Core>
 #include <cstdint>
@@ -44,7 +47,7 @@ namespace caps::render {
 inline constexpr double kDrawnSkinMaxShiftMm = 3.0;
 
 /// The skin drawn: the range image, and the isosurface's triangles where the range cannot show
-/// the skin (undercuts).
+/// the skin (undercuts, grazing rays).
 struct DrawnSkin {
   PatientModel range;  ///< the model with r_skin resampled and filtered (same grid and colour)
   TriMesh undercuts;   ///< isosurface triangles drawn in the undercut cells (LPS mm); may be empty
