@@ -1,6 +1,7 @@
 #include "caps/app/loaded_model.hpp"
 
 #include "caps/mesher/tissue_model.hpp"
+#include "caps/render/drawn_skin.hpp"
 #include "caps/surface/feature_lines.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "caps/volume/model_dir.hpp"
@@ -90,6 +91,13 @@ std::shared_ptr<const mesher::TissueModel> loaded_tissue_model(const std::string
   static FolderCache<mesher::TissueModel> cache;
   return cache.get(dir, [&] {
     return std::make_shared<const mesher::TissueModel>(mesher::read_tissue_model(dir));
+  });
+}
+
+std::shared_ptr<const render::DrawnSkin> loaded_drawn_skin(const std::string& dir) {
+  static FolderCache<render::DrawnSkin> cache;
+  return cache.get(dir, [&] {
+    return std::make_shared<const render::DrawnSkin>(render::load_drawn_skin(*loaded_model(dir), dir));
   });
 }
 

@@ -1,6 +1,7 @@
 #include "caps/server/planner_server.hpp"
 
 #include "caps/app/loaded_model.hpp"
+#include "caps/render/drawn_skin.hpp"
 #include "caps/app/verbs.hpp"
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
@@ -677,7 +678,10 @@ struct PlannerServer::Impl {
     std::lock_guard<std::mutex> lock(views_mutex);
     if (!fs::is_regular_file(info)) {
       fs::create_directories(folder);
-      write_text_atomic(info, detail::write_model_skin_glb(*on->model, colouring, glb));
+      // The drawn skin's range (slice terraces filtered, resampled from the skin isosurface):
+      // what caps render draws, on the model's grid, so the page's vertices are the samples.
+      write_text_atomic(info, detail::write_model_skin_glb(app::loaded_drawn_skin(on->dir)->range,
+                                                           colouring, glb));
     }
     json j = json::parse(read_file(info));
     j["url"] = cat("/api/skin/", name, ".glb");
@@ -738,7 +742,9 @@ struct PlannerServer::Impl {
     const fs::path info = dir / "view.json";
     std::lock_guard<std::mutex> lock(views_mutex);
     if (!fs::is_regular_file(info)) {
-      detail::ResultView view = detail::write_result_skin_glbs(*model_of(id)->model, dir);
+      const std::shared_ptr<const Served> on = model_of(id);
+      detail::ResultView view =
+          detail::write_result_skin_glbs(*on->model, app::loaded_drawn_skin(on->dir).get(), dir);
       write_text_atomic(info, view.json);
       // tension.glb after the answer: the page draws the skin first (GET .../tension.glb waits).
       tension_files[id] = std::async(std::launch::async, std::move(view.write_tension)).share();

@@ -8,6 +8,7 @@
 #include "caps/fem/mesh_io.hpp"
 #include "caps/fem/result_io.hpp"
 #include "caps/plan/plan.hpp"
+#include "caps/render/drawn_skin.hpp"
 #include "caps/render/gltf_export.hpp"
 #include "caps/render/overlay.hpp"
 #include "caps/render/simulation_report.hpp"
@@ -206,7 +207,8 @@ int view_subdivisions(const PatientModel& model, const fem::Mesh& mesh) {
   return std::clamp(static_cast<int>(std::ceil(median / spacing)), 1, kMaxResultSubdivisions);
 }
 
-ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& result_dir) {
+ResultView write_result_skin_glbs(const PatientModel& model, const render::DrawnSkin* drawn,
+                                  const fs::path& result_dir) {
   using Clock = std::chrono::steady_clock;
   const auto seconds = [](Clock::time_point a, Clock::time_point b) {
     return std::chrono::duration<double>(b - a).count();
@@ -217,7 +219,7 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
   const int n = view_subdivisions(model, mesh);
   // Only the part the simulation moved: the page draws the model's own skin around it.
   const render::SkinSurfaces skin =
-      render::displaced_skin(model, mesh, &u, n, nullptr, render::SkinExtent::Patch);
+      render::displaced_skin(model, mesh, &u, n, drawn, render::SkinExtent::Patch);
   const auto t1 = Clock::now();
   const Eigen::VectorXd max_principal = fem::read_result_max_principal(result_dir, mesh.n_nodes());
   const render::ScalarMap tension = render::tension_map(skin, mesh, max_principal, 0);
@@ -233,7 +235,8 @@ ResultView write_result_skin_glbs(const PatientModel& model, const fs::path& res
   if (!model.has_color()) part.color.rowwise() = kPlainSkin.transpose();  // as the model's skin
   render::write_gltf(part, result_dir / "skin.glb");
   MovedSkin moved =
-      write_moved_model_skin(model, mesh, u, max_principal, result_dir / "skin_moved.bin");
+      write_moved_model_skin(drawn ? drawn->range : model, mesh, u, max_principal,
+                             result_dir / "skin_moved.bin");
   // The wound's and incisions' lips (the incision lines before, the scar after the closure): the
   // page draws them on the skin and moves them with its pre-to-post slider.
   json scars = json::array();

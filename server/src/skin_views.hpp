@@ -16,6 +16,9 @@ struct Mesh;
 namespace caps::plan {
 struct Plan;
 }
+namespace caps::render {
+struct DrawnSkin;
+}
 
 namespace caps::server::detail {
 
@@ -44,7 +47,9 @@ struct ResultView {
 };
 
 /// The pre- and post-operative skin of the simulation in `result_dir` (caps simulate's folder)
-/// on `model`, with the post-operative skin as the morph target (render::write_gltf): skin.glb,
+/// on `model` drawn as `drawn` (its DrawnSkin, or null for the model's range as measured: the
+/// seam's range vertices and the moved skin's vertices are those of the skin the page draws,
+/// write_model_skin_glb() of `drawn->range`), with the post-operative skin as the morph target (render::write_gltf): skin.glb,
 /// written now, the part of render::displaced_skin() the simulation moved (the micropolygons at
 /// view_subdivisions(), the wound fill and the seam) coloured as the model, and tension.glb,
 /// written by the returned write_tension, the same part coloured by the skin tension
@@ -66,7 +71,7 @@ struct ResultView {
 /// closed loop of points, LPS mm, before and after the closure), "timings_s":
 /// {"skin" (reading the result and building the
 /// skin), "tension" (its values), "glb" (writing skin.glb)}}.
-ResultView write_result_skin_glbs(const PatientModel& model,
+ResultView write_result_skin_glbs(const PatientModel& model, const render::DrawnSkin* drawn,
                                   const std::filesystem::path& result_dir);
 
 /// The plan's cutting paths and points on the skin, LPS mm: {"lines_lps": [[[x, y, z], ...],

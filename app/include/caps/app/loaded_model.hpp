@@ -11,6 +11,9 @@ struct FeatureLines;
 namespace mesher {
 struct TissueModel;
 }
+namespace render {
+struct DrawnSkin;
+}
 }
 
 namespace caps::app {
@@ -28,5 +31,9 @@ std::shared_ptr<const mesher::TissueModel> loaded_tissue_model(const std::string
 
 /// The model directory's feature lines (read_feature_lines()), kept the same way.
 std::shared_ptr<const FeatureLines> loaded_feature_lines(const std::string& dir);
+
+/// The model directory's drawn skin (render::load_drawn_skin() of loaded_model(dir): the range
+/// resampled from its skin isosurface and filtered of slice terraces), kept the same way.
+std::shared_ptr<const render::DrawnSkin> loaded_drawn_skin(const std::string& dir);
 
 }  // namespace caps::app
