@@ -17,6 +17,8 @@
 #include "cli_run.hpp"
 #include "phantom_model.hpp"
 #include "../server/src/page_words.hpp"  // the page's words, tested directly
+#include "../server/src/skin_views.hpp"  // the skin's glTF, written directly to compare
+#include "caps/render/drawn_skin.hpp"
 
 #include <httplib.h>
 #include <nlohmann/json.hpp>
@@ -617,6 +619,22 @@ TEST_F(ServerTest, ServesTheSkinAsGlbWithColourAndThickness) {
   const auto other = get("/api/skin/bone.glb");
   ASSERT_TRUE(other);
   EXPECT_EQ(other->status, 404);
+  // The skin is the drawn skin's range (slice terraces filtered, resampled from the skin
+  // isosurface), as caps render draws it: byte for byte the file written from it, not the one
+  // written from the model's range as measured.
+  const auto served = get(j.at("skin").at("url").get<std::string>());
+  ASSERT_TRUE(served);
+  const std::shared_ptr<const PatientModel> model = app::loaded_model(kModel);
+  const render::DrawnSkin drawn = render::load_drawn_skin(*model, kModel);
+  const fs::path drawn_glb = fs::path(kTmp) / "drawn_skin.glb", raw_glb = fs::path(kTmp) / "raw_skin.glb";
+  (void)server::detail::write_model_skin_glb(drawn.range, server::detail::SkinColouring::Skin, drawn_glb);
+  (void)server::detail::write_model_skin_glb(*model, server::detail::SkinColouring::Skin, raw_glb);
+  const auto bytes = [](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  EXPECT_EQ(served->body, bytes(drawn_glb));
+  EXPECT_NE(served->body, bytes(raw_glb));
   expect_still_serving();
 }
 
