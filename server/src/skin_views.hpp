@@ -49,8 +49,8 @@ struct ResultView {
 /// The pre- and post-operative skin of the simulation in `result_dir` (caps simulate's folder)
 /// on `model` drawn as `drawn` (its DrawnSkin, or null for the model's range as measured: the
 /// seam's range vertices and the moved skin's vertices are those of the skin the page draws,
-/// write_model_skin_glb() of `drawn->range`), with the post-operative skin as the morph target (render::write_gltf): skin.glb,
-/// written now, the part of render::displaced_skin() the simulation moved (the micropolygons at
+/// write_model_skin_glb() of `drawn->range`), with the post-operative skin as the morph target
+/// (render::write_gltf): skin.glb, written now, the part of render::displaced_skin() the simulation moved (the micropolygons at
 /// view_subdivisions(), the wound fill and the seam) coloured as the model, and tension.glb,
 /// written by the returned write_tension, the same part coloured by the skin tension
 /// (render::tension_map, viridis from 0 to the 99th percentile; the seam's outer vertices carry
