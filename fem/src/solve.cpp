@@ -147,9 +147,9 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   std::optional<tbb::global_control> threads;
   if (options.threads > 0)
     threads.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
-  if (options.blas_threads < 0)
-    throw InvalidInput(cat("blas_threads ", options.blas_threads, " must be >= 0 (0 = as configured)"));
-  const detail::BlasThreads blas(options.blas_threads);
+  if (options.blas_threads < kAutoBlasThreads)
+    throw InvalidInput(cat("blas_threads ", options.blas_threads,
+                           " must be >= 0 (0 = as configured) or kAutoBlasThreads (-1)"));
   validate(mesh);
   if (!(options.prestretch >= 1.0 && options.prestretch <= 1.5))
     throw InvalidInput(cat("prestretch ", options.prestretch, " must be in 1..1.5 (skin in vivo: "
@@ -170,6 +170,9 @@ SolveResult solve(const Mesh& mesh, const SolveOptions& options) {
   res.n_dofs = 3 * n_nodes;
   res.n_equations = map.n_eq;
   if (map.n_eq == 0) throw InvalidInput("every degree of freedom is fixed; nothing to solve");
+  const detail::BlasThreads blas(options.blas_threads != kAutoBlasThreads ? options.blas_threads
+                                 : map.n_eq >= kTwoBlasThreadsFromEquations ? 2
+                                                                             : 1);
   res.kinematics = kinematics_name(options.kinematics);
   res.prestretch = options.prestretch;
   if (options.kinematics == Kinematics::Finite) {

@@ -116,6 +116,11 @@ struct NewtonOptions {
   bool secant_predictor = true;
 };
 
+/// SolveOptions::blas_threads: chosen by the system's size (see there).
+inline constexpr int kAutoBlasThreads = -1;
+/// The smallest system (equations) solved with two BLAS threads under kAutoBlasThreads.
+inline constexpr long kTwoBlasThreadsFromEquations = 30000;
+
 struct SolveOptions {
   /// Linear (default) or Finite; the finite-strain controls are in `newton`.
   Kinematics kinematics = Kinematics::Linear;
@@ -134,11 +139,14 @@ struct SolveOptions {
   int threads = 0;
   /// Threads of the BLAS inside the sparse factorization and solves (OpenBLAS; another BLAS is
   /// left alone) during the solve, restored afterwards; 0 = as the BLAS is configured
-  /// (OPENBLAS_NUM_THREADS). Two by default: with OpenBLAS on the CPU's own kernels
-  /// (fem/blas.hpp) the finite-strain closures on the whole face take 8-23 % less time than with
-  /// one, the same answers to 1e-12 and no slower with a second closure beside them; more than
-  /// two was not measured (docs/benchmarks.md, "BLAS threads").
-  int blas_threads = 2;
+  /// (OPENBLAS_NUM_THREADS); kAutoBlasThreads (the default) = two for a system of at least
+  /// kTwoBlasThreadsFromEquations equations, one below. With OpenBLAS on the CPU's own kernels
+  /// (fem/blas.hpp) two threads take 8-23 % off the finite-strain closures on the whole face
+  /// (37-96k equations), the same answers to 1e-12, and are no slower with a second closure
+  /// beside them; on small systems their idle threads' spinning costs a third more CPU for the
+  /// same wall time alone and 15 % more wall time beside another solve (docs/benchmarks.md,
+  /// "BLAS threads").
+  int blas_threads = kAutoBlasThreads;
   /// In-vivo prestretch of the skin (layer 0, the element layer under the surface), in its
   /// plane, 1 = none, valid 1..1.5 (skin in vivo: about 1.1-1.2; docs/fem.md). The stress-free
   /// skin is its reference shrunk by this factor in the plane and thickened along the normal
