@@ -927,6 +927,19 @@ TEST(FemBadInput, EachErrorIsInvalidInputNamingTheItem) {
     m.nodes(5, 1) = NAN;
     EXPECT_NE(error_of([&] { solve(m); }).find("node 5 has a non-finite coordinate"), std::string::npos);
   }
+  // BLAS threads: a count, 0 (as configured) or kAutoBlasThreads (by the system's size); the
+  // same answer either way.
+  {
+    const Mesh m = small();
+    SolveOptions o;
+    o.blas_threads = kAutoBlasThreads - 1;
+    EXPECT_NE(error_of([&] { solve(m, o); }).find("blas_threads -2 must be >= 0"), std::string::npos);
+    EXPECT_EQ(SolveOptions{}.blas_threads, kAutoBlasThreads);
+    o.blas_threads = 1;
+    const SolveResult one = solve(m, o);
+    o.blas_threads = kAutoBlasThreads;
+    EXPECT_LT((solve(m, o).displacement_mm - one.displacement_mm).cwiseAbs().maxCoeff(), 1e-12);
+  }
   // Self-suture.
   {
     Mesh m = small();
