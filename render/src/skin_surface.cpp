@@ -64,6 +64,9 @@ struct Builder {
   }
 };
 
+// A grid column index j (unwrapped around the mesh) brought into 0..nt-1.
+long wrapped(long j, long nt) { return ((j % nt) + nt) % nt; }
+
 double wrap180(double deg) {
   double t = std::fmod(deg + 180.0, 360.0);
   if (t < 0) t += 360.0;
@@ -534,7 +537,7 @@ class RangeVertices {
   }
   // the vertex of sample (j, k); j wraps around
   int at(long j, long k) {
-    const long jj = ((j % nt_) + nt_) % nt_;
+    const long jj = wrapped(j, nt_);
     if (all_) return first_ + static_cast<int>(k * nt_ + jj);
     const auto [it, added] = made_.try_emplace(k * nt_ + jj, 0);
     if (added) it->second = add(jj, k);
@@ -689,7 +692,7 @@ std::vector<char> range_around_footprint(const PatientModel& skin, const Footpri
         for (long dj = -by; dj <= by; ++dj)
           if (fp.removed(j + dj, k + dk, nt)) d = std::min(d, std::max(std::abs(dj), std::abs(dk)));
       if (d > by || d == 0) continue;
-      const int jw = static_cast<int>(((j % nt) + nt) % nt), j1 = static_cast<int>((jw + 1) % nt);
+      const int jw = static_cast<int>(wrapped(j, nt)), j1 = static_cast<int>((jw + 1) % nt);
       const int kk = static_cast<int>(k);
       const std::uint8_t corners = flags[g.index(jw, kk)] | flags[g.index(j1, kk)] |
                                    flags[g.index(jw, kk + 1)] | flags[g.index(j1, kk + 1)];
@@ -707,7 +710,7 @@ std::vector<int> footprint_cell_indices(const CylinderGrid& g, const Footprint& 
   for (long k = fp.k0; k <= fp.k1; ++k)
     for (long j = fp.j0; j <= fp.j1; ++j)
       if (fp.cell(j, k))
-        cells.push_back(static_cast<int>(k * g.n_theta + ((j % g.n_theta) + g.n_theta) % g.n_theta));
+        cells.push_back(static_cast<int>(k * g.n_theta + wrapped(j, g.n_theta)));
   std::sort(cells.begin(), cells.end());
   cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
   return cells;
@@ -786,7 +789,7 @@ void add_undercuts(Builder& b, const PatientModel& skin, const DrawnSkin& drawn,
     const long k = static_cast<long>(std::floor((cp.z_mm - g.z0_mm) / g.dz_mm));
     if (fp.removed(j, k, g.n_theta)) continue;
     if (k >= 0 && k < g.n_z &&
-        ranged[g.index(static_cast<int>(((j % g.n_theta) + g.n_theta) % g.n_theta), static_cast<int>(k))])
+        ranged[g.index(static_cast<int>(wrapped(j, g.n_theta)), static_cast<int>(k))])
       continue;
     int t[3];
     for (int a = 0; a < 3; ++a) {
