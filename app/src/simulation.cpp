@@ -466,59 +466,11 @@ AxisLengthening plan_lengthening(const closure::Simulation& sim, const plan::Pla
 
 }  // namespace
 
-SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
-  detail::refuse_output_over_inputs(r);
-  closure::SimulateOptions o = simulate_options(r.meshing, r.solver);
-  // Both names are recorded in result.json (JSON is UTF-8).
-  require_utf8(r.model, "the model folder");
-  require_utf8(r.plan, "the plan file");
-  const plan::Plan plan = plan::read_plan(r.plan);
-  std::string chart_note;
-  const std::string model_dir = model_for_plan(r.model, plan, &chart_note);
-  const std::string domain_warning = set_domain(o, r.domain, model_dir);
-  if (!(r.suture_spacing > 0) || !std::isfinite(r.suture_spacing))
-    throw InvalidParameter(cat("{suture_spacing} ", r.suture_spacing, ": give the distance "
-                               "between sutures in mm, > 0 (e.g. 5)"));
-  o.suture_spacing_mm = r.suture_spacing;
-  if (r.tension_map && !r.render)
-    throw InvalidInput("--tension-map draws on the rendered images; add --render");
-  OutputDirectory out(r.output, r.force);
-  const auto loaded = loaded_model(model_dir);
-  const PatientModel& model = *loaded;
-  check_mesh_budget(plan::wound_border(plan), model, r.meshing);
-  if (!domain_warning.empty()) warn(reporter, domain_warning);
-  closure::Simulation sim = closure::simulate(model, plan, o, reporter);
-  if (!chart_note.empty()) sim.wound.continuum.mesh.warnings.push_back(chart_note);
-  if (!domain_warning.empty()) sim.wound.continuum.mesh.warnings.push_back(domain_warning);
-  if (const std::string doubt = placement_doubt(model_dir, model, plan.placement); !doubt.empty()) {
-    warn(reporter, doubt);
-    sim.wound.continuum.mesh.warnings.push_back(doubt);
-  }
-  sim.wound.continuum.mesh.model = model_dir;
-  sim.wound.continuum.mesh.plan = r.plan;
-  if (sim.face) {  // the whole face's mesh is the one written: it names them too
-    sim.face->mesh.model = model_dir;
-    sim.face->mesh.plan = r.plan;
-  }
-  closure::write_simulation(sim, model, o, out.path(), fs::path(r.plan).filename().string(),
-                            !r.no_mesh_pictures);
-  // The plan closed, beside its result: caps plan sheet --result refuses another plan's result.
-  plan::write_plan(out.path() / "plan.json", plan);
+SimulateResult simulation_summary(const closure::Simulation& sim,
+                                  const closure::SimulateOptions& o, const plan::Plan& plan,
+                                  const PatientModel& model) {
   SimulateResult s;
-  if (r.render) {
-    const render::DrawnSkin drawn = render::load_drawn_skin(model, model_dir, reporter);
-    render::SimulationPictures pictures;
-    pictures.tension_map = r.tension_map;
-    pictures.drawn = &drawn;
-    pictures.plan = &plan;
-    for (const fs::path& p : render::render_simulation(
-             model, sim,
-             {render::View::Front, render::View::Oblique, render::View::Side, render::View::Plan},
-             {}, out.path(), pictures, reporter))
-      s.images.push_back(p.filename().string());
-  }
   const auto& res = sim.result;
-  s.output = r.output;
   s.elements = static_cast<int>(sim.wound.continuum.mesh.n_elements());
   s.nodes = static_cast<int>(sim.wound.continuum.mesh.n_nodes());
   s.suture_pairs = static_cast<int>(sim.wound.continuum.mesh.sutures.size());
@@ -574,6 +526,69 @@ SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
     s.corner_length_after_mm = s.axis_length_after_mm;
   }
   s.solve_s = res.timings.total_s;
+  return s;
+}
+
+SimulateResult write_closure(closure::Simulation& sim, const closure::SimulateOptions& o,
+                             const plan::Plan& plan, const std::string& plan_path,
+                             const PatientModel& model, const std::string& model_dir,
+                             const fs::path& dir, bool mesh_pictures) {
+  sim.wound.continuum.mesh.model = model_dir;
+  sim.wound.continuum.mesh.plan = plan_path;
+  if (sim.face) {  // the whole face's mesh is the one written: it names them too
+    sim.face->mesh.model = model_dir;
+    sim.face->mesh.plan = plan_path;
+  }
+  closure::write_simulation(sim, model, o, dir, fs::path(plan_path).filename().string(),
+                            mesh_pictures);
+  // The plan closed, beside its result: caps plan sheet --result refuses another plan's result.
+  plan::write_plan(dir / "plan.json", plan);
+  return simulation_summary(sim, o, plan, model);
+}
+
+SimulateResult run_simulate(const SimulateRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
+  closure::SimulateOptions o = simulate_options(r.meshing, r.solver);
+  // Both names are recorded in result.json (JSON is UTF-8).
+  require_utf8(r.model, "the model folder");
+  require_utf8(r.plan, "the plan file");
+  const plan::Plan plan = plan::read_plan(r.plan);
+  std::string chart_note;
+  const std::string model_dir = model_for_plan(r.model, plan, &chart_note);
+  const std::string domain_warning = set_domain(o, r.domain, model_dir);
+  if (!(r.suture_spacing > 0) || !std::isfinite(r.suture_spacing))
+    throw InvalidParameter(cat("{suture_spacing} ", r.suture_spacing, ": give the distance "
+                               "between sutures in mm, > 0 (e.g. 5)"));
+  o.suture_spacing_mm = r.suture_spacing;
+  if (r.tension_map && !r.render)
+    throw InvalidInput("--tension-map draws on the rendered images; add --render");
+  OutputDirectory out(r.output, r.force);
+  const auto loaded = loaded_model(model_dir);
+  const PatientModel& model = *loaded;
+  check_mesh_budget(plan::wound_border(plan), model, r.meshing);
+  if (!domain_warning.empty()) warn(reporter, domain_warning);
+  closure::Simulation sim = closure::simulate(model, plan, o, reporter);
+  if (!chart_note.empty()) sim.wound.continuum.mesh.warnings.push_back(chart_note);
+  if (!domain_warning.empty()) sim.wound.continuum.mesh.warnings.push_back(domain_warning);
+  if (const std::string doubt = placement_doubt(model_dir, model, plan.placement); !doubt.empty()) {
+    warn(reporter, doubt);
+    sim.wound.continuum.mesh.warnings.push_back(doubt);
+  }
+  SimulateResult s = write_closure(sim, o, plan, r.plan, model, model_dir, out.path(),
+                                   !r.no_mesh_pictures);
+  s.output = r.output;
+  if (r.render) {
+    const render::DrawnSkin drawn = render::load_drawn_skin(model, model_dir, reporter);
+    render::SimulationPictures pictures;
+    pictures.tension_map = r.tension_map;
+    pictures.drawn = &drawn;
+    pictures.plan = &plan;
+    for (const fs::path& p : render::render_simulation(
+             model, sim,
+             {render::View::Front, render::View::Oblique, render::View::Side, render::View::Plan},
+             {}, out.path(), pictures, reporter))
+      s.images.push_back(p.filename().string());
+  }
   // What --json prints, kept with the result: the feature lines' displacements and the forces
   // per suture are not in result.json (caps plan sheet --result reads them here).
   write_text_atomic(out.path() / "summary.json", to_json(s) + "\n");

@@ -5,6 +5,7 @@
 /// options structs (mesher::SurfaceMeshOptions, mesher::ContinuumMeshOptions, fem::SolveOptions).
 
 #include <array>
+#include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
@@ -419,6 +420,19 @@ struct CornerLengthening {
 };
 CornerLengthening corner_lengthening(const Eigen::MatrixX3d& pre, const Eigen::MatrixX3d& post,
                                      const std::vector<std::array<int, 4>>& sutures);
+
+/// A closure's figures as caps simulate reports them (everything but `output` and `images`).
+SimulateResult simulation_summary(const closure::Simulation& sim,
+                                  const closure::SimulateOptions& options, const plan::Plan& plan,
+                                  const PatientModel& model);
+
+/// Writes a closure into `dir` as caps simulate does (closure::write_simulation(), the meshes
+/// naming `model_dir` and `plan_path`, and the plan as plan.json beside them; not summary.json)
+/// and returns its summary (simulation_summary()).
+SimulateResult write_closure(closure::Simulation& sim, const closure::SimulateOptions& options,
+                             const plan::Plan& plan, const std::string& plan_path,
+                             const PatientModel& model, const std::string& model_dir,
+                             const std::filesystem::path& dir, bool mesh_pictures);
 
 /// Meshes the plan on the model and solves the closure into `output`: the files of caps mesh
 /// and caps solve (result.json carries the warnings), and with `render` the images.

@@ -21,6 +21,7 @@
 #include "caps/app/sheet.hpp"
 #include "caps/app/simulation.hpp"
 #include "caps/app/slicer.hpp"
+#include "caps/app/suggest.hpp"
 #include "caps/core/reporter.hpp"
 
 namespace caps::app {
@@ -187,6 +188,12 @@ void for_each_verb(F&& f) {
          "Save a plan's procedure (points, paths, excisions, sutures) to reuse elsewhere with "
          "caps plan new FILE.json",
          &run_save_procedure});
+  f(Verb{"plan suggest",
+         "For a lesion: the library's closures that fit it laid around it at every orientation, "
+         "checked,\nclosed in the whole face and ranked (suggestions.json, suggestions.png, each "
+         "design's plan).\n"
+         "Example: caps plan suggest --model cranium --at 30,105 --diameter 10 -o suggest",
+         &run_plan_suggest});
   f(Verb{"plan templates", "List the procedure library and its parameters.", &run_templates,
          Answer::Printed});
   f(Verb{"mesh",

@@ -1,0 +1,580 @@
+#include "caps/app/suggest.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "caps/app/loaded_model.hpp"
+#include "caps/core/atomic_output.hpp"
+#include "caps/core/error.hpp"
+#include "caps/core/units.hpp"
+#include "caps/image/canvas.hpp"
+#include "caps/plan/check.hpp"
+#include "caps/plan/plan_io.hpp"
+#include "caps/plan/procedures.hpp"
+#include "caps/surface/patient_model.hpp"
+#include "json_fields.hpp"
+#include "model_result.hpp"
+#include "numbers.hpp"
+#include "output_check.hpp"
+#include "skin_place.hpp"
+
+CAPS_APP_REQUEST_JSON(caps::app::SuggestRequest)
+CAPS_APP_RESULT_JSON(caps::app::SuggestResult)
+
+namespace caps::app {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+/// The closures suggest lays around a lesion: each one's template parameters for a lesion whose
+/// excised disc (the lesion and its margin) has radius `r_mm`, and the orientations that differ
+/// (an ellipse is the same turned 180 deg; a rhomboid's flap is not).
+struct Fit {
+  std::map<std::string, double> parameters;
+  double turn_deg = 180;  ///< orientations are taken in [0, turn_deg)
+};
+
+/// An ellipse of `ratio` (length / width): the library's outline is the rhombus of its length,
+/// width and apex angle (plan/procedures.cpp), whose inscribed circle has radius
+/// L W / (2 sqrt(L^2 + W^2)); it is the excised disc when W = 2 r sqrt(k^2 + 1) / k.
+/// A Limberg rhomboid (60 and 120 deg) of side s has an inscribed circle of radius s sin 60 / 2:
+/// s = 2 r / sqrt 3.
+Fit fit(const std::string& procedure, double r_mm, double ratio) {
+  if (procedure == "ellipse") {
+    const double w = 2 * r_mm * std::sqrt(ratio * ratio + 1) / ratio;
+    return {{{"length", ratio * w}, {"width", w}}, 180};
+  }
+  if (procedure == "rhomboid") return {{{"side", 2 * r_mm / std::sqrt(3.0)}}, 360};
+  throw InvalidParameter(cat("{procedures} ", procedure, ": give ellipse or rhomboid (the "
+                             "closures suggest can lay around a lesion so far)"));
+}
+
+std::vector<std::string> split_list(const std::string& text) {
+  std::vector<std::string> out;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    item.erase(0, item.find_first_not_of(" \t"));
+    item.erase(item.find_last_not_of(" \t") + 1);
+    if (!item.empty() && std::find(out.begin(), out.end(), item) == out.end()) out.push_back(item);
+  }
+  return out;
+}
+
+struct Objective {
+  const char* name;
+  const char* meaning;
+  const char* unit;
+};
+constexpr Objective kObjectives[] = {
+    {"force", "the largest force on one suture", "N"},
+    {"features", "the largest displacement of a feature line (eyelid margin, brow, lip, nostril "
+                 "rim)", "mm"},
+    {"scar", "the scar's length", "mm"},
+    {"excised", "the healthy skin excised around the lesion and its margin", "mm2"},
+};
+
+const Objective& objective_named(const std::string& name) {
+  for (const Objective& o : kObjectives)
+    if (name == o.name) return o;
+  throw InvalidParameter(cat("{objective} ", name, ": give force, features, scar or excised"));
+}
+
+double objective_value(const std::string& name, const SuggestedDesign& d,
+                       const SuggestedDesign::Closure& c) {
+  if (name == "force") return c.max_force_per_suture_n;
+  if (name == "features") return c.max_feature_mm;
+  if (name == "scar") return d.scar_length_mm;
+  return d.healthy_excised_mm2;
+}
+
+/// A reporter that reports nothing but passes on its parent's cancellation: the sweep's closures
+/// would each draw a progress bar.
+class Quiet : public Reporter {
+ public:
+  explicit Quiet(Reporter* parent) : parent_(parent) {}
+  bool is_cancelled() const override { return parent_ && parent_->is_cancelled(); }
+
+ private:
+  Reporter* parent_;
+};
+
+SuggestedDesign::Closure figures(const closure::Simulation& sim) {
+  SuggestedDesign::Closure c;
+  c.max_force_per_suture_n = sim.sutures.max_suture_force_n;
+  c.closing_force_n = sim.result.total_suture_force_n;
+  for (const FeatureDisplacement& f : sim.features) {
+    if (!f.warning.empty()) ++c.feature_warnings;
+    if (f.has_value && f.max_mm > c.max_feature_mm) {
+      c.max_feature_mm = f.max_mm;
+      c.feature = f.name;
+    }
+  }
+  c.warnings = sim.wound.continuum.mesh.warnings;
+  return c;
+}
+
+json closure_json(const SuggestedDesign::Closure& c) {
+  json j = {{"max_force_per_suture_n", round_to(c.max_force_per_suture_n, 3)},
+            {"closing_force_n", round_to(c.closing_force_n, 3)},
+            {"max_feature_mm", round_to(c.max_feature_mm, 3)},
+            {"feature_warnings", c.feature_warnings},
+            {"warnings", c.warnings}};
+  j["feature"] = c.feature.empty() ? json(nullptr) : json(c.feature);
+  return j;
+}
+
+/// The polar plot of one figure of the designs: per procedure, the sweep's value against
+/// orientation as a curve (superior up, the patient's left to the right, as the surgeon faces
+/// the patient; an ellipse drawn at both ends of its axis), the refined closures' values as
+/// rings, the best design's ringed in green, the orientations not possible as grey ticks.
+void draw_polar(Canvas& canvas, double cx, double cy, double radius,
+                const std::vector<SuggestedDesign>& designs, const std::string& title,
+                const std::string& unit,
+                const std::function<double(const SuggestedDesign::Closure&)>& value,
+                const std::string& best) {
+  const Eigen::Vector3d grey(0.6, 0.6, 0.6);
+  double top = 0;
+  for (const SuggestedDesign& d : designs)
+    if (d.rank > 0) top = std::max({top, value(d.sweep), d.refined ? value(d.full) : 0.0});
+  TextStyle t;
+  t.size_px = 15;
+  t.align = 0.5;
+  canvas.text(cx, cy - radius - 34, title, t);
+  if (!(top > 0)) {
+    t.size_px = 13;
+    canvas.text(cx, cy, "no design reaches it", t);
+    return;
+  }
+  top = round_sig(top * 1.1, 2);
+  const auto at = [&](double orientation_deg, double r) {
+    const double a = deg_to_rad(orientation_deg);
+    return Eigen::Vector2d(cx + r * std::sin(a), cy - r * std::cos(a));
+  };
+  for (int ring = 1; ring <= 4; ++ring) {
+    Pen p;
+    p.colour = Eigen::Vector3d(0.85, 0.85, 0.85);
+    canvas.stroke_circle({cx, cy}, radius * ring / 4.0, p);
+    TextStyle s;
+    s.size_px = 10;
+    s.colour = grey;
+    const Eigen::Vector2d q = at(135, radius * ring / 4.0);
+    canvas.text(q.x() + 3, q.y() + 10, cat(round_sig(top * ring / 4.0, 2), " ", unit), s);
+  }
+  TextStyle s;
+  s.size_px = 11;
+  s.align = 0.5;
+  s.colour = Eigen::Vector3d(0.3, 0.3, 0.3);
+  canvas.text(cx, cy - radius - 8, "superior", s);
+  canvas.text(cx, cy + radius + 16, "inferior", s);
+  s.rotate_deg = 90;
+  canvas.text(cx + radius + 10, cy, "patient's left", s);
+  s.rotate_deg = -90;
+  canvas.text(cx - radius - 10, cy, "patient's right", s);
+  const Eigen::Vector3d colours[] = {{0.12, 0.47, 0.71}, {0.84, 0.37, 0.0}};
+  std::vector<std::string> procedures;
+  for (const SuggestedDesign& d : designs)
+    if (std::find(procedures.begin(), procedures.end(), d.procedure) == procedures.end())
+      procedures.push_back(d.procedure);
+  // Both ends of an ellipse's axis; a flap's one orientation.
+  const auto ends = [](const SuggestedDesign& d) {
+    return d.procedure == "ellipse" ? std::vector<double>{d.orientation_deg, d.orientation_deg + 180}
+                                    : std::vector<double>{d.orientation_deg};
+  };
+  for (std::size_t k = 0; k < procedures.size(); ++k) {
+    const Eigen::Vector3d colour = colours[k % 2];
+    std::vector<std::pair<double, double>> points;  // orientation, the sweep's value
+    double step = 360;
+    for (const SuggestedDesign& d : designs) {
+      if (d.procedure != procedures[k]) continue;
+      for (const double o : ends(d)) {
+        if (d.rank == 0) {
+          Pen p;
+          p.colour = grey;
+          p.width_px = 2;
+          canvas.line(at(o, radius * 0.95), at(o, radius * 1.05), p);
+          continue;
+        }
+        points.emplace_back(o, value(d.sweep));
+        if (d.refined) {
+          Pen p;
+          p.colour = colour;
+          p.width_px = 1.5;
+          canvas.stroke_circle(at(o, radius * value(d.full) / top), 5, p);
+        }
+      }
+    }
+    std::sort(points.begin(), points.end());
+    for (std::size_t q = 0; q + 1 < points.size(); ++q)
+      step = std::min(step, points[q + 1].first - points[q].first);
+    Pen p;
+    p.colour = colour;
+    p.width_px = 1.5;
+    // Lines join orientations one step apart; a gap (an orientation not possible) stays open.
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      canvas.fill_circle(at(points[i].first, radius * points[i].second / top), 2.5, colour);
+      const std::size_t j = (i + 1) % points.size();
+      if (j == i || std::abs(std::remainder(points[j].first - points[i].first, 360.0)) > step * 1.5)
+        continue;
+      canvas.line(at(points[i].first, radius * points[i].second / top),
+                  at(points[j].first, radius * points[j].second / top), p);
+    }
+    TextStyle l;
+    l.size_px = 12;
+    l.colour = colour;
+    canvas.text(cx - radius, cy + radius + 44 + 16.0 * static_cast<double>(k), procedures[k], l);
+  }
+  for (const SuggestedDesign& d : designs)
+    if (d.name == best) {
+      Pen p;
+      p.colour = Eigen::Vector3d(0.1, 0.6, 0.2);
+      p.width_px = 2.5;
+      for (const double o : ends(d))
+        canvas.stroke_circle(at(o, radius * value(d.refined ? d.full : d.sweep) / top), 9, p);
+    }
+}
+
+}  // namespace
+
+SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
+  detail::refuse_output_over_inputs(r);
+  require_utf8(r.model, "the model folder");
+  if (r.at.empty() == r.at_xyz.empty())
+    throw InvalidInput("give the lesion's centre with --at THETA,Z, --at LANDMARK+LEFT,UP or "
+                       "--at-xyz X,Y,Z");
+  if (!(r.diameter > 0 && r.diameter <= 50))
+    throw InvalidParameter(cat("{diameter} ", r.diameter, ": give the lesion's largest diameter "
+                               "in mm, more than 0 and at most 50"));
+  if (!(r.margin >= 0 && r.margin <= 20))
+    throw InvalidParameter(cat("{margin} ", r.margin, ": give the margin in mm, 0 to 20"));
+  if (!(r.step >= 5 && r.step <= 90))
+    throw InvalidParameter(cat("{step} ", r.step, ": give 5 to 90 degrees between orientations"));
+  if (!(r.ratio >= 2.5 && r.ratio <= 4.5))
+    throw InvalidParameter(cat("{ratio} ", r.ratio, ": give an ellipse's length over its width, "
+                               "2.5 to 4.5"));
+  if (r.refine < 0 || r.refine > 12)
+    throw InvalidParameter(cat("{refine} ", r.refine, ": give 0 to 12 designs"));
+  if (!(r.sweep_size >= 0 && r.sweep_size <= 10))
+    throw InvalidParameter(cat("{sweep_size} ", r.sweep_size, ": give mm, 0 (twice --size) to 10"));
+  if (!(r.sweep_time_limit >= 0 && r.sweep_time_limit <= 3600))
+    throw InvalidParameter(cat("{sweep_time_limit} ", r.sweep_time_limit, ": give seconds, 0 "
+                               "(none) to 3600"));
+  const Objective& objective = objective_named(r.objective);
+  if (r.sweep_material != "auto" && r.sweep_material != "linear" &&
+      r.sweep_material != "neo-hookean" && r.sweep_material != "goh")
+    throw InvalidParameter(cat("{sweep_material} ", r.sweep_material, ": give auto, linear, "
+                               "neo-hookean or goh"));
+  const std::vector<std::string> procedures = split_list(r.procedures);
+  if (procedures.empty()) throw InvalidParameter("{procedures}: give ellipse, rhomboid or both");
+  const double r_mm = r.diameter / 2 + r.margin;
+  // Every layout once before any closure: a lesion too large or small for a template's clinical
+  // range is refused here, naming it.
+  std::map<std::string, Fit> fits;
+  for (const std::string& p : procedures) {
+    Fit f = fit(p, r_mm, r.ratio);
+    try {
+      plan::layout_procedure(p, f.parameters);
+    } catch (const InvalidInput& e) {
+      throw InvalidParameter(cat("{diameter} ", r.diameter, " mm with a {margin} of ", r.margin,
+                                 " mm: the ", p, " around it is outside its range: ", e.what()));
+    }
+    fits.emplace(p, std::move(f));
+  }
+
+  // The full closure's options (the user's simulate) and the sweep's coarser mesh.
+  closure::SimulateOptions full = simulate_options(r.meshing, r.solver);
+  const std::string domain_warning = set_domain(full, r.domain, r.model);
+  MeshingFields coarse_mesh = r.meshing;
+  coarse_mesh.mesh_size = r.sweep_size > 0 ? r.sweep_size : 2 * r.meshing.mesh_size;
+  SolverFields sweep_solver = r.solver;
+  sweep_solver.material = r.sweep_material == "auto"
+                              ? (r.solver.material == "goh" ? "goh" : "linear")
+                              : r.sweep_material;
+  closure::SimulateOptions sweep = simulate_options(coarse_mesh, sweep_solver);
+  set_domain(sweep, r.domain, r.model);
+  if (r.solver.time_limit == 0 && sweep_solver.material != "linear")
+    sweep.solve.time_limit_s = r.sweep_time_limit;
+
+  OutputDirectory out(r.output, r.force);
+  fs::create_directories(out.path() / "designs");
+  const auto loaded = loaded_model(r.model);
+  const PatientModel& model = *loaded;
+  std::optional<plan::LandmarkPlacement> placement;
+  const Eigen::Vector2d tz = resolve_at(r.model, model, r.at, r.at_xyz, &placement);
+  std::vector<std::string> common;  // carried into every closure's warnings
+  if (!domain_warning.empty()) {
+    warn(reporter, domain_warning);
+    common.push_back(domain_warning);
+  }
+  if (std::string doubt = placement_doubt(r.model, model, placement); !doubt.empty()) {
+    warn(reporter, doubt);
+    common.push_back(std::move(doubt));
+  }
+
+  SuggestResult result;
+  result.output = r.output;
+  std::vector<SuggestedDesign>& designs = result.designs;
+  std::map<std::string, plan::Plan> plans;
+  for (const std::string& p : procedures)
+    for (double o = 0; o < fits.at(p).turn_deg - 1e-9; o += r.step) {
+      SuggestedDesign d;
+      d.procedure = p;
+      d.orientation_deg = o;
+      d.name = cat(p, "-", std::string(o < 10 ? "00" : o < 100 ? "0" : ""),
+                   static_cast<int>(std::lround(o)));
+      designs.push_back(d);
+    }
+
+  Quiet quiet(reporter), quiet_chart(reporter);
+  // Where the head's cylindrical image cannot hold the skin under a design (the side of the
+  // nose), every design is laid on one local chart facing the lesion (as caps plan new makes for
+  // one plan), made in the output folder as chart/ and closed in the head's whole face.
+  std::shared_ptr<const PatientModel> on = loaded;
+  std::string plan_model = r.model;  // the plans' model, as they name it
+  std::string chart_note;
+  const auto lay = [&](const SuggestedDesign& d) {
+    plan::Plan plan = plan::place_procedure(
+        plan::layout_procedure(d.procedure, fits.at(d.procedure).parameters), *on,
+        chart_note.empty() ? tz[0] : 0.0, chart_note.empty() ? tz[1] : 0.0, d.orientation_deg);
+    plan.placement = placement;
+    plan.model = plan_model;
+    plan.model_hash = on->content_hash();
+    return plan;
+  };
+  if (detail::chart_parent(r.model).empty() && [&] {
+        try {
+          detail::refuse_unchartable(r.model);
+          return true;
+        } catch (const Error&) {
+          return false;
+        }
+      }()) {
+    for (const SuggestedDesign& d : designs) {
+      try {
+        plan::check_plan(lay(d), model);
+      } catch (const plan::SkinNotHeld& e) {
+        ChartRequest cr;
+        cr.model = fs::absolute(r.model).lexically_normal().string();
+        cr.at = cat(round_to(tz[0], 3), ",", round_to(tz[1], 3));
+        cr.output = (out.path() / "chart").string();
+        cr.force = true;
+        run_chart(cr, &quiet_chart);
+        on = std::make_shared<const PatientModel>(PatientModel::load(cr.output));
+        plan_model = (fs::path(r.output) / "chart").string();
+        chart_note = cat("the model's cylindrical image cannot hold the skin around the lesion (",
+                         e.what(), "): every design is laid on a local chart facing it, made in ",
+                         plan_model, " (as caps model chart ", r.model, " --at ", cr.at,
+                         "), and closed in ", r.model, "'s whole face");
+        warn(reporter, chart_note);
+        common.push_back(chart_note);
+        break;
+      } catch (const Error&) {
+      }
+    }
+  }
+
+  // The sweep: each design laid, checked and closed on the coarse mesh.
+  const Clock::time_point t_sweep = Clock::now();
+  {
+    Progress progress(reporter, "closing each design on a coarse mesh",
+                      static_cast<double>(designs.size()));
+    int done = 0;
+    for (SuggestedDesign& d : designs) {
+      progress.update(done++);
+      try {
+        plan::Plan plan = lay(d);
+        const plan::PlanReport report = plan::check_plan(plan, *on);
+        d.plan = cat("designs/", d.name, ".json");
+        plan::write_plan(out.path() / d.plan, plan, &report);
+        // The wound's border on the skin (LPS): its vector area and its length.
+        Eigen::Vector3d area2 = Eigen::Vector3d::Zero();
+        double perimeter = 0;
+        const auto& loop = plan::wound_border(plan).loop_theta_z;
+        for (std::size_t i = 0; i < loop.size(); ++i) {
+          const auto& ta = loop[i];
+          const auto& tb = loop[(i + 1) % loop.size()];
+          const Eigen::Vector3d a = on->skin_point(ta.x(), ta.y());
+          const Eigen::Vector3d b = on->skin_point(tb.x(), tb.y());
+          area2 += a.cross(b);
+          perimeter += (b - a).norm();
+        }
+        d.excised_mm2 = area2.norm() / 2;
+        d.healthy_excised_mm2 = std::max(0.0, d.excised_mm2 - kPi * r.diameter * r.diameter / 4);
+        d.scar_length_mm = perimeter / 2;  // each sutured edge meets its twin: one scar line
+        check_mesh_budget(plan::wound_border(plan), *on, coarse_mesh);
+        const closure::Simulation sim = closure::simulate(*on, plan, sweep, &quiet);
+        d.sweep = figures(sim);
+        d.sweep.warnings.insert(d.sweep.warnings.end(), common.begin(), common.end());
+        plans.emplace(d.name, std::move(plan));
+      } catch (const Cancelled&) {
+        throw;
+      } catch (const Error& e) {
+        d.refused = e.what();
+      }
+    }
+    progress.done();
+  }
+  result.sweep_s = seconds_since(t_sweep);
+
+  // The ranking: by the sweep's figures, then the best `refine` closed again at the full mesh
+  // and ranked ahead of the others by their own.
+  const auto by_objective = [&](const SuggestedDesign& a, const SuggestedDesign& b) {
+    if ((a.refused.empty()) != (b.refused.empty())) return a.refused.empty();
+    if (a.refined != b.refined) return a.refined;
+    if (a.objective != b.objective) return a.objective < b.objective;
+    return a.name < b.name;
+  };
+  for (SuggestedDesign& d : designs)
+    if (d.refused.empty()) d.objective = objective_value(r.objective, d, d.sweep);
+  std::stable_sort(designs.begin(), designs.end(), by_objective);
+  const Clock::time_point t_refine = Clock::now();
+  {
+    int n = 0;
+    for (const SuggestedDesign& d : designs) n += d.refused.empty() && n < r.refine ? 1 : 0;
+    Progress progress(reporter, "closing the best designs on the full mesh", std::max(1, n));
+    int done = 0;
+    for (SuggestedDesign& d : designs) {
+      if (done == n) break;
+      progress.update(done++);
+      const plan::Plan& plan = plans.at(d.name);
+      try {
+        closure::Simulation sim = closure::simulate(*on, plan, full, &quiet);
+        for (const std::string& w : common) sim.wound.continuum.mesh.warnings.push_back(w);
+        d.result = d.name;
+        const fs::path dir = out.path() / d.result;
+        fs::create_directories(dir);
+        SimulateResult s = write_closure(sim, full, plan, (fs::path(r.output) / d.plan).string(),
+                                         *on, plan_model, dir, false);
+        s.output = (fs::path(r.output) / d.result).string();
+        write_text_atomic(dir / "summary.json", to_json(s) + "\n");
+        d.full = figures(sim);
+        d.refined = true;
+        d.objective = objective_value(r.objective, d, d.full);
+      } catch (const Cancelled&) {
+        throw;
+      } catch (const Error& e) {
+        // Closed on the coarse mesh but not on the full one: kept with the sweep's figures.
+        d.full.warnings.push_back(cat("not closed on the full mesh: ", e.what()));
+      }
+    }
+    progress.done();
+  }
+  result.refine_s = seconds_since(t_refine);
+  std::stable_sort(designs.begin(), designs.end(), by_objective);
+  int rank = 0;
+  for (SuggestedDesign& d : designs)
+    if (d.refused.empty()) d.rank = ++rank;
+  const std::string best = rank > 0 ? designs.front().name : std::string();
+  if (rank == 0)
+    result.warnings.push_back("no design could be laid and closed around this lesion here: "
+                              "see each one's reason");
+
+  // suggestions.json
+  json j;
+  j["format"] = "caps-suggestions";
+  j["version"] = 1;
+  j["model"] = r.model;
+  j["lesion"] = {{"theta_deg", round_to(tz[0], 3)}, {"z_mm", round_to(tz[1], 3)},
+                 {"at", r.at.empty() ? r.at_xyz : r.at}, {"diameter_mm", r.diameter},
+                 {"margin_mm", r.margin}, {"excised_radius_mm", round_to(r_mm, 3)}};
+  j["objective"] = {{"name", objective.name}, {"meaning", objective.meaning},
+                    {"unit", objective.unit}, {"least_first", true}};
+  j["material"] = r.solver.material;
+  j["domain"] = closure::domain_name(full.domain);
+  j["sweep"] = {{"mesh_size_mm", coarse_mesh.mesh_size}, {"material", sweep_solver.material},
+                {"designs", designs.size()}};
+  j["refine"] = {{"mesh_size_mm", r.meshing.mesh_size}, {"designs", r.refine}};
+  j["best"] = best.empty() ? json(nullptr) : json(best);
+  json a = json::array();
+  for (const SuggestedDesign& d : designs) {
+    json o = {{"name", d.name}, {"procedure", d.procedure},
+              {"orientation_deg", d.orientation_deg}, {"rank", d.rank}};
+    json params = json::object();
+    for (const auto& [k, v] : fits.at(d.procedure).parameters) params[k] = round_to(v, 3);
+    o["parameters"] = params;
+    o["plan"] = d.plan.empty() ? json(nullptr) : json(d.plan);
+    if (!d.refused.empty()) {
+      o["refused"] = d.refused;
+    } else {
+      o["objective"] = round_to(d.objective, 3);
+      o["scar_length_mm"] = round_to(d.scar_length_mm, 2);
+      o["excised_mm2"] = round_to(d.excised_mm2, 1);
+      o["healthy_excised_mm2"] = round_to(d.healthy_excised_mm2, 1);
+      o["sweep"] = closure_json(d.sweep);
+      o["full"] = d.refined ? closure_json(d.full) : json(nullptr);
+      if (!d.refined && !d.full.warnings.empty()) o["full_warnings"] = d.full.warnings;
+      o["result"] = d.result.empty() ? json(nullptr) : json(d.result);
+    }
+    a.push_back(o);
+  }
+  j["designs"] = a;
+  j["warnings"] = result.warnings;
+  j["picture"] = "suggestions.png";
+  j["timings_s"] = {{"sweep", round_to(result.sweep_s, 2)}, {"refine", round_to(result.refine_s, 2)}};
+  result.suggestions_json = detail::dump(j);
+  write_text_atomic(out.path() / "suggestions.json", result.suggestions_json + "\n");
+
+  // suggestions.png: the objective and the feature lines' displacement against orientation.
+  Canvas canvas(1100, 600);
+  draw_polar(canvas, 275, 285, 180, designs, "the largest force on one suture (N)", "N",
+             [](const SuggestedDesign::Closure& c) { return c.max_force_per_suture_n; }, best);
+  draw_polar(canvas, 825, 285, 180, designs, "the largest feature-line displacement (mm)", "mm",
+             [](const SuggestedDesign::Closure& c) { return c.max_feature_mm; }, best);
+  TextStyle legend;
+  legend.size_px = 11;
+  legend.colour = Eigen::Vector3d(0.35, 0.35, 0.35);
+  canvas.text(20, 566,
+              cat("dots and line: the sweep (", sweep_solver.material, ", ", coarse_mesh.mesh_size,
+                  " mm mesh); rings: the best ", r.refine, " closed again (", r.solver.material,
+                  ", ", r.meshing.mesh_size, " mm); green: the suggestion; grey ticks: not "
+                  "possible there; an ellipse's orientation is its scar's"),
+              legend);
+  TextStyle foot;
+  foot.size_px = 11;
+  foot.colour = Eigen::Vector3d(0.35, 0.35, 0.35);
+  canvas.text(20, 586,
+              cat("a lesion of ", r.diameter, " mm with a ", r.margin, " mm margin at theta ",
+                  round_to(tz[0], 1), " deg, z ", round_to(tz[1], 1), " mm, closed in the ",
+                  closure::domain_name(full.domain) == std::string("face") ? "whole face"
+                                                                        : "clamped patch",
+                  "; ranked by ", objective.meaning, "; the suggestion: ",
+                  best.empty() ? std::string("none") : best),
+              foot);
+  canvas.write_png(out.path() / "suggestions.png");
+  out.commit();
+  return result;
+}
+
+
+std::string summary(const SuggestResult& s) {
+  int ranked = 0;
+  for (const SuggestedDesign& d : s.designs) ranked += d.rank > 0;
+  std::string line = cat("caps plan suggest: ", ranked, " of ", s.designs.size(),
+                         " designs closed around the lesion");
+  if (ranked > 0) {
+    const SuggestedDesign& b = s.designs.front();
+    const SuggestedDesign::Closure& c = b.refined ? b.full : b.sweep;
+    line += cat("; best ", b.name, " (", b.procedure, " along ", b.orientation_deg,
+                " deg: up to ", round_to(c.max_force_per_suture_n, 2), " N a suture",
+                c.feature.empty() ? std::string()
+                                  : cat(", the ", c.feature, " moved ", round_to(c.max_feature_mm, 1),
+                                        " mm"),
+                ", scar ", round_to(b.scar_length_mm, 1), " mm)");
+  }
+  return cat(line, " -> ", s.output);
+}
+
+}  // namespace caps::app
