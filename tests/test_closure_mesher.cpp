@@ -1093,6 +1093,25 @@ TEST(Simulate, BaseOverAnAirCavityIsFreeAndTheSurroundingTissueHoldsTheSolve) {
                    all_cavity, 0.0, 0.0, 90.0), o), InvalidInput);
 }
 
+namespace {
+
+// A cylinder with an eye-like patch (flag kEye, radius 3 mm, centred 7 mm along theta from the
+// origin), or without it.
+PatientModel model_with_eye_patch(bool patch) {
+  CylindricalMaps m = caps_test::synthetic_maps(caps_test::grid(360, 401, -200, 1),
+                                                [](double, double) { return kR; },
+                                                [](double, double) { return 5.0; });
+  if (patch)
+    for (int k = 0; k < m.grid.n_z; ++k)
+      for (int j = 0; j < m.grid.n_theta; ++j) {
+        const double x = m.grid.theta_deg(j) * kPi / 180 * kR, z = m.grid.z_mm(k);
+        if (std::hypot(x - 7.0, z) < 3.0) m.flags[m.grid.index(j, k)] = kEye;
+      }
+  return PatientModel(std::move(m));
+}
+
+}  // namespace
+
 TEST(Simulate, AMeshThatCannotAvoidTheEyeIsTrimmedToTheModelAndStillCloses) {
   // An eye-like patch (flag kEye, radius 3 mm) 2 mm beside a 12 x 4 mm ellipse: the first layer
   // of the skin mesh (2 mm) reaches its cells (1 deg = 1.22 mm wide: from x = 3.66 mm) at every
@@ -1101,19 +1120,7 @@ TEST(Simulate, AMeshThatCannotAvoidTheEyeIsTrimmedToTheModelAndStillCloses) {
   // the outer layers that reach the patch are left out, and elsewhere the mesh keeps its full
   // extent (3 x the wound). The trimmed rim is held, so the closure pulls harder than with no
   // patch at all (the same plan on the same cylinder).
-  const auto model_with_patch = [](bool patch) {
-    CylindricalMaps m = caps_test::synthetic_maps(caps_test::grid(360, 401, -200, 1),
-                                                  [](double, double) { return kR; },
-                                                  [](double, double) { return 5.0; });
-    if (patch)
-      for (int k = 0; k < m.grid.n_z; ++k)
-        for (int j = 0; j < m.grid.n_theta; ++j) {
-          const double x = m.grid.theta_deg(j) * kPi / 180 * kR, z = m.grid.z_mm(k);
-          if (std::hypot(x - 7.0, z) < 3.0) m.flags[m.grid.index(j, k)] = kEye;
-        }
-    return PatientModel(std::move(m));
-  };
-  const PatientModel model = model_with_patch(true), plain = model_with_patch(false);
+  const PatientModel model = model_with_eye_patch(true), plain = model_with_eye_patch(false);
   const plan::Plan p = plan::place_procedure(
       plan::layout_procedure("ellipse", {{"length", 12.0}, {"width", 4.0}}), model, 0.0, 0.0, 0.0);
   double x_max = -1e9, z_max = -1e9;  // the ellipse's side facing the patch, its tip
@@ -1168,6 +1175,30 @@ TEST(Simulate, AMeshThatCannotAvoidTheEyeIsTrimmedToTheModelAndStillCloses) {
   EXPECT_EQ(free_of_it.wound.surface.trimmed_polygons, 0);
   EXPECT_GT(sim.result.total_suture_force_n, 1.02 * free_of_it.result.total_suture_force_n);
   EXPECT_LT(sim.result.total_suture_force_n, 3.0 * free_of_it.result.total_suture_force_n);
+}
+
+// Tied into the whole face, the rim holds nothing: there the mesher keeps the smallest trimmed
+// extent that rings the wound (2 mm here), not the largest (3 x the wound, 36 mm),
+// whose outer layers, trimmed around the eye, can leave arms of skin reaching far along the valid
+// cells between features (a cheek ellipse below Cranium's eye kept one 100 mm long at a 4 mm
+// mesh size, and the whole face's region, 5 mm beyond the patch's farthest node, grew with it).
+TEST(Simulate, ATrimmedMeshTiedIntoTheWholeFaceKeepsTheSmallestExtentThatRingsTheWound) {
+  const PatientModel model = model_with_eye_patch(true);
+  const plan::Plan p = plan::place_procedure(
+      plan::layout_procedure("ellipse", {{"length", 12.0}, {"width", 4.0}}), model, 0.0, 0.0, 0.0);
+  SurfaceMeshOptions so;
+  so.size_mm = 2.0;
+  ContinuumMeshOptions co;
+  co.rim = RimCondition::Tied;
+  const WoundMesh tied = mesh_wound(plan::wound_border(p), model, so, co);
+  co.rim = RimCondition::Fixed;
+  const WoundMesh fixed = mesh_wound(plan::wound_border(p), model, so, co);
+  EXPECT_GT(tied.surface.trimmed_polygons, 0);
+  EXPECT_NEAR(fixed.surface.extent_mm, 3 * fixed.surface.wound_size_mm, 1e-9);
+  // 36 x 0.75^10 = 2.03 mm: the last extent of the search, one layer.
+  EXPECT_NEAR(tied.surface.extent_mm, 3 * tied.surface.wound_size_mm * std::pow(0.75, 10), 1e-9);
+  EXPECT_LE(tied.surface.n_layers, 2);
+  EXPECT_LT(tied.continuum.mesh.n_elements(), fixed.continuum.mesh.n_elements() / 5);
 }
 
 // The meshers' outcomes: a refusal names its kind, place and message, and the throwing meshers
