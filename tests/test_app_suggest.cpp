@@ -118,6 +118,28 @@ TEST(Suggest, SkinStifferAlongItsFibresIsClosedAcrossThem) {
   EXPECT_GT(goh_ratio, 1.2 * iso_ratio) << goh_ratio << " " << iso_ratio;
 }
 
+// A Limberg rhomboid (60 and 120 deg) is laid with the lesion and its margin as its inscribed
+// circle: side s = 4 r / sqrt 3 (the circle's diameter is the rhombus's height, s sin 60), its
+// defect's area s^2 sin 60 on the skin (the flap's cuts enclose none). Its flap makes it differ
+// turned by 180 deg, so its orientations go round the whole circle.
+TEST(Suggest, TheRhomboidsInscribedCircleIsTheLesionAndItsMargin) {
+  app::SuggestRequest r = forehead_request("linear", "rhomboid");
+  r.procedures = "rhomboid";
+  r.step = 90;
+  r.refine = 0;
+  r.domain.domain = "patch";
+  const json j = json::parse(app::run_plan_suggest(r).suggestions_json);
+  const double side = 4 * 3.0 / std::sqrt(3.0), area = side * side * std::sqrt(3.0) / 2;
+  ASSERT_EQ(j.at("designs").size(), 4u);  // 0, 90, 180, 270
+  for (const json& d : j.at("designs")) {
+    ASSERT_FALSE(d.contains("refused")) << d.dump();
+    EXPECT_NEAR(d.at("parameters").at("side").get<double>(), side, 1e-3);
+    EXPECT_NEAR(d.at("excised_mm2").get<double>(), area, 0.03 * area) << d.dump();
+    EXPECT_NEAR(d.at("healthy_excised_mm2").get<double>(), d.at("excised_mm2").get<double>() - M_PI * 4,
+                0.1);
+  }
+}
+
 TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
   const auto refused = [](auto change, const std::string& words) {
     app::SuggestRequest r = forehead_request("neo-hookean", "refused");

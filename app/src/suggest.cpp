@@ -21,6 +21,7 @@
 #include "caps/plan/check.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/plan/procedures.hpp"
+#include "caps/surface/feature_lines.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "json_fields.hpp"
 #include "model_result.hpp"
@@ -54,14 +55,14 @@ struct Fit {
 /// An ellipse of `ratio` (length / width): the library's outline is the rhombus of its length,
 /// width and apex angle (plan/procedures.cpp), whose inscribed circle has radius
 /// L W / (2 sqrt(L^2 + W^2)); it is the excised disc when W = 2 r sqrt(k^2 + 1) / k.
-/// A Limberg rhomboid (60 and 120 deg) of side s has an inscribed circle of radius s sin 60 / 2:
-/// s = 2 r / sqrt 3.
+/// A Limberg rhomboid (60 and 120 deg) of side s has an inscribed circle of radius s sin 60 / 2
+/// (half its height): s = 4 r / sqrt 3.
 Fit fit(const std::string& procedure, double r_mm, double ratio) {
   if (procedure == "ellipse") {
     const double w = 2 * r_mm * std::sqrt(ratio * ratio + 1) / ratio;
     return {{{"length", ratio * w}, {"width", w}}, 180};
   }
-  if (procedure == "rhomboid") return {{{"side", 2 * r_mm / std::sqrt(3.0)}}, 360};
+  if (procedure == "rhomboid") return {{{"side", 4 * r_mm / std::sqrt(3.0)}}, 360};
   throw InvalidParameter(cat("{procedures} ", procedure, ": give ellipse or rhomboid (the "
                              "closures suggest can lay around a lesion so far)"));
 }
@@ -138,6 +139,7 @@ json closure_json(const SuggestedDesign::Closure& c) {
             {"feature_warnings", c.feature_warnings},
             {"warnings", c.warnings}};
   j["feature"] = c.feature.empty() ? json(nullptr) : json(c.feature);
+  j["feature_words"] = c.feature.empty() ? json(nullptr) : json(feature_line_words(c.feature));
   return j;
 }
 
@@ -307,6 +309,9 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   if (!(r.sweep_time_limit >= 0 && r.sweep_time_limit <= 3600))
     throw InvalidParameter(cat("{sweep_time_limit} ", r.sweep_time_limit, ": give seconds, 0 "
                                "(none) to 3600"));
+  if (!(r.refine_time_limit >= 0 && r.refine_time_limit <= 3600))
+    throw InvalidParameter(cat("{refine_time_limit} ", r.refine_time_limit, ": give seconds, 0 "
+                               "(none) to 3600"));
   const Objective& objective = objective_named(r.objective);
   if (r.sweep_material != "auto" && r.sweep_material != "linear" &&
       r.sweep_material != "neo-hookean" && r.sweep_material != "goh")
@@ -342,6 +347,10 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   set_domain(sweep, r.domain, r.model);
   if (r.solver.time_limit == 0 && sweep_solver.material != "linear")
     sweep.solve.time_limit_s = r.sweep_time_limit;
+  // A design whose finite-strain closure would take minutes keeps the sweep's answer (issue 35:
+  // a bounded worst case): the side of the nose's ellipse took 101 s on Cranium.
+  if (r.solver.time_limit == 0 && r.solver.material != "linear")
+    full.solve.time_limit_s = r.refine_time_limit;
 
   OutputDirectory out(r.output, r.force);
   fs::create_directories(out.path() / "designs");
@@ -465,7 +474,9 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       } catch (const Cancelled&) {
         throw;
       } catch (const Error& e) {
-        d.refused = e.what();
+        // The places a refusal names are the chart's (theta, z) where the designs lie on one.
+        d.refused = chart_note.empty() ? std::string(e.what())
+                                       : cat("on the local chart chart/: ", e.what());
       }
     };
     for_each_parallel(designs.size(), workers, progress,
@@ -523,6 +534,9 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   for (SuggestedDesign& d : designs)
     if (d.refused.empty()) d.rank = ++rank;
   const std::string best = rank > 0 ? designs.front().name : std::string();
+  for (SuggestedDesign& d : designs)
+    d.near_best = d.rank > 1 && d.refined == designs.front().refined &&
+                  d.objective <= (1 + kNearBest) * designs.front().objective;
   if (rank == 0)
     result.warnings.push_back("no design could be laid and closed around this lesion here: "
                               "see each one's reason");
@@ -546,7 +560,8 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   json a = json::array();
   for (const SuggestedDesign& d : designs) {
     json o = {{"name", d.name}, {"procedure", d.procedure},
-              {"orientation_deg", d.orientation_deg}, {"rank", d.rank}};
+              {"orientation_deg", d.orientation_deg}, {"rank", d.rank},
+              {"near_best", d.near_best}};
     json params = json::object();
     for (const auto& [k, v] : fits.at(d.procedure).parameters) params[k] = round_to(v, 3);
     o["parameters"] = params;
@@ -560,6 +575,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       o["healthy_excised_mm2"] = round_to(d.healthy_excised_mm2, 1);
       o["sweep"] = closure_json(d.sweep);
       o["full"] = d.refined ? closure_json(d.full) : json(nullptr);
+      o["ranked_by"] = d.refined ? "full" : "sweep";
       if (!d.refined && !d.full.warnings.empty()) o["full_warnings"] = d.full.warnings;
       o["result"] = d.result.empty() ? json(nullptr) : json(d.result);
     }
@@ -615,9 +631,18 @@ std::string summary(const SuggestResult& s) {
     line += cat("; best ", b.name, " (", b.procedure, " along ", b.orientation_deg,
                 " deg: up to ", round_to(c.max_force_per_suture_n, 2), " N a suture",
                 c.feature.empty() ? std::string()
-                                  : cat(", the ", c.feature, " moved ", round_to(c.max_feature_mm, 1),
-                                        " mm"),
-                ", scar ", round_to(b.scar_length_mm, 1), " mm)");
+                                  : cat(", ", feature_line_words(c.feature), " moved ",
+                                        round_to(c.max_feature_mm, 1), " mm"),
+                ", scar ", round_to(b.scar_length_mm, 1), " mm",
+                b.refined ? std::string()
+                          : std::string("; the sweep's figures: its closure at full accuracy "
+                                        "did not finish, see suggestions.json"),
+                ")");
+    std::string near;
+    for (const SuggestedDesign& d : s.designs)
+      if (d.near_best) near += cat(near.empty() ? "" : ", ", d.name);
+    if (!near.empty())
+      line += cat("; within ", kNearBest * 100, " % of it: ", near);
   }
   return cat(line, " -> ", s.output);
 }

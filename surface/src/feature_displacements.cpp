@@ -17,9 +17,11 @@ namespace {
 
 using nlohmann::json;
 
+}  // namespace
+
 // "lower_eyelid_margin_left" -> "the left lower eyelid margin"; "oral_commissure_right" -> "the
 // right oral commissure"; "upper_lip_vermilion" -> "the upper lip's vermilion border".
-std::string spoken(const std::string& name) {
+std::string feature_line_words(const std::string& name) {
   std::string base = name, side;
   for (const char* sfx : {"_left", "_right"}) {
     const std::string s(sfx);
@@ -34,8 +36,6 @@ std::string spoken(const std::string& name) {
   std::replace(base.begin(), base.end(), '_', ' ');
   return "the " + side + base;
 }
-
-}  // namespace
 
 AnatomicalFrame anatomical_frame(const PatientModel& model) {
   const auto& ax = model.axis();
@@ -144,7 +144,7 @@ std::vector<FeatureDisplacement> feature_displacements(const FeatureLines& lines
     d.name = l.name;
     d.found = l.found;
     d.n_points = static_cast<int>(l.lps.size());
-    const std::string who = spoken(l.name);
+    const std::string who = feature_line_words(l.name);
     if (!l.found || l.lps.empty()) {
       d.sentence = who + " was not found on the model (" + l.note + ")";
       out.push_back(d);

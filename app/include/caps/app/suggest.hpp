@@ -26,10 +26,11 @@ struct SuggestRequest {
   double step = 15;   ///< deg between orientations
   double ratio = 3;   ///< an ellipse's length over its width
   std::string objective = "force";
-  int refine = 3;
+  int refine = 2;
   double sweep_size = 0;  ///< the sweep's mesh size (mm); 0: twice the mesh size
   std::string sweep_material = "auto";
   double sweep_time_limit = 30;  ///< s per design in the sweep (finite strain)
+  double refine_time_limit = 20;  ///< s per design closed again (finite strain)
   MeshingFields meshing;
   SolverFields solver;
   DomainFields domain;
@@ -61,6 +62,9 @@ struct SuggestRequest {
                                            "names as --material"});
     v(r.sweep_time_limit, {"sweep_time_limit", "finite strain: give up a design in the sweep "
                                                "after this many seconds (listed as not closed)"});
+    v(r.refine_time_limit, {"refine_time_limit", "finite strain: give up closing a design again "
+                                                 "after this many seconds (it keeps the sweep's "
+                                                 "figures, and says so); 0 = no limit"});
     MeshingFields::fields(r.meshing, v);
     SolverFields::fields(r.solver, v);
     DomainFields::fields(r.domain, v);
@@ -91,7 +95,15 @@ struct SuggestedDesign {
   bool refined = false;
   double objective = 0;  ///< the ranking value (the full closure's where refined)
   int rank = 0;          ///< 1 = best; 0 = not ranked
+  /// Within kNearBest of the best's objective, by the same closure (both refined, or both
+  /// the sweep's): as good as the best within what the model can tell apart.
+  bool near_best = false;
 };
+
+/// Designs whose objective is within this fraction of the best's (by the same closure) are
+/// reported as near it: closer than that, a ranking rests on differences that the model's own
+/// uncertainties (its tissue's moduli, the mesh) exceed.
+inline constexpr double kNearBest = 0.05;
 
 struct SuggestResult {
   std::string output;

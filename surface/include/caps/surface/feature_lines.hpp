@@ -54,6 +54,10 @@ struct FeatureLines {
 /// oral_commissure_left/right, alar_rim_left/right, hairline.
 const std::vector<std::string>& feature_line_names();
 
+/// A feature line's name in words: "lower_eyelid_margin_left" -> "the left lower eyelid margin",
+/// "eyebrow_right" -> "the right brow", "upper_lip_vermilion" -> "the upper lip's vermilion border".
+std::string feature_line_words(const std::string& name);
+
 /// Finds the feature lines on a range view beside `landmarks` (found on the same view; their
 /// theta_deg, z_mm and the midline are read). `r_bone` (theta deg, z mm -> mm; NaN where there is
 /// no bone) guides the brows to the supraorbital rim; empty: the skin alone. The theta_z of each
