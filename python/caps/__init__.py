@@ -24,7 +24,7 @@ from . import _caps
 __all__ = [
     "Error", "InvalidInput", "InvalidParameter", "IoError", "SolverError", "Cancelled",
     "CapsWarning", "run", "defaults", "verbs", "phantom", "model_from_volume", "model_from_scan",
-    "model_info", "plan_new", "plan_check", "plan_templates", "mesh", "simulate", "render",
+    "model_info", "plan_new", "plan_check", "plan_templates", "plan_suggest", "mesh", "simulate", "render",
     "load_model", "read_result", "model_landmarks", "model_site", "model_chart", "verb_help",
     "compare", "compare_models", "model_sensitivity",
 ]
@@ -150,6 +150,16 @@ def plan_check(plan, model=None):
 def plan_templates():
     """The procedure templates and their parameters (name, unit, default, min, max), a list."""
     return run("plan_templates")
+
+
+def plan_suggest(model, at, diameter, output, *, progress=None, **fields):
+    """For a lesion at ``at`` ("THETA,Z" or "glabella+15,20") of ``diameter`` mm, the library's
+    closures laid around it at every orientation, closed and ranked (caps plan suggest);
+    fields: margin (mm), procedures ("ellipse,rhomboid"), step (deg), objective ("force",
+    "features", "scar", "excised"), refine, material, force, ... Returns suggestions.json as a
+    dict: "best", "designs" (ranked first, each with its figures, plan and rank or refusal)."""
+    return run("plan_suggest", model=model, at=at, diameter=diameter, output=output,
+               progress=progress, **fields)
 
 
 def mesh(model, output, **fields):

@@ -110,6 +110,20 @@ def test_a_simulation_through_python_equals_the_cli(model, work, cli):
     assert r["result"]["total_suture_force_n"] == sim["closing_force_n"]
 
 
+def test_a_suggestion_ranks_the_designs_around_a_lesion(model, work):
+    # Every 90 deg on the clamped patch with the linear model: the cheapest closures.
+    s = caps.plan_suggest(model, "0,60", 4, work / "suggest", margin=1, step=90, refine=0,
+                          domain="patch", material="linear")
+    ranked = [d for d in s["designs"] if d["rank"] > 0]
+    assert s["best"] == ranked[0]["name"] and len(s["designs"]) == 2  # ellipses at 0 and 90
+    forces = [d["objective"] for d in ranked]
+    assert forces == sorted(forces) and forces[0] > 0
+    assert (work / "suggest" / "suggestions.png").exists()
+    with pytest.raises(caps.InvalidParameter, match="diameter 0"):
+        caps.plan_suggest(model, "0,60", 0, work / "refused")
+    assert not (work / "refused").exists()
+
+
 def test_the_generic_run_takes_the_request_json(model, work):
     body = {"procedure": "ellipse", "model": str(model), "at": "0,60", "orientation": 90,
             "parameters": {"length": 15, "width": 4}, "output": str(work / "ellipse.json")}
