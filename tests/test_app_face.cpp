@@ -141,6 +141,37 @@ TEST(FaceDomain, TheAnswerDoesNotDependOnWhereTheModelStops) {
   EXPECT_NEAR(far.max_suture_force_n, near.max_suture_force_n, 0.05 * near.max_suture_force_n);
 }
 
+// The surgeon's undermining (10 mm from the wound's border by default) goes on beyond the patch,
+// into the whole face's tissue, which slides on the bone there as the patch's freed base does:
+// so the answer hardly depends on where the patch stops. Before, the tissue beyond the patch's
+// rim stayed attached to the bone, and the small patch (4 mm out) undermined only 4 mm: closing
+// force 2.31 N against 1.23 N, the largest suture 1.14 against 0.64 N (linear, 6 December 2026);
+// now 1.05 and 0.61 N. What is left is the coarse tets' (2.5 mm voxels) against the patch's
+// elements: undermining nothing, the two patches differ by 6 % (5.18 against 4.88 N).
+TEST(FaceDomain, TheUnderminingGoesOnBeyondThePatch) {
+  const Case& c = phantom_case();
+  const auto closed = [&](double extent, const std::string& name) {
+    app::SimulateRequest r;
+    r.model = c.model;
+    r.plan = c.plan;
+    r.output = (folder() / name).string();
+    r.force = true;
+    r.solver.material = "linear";
+    r.meshing.extent = extent;
+    r.no_mesh_pictures = true;
+    return app::run_simulate(r);
+  };
+  const app::SimulateResult small = closed(4, "undermined-4"), large = closed(14, "undermined-14");
+  EXPECT_GT(large.patch_elements, 2 * small.patch_elements);
+  EXPECT_NEAR(small.closing_force_n, large.closing_force_n, 0.2 * large.closing_force_n);
+  EXPECT_NEAR(small.max_force_per_suture_n, large.max_force_per_suture_n,
+              0.08 * large.max_force_per_suture_n);
+  ASSERT_FALSE(small.face_notes.empty());
+  EXPECT_NE(small.face_notes[0].find("undermined within 10 mm of the wound (sliding on it)"),
+            std::string::npos)
+      << small.face_notes[0];
+}
+
 // caps compare closes the plan in the whole face by default, as simulate: its measured column
 // is simulate's answer, and no clamped rim warns; the constant thickness changes only the patch.
 TEST(FaceDomain, CompareHoldsTheConstantThicknessInTheWholeFace) {
@@ -238,9 +269,13 @@ TEST(FaceDomain, APlanOnALocalChartIsSolvedInItsParentsWholeFace) {
   EXPECT_EQ(s.untied_nodes, 0);
   EXPECT_GT(s.face_tets, 1000);
   EXPECT_LT(s.max_suture_gap_mm, 1e-6);
-  // The same plan on the parent, tied alike: the forces agree to the charts' resampling.
+  // The same plan on the parent, tied alike: the forces agree to the charts' resampling and to
+  // the tissue each undermines beyond its patch (the tets' nodes on the bone found within 10 mm
+  // of the wound in the plan's own cylinder, the chart's or the parent's: the same tissue seen
+  // along other rays). 0.99 against 1.20 N since the undermining goes on beyond the patch
+  // (6 December 2026); within 15 % before.
   const app::SimulateResult on_parent = simulate("parent_linear", "face", "linear");
-  EXPECT_NEAR(s.closing_force_n, on_parent.closing_force_n, 0.15 * on_parent.closing_force_n);
+  EXPECT_NEAR(s.closing_force_n, on_parent.closing_force_n, 0.2 * on_parent.closing_force_n);
   // The parent changed since the chart was made: the chart's own (clamped) patch, said.
   const fs::path chart_json = fs::path(cr.output) / "model.json";
   std::string text = caps_test::slurp(chart_json);

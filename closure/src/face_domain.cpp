@@ -9,6 +9,7 @@
 #include "caps/core/error.hpp"
 #include "caps/core/plane_geometry.hpp"
 #include "caps/core/union_find.hpp"
+#include "caps/core/units.hpp"
 #include "caps/fem/material_registry.hpp"
 #include "caps/fem/tet_mesh.hpp"
 #include "caps/fem/tie.hpp"
@@ -29,6 +30,13 @@ Domain parse_domain(const std::string& name) {
 
 namespace {
 
+// The distance from p to the segment a-b.
+double point_segment_distance(const Eigen::Vector2d& p, const Eigen::Vector2d& a,
+                              const Eigen::Vector2d& b) {
+  const double L2 = (b - a).squaredNorm();
+  const double t = L2 > 0 ? std::clamp((p - a).dot(b - a) / L2, 0.0, 1.0) : 0.0;
+  return (a + t * (b - a) - p).norm();
+}
 
 // The E and nu of a layer's material (its small-strain constants; a material without them,
 // such as goh, stands in with the dermis preset's).
@@ -203,20 +211,44 @@ void Join::append_tissue(const Region& region) {
   }
   d_.tets = static_cast<int>(region.tets.size());
   // Supports: a corner on the bone is attached, one on the region's cut or the CT's end held; a
-  // mid-edge node as both its corners (the edge lies on that surface or spans the layer).
+  // mid-edge node as both its corners (the edge lies on that surface or spans the layer). On
+  // the bone within the undermining distance of the wound's border, as the patch frees its own
+  // columns' bases (ContinuumMeshOptions::undermine_mm, measured alike in the surface mesh's
+  // plane), the tissue is freed from the bone: it slides on it (BaseCondition::Slide, the
+  // default) or is free. Without this the undermining stopped at the patch's rim, a few mm from
+  // the wound beside the eye, and the answer depended on the patch's size (Cranium's forehead
+  // ellipse: 2.17 N a suture in a 5 mm patch against 1.49 N in a 23 mm one, linear).
+  const mesher::SurfaceMesh& surface = wound_.surface;
+  auto undermined_at = [&](const Eigen::Vector3d& x) {
+    if (!(layers_.undermine_mm > 0)) return false;
+    const CylindricalPoint p = model_.to_cylindrical(x);
+    const Eigen::Vector2d xy(wrap_degrees(p.theta_deg - surface.theta_c_deg) * kPi / 180.0 *
+                                 surface.ref_radius_mm,
+                             p.z_mm - surface.z_c_mm);
+    for (const auto& chain : surface.edge_chain)
+      for (std::size_t i = 0; i + 1 < chain.size(); ++i)
+        if (point_segment_distance(xy, surface.xy_mm.row(chain[i]).transpose(),
+                                   surface.xy_mm.row(chain[i + 1]).transpose()) <
+            layers_.undermine_mm)
+          return true;
+    return false;
+  };
   auto corner_state = [&](int c) {
     const int n = tissue_id[c];
     if (region.held[n]) return 2;
-    return (tissue_.node_flags[n] & mesher::kTissueOnBone) ? 1 : 0;
+    if (!(tissue_.node_flags[n] & mesher::kTissueOnBone)) return 0;
+    return undermined_at(q.nodes.row(c).transpose()) ? 3 : 1;
   };
   auto skin = [&](int c) { return (tissue_.node_flags[tissue_id[c]] & mesher::kTissueOnSkin) != 0; };
   std::vector<char> done(static_cast<std::size_t>(q.nodes.rows()), 0);
+  std::vector<int> freed;  // undermined nodes on the bone (kept ids)
   auto visit = [&](int id, int state, bool on_skin) {
     if (done[id]) return;
     done[id] = 1;
     if (state == 1) ++d_.attached_nodes;
     if (state == 2) ++d_.held_nodes;
-    if (state > 0) mesh.fixed_nodes.push_back(base + id);
+    if (state == 1 || state == 2) mesh.fixed_nodes.push_back(base + id);
+    if (state == 3) freed.push_back(id);
     if (on_skin) d_.skin_nodes.push_back(base + id);
   };
   static constexpr int kEdge[6][2] = {{0, 1}, {1, 2}, {2, 0}, {0, 3}, {1, 3}, {2, 3}};
@@ -225,8 +257,69 @@ void Join::append_tissue(const Region& region) {
     for (int k = 0; k < 6; ++k) {
       const int a = e.nodes[kEdge[k][0]], b = e.nodes[kEdge[k][1]];
       const int sa = corner_state(a), sb = corner_state(b);
-      visit(e.nodes[4 + k], sa > 0 && sb > 0 ? std::max(sa, sb) : 0, skin(a) && skin(b));
+      // On the bone when both corners are; held when either is; else freed as its own place.
+      const int m = e.nodes[4 + k];
+      const int state = sa == 0 || sb == 0 ? 0
+                        : sa == 2 || sb == 2 ? 2
+                        : undermined_at(q.nodes.row(m).transpose()) ? 3
+                                                                    : 1;
+      visit(m, state, skin(a) && skin(b));
     }
+  }
+  d_.undermined_nodes = static_cast<int>(freed.size());
+  if (freed.empty() || layers_.base != mesher::BaseCondition::Slide) return;
+  // The freed nodes slide on the bone: held along its normal by a spring as the patch's freed
+  // base is (the continuum mesher's kSlidingStiffness x E x the tissue's height above the node),
+  // free along it. The bone's normal at a node: the area-weighted normals of the region's
+  // boundary faces on the bone around it (all three corners on the bone), turned towards the
+  // tissue (the face's tetrahedron's fourth corner); a mid-edge node takes its corners'.
+  constexpr double kSlidingStiffness = 1e5;
+  const bool uniform = wound_.continuum.tissue == mesher::TissueLayers::Uniform;
+  const double E_sliding =
+      uniform ? layers_.material->stiffness_scale_mpa()
+              : std::max({layers_.dermis->stiffness_scale_mpa(), layers_.fat->stiffness_scale_mpa(),
+                          layers_.deep->stiffness_scale_mpa()});
+  std::map<std::array<int, 3>, std::pair<int, int>> faces;  // sorted corners -> (count, opposite)
+  static constexpr int kFace[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+  for (Eigen::Index t = 0; t < tets.rows(); ++t)
+    for (int f = 0; f < 4; ++f) {
+      std::array<int, 3> key{tets(t, kFace[f][0]), tets(t, kFace[f][1]), tets(t, kFace[f][2])};
+      std::sort(key.begin(), key.end());
+      auto& [count, opposite] = faces[key];
+      ++count;
+      opposite = tets(t, f);
+    }
+  std::vector<Eigen::Vector3d> normal(static_cast<std::size_t>(q.nodes.rows()),
+                                      Eigen::Vector3d::Zero());
+  for (const auto& [key, face] : faces) {
+    if (face.first != 1) continue;
+    if (!std::all_of(key.begin(), key.end(), [&](int c) {
+          return (tissue_.node_flags[tissue_id[c]] & mesher::kTissueOnBone) != 0;
+        }))
+      continue;
+    const Eigen::Vector3d a = q.nodes.row(key[0]), b = q.nodes.row(key[1]), c = q.nodes.row(key[2]);
+    Eigen::Vector3d n = (b - a).cross(c - a);
+    if (n.dot(q.nodes.row(face.second).transpose() - a) < 0) n = -n;
+    for (int k : key) normal[k] += n;
+  }
+  for (const Element& e : q.elements)
+    for (int k = 0; k < 6; ++k)
+      if (normal[e.nodes[4 + k]].isZero())
+        normal[e.nodes[4 + k]] = normal[e.nodes[kEdge[k][0]]] + normal[e.nodes[kEdge[k][1]]];
+  for (int id : freed) {
+    const Eigen::Vector3d x = q.nodes.row(id);
+    const CylindricalPoint p = model_.to_cylindrical(x);
+    const double height = std::max(1.0, model_.has_z(p.z_mm)
+                                            ? model_.r_skin(p.theta_deg, p.z_mm) - p.r_mm
+                                            : 1.0);
+    if (!(normal[id].norm() > 0)) {  // no bone face beside it: held as attached
+      mesh.fixed_nodes.push_back(base + id);
+      --d_.undermined_nodes;
+      ++d_.attached_nodes;
+      continue;
+    }
+    mesh.sliding.push_back({base + id, normal[id].normalized(),
+                            kSlidingStiffness * E_sliding * height});
   }
 }
 
@@ -292,7 +385,11 @@ FaceDomain Join::run() {
                          "wound (", d_.tied_nodes, " rim nodes tied, the farthest ",
                          std::round(d_.max_tie_distance_mm * 100) / 100, " mm from its "
                          "tetrahedron; ", d_.attached_nodes, " nodes attached to the bone, ",
-                         d_.held_nodes, " held where the region or the CT ends)"));
+                         d_.undermined_nodes, " undermined within ", layers_.undermine_mm,
+                         " mm of the wound (",
+                         layers_.base == mesher::BaseCondition::Slide ? "sliding on it"
+                                                                      : "free",
+                         "), ", d_.held_nodes, " held where the region or the CT ends)"));
   return std::move(d_);
 }
 

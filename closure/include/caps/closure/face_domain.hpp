@@ -83,6 +83,9 @@ struct FaceDomain {
   int tied_nodes = 0, untied_nodes = 0;
   double max_tie_distance_mm = 0;     ///< the farthest a tied rim node lies from its master
   int attached_nodes = 0;             ///< tissue nodes on the bone, fixed
+  /// Tissue nodes on the bone within the undermining distance of the wound's border
+  /// (ContinuumMeshOptions::undermine_mm): freed from it, sliding on it (or free).
+  int undermined_nodes = 0;
   int held_nodes = 0;                 ///< tissue nodes where the region or the CT ends, fixed
   /// The layer ids of the tissue's elements (>= kFirstTissueLayer) and their mixture.
   std::vector<std::string> notes;
