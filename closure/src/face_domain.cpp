@@ -242,12 +242,13 @@ void Join::append_tissue(const Region& region) {
   auto skin = [&](int c) { return (tissue_.node_flags[tissue_id[c]] & mesher::kTissueOnSkin) != 0; };
   std::vector<char> done(static_cast<std::size_t>(q.nodes.rows()), 0);
   std::vector<int> freed;  // undermined nodes on the bone (kept ids)
+  std::vector<int> fixed;  // attached or held (kept ids)
   auto visit = [&](int id, int state, bool on_skin) {
     if (done[id]) return;
     done[id] = 1;
     if (state == 1) ++d_.attached_nodes;
     if (state == 2) ++d_.held_nodes;
-    if (state == 1 || state == 2) mesh.fixed_nodes.push_back(base + id);
+    if (state == 1 || state == 2) fixed.push_back(id);
     if (state == 3) freed.push_back(id);
     if (on_skin) d_.skin_nodes.push_back(base + id);
   };
@@ -266,6 +267,25 @@ void Join::append_tissue(const Region& region) {
       visit(m, state, skin(a) && skin(b));
     }
   }
+  // A piece of tissue (tets sharing nodes) whose every support was freed would float (a lone
+  // tet on the bone under undermined skin, kept by select() for its nodes on the bone): it stays
+  // attached.
+  UnionFind parts(static_cast<int>(q.nodes.rows()));
+  for (const Element& e : q.elements)
+    for (int k = 1; k < 10; ++k) parts.unite(e.nodes[0], e.nodes[k]);
+  std::set<int> supported;
+  for (int id : fixed) supported.insert(parts.find(id));
+  std::vector<int> sliding;
+  for (int id : freed) {
+    if (supported.count(parts.find(id))) {
+      sliding.push_back(id);
+    } else {
+      fixed.push_back(id);
+      ++d_.attached_nodes;
+    }
+  }
+  freed = std::move(sliding);
+  for (int id : fixed) mesh.fixed_nodes.push_back(base + id);
   d_.undermined_nodes = static_cast<int>(freed.size());
   if (freed.empty() || layers_.base != mesher::BaseCondition::Slide) return;
   // The freed nodes slide on the bone: held along its normal by a spring as the patch's freed
