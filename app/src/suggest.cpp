@@ -17,6 +17,7 @@
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/units.hpp"
+#include "caps/fem/blas.hpp"
 #include "caps/image/canvas.hpp"
 #include "caps/plan/check.hpp"
 #include "caps/plan/plan_io.hpp"
@@ -441,6 +442,10 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   }
   const Clock::time_point t_sweep = Clock::now();
   {
+    // One BLAS thread for the whole sweep, held here: each solve's own guard then never changes
+    // OpenBLAS's thread count while the other worker is inside a BLAS call (a SIGFPE in a test
+    // under load, once).
+    const fem::BlasThreads one_blas_thread(workers > 1 ? 1 : 0);
     Progress progress(reporter, "closing each design in the sweep",
                       static_cast<double>(designs.size()));
     std::mutex mutex;  // plans

@@ -289,11 +289,10 @@ void Join::append_tissue(const Region& region) {
   d_.undermined_nodes = static_cast<int>(freed.size());
   if (freed.empty() || layers_.base != mesher::BaseCondition::Slide) return;
   // The freed nodes slide on the bone: held along its normal by a spring as the patch's freed
-  // base is (the continuum mesher's kSlidingStiffness x E x the tissue's height above the node),
+  // base is (mesher::kSlidingStiffness x E x the tissue's height above the node),
   // free along it. The bone's normal at a node: the area-weighted normals of the region's
   // boundary faces on the bone around it (all three corners on the bone), turned towards the
   // tissue (the face's tetrahedron's fourth corner); a mid-edge node takes its corners'.
-  constexpr double kSlidingStiffness = 1e5;
   const bool uniform = wound_.continuum.tissue == mesher::TissueLayers::Uniform;
   const double E_sliding =
       uniform ? layers_.material->stiffness_scale_mpa()
@@ -339,7 +338,7 @@ void Join::append_tissue(const Region& region) {
       continue;
     }
     mesh.sliding.push_back({base + id, normal[id].normalized(),
-                            kSlidingStiffness * E_sliding * height});
+                            mesher::kSlidingStiffness * E_sliding * height});
   }
 }
 

@@ -518,6 +518,16 @@ int blas_kept_threads = 0;  // the count before the first of them
 
 }  // namespace
 
+}  // namespace caps::fem::detail
+
+namespace caps::fem {
+
+using detail::blas_guards;
+using detail::blas_kept_threads;
+using detail::blas_mutex;
+using detail::OpenBlas;
+using detail::openblas;
+
 BlasThreads::BlasThreads(int threads) {
   const OpenBlas& blas = openblas();
   if (threads <= 0 || !blas.set) return;
@@ -534,6 +544,10 @@ BlasThreads::~BlasThreads() {
   const std::lock_guard lock(blas_mutex);
   if (--blas_guards == 0 && openblas().get() != blas_kept_threads) openblas().set(blas_kept_threads);
 }
+
+}  // namespace caps::fem
+
+namespace caps::fem::detail {
 
 bool gemv_forwarding_linked();  // blas_gemv_forward.cpp
 

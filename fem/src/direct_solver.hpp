@@ -1,6 +1,7 @@
 #pragma once
 // Internal: sparse symmetric positive definite direct solvers behind one interface.
 
+#include "caps/fem/blas.hpp"
 #include <Eigen/Sparse>
 #include <memory>
 #include <optional>
@@ -61,21 +62,6 @@ class DirectSolver {
 std::unique_ptr<DirectSolver> make_direct_solver(SolverKind kind, int mumps_ordering,
                                                  bool mixed_precision);
 
-/// While alive, the BLAS under the direct solvers runs on `threads` threads (OpenBLAS, when it
-/// is the BLAS loaded; any other BLAS is left alone; 0 leaves it as configured). The count it
-/// had is restored when the last of the guards alive in the process ends; guards of concurrent
-/// solves share the first one's count. OpenBLAS's worker threads spin (sched_yield) after each
-/// call and take a core from TBB's assembly; a sparse factorization of skin meshes gains little
-/// from them (docs/benchmarks.md).
-class BlasThreads {
- public:
-  explicit BlasThreads(int threads);
-  ~BlasThreads();
-  BlasThreads(const BlasThreads&) = delete;
-  BlasThreads& operator=(const BlasThreads&) = delete;
-
- private:
-  bool active_ = false;
-};
+using caps::fem::BlasThreads;  // fem/blas.hpp
 
 }  // namespace caps::fem::detail

@@ -608,7 +608,6 @@ void ContinuumBuild::fix_nodes() {
 // leaving them free makes the floor kink against its sliding neighbours, a kink that stiffens
 // without bound as the mesh is refined: docs/fem.md, "The freed base slides").
 void ContinuumBuild::add_sliding_base() {
-  constexpr double kSlidingStiffness = 1e5;
   const double E_sliding =
       measured ? std::max({o.dermis->stiffness_scale_mpa(), o.fat->stiffness_scale_mpa(),
                            o.deep->stiffness_scale_mpa()})

@@ -28,4 +28,23 @@ std::string blas_core_to_force();
 /// switched, "" otherwise.
 std::string use_the_cpus_blas_kernels();
 
+/// While alive, the BLAS under the direct solvers runs on `threads` threads (OpenBLAS, when it
+/// is the BLAS loaded; any other BLAS is left alone; 0 leaves it as configured). The count it
+/// had is restored when the last of the guards alive in the process ends; guards of concurrent
+/// solves share the first one's count. fem::solve() holds one for its factorizations; a caller
+/// that solves in several threads at once holds one around them all, so that OpenBLAS's count
+/// is never changed (openblas_set_num_threads()) while another thread is inside a BLAS call
+/// (OpenBLAS's worker threads spin (sched_yield) after each call and take a core from TBB's
+/// assembly; a sparse factorization of skin meshes gains little from them: docs/benchmarks.md).
+class BlasThreads {
+ public:
+  explicit BlasThreads(int threads);
+  ~BlasThreads();
+  BlasThreads(const BlasThreads&) = delete;
+  BlasThreads& operator=(const BlasThreads&) = delete;
+
+ private:
+  bool active_ = false;
+};
+
 }  // namespace caps::fem

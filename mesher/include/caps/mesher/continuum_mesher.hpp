@@ -51,6 +51,12 @@ enum class RimCondition { Fixed, Free, Tied };
 /// lift off or sink into the bone when the closure compresses it.
 enum class BaseCondition { Slide, Free };
 
+/// The spring that holds a sliding base along the bone's normal, per unit of the tissue's
+/// stiffness (MPa) and of its height above the base (mm): stiff enough that the support gives
+/// way by about 1e-6 mm under the closing forces (the patch's freed base; the whole face's
+/// undermined tissue, closure/face_domain.cpp).
+inline constexpr double kSlidingStiffness = 1e5;
+
 /// "slide" / "free".
 const char* base_condition_name(BaseCondition base);
 /// Parses "slide" / "free"; throws InvalidInput otherwise.
