@@ -383,7 +383,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       designs.push_back(d);
     }
 
-  Quiet quiet(reporter), quiet_chart(reporter);
+  Quiet quiet(reporter);
   // Where the head's cylindrical image cannot hold the skin under a design (the side of the
   // nose), every design is laid on one local chart facing the lesion (as caps plan new makes for
   // one plan), made in the output folder as chart/ and closed in the head's whole face.
@@ -416,7 +416,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
         cr.at = cat(round_to(tz[0], 3), ",", round_to(tz[1], 3));
         cr.output = (out.path() / "chart").string();
         cr.force = true;
-        run_chart(cr, &quiet_chart);
+        run_chart(cr, &quiet);
         on = std::make_shared<const PatientModel>(PatientModel::load(cr.output));
         plan_model = (fs::path(r.output) / "chart").string();
         chart_note = cat("the model's cylindrical image cannot hold the skin around the lesion (",
