@@ -460,3 +460,34 @@ TEST(FeatureDisplacements, AFieldFromSamplesIsExactAtThemAndAbsentFarFromThem) {
       << d[0].sentence;
   EXPECT_THROW(displacement_from_samples(P, U.topRows(3), 1.0), InvalidInput);
 }
+
+// A field carried on across a seam: samples along the line y = 0 (every 0.1 mm, the value 1 in
+// x) blended into a far field of 3 in x over 2 mm: 1 on the seam, 2 halfway, the far field's 3
+// from 2 mm on; where the far field has nothing, the blend goes to zero and then nothing.
+TEST(FeatureLines, AFieldIsCarriedOnAcrossASeamWithoutAnEdge) {
+  const int n = 201;
+  Eigen::MatrixX3d P(n, 3), U = Eigen::MatrixX3d::Zero(n, 3);
+  for (int i = 0; i < n; ++i) {
+    P.row(i) = Eigen::RowVector3d(-10 + 0.1 * i, 0, 0);
+    U(i, 0) = 1;
+  }
+  const DisplacementAt far = [](const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
+    if (x.y() > 5) return std::nullopt;
+    return Eigen::Vector3d(3, 0, 0);
+  };
+  const DisplacementAt at = blend_across_seam(far, P, U, 2.0);
+  EXPECT_NEAR(at(Eigen::Vector3d(0.3, 0, 0))->x(), 1.0, 1e-12);
+  EXPECT_NEAR(at(Eigen::Vector3d(0, 1, 0))->x(), 2.0, 1e-12);
+  EXPECT_NEAR(at(Eigen::Vector3d(0, 0.5, 0))->x(), 1.5, 1e-12);
+  EXPECT_NEAR(at(Eigen::Vector3d(0, 0, -1.5))->x(), 2.5, 1e-12);
+  EXPECT_NEAR(at(Eigen::Vector3d(0, 2.5, 0))->x(), 3.0, 1e-12);
+  EXPECT_NEAR(at(Eigen::Vector3d(30, 0, 0))->x(), 3.0, 1e-12);  // past the seam's end
+  // Where the far field has none, a seam with nothing beyond it: the samples fade to zero.
+  const DisplacementAt alone = blend_across_seam(
+      [](const Eigen::Vector3d&) { return std::optional<Eigen::Vector3d>(); }, P, U, 2.0);
+  EXPECT_NEAR(alone(Eigen::Vector3d(0, 1.5, 0))->x(), 0.25, 1e-12);
+  EXPECT_FALSE(alone(Eigen::Vector3d(0, 2.5, 0)));
+  EXPECT_THROW(blend_across_seam(far, P, U.topRows(3), 1.0), InvalidInput);
+  EXPECT_THROW(blend_across_seam(far, P, U, 0.0), InvalidInput);
+  EXPECT_THROW(blend_across_seam(nullptr, P, U, 1.0), InvalidInput);
+}

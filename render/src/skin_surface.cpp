@@ -935,11 +935,13 @@ void shade_normals(const PatientModel& skin, const std::vector<int>& cap_centres
 
 // A closure in the whole face (closure/face_domain.hpp) moves the skin beyond the patch too:
 // the vertices of the range mesh, the seam and the undercuts follow the tissue model's skin
-// nodes (the mesh's node set closure::kFaceSkinNodes) by inverse-distance-squared weights; the
+// nodes (the mesh's node set closure::kFaceSkinNodes) by inverse-distance-squared weights, and
+// within kSeamBlendMm of the patch's rim its rim's displacement (seam_field()); the
 // micropolygons (the first n_micro vertices) carry the patch's own displacement.
 void move_with_face(const fem::Mesh& mesh, const Eigen::MatrixX3d& u, int n_micro, SkinSurfaces& out) {
   if (!mesh.node_sets.count(closure::kFaceSkinNodes)) return;
-  const DisplacementAt field = closure::skin_displacement(mesh, u);
+  const DisplacementAt field =
+      seam_field(out, out.post.V - out.pre.V, closure::skin_displacement(mesh, u));
   for (Eigen::Index v = n_micro; v < out.pre.V.rows(); ++v)
     if (const auto d = field(out.pre.V.row(v).transpose())) out.post.V.row(v) += d->transpose();
 }
@@ -1024,6 +1026,7 @@ SkinSurfaces displaced_skin(const PatientModel& model, const fem::Mesh& mesh,
   const std::vector<int> cap_centres = b.cap_centres;
   const auto given_normals = b.given_normals;
   pack(b, out);
+  out.rim_vertices = loops[rim];
   if (displacement_mm) move_with_face(mesh, *displacement_mm, n_micro, out);
   shade_normals(skin, cap_centres, given_normals, out);
   return out;
@@ -1035,6 +1038,21 @@ Eigen::MatrixX3d skin_normal_field(const PatientModel& skin, const Eigen::Matrix
   for (Eigen::Index i = 0; i < theta_z.rows(); ++i)
     N.row(i) = field.at(theta_z(i, 0), theta_z(i, 1)).transpose();
   return N;
+}
+
+DisplacementAt seam_field(const SkinSurfaces& skin, const Eigen::MatrixX3d& values,
+                          DisplacementAt far) {
+  if (values.rows() != skin.pre.V.rows())
+    throw InvalidInput(cat("seam_field: ", values.rows(), " values for ", skin.pre.V.rows(),
+                           " skin vertices"));
+  if (skin.rim_vertices.empty()) return far;
+  const auto n = static_cast<Eigen::Index>(skin.rim_vertices.size());
+  Eigen::MatrixX3d points(n, 3), at_rim(n, 3);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    points.row(i) = skin.pre.V.row(skin.rim_vertices[static_cast<std::size_t>(i)]);
+    at_rim.row(i) = values.row(skin.rim_vertices[static_cast<std::size_t>(i)]);
+  }
+  return blend_across_seam(std::move(far), points, at_rim, kSeamBlendMm);
 }
 
 Eigen::VectorXd nodal_field_on_skin(const SkinSurfaces& skin, const fem::Mesh& mesh,
@@ -1065,6 +1083,26 @@ Eigen::VectorXd nodal_field_on_skin(const SkinSurfaces& skin, const fem::Mesh& m
   // so the map goes on across the patch's rim. A wound fill's own vertices keep off_mesh_value.
   if (mesh.node_sets.count(closure::kFaceSkinNodes)) {
     const auto field = closure::skin_scalar(mesh, nodal);
+    // The patch's own field at its rim is the least accurate of it (the tie's kinks in the
+    // outermost elements: a ring of teeth on the map), so within kSeamBlendInsideMm of the rim
+    // it goes over into the tissue's, and the two meet there without an edge. The closeness to
+    // the rim, 1 - d / width, is blend_across_seam() of ones on the rim into nothing.
+    if (!skin.rim_vertices.empty()) {
+      const auto n_rim = static_cast<Eigen::Index>(skin.rim_vertices.size());
+      Eigen::MatrixX3d rim(n_rim, 3);
+      for (Eigen::Index i = 0; i < n_rim; ++i)
+        rim.row(i) = skin.pre.V.row(skin.rim_vertices[static_cast<std::size_t>(i)]);
+      const DisplacementAt closeness = blend_across_seam(
+          [](const Eigen::Vector3d&) { return std::optional<Eigen::Vector3d>(); }, rim,
+          Eigen::MatrixX3d::Ones(n_rim, 3), kSeamBlendInsideMm);
+      for (Eigen::Index v = 0; v < skin.n_micropolygon_vertices; ++v) {
+        if (skin.vertex_element[v] < 0) continue;
+        const Eigen::Vector3d x = skin.pre.V.row(v).transpose();
+        const auto c = closeness(x);
+        if (!c) continue;
+        if (const auto f = field(x)) out[v] = c->x() * *f + (1 - c->x()) * out[v];
+      }
+    }
     std::vector<char> on_skin(static_cast<std::size_t>(nv), 0);
     for (Eigen::Index f = 0; f < skin.pre.F.rows(); ++f)
       if (skin.face_part[static_cast<std::size_t>(f)] != SkinPart::WoundFill)

@@ -104,16 +104,19 @@ struct MovedSkin {
 // A closure in the whole face moves the skin around the patch as well: the vertices of the
 // model's range mesh (write_model_skin_glb(), which the page draws around the patch) that the
 // tissue's skin nodes move (closure::skin_displacement(), the field the renderer and the
-// feature lines use), as records of a uint32 vertex and its move as three float32 in glTF's
-// frame (metres; render::lps_to_gltf), little endian, at `path`. Nothing is written for a
+// feature lines use; within render::kSeamBlendMm of the rim of `patch`, the skin drawn from the
+// closure, carried on from the rim's displacement, as displaced_skin() moves the seam), as
+// records of a uint32 vertex and its move as three float32 in glTF's frame (metres;
+// render::lps_to_gltf), little endian, at `path`. Nothing is written for a
 // patch-only closure (no face skin nodes) or where nothing moved. `max_principal_mpa` (one
 // value a node of `mesh`) gives MovedSkin::tension_records.
 MovedSkin write_moved_model_skin(const PatientModel& model, const fem::Mesh& mesh,
                                  const Eigen::MatrixX3d& u, const Eigen::VectorXd& max_principal_mpa,
-                                 const fs::path& path) {
+                                 const render::SkinSurfaces& patch, const fs::path& path) {
   MovedSkin out;
   if (!mesh.node_sets.count(closure::kFaceSkinNodes)) return out;
-  const DisplacementAt field = closure::skin_displacement(mesh, u);
+  const DisplacementAt field =
+      render::seam_field(patch, patch.post.V - patch.pre.V, closure::skin_displacement(mesh, u));
   const auto tension = closure::skin_scalar(mesh, max_principal_mpa);
   const TriMesh range = range_mesh(model.maps(), RangeSurface::Skin);
   std::string bytes;
@@ -235,7 +238,7 @@ ResultView write_result_skin_glbs(const PatientModel& model, const render::Drawn
   if (!model.has_color()) part.color.rowwise() = kPlainSkin.transpose();  // as the model's skin
   render::write_gltf(part, result_dir / "skin.glb");
   MovedSkin moved =
-      write_moved_model_skin(drawn ? drawn->range : model, mesh, u, max_principal,
+      write_moved_model_skin(drawn ? drawn->range : model, mesh, u, max_principal, skin,
                              result_dir / "skin_moved.bin");
   // The wound's and incisions' lips (the incision lines before, the scar after the closure): the
   // page draws them on the skin and moves them with its pre-to-post slider.

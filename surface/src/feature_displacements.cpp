@@ -92,6 +92,53 @@ DisplacementAt displacement_from_samples(const Eigen::MatrixX3d& points,
   };
 }
 
+DisplacementAt blend_across_seam(DisplacementAt far, const Eigen::MatrixX3d& points,
+                                 const Eigen::MatrixX3d& values, double width_mm) {
+  if (points.rows() != values.rows())
+    throw InvalidInput(cat("blend_across_seam: ", points.rows(), " points but ", values.rows(),
+                           " values"));
+  if (!(width_mm > 0) || !std::isfinite(width_mm))
+    throw InvalidInput(cat("blend_across_seam: width ", width_mm, " mm must be positive"));
+  if (!far) throw InvalidInput("blend_across_seam: no field to blend into");
+  // The samples in cells of the width: a point's nearest sample within reach is in its cell or
+  // the 26 around it.
+  struct Seam {
+    Eigen::MatrixX3d P, U;
+    double w;
+    std::map<std::array<long, 3>, std::vector<Eigen::Index>> cells;
+    DisplacementAt far;
+    std::array<long, 3> cell(const Eigen::Vector3d& x) const {
+      return {static_cast<long>(std::floor(x.x() / w)), static_cast<long>(std::floor(x.y() / w)),
+              static_cast<long>(std::floor(x.z() / w))};
+    }
+  };
+  auto s = std::make_shared<Seam>(Seam{points, values, width_mm, {}, std::move(far)});
+  for (Eigen::Index i = 0; i < points.rows(); ++i)
+    if (points.row(i).allFinite() && values.row(i).allFinite())
+      s->cells[s->cell(points.row(i).transpose())].push_back(i);
+  return [s](const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
+    const std::optional<Eigen::Vector3d> f = s->far(x);
+    if (!x.allFinite()) return f;
+    const std::array<long, 3> c = s->cell(x);
+    double best = s->w * s->w;
+    Eigen::Index nearest = -1;
+    for (long i = -1; i <= 1; ++i)
+      for (long j = -1; j <= 1; ++j)
+        for (long k = -1; k <= 1; ++k) {
+          const auto it = s->cells.find({c[0] + i, c[1] + j, c[2] + k});
+          if (it == s->cells.end()) continue;
+          for (Eigen::Index n : it->second) {
+            const double d2 = (s->P.row(n).transpose() - x).squaredNorm();
+            if (d2 < best) best = d2, nearest = n;
+          }
+        }
+    if (nearest < 0) return f;
+    const double t = std::sqrt(best) / s->w;  // 0 on the seam, 1 a width away
+    return Eigen::Vector3d((1 - t) * s->U.row(nearest).transpose() +
+                           t * f.value_or(Eigen::Vector3d::Zero()));
+  };
+}
+
 const std::vector<ClinicalThreshold>& clinical_thresholds() {
   // docs/landmarks.md, "Feature lines and what a closure does to them", has the table with its
   // sources; the sources were read, the numbers are theirs.

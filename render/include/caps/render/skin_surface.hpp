@@ -38,6 +38,7 @@
 #include "caps/core/mesh.hpp"
 #include "caps/fem/mesh.hpp"
 #include "caps/fem/solve.hpp"
+#include "caps/surface/feature_lines.hpp"
 
 namespace caps {
 class PatientModel;
@@ -73,6 +74,11 @@ struct SkinSurfaces {
   std::vector<SkinPart> face_part;   ///< #F
   std::vector<int> skin_elements;    ///< elements whose top face lies on the skin
   int n_micropolygon_vertices = 0;
+  /// The micropolygons' outer rim: a loop of their vertices, counter-clockwise in (theta, z).
+  /// Beyond it, in a closure in the whole face, the skin follows the tissue model's skin nodes;
+  /// within kSeamBlendMm of it the rim's displacement carries on into theirs (seam_field()), and
+  /// the tension map goes over into theirs within kSeamBlendInsideMm inside it.
+  std::vector<int> rim_vertices;
   /// The cells q = k n_theta + j (0 <= j < n_theta, 0 <= k < n_z - 1) of the model's range mesh
   /// left out under the mesh's footprint (where the micropolygons, the wound fill and the seam
   /// replace the range image), sorted.
@@ -84,6 +90,15 @@ struct SkinSurfaces {
 /// A face lies on the skin when each of its nodes is within this distance (mm) of the range
 /// surface along the model's radial ray.
 inline constexpr double kOnSkinToleranceMm = 1e-4;
+
+/// How far beyond the patch's rim its displacement and fields carry on into the whole face's
+/// (mm; surface::blend_across_seam()): about two of the tissue model's facets on the face, so the
+/// seam shows no edge where the two discretisations differ.
+inline constexpr double kSeamBlendMm = 3.0;
+/// How far inside the patch's rim a nodal field on the skin (nodal_field_on_skin(): the tension
+/// map) goes over from the tissue model's field at the rim to the patch's own: its outermost
+/// elements' field is kinked by the tie, and the map would show the rim as a ring of teeth.
+inline constexpr double kSeamBlendInsideMm = 1.5;
 
 /// How much of the head displaced_skin() builds.
 enum class SkinExtent {
@@ -140,11 +155,19 @@ Eigen::MatrixX3d skin_normal_field(const PatientModel& skin, const Eigen::Matrix
 /// normals. #V×3, LPS.
 Eigen::MatrixX3d shading_normals(const SkinSurfaces& skin, double t);
 
+/// A field on the skin around a patch closed in the whole face: `far` (the field of the tissue
+/// model's skin nodes) carried on from the patch's rim, where it takes `values` (#V×3, one row a
+/// vertex of `skin`) of skin.rim_vertices, over kSeamBlendMm (blend_across_seam()). `far` itself
+/// where `skin` has no rim.
+DisplacementAt seam_field(const SkinSurfaces& skin, const Eigen::MatrixX3d& values,
+                          DisplacementAt far);
+
 /// A nodal field carried to the skin's vertices by the same shape functions that place the
 /// micropolygons: f(v) = sum_a N_a(xi_v, eta_v, -1) f_a over the nodes of vertex v's element.
 /// Vertices off the mesh (the range mesh, the end caps) get `off_mesh_value`, except where a
 /// closure in the whole face reaches them: there the field of the tissue model's skin nodes
-/// (closure::skin_scalar()), so that a map of the whole face has no edge at the patch's rim.
+/// (closure::skin_scalar()), into which the patch's own goes over within kSeamBlendInsideMm of
+/// its rim, so that a map of the whole face has no edge at the patch's rim.
 /// @param skin     displaced_skin() of `mesh`
 /// @param nodal    #N values, one per mesh node (any unit; the result has the same)
 /// @return         #V values

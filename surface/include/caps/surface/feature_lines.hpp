@@ -112,6 +112,19 @@ using DisplacementAt = std::function<std::optional<Eigen::Vector3d>(const Eigen:
 DisplacementAt displacement_from_samples(const Eigen::MatrixX3d& points,
                                          const Eigen::MatrixX3d& displacements, double radius_mm);
 
+/// A field carried on across a seam: within `width_mm` of the nearest of the samples `points`
+/// (dense along a curve: the rim of a finely meshed patch tied to a coarser mesh around it), at a
+/// distance d from it, (1 - d / width) times that sample's value plus d / width times `far`'s
+/// (zero where `far` has none); `far` itself beyond. So a field that jumps across the seam (each
+/// side's discretisation gives its own value there) goes on without an edge, equal to the
+/// samples on the seam and to `far` a width away.
+/// @param far       the field away from the seam
+/// @param points    #P×3 sample positions along the seam (LPS mm)
+/// @param values    #P×3 the field's values there
+/// @param width_mm  how far from the seam the samples speak (> 0)
+DisplacementAt blend_across_seam(DisplacementAt far, const Eigen::MatrixX3d& points,
+                                 const Eigen::MatrixX3d& values, double width_mm);
+
 /// A clinical threshold: the displacement of a feature, in one anatomical direction, beyond which
 /// it matters, and where the number comes from (docs/landmarks.md's table).
 struct ClinicalThreshold {
