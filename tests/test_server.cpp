@@ -10,6 +10,7 @@
 #include "caps/app/model.hpp"
 #include "caps/app/plan.hpp"
 #include "caps/app/simulation.hpp"
+#include "caps/app/suggest.hpp"
 #include "caps/core/error.hpp"
 #include "caps/server/planner_server.hpp"
 #include "caps/server/serve.hpp"
@@ -565,6 +566,84 @@ TEST_F(ServerTest, ANewerSimulationCancelsTheOlderOne) {
   EXPECT_EQ(first_status, 409);
   EXPECT_NE(first_body.find("cancelled by a newer simulate request"), std::string::npos);
   EXPECT_EQ(second_status, 200);
+  expect_still_serving();
+}
+
+// POST /api/suggest (the page's Suggest): caps plan suggest for a lesion on the served model, its
+// answer suggestions.json as the verb writes it, the polar plot and each design's plan served
+// from the result's folder; the server's own keys and a bad lesion are refused with the CLI's
+// words, and a newer simulation cancels a running suggestion.
+TEST_F(ServerTest, SuggestsClosuresForALesionAndServesTheirPlansAndPlot) {
+  const json request{{"at", "0,40"}, {"diameter", 4},       {"margin", 1}, {"step", 45},
+                     {"refine", 0},  {"material", "linear"}, {"extent", 8}};
+  const auto r = post("/api/suggest", request.dump());
+  ASSERT_TRUE(r);
+  ASSERT_EQ(r->status, 200) << r->body;
+  const json j = json::parse(r->body);
+  ASSERT_EQ(j.at("designs").size(), 4u);  // 0, 45, 90, 135 deg
+  const std::string url = j.at("result_url").get<std::string>();
+  // The answer is the suggestions.json the verb wrote, with where to find its files.
+  const auto written = get(url + "suggestions.json");
+  ASSERT_TRUE(written);
+  ASSERT_EQ(written->status, 200);
+  EXPECT_EQ(json::parse(written->body).at("designs"), j.at("designs"));
+  // Ranked least force on one suture first.
+  double last = 0;
+  for (const json& d : j.at("designs")) {
+    ASSERT_FALSE(d.contains("refused")) << d.dump();
+    EXPECT_EQ(d.at("rank").get<int>(), &d - &j.at("designs")[0] + 1);
+    EXPECT_GE(d.at("objective").get<double>(), last);
+    last = d.at("objective").get<double>();
+    // Each design's plan, as the page opens it.
+    const auto plan = get(url + d.at("plan").get<std::string>());
+    ASSERT_TRUE(plan);
+    ASSERT_EQ(plan->status, 200);
+    EXPECT_EQ(json::parse(plan->body).at("procedure").at("name"), "ellipse");
+  }
+  const auto plot = get(url + "suggestions.png");
+  ASSERT_TRUE(plot);
+  ASSERT_EQ(plot->status, 200);
+  EXPECT_EQ(plot->get_header_value("Content-Type"), "image/png");
+  EXPECT_EQ(plot->body.substr(1, 3), "PNG");
+
+  const auto own = post("/api/suggest", json{{"at", "0,40"}, {"diameter", 4}, {"output", "x"}}.dump());
+  ASSERT_TRUE(own);
+  EXPECT_EQ(own->status, 400);
+  EXPECT_NE(error_of(own).find("\"output\" is set by the server"), std::string::npos) << own->body;
+  const auto no_lesion = post("/api/suggest", json{{"at", "0,40"}, {"diameter", 0}}.dump());
+  ASSERT_TRUE(no_lesion);
+  EXPECT_EQ(no_lesion->status, 400);
+  EXPECT_EQ(error_of(no_lesion),
+            message_of([] {
+              app::SuggestRequest s;
+              s.model = kModel;
+              s.at = "0,40";
+              s.output = (kTmp / "not-written").string();
+              app::run_plan_suggest(s);
+            }));
+  EXPECT_FALSE(fs::exists(kTmp / "not-written"));
+
+  // A newer simulation cancels a running suggestion (409), as it cancels an older simulation.
+  const auto planned = post("/api/plan/new", plan_body().dump());
+  ASSERT_TRUE(planned);
+  ASSERT_EQ(planned->status, 200);
+  reporter_->arm();
+  int suggest_status = 0, simulate_status = 0;
+  std::thread first([&] {
+    const auto s = post("/api/suggest", request.dump());
+    suggest_status = s ? s->status : -1;
+  });
+  ASSERT_TRUE(reporter_->wait_started());
+  std::thread second([&] {
+    const auto s = simulate_coarse(planned->body);
+    simulate_status = s ? s->status : -1;
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  reporter_->release();
+  first.join();
+  second.join();
+  EXPECT_EQ(suggest_status, 409);
+  EXPECT_EQ(simulate_status, 200);
   expect_still_serving();
 }
 

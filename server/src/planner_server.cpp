@@ -618,6 +618,48 @@ struct PlannerServer::Impl {
     return out.dump(2);
   }
 
+  // POST /api/suggest: caps plan suggest for a lesion on the served model ({"at" | "at_xyz",
+  // "diameter", and the verb's other options}), in the simulation's slot: a newer simulate or
+  // suggest request, DELETE /api/simulate and the server's stop cancel it (409), and
+  // /api/progress shows its progress. Answers suggestions.json with result_id and result_url:
+  // the polar plot is result_url + "suggestions.png", each design's plan result_url + its "plan".
+  std::string suggest(const std::string& body) {
+    const std::string source = "suggest request";
+    progress->set_first_answer(nullptr);
+    json j = parse_object(body, source);
+    refuse_server_keys(j, {"model", "output", "force"}, source);
+    const int id = ++next_id;
+    const std::shared_ptr<const Served> on = current();
+    {
+      std::lock_guard<std::mutex> lock(served_mutex);
+      result_models[id] = on;
+    }
+    j["model"] = on->dir;
+    j["output"] = (work / "results" / std::to_string(id)).string();
+    const app::VerbEntry& verb = app::find_verb("plan suggest");
+    const std::string request = j.dump();
+    verb.check_json(request, source);  // a mistake is answered at once, not after the queue
+    const std::uint64_t ticket = ++latest_simulation;
+    SimulationReporter cancellable(latest_simulation, ticket, stop_requested, progress.get());
+    std::lock_guard<std::mutex> lock(simulation_mutex);
+    cancellable.check_cancelled();
+    progress->start();
+    struct Finish {
+      ProgressBoard& board;
+      ~Finish() { board.finish(); }
+    } finish{*progress};
+    const auto t0 = std::chrono::steady_clock::now();
+    verb.run_json(request, source, &cancellable);
+    json out = json::parse(read_file(work / "results" / std::to_string(id) / "suggestions.json"));
+    out["timings_s"]["suggest"] =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    out["result_id"] = id;
+    out["result_url"] = cat("/api/results/", id, "/");
+    out.erase("output");
+    detail::page_words_json(out, *on->model, on->dir);
+    return out.dump(2);
+  }
+
   // The linear closure of the simulate request `options_json` (a finite-strain one) on the
   // clamped patch, as a result of its own, put on the progress board; its id. A request the
   // linear model refuses (an option of the finite-strain model alone) has no first answer: the
@@ -900,6 +942,9 @@ struct PlannerServer::Impl {
               }));
     http.Post("/api/simulate", guarded([this](const httplib::Request& req, httplib::Response& res) {
                 send_json(res, simulate(req.body));
+              }));
+    http.Post("/api/suggest", guarded([this](const httplib::Request& req, httplib::Response& res) {
+                send_json(res, suggest(req.body));
               }));
     // Cancels the running simulation (the page's Cancel button, a page left): it ends within a
     // second and its request is answered 409.

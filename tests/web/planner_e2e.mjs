@@ -398,6 +398,45 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, url, allow }) =>
     `caps simulate on the saved plan: ${cliForce} N, the page: ${closing3} N`);
   log(`caps simulate on the saved drawn plan: ${cliForce.toFixed(4)} N, as on the page`);
 
+  // Suggest: a 4 mm lesion (1 mm margin) at the placed plan's centre, ellipses every 45 deg,
+  // linear for speed: the ranked designs and the polar plot appear, ranked by the largest suture
+  // force; the best opens in the planner as an ellipse at its orientation, and undo goes back.
+  await page.click('#suggest-details summary');
+  await page.fill('#suggest-diameter', '4');
+  await page.fill('#suggest-margin', '1');
+  await page.selectOption('#suggest-step', '45');
+  await page.selectOption('#material', 'linear');
+  const centre = await page.evaluate(() => window.caps.planner.lines.centre);
+  await page.click('#suggest');
+  await page.waitForSelector('body[data-suggestion="shown"]', { timeout: 240000 });
+  const suggested = await page.evaluate(() => window.caps.suggestions.last);
+  const ranked = suggested.designs.filter((d) => d.rank > 0);
+  assert.ok(ranked.length >= 2, `ranked designs: ${JSON.stringify(suggested.designs.map((d) => d.refused ?? d.rank))}`);
+  assert.equal(await page.locator('#suggestions tbody tr[data-design]').count(), ranked.length);
+  for (let i = 1; i < ranked.length; ++i)
+    if (ranked[i].ranked_by === ranked[i - 1].ranked_by)
+      assert.ok(ranked[i].objective >= ranked[i - 1].objective, 'ranked least force first');
+  assert.equal(await page.locator('#suggestions tbody tr[data-design] td').nth(1).innerText(),
+    `ellipse ${Math.round(ranked[0].orientation_deg)}°`);
+  await page.waitForFunction(() => {
+    const img = document.getElementById('suggest-plot');
+    return img.complete && img.naturalWidth > 100;
+  }, null, { timeout: 30000 });
+  await page.screenshot({ path: join(out, '8-suggested.png') });
+  await page.locator('#suggestions [data-open]').first().click();
+  await page.waitForFunction((o) => window.caps.planner.state?.procedure === 'ellipse' &&
+    Math.abs(window.caps.planner.state.orientation - o) < 1e-6, ranked[0].orientation_deg);
+  await page.waitForSelector('body[data-check="ok"]');
+  const opened = await page.evaluate(() => window.caps.planner.plan.frame);
+  assert.ok(Math.abs(opened.theta_deg - centre.theta_deg) < 0.01 && Math.abs(opened.z_mm - centre.z_mm) < 0.01,
+    `the design lies about the lesion: ${JSON.stringify(opened)} against ${JSON.stringify(centre)}`);
+  log(`suggested in ${suggested.timings_s.suggest.toFixed(1)} s: ${ranked.length} designs ranked, the best ` +
+    `${ranked[0].name} (${ranked[0].objective} N on one suture), opened in the planner`);
+  await page.keyboard.press('Control+z');
+  await page.waitForFunction(() => window.caps.planner.state?.procedure !== 'ellipse');
+  await page.waitForSelector('body[data-check="ok"]');
+  await page.selectOption('#material', 'neo-hookean');
+
   // A finite-strain closure that runs out of its time limit: the first answer (the linear
   // closure) stays, labelled so, in the view, the summary and the table, and the status says why.
   allow(/status of 422/);  // the browser logs the refused simulate request

@@ -68,6 +68,11 @@ export const api = {
    * closes the plan with the linear model first and puts that result on /api/progress. */
   simulate: (plan, options, firstAnswer = false) =>
     postJson('/api/simulate', firstAnswer ? { plan, options, first_answer: true } : { plan, options }),
+  /** caps plan suggest for a lesion on the served model: {at | at_xyz, diameter, margin,
+   * procedures, step, objective, and simulate's options} -> suggestions.json with result_id and
+   * result_url (suggestions.png and each design's plan are under it). Shares the simulation's
+   * slot: cancelSimulation() and a newer simulate request cancel it (409). */
+  suggest: (request) => postJson('/api/suggest', request),
   /** Cancels the running simulation (its request is answered 409); {cancelled: was one running}.
    * `keepalive`: sent even while the page is being left. */
   cancelSimulation: async (keepalive = false) =>

@@ -5,6 +5,7 @@ import { lpsToScene } from './frames.js';
 import { kIncision, Planner } from './planner.js';
 import { showLandmarks } from './landmarks.js';
 import { Results, escapeHtml, whyNotFinished } from './results.js';
+import { Suggestions } from './suggest.js';
 import { pairColour, sideText } from './sutures.js';
 import { loadModelSkin } from './skin.js';
 import { Viewer } from './viewer.js';
@@ -187,6 +188,7 @@ async function main() {
         Boolean(model.source?.chart);
       showSutures(planner);
       $('simulate').disabled = !plan;
+      $('suggest').disabled = !plan || document.body.dataset.suggestion === 'running';
       $('save').disabled = !plan;
     },
     onNotice: notice,
@@ -309,6 +311,34 @@ async function main() {
   window.addEventListener('pagehide', () => {
     if (document.body.dataset.simulation === 'running') api.cancelSimulation(true).catch(() => {});
   });
+  // Suggest: for a lesion at the placed plan's centre (docs/planner.md, "Suggest").
+  const suggestions = new Suggestions({
+    progress: $('suggest-progress'), progressText: $('suggest-progress-text'), plot: $('suggest-plot'),
+    table: $('suggestions'), summary: $('suggest-summary'),
+  }, (plan, name) => planner.load(plan, name));
+  $('suggest').addEventListener('click', async () => {
+    const c = planner.lines?.centre;
+    if (!c) return;
+    const options = { material: $('material').value, tissue: $('tissue').value,
+      procedures: $('suggest-procedures').value, step: Number($('suggest-step').value),
+      objective: $('suggest-objective').value };
+    if ($('mesh-size').value) options.mesh_size = Number($('mesh-size').value);
+    $('suggest').disabled = $('simulate').disabled = true;
+    $('cancel-suggest').hidden = false;
+    try {
+      status('Suggesting: each design is closed in turn…');
+      const s = await suggestions.run(`${c.theta_deg},${c.z_mm}`,
+        { diameter: Number($('suggest-diameter').value), margin: Number($('suggest-margin').value) }, options);
+      status(`Suggested in ${s.timings_s.suggest.toFixed(0)} s: open a design to simulate it and compare.`);
+    } catch (e) {
+      status(e.status === 409 ? 'The suggestion was cancelled.' : `No suggestion: ${e.message}`);
+    } finally {
+      $('suggest').disabled = !planner.plan;
+      $('simulate').disabled = !planner.plan;
+      $('cancel-suggest').hidden = true;
+    }
+  });
+  $('cancel-suggest').addEventListener('click', () => api.cancelSimulation().catch(() => {}));
   $('morph').addEventListener('input', (e) => results.setMorph(Number(e.target.value)));
   $('play').addEventListener('click', () => results.play());
   $('show-tension').addEventListener('change', (e) => results.setTension(e.target.checked));
@@ -390,7 +420,7 @@ async function main() {
   });
 
   // For tests and the console: the page's parts.
-  window.caps = { planner, results, viewA, viewB };
+  window.caps = { planner, results, suggestions, viewA, viewB };
   status(kPlaceHint);
   document.body.dataset.ready = 'true';
 }

@@ -1,0 +1,98 @@
+// Suggest (POST /api/suggest, `caps plan suggest`): for a lesion at the placed plan's centre,
+// the closures that fit it around the lesion and its margin at every orientation, each closed in
+// the whole face and ranked; the polar plot and a table of the designs, each of which opens in
+// the planner as its plan (then Simulate adds it to the alternatives). docs/planner.md.
+import { api, apiFetch } from './api.js';
+import { escapeHtml } from './results.js';
+
+const kPollMs = 500;
+
+const fmt = (v, digits) => (typeof v === 'number' ? v.toFixed(digits) : '–');
+
+/** The design's figures: the full closure's where it was closed again, else the sweep's. */
+function figures(d) {
+  return d.ranked_by === 'full' && d.full ? d.full : d.sweep ?? {};
+}
+
+export class Suggestions {
+  /**
+   * @param e   the page's elements: {button, cancel, progress, progressText, plot, table, summary}
+   * @param open  async (planJson, name) => opens a design's plan in the planner
+   */
+  constructor(e, open) {
+    this.e = e;
+    this.open = open;
+    this.last = null;
+  }
+
+  /** Runs a suggestion for a lesion at `at` ("THETA,Z" on the served model); shows it. */
+  async run(at, lesion, options) {
+    const e = this.e;
+    e.progress.hidden = false;
+    e.progressText.textContent = 'starting…';
+    document.body.dataset.suggestion = 'running';
+    const poll = setInterval(async () => {
+      try {
+        const p = await api.progress();
+        if (p.running)
+          e.progressText.textContent = `${p.step} ${Math.round(p.fraction * 100)} % (${p.elapsed_s.toFixed(1)} s)`;
+      } catch { /* the next poll tries again */ }
+    }, kPollMs);
+    try {
+      const s = await api.suggest({ at, ...lesion, ...options });
+      this.last = s;
+      this.show(s);
+      document.body.dataset.suggestion = 'shown';
+      return s;
+    } catch (err) {
+      document.body.dataset.suggestion = 'failed';
+      throw err;
+    } finally {
+      clearInterval(poll);
+      e.progress.hidden = true;
+    }
+  }
+
+  show(s) {
+    const e = this.e;
+    e.plot.src = `${s.result_url}suggestions.png`;
+    e.plot.hidden = false;
+    const ranked = s.designs.filter((d) => d.rank > 0);
+    const refused = s.designs.filter((d) => !(d.rank > 0));
+    const objective = { force: 'the largest force on one suture', features: 'the largest displacement of a feature line',
+      scar: 'the scar\'s length', excised: 'the healthy skin excised' }[s.objective] ?? s.objective;
+    e.summary.textContent = ranked.length
+      ? `Ranked by ${objective}, least first. ★: within 5 % of the best, closer than the model can tell apart. ` +
+        `The first ${ranked.filter((d) => d.ranked_by === 'full').length} were closed again with the full mesh; ` +
+        `the others carry the sweep's coarser figures.` +
+        (refused.length ? ` ${refused.length} design(s) could not be laid or closed (hover for why).` : '')
+      : 'No design could be laid or closed here (hover for why).';
+    const rows = ranked.map((d) => {
+      const f = figures(d);
+      const feature = f.feature_words ? `${fmt(f.max_feature_mm, 2)} (${escapeHtml(f.feature_words)})` : '–';
+      return `<tr data-design="${escapeHtml(d.name)}"><td>${d.rank}${d.near_best ? ' ★' : ''}</td>` +
+        `<td>${escapeHtml(d.procedure)} ${Math.round(d.orientation_deg)}°</td>` +
+        `<td>${fmt(f.max_force_per_suture_n, 2)}</td><td>${feature}</td>` +
+        `<td>${fmt(d.scar_length_mm, 1)}</td><td>${fmt(d.healthy_excised_mm2, 0)}</td>` +
+        `<td>${d.ranked_by === 'full' ? 'full' : 'sweep'}</td>` +
+        `<td><button data-open="${escapeHtml(d.name)}" title="Open this design in the planner; Simulate adds it to the alternatives">Open</button></td></tr>`;
+    });
+    for (const d of refused)
+      rows.push(`<tr class="muted" title="${escapeHtml(d.refused ?? '')}"><td>–</td>` +
+        `<td>${escapeHtml(d.procedure)} ${Math.round(d.orientation_deg)}°</td><td colspan="6">not closed: ` +
+        `${escapeHtml((d.refused ?? '').slice(0, 80))}…</td></tr>`);
+    e.table.querySelector('tbody').innerHTML = rows.join('');
+    e.table.hidden = false;
+    for (const b of e.table.querySelectorAll('[data-open]'))
+      b.addEventListener('click', () => this.openDesign(b.dataset.open));
+  }
+
+  /** Opens the design `name` of the last suggestion in the planner. */
+  async openDesign(name) {
+    const d = this.last?.designs.find((x) => x.name === name);
+    if (!d?.plan) return;
+    const response = await apiFetch(`${this.last.result_url}${d.plan}`);
+    if (!response.ok) throw new Error(`the design's plan could not be read (HTTP ${response.status})`);
+    await this.open(await response.json(), `${name}.json`);
+  }
+}
