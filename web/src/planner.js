@@ -333,10 +333,15 @@ export class Planner {
       const a = plan.at;
       const at = a?.landmark ? landmarkAt(a.landmark, a.left_mm ?? 0, a.up_mm ?? 0)
         : `${plan.frame.theta_deg},${plan.frame.z_mm}`;
-      const own = await api.planNew({ procedure: name, parameters: { ...plan.procedure.parameters },
+      // A plan file records every parameter, also one set by another (an ellipse's apex_angle
+      // by its width): plan new takes the one it is set by.
+      const parameters = { ...plan.procedure.parameters };
+      for (const p of this.templates.get(name).parameters)
+        if (p.alternative_to && parameters[p.alternative_to] !== undefined) delete parameters[p.name];
+      const own = await api.planNew({ procedure: name, parameters,
         orientation: plan.frame.orientation_deg, at });
       const changed = JSON.stringify(own.sutures) !== JSON.stringify(plan.sutures);
-      this.state = { procedure: name, parameters: { ...plan.procedure.parameters },
+      this.state = { procedure: name, parameters,
         orientation: plan.frame.orientation_deg, at, at_xyz: '',
         sutures: changed ? plan.sutures : null };
       this.procedure = name;

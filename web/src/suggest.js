@@ -56,11 +56,11 @@ export class Suggestions {
   show(s) {
     const e = this.e;
     e.plot.src = `${s.result_url}suggestions.png`;
+    e.plot.parentElement.href = e.plot.src;
     e.plot.hidden = false;
     const ranked = s.designs.filter((d) => d.rank > 0);
     const refused = s.designs.filter((d) => !(d.rank > 0));
-    const objective = { force: 'the largest force on one suture', features: 'the largest displacement of a feature line',
-      scar: 'the scar\'s length', excised: 'the healthy skin excised' }[s.objective] ?? s.objective;
+    const objective = s.objective?.meaning ?? 'the objective';
     e.summary.textContent = ranked.length
       ? `Ranked by ${objective}, least first. ★: within 5 % of the best, closer than the model can tell apart. ` +
         `The first ${ranked.filter((d) => d.ranked_by === 'full').length} were closed again with the full mesh; ` +
@@ -84,7 +84,9 @@ export class Suggestions {
     e.table.querySelector('tbody').innerHTML = rows.join('');
     e.table.hidden = false;
     for (const b of e.table.querySelectorAll('[data-open]'))
-      b.addEventListener('click', () => this.openDesign(b.dataset.open));
+      b.addEventListener('click', () => this.openDesign(b.dataset.open).catch((err) => {
+        e.summary.textContent = `The design could not be opened: ${err.message}`;
+      }));
   }
 
   /** Opens the design `name` of the last suggestion in the planner. */
