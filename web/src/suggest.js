@@ -61,10 +61,13 @@ export class Suggestions {
     const ranked = s.designs.filter((d) => d.rank > 0);
     const refused = s.designs.filter((d) => !(d.rank > 0));
     const objective = s.objective?.meaning ?? 'the objective';
+    const full = ranked.filter((d) => d.ranked_by === 'full').length;
     e.summary.textContent = ranked.length
       ? `Ranked by ${objective}, least first. ★: within 5 % of the best, closer than the model can tell apart. ` +
-        `The first ${ranked.filter((d) => d.ranked_by === 'full').length} were closed again with the full mesh; ` +
-        `the others carry the sweep's coarser figures.` +
+        (full ? `The first ${full} were closed again with the full mesh and ${s.material}; the others carry ` +
+          `the sweep's coarser figures (${s.sweep?.material ?? ''}, ${s.sweep?.mesh_size_mm ?? ''} mm).`
+          : `None was closed again with the full mesh within its time limit: the figures are the sweep's ` +
+          `(${s.sweep?.material ?? ''}, ${s.sweep?.mesh_size_mm ?? ''} mm mesh).`) +
         (refused.length ? ` ${refused.length} design(s) could not be laid or closed (hover for why).` : '')
       : 'No design could be laid or closed here (hover for why).';
     const rows = ranked.map((d) => {
