@@ -68,8 +68,9 @@ export class Suggestions {
           `the sweep's coarser figures (${s.sweep?.material ?? ''}, ${s.sweep?.mesh_size_mm ?? ''} mm).`
           : `None was closed again with the full mesh within its time limit: the figures are the sweep's ` +
           `(${s.sweep?.material ?? ''}, ${s.sweep?.mesh_size_mm ?? ''} mm mesh).`) +
-        (refused.length ? ` ${refused.length} design(s) could not be laid or closed (hover for why).` : '')
-      : 'No design could be laid or closed here (hover for why).';
+        (refused.length ? ` ${refused.length} design(s) could not be laid or closed here: see below the table.` : '')
+      : 
+      'No design could be laid or closed here: see why below the table.';
     const rows = ranked.map((d) => {
       const f = figures(d);
       const feature = f.feature_words ? `${fmt(f.max_feature_mm, 2)} (${escapeHtml(f.feature_words)})` : '–';
@@ -80,10 +81,11 @@ export class Suggestions {
         `<td>${d.ranked_by === 'full' ? 'full' : 'sweep'}</td>` +
         `<td><button data-open="${escapeHtml(d.name)}" title="Open this design in the planner; Simulate adds it to the alternatives">Open</button></td></tr>`;
     });
-    for (const d of refused)
-      rows.push(`<tr class="muted" title="${escapeHtml(d.refused ?? '')}"><td>–</td>` +
-        `<td>${escapeHtml(d.procedure)} ${Math.round(d.orientation_deg)}°</td><td colspan="6">not closed: ` +
-        `${escapeHtml((d.refused ?? '').slice(0, 80))}…</td></tr>`);
+    if (refused.length)
+      rows.push(`<tr><td colspan="8"><details><summary class="muted">${refused.length} design(s) not ` +
+        `possible here</summary><ul>${refused.map((d) => `<li><b>${escapeHtml(d.procedure)} ` +
+        `${Math.round(d.orientation_deg)}°</b>: ${escapeHtml(d.refused ?? '')}</li>`).join('')}</ul>` +
+        `</details></td></tr>`);
     e.table.querySelector('tbody').innerHTML = rows.join('');
     e.table.hidden = false;
     for (const b of e.table.querySelectorAll('[data-open]'))
