@@ -69,8 +69,7 @@ export class Suggestions {
           : `None was closed again with the full mesh within its time limit: the figures are the sweep's ` +
           `(${s.sweep?.material ?? ''}, ${s.sweep?.mesh_size_mm ?? ''} mm mesh).`) +
         (refused.length ? ` ${refused.length} design(s) could not be laid or closed here: see below the table.` : '')
-      : 
-      'No design could be laid or closed here: see why below the table.';
+      : 'No design could be laid or closed here: see why below the table.';
     const rows = ranked.map((d) => {
       const f = figures(d);
       const feature = f.feature_words ? `${fmt(f.max_feature_mm, 2)} (${escapeHtml(f.feature_words)})` : '–';
