@@ -84,6 +84,11 @@ TEST(Suggest, TheEllipseIsTheSmallestOfItsRatioAroundTheLesionAndItsMargin) {
   EXPECT_EQ(j.at("best").get<std::string>(), best.name);
   EXPECT_TRUE(fs::exists(folder() / "neo-hookean" / best.result / "result.json"));
   EXPECT_TRUE(fs::exists(folder() / "neo-hookean" / "suggestions.png"));
+  // The skin lines are laid by the nasion and the subnasale, which the phantom has not: not
+  // found, saying so, and no design has an angle to them.
+  EXPECT_FALSE(j.at("skin_lines").at("found").get<bool>());
+  EXPECT_NE(j.at("skin_lines").at("note").get<std::string>().find("subnasale"), std::string::npos);
+  for (const json& d : j.at("designs")) EXPECT_TRUE(d.at("angle_to_skin_lines_deg").is_null());
   for (std::size_t i = 2; i < s.designs.size(); ++i)
     EXPECT_LE(s.designs[i - 1].objective, s.designs[i].objective);
   // The full mesh and the sweep's coarse one agree on the best design's force within 25 %.
@@ -154,4 +159,7 @@ TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
   refused([](app::SuggestRequest& r) { r.objective = "beauty"; }, "force, features, scar");
   refused([](app::SuggestRequest& r) { r.procedures = "ellipse,bilobed"; }, "bilobed");
   refused([](app::SuggestRequest& r) { r.at = ""; }, "--at");
+  // The phantom's face has no nose: the relaxed skin tension lines are not laid on it, so they
+  // cannot rank the designs (they are reported as not known: the first test).
+  refused([](app::SuggestRequest& r) { r.objective = "rstl"; }, "not known at this lesion");
 }

@@ -23,6 +23,7 @@
 #include "caps/plan/plan.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/plan/procedures.hpp"
+#include "caps/plan/skin_lines.hpp"
 
 using namespace caps;
 using namespace caps::plan;
@@ -818,4 +819,75 @@ TEST(ProcedureLibrary, AMissingDataFolderIsAnErrorNamingCapsDataDir) {
   ::unsetenv("CAPS_DATA_DIR");
   std::filesystem::remove_all(empty);
   EXPECT_NO_THROW(data_file("procedures/library.json"));
+}
+
+// The relaxed skin tension lines (plan/skin_lines.hpp) laid on the test cylinder (radius 80 mm)
+// by a nasion at z 60 and a subnasale at z 10 on the midline theta 0 (h = 50 mm): a point's
+// frame is u = 80 |sin theta| / 50 from the midsagittal plane, v = (z - 60) / 50; each zone
+// gives the direction Borges's map draws there, mirrored on the patient's right.
+TEST(SkinLines, BorgessMapLaidOnTheFaceByItsLandmarks) {
+  Landmarks lm;
+  lm.midline_theta_deg = 0;
+  for (const auto& [name, z] : {std::pair<const char*, double>{"nasion", 60.0}, {"subnasale", 10.0}}) {
+    Landmark l;
+    l.name = name;
+    l.found = true;
+    l.theta_deg = 0;
+    l.z_mm = z;
+    lm.items.push_back(l);
+  }
+  const SkinLineMap& map = borges_map();
+  EXPECT_EQ(map.zones.size(), 10u);
+  EXPECT_NE(map.source.find("Borges"), std::string::npos);
+  const auto at = [&](double theta, double z) {
+    return skin_line_direction(map, cylinder(), lm, theta, z);
+  };
+  // The forehead: horizontal; the glabella (6.97 mm from the midline, 10 mm up): vertical.
+  EXPECT_EQ(at(0, 100).zone, "forehead");
+  EXPECT_NEAR(at(0, 100).orientation_deg, 90, 1e-9);
+  EXPECT_EQ(at(5, 70).zone, "glabella");
+  EXPECT_NEAR(at(5, 70).orientation_deg, 0, 1e-9);
+  // Below the eye, concentric about (0.55, -0.2): at u = 0.8 (theta 30), v = -0.7 (z 25) the
+  // radius is (0.25, -0.5), the lines perpendicular to it: atan2(0.5, 0.25) = 63.43 deg from
+  // superior towards the patient's left; on the right, mirrored, 116.57 deg.
+  const SkinLineDirection cheek = at(30, 25);
+  ASSERT_TRUE(cheek.found) << cheek.note;
+  EXPECT_EQ(cheek.zone, "infraorbital cheek");
+  EXPECT_NEAR(cheek.at.u, 0.8, 1e-3);
+  EXPECT_NEAR(cheek.at.v, -0.7, 1e-9);
+  EXPECT_NEAR(cheek.at.h_mm, 50, 1e-9);
+  EXPECT_NEAR(cheek.orientation_deg, rad_to_deg(std::atan2(0.5, 0.25)), 0.05);
+  EXPECT_NEAR(at(-30, 25).orientation_deg, 180 - rad_to_deg(std::atan2(0.5, 0.25)), 0.05);
+  EXPECT_FALSE(at(-30, 25).at.left);
+  // Beside the mouth, radial from it: at u = 0.3, v = -1.45 the lines run horizontally.
+  const SkinLineDirection lips = at(rad_to_deg(std::asin(0.3 * 50 / kR)), 60 - 1.45 * 50);
+  EXPECT_EQ(lips.zone, "lips");
+  EXPECT_NEAR(lips.orientation_deg, 90, 0.01);
+  // Behind the ear, and without a subnasale: not found, saying why.
+  EXPECT_FALSE(at(120, 40).found);
+  EXPECT_NE(at(120, 40).note.find("behind the ear"), std::string::npos);
+  Landmarks no_sn = lm;
+  no_sn.items.pop_back();
+  const SkinLineDirection none = skin_line_direction(map, cylinder(), no_sn, 0, 100);
+  EXPECT_FALSE(none.found);
+  EXPECT_NE(none.note.find("subnasale"), std::string::npos);
+  // Angles between lines (unoriented): 0..90.
+  EXPECT_NEAR(angle_between_lines_deg(10, 170), 20, 1e-12);
+  EXPECT_NEAR(angle_between_lines_deg(0, 90), 90, 1e-12);
+  EXPECT_NEAR(angle_between_lines_deg(179, 1), 2, 1e-12);
+  EXPECT_NEAR(angle_between_lines_deg(45, 45), 0, 1e-12);
+  // A map file that is not one is refused, naming the file.
+  namespace fs = std::filesystem;
+  const fs::path bad =
+      fs::temp_directory_path() / ("caps_test_plan_rstl_" + std::to_string(::getpid()) + ".json");
+  std::ofstream(bad) << R"({"format": "caps-skin-lines", "zones": [{"name": "x", "u": [1, 0],
+                           "v": [0, 1], "lines": {"fixed_deg": 0}}]})";
+  try {
+    read_skin_line_map(bad.string());
+    ADD_FAILURE() << "a zone with u [1, 0] was read";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find(bad.string()), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("min < max"), std::string::npos) << e.what();
+  }
+  fs::remove(bad);
 }

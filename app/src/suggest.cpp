@@ -21,7 +21,10 @@
 #include "caps/image/canvas.hpp"
 #include "caps/plan/check.hpp"
 #include "caps/plan/plan_io.hpp"
+#include "caps/plan/placement.hpp"
 #include "caps/plan/procedures.hpp"
+#include "caps/plan/skin_lines.hpp"
+#include "caps/plan/skin_walk.hpp"
 #include "caps/surface/feature_lines.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "json_fields.hpp"
@@ -91,12 +94,14 @@ constexpr Objective kObjectives[] = {
                  "rim)", "mm"},
     {"scar", "the scar's length", "mm"},
     {"excised", "the healthy skin excised around the lesion and its margin", "mm2"},
+    {"rstl", "the angle between the scar and the relaxed skin tension lines (Borges's map)", "deg"},
 };
 
 const Objective& objective_named(const std::string& name) {
   for (const Objective& o : kObjectives)
     if (name == o.name) return o;
-  throw InvalidParameter(cat("{objective} ", name, ": give force, features, scar or excised"));
+  throw InvalidParameter(cat("{objective} ", name, ": give force, features, scar, excised or "
+                             "rstl"));
 }
 
 double objective_value(const std::string& name, const SuggestedDesign& d,
@@ -104,6 +109,7 @@ double objective_value(const std::string& name, const SuggestedDesign& d,
   if (name == "force") return c.max_force_per_suture_n;
   if (name == "features") return c.max_feature_mm;
   if (name == "scar") return d.scar_length_mm;
+  if (name == "rstl") return d.angle_to_skin_lines_deg;
   return d.healthy_excised_mm2;
 }
 
@@ -152,7 +158,7 @@ void draw_polar(Canvas& canvas, double cx, double cy, double radius,
                 const std::vector<SuggestedDesign>& designs, const std::string& title,
                 const std::string& unit,
                 const std::function<double(const SuggestedDesign::Closure&)>& value,
-                const std::string& best) {
+                const std::string& best, double skin_lines_deg) {
   const Eigen::Vector3d grey(0.6, 0.6, 0.6);
   double top = 0;
   for (const SuggestedDesign& d : designs)
@@ -191,6 +197,19 @@ void draw_polar(Canvas& canvas, double cx, double cy, double radius,
   canvas.text(cx + radius + 10, cy, "patient's left", s);
   s.rotate_deg = -90;
   canvas.text(cx - radius - 10, cy, "patient's right", s);
+  if (std::isfinite(skin_lines_deg)) {
+    // The relaxed skin tension lines at the lesion: a dashed line through the centre.
+    Pen p;
+    p.colour = Eigen::Vector3d(0.55, 0.35, 0.2);
+    p.width_px = 1.5;
+    p.dash_px = {6, 4};
+    canvas.line(at(skin_lines_deg, radius), at(skin_lines_deg + 180, radius), p);
+    TextStyle l;
+    l.size_px = 12;
+    l.colour = p.colour;
+    l.align = 1;
+    canvas.text(cx + radius, cy + radius + 44, "- - skin lines (Borges)", l);
+  }
   const Eigen::Vector3d colours[] = {{0.12, 0.47, 0.71}, {0.84, 0.37, 0.0}};
   std::vector<std::string> procedures;
   for (const SuggestedDesign& d : designs)
@@ -431,6 +450,52 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
     }
   }
 
+  // The relaxed skin tension lines at the lesion, on the head (a chart's parent: its landmarks),
+  // turned into the designs' frame; each ellipse's angle to them.
+  SuggestedSkinLines& lines = result.skin_lines;
+  {
+    const Eigen::Vector2d on_tz = chart_note.empty() ? tz : Eigen::Vector2d(0, 0);
+    const Eigen::Vector3d lesion = on->skin_point(on_tz[0], on_tz[1]);
+    const std::string parent = detail::chart_parent(r.model);
+    const std::string head_dir = parent.empty() ? r.model : parent;
+    std::shared_ptr<const PatientModel> head = loaded;
+    try {
+      if (!parent.empty()) head = loaded_model(parent);
+      const CylindricalPoint hc = head->to_cylindrical(lesion);
+      const plan::SkinLineDirection dir =
+          plan::skin_line_direction(plan::borges_map(), *head, plan::model_landmarks(head_dir, *head),
+                                    hc.theta_deg, hc.z_mm);
+      lines.note = dir.note;
+      if (dir.found) {
+        const Eigen::Vector3d v =
+            plan::skin_frame(*head, hc.theta_deg, hc.z_mm, dir.orientation_deg).ex;
+        const Eigen::Vector3d up = plan::skin_frame(*on, on_tz[0], on_tz[1], 0).ex;
+        const Eigen::Vector3d right = plan::skin_frame(*on, on_tz[0], on_tz[1], 90).ex;
+        double o = round_to(std::fmod(rad_to_deg(std::atan2(v.dot(right), v.dot(up))) + 360.0, 180.0), 1);
+        lines.found = true;
+        lines.orientation_deg = o >= 180.0 ? o - 180.0 : o;
+        lines.zone = dir.zone;
+        lines.words = dir.words;
+        lines.says = dir.says;
+      }
+    } catch (const Error& e) {
+      lines.note = cat("the skin lines could not be laid here: ", e.what());
+    }
+    for (SuggestedDesign& d : designs)
+      if (lines.found && d.procedure == "ellipse")
+        d.angle_to_skin_lines_deg =
+            plan::angle_between_lines_deg(d.orientation_deg, lines.orientation_deg);
+    if (r.objective == "rstl" && !lines.found)
+      throw InvalidParameter(cat("{objective} rstl: the relaxed skin tension lines are not known "
+                                 "at this lesion (", lines.note, "); rank by force, features, "
+                                 "scar or excised"));
+    if (r.objective == "rstl" && std::find(procedures.begin(), procedures.end(), "rhomboid") !=
+                                     procedures.end())
+      throw InvalidParameter("{objective} rstl ranks ellipses by their scar's angle to the skin "
+                             "lines; a rhomboid flap's scars run several ways: give "
+                             "--procedures ellipse, or rank by force");
+  }
+
   // The sweep: each design laid, checked and closed on the sweep's mesh, two at a time where the
   // machine has two cores (each closure's factorization runs on one): with CHOLMOD, whose
   // factorizations are independent in two threads (MUMPS's are not documented so), and OpenBLAS
@@ -546,6 +611,35 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
     result.warnings.push_back("no design could be laid and closed around this lesion here: "
                               "see each one's reason");
 
+  // The cross-check: the ellipse of least force in the sweep (every design's figures from the
+  // same closure) against the skin lines.
+  if (lines.found) {
+    const SuggestedDesign* least = nullptr;
+    for (const SuggestedDesign& d : designs)
+      if (d.rank > 0 && d.procedure == "ellipse" &&
+          (!least || d.sweep.max_force_per_suture_n < least->sweep.max_force_per_suture_n))
+        least = &d;
+    const std::string map_words = cat("Borges's relaxed skin tension lines ", lines.words, " run ",
+                                      lines.says, " (", std::fmod(std::round(lines.orientation_deg), 180.0), " deg)");
+    if (least) {
+      lines.least_force_deg = least->orientation_deg;
+      lines.least_force_angle_deg = least->angle_to_skin_lines_deg;
+      const double tolerance = std::max(r.step, 20.0);
+      lines.sentence =
+          lines.least_force_angle_deg <= tolerance
+              ? cat(map_words, "; the model's least force on one suture is at ",
+                    least->orientation_deg, " deg, ", round_to(lines.least_force_angle_deg, 0),
+                    " deg from them: they agree")
+              : cat(map_words, "; the model's least force on one suture is at ",
+                    least->orientation_deg, " deg, ", round_to(lines.least_force_angle_deg, 0),
+                    " deg from them: they disagree here (the model sees this patient's anatomy "
+                    "and the designs that fit; the map is the textbook's average face)");
+    } else {
+      lines.sentence = cat(map_words, "; no ellipse was closed to compare with");
+    }
+    note(reporter, lines.sentence);
+  }
+
   // suggestions.json
   json j;
   j["format"] = "caps-suggestions";
@@ -562,11 +656,26 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
                 {"designs", designs.size()}};
   j["refine"] = {{"mesh_size_mm", r.meshing.mesh_size}, {"designs", r.refine}};
   j["best"] = best.empty() ? json(nullptr) : json(best);
+  const auto number_or_null = [](double v, int digits) {
+    return std::isfinite(v) ? json(round_to(v, digits)) : json(nullptr);
+  };
+  j["skin_lines"] = {{"found", lines.found},
+                     {"source", plan::borges_map().source},
+                     {"orientation_deg", lines.found ? json(round_to(lines.orientation_deg, 1))
+                                                     : json(nullptr)},
+                     {"zone", lines.found ? json(lines.zone) : json(nullptr)},
+                     {"words", lines.found ? json(lines.words) : json(nullptr)},
+                     {"says", lines.found ? json(lines.says) : json(nullptr)},
+                     {"least_force_orientation_deg", number_or_null(lines.least_force_deg, 1)},
+                     {"least_force_angle_deg", number_or_null(lines.least_force_angle_deg, 1)},
+                     {"sentence", lines.sentence}};
+  if (!lines.found) j["skin_lines"]["note"] = lines.note;
   json a = json::array();
   for (const SuggestedDesign& d : designs) {
     json o = {{"name", d.name}, {"procedure", d.procedure},
               {"orientation_deg", d.orientation_deg}, {"rank", d.rank},
-              {"near_best", d.near_best}};
+              {"near_best", d.near_best},
+              {"angle_to_skin_lines_deg", number_or_null(d.angle_to_skin_lines_deg, 1)}};
     json params = json::object();
     for (const auto& [k, v] : fits.at(d.procedure).parameters) params[k] = round_to(v, 3);
     o["parameters"] = params;
@@ -596,9 +705,11 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   // suggestions.png: the objective and the feature lines' displacement against orientation.
   Canvas canvas(1100, 600);
   draw_polar(canvas, 275, 285, 180, designs, "the largest force on one suture (N)", "N",
-             [](const SuggestedDesign::Closure& c) { return c.max_force_per_suture_n; }, best);
+             [](const SuggestedDesign::Closure& c) { return c.max_force_per_suture_n; }, best,
+             lines.found ? lines.orientation_deg : std::numeric_limits<double>::quiet_NaN());
   draw_polar(canvas, 825, 285, 180, designs, "the largest feature-line displacement (mm)", "mm",
-             [](const SuggestedDesign::Closure& c) { return c.max_feature_mm; }, best);
+             [](const SuggestedDesign::Closure& c) { return c.max_feature_mm; }, best,
+             lines.found ? lines.orientation_deg : std::numeric_limits<double>::quiet_NaN());
   TextStyle legend;
   legend.size_px = 11;
   legend.colour = Eigen::Vector3d(0.35, 0.35, 0.35);
@@ -649,6 +760,9 @@ std::string summary(const SuggestResult& s) {
     if (!near.empty())
       line += cat("; within ", kNearBest * 100, " % of it: ", near);
   }
+  if (s.skin_lines.found)
+    line += cat("; the relaxed skin tension lines (Borges) run at ",
+                std::fmod(std::round(s.skin_lines.orientation_deg), 180.0), " deg here");
   return cat(line, " -> ", s.output);
 }
 

@@ -267,17 +267,45 @@ void Join::append_tissue(const Region& region) {
       visit(m, state, skin(a) && skin(b));
     }
   }
-  // A piece of tissue (tets sharing nodes) whose every support was freed would float (a lone
-  // tet on the bone under undermined skin, kept by select() for its nodes on the bone): it stays
-  // attached.
-  UnionFind parts(static_cast<int>(q.nodes.rows()));
-  for (const Element& e : q.elements)
-    for (int k = 1; k < 10; ++k) parts.unite(e.nodes[0], e.nodes[k]);
-  std::set<int> supported;
-  for (int id : fixed) supported.insert(parts.find(id));
+  // A piece of tissue whose supports the undermining freed would float or turn: it stays
+  // attached. A piece is tets joined face to face, as select() keeps them (one hanging on by an
+  // edge or a corner turns about it), and it is held by at least three attached or held nodes;
+  // a piece with fewer keeps its undermined nodes on the bone attached, as select() counted
+  // them. Until 7 December 2026 pieces were joined by shared nodes: a lone tet floated no more,
+  // but on Cranium's nasal sidewall a piece hinged on an edge to the rest was left sliding and
+  // the vertical ellipse of the suggestion there was refused as under-constrained.
+  const int n_tets = static_cast<int>(q.elements.size());
+  UnionFind parts(n_tets);
+  {
+    static constexpr int kTetFace[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+    std::map<std::array<int, 3>, int> face_of;
+    for (int t = 0; t < n_tets; ++t)
+      for (const auto& f : kTetFace) {
+        const Element& e = q.elements[static_cast<std::size_t>(t)];
+        std::array<int, 3> key{e.nodes[f[0]], e.nodes[f[1]], e.nodes[f[2]]};
+        std::sort(key.begin(), key.end());
+        const auto [it, added] = face_of.emplace(key, t);
+        if (!added) parts.unite(it->second, t);
+      }
+  }
+  std::vector<char> is_fixed(static_cast<std::size_t>(q.nodes.rows()), 0);
+  for (int id : fixed) is_fixed[id] = 1;
+  std::map<int, std::set<int>> holds;  // piece root -> its attached or held corners
+  for (int t = 0; t < n_tets; ++t)
+    for (int k = 0; k < 4; ++k) {
+      const int n = q.elements[static_cast<std::size_t>(t)].nodes[k];
+      if (is_fixed[n]) holds[parts.find(t)].insert(n);
+    }
+  std::vector<char> loose(static_cast<std::size_t>(q.nodes.rows()), 0);  // in a piece held by < 3
+  for (int t = 0; t < n_tets; ++t) {
+    const auto it = holds.find(parts.find(t));
+    if (it == holds.end() || it->second.size() < 3)
+      for (int k = 0; k < q.elements[static_cast<std::size_t>(t)].n_nodes(); ++k)
+        loose[q.elements[static_cast<std::size_t>(t)].nodes[k]] = 1;
+  }
   std::vector<int> sliding;
   for (int id : freed) {
-    if (supported.count(parts.find(id))) {
+    if (!loose[id]) {
       sliding.push_back(id);
     } else {
       fixed.push_back(id);

@@ -314,7 +314,7 @@ async function main() {
   // Suggest: for a lesion at the placed plan's centre (docs/planner.md, "Suggest").
   const suggestions = new Suggestions({
     progress: $('suggest-progress'), progressText: $('suggest-progress-text'), plot: $('suggest-plot'),
-    table: $('suggestions'), summary: $('suggest-summary'),
+    table: $('suggestions'), summary: $('suggest-summary'), lines: $('suggest-lines'),
   }, (plan, name) => planner.load(plan, name));
   $('suggest').addEventListener('click', async () => {
     const c = planner.lines?.centre;

@@ -16,7 +16,7 @@ function figures(d) {
 
 export class Suggestions {
   /**
-   * @param e   the page's elements: {button, cancel, progress, progressText, plot, table, summary}
+   * @param e   the page's elements: {progress, progressText, plot, table, summary, lines}
    * @param open  async (planJson, name) => opens a design's plan in the planner
    */
   constructor(e, open) {
@@ -70,18 +70,22 @@ export class Suggestions {
           `(${s.sweep?.material ?? ''}, ${s.sweep?.mesh_size_mm ?? ''} mm mesh).`) +
         (refused.length ? ` ${refused.length} design(s) could not be laid or closed here: see below the table.` : '')
       : 'No design could be laid or closed here: see why below the table.';
+    // Borges's relaxed skin tension lines at the lesion, and how the least force lies to them.
+    e.lines.textContent = s.skin_lines?.found ? `${s.skin_lines.sentence}.`
+      : `Relaxed skin tension lines: not known here (${s.skin_lines?.note ?? 'no map'}).`;
     const rows = ranked.map((d) => {
       const f = figures(d);
       const feature = f.feature_words ? `${fmt(f.max_feature_mm, 2)} (${escapeHtml(f.feature_words)})` : '–';
       return `<tr data-design="${escapeHtml(d.name)}"><td>${d.rank}${d.near_best ? ' ★' : ''}</td>` +
         `<td>${escapeHtml(d.procedure)} ${Math.round(d.orientation_deg)}°</td>` +
         `<td>${fmt(f.max_force_per_suture_n, 2)}</td><td>${feature}</td>` +
+        `<td>${fmt(d.angle_to_skin_lines_deg, 0)}</td>` +
         `<td>${fmt(d.scar_length_mm, 1)}</td><td>${fmt(d.healthy_excised_mm2, 0)}</td>` +
         `<td>${d.ranked_by === 'full' ? 'full' : 'sweep'}</td>` +
         `<td><button data-open="${escapeHtml(d.name)}" title="Open this design in the planner; Simulate adds it to the alternatives">Open</button></td></tr>`;
     });
     if (refused.length)
-      rows.push(`<tr><td colspan="8"><details><summary class="muted">${refused.length} design(s) not ` +
+      rows.push(`<tr><td colspan="9"><details><summary class="muted">${refused.length} design(s) not ` +
         `possible here</summary><ul>${refused.map((d) => `<li><b>${escapeHtml(d.procedure)} ` +
         `${Math.round(d.orientation_deg)}°</b>: ${escapeHtml(d.refused ?? '')}</li>`).join('')}</ul>` +
         `</details></td></tr>`);

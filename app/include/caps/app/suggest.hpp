@@ -9,6 +9,7 @@
 /// among themselves. The designs the sweep refused (the
 /// plan reaches the eye, the closure did not converge in its time) are listed with why.
 
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -51,7 +52,9 @@ struct SuggestRequest {
     v(r.objective, {"objective", "what ranks the designs, least first: force (the largest "
                                  "force on one suture, N), features (the largest displacement "
                                  "of an eyelid margin, brow, lip or nostril rim, mm), scar (the "
-                                 "scar's length, mm) or excised (the healthy skin excised, mm2)"});
+                                 "scar's length, mm), excised (the healthy skin excised, mm2) or "
+                                 "rstl (an ellipse's angle to the relaxed skin tension lines, "
+                                 "Borges's map, deg)"});
     v(r.refine, {"refine", "close the best this many again at the full mesh (0-12)"});
     v(r.sweep_size, {"sweep_size", "the sweep's mesh size (mm); 0 = twice --size"});
     v(r.sweep_material, {"sweep_material", "the sweep's material: auto (linear for an isotropic "
@@ -92,6 +95,9 @@ struct SuggestedDesign {
     std::vector<std::string> warnings;
   };
   Closure sweep, full;
+  /// An ellipse's scar against the relaxed skin tension lines at the lesion (deg, 0-90; 0 along
+  /// them); NaN where the lines are not known there or for a flap.
+  double angle_to_skin_lines_deg = std::numeric_limits<double>::quiet_NaN();
   bool refined = false;
   double objective = 0;  ///< the ranking value (the full closure's where refined)
   int rank = 0;          ///< 1 = best; 0 = not ranked
@@ -105,8 +111,23 @@ struct SuggestedDesign {
 /// uncertainties (its tissue's moduli, the mesh) exceed.
 inline constexpr double kNearBest = 0.05;
 
+/// The relaxed skin tension lines at the lesion (plan/skin_lines.hpp, Borges's map laid on the
+/// head by its landmarks) against the closure's least-force direction.
+struct SuggestedSkinLines {
+  bool found = false;
+  double orientation_deg = 0;  ///< in the designs' frame (a chart's where they lie on one)
+  std::string zone, words, says;
+  std::string note;  ///< why not found
+  /// The ranked ellipse of least force on one suture (by the figures it is ranked by), and the
+  /// angle between it and the lines; NaN without one.
+  double least_force_deg = std::numeric_limits<double>::quiet_NaN();
+  double least_force_angle_deg = std::numeric_limits<double>::quiet_NaN();
+  std::string sentence;  ///< the cross-check in words
+};
+
 struct SuggestResult {
   std::string output;
+  SuggestedSkinLines skin_lines;
   std::string suggestions_json;  ///< suggestions.json
   std::vector<SuggestedDesign> designs;  ///< ranked first (by rank), then the refused
   std::vector<std::string> warnings;
