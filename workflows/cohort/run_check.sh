@@ -20,10 +20,11 @@ rm -rf "$work"
 mkdir -p "$work"
 # The cohort's patients and the broken one.
 table_path() {  # the config's table KEY as a path
-  "$python" -c "import sys,yaml,os; p=yaml.safe_load(open(sys.argv[1]))[sys.argv[3]]; print(p if os.path.isabs(p) else os.path.join(sys.argv[2], p))" "$config" "$here" "$1"
+  "$python" -c "import sys,yaml,os; p=yaml.safe_load(open(sys.argv[1])).get(sys.argv[3]); print('' if not p else p if os.path.isabs(p) else os.path.join(sys.argv[2], p))" "$config" "$here" "$1"
 }
 patients_src=$(table_path patients)
 export CAPS_PLANS=$(table_path plans)
+export CAPS_LESIONS=$(table_path lesions)  # empty: no lesions, no suggestions
 cp "$patients_src" "$work/patients.tsv"
 echo "this is not a volume" > "$work/broken.nii.gz"
 printf 'broken\tvolume\t%s\t\n' "$work/broken.nii.gz" >> "$work/patients.tsv"
@@ -40,7 +41,7 @@ rerun=$!
 import concurrent.futures, csv, json, math, os, subprocess, sys
 work, caps = sys.argv[1], sys.argv[2]
 sys.path.insert(0, sys.argv[3])
-from plans import expand_plans, simulate_arguments, simulate_options
+from plans import expand_plans, plan_options, simulate_arguments, simulate_options
 patients = [r["patient"] for r in csv.DictReader(open(f"{work}/patients.tsv"), delimiter="\t")]
 rows = list(csv.DictReader(open(f"{work}/results.tsv"), delimiter="\t"))
 plans = sorted({r["plan"] for r in rows})
@@ -95,9 +96,40 @@ for r in zs:
     assert 0.1 * limb < gain and percent < 100 * (math.sqrt(5 - 4 * math.cos(angle)) - 1), r
     assert abs(100 * gain / percent - limb) < 0.5, (r["patient"], 100 * gain / percent, limb)
 assert all(r["lengthening_mm"] == "" for r in rows if r["status"] != "ok")
+# Suggestions (config "lesions"): one row per patient x lesion, the broken patient failed alone;
+# the first patient's again by hand with caps plan suggest gives the same best design and force;
+# on Cranium's forehead the relaxed skin tension lines are horizontal.
+suggested = ""
+if os.environ.get("CAPS_LESIONS"):
+    lesions = {l["lesion"]: l for l in csv.DictReader(
+        (x for x in open(os.environ["CAPS_LESIONS"]) if not x.startswith("#")), delimiter="\t")}
+    srows = list(csv.DictReader(open(f"{work}/suggestions.tsv"), delimiter="\t"))
+    assert len(srows) == len(patients) * len(lesions), (len(srows), len(patients), len(lesions))
+    for r in srows:
+        if r["patient"] == "broken":
+            assert r["status"] == "failed" and r["error"], r
+        else:
+            assert r["status"] == "ok" and float(r["best_max_suture_force_n"]) > 0, r
+    first = next(r for r in srows if r["status"] == "ok")
+    l = lesions[first["lesion"]]
+    out = f"{work}/direct_suggestion"
+    subprocess.run([caps, "plan", "suggest", "--model", f"{work}/models/{first['patient']}",
+                    "--at", l["at"], "--diameter", l["diameter"], "--margin", l["margin"],
+                    *plan_options({"parameters": l["suggest"]}).split(), "-o", out, "-q"],
+                   check=True, capture_output=True, text=True)
+    direct = json.load(open(f"{out}/suggestions.json"))
+    best = next(d for d in direct["designs"] if d["name"] == direct["best"])
+    assert first["best"] == direct["best"], (first, direct["best"])
+    assert abs(float(first["best_max_suture_force_n"]) -
+               best["sweep"]["max_force_per_suture_n"]) <= 1e-9, (first, best)
+    cranium = [r for r in srows if r["patient"] == "cranium" and r["status"] == "ok"]
+    for r in cranium:
+        assert r["skin_lines_zone"] == "forehead" and abs(float(r["skin_lines_deg"]) - 90) < 5, r
+    suggested = (f"; {len(srows)} suggestions, {first['patient']}'s equal caps plan suggest's "
+                 f"(best {first['best']}), Cranium's skin lines horizontal")
 print(f"cohort: {len(rows)} rows ({len(ok)} ok, broken failed alone); {len(by_hand)} rows' closing "
       f"force and lengthening equal caps simulate's; {len(zs)} Z-plasties lengthen "
-      + ", ".join(f"{float(r['lengthening_percent']):.1f} %" for r in zs))
+      + ", ".join(f"{float(r['lengthening_percent']):.1f} %" for r in zs) + suggested)
 EOF
 wait "$rerun" || true
 grep -q "Nothing to be done" "$work/rerun.log" || { cat "$work/rerun.log"; echo "a rerun would do work"; exit 1; }
