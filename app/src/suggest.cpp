@@ -463,15 +463,16 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       if (!parent.empty()) head = loaded_model(parent);
       const CylindricalPoint hc = head->to_cylindrical(lesion);
       const plan::SkinLineDirection dir =
-          plan::skin_line_direction(plan::borges_map(), *head, plan::model_landmarks(head_dir, *head),
-                                    hc.theta_deg, hc.z_mm);
+          plan::skin_line_direction(plan::borges_map(), *head,
+                                    plan::model_landmarks(head_dir, *head), hc.theta_deg, hc.z_mm);
       lines.note = dir.note;
       if (dir.found) {
         const Eigen::Vector3d v =
             plan::skin_frame(*head, hc.theta_deg, hc.z_mm, dir.orientation_deg).ex;
         const Eigen::Vector3d up = plan::skin_frame(*on, on_tz[0], on_tz[1], 0).ex;
         const Eigen::Vector3d right = plan::skin_frame(*on, on_tz[0], on_tz[1], 90).ex;
-        double o = round_to(std::fmod(rad_to_deg(std::atan2(v.dot(right), v.dot(up))) + 360.0, 180.0), 1);
+        const double o = round_to(
+            std::fmod(rad_to_deg(std::atan2(v.dot(right), v.dot(up))) + 360.0, 180.0), 1);
         lines.found = true;
         lines.orientation_deg = o >= 180.0 ? o - 180.0 : o;
         lines.zone = dir.zone;
@@ -560,6 +561,11 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
     if ((a.refused.empty()) != (b.refused.empty())) return a.refused.empty();
     if (a.refined != b.refined) return a.refined;
     if (a.objective != b.objective) return a.objective < b.objective;
+    // A tie (two orientations at the same angle to the skin lines, scars of one length) goes
+    // to the smaller force on one suture.
+    const double fa = (a.refined ? a.full : a.sweep).max_force_per_suture_n;
+    const double fb = (b.refined ? b.full : b.sweep).max_force_per_suture_n;
+    if (fa != fb) return fa < fb;
     return a.name < b.name;
   };
   for (SuggestedDesign& d : designs)
@@ -619,8 +625,9 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       if (d.rank > 0 && d.procedure == "ellipse" &&
           (!least || d.sweep.max_force_per_suture_n < least->sweep.max_force_per_suture_n))
         least = &d;
-    const std::string map_words = cat("Borges's relaxed skin tension lines ", lines.words, " run ",
-                                      lines.says, " (", std::fmod(std::round(lines.orientation_deg), 180.0), " deg)");
+    const std::string map_words =
+        cat("Borges's relaxed skin tension lines ", lines.words, " run ", lines.says, " (",
+            std::fmod(std::round(lines.orientation_deg), 180.0), " deg)");
     if (least) {
       lines.least_force_deg = least->orientation_deg;
       lines.least_force_angle_deg = least->angle_to_skin_lines_deg;

@@ -269,11 +269,12 @@ void Join::append_tissue(const Region& region) {
   }
   // A piece of tissue whose supports the undermining freed would float or turn: it stays
   // attached. A piece is tets joined face to face, as select() keeps them (one hanging on by an
-  // edge or a corner turns about it), and it is held by at least three attached or held nodes;
-  // a piece with fewer keeps its undermined nodes on the bone attached, as select() counted
-  // them. Until 7 December 2026 pieces were joined by shared nodes: a lone tet floated no more,
-  // but on Cranium's nasal sidewall a piece hinged on an edge to the rest was left sliding and
-  // the vertical ellipse of the suggestion there was refused as under-constrained.
+  // edge or a corner turns about it), and it is held by at least three nodes that are attached,
+  // held, or within the tie's reach of the patch's rim (tie_rim() ties the patch to them); a
+  // piece with fewer keeps its undermined nodes on the bone attached, as select() counted them.
+  // Until 7 December 2026 pieces were joined by shared nodes: a lone tet floated no more, but on
+  // Cranium's nasal sidewall a piece hinged on an edge to the rest was left sliding and the
+  // vertical ellipse of the suggestion there was refused as under-constrained.
   const int n_tets = static_cast<int>(q.elements.size());
   UnionFind parts(n_tets);
   {
@@ -290,7 +291,42 @@ void Join::append_tissue(const Region& region) {
   }
   std::vector<char> is_fixed(static_cast<std::size_t>(q.nodes.rows()), 0);
   for (int id : fixed) is_fixed[id] = 1;
-  std::map<int, std::set<int>> holds;  // piece root -> its attached or held corners
+  {
+    // The nodes the patch's rim will be tied to: within the tie's reach of a rim node.
+    const double reach = o_.tie_tolerance_mm > 0
+                             ? o_.tie_tolerance_mm
+                             : 3.0 * std::max(tissue_.options.face_size_mm,
+                                              tissue_.label_voxel_mm.maxCoeff());
+    std::map<std::array<long, 3>, std::vector<Eigen::Vector3d>> rim_cells;
+    const auto cell = [&](const Eigen::Vector3d& x) {
+      return std::array<long, 3>{static_cast<long>(std::floor(x.x() / reach)),
+                                 static_cast<long>(std::floor(x.y() / reach)),
+                                 static_cast<long>(std::floor(x.z() / reach))};
+    };
+    for (int n : wound_.continuum.rim_nodes) {
+      const Eigen::Vector3d x = wound_.continuum.mesh.nodes.row(n).transpose();
+      rim_cells[cell(x)].push_back(x);
+    }
+    for (Eigen::Index id = 0; id < q.nodes.rows(); ++id) {
+      if (is_fixed[id]) continue;
+      const Eigen::Vector3d x = q.nodes.row(id).transpose();
+      const std::array<long, 3> c = cell(x);
+      bool near = false;
+      for (long i = -1; i <= 1 && !near; ++i)
+        for (long j = -1; j <= 1 && !near; ++j)
+          for (long k = -1; k <= 1 && !near; ++k) {
+            const auto it = rim_cells.find({c[0] + i, c[1] + j, c[2] + k});
+            if (it == rim_cells.end()) continue;
+            for (const Eigen::Vector3d& r : it->second)
+              if ((r - x).norm() <= reach) {
+                near = true;
+                break;
+              }
+          }
+      if (near) is_fixed[id] = 1;
+    }
+  }
+  std::map<int, std::set<int>> holds;  // piece root -> its attached, held or tied corners
   for (int t = 0; t < n_tets; ++t)
     for (int k = 0; k < 4; ++k) {
       const int n = q.elements[static_cast<std::size_t>(t)].nodes[k];

@@ -381,6 +381,32 @@ struct PlannerServer::Impl {
     return served;
   }
   std::unique_ptr<ProgressBoard> progress;
+
+  // The simulation's slot, held by one simulate or suggest request at a time
+  // (kMaxConcurrentSimulations = 1). Taking it makes the request the latest, so an older one still
+  // running is cancelled (its reporter sees a newer ticket) and a newer one will cancel this; it
+  // waits for the running one to stop, then shows this one on the progress board until released.
+  class SimulationSlot {
+   public:
+    explicit SimulationSlot(Impl& s)
+        : cancellable_(s.latest_simulation, ++s.latest_simulation, s.stop_requested,
+                       s.progress.get()),
+          lock_(s.simulation_mutex),
+          board_(*s.progress) {
+      cancellable_.check_cancelled();
+      board_.start();
+    }
+    ~SimulationSlot() { board_.finish(); }
+    SimulationSlot(const SimulationSlot&) = delete;
+    SimulationSlot& operator=(const SimulationSlot&) = delete;
+    /// Passes progress on to the board and is cancelled by a newer request or the server's stop.
+    Reporter& reporter() { return cancellable_; }
+
+   private:
+    SimulationReporter cancellable_;
+    std::lock_guard<std::mutex> lock_;
+    ProgressBoard& board_;
+  };
   std::mutex views_mutex;   // writing the skin's .glb files (once each)
   std::mutex export_mutex;  // rendering a result's export (once each)
   std::map<std::string, std::shared_future<void>> tension_files;  // by result id (views_mutex)
@@ -574,16 +600,8 @@ struct PlannerServer::Impl {
     verb.check_json(request, source);  // a mistake is answered at once, not after the queue
     write_text_atomic(plan, plan_text);
 
-    // A newer request cancels this one: its ticket is no longer the latest.
-    const std::uint64_t ticket = ++latest_simulation;
-    SimulationReporter cancellable(latest_simulation, ticket, stop_requested, progress.get());
-    std::lock_guard<std::mutex> lock(simulation_mutex);
-    cancellable.check_cancelled();
-    progress->start();
-    struct Finish {
-      ProgressBoard& board;
-      ~Finish() { board.finish(); }
-    } finish{*progress};
+    SimulationSlot slot(*this);
+    Reporter& cancellable = slot.reporter();
     const auto t0 = std::chrono::steady_clock::now();
     const auto since_t0 = [&] {
       return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -639,17 +657,9 @@ struct PlannerServer::Impl {
     const app::VerbEntry& verb = app::find_verb("plan suggest");
     const std::string request = j.dump();
     verb.check_json(request, source);  // a mistake is answered at once, not after the queue
-    const std::uint64_t ticket = ++latest_simulation;
-    SimulationReporter cancellable(latest_simulation, ticket, stop_requested, progress.get());
-    std::lock_guard<std::mutex> lock(simulation_mutex);
-    cancellable.check_cancelled();
-    progress->start();
-    struct Finish {
-      ProgressBoard& board;
-      ~Finish() { board.finish(); }
-    } finish{*progress};
+    SimulationSlot slot(*this);
     const auto t0 = std::chrono::steady_clock::now();
-    verb.run_json(request, source, &cancellable);
+    verb.run_json(request, source, &slot.reporter());
     json out = json::parse(read_file(work / "results" / std::to_string(id) / "suggestions.json"));
     out["timings_s"]["suggest"] =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
