@@ -102,8 +102,8 @@ SkinLineDirection skin_line_direction(const SkinLineMap& map, const PatientModel
   }
   const double h = n->z_mm - sn->z_mm;
   if (!(h > 20 && h < 90)) {
-    out.note = cat("the nasion lies ", h, " mm above the subnasale, not a face's 30-70 mm: the "
-                   "skin lines are not laid on it");
+    out.note = cat("the nasion lies ", h, " mm above the subnasale, not the 20-90 mm of a face: "
+                   "the skin lines are not laid on it");
     return out;
   }
   // The distance from the midsagittal plane (the plane of the axis and the midline): the arc
@@ -116,6 +116,10 @@ SkinLineDirection skin_line_direction(const SkinLineMap& map, const PatientModel
     return out;
   }
   const double lateral = model.r_skin(theta_deg, z_mm) * std::abs(std::sin(d_theta * kPi / 180.0));
+  if (!std::isfinite(lateral)) {
+    out.note = "the model has no skin measured there";
+    return out;
+  }
   out.at = {lateral / h, (z_mm - n->z_mm) / h, h, d_theta >= 0};
   const double u = out.at.u, v = out.at.v;
   for (const SkinLineZone& z : map.zones) {
