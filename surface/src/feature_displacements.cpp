@@ -46,6 +46,43 @@ AnatomicalFrame anatomical_frame(const PatientModel& model) {
   return fr;
 }
 
+namespace {
+
+// Samples binned in cubic cells of `size`: the samples within `size` of a point lie in its cell
+// or the 26 around it (displacement_from_samples()'s reach, blend_across_seam()'s width).
+struct SampleBins {
+  Eigen::MatrixX3d P, U;
+  double size;
+  std::map<std::array<long, 3>, std::vector<Eigen::Index>> cells;
+
+  // Bins the samples whose point (and, with finite_values, value) is finite.
+  SampleBins(Eigen::MatrixX3d points, Eigen::MatrixX3d values, double size_mm, bool finite_values)
+      : P(std::move(points)), U(std::move(values)), size(size_mm) {
+    for (Eigen::Index i = 0; i < P.rows(); ++i)
+      if (P.row(i).allFinite() && (!finite_values || U.row(i).allFinite()))
+        cells[cell(P.row(i).transpose())].push_back(i);
+  }
+  std::array<long, 3> cell(const Eigen::Vector3d& x) const {
+    return {static_cast<long>(std::floor(x.x() / size)),
+            static_cast<long>(std::floor(x.y() / size)),
+            static_cast<long>(std::floor(x.z() / size))};
+  }
+  // f(sample, squared distance) for each sample in x's cell and the 26 around it.
+  template <class F>
+  void near(const Eigen::Vector3d& x, F&& f) const {
+    const std::array<long, 3> c = cell(x);
+    for (long i = -1; i <= 1; ++i)
+      for (long j = -1; j <= 1; ++j)
+        for (long k = -1; k <= 1; ++k) {
+          const auto it = cells.find({c[0] + i, c[1] + j, c[2] + k});
+          if (it == cells.end()) continue;
+          for (Eigen::Index n : it->second) f(n, (P.row(n).transpose() - x).squaredNorm());
+        }
+  }
+};
+
+}  // namespace
+
 DisplacementAt displacement_from_samples(const Eigen::MatrixX3d& points,
                                          const Eigen::MatrixX3d& displacements, double radius_mm) {
   if (points.rows() != displacements.rows())
@@ -54,39 +91,23 @@ DisplacementAt displacement_from_samples(const Eigen::MatrixX3d& points,
   if (!(radius_mm > 0) || !std::isfinite(radius_mm))
     throw InvalidInput(
         cat("displacement_from_samples: radius ", radius_mm, " mm must be positive"));
-  // The samples in cells of the radius: a point's samples within reach are in its cell and the
-  // 26 around it.
-  struct Samples {
-    Eigen::MatrixX3d P, U;
-    double r;
-    std::map<std::array<long, 3>, std::vector<Eigen::Index>> cells;
-    std::array<long, 3> cell(const Eigen::Vector3d& x) const {
-      return {static_cast<long>(std::floor(x.x() / r)), static_cast<long>(std::floor(x.y() / r)),
-              static_cast<long>(std::floor(x.z() / r))};
-    }
-  };
-  auto s = std::make_shared<Samples>(Samples{points, displacements, radius_mm, {}});
-  for (Eigen::Index i = 0; i < points.rows(); ++i)
-    if (points.row(i).allFinite()) s->cells[s->cell(points.row(i).transpose())].push_back(i);
+  auto s = std::make_shared<const SampleBins>(points, displacements, radius_mm, false);
   return [s](const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
     if (!x.allFinite()) return std::nullopt;
-    const std::array<long, 3> c = s->cell(x);
-    const double r2 = s->r * s->r;
+    const double r2 = s->size * s->size;
     Eigen::Vector3d sum(0, 0, 0);
     double wsum = 0;
-    for (long i = -1; i <= 1; ++i)
-      for (long j = -1; j <= 1; ++j)
-        for (long k = -1; k <= 1; ++k) {
-          const auto it = s->cells.find({c[0] + i, c[1] + j, c[2] + k});
-          if (it == s->cells.end()) continue;
-          for (Eigen::Index n : it->second) {
-            const double d2 = (s->P.row(n).transpose() - x).squaredNorm();
-            if (d2 > r2) continue;
-            if (d2 < 1e-18) return Eigen::Vector3d(s->U.row(n).transpose());
-            sum += s->U.row(n).transpose() / d2;
-            wsum += 1.0 / d2;
-          }
-        }
+    Eigen::Index at = -1;  // a sample the point is (its own value)
+    s->near(x, [&](Eigen::Index n, double d2) {
+      if (at >= 0 || d2 > r2) return;
+      if (d2 < 1e-18) {
+        at = n;
+        return;
+      }
+      sum += s->U.row(n).transpose() / d2;
+      wsum += 1.0 / d2;
+    });
+    if (at >= 0) return Eigen::Vector3d(s->U.row(at).transpose());
     if (wsum == 0) return std::nullopt;
     return Eigen::Vector3d(sum / wsum);
   };
@@ -100,40 +121,17 @@ DisplacementAt blend_across_seam(DisplacementAt far, const Eigen::MatrixX3d& poi
   if (!(width_mm > 0) || !std::isfinite(width_mm))
     throw InvalidInput(cat("blend_across_seam: width ", width_mm, " mm must be positive"));
   if (!far) throw InvalidInput("blend_across_seam: no field to blend into");
-  // The samples in cells of the width: a point's nearest sample within reach is in its cell or
-  // the 26 around it.
-  struct Seam {
-    Eigen::MatrixX3d P, U;
-    double w;
-    std::map<std::array<long, 3>, std::vector<Eigen::Index>> cells;
-    DisplacementAt far;
-    std::array<long, 3> cell(const Eigen::Vector3d& x) const {
-      return {static_cast<long>(std::floor(x.x() / w)), static_cast<long>(std::floor(x.y() / w)),
-              static_cast<long>(std::floor(x.z() / w))};
-    }
-  };
-  auto s = std::make_shared<Seam>(Seam{points, values, width_mm, {}, std::move(far)});
-  for (Eigen::Index i = 0; i < points.rows(); ++i)
-    if (points.row(i).allFinite() && values.row(i).allFinite())
-      s->cells[s->cell(points.row(i).transpose())].push_back(i);
-  return [s](const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
-    const std::optional<Eigen::Vector3d> f = s->far(x);
+  auto s = std::make_shared<const SampleBins>(points, values, width_mm, true);
+  return [s, far = std::move(far)](const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
+    const std::optional<Eigen::Vector3d> f = far(x);
     if (!x.allFinite()) return f;
-    const std::array<long, 3> c = s->cell(x);
-    double best = s->w * s->w;
+    double best = s->size * s->size;
     Eigen::Index nearest = -1;
-    for (long i = -1; i <= 1; ++i)
-      for (long j = -1; j <= 1; ++j)
-        for (long k = -1; k <= 1; ++k) {
-          const auto it = s->cells.find({c[0] + i, c[1] + j, c[2] + k});
-          if (it == s->cells.end()) continue;
-          for (Eigen::Index n : it->second) {
-            const double d2 = (s->P.row(n).transpose() - x).squaredNorm();
-            if (d2 < best) best = d2, nearest = n;
-          }
-        }
+    s->near(x, [&](Eigen::Index n, double d2) {
+      if (d2 < best) best = d2, nearest = n;
+    });
     if (nearest < 0) return f;
-    const double t = std::sqrt(best) / s->w;  // 0 on the seam, 1 a width away
+    const double t = std::sqrt(best) / s->size;  // 0 on the seam, 1 a width away
     return Eigen::Vector3d((1 - t) * s->U.row(nearest).transpose() +
                            t * f.value_or(Eigen::Vector3d::Zero()));
   };
