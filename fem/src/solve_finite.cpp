@@ -3,6 +3,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <memory>
 #include <optional>
@@ -32,6 +33,18 @@ constexpr int kMaxLineSearch = 12;
 constexpr double kShiftedStepMm = 1.0;
 // The first shift of an indefinite tangent, in units of |diag K| (see solve_system).
 constexpr double kFirstShift = 1e-6;
+// The shifts tried, a ladder of rungs: rung -1 is the tangent itself, rung k >= 0 the shift
+// kFirstShift 10^k, up to kTopRung (100 |diag K|).
+constexpr int kTopRung = 8;
+constexpr int kNoRung = -2;
+constexpr std::array<double, kTopRung + 1> kRungShifts{1e-6, 1e-5, 1e-4, 1e-3, 1e-2,
+                                                       1e-1, 1.0,  1e1,  1e2};
+double rung_shift(int k) { return k < 0 ? 0.0 : kRungShifts[static_cast<std::size_t>(k)]; }
+// The rung of a shift (the nearest: shifts are products of rungs and powers of ten).
+int shift_rung(double mu) {
+  if (mu <= 0) return -1;
+  return std::clamp(static_cast<int>(std::lround(std::log10(mu / kFirstShift))), 0, kTopRung);
+}
 // Levenberg-Marquardt memory: a line search that had to cut the step below kPoorStep of its
 // start raises the next solve's shift tenfold; a full step lowers it tenfold.
 constexpr double kPoorStep = 0.25;
@@ -265,7 +278,8 @@ class FiniteStrainSolver {
   void cut_back_step(StepAttempt& s);
   // One solve of the tangent, shifted where it is not positive definite.
   std::optional<Failure> solve_shifted(Eigen::VectorXd& dq, double& shift, double tolerance,
-                                       double damping, bool factor_is_shifted_tangent = false);
+                                       double damping, bool factor_is_shifted_tangent = false,
+                                       double guess = 0);
   void factorize_and_solve(Eigen::VectorXd& dq, double tolerance);
   // K dq = f by conjugate gradients preconditioned with the solver's last factor, in at most
   // max_iterations (timed as a solve); false, dq untouched, if they did not get there.
@@ -289,6 +303,8 @@ class FiniteStrainSolver {
   // The diagonal of K's stored upper triangle (the last entry of each column), for the shift.
   std::vector<Eigen::Index> diagonal_;
   Eigen::VectorXd kept_diagonal_;
+  // The shift the last step's first solve needed: the next step's first solve guesses it.
+  double first_shift_ = 0;
 
   // sys_ holds the tangent and out-of-balance force of the last converged state, and unit_lift_
   // its -T^T K g: the next predictor is then f + dl (f_ext + unit_lift), without an assembly.
@@ -510,10 +526,12 @@ IterationOutcome FiniteStrainSolver::newton_iteration(StepAttempt& s, int it) {
   if (known_start) s.damping = start_tangent_.shift;
   const bool reuse_start = known_start && start_tangent_.shift > 0 && no_.reuse_iterations > 0 &&
                            start_tangent_.factorizations == res_.factorizations;
-  if ((s.failure = solve_shifted(dq, shift, eta, s.damping, reuse_start))) {
+  const double guess = it == 1 && !known_start ? first_shift_ : 0.0;
+  if ((s.failure = solve_shifted(dq, shift, eta, s.damping, reuse_start, guess))) {
     s.failure->iteration = it;
     return IterationOutcome::Failed;
   }
+  if (it == 1) first_shift_ = shift;
   if (start_tangent) start_tangent_ = {step_, shift, res_.factorizations};
   // A shifted direction is long along the soft (buckling) mode: it is first cut to move no
   // dof by more than kShiftedStepMm.
@@ -798,50 +816,75 @@ bool FiniteStrainSolver::solve_with_last_factor(Eigen::VectorXd& dq, int max_ite
 // instead of a new factorization.
 std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, double& shift,
                                                          double tolerance, double damping,
-                                                         bool factor_is_shifted_tangent) {
+                                                         bool factor_is_shifted_tangent,
+                                                         double guess) {
   shift = 0;
   const auto finite = [&]() -> std::optional<Failure> {
     if (dq.allFinite()) return std::nullopt;
     return Failure{"the Newton correction is not finite"};
   };
   std::string unshifted;  // why the tangent itself could not be factorized
-  if (damping == 0) {
-    if (no_.reuse_iterations > 0 && solve_with_last_factor(dq, no_.reuse_iterations, tolerance))
-      return finite();
-    try {
-      factorize_and_solve(dq, tolerance);
-      return finite();
-    } catch (const SingularMatrix& e) {
-      ++res_.indefinite_factorizations;
-      unshifted = e.what();
-    }
-  }
   double* values = sys_.K.valuePtr();
   for (Eigen::Index j = 0; j < sys_.K.cols(); ++j) kept_diagonal_[j] = values[diagonal_[j]];
-  bool solved = false;
-  for (double mu = std::max(damping, kFirstShift); mu <= 1.01e2 && !solved; mu *= 10) {
+  const int lowest = damping == 0 ? -1 : shift_rung(damping);
+  // One rung: the tangent shifted by it solved, or false (not positive definite).
+  int factored = kNoRung;  // the rung whose factor the solver holds, if any
+  const auto attempt = [&](int k) {
     if (options_.reporter) options_.reporter->check_cancelled();
+    const double mu = rung_shift(k);
     for (Eigen::Index j = 0; j < sys_.K.cols(); ++j)
       values[diagonal_[j]] = kept_diagonal_[j] + mu * std::abs(kept_diagonal_[j]);
-    if (factor_is_shifted_tangent && mu == damping &&
-        solve_with_last_factor(dq, kMaxFreshIterations, tolerance)) {
-      solved = true;
-      shift = mu;
-      break;
-    }
+    if (k == -1 && no_.reuse_iterations > 0 &&
+        solve_with_last_factor(dq, no_.reuse_iterations, tolerance))
+      return true;
+    if (k >= 0 && factor_is_shifted_tangent && k == lowest &&
+        solve_with_last_factor(dq, kMaxFreshIterations, tolerance))
+      return true;
     try {
       factorize_and_solve(dq, tolerance);
-      solved = true;
-      shift = mu;
+      factored = k;
+      return true;
     } catch (const SingularMatrix& e) {
       ++res_.indefinite_factorizations;
+      factored = kNoRung;
       if (unshifted.empty()) unshifted = e.what();
+      return false;
     }
+  };
+  // The smallest rung from `lowest` up whose shifted tangent is positive definite (definiteness
+  // only grows with the shift). Climbed rung by rung from `lowest`, unless `guess` (the shift
+  // the last step's first solve needed) is two or more rungs above it: then from the rung below
+  // the guess, and, if that rung holds, down by bisection to the smallest that does (the page's
+  // default Z-plasty on the phantom climbed seven rungs, 0 to 1, at the first solve of each of
+  // four steps). Either way the chosen shift is the same; only the factorizations tried on the
+  // way differ.
+  int found = kNoRung;
+  const int remembered = guess > 0 ? shift_rung(guess) : kNoRung;
+  const bool guessed = remembered != kNoRung && remembered - 1 > lowest;
+  if (guessed && attempt(remembered - 1)) {
+    int hi = remembered - 1, lo = lowest;  // hi holds; lo is not yet known
+    if (attempt(lo)) {
+      hi = lo;
+    } else {
+      while (hi - lo > 1) {  // lo fails, hi holds
+        const int mid = (lo + hi) / 2;
+        (attempt(mid) ? hi : lo) = mid;
+      }
+      if (factored != hi && !attempt(hi)) hi = kNoRung;  // the solver holds another factor now
+    }
+    found = hi;
+  } else {
+    for (int k = guessed ? remembered : lowest; k <= kTopRung; ++k)
+      if (attempt(k)) {
+        found = k;
+        break;
+      }
   }
   for (Eigen::Index j = 0; j < sys_.K.cols(); ++j) values[diagonal_[j]] = kept_diagonal_[j];
-  if (!solved)
+  if (found == kNoRung)
     return Failure{cat("the tangent stiffness is not positive definite even shifted by 100 times "
                        "its diagonal (", unshifted, ")")};
+  shift = rung_shift(found);
   return finite();
 }
 
