@@ -1049,19 +1049,31 @@ TEST(FiniteStrain, AStepCutBackReusesItsIndefiniteStartTangentsShiftAndFactor) {
   o.newton.max_solves = 100000;
   o.newton.max_steps = 10000;
   const SolveResult r = solve(m, o);
-  int checked = 0;
+  int checked = 0, guessed = 0;
+  double last_shift = 0;
   for (const NewtonStep& s : r.newton_steps) {
     ASSERT_EQ(s.shifts.size(), 1u);
-    // The rungs: the tangent itself, then 1e-6, 1e-5, ... up to the shift that worked.
+    // The rungs: the tangent itself, then 1e-6, 1e-5, ... up to the shift that worked. A step's
+    // first solve starts from the shift the last step's needed, below it, and bisects down: one
+    // factorization more than the rungs where the tangent no longer needs the shift (the rung
+    // below the guess, then the tangent itself), fewer where it still does.
     const int rungs =
         s.shifts[0] > 0 ? 2 + static_cast<int>(std::lround(std::log10(s.shifts[0] / 1e-6))) : 1;
-    EXPECT_LE(s.factorizations, rungs) << "step " << s.step << ", " << s.cutbacks << " cut-backs";
+    EXPECT_LE(s.factorizations, rungs + 1) << "step " << s.step << ", " << s.cutbacks << " cut-backs";
     if (s.cutbacks > 0 && s.shifts[0] > 0) ++checked;
+    // Where the shift is the last step's, at 1e-5 or more: the rung below it, then it.
+    if (s.cutbacks == 0 && s.shifts[0] >= 1e-5 && s.shifts[0] == last_shift) {
+      EXPECT_EQ(s.factorizations, 2) << "step " << s.step << ", shift " << s.shifts[0];
+      ++guessed;
+    }
+    last_shift = s.shifts[0];
   }
   std::cout << r.newton_steps.size() << " steps, " << checked
-            << " of them cut back from an indefinite start tangent; " << r.factorizations
-            << " factorizations, " << r.newton_iterations << " solves\n";
+            << " of them cut back from an indefinite start tangent, " << guessed
+            << " needing the last step's shift; " << r.factorizations << " factorizations, "
+            << r.newton_iterations << " solves\n";
   EXPECT_GT(checked, 10);
+  EXPECT_GT(guessed, 0);
   // The same buckled slab as Newton's own tolerances give.
   o = finite(4);
   const SolveResult full = solve(m, o);

@@ -546,15 +546,15 @@ IterationOutcome FiniteStrainSolver::newton_iteration(StepAttempt& s, int it) {
   // alpha |dq|, or the move including the projection onto the surface
   const double du = projected_ ? (q_trial_ - q_).norm() : alpha * dq.norm();
   q_ = q_trial_;
+  const double rn = sys_.f.norm();
   if (alpha < kPoorStep * alpha_start)
     s.damping = std::max(kFirstShift, 10 * shift);
   else if (alpha == alpha_start)
-    s.damping = shift >= 10 * kFirstShift ? 0.1 * shift : 0.0;
+    s.damping = rung_shift(shift_rung(shift) - 1);
   else
     s.damping = shift;
   record.line_search.push_back(alpha);
   record.shifts.push_back(shift);
-  const double rn = sys_.f.norm();
   record.residual_norms.push_back(rn / s.r0);
   if (!std::isfinite(rn) || rn > kDivergence * s.r0) {
     s.failure = Failure{cat("the Newton iteration diverges (residual ", rn / s.r0,
@@ -823,6 +823,10 @@ std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, do
     if (dq.allFinite()) return std::nullopt;
     return Failure{"the Newton correction is not finite"};
   };
+  // The tangent itself first, by conjugate gradients on the last factor: no factorization.
+  if (damping == 0 && no_.reuse_iterations > 0 &&
+      solve_with_last_factor(dq, no_.reuse_iterations, tolerance))
+    return finite();
   std::string unshifted;  // why the tangent itself could not be factorized
   double* values = sys_.K.valuePtr();
   for (Eigen::Index j = 0; j < sys_.K.cols(); ++j) kept_diagonal_[j] = values[diagonal_[j]];
@@ -834,9 +838,6 @@ std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, do
     const double mu = rung_shift(k);
     for (Eigen::Index j = 0; j < sys_.K.cols(); ++j)
       values[diagonal_[j]] = kept_diagonal_[j] + mu * std::abs(kept_diagonal_[j]);
-    if (k == -1 && no_.reuse_iterations > 0 &&
-        solve_with_last_factor(dq, no_.reuse_iterations, tolerance))
-      return true;
     if (k >= 0 && factor_is_shifted_tangent && k == lowest &&
         solve_with_last_factor(dq, kMaxFreshIterations, tolerance))
       return true;
