@@ -891,3 +891,64 @@ TEST(SkinLines, BorgessMapLaidOnTheFaceByItsLandmarks) {
   }
   fs::remove(bad);
 }
+
+// The map traced over the test cylinder's face (the landmarks of the test above): every step of
+// a line runs along the map's direction at its middle, 1 mm along the skin (r dtheta across, dz
+// up, the plan's frame); the forehead's lines keep their height, the glabella's their theta.
+TEST(SkinLines, TracedOverTheFaceAlongTheMapsDirection) {
+  Landmarks lm;
+  lm.midline_theta_deg = 0;
+  for (const auto& [name, z] : {std::pair<const char*, double>{"nasion", 60.0}, {"subnasale", 10.0}}) {
+    Landmark l;
+    l.name = name;
+    l.found = true;
+    l.z_mm = z;
+    lm.items.push_back(l);
+  }
+  const SkinLineMap& map = borges_map();
+  const PatientModel& model = cylinder();
+  const std::vector<SkinLinePath> paths = trace_skin_lines(map, model, lm, 10, 5);
+  std::map<std::string, int> per_zone;
+  double worst_deg = 0;
+  std::string worst_zone;
+  for (const SkinLinePath& p : paths) {
+    ++per_zone[p.zone];
+    ASSERT_EQ(p.theta_deg.size(), p.z_mm.size());
+    ASSERT_GE(p.theta_deg.size(), 2u);
+    EXPECT_LE(p.theta_deg.size(), 11u);  // the seed and at most 5 steps either way
+    for (std::size_t i = 1; i < p.theta_deg.size(); ++i) {
+      const double across = kR * deg_to_rad(p.theta_deg[i] - p.theta_deg[i - 1]);
+      const double up = p.z_mm[i] - p.z_mm[i - 1];
+      EXPECT_NEAR(std::hypot(across, up), 1.0, 0.02) << p.zone;
+      const SkinLineDirection d =
+          skin_line_direction(map, model, lm, 0.5 * (p.theta_deg[i] + p.theta_deg[i - 1]),
+                              0.5 * (p.z_mm[i] + p.z_mm[i - 1]));
+      ASSERT_TRUE(d.found) << d.note;
+      EXPECT_EQ(d.zone, p.zone) << "a line ends at its zone's border";
+      const double step_deg = rad_to_deg(std::atan2(across, up));
+      const double off = angle_between_lines_deg(step_deg, d.orientation_deg);
+      if (off > worst_deg) worst_zone = cat(p.zone, " at u ", d.at.u, ", v ", d.at.v);
+      worst_deg = std::max(worst_deg, off);
+    }
+    if (p.zone == "forehead")
+      for (double z : p.z_mm) EXPECT_NEAR(z, p.z_mm.front(), 1e-9);
+    if (p.zone == "glabella")
+      for (double t : p.theta_deg) EXPECT_NEAR(t, p.theta_deg.front(), 1e-9);
+  }
+  std::cout << paths.size() << " lines; the steps' worst angle to the map " << worst_deg
+            << " deg (" << worst_zone << ")\n";
+  // Midpoint steps of 1 mm follow the field to a degree or two; the worst is 5 mm from the
+  // outer eye corner, where the crow's feet radiate and a 1 mm step turns by 11 deg.
+  EXPECT_LT(worst_deg, 2.5);
+  for (const char* zone : {"forehead", "glabella", "nose", "lateral canthus", "eyelids and brows",
+                           "infraorbital cheek", "nasolabial cheek", "lips", "preauricular cheek"})
+    EXPECT_GT(per_zone[zone], 0) << zone;
+  // Without a subnasale: no line, and the reason.
+  Landmarks no_sn = lm;
+  no_sn.items.pop_back();
+  std::string note;
+  EXPECT_TRUE(trace_skin_lines(map, model, no_sn, 10, 5, &note).empty());
+  EXPECT_NE(note.find("subnasale"), std::string::npos) << note;
+  EXPECT_THROW(trace_skin_lines(map, model, lm, 0.5, 5), InvalidParameter);
+  EXPECT_THROW(trace_skin_lines(map, model, lm, 10, 0), InvalidParameter);
+}

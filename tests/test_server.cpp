@@ -36,6 +36,7 @@
 #include <memory>
 #include <mutex>
 #include <sstream>
+#include <set>
 #include <string>
 #include <thread>
 
@@ -1008,6 +1009,24 @@ TEST_F(ServerTest, LandmarksAreTheCliAnswerAndAPlanIsPlacedAtOneAsTheCliPlacesIt
   EXPECT_GT(glabella.at("thickness_mm").get<double>(), 0);
   EXPECT_EQ(slurp(fs::path(face) / "model.json"), model_json);
   EXPECT_EQ(fs::last_write_time(fs::path(face) / "model.json"), written);
+  // GET /api/skin-lines is `caps plan skin-lines --json` of the served model: the face
+  // phantom's nasion and subnasale lay Borges's map on it, every line's points on its skin.
+  const auto lines = c.Get("/api/skin-lines");
+  ASSERT_TRUE(lines);
+  ASSERT_EQ(lines->status, 200) << lines->body;
+  const json traced = json::parse(lines->body);
+  const auto lines_cli = caps_test::caps("plan skin-lines " + face + " --json -q");
+  ASSERT_EQ(lines_cli.code, 0) << lines_cli.out;
+  EXPECT_EQ(traced, json::parse(lines_cli.out));
+  EXPECT_GT(traced.at("count").get<int>(), 50) << traced.dump().substr(0, 400);
+  EXPECT_EQ(traced.at("lines").size(), traced.at("count").get<std::size_t>());
+  std::set<std::string> zones;
+  for (const json& l : traced.at("lines")) {
+    zones.insert(l.at("zone").get<std::string>());
+    EXPECT_EQ(l.at("points_lps").size(), l.at("theta_z").size());
+  }
+  EXPECT_TRUE(zones.count("forehead") && zones.count("nose") && zones.count("lips"))
+      << traced.dump().substr(0, 400);
 
   // 15 mm to the patient's left and 20 mm up from the glabella: the CLI's plan, recorded so.
   const json request = {{"procedure", "z-plasty"},
@@ -1043,6 +1062,13 @@ TEST_F(ServerTest, LandmarksAreTheCliAnswerAndAPlanIsPlacedAtOneAsTheCliPlacesIt
     EXPECT_EQ(l.at("found"), false) << name;
     EXPECT_FALSE(l.at("note").get<std::string>().empty()) << name;
   }
+  // ... nor skin lines, and the answer says why.
+  const auto no_lines = get("/api/skin-lines");
+  ASSERT_TRUE(no_lines);
+  ASSERT_EQ(no_lines->status, 200) << no_lines->body;
+  EXPECT_EQ(json::parse(no_lines->body).at("count"), 0);
+  EXPECT_NE(json::parse(no_lines->body).at("note").get<std::string>().find("nasion"),
+            std::string::npos) << no_lines->body;
   app::PlanNewRequest pn;
   pn.procedure = "z-plasty";
   pn.model = kModel;

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
@@ -24,6 +25,7 @@
 #include "caps/plan/placement.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/plan/procedures.hpp"
+#include "caps/plan/skin_lines.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "json_fields.hpp"
 #include "model_result.hpp"
@@ -36,6 +38,8 @@ CAPS_APP_REQUEST_JSON(caps::app::PlanCheckRequest)
 CAPS_APP_REQUEST_JSON(caps::app::PlanShowRequest)
 CAPS_APP_REQUEST_JSON(caps::app::SaveProcedureRequest)
 CAPS_APP_REQUEST_JSON(caps::app::TemplatesRequest)
+CAPS_APP_REQUEST_JSON(caps::app::SkinLinesRequest)
+CAPS_APP_RESULT_JSON(caps::app::SkinLinesResult)
 CAPS_APP_RESULT_JSON(caps::app::PlanResult)
 CAPS_APP_RESULT_JSON(caps::app::TemplatesResult)
 
@@ -343,6 +347,44 @@ PlanResult run_save_procedure(const SaveProcedureRequest& r, Reporter* reporter)
   const plan::PlanReport report = plan::check_plan_structure(p);
   write_text_atomic(r.output, plan::procedure_to_json(plan::procedure_from_plan(p)) + "\n");
   return plan_result(p, report, r.output, reporter);
+}
+
+SkinLinesResult run_skin_lines(const SkinLinesRequest& r, Reporter*) {
+  const PatientModel model = PatientModel::load(r.model);
+  const plan::SkinLineMap& map = plan::borges_map();
+  SkinLinesResult out;
+  out.model = r.model;
+  out.map = map.name;
+  out.source = map.source;
+  const std::vector<plan::SkinLinePath> paths = plan::trace_skin_lines(
+      map, model, plan::model_landmarks(r.model, model), r.spacing_mm, r.half_length_mm,
+      &out.note);
+  json lines = json::array();
+  std::map<std::string, int> per_zone;
+  for (const plan::SkinLinePath& p : paths) {
+    json lps = json::array(), tz = json::array();
+    for (std::size_t i = 0; i < p.theta_deg.size(); ++i) {
+      const Eigen::Vector3d x = model.skin_point(p.theta_deg[i], p.z_mm[i]);
+      lps.push_back({round_to(x.x(), 3), round_to(x.y(), 3), round_to(x.z(), 3)});
+      tz.push_back({round_to(p.theta_deg[i], 4), round_to(p.z_mm[i], 3)});
+    }
+    lines.push_back({{"zone", p.zone}, {"points_lps", lps}, {"theta_z", tz}});
+    ++per_zone[p.zone];
+  }
+  out.count = static_cast<int>(paths.size());
+  out.lines_json = lines.dump();
+  std::ostringstream text;
+  for (const plan::SkinLineZone& z : map.zones)
+    if (per_zone.count(z.name))
+      text << "  " << z.name << ": " << per_zone[z.name] << " lines; they run " << z.says << "\n";
+  out.zones_text = text.str();
+  return out;
+}
+
+std::string summary(const SkinLinesResult& r) {
+  if (r.count == 0) return cat("no skin lines traced on ", r.model, ": ", r.note);
+  return cat(r.count, " skin lines traced on ", r.model, " (", r.map, "):\n", r.zones_text,
+             "source: ", r.source);
 }
 
 TemplatesResult run_templates(const TemplatesRequest&, Reporter*) {

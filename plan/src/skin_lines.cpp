@@ -2,11 +2,16 @@
 
 #include <nlohmann/json.hpp>
 
+#include <Eigen/Core>
+
+#include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include "caps/core/data_dir.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/json_file.hpp"
+#include "caps/volume/cylindrical_map.hpp"
 
 namespace caps::plan {
 namespace {
@@ -14,6 +19,9 @@ namespace {
 using nlohmann::json;
 
 constexpr double kPi = 3.14159265358979323846;
+// The face trace_skin_lines() draws on, in nose heights (nasion to subnasale) from the nasion.
+constexpr double kFaceBelow = 3.0;
+constexpr double kFaceAbove = 1.6;
 
 double wrap_line(double deg) {
   double d = std::fmod(deg, 180.0);
@@ -138,6 +146,119 @@ SkinLineDirection skin_line_direction(const SkinLineMap& map, const PatientModel
   }
   out.note = cat("the point lies outside the map's face (", std::round(u * h), " mm from the "
                  "midline, ", std::round(v * h), " mm above the nasion)");
+  return out;
+}
+
+std::vector<SkinLinePath> trace_skin_lines(const SkinLineMap& map, const PatientModel& model,
+                                           const Landmarks& landmarks, double spacing_mm,
+                                           double half_length_mm, std::string* note) {
+  if (!(spacing_mm >= 2 && spacing_mm <= 50))
+    throw InvalidParameter(cat("the skin lines' spacing ", spacing_mm, " mm must be in [2, 50]"));
+  if (!(half_length_mm > 0 && half_length_mm <= 50))
+    throw InvalidParameter(
+        cat("the skin lines' half length ", half_length_mm, " mm must be in (0, 50]"));
+  std::vector<SkinLinePath> out;
+  const Landmark* n = landmarks.find("nasion");
+  const Landmark* sn = landmarks.find("subnasale");
+  if (!n || !n->found || !sn || !sn->found || !(n->z_mm - sn->z_mm > 20 && n->z_mm - sn->z_mm < 90)) {
+    // skin_line_direction() says why, in its words.
+    const SkinLineDirection d =
+        skin_line_direction(map, model, landmarks, landmarks.midline_theta_deg, 0.0);
+    if (note) *note = d.note;
+    return out;
+  }
+  const double h = n->z_mm - sn->z_mm;
+  // The face: the map's zones, from kFaceBelow h below the nasion (below the chin) to kFaceAbove
+  // h above it (about the hairline; the map's forehead runs on over the scalp), within the
+  // model's rows.
+  double v_lo = 0, v_hi = 0;
+  for (const SkinLineZone& z : map.zones) {
+    v_lo = std::min(v_lo, z.round ? z.cv - z.radius : z.v_min);
+    v_hi = std::max(v_hi, z.round ? z.cv + z.radius : z.v_max);
+  }
+  const CylinderGrid& g = model.grid();
+  const double z_lo = std::max({n->z_mm + std::max(v_lo, -kFaceBelow) * h, g.z_mm(0)});
+  const double z_hi = std::min({n->z_mm + std::min(v_hi, kFaceAbove) * h, g.z_mm(g.n_z - 1)});
+  // Skin measured there (not above the vertex or below the neck's cut, not where the scan
+  // ends), in `zone` if one is given: a line ends at its zone's border, where the map's
+  // direction jumps.
+  const auto on_skin = [&](double theta, double z, const std::string* zone) {
+    if (!(z >= z_lo && z <= z_hi) || (model.flags_at(theta, z) & (kNoSkin | kTruncated)) != 0)
+      return false;
+    const SkinLineDirection d = skin_line_direction(map, model, landmarks, theta, z);
+    return d.found && (!zone || d.zone == *zone);
+  };
+  const double mid = landmarks.midline_theta_deg;
+  const double to_deg = 180.0 / kPi;
+  // The step along the skin, dtheta per mm across at (theta, z), from the plan's frame.
+  const auto across_deg_per_mm = [&](double theta, double z) {
+    const double r = model.r_skin(theta, z);
+    return std::isfinite(r) && r > 1 ? to_deg / r : NAN;
+  };
+  // The unit direction (mm towards the patient's left, mm up) of the lines of `zone` at
+  // (theta, z), turned to agree with `along` (lines have no sense), or nothing.
+  const auto direction = [&](double theta, double z, const Eigen::Vector2d& along,
+                             const std::string& zone) -> std::optional<Eigen::Vector2d> {
+    const SkinLineDirection d = skin_line_direction(map, model, landmarks, theta, z);
+    const double k = across_deg_per_mm(theta, z);
+    if (!d.found || d.zone != zone || !std::isfinite(k)) return std::nullopt;
+    const double o = d.orientation_deg / to_deg;
+    Eigen::Vector2d step(std::sin(o), std::cos(o));  // mm towards the patient's left, mm up
+    if (step.dot(along) < 0) step = -step;
+    return step;
+  };
+  const auto advance = [&](double& theta, double& z, const Eigen::Vector2d& s) {
+    theta += across_deg_per_mm(theta, z) * s[0];
+    z += s[1];
+  };
+  const int n_steps = static_cast<int>(std::floor(half_length_mm));
+  for (double z0 = z_lo; z0 <= z_hi + 1e-9; z0 += spacing_mm) {
+    const double k0 = across_deg_per_mm(mid, z0);
+    if (!std::isfinite(k0)) continue;
+    const double d_theta = spacing_mm * k0;
+    const int n_side = static_cast<int>(std::floor(90.0 / d_theta));
+    for (int j = -n_side; j <= n_side; ++j) {
+      const double t0 = mid + j * d_theta;
+      if (!on_skin(t0, z0, nullptr)) continue;
+      const SkinLineDirection seed = skin_line_direction(map, model, landmarks, t0, z0);
+      // Traced either way from the seed: midpoint (RK2) steps of 1 mm.
+      std::vector<std::pair<double, double>> half[2];
+      for (int sense = 0; sense < 2; ++sense) {
+        double theta = t0, z = z0;
+        const double o = seed.orientation_deg / to_deg;
+        Eigen::Vector2d along = (sense ? -1.0 : 1.0) * Eigen::Vector2d(std::sin(o), std::cos(o));
+        for (int i = 0; i < n_steps; ++i) {
+          const std::optional<Eigen::Vector2d> d1 = direction(theta, z, along, seed.zone);
+          if (!d1) break;
+          double tm = theta, zm = z;
+          advance(tm, zm, 0.5 * *d1);
+          const std::optional<Eigen::Vector2d> d2 = direction(tm, zm, *d1, seed.zone);
+          if (!d2) break;
+          double tn = theta, zn = z;
+          advance(tn, zn, *d2);
+          if (!std::isfinite(tn) || !on_skin(tn, zn, &seed.zone)) break;
+          theta = tn;
+          z = zn;
+          along = *d2;
+          half[sense].emplace_back(theta, z);
+        }
+      }
+      SkinLinePath path;
+      path.zone = seed.zone;
+      for (auto it = half[1].rbegin(); it != half[1].rend(); ++it) {
+        path.theta_deg.push_back(it->first);
+        path.z_mm.push_back(it->second);
+      }
+      path.theta_deg.push_back(t0);
+      path.z_mm.push_back(z0);
+      for (const auto& [theta, z] : half[0]) {
+        path.theta_deg.push_back(theta);
+        path.z_mm.push_back(z);
+      }
+      if (path.theta_deg.size() >= 2) out.push_back(std::move(path));
+    }
+  }
+  if (out.empty() && note) *note = "no point of the map's face lies on the model's skin";
   return out;
 }
 

@@ -905,6 +905,13 @@ struct PlannerServer::Impl {
                send_json(res, app::find_verb("model landmarks")
                                   .run_json(r.dump(), "landmarks request", nullptr));
              }));
+    // The relaxed skin tension lines over the face (`caps plan skin-lines MODEL --json`).
+    http.Get("/api/skin-lines",
+             guarded([this](const httplib::Request&, httplib::Response& res) {
+               const json r{{"model", current()->dir}};
+               send_json(res, app::find_verb("plan skin-lines")
+                                  .run_json(r.dump(), "skin lines request", nullptr));
+             }));
     http.Get(R"(/api/model/(.+))",
              guarded([this](const httplib::Request& req, httplib::Response& res) {
                send_file(res, file_under(current()->dir, req.matches[1]));

@@ -36,6 +36,24 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page }) => {
   await page.waitForSelector('body[data-ready="true"]', { timeout: 120000 });
   log('page ready, Cranium\'s skin shown');
   await page.screenshot({ path: join(out, '1-loaded.png') });
+  // The relaxed skin tension lines: ticked, they are drawn over the face as the server traced
+  // them (`caps plan skin-lines`), every segment of every line; unticked, gone.
+  await page.check('#show-skin-lines');
+  await page.waitForSelector('body[data-skin-lines="shown"]', { timeout: 30000 });
+  const traced = capsJson(['plan', 'skin-lines', model]);
+  const drawn = await page.evaluate(() => {
+    const g = window.caps.viewA.guides.children.find((o) => o.name === 'skin-lines');
+    return g ? g.geometry.getAttribute('position').count / 2 : 0;
+  });
+  const segments = traced.lines.reduce((n, l) => n + l.points_lps.length - 1, 0);
+  assert.ok(traced.count > 100, `skin lines traced on Cranium: ${traced.count}`);
+  assert.equal(drawn, segments, 'every segment of the traced lines is drawn');
+  assert.match(await page.locator('#status').innerText(), /Borges/);
+  await page.screenshot({ path: join(out, '1-skin-lines.png') });
+  await page.uncheck('#show-skin-lines');
+  await page.waitForSelector('body[data-skin-lines="hidden"]');
+  assert.equal(await page.evaluate(() => window.caps.viewA.guides.children.length), 0);
+  log(`skin lines: ${traced.count} lines of Borges's map, ${segments} segments drawn, then hidden`);
   const state = () => page.evaluate(() => window.caps.planner.state);
   const plan = () => page.evaluate(() => window.caps.planner.plan);
   const checked = () => page.waitForSelector('body[data-check="ok"]', { timeout: 30000 });

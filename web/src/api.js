@@ -56,6 +56,8 @@ export async function getBinary(path) {
 export const api = {
   model: () => getJson('/api/model'),
   skin: () => getJson('/api/skin'),
+  /** The relaxed skin tension lines over the face (`caps plan skin-lines MODEL --json`). */
+  skinLines: () => getJson('/api/skin-lines'),
   templates: () => getJson('/api/templates'),
   /** caps plan new: {procedure, at | at_xyz, orientation, parameters} -> the plan with its check. */
   planNew: (request, signal) => postJson('/api/plan/new', request, signal),

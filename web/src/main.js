@@ -2,6 +2,7 @@
 // menu, the parameter sliders, the plan check, Simulate, the alternatives and save/load.
 import { api, apiFetch } from './api.js';
 import { lpsToScene } from './frames.js';
+import { skinLineObjects } from './overlays.js';
 import { kIncision, Planner } from './planner.js';
 import { showLandmarks } from './landmarks.js';
 import { Results, escapeHtml, whyNotFinished } from './results.js';
@@ -273,6 +274,30 @@ async function main() {
     $('thickness-legend').hidden = !e.target.checked;
     $('thickness-legend').innerHTML = `0<span class="bar"></span>${thicknessMax.toFixed(1)} mm; grey: not measured`;
     viewA.requestRender();
+  });
+
+  // The relaxed skin tension lines, fetched once, drawn on the skin before the operation.
+  let skinLines = null;
+  $('show-skin-lines').addEventListener('change', async (e) => {
+    if (!e.target.checked) {
+      viewA.setGuides([]);
+      document.body.dataset.skinLines = 'hidden';
+      return;
+    }
+    try {
+      skinLines ??= await api.skinLines();
+    } catch (err) {
+      status(`Skin lines: ${err.message}`);
+      e.target.checked = false;
+      return;
+    }
+    if (!e.target.checked) return;  // unticked while they came
+    viewA.setGuides(skinLineObjects(skinLines));
+    status(skinLines.count
+      ? `Skin lines (green): Borges's relaxed skin tension lines (1984), laid on this face by its ` +
+        'nasion, subnasale and midline; schematic, drawn on the skin before the operation.'
+      : `No skin lines here: ${skinLines.note}.`);
+    document.body.dataset.skinLines = 'shown';
   });
 
   // Free incisions and sutures.

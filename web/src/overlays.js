@@ -1,8 +1,12 @@
 // What is drawn over the skin: the plan's cutting lines (tubes along the skin), its points, the
 // handle that moves it, and the sutures of a simulation coloured by their force.
 import {
+  BufferGeometry,
   CatmullRomCurve3,
   Color,
+  Float32BufferAttribute,
+  LineBasicMaterial,
+  LineSegments,
   Mesh,
   MeshBasicMaterial,
   MeshStandardMaterial,
@@ -35,6 +39,24 @@ export function planObjects(view, { refused = false } = {}) {
     objects.push(m);
   }
   return objects;
+}
+
+/** The relaxed skin tension lines ({lines: [{points_lps}]} from /api/skin-lines) as one set of
+ * thin green line segments on the skin before the operation, named 'skin-lines'. */
+export function skinLineObjects(answer) {
+  const xyz = [];
+  for (const line of answer.lines ?? [])
+    for (let i = 1; i < line.points_lps.length; ++i)
+      for (const p of [line.points_lps[i - 1], line.points_lps[i]]) {
+        const v = lpsToScene(p);
+        xyz.push(v.x, v.y, v.z);
+      }
+  if (!xyz.length) return [];
+  const geometry = new BufferGeometry();
+  geometry.setAttribute('position', new Float32BufferAttribute(xyz, 3));
+  const lines = new LineSegments(geometry, new LineBasicMaterial({ color: 0x1f9d55 }));
+  lines.name = 'skin-lines';
+  return [lines];
 }
 
 /** The yellow handle at the plan's centre (dragged to move the plan). */

@@ -72,6 +72,8 @@ export class Viewer {
     this.controls.addEventListener('change', () => this.requestRender());
     this.overlay = new Group();
     this.scene.add(this.overlay);
+    this.guides = new Group();  // drawn beside the overlay: the skin lines
+    this.scene.add(this.guides);
     this.skin = null;
     this.raycaster = new Raycaster();
     this.raycaster.firstHitOnly = true;
@@ -184,6 +186,13 @@ export class Viewer {
     if (!this.pickTarget) return null;
     const hit = this.hits(e, [this.pickTarget])[0];
     return hit ? hit.point : null;
+  }
+
+  /** Replaces the guides' objects (the skin lines), which the overlay's changes leave alone. */
+  setGuides(objects) {
+    this.guides.clear();
+    for (const o of objects) this.guides.add(o);
+    this.requestRender();
   }
 
   /** Replaces the overlay's objects. */

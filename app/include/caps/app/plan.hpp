@@ -131,6 +131,46 @@ struct SaveProcedureRequest {
 /// Saves a plan's procedure (points, paths, excisions, sutures) to reuse with plan new FILE.json.
 PlanResult run_save_procedure(const SaveProcedureRequest& request, Reporter* reporter = nullptr);
 
+// ---- caps plan skin-lines ------------------------------------------------------------------
+
+struct SkinLinesRequest {
+  std::string model;
+  double spacing_mm = 10;
+  double half_length_mm = 4;
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model", "a model directory", FieldKind::Positional, "MODEL_DIR"});
+    v(r.spacing_mm, {"spacing_mm", "mm between the lines' seeds, across and up the face [2, 50]",
+                     FieldKind::Option, "--spacing"});
+    v(r.half_length_mm, {"half_length_mm", "mm each line runs either way from its seed (0, 50]",
+                         FieldKind::Option, "--half-length"});
+  }
+};
+
+/// The relaxed skin tension lines (Borges's map, plan/skin_lines.hpp) traced over a model's face.
+struct SkinLinesResult {
+  std::string model, map, source;
+  int count = 0;
+  std::string lines_json;  ///< [{zone, points_lps: [[x, y, z], ...], theta_z: [[t, z], ...]}]
+  std::string note;        ///< why there are none
+  std::string zones_text;  ///< the zones with their lines, for reading
+
+  template <class Self, class V>
+  static void fields(Self& r, V&& v) {
+    v(r.model, {"model"});
+    v(r.map, {"map", "the map's name"});
+    v(r.source, {"source", "where the map comes from"});
+    v(r.count, {"count", "lines traced"});
+    v.json_value(r.lines_json, {"lines"});
+    v(r.note, {"note", "why no line is traced, or empty"});
+  }
+};
+/// Traces the map over the model's face (from its landmarks: the nasion, the subnasale and the
+/// midline); none, with a note, where the landmarks cannot lay it.
+SkinLinesResult run_skin_lines(const SkinLinesRequest& request, Reporter* reporter = nullptr);
+std::string to_json(const SkinLinesResult& result);
+std::string summary(const SkinLinesResult& result);
+
 struct TemplatesRequest {
   template <class Self, class V>
   static void fields(Self&, V&&) {}

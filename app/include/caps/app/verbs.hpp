@@ -194,6 +194,11 @@ void for_each_verb(F&& f) {
          "design's plan).\n"
          "Example: caps plan suggest --model cranium --at 30,105 --diameter 10 -o suggest",
          &run_plan_suggest});
+  f(Verb{"plan skin-lines",
+         "Trace the relaxed skin tension lines (Borges 1984's map, laid by the model's nasion,\n"
+         "subnasale and midline; docs/plan.md) over a model's face and print them.\n"
+         "Example: caps plan skin-lines cranium --json",
+         &run_skin_lines, Answer::Printed});
   f(Verb{"plan templates", "List the procedure library and its parameters.", &run_templates,
          Answer::Printed});
   f(Verb{"mesh",

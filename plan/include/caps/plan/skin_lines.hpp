@@ -74,6 +74,25 @@ struct SkinLineDirection {
 SkinLineDirection skin_line_direction(const SkinLineMap& map, const PatientModel& model,
                                       const Landmarks& landmarks, double theta_deg, double z_mm);
 
+/// One traced skin line: a short stretch of the map's direction field, through a seed point.
+struct SkinLinePath {
+  std::string zone;                    ///< the seed's zone
+  std::vector<double> theta_deg, z_mm;  ///< the points on the model, 1 mm apart along the skin
+};
+
+/// The map drawn over the face, as the textbooks draw it: from seeds `spacing_mm` apart (in z
+/// and along the skin around the axis; over the face within 90 deg of its midline, from 3 nose
+/// heights below the nasion to 1.6 above it, about the hairline, where the model has skin), each
+/// line traced along the map's direction (midpoint steps of 1 mm, measured as the plan's frame
+/// measures it: r_skin d(theta) across, dz up) for up to `half_length_mm` either way, ending
+/// where the map has no direction (off its face, no skin) or at its zone's border (where the
+/// direction jumps). Empty, with `note` set as skin_line_direction sets it, where the map cannot
+/// be laid on this model. Throws InvalidParameter for a spacing outside [2, 50] mm or a half
+/// length outside (0, 50] mm.
+std::vector<SkinLinePath> trace_skin_lines(const SkinLineMap& map, const PatientModel& model,
+                                           const Landmarks& landmarks, double spacing_mm,
+                                           double half_length_mm, std::string* note = nullptr);
+
 /// The angle between two unoriented lines given as orientations (deg): 0..90.
 double angle_between_lines_deg(double a_deg, double b_deg);
 
