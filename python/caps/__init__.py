@@ -24,7 +24,7 @@ from . import _caps
 __all__ = [
     "Error", "InvalidInput", "InvalidParameter", "IoError", "SolverError", "Cancelled",
     "CapsWarning", "run", "defaults", "verbs", "phantom", "model_from_volume", "model_from_scan",
-    "model_info", "plan_new", "plan_check", "plan_templates", "plan_suggest", "mesh", "simulate", "render",
+    "model_info", "plan_new", "plan_check", "plan_templates", "plan_suggest", "plan_skin_lines", "mesh", "simulate", "render",
     "load_model", "read_result", "model_landmarks", "model_site", "model_chart", "verb_help",
     "compare", "compare_models", "model_sensitivity",
 ]
@@ -150,6 +150,14 @@ def plan_check(plan, model=None):
 def plan_templates():
     """The procedure templates and their parameters (name, unit, default, min, max), a list."""
     return run("plan_templates")
+
+
+def plan_skin_lines(model, **fields):
+    """Borges's relaxed skin tension lines traced over the model's face (caps plan skin-lines);
+    fields: spacing_mm, half_length_mm. Returns {"count", "lines": [{"zone", "points_lps",
+    "theta_z"}], "map", "source", "note"} (count 0 and the reason where the model has no nasion
+    or subnasale)."""
+    return run("plan_skin_lines", model=model, **fields)
 
 
 def plan_suggest(model, at, diameter, output, *, progress=None, **fields):

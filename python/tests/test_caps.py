@@ -124,6 +124,16 @@ def test_a_suggestion_ranks_the_designs_around_a_lesion(model, work):
     assert not (work / "refused").exists()
 
 
+def test_skin_lines_need_the_nose_the_phantom_has_not(model):
+    # The plain phantom has no nasion or subnasale: no line, and why (the face phantom's lines:
+    # tests/test_server.cpp; Cranium's: planner_e2e_cranium).
+    lines = caps.plan_skin_lines(model, spacing_mm=12)
+    assert lines["count"] == 0 and lines["lines"] == []
+    assert "nasion" in lines["note"] and "Borges" in lines["source"]
+    with pytest.raises(caps.InvalidParameter, match="spacing 1 mm"):
+        caps.plan_skin_lines(model, spacing_mm=1)
+
+
 def test_the_generic_run_takes_the_request_json(model, work):
     body = {"procedure": "ellipse", "model": str(model), "at": "0,60", "orientation": 90,
             "parameters": {"length": 15, "width": 4}, "output": str(work / "ellipse.json")}
