@@ -10,6 +10,7 @@
 #include <exception>
 
 #include "caps/app/fields.hpp"
+#include "caps/core/crash_report.hpp"
 #include "caps/core/error.hpp"
 #include "caps/core/reporter.hpp"
 #include "caps/fem/blas.hpp"
@@ -20,6 +21,7 @@ int main(int argc, char** argv) {
   // OpenBLAS chose its generic kernels on a CPU it does not know (fem/blas.hpp): the kernels the
   // CPU runs, before any BLAS work. The factorizations then take about half the time.
   fem::use_the_cpus_blas_kernels();
+  install_crash_report();
   CLI::App app{"caps: computer-aided plastic surgery planning.\n"
                "Builds patient models from CT/MR and surface scans, plans incisions, simulates "
                "wound closure.\nExample: caps model from-volume Cranium.inv3 -o cranium",
