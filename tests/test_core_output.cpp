@@ -135,7 +135,12 @@ TEST_F(Output, AnAbandonedRunLeavesNothingAndMovesNothingIntoPlace) {
 // A fault is reported before the process dies of it (core/crash_report.hpp): the signal named and
 // a call stack on stderr, then the same signal ends the process (ctest and shells see it as
 // before: exit status 128 + signal). The handlers are not installed under AddressSanitizer.
-#if !defined(__SANITIZE_ADDRESS__)
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define CAPS_TEST_ASAN 1
+#endif
+#endif
+#if !defined(__SANITIZE_ADDRESS__) && !defined(CAPS_TEST_ASAN)
 TEST(CrashReport, AFaultSaysWhatAndWhereThenEndsTheProcessWithItsSignal) {
   GTEST_FLAG_SET(death_test_style, "threadsafe");
   EXPECT_EXIT(

@@ -949,6 +949,7 @@ TEST(SkinLines, TracedOverTheFaceAlongTheMapsDirection) {
   std::string note;
   EXPECT_TRUE(trace_skin_lines(map, model, no_sn, 10, 5, &note).empty());
   EXPECT_NE(note.find("subnasale"), std::string::npos) << note;
-  EXPECT_THROW(trace_skin_lines(map, model, lm, 0.5, 5), InvalidParameter);
-  EXPECT_THROW(trace_skin_lines(map, model, lm, 10, 0), InvalidParameter);
+  EXPECT_THROW(trace_skin_lines(map, model, lm, 3, 5), InvalidParameter);
+  EXPECT_THROW(trace_skin_lines(map, model, lm, 10, 0.5), InvalidParameter);
+  EXPECT_THROW(trace_skin_lines(map, model, lm, 10, 31), InvalidParameter);
 }

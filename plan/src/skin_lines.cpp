@@ -152,11 +152,11 @@ SkinLineDirection skin_line_direction(const SkinLineMap& map, const PatientModel
 std::vector<SkinLinePath> trace_skin_lines(const SkinLineMap& map, const PatientModel& model,
                                            const Landmarks& landmarks, double spacing_mm,
                                            double half_length_mm, std::string* note) {
-  if (!(spacing_mm >= 2 && spacing_mm <= 50))
-    throw InvalidParameter(cat("the skin lines' spacing ", spacing_mm, " mm must be in [2, 50]"));
-  if (!(half_length_mm > 0 && half_length_mm <= 50))
+  if (!(spacing_mm >= 4 && spacing_mm <= 50))
+    throw InvalidParameter(cat("the skin lines' spacing ", spacing_mm, " mm must be in [4, 50]"));
+  if (!(half_length_mm >= 1 && half_length_mm <= 30))
     throw InvalidParameter(
-        cat("the skin lines' half length ", half_length_mm, " mm must be in (0, 50]"));
+        cat("the skin lines' half length ", half_length_mm, " mm must be in [1, 30]"));
   std::vector<SkinLinePath> out;
   const Landmark* n = landmarks.find("nasion");
   const Landmark* sn = landmarks.find("subnasale");
@@ -177,8 +177,8 @@ std::vector<SkinLinePath> trace_skin_lines(const SkinLineMap& map, const Patient
     v_hi = std::max(v_hi, z.round ? z.cv + z.radius : z.v_max);
   }
   const CylinderGrid& g = model.grid();
-  const double z_lo = std::max({n->z_mm + std::max(v_lo, -kFaceBelow) * h, g.z_mm(0)});
-  const double z_hi = std::min({n->z_mm + std::min(v_hi, kFaceAbove) * h, g.z_mm(g.n_z - 1)});
+  const double z_lo = std::max(n->z_mm + std::max(v_lo, -kFaceBelow) * h, g.z_mm(0));
+  const double z_hi = std::min(n->z_mm + std::min(v_hi, kFaceAbove) * h, g.z_mm(g.n_z - 1));
   // Skin measured there (not above the vertex or below the neck's cut, not where the scan
   // ends), in `zone` if one is given: a line ends at its zone's border, where the map's
   // direction jumps.

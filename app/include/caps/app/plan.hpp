@@ -140,9 +140,9 @@ struct SkinLinesRequest {
   template <class Self, class V>
   static void fields(Self& r, V&& v) {
     v(r.model, {"model", "a model directory", FieldKind::Positional, "MODEL_DIR"});
-    v(r.spacing_mm, {"spacing_mm", "mm between the lines' seeds, across and up the face [2, 50]",
+    v(r.spacing_mm, {"spacing_mm", "mm between the lines' seeds, across and up the face [4, 50]",
                      FieldKind::Option, "--spacing"});
-    v(r.half_length_mm, {"half_length_mm", "mm each line runs either way from its seed (0, 50]",
+    v(r.half_length_mm, {"half_length_mm", "mm each line runs either way from its seed [1, 30]",
                          FieldKind::Option, "--half-length"});
   }
 };

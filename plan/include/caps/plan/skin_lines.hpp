@@ -87,8 +87,8 @@ struct SkinLinePath {
 /// measures it: r_skin d(theta) across, dz up) for up to `half_length_mm` either way, ending
 /// where the map has no direction (off its face, no skin) or at its zone's border (where the
 /// direction jumps). Empty, with `note` set as skin_line_direction sets it, where the map cannot
-/// be laid on this model. Throws InvalidParameter for a spacing outside [2, 50] mm or a half
-/// length outside (0, 50] mm.
+/// be laid on this model. Throws InvalidParameter for a spacing outside [4, 50] mm or a half
+/// length outside [1, 30] mm (at most about ten thousand lines of 61 points).
 std::vector<SkinLinePath> trace_skin_lines(const SkinLineMap& map, const PatientModel& model,
                                            const Landmarks& landmarks, double spacing_mm,
                                            double half_length_mm, std::string* note = nullptr);
