@@ -825,7 +825,9 @@ TEST(ProcedureLibrary, AMissingDataFolderIsAnErrorNamingCapsDataDir) {
 // by a nasion at z 60 and a subnasale at z 10 on the midline theta 0 (h = 50 mm): a point's
 // frame is u = 80 |sin theta| / 50 from the midsagittal plane, v = (z - 60) / 50; each zone
 // gives the direction Borges's map draws there, mirrored on the patient's right.
-TEST(SkinLines, BorgessMapLaidOnTheFaceByItsLandmarks) {
+// The face the skin lines are laid on: a nasion at z 60 and a subnasale at z 10 on the midline
+// theta 0 of the test cylinder.
+Landmarks nose_on_the_cylinder() {
   Landmarks lm;
   lm.midline_theta_deg = 0;
   for (const auto& [name, z] : {std::pair<const char*, double>{"nasion", 60.0}, {"subnasale", 10.0}}) {
@@ -836,6 +838,11 @@ TEST(SkinLines, BorgessMapLaidOnTheFaceByItsLandmarks) {
     l.z_mm = z;
     lm.items.push_back(l);
   }
+  return lm;
+}
+
+TEST(SkinLines, BorgessMapLaidOnTheFaceByItsLandmarks) {
+  const Landmarks lm = nose_on_the_cylinder();
   const SkinLineMap& map = borges_map();
   EXPECT_EQ(map.zones.size(), 10u);
   EXPECT_NE(map.source.find("Borges"), std::string::npos);
@@ -896,15 +903,7 @@ TEST(SkinLines, BorgessMapLaidOnTheFaceByItsLandmarks) {
 // a line runs along the map's direction at its middle, 1 mm along the skin (r dtheta across, dz
 // up, the plan's frame); the forehead's lines keep their height, the glabella's their theta.
 TEST(SkinLines, TracedOverTheFaceAlongTheMapsDirection) {
-  Landmarks lm;
-  lm.midline_theta_deg = 0;
-  for (const auto& [name, z] : {std::pair<const char*, double>{"nasion", 60.0}, {"subnasale", 10.0}}) {
-    Landmark l;
-    l.name = name;
-    l.found = true;
-    l.z_mm = z;
-    lm.items.push_back(l);
-  }
+  const Landmarks lm = nose_on_the_cylinder();
   const SkinLineMap& map = borges_map();
   const PatientModel& model = cylinder();
   const std::vector<SkinLinePath> paths = trace_skin_lines(map, model, lm, 10, 5);

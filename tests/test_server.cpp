@@ -997,13 +997,17 @@ TEST_F(ServerTest, LandmarksAreTheCliAnswerAndAPlanIsPlacedAtOneAsTheCliPlacesIt
   c.set_read_timeout(120, 0);
   c.set_default_headers({{server::kTokenHeader, s.token()}});
 
-  const auto marks = c.Get("/api/landmarks");
-  ASSERT_TRUE(marks);
-  ASSERT_EQ(marks->status, 200) << marks->body;
-  const json got = json::parse(marks->body);
-  const auto cli = caps_test::caps("model landmarks " + face + " --no-write --json -q");
-  ASSERT_EQ(cli.code, 0) << cli.out;
-  EXPECT_EQ(got, json::parse(cli.out));
+  // A route's answer, which must be the caps program's JSON answer to `verb`.
+  const auto the_clis_answer = [&](const char* route, const std::string& verb) {
+    const auto got = c.Get(route);
+    EXPECT_TRUE(got && got->status == 200) << route << ": " << (got ? got->body : "no answer");
+    const auto cli = caps_test::caps(verb + " --json -q");
+    EXPECT_EQ(cli.code, 0) << cli.out;
+    const json answer = got && got->status == 200 ? json::parse(got->body) : json();
+    EXPECT_EQ(answer, json::parse(cli.out)) << route;
+    return answer;
+  };
+  const json got = the_clis_answer("/api/landmarks", "model landmarks " + face + " --no-write");
   const json glabella = got.at("items").at("glabella");
   ASSERT_EQ(glabella.at("found"), true) << glabella.dump();
   EXPECT_GT(glabella.at("thickness_mm").get<double>(), 0);
@@ -1011,14 +1015,8 @@ TEST_F(ServerTest, LandmarksAreTheCliAnswerAndAPlanIsPlacedAtOneAsTheCliPlacesIt
   EXPECT_EQ(fs::last_write_time(fs::path(face) / "model.json"), written);
   // GET /api/skin-lines is `caps plan skin-lines --json` of the served model: the face
   // phantom's nasion and subnasale lay Borges's map on it, every line's points on its skin.
-  const auto lines = c.Get("/api/skin-lines");
-  ASSERT_TRUE(lines);
-  ASSERT_EQ(lines->status, 200) << lines->body;
-  const json traced = json::parse(lines->body);
-  const auto lines_cli = caps_test::caps("plan skin-lines " + face + " --json -q");
-  ASSERT_EQ(lines_cli.code, 0) << lines_cli.out;
-  EXPECT_EQ(traced, json::parse(lines_cli.out));
-  EXPECT_GT(traced.at("count").get<int>(), 50) << traced.dump().substr(0, 400);
+  const json traced = the_clis_answer("/api/skin-lines", "plan skin-lines " + face);
+  ASSERT_GT(traced.at("count").get<int>(), 50) << traced.dump().substr(0, 400);
   EXPECT_EQ(traced.at("lines").size(), traced.at("count").get<std::size_t>());
   std::set<std::string> zones;
   for (const json& l : traced.at("lines")) {
