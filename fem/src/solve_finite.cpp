@@ -857,8 +857,8 @@ std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, do
   // the last step's first solve needed) is two or more rungs above it: then from the rung below
   // the guess, and, if that rung holds, down by bisection to the smallest that does (the 45 deg
   // Z-plasty planner_e2e saves on the phantom, closed with finite strain, climbed seven rungs,
-  // 0 to 1, at the first solve of each of four steps). Either way the chosen shift is the same; only the factorizations tried on the
-  // way differ.
+  // 0 to 1, at the first solve of each of four steps). Either way the chosen shift is the same;
+  // only the factorizations tried on the way differ.
   int found = kNoRung;
   const int remembered = guess > 0 ? shift_rung(guess) : kNoRung;
   const bool guessed = remembered != kNoRung && remembered - 1 > lowest;
