@@ -8,6 +8,7 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/plane_geometry.hpp"
+#include "caps/core/point_bins.hpp"
 #include "caps/core/union_find.hpp"
 #include "caps/core/units.hpp"
 #include "caps/fem/material_registry.hpp"
@@ -297,32 +298,16 @@ void Join::append_tissue(const Region& region) {
                              ? o_.tie_tolerance_mm
                              : 3.0 * std::max(tissue_.options.face_size_mm,
                                               tissue_.label_voxel_mm.maxCoeff());
-    std::map<std::array<long, 3>, std::vector<Eigen::Vector3d>> rim_cells;
-    const auto cell = [&](const Eigen::Vector3d& x) {
-      return std::array<long, 3>{static_cast<long>(std::floor(x.x() / reach)),
-                                 static_cast<long>(std::floor(x.y() / reach)),
-                                 static_cast<long>(std::floor(x.z() / reach))};
-    };
-    for (int n : wound_.continuum.rim_nodes) {
-      const Eigen::Vector3d x = wound_.continuum.mesh.nodes.row(n).transpose();
-      rim_cells[cell(x)].push_back(x);
-    }
+    Eigen::MatrixX3d rim(static_cast<Eigen::Index>(wound_.continuum.rim_nodes.size()), 3);
+    for (std::size_t i = 0; i < wound_.continuum.rim_nodes.size(); ++i)
+      rim.row(static_cast<Eigen::Index>(i)) =
+          wound_.continuum.mesh.nodes.row(wound_.continuum.rim_nodes[i]);
+    const PointBins rim_bins(std::move(rim), reach);
     for (Eigen::Index id = 0; id < q.nodes.rows(); ++id) {
       if (is_fixed[id]) continue;
-      const Eigen::Vector3d x = q.nodes.row(id).transpose();
-      const std::array<long, 3> c = cell(x);
       bool near = false;
-      for (long i = -1; i <= 1 && !near; ++i)
-        for (long j = -1; j <= 1 && !near; ++j)
-          for (long k = -1; k <= 1 && !near; ++k) {
-            const auto it = rim_cells.find({c[0] + i, c[1] + j, c[2] + k});
-            if (it == rim_cells.end()) continue;
-            for (const Eigen::Vector3d& r : it->second)
-              if ((r - x).norm() <= reach) {
-                near = true;
-                break;
-              }
-          }
+      rim_bins.near(q.nodes.row(id).transpose(),
+                    [&](Eigen::Index, double d2) { near = near || std::sqrt(d2) <= reach; });
       if (near) is_fixed[id] = 1;
     }
   }

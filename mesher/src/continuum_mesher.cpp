@@ -2,6 +2,7 @@
 
 #include "caps/core/error.hpp"
 #include "caps/core/plane_geometry.hpp"
+#include "caps/core/point_bins.hpp"
 #include "caps/core/reporter.hpp"
 #include "caps/fem/elements.hpp"
 #include "caps/surface/patient_model.hpp"
@@ -631,24 +632,15 @@ void ContinuumBuild::add_sliding_base() {
     face_vector.push_back(n);
     face_centre.push_back(c / static_cast<double>(poly.size()));
   }
-  std::map<std::array<long, 3>, std::vector<int>> cells;  // faces by kNormalRadiusMm cube
-  auto cell_of = [&](const Eigen::Vector3d& x) {
-    return std::array<long, 3>{std::lround(std::floor(x.x() / kNormalRadiusMm)),
-                               std::lround(std::floor(x.y() / kNormalRadiusMm)),
-                               std::lround(std::floor(x.z() / kNormalRadiusMm))};
-  };
-  for (std::size_t f = 0; f < face_centre.size(); ++f) cells[cell_of(face_centre[f])].push_back(static_cast<int>(f));
+  Eigen::MatrixX3d centres(static_cast<Eigen::Index>(face_centre.size()), 3);
+  for (std::size_t f = 0; f < face_centre.size(); ++f)
+    centres.row(static_cast<Eigen::Index>(f)) = face_centre[f].transpose();
+  const PointBins faces(std::move(centres), kNormalRadiusMm);
   auto base_normal = [&](const Eigen::Vector3d& x) {
     Eigen::Vector3d n = Eigen::Vector3d::Zero();
-    const auto c = cell_of(x);
-    for (long i = -1; i <= 1; ++i)
-      for (long j = -1; j <= 1; ++j)
-        for (long k = -1; k <= 1; ++k) {
-          const auto it = cells.find({c[0] + i, c[1] + j, c[2] + k});
-          if (it == cells.end()) continue;
-          for (int f : it->second)
-            if ((face_centre[f] - x).norm() <= kNormalRadiusMm) n += face_vector[f];
-        }
+    faces.near(x, [&](Eigen::Index f, double d2) {
+      if (std::sqrt(d2) <= kNormalRadiusMm) n += face_vector[static_cast<std::size_t>(f)];
+    });
     if (n.norm() > 0) return n;
     std::size_t nearest = 0;
     for (std::size_t f = 1; f < face_centre.size(); ++f)

@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "caps/core/error.hpp"
+#include "caps/core/point_bins.hpp"
 
 namespace caps {
 namespace {
@@ -46,43 +47,6 @@ AnatomicalFrame anatomical_frame(const PatientModel& model) {
   return fr;
 }
 
-namespace {
-
-// Samples binned in cubic cells of `size`: the samples within `size` of a point lie in its cell
-// or the 26 around it (displacement_from_samples()'s reach, blend_across_seam()'s width).
-struct SampleBins {
-  Eigen::MatrixX3d P, U;
-  double size;
-  std::map<std::array<long, 3>, std::vector<Eigen::Index>> cells;
-
-  // Bins the samples whose point (and, with finite_values, value) is finite.
-  SampleBins(Eigen::MatrixX3d points, Eigen::MatrixX3d values, double size_mm, bool finite_values)
-      : P(std::move(points)), U(std::move(values)), size(size_mm) {
-    for (Eigen::Index i = 0; i < P.rows(); ++i)
-      if (P.row(i).allFinite() && (!finite_values || U.row(i).allFinite()))
-        cells[cell(P.row(i).transpose())].push_back(i);
-  }
-  std::array<long, 3> cell(const Eigen::Vector3d& x) const {
-    return {static_cast<long>(std::floor(x.x() / size)),
-            static_cast<long>(std::floor(x.y() / size)),
-            static_cast<long>(std::floor(x.z() / size))};
-  }
-  // f(sample, squared distance) for each sample in x's cell and the 26 around it.
-  template <class F>
-  void near(const Eigen::Vector3d& x, F&& f) const {
-    const std::array<long, 3> c = cell(x);
-    for (long i = -1; i <= 1; ++i)
-      for (long j = -1; j <= 1; ++j)
-        for (long k = -1; k <= 1; ++k) {
-          const auto it = cells.find({c[0] + i, c[1] + j, c[2] + k});
-          if (it == cells.end()) continue;
-          for (Eigen::Index n : it->second) f(n, (P.row(n).transpose() - x).squaredNorm());
-        }
-  }
-};
-
-}  // namespace
-
 DisplacementAt displacement_from_samples(const Eigen::MatrixX3d& points,
                                          const Eigen::MatrixX3d& displacements, double radius_mm) {
   if (points.rows() != displacements.rows())
@@ -91,10 +55,10 @@ DisplacementAt displacement_from_samples(const Eigen::MatrixX3d& points,
   if (!(radius_mm > 0) || !std::isfinite(radius_mm))
     throw InvalidInput(
         cat("displacement_from_samples: radius ", radius_mm, " mm must be positive"));
-  auto s = std::make_shared<const SampleBins>(points, displacements, radius_mm, false);
-  return [s](const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
+  auto s = std::make_shared<const PointBins>(points, radius_mm);
+  return [s, U = displacements](const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
     if (!x.allFinite()) return std::nullopt;
-    const double r2 = s->size * s->size;
+    const double r2 = s->size() * s->size();
     Eigen::Vector3d sum(0, 0, 0);
     double wsum = 0;
     Eigen::Index at = -1;  // a sample the point is (its own value)
@@ -104,10 +68,10 @@ DisplacementAt displacement_from_samples(const Eigen::MatrixX3d& points,
         at = n;
         return;
       }
-      sum += s->U.row(n).transpose() / d2;
+      sum += U.row(n).transpose() / d2;
       wsum += 1.0 / d2;
     });
-    if (at >= 0) return Eigen::Vector3d(s->U.row(at).transpose());
+    if (at >= 0) return Eigen::Vector3d(U.row(at).transpose());
     if (wsum == 0) return std::nullopt;
     return Eigen::Vector3d(sum / wsum);
   };
@@ -121,18 +85,21 @@ DisplacementAt blend_across_seam(DisplacementAt far, const Eigen::MatrixX3d& poi
   if (!(width_mm > 0) || !std::isfinite(width_mm))
     throw InvalidInput(cat("blend_across_seam: width ", width_mm, " mm must be positive"));
   if (!far) throw InvalidInput("blend_across_seam: no field to blend into");
-  auto s = std::make_shared<const SampleBins>(points, values, width_mm, true);
-  return [s, far = std::move(far)](const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
+  // The samples whose value is known too.
+  auto s = std::make_shared<const PointBins>(
+      points, width_mm, [&values](Eigen::Index i) { return values.row(i).allFinite(); });
+  return [s, U = values, far = std::move(far)](
+             const Eigen::Vector3d& x) -> std::optional<Eigen::Vector3d> {
     const std::optional<Eigen::Vector3d> f = far(x);
     if (!x.allFinite()) return f;
-    double best = s->size * s->size;
+    double best = s->size() * s->size();
     Eigen::Index nearest = -1;
     s->near(x, [&](Eigen::Index n, double d2) {
       if (d2 < best) best = d2, nearest = n;
     });
     if (nearest < 0) return f;
-    const double t = std::sqrt(best) / s->size;  // 0 on the seam, 1 a width away
-    return Eigen::Vector3d((1 - t) * s->U.row(nearest).transpose() +
+    const double t = std::sqrt(best) / s->size();  // 0 on the seam, 1 a width away
+    return Eigen::Vector3d((1 - t) * U.row(nearest).transpose() +
                            t * f.value_or(Eigen::Vector3d::Zero()));
   };
 }
