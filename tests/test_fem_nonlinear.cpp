@@ -786,6 +786,21 @@ TEST(FiniteStrain, ResultJsonRecordsTheModelAndTheNewtonHistory) {
   EXPECT_NE(json.find("\"material\": \"neo-hookean\""), std::string::npos);
   EXPECT_NE(json.find("\"newton\""), std::string::npos);
   EXPECT_NE(json.find("\"relative_residuals\""), std::string::npos);
+  EXPECT_NE(json.find("\"corrections_mm\""), std::string::npos);
+  // One correction per solve, the largest move of a dof (mm); the last, at convergence, a
+  // thousandth of the largest at most.
+  ASSERT_FALSE(r.newton_steps.empty());
+  double largest = 0;
+  for (const NewtonStep& s : r.newton_steps) {
+    ASSERT_EQ(s.corrections_mm.size(), static_cast<std::size_t>(s.iterations));
+    ASSERT_EQ(s.corrections_mm.size(), s.shifts.size());
+    for (const double c : s.corrections_mm) {
+      EXPECT_TRUE(std::isfinite(c) && c >= 0) << c;
+      largest = std::max(largest, c);
+    }
+  }
+  EXPECT_GT(largest, 0.1);  // the slot is closed by millimetres
+  EXPECT_LT(r.newton_steps.back().corrections_mm.back(), 1e-3 * largest);
   std::filesystem::remove_all(dir);
 }
 

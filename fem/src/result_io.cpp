@@ -69,7 +69,7 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
                        {"cutbacks", s.cutbacks},
                        {"factorizations", s.factorizations}, {"relative_residuals", s.residual_norms},
                        {"line_search", s.line_search}, {"shifts", s.shifts},
-                       {"stagnated", s.stagnated}});
+                       {"corrections_mm", s.corrections_mm}, {"stagnated", s.stagnated}});
     j["newton"] = {{"iterations", r.newton_iterations}, {"factorizations", r.factorizations},
                    {"indefinite_factorizations", r.indefinite_factorizations},
                    {"secant_predictions", r.secant_predictions},

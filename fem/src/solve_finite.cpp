@@ -545,6 +545,7 @@ IterationOutcome FiniteStrainSolver::newton_iteration(StepAttempt& s, int it) {
   s.energy = energy_at;
   // alpha |dq|, or the move including the projection onto the surface
   const double du = projected_ ? (q_trial_ - q_).norm() : alpha * dq.norm();
+  const double du_max = projected_ ? (q_trial_ - q_).lpNorm<Eigen::Infinity>() : alpha * dq_max;
   q_ = q_trial_;
   const double rn = sys_.f.norm();
   if (alpha < kPoorStep * alpha_start)
@@ -555,6 +556,7 @@ IterationOutcome FiniteStrainSolver::newton_iteration(StepAttempt& s, int it) {
     s.damping = shift;
   record.line_search.push_back(alpha);
   record.shifts.push_back(shift);
+  record.corrections_mm.push_back(du_max);
   record.residual_norms.push_back(rn / s.r0);
   if (!std::isfinite(rn) || rn > kDivergence * s.r0) {
     s.failure = Failure{cat("the Newton iteration diverges (residual ", rn / s.r0,

@@ -191,6 +191,9 @@ struct NewtonStep {
   /// Per iteration, the shift mu that made the tangent positive definite (K + mu diag(K)), 0
   /// where the tangent itself was: non-zero past a buckling point (the tissue puckers).
   std::vector<double> shifts;
+  /// Per iteration, the largest move of a dof by its correction (mm, alpha |dq|_inf): what the
+  /// displacement tolerance weighs, in the unit a surgeon reads.
+  std::vector<double> corrections_mm;
   /// Accepted at NewtonOptions::stagnation_tolerance after max_iterations, not at the tolerances.
   bool stagnated = false;
 };
