@@ -43,13 +43,18 @@ namespace {
 const fs::path kTmp = caps_test::program_folder("caps_test_server_hostile");
 const std::string kModel = (kTmp / "model").string();
 
-// How soon a cancellation or a stop must take effect here. Issue 36 asks for a second and it is
-// measured within one on a quiet machine (docs/reliability.md, "The local planner server"); in
-// the suite, beside two other test programs, one factorization or meshing step between two
-// checks takes up to 2 s (1.3-1.8 s seen here; the CI machine ran the suite 1.6-1.9 times
-// slower). The bound still fails a cancellation that is not checked at all, which takes the rest
-// of the simulation (tens of seconds).
-constexpr double kCancelBoundS = 5.0;
+// How soon a cancelled simulate or suggest request is answered (409): issue 35 asks for a
+// second. The request's work runs on a thread of its own and the request answers as soon as it
+// is cancelled (PlannerServer, run_cancellable), whatever the machine's load; the work itself
+// stops at its next check. Before (7 December 2026) the request waited for that check: 9.2 s once
+// in the suite, one factorization and its fallback between two checks.
+constexpr double kCancelBoundS = 1.0;
+// How soon a stop takes effect: the server waits for the work to stop, at its next check; in the
+// suite, beside two other test programs, one factorization or meshing step between two checks
+// takes up to 2 s (1.3-1.8 s seen here; the CI machine ran the suite 1.6-1.9 times slower). The
+// bound still fails a stop that is not checked at all, which takes the rest of the simulation
+// (tens of seconds).
+constexpr double kStopBoundS = 5.0;
 
 double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
@@ -647,7 +652,7 @@ TEST_F(HostileTest, StopCancelsASimulationAndRemovesTheWorkFolder) {
   stopping.reset();  // stop(), listen() returns, the server is destroyed
   const double took = seconds_since(t0);
   std::printf("[          ] stop() with a simulation running: %.3f s\n", took);
-  EXPECT_LT(took, kCancelBoundS);
+  EXPECT_LT(took, kStopBoundS);
   EXPECT_FALSE(fs::exists(work));
   sim.thread.join();
   EXPECT_NE(sim.status, 200);
@@ -738,7 +743,7 @@ TEST_F(HostileTest, SigintOrSigtermStopsCapsServeWithinASecond) {
     ::close(err[0]);
     std::printf("[          ] caps serve stopped %.3f s after %s\n", took,
                 signal == SIGINT ? "SIGINT" : "SIGTERM");
-    EXPECT_LT(took, kCancelBoundS);
+    EXPECT_LT(took, kStopBoundS);
     EXPECT_TRUE(WIFEXITED(status)) << "ended by signal " << (WIFSIGNALED(status) ? WTERMSIG(status) : 0)
                                    << "\n" << stderr_text;
     EXPECT_NE(stderr_text.find(signal == SIGINT ? "SIGINT: stopping" : "SIGTERM: stopping"),

@@ -23,6 +23,7 @@
 #include <atomic>
 #include <cctype>
 #include <chrono>
+#include <condition_variable>
 #include <cerrno>
 #include <cmath>
 #include <csignal>
@@ -216,11 +217,12 @@ class SimulationReporter : public Reporter {
  protected:
   void on_warning(const std::string& m) override { caps::warn(outer_, m); }
   void on_note(const std::string& m) override { caps::note(outer_, m); }
+  // A cancelled simulation's last steps, until its next check, are not shown.
   void on_progress(const std::string& step, double fraction) override {
-    if (outer_) outer_->progress(step, fraction);
+    if (outer_ && !is_cancelled()) outer_->progress(step, fraction);
   }
   void on_step_done(const std::string& step) override {
-    if (outer_) outer_->step_done(step);
+    if (outer_ && !is_cancelled()) outer_->step_done(step);
   }
 
  private:
@@ -248,6 +250,16 @@ class ProgressBoard : public Reporter {
     first_answer_ = std::move(result);
   }
   void finish() { set("", 1, false); }
+  /// The running request was cancelled and answered: not running any more for the page, while
+  /// its work stops at its next check (run_cancellable) and then finishes the board.
+  void cancel() {
+    bool was_running = false;
+    {
+      std::lock_guard<std::mutex> lock(m_);
+      was_running = running_;
+    }
+    if (was_running) set("stopping the cancelled simulation", 0, false);
+  }
   /// Seconds spent in each progress step of the last simulation ({"meshing and solving": ...}).
   json steps_s() const {
     std::lock_guard<std::mutex> lock(m_);
@@ -382,31 +394,75 @@ struct PlannerServer::Impl {
   }
   std::unique_ptr<ProgressBoard> progress;
 
+  // A simulate or suggest request's ticket: it makes the request the latest, so an older one
+  // still running is cancelled (its reporter sees a newer ticket) and a newer one, DELETE
+  // /api/simulate or the server's stop will cancel this. Passes progress on to the board.
+  std::shared_ptr<SimulationReporter> new_ticket() {
+    auto ticket = std::make_shared<SimulationReporter>(latest_simulation, ++latest_simulation,
+                                                       stop_requested, progress.get());
+    progress->cancel();  // the running one, if any
+    return ticket;
+  }
+
   // The simulation's slot, held by one simulate or suggest request at a time
-  // (kMaxConcurrentSimulations = 1). Taking it makes the request the latest, so an older one still
-  // running is cancelled (its reporter sees a newer ticket) and a newer one will cancel this; it
-  // waits for the running one to stop, then shows this one on the progress board until released.
+  // (kMaxConcurrentSimulations = 1): waits for the running one to stop, then shows this one on
+  // the progress board until released.
   class SimulationSlot {
    public:
-    explicit SimulationSlot(Impl& s)
-        : cancellable_(s.latest_simulation, ++s.latest_simulation, s.stop_requested,
-                       s.progress.get()),
-          lock_(s.simulation_mutex),
-          board_(*s.progress) {
-      cancellable_.check_cancelled();
+    SimulationSlot(Impl& s, const SimulationReporter& ticket)
+        : lock_(s.simulation_mutex), board_(*s.progress) {
+      ticket.check_cancelled();  // a newer request came while this one waited
       board_.start();
     }
     ~SimulationSlot() { board_.finish(); }
     SimulationSlot(const SimulationSlot&) = delete;
     SimulationSlot& operator=(const SimulationSlot&) = delete;
-    /// Passes progress on to the board and is cancelled by a newer request or the server's stop.
-    Reporter& reporter() { return cancellable_; }
 
    private:
-    SimulationReporter cancellable_;
     std::lock_guard<std::mutex> lock_;
     ProgressBoard& board_;
   };
+
+  // Simulate and suggest run on a thread of their own while the request's thread waits for
+  // their answer: a cancelled request (a newer one, DELETE /api/simulate, the server's stop) is
+  // answered 409 within kCancelPollMs, while its work stops at its own next check, which can be
+  // a factorization later (several seconds on a loaded machine: the hostile-input test saw 9 s).
+  // The work holds the slot until it has stopped, so the next request still starts after it.
+  static constexpr int kCancelPollMs = 20;
+  std::mutex workers_mutex;
+  std::condition_variable workers_done;
+  int workers = 0;  // work threads still running (workers_mutex)
+
+  std::string run_cancellable(const std::shared_ptr<SimulationReporter>& ticket,
+                              std::function<std::string()> work) {
+    auto answer = std::make_shared<std::promise<std::string>>();
+    std::future<std::string> answered = answer->get_future();
+    {
+      std::lock_guard<std::mutex> lock(workers_mutex);
+      ++workers;
+    }
+    std::thread([this, answer, work = std::move(work)] {
+      try {
+        answer->set_value(work());
+      } catch (...) {
+        answer->set_exception(std::current_exception());
+      }
+      // Notified under the lock: once it is released the server may be destroyed, and this
+      // thread touches nothing of it any more.
+      std::lock_guard<std::mutex> lock(workers_mutex);
+      --workers;
+      workers_done.notify_all();
+    }).detach();
+    while (answered.wait_for(std::chrono::milliseconds(kCancelPollMs)) !=
+           std::future_status::ready)
+      ticket->check_cancelled();
+    return answered.get();
+  }
+
+  void wait_for_workers() {
+    std::unique_lock<std::mutex> lock(workers_mutex);
+    workers_done.wait(lock, [this] { return workers == 0; });
+  }
   std::mutex views_mutex;   // writing the skin's .glb files (once each)
   std::mutex export_mutex;  // rendering a result's export (once each)
   std::map<std::string, std::shared_future<void>> tension_files;  // by result id (views_mutex)
@@ -599,9 +655,20 @@ struct PlannerServer::Impl {
     const std::string request = options_json.dump();
     verb.check_json(request, source);  // a mistake is answered at once, not after the queue
     write_text_atomic(plan, plan_text);
+    const std::shared_ptr<SimulationReporter> ticket = new_ticket();
+    return run_cancellable(ticket, [=, this, &verb] {
+      return simulate_in_slot(*ticket, verb, request, source, options_json, first_answer, on,
+                              plan_text, id);
+    });
+  }
 
-    SimulationSlot slot(*this);
-    Reporter& cancellable = slot.reporter();
+  // simulate()'s work, on its own thread (run_cancellable).
+  std::string simulate_in_slot(SimulationReporter& cancellable, const app::VerbEntry& verb,
+                               const std::string& request, const std::string& source,
+                               const json& options_json, bool first_answer,
+                               const std::shared_ptr<const Served>& on,
+                               const std::string& plan_text, int id) {
+    SimulationSlot slot(*this, cancellable);
     const auto t0 = std::chrono::steady_clock::now();
     const auto since_t0 = [&] {
       return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -657,9 +724,19 @@ struct PlannerServer::Impl {
     const app::VerbEntry& verb = app::find_verb("plan suggest");
     const std::string request = j.dump();
     verb.check_json(request, source);  // a mistake is answered at once, not after the queue
-    SimulationSlot slot(*this);
+    const std::shared_ptr<SimulationReporter> ticket = new_ticket();
+    return run_cancellable(ticket, [=, this, &verb] {
+      return suggest_in_slot(*ticket, verb, request, source, on, id);
+    });
+  }
+
+  // suggest()'s work, on its own thread (run_cancellable).
+  std::string suggest_in_slot(SimulationReporter& cancellable, const app::VerbEntry& verb,
+                              const std::string& request, const std::string& source,
+                              const std::shared_ptr<const Served>& on, int id) {
+    SimulationSlot slot(*this, cancellable);
     const auto t0 = std::chrono::steady_clock::now();
-    verb.run_json(request, source, &slot.reporter());
+    verb.run_json(request, source, &cancellable);
     json out = json::parse(read_file(work / "results" / std::to_string(id) / "suggestions.json"));
     out["timings_s"]["suggest"] =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -969,6 +1046,7 @@ struct PlannerServer::Impl {
                 guarded([this](const httplib::Request&, httplib::Response& res) {
                   const bool running = progress->snapshot().value("running", false);
                   ++latest_simulation;
+                  progress->cancel();
                   send_json(res, json{{"cancelled", running}}.dump());
                 }));
     http.Get(R"(/api/results/([0-9]+)/(.+))",
@@ -1044,6 +1122,7 @@ PlannerServer::PlannerServer(ServerOptions options, Reporter* reporter)
 
 PlannerServer::~PlannerServer() {
   stop();
+  impl_->wait_for_workers();  // cancelled by stop(); each ends at its next check
   for (auto& [id, job] : impl_->tension_files) job.wait();
   std::error_code ec;
   fs::remove_all(impl_->work, ec);
