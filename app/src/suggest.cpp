@@ -49,11 +49,14 @@ double seconds_since(Clock::time_point t0) {
 }
 
 /// The closures suggest lays around a lesion: each one's template parameters for a lesion whose
-/// excised disc (the lesion and its margin) has radius `r_mm`, and the orientations that differ
-/// (an ellipse is the same turned 180 deg; a rhomboid's flap is not).
+/// excised disc (the lesion and its margin) has radius `r_mm`, the orientations that differ
+/// (an ellipse is the same turned 180 deg; a rhomboid's flap is not), and a flap's two mirror
+/// images where turning it does not give them (a bilobed flap's lobes to either side).
 struct Fit {
   std::map<std::string, double> parameters;
   double turn_deg = 180;  ///< orientations are taken in [0, turn_deg)
+  std::string side_parameter;  ///< the template's parameter for the side ("" where none)
+  std::vector<double> sides{0};  ///< its values tried (1: left of the orientation, -1: right)
 };
 
 /// An ellipse of `ratio` (length / width): the library's outline is the rhombus of its length,
@@ -61,14 +64,32 @@ struct Fit {
 /// L W / (2 sqrt(L^2 + W^2)); it is the excised disc when W = 2 r sqrt(k^2 + 1) / k.
 /// A Limberg rhomboid (60 and 120 deg) of side s has an inscribed circle of radius s sin 60 / 2
 /// (half its height): s = 4 r / sqrt 3.
+/// A bilobed flap's defect is a disc of its radius about the template's origin (with its
+/// Burow's triangle towards the pivot): the radius is r; the lobes (Zitelli's 45 deg apart, the
+/// second 0.75 of the first) to the left or the right of the axis from the pivot through the
+/// defect, which is the orientation.
 Fit fit(const std::string& procedure, double r_mm, double ratio) {
   if (procedure == "ellipse") {
     const double w = 2 * r_mm * std::sqrt(ratio * ratio + 1) / ratio;
     return {{{"length", ratio * w}, {"width", w}}, 180};
   }
   if (procedure == "rhomboid") return {{{"side", 4 * r_mm / std::sqrt(3.0)}}, 360};
-  throw InvalidParameter(cat("{procedures} ", procedure, ": give ellipse or rhomboid (the "
-                             "closures suggest can lay around a lesion so far)"));
+  if (procedure == "bilobed") return {{{"radius", r_mm}}, 360, "lobe_side", {1, -1}};
+  throw InvalidParameter(cat("{procedures} ", procedure, ": give ellipse, rhomboid or bilobed "
+                             "(the closures suggest can lay around a lesion so far)"));
+}
+
+/// A design's template parameters: its procedure's fit, and its side.
+std::map<std::string, double> design_parameters(const Fit& f, double side) {
+  std::map<std::string, double> p = f.parameters;
+  if (!f.side_parameter.empty()) p[f.side_parameter] = side;
+  return p;
+}
+
+/// The family a design is drawn in: its procedure, and its side where it has one.
+std::string family(const SuggestedDesign& d) {
+  if (d.side == 0) return d.procedure;
+  return cat(d.procedure, d.side > 0 ? " (lobes left)" : " (lobes right)");
 }
 
 std::vector<std::string> split_list(const std::string& text) {
@@ -210,22 +231,23 @@ void draw_polar(Canvas& canvas, double cx, double cy, double radius,
     l.align = 1;
     canvas.text(cx + radius, cy + radius + 44, "- - skin lines (Borges)", l);
   }
-  const Eigen::Vector3d colours[] = {{0.12, 0.47, 0.71}, {0.84, 0.37, 0.0}};
-  std::vector<std::string> procedures;
+  const Eigen::Vector3d colours[] = {
+      {0.12, 0.47, 0.71}, {0.84, 0.37, 0.0}, {0.55, 0.25, 0.6}, {0.0, 0.55, 0.55}};
+  std::vector<std::string> procedures;  // the families drawn
   for (const SuggestedDesign& d : designs)
-    if (std::find(procedures.begin(), procedures.end(), d.procedure) == procedures.end())
-      procedures.push_back(d.procedure);
+    if (std::find(procedures.begin(), procedures.end(), family(d)) == procedures.end())
+      procedures.push_back(family(d));
   // Both ends of an ellipse's axis; a flap's one orientation.
   const auto ends = [](const SuggestedDesign& d) {
     return d.procedure == "ellipse" ? std::vector<double>{d.orientation_deg, d.orientation_deg + 180}
                                     : std::vector<double>{d.orientation_deg};
   };
   for (std::size_t k = 0; k < procedures.size(); ++k) {
-    const Eigen::Vector3d colour = colours[k % 2];
+    const Eigen::Vector3d colour = colours[k % 4];
     std::vector<std::pair<double, double>> points;  // orientation, the sweep's value
     double step = 360;
     for (const SuggestedDesign& d : designs) {
-      if (d.procedure != procedures[k]) continue;
+      if (family(d) != procedures[k]) continue;
       for (const double o : ends(d)) {
         if (d.rank == 0) {
           Pen p;
@@ -338,7 +360,8 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
     throw InvalidParameter(cat("{sweep_material} ", r.sweep_material, ": give auto, linear, "
                                "neo-hookean or goh"));
   const std::vector<std::string> procedures = split_list(r.procedures);
-  if (procedures.empty()) throw InvalidParameter("{procedures}: give ellipse, rhomboid or both");
+  if (procedures.empty())
+    throw InvalidParameter("{procedures}: give one or more of ellipse, rhomboid and bilobed");
   const double r_mm = r.diameter / 2 + r.margin;
   // Every layout once before any closure: a lesion too large or small for a template's clinical
   // range is refused here, naming it.
@@ -346,7 +369,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   for (const std::string& p : procedures) {
     Fit f = fit(p, r_mm, r.ratio);
     try {
-      plan::layout_procedure(p, f.parameters);
+      for (const double side : f.sides) plan::layout_procedure(p, design_parameters(f, side));
     } catch (const InvalidInput& e) {
       throw InvalidParameter(cat("{diameter} ", r.diameter, " mm with a {margin} of ", r.margin,
                                  " mm: the ", p, " around it is outside its range: ", e.what()));
@@ -393,14 +416,17 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   std::vector<SuggestedDesign>& designs = result.designs;
   std::map<std::string, plan::Plan> plans;
   for (const std::string& p : procedures)
-    for (double o = 0; o < fits.at(p).turn_deg - 1e-9; o += r.step) {
-      SuggestedDesign d;
-      d.procedure = p;
-      d.orientation_deg = o;
-      d.name = cat(p, "-", std::string(o < 10 ? "00" : o < 100 ? "0" : ""),
-                   static_cast<int>(std::lround(o)));
-      designs.push_back(d);
-    }
+    for (const double side : fits.at(p).sides)
+      for (double o = 0; o < fits.at(p).turn_deg - 1e-9; o += r.step) {
+        SuggestedDesign d;
+        d.procedure = p;
+        d.side = side;
+        d.orientation_deg = o;
+        d.name = cat(p, side < 0 ? "-mirrored" : "", "-",
+                     std::string(o < 10 ? "00" : o < 100 ? "0" : ""),
+                     static_cast<int>(std::lround(o)));
+        designs.push_back(d);
+      }
 
   Quiet quiet(reporter);
   // Where the head's cylindrical image cannot hold the skin under a design (the side of the
@@ -411,7 +437,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   std::string chart_note;
   const auto lay = [&](const SuggestedDesign& d) {
     plan::Plan plan = plan::place_procedure(
-        plan::layout_procedure(d.procedure, fits.at(d.procedure).parameters), *on,
+        plan::layout_procedure(d.procedure, design_parameters(fits.at(d.procedure), d.side)), *on,
         chart_note.empty() ? tz[0] : 0.0, chart_note.empty() ? tz[1] : 0.0, d.orientation_deg);
     plan.placement = placement;
     plan.model = plan_model;
@@ -490,10 +516,10 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       throw InvalidParameter(cat("{objective} rstl: the relaxed skin tension lines are not known "
                                  "at this lesion (", lines.note, "); rank by force, features, "
                                  "scar or excised"));
-    if (r.objective == "rstl" && std::find(procedures.begin(), procedures.end(), "rhomboid") !=
-                                     procedures.end())
+    if (r.objective == "rstl" &&
+        std::any_of(procedures.begin(), procedures.end(), [](const std::string& p) { return p != "ellipse"; }))
       throw InvalidParameter("{objective} rstl ranks ellipses by their scar's angle to the skin "
-                             "lines; a rhomboid flap's scars run several ways: give "
+                             "lines; a flap's scars (rhomboid, bilobed) run several ways: give "
                              "--procedures ellipse, or rank by force");
   }
 
@@ -684,7 +710,8 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
               {"near_best", d.near_best},
               {"angle_to_skin_lines_deg", number_or_null(d.angle_to_skin_lines_deg, 1)}};
     json params = json::object();
-    for (const auto& [k, v] : fits.at(d.procedure).parameters) params[k] = round_to(v, 3);
+    for (const auto& [k, v] : design_parameters(fits.at(d.procedure), d.side))
+      params[k] = round_to(v, 3);
     o["parameters"] = params;
     o["plan"] = d.plan.empty() ? json(nullptr) : json(d.plan);
     if (!d.refused.empty()) {
