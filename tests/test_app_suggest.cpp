@@ -13,6 +13,7 @@
 #include "caps/app/suggest.hpp"
 #include "caps/core/error.hpp"
 #include "caps/plan/plan_io.hpp"
+#include "caps/surface/patient_model.hpp"
 #include "error_of.hpp"
 #include "phantom_model.hpp"
 
@@ -51,6 +52,17 @@ const app::SuggestedDesign& design(const app::SuggestResult& s, double orientati
   for (const app::SuggestedDesign& d : s.designs)
     if (std::abs(d.orientation_deg - orientation) < 1e-9) return d;
   throw std::runtime_error("no design at that orientation");
+}
+
+// Whether (theta, z) lies inside the plan's wound border, the hole its cuts open (in (theta, z)).
+bool inside_the_wound(const plan::Plan& p, double theta, double z) {
+  const auto& loop = plan::wound_border(p).loop_theta_z;
+  bool in = false;
+  for (std::size_t i = 0, j = loop.size() - 1; i < loop.size(); j = i++)
+    if ((loop[i].y() > z) != (loop[j].y() > z) &&
+        theta < loop[j].x() + (z - loop[j].y()) * (loop[i].x() - loop[j].x()) / (loop[i].y() - loop[j].y()))
+      in = !in;
+  return in;
 }
 
 }  // namespace
@@ -190,6 +202,8 @@ TEST(Suggest, TheBilobedFlapsDefectIsTheLesionAndItsMarginAndItsMirrorImageIsADe
     EXPECT_NEAR(o.at("excised_mm2").get<double>(), area, 0.08 * area) << o.dump();
     EXPECT_NEAR(o.at("healthy_excised_mm2").get<double>(),
                 o.at("excised_mm2").get<double>() - M_PI * 4, 0.1);
+    const plan::Plan p = plan::read_plan(folder() / "bilobed" / o.at("plan").get<std::string>());
+    EXPECT_TRUE(inside_the_wound(p, 0, 40)) << o.at("name");
     by_name[o.at("name").get<std::string>()] = o;
   }
   for (const auto& [left, right] : std::vector<std::pair<std::string, std::string>>{
@@ -208,6 +222,48 @@ TEST(Suggest, TheBilobedFlapsDefectIsTheLesionAndItsMarginAndItsMirrorImageIsADe
   EXPECT_TRUE(fs::exists(folder() / "bilobed" / "suggestions.png"));
 }
 
+// A rotation flap's triangular defect O F S (legs R, 40 deg at O, the library's default) has
+// the lesion and its margin as its inscribed circle: R = 2 r (1 + sin 20) / sin 40 (12.5 mm for
+// r = 3), the circle's centre r / sin 20 (8.8 mm) from O on the bisector, so the template's
+// origin O is laid that far from the lesion; the defect's area R^2 sin 40 / 2. Its arc goes to
+// either side, and on the symmetric phantom each design's mirror image across the midline
+// closes with the same force.
+TEST(Suggest, TheRotationFlapsDefectHasTheLesionAndItsMarginAsItsInscribedCircle) {
+  app::SuggestRequest r = forehead_request("linear", "rotation");
+  r.procedures = "rotation-flap";
+  r.step = 90;
+  r.refine = 0;
+  r.domain.domain = "patch";
+  const json j = json::parse(app::run_plan_suggest(r).suggestions_json);
+  ASSERT_EQ(j.at("designs").size(), 8u);  // 0, 90, 180, 270, each side
+  const double delta = 40 * M_PI / 180;
+  const double R = 2 * 3.0 * (1 + std::sin(delta / 2)) / std::sin(delta);
+  const double area = R * R * std::sin(delta) / 2, from_o = 3.0 / std::sin(delta / 2);
+  const PatientModel model = PatientModel::load(r.model);
+  const Eigen::Vector3d lesion = model.skin_point(0, 40);
+  std::map<std::string, json> by_name;
+  for (const json& o : j.at("designs")) {
+    ASSERT_FALSE(o.contains("refused")) << o.dump();
+    EXPECT_NEAR(o.at("parameters").at("radius").get<double>(), R, 1e-3);
+    EXPECT_NEAR(o.at("excised_mm2").get<double>(), area, 0.08 * area) << o.dump();
+    const plan::Plan p = plan::read_plan(folder() / "rotation" / o.at("plan").get<std::string>());
+    const Eigen::Vector3d apex = model.skin_point(p.frame.theta_deg, p.frame.z_mm);
+    EXPECT_NEAR((apex - lesion).norm(), from_o, 0.05 * from_o) << o.at("name");
+    EXPECT_TRUE(inside_the_wound(p, 0, 40)) << o.at("name");  // the defect's side of O
+    by_name[o.at("name").get<std::string>()] = o;
+  }
+  for (const auto& [left, right] : std::vector<std::pair<std::string, std::string>>{
+           {"rotation-flap-000", "rotation-flap-mirrored-000"},
+           {"rotation-flap-090", "rotation-flap-mirrored-270"},
+           {"rotation-flap-180", "rotation-flap-mirrored-180"},
+           {"rotation-flap-270", "rotation-flap-mirrored-090"}}) {
+    const double fa = by_name.at(left).at("sweep").at("closing_force_n").get<double>();
+    EXPECT_GT(fa, 0);
+    EXPECT_NEAR(fa, by_name.at(right).at("sweep").at("closing_force_n").get<double>(), 0.08 * fa)
+        << left << " " << right;
+  }
+}
+
 TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
   const auto refused = [](auto change, const std::string& words) {
     app::SuggestRequest r = forehead_request("neo-hookean", "refused");
@@ -220,7 +276,7 @@ TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
   refused([](app::SuggestRequest& r) { r.diameter = 50; }, "outside its range");
   refused([](app::SuggestRequest& r) { r.step = 1; }, "step 1");
   refused([](app::SuggestRequest& r) { r.objective = "beauty"; }, "force, features, scar");
-  refused([](app::SuggestRequest& r) { r.procedures = "ellipse,rotation-flap"; }, "rotation-flap");
+  refused([](app::SuggestRequest& r) { r.procedures = "ellipse,o-z"; }, "o-z");
   refused([](app::SuggestRequest& r) { r.at = ""; }, "--at");
   // The phantom's face has no nose: the relaxed skin tension lines are not laid on it, so they
   // cannot rank the designs (they are reported as not known: the first test).

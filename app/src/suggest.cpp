@@ -57,6 +57,10 @@ struct Fit {
   double turn_deg = 180;  ///< orientations are taken in [0, turn_deg)
   std::string side_parameter;  ///< the template's parameter for the side ("" where none)
   std::vector<double> sides{0};  ///< its values tried (1: left of the orientation, -1: right)
+  /// The template's origin from the lesion's centre (mm along the design's frame's ex and ey,
+  /// side 1; the mirror image's is mirrored): where the template's origin is not its defect's
+  /// centre (a rotation flap's is its arc's centre, the defect's apex).
+  Eigen::Vector2d origin_mm{0, 0};
 };
 
 /// An ellipse of `ratio` (length / width): the library's outline is the rhombus of its length,
@@ -75,8 +79,21 @@ Fit fit(const std::string& procedure, double r_mm, double ratio) {
   }
   if (procedure == "rhomboid") return {{{"side", 4 * r_mm / std::sqrt(3.0)}}, 360};
   if (procedure == "bilobed") return {{{"radius", r_mm}}, 360, "lobe_side", {1, -1}};
-  throw InvalidParameter(cat("{procedures} ", procedure, ": give ellipse, rhomboid or bilobed "
-                             "(the closures suggest can lay around a lesion so far)"));
+  if (procedure == "rotation-flap") {
+    // The triangular defect O F S (legs R, the library's default 40 deg at O): its inscribed
+    // circle, radius R sin(delta) / (2 (1 + sin(delta / 2))), is the lesion and its margin, and
+    // its centre lies on the bisector at that radius over sin(delta / 2) from O.
+    const double delta = deg_to_rad(40.0);
+    const double R = 2 * r_mm * (1 + std::sin(delta / 2)) / std::sin(delta);
+    const double from_o = r_mm / std::sin(delta / 2);
+    return {{{"radius", R}, {"defect_angle", 40.0}},
+            360,
+            "arc_side",
+            {1, -1},
+            -from_o * Eigen::Vector2d(std::cos(delta / 2), -std::sin(delta / 2))};
+  }
+  throw InvalidParameter(cat("{procedures} ", procedure, ": give ellipse, rhomboid, bilobed or "
+                             "rotation-flap (the closures suggest can lay around a lesion so far)"));
 }
 
 /// A design's template parameters: its procedure's fit, and its side.
@@ -89,7 +106,9 @@ std::map<std::string, double> design_parameters(const Fit& f, double side) {
 /// The family a design is drawn in: its procedure, and its side where it has one.
 std::string family(const SuggestedDesign& d) {
   if (d.side == 0) return d.procedure;
-  return cat(d.procedure, d.side > 0 ? " (lobes left)" : " (lobes right)");
+  const bool lobes = d.procedure == "bilobed";
+  return cat(d.procedure, d.side > 0 ? (lobes ? " (lobes left)" : " (arc left)")
+                                     : (lobes ? " (lobes right)" : " (arc right)"));
 }
 
 std::vector<std::string> split_list(const std::string& text) {
@@ -361,7 +380,8 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
                                "neo-hookean or goh"));
   const std::vector<std::string> procedures = split_list(r.procedures);
   if (procedures.empty())
-    throw InvalidParameter("{procedures}: give one or more of ellipse, rhomboid and bilobed");
+    throw InvalidParameter("{procedures}: give one or more of ellipse, rhomboid, bilobed and "
+                           "rotation-flap");
   const double r_mm = r.diameter / 2 + r.margin;
   // Every layout once before any closure: a lesion too large or small for a template's clinical
   // range is refused here, naming it.
@@ -436,9 +456,23 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   std::string plan_model = r.model;  // the plans' model, as they name it
   std::string chart_note;
   const auto lay = [&](const SuggestedDesign& d) {
+    const Fit& f = fits.at(d.procedure);
+    double theta = chart_note.empty() ? tz[0] : 0.0, z = chart_note.empty() ? tz[1] : 0.0;
+    double orientation = d.orientation_deg;
+    if (f.origin_mm.norm() > 0) {
+      // The template's origin walked to from the lesion on the skin, the frame carried along.
+      const Eigen::Vector2d step(f.origin_mm.x(), d.side < 0 ? -f.origin_mm.y() : f.origin_mm.y());
+      const plan::SkinFrame o =
+          plan::walk_on_skin(*on, plan::skin_frame(*on, theta, z, orientation), step);
+      theta = o.theta_z.x();
+      z = o.theta_z.y();
+      const Eigen::Vector3d up = plan::skin_frame(*on, theta, z, 0).ex;
+      const Eigen::Vector3d right = plan::skin_frame(*on, theta, z, 90).ex;
+      orientation = rad_to_deg(std::atan2(o.ex.dot(right), o.ex.dot(up)));
+    }
     plan::Plan plan = plan::place_procedure(
-        plan::layout_procedure(d.procedure, design_parameters(fits.at(d.procedure), d.side)), *on,
-        chart_note.empty() ? tz[0] : 0.0, chart_note.empty() ? tz[1] : 0.0, d.orientation_deg);
+        plan::layout_procedure(d.procedure, design_parameters(f, d.side)), *on, theta, z,
+        orientation);
     plan.placement = placement;
     plan.model = plan_model;
     plan.model_hash = on->content_hash();
@@ -519,7 +553,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
     if (r.objective == "rstl" &&
         std::any_of(procedures.begin(), procedures.end(), [](const std::string& p) { return p != "ellipse"; }))
       throw InvalidParameter("{objective} rstl ranks ellipses by their scar's angle to the skin "
-                             "lines; a flap's scars (rhomboid, bilobed) run several ways: give "
+                             "lines; a flap's scars (rhomboid, bilobed, rotation) run several ways: give "
                              "--procedures ellipse, or rank by force");
   }
 

@@ -47,7 +47,8 @@ struct SuggestRequest {
     v(r.margin, {"margin", "the margin excised around the lesion (mm; 1-2 for a benign lesion, "
                            "4 for a basal cell carcinoma)"});
     v(r.procedures, {"procedures", "the closures to try, comma-separated: ellipse, rhomboid, "
-                                   "bilobed (its lobes to either side)"});
+                                   "bilobed (its lobes to either side), rotation-flap (its arc "
+                                   "to either side)"});
     v(r.step, {"step", "degrees between the orientations tried (5-90)"});
     v(r.ratio, {"ratio", "an ellipse's length over its width (2.5-4.5; 3 gives a 37 deg apex)"});
     v(r.objective, {"objective", "what ranks the designs, least first: force (the largest "
@@ -85,7 +86,8 @@ struct SuggestedDesign {
   std::string procedure;  ///< the template
   double orientation_deg = 0;
   /// A flap's side where its mirror image is a design of its own ("bilobed-mirrored-045"): 1
-  /// the bilobed flap's lobes to the left of the orientation, -1 to the right; 0 where none.
+  /// the bilobed flap's lobes (a rotation flap's arc) to the left of the orientation, -1 to the
+  /// right; 0 where none.
   double side = 0;
   std::string plan;    ///< the plan file (relative to the output folder); empty if not placed
   std::string result;  ///< the refined closure's folder (relative), empty if not refined
