@@ -51,7 +51,8 @@ double seconds_since(Clock::time_point t0) {
 /// The closures suggest lays around a lesion: each one's template parameters for a lesion whose
 /// excised disc (the lesion and its margin) has radius `r_mm`, the orientations that differ
 /// (an ellipse is the same turned 180 deg; a rhomboid's flap is not), and a flap's two mirror
-/// images where turning it does not give them (a bilobed flap's lobes to either side).
+/// images where turning it does not give them (a bilobed flap's lobes, a rotation flap's arc, to
+/// either side).
 struct Fit {
   std::map<std::string, double> parameters;
   double turn_deg = 180;  ///< orientations are taken in [0, turn_deg)
@@ -250,8 +251,9 @@ void draw_polar(Canvas& canvas, double cx, double cy, double radius,
     l.align = 1;
     canvas.text(cx + radius, cy + radius + 44, "- - skin lines (Borges)", l);
   }
-  const Eigen::Vector3d colours[] = {
-      {0.12, 0.47, 0.71}, {0.84, 0.37, 0.0}, {0.55, 0.25, 0.6}, {0.0, 0.55, 0.55}};
+  // One colour per family: the ellipse, the rhomboid and each side of the two flaps.
+  const Eigen::Vector3d colours[] = {{0.12, 0.47, 0.71}, {0.84, 0.37, 0.0}, {0.55, 0.25, 0.6},
+                                     {0.0, 0.55, 0.55},  {0.7, 0.1, 0.3},   {0.45, 0.45, 0.1}};
   std::vector<std::string> procedures;  // the families drawn
   for (const SuggestedDesign& d : designs)
     if (std::find(procedures.begin(), procedures.end(), family(d)) == procedures.end())
@@ -262,7 +264,7 @@ void draw_polar(Canvas& canvas, double cx, double cy, double radius,
                                     : std::vector<double>{d.orientation_deg};
   };
   for (std::size_t k = 0; k < procedures.size(); ++k) {
-    const Eigen::Vector3d colour = colours[k % 4];
+    const Eigen::Vector3d colour = colours[k % std::size(colours)];
     std::vector<std::pair<double, double>> points;  // orientation, the sweep's value
     double step = 360;
     for (const SuggestedDesign& d : designs) {
