@@ -66,6 +66,17 @@ bool inside_the_wound(const plan::Plan& p, double theta, double z) {
   return in;
 }
 
+// A flap's designs every 90 deg around the forehead's lesion, the sweep's linear closures on the
+// clamped patch alone (quick): suggestions.json.
+json flap_sweep(const std::string& procedure, const std::string& name) {
+  app::SuggestRequest r = forehead_request("linear", name);
+  r.procedures = procedure;
+  r.step = 90;
+  r.refine = 0;
+  r.domain.domain = "patch";
+  return json::parse(app::run_plan_suggest(r).suggestions_json);
+}
+
 // On the phantom, symmetric about its midline where the lesion is, a flap turned by o with its
 // side 1 (`P-0oo`) is the mirror image of the one turned by -o with side -1 (`P-mirrored-...`):
 // the same defect, and within 8 % the same closing force (the surface mesh of a mirror image is
@@ -164,12 +175,7 @@ TEST(Suggest, SkinStifferAlongItsFibresIsClosedAcrossThem) {
 // defect's area s^2 sin 60 on the skin (the flap's cuts enclose none). Its flap makes it differ
 // turned by 180 deg, so its orientations go round the whole circle.
 TEST(Suggest, TheRhomboidsInscribedCircleIsTheLesionAndItsMargin) {
-  app::SuggestRequest r = forehead_request("linear", "rhomboid");
-  r.procedures = "rhomboid";
-  r.step = 90;
-  r.refine = 0;
-  r.domain.domain = "patch";
-  const json j = json::parse(app::run_plan_suggest(r).suggestions_json);
+  const json j = flap_sweep("rhomboid", "rhomboid");
   const double side = 4 * 3.0 / std::sqrt(3.0), area = side * side * std::sqrt(3.0) / 2;
   ASSERT_EQ(j.at("designs").size(), 4u);  // 0, 90, 180, 270
   for (const json& d : j.at("designs")) {
@@ -195,13 +201,7 @@ TEST(Suggest, TheRhomboidsInscribedCircleIsTheLesionAndItsMargin) {
 // farthest from its centroid, and between two ends nearly as far the mirror image starts at the
 // other one: 0.289 against 0.402 N for the two flaps turned 0.)
 TEST(Suggest, TheBilobedFlapsDefectIsTheLesionAndItsMarginAndItsMirrorImageIsADesign) {
-  app::SuggestRequest r = forehead_request("linear", "bilobed");
-  r.procedures = "bilobed";
-  r.step = 90;
-  r.refine = 0;
-  r.domain.domain = "patch";
-  const app::SuggestResult s = app::run_plan_suggest(r);
-  const json j = json::parse(s.suggestions_json);
+  const json j = flap_sweep("bilobed", "bilobed");
   ASSERT_EQ(j.at("designs").size(), 8u);  // 0, 90, 180, 270, each side
   // The defect: P, t+, the cap's three inner points, t- (the template's geometry).
   const double radius = 3, d = radius / std::sin(M_PI / 8), end = 70 * M_PI / 180;
@@ -239,17 +239,13 @@ TEST(Suggest, TheBilobedFlapsDefectIsTheLesionAndItsMarginAndItsMirrorImageIsADe
 // either side, and on the symmetric phantom each design's mirror image across the midline
 // closes with the same force.
 TEST(Suggest, TheRotationFlapsDefectHasTheLesionAndItsMarginAsItsInscribedCircle) {
-  app::SuggestRequest r = forehead_request("linear", "rotation");
-  r.procedures = "rotation-flap";
-  r.step = 90;
-  r.refine = 0;
-  r.domain.domain = "patch";
-  const json j = json::parse(app::run_plan_suggest(r).suggestions_json);
+  const json j = flap_sweep("rotation-flap", "rotation");
   ASSERT_EQ(j.at("designs").size(), 8u);  // 0, 90, 180, 270, each side
   const double delta = 40 * M_PI / 180;
   const double R = 2 * 3.0 * (1 + std::sin(delta / 2)) / std::sin(delta);
   const double area = R * R * std::sin(delta) / 2, from_o = 3.0 / std::sin(delta / 2);
-  const PatientModel model = PatientModel::load(r.model);
+  const PatientModel model =
+      PatientModel::load(caps_test::program_phantom_model("caps_test_app_suggest"));
   const Eigen::Vector3d lesion = model.skin_point(0, 40);
   std::map<std::string, json> by_name;
   for (const json& o : j.at("designs")) {

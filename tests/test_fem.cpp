@@ -1,6 +1,7 @@
 // caps::fem: element checks (patch, tangent, convergence, MUMPS = CHOLMOD), analytic benchmarks
 // (cantilever, Lame cylinder), suture closure, mesh directory IO and the bad-input catalogue.
 #include <gtest/gtest.h>
+#include <functional>
 #include <tbb/global_control.h>
 
 #include "error_of.hpp"
@@ -729,6 +730,34 @@ TEST(FemSolvers, ResultDoesNotDependOnTheThreadCount) {
   const SolveResult r1 = solve(m, one), ra = solve(m, all);
   EXPECT_EQ(r1.refinement_iterations, ra.refinement_iterations);
   EXPECT_TRUE((r1.displacement_mm.array() == ra.displacement_mm.array()).all());
+}
+
+// Two solves at once in two threads, as `caps plan suggest`'s sweep closes two designs at once:
+// each one's answer is the answer alone, and neither kills the process. Both MUMPS (mixed
+// precision) and CHOLMOD (ordered by MUMPS's analysis) run in each thread. Before every call into
+// MUMPS held one lock (7 December 2026), the sequential library's module variables were shared:
+// one run of test_app_suggest in three died of SIGFPE in mumps_init_arch_parameters, and 3 of 6
+// runs of this test without the lock died (SIGSEGV, SIGFPE, a MUMPS analysis failing with
+// INFOG(1) = -13); with it, 8 of 8 passed (about 4 s each).
+TEST(FemSolvers, TwoSolvesAtOnceInTwoThreadsEachGiveTheAnswerAlone) {
+  Mesh m = slotted_box(ElementType::Wedge15);
+  distort(m, 0.2, 3.0, 5);
+  SolveOptions mumps, cholmod;
+  cholmod.solver = SolverKind::Cholmod;
+  for (SolveOptions* o : {&mumps, &cholmod}) o->threads = 1;
+  const SolveResult alone_m = solve(m, mumps), alone_c = solve(m, cholmod);
+  std::atomic<int> wrong{0};
+  const auto work = [&](const SolveOptions& o, const SolveResult& alone) {
+    for (int i = 0; i < 150; ++i)
+      if (!(solve(m, o).displacement_mm.array() == alone.displacement_mm.array()).all()) ++wrong;
+  };
+  std::thread a(work, std::cref(cholmod), std::cref(alone_c));
+  std::thread b(work, std::cref(cholmod), std::cref(alone_c));
+  std::thread c(work, std::cref(mumps), std::cref(alone_m));
+  a.join();
+  b.join();
+  c.join();
+  EXPECT_EQ(wrong.load(), 0);
 }
 
 TEST(FemSutures, SlotClosesSymmetricallyWithEqualAndOppositeForces) {

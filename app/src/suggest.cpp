@@ -561,8 +561,9 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
 
   // The sweep: each design laid, checked and closed on the sweep's mesh, two at a time where the
   // machine has two cores (each closure's factorization runs on one): with CHOLMOD, whose
-  // factorizations are independent in two threads (MUMPS's are not documented so), and OpenBLAS
-  // kept to one thread each.
+  // factorizations are independent in two threads (MUMPS's are not: every call into MUMPS, the
+  // ordering CHOLMOD is given among them, holds one lock, fem/src/direct_solver.cpp), and
+  // OpenBLAS kept to one thread each.
   const unsigned workers = std::min(2u, std::max(1u, std::thread::hardware_concurrency()));
   if (workers > 1) {
     sweep.solve.solver = fem::SolverKind::Cholmod;

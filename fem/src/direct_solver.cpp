@@ -62,10 +62,28 @@ int dominant_equation(Eigen::Index n, Solve&& solve) {
   return best;
 }
 
+// Every call into MUMPS, by any instance in any thread, holds this. The sequential library keeps
+// state in Fortran module variables (the analysis's static mapping among them), so two instances
+// working at once in two threads corrupt each other: `caps plan suggest`'s sweep closes two
+// designs at once, each with CHOLMOD ordered by MUMPS's analysis, and one of them died of an
+// integer division by zero in mumps_init_arch_parameters (SIGFPE, 1 run in 3 of test_app_suggest
+// on 7 December 2026; most likely also the SIGFPE of its goh sweep in a loaded full run before),
+// and once, probably the same race, glibc found the heap corrupt at a thread's end. One call
+// after another, as a single thread makes them, is what the library supports.
+std::mutex& mumps_mutex() {
+  static std::mutex m;
+  return m;
+}
+
 // One MUMPS instance in double (DMUMPS) or single (SMUMPS) precision. MUMPS 5.5 users' guide,
 // sec. 5-6: SYM = 1 (symmetric positive definite), sequential host, assembled centralized input.
-template <class Struc, class Real, void (*Call)(Struc*)>
+template <class Struc, class Real, void (*MumpsCall)(Struc*)>
 class Mumps {
+  static void Call(Struc* id) {
+    const std::lock_guard<std::mutex> lock(mumps_mutex());
+    MumpsCall(id);
+  }
+
  public:
   Mumps(int ordering, Real null_pivot) {
     id_.comm_fortran = -987654;  // USE_COMM_WORLD; the sequential library ignores it
