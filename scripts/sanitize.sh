@@ -44,7 +44,9 @@ jobs="$(nproc)"
 # One accuracy test is left to the unsanitized suite (ctest runs it): it builds the volume model
 # of the full 1 mm phantom head, which took 3 of test_surface's 3.3 minutes under ASan; the other
 # surface tests, the readers and the scan model keep running here.
-filter="-ScanModel.PhantomSkinMeshReproducesVolumeRSkin"
+# Nor the three threads solving at once (FemSolvers.SolvesAtOnce...): a crash test of MUMPS's
+# shared state, which lives in the uninstrumented library; it took 58 of test_fem's 70 s here.
+filter="-ScanModel.PhantomSkinMeshReproducesVolumeRSkin:FemSolvers.SolvesAtOnceInThreeThreadsEachGiveTheAnswerAlone"
 run_test() {
   local p="$1" s
   s=$(date +%s)

@@ -732,14 +732,14 @@ TEST(FemSolvers, ResultDoesNotDependOnTheThreadCount) {
   EXPECT_TRUE((r1.displacement_mm.array() == ra.displacement_mm.array()).all());
 }
 
-// Two solves at once in two threads, as `caps plan suggest`'s sweep closes two designs at once:
-// each one's answer is the answer alone, and neither kills the process. Both MUMPS (mixed
-// precision) and CHOLMOD (ordered by MUMPS's analysis) run in each thread. Before every call into
+// Solves at once in three threads, as `caps plan suggest`'s sweep closes two designs at once:
+// each one's answer is the answer alone, and none kills the process. Two threads solve with
+// CHOLMOD (ordered by MUMPS's analysis), the third with MUMPS (mixed precision). Before every call into
 // MUMPS held one lock (7 December 2026), the sequential library's module variables were shared:
 // one run of test_app_suggest in three died of SIGFPE in mumps_init_arch_parameters, and 3 of 6
 // runs of this test without the lock died (SIGSEGV, SIGFPE, a MUMPS analysis failing with
 // INFOG(1) = -13); with it, 8 of 8 passed (about 4 s each).
-TEST(FemSolvers, TwoSolvesAtOnceInTwoThreadsEachGiveTheAnswerAlone) {
+TEST(FemSolvers, SolvesAtOnceInThreeThreadsEachGiveTheAnswerAlone) {
   Mesh m = slotted_box(ElementType::Wedge15);
   distort(m, 0.2, 3.0, 5);
   SolveOptions mumps, cholmod;
