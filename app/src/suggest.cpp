@@ -695,14 +695,18 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       lines.least_force_deg = least->orientation_deg;
       lines.least_force_angle_deg = least->angle_to_skin_lines_deg;
       const double tolerance = std::max(r.step, 20.0);
+      const std::string least_words =
+          cat(map_words, "; the model's least force on one suture is at ", least->orientation_deg,
+              " deg, ", round_to(lines.least_force_angle_deg, 0), " deg from them");
       lines.sentence =
-          lines.least_force_angle_deg <= tolerance
-              ? cat(map_words, "; the model's least force on one suture is at ",
-                    least->orientation_deg, " deg, ", round_to(lines.least_force_angle_deg, 0),
-                    " deg from them: they agree")
-              : cat(map_words, "; the model's least force on one suture is at ",
-                    least->orientation_deg, " deg, ", round_to(lines.least_force_angle_deg, 0),
-                    " deg from them: they disagree here (the model sees this patient's anatomy "
+          lines.least_force_angle_deg <= 20.0
+              ? cat(least_words, ": they agree")
+          : lines.least_force_angle_deg <= tolerance
+              // Within one step of a coarse sweep: the sweep cannot tell (--step 45 put the least
+              // force 45 deg from the forehead's lines and called it agreement).
+              ? cat(least_words, ": within the sweep's step of ", r.step,
+                    " deg, too coarse to tell; a finer --step would")
+              : cat(least_words, ": they disagree here (the model sees this patient's anatomy "
                     "and the designs that fit; the map is the textbook's average face)");
     } else {
       lines.sentence = cat(map_words, "; no ellipse was closed to compare with");

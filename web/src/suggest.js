@@ -73,11 +73,18 @@ export class Suggestions {
     // Borges's relaxed skin tension lines at the lesion, and how the least force lies to them.
     e.lines.textContent = s.skin_lines?.found ? `${s.skin_lines.sentence}.`
       : `Relaxed skin tension lines: not known here (${s.skin_lines?.note ?? 'no map'}).`;
+    // A flap tried to both sides says which (its lobes or arc to the left or right of its axis).
+    const label = (d) => {
+      const side = d.parameters?.lobe_side ?? d.parameters?.arc_side;
+      const words = side === undefined ? ''
+        : ` (${d.parameters?.lobe_side !== undefined ? 'lobes' : 'arc'} ${side > 0 ? 'left' : 'right'})`;
+      return `${escapeHtml(d.procedure)} ${Math.round(d.orientation_deg)}°${words}`;
+    };
     const rows = ranked.map((d) => {
       const f = figures(d);
       const feature = f.feature_words ? `${fmt(f.max_feature_mm, 2)} (${escapeHtml(f.feature_words)})` : '–';
       return `<tr data-design="${escapeHtml(d.name)}"><td>${d.rank}${d.near_best ? ' ★' : ''}</td>` +
-        `<td>${escapeHtml(d.procedure)} ${Math.round(d.orientation_deg)}°</td>` +
+        `<td>${label(d)}</td>` +
         `<td>${fmt(f.max_force_per_suture_n, 2)}</td><td>${feature}</td>` +
         `<td>${fmt(d.angle_to_skin_lines_deg, 0)}</td>` +
         `<td>${fmt(d.scar_length_mm, 1)}</td><td>${fmt(d.healthy_excised_mm2, 0)}</td>` +
@@ -86,8 +93,8 @@ export class Suggestions {
     });
     if (refused.length)
       rows.push(`<tr><td colspan="9"><details><summary class="muted">${refused.length} design(s) not ` +
-        `possible here</summary><ul>${refused.map((d) => `<li><b>${escapeHtml(d.procedure)} ` +
-        `${Math.round(d.orientation_deg)}°</b>: ${escapeHtml(d.refused ?? '')}</li>`).join('')}</ul>` +
+        `possible here</summary><ul>${refused.map((d) => `<li><b>${label(d)}</b>: ` +
+        `${escapeHtml(d.refused ?? '')}</li>`).join('')}</ul>` +
         `</details></td></tr>`);
     e.table.querySelector('tbody').innerHTML = rows.join('');
     e.table.hidden = false;
