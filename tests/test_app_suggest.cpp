@@ -61,7 +61,8 @@ bool inside_the_wound(const plan::Plan& p, double theta, double z) {
   bool in = false;
   for (std::size_t i = 0, j = loop.size() - 1; i < loop.size(); j = i++)
     if ((loop[i].y() > z) != (loop[j].y() > z) &&
-        theta < loop[j].x() + (z - loop[j].y()) * (loop[i].x() - loop[j].x()) / (loop[i].y() - loop[j].y()))
+        theta < loop[j].x() +
+                    (z - loop[j].y()) * (loop[i].x() - loop[j].x()) / (loop[i].y() - loop[j].y()))
       in = !in;
   return in;
 }

@@ -1,8 +1,8 @@
 // caps::fem: element checks (patch, tangent, convergence, MUMPS = CHOLMOD), analytic benchmarks
 // (cantilever, Lame cylinder), suture closure, mesh directory IO and the bad-input catalogue.
 #include <gtest/gtest.h>
-#include <functional>
 #include <tbb/global_control.h>
+#include <functional>
 
 #include "error_of.hpp"
 #include "fem_test_support.hpp"
@@ -734,10 +734,10 @@ TEST(FemSolvers, ResultDoesNotDependOnTheThreadCount) {
 
 // Solves at once in three threads, as `caps plan suggest`'s sweep closes two designs at once:
 // each one's answer is the answer alone, and none kills the process. Two threads solve with
-// CHOLMOD (ordered by MUMPS's analysis), the third with MUMPS (mixed precision). Before every call into
-// MUMPS held one lock (7 December 2026), the sequential library's module variables were shared:
-// one run of test_app_suggest in three died of SIGFPE in mumps_init_arch_parameters, and 3 of 6
-// runs of this test without the lock died (SIGSEGV, SIGFPE, a MUMPS analysis failing with
+// CHOLMOD (ordered by MUMPS's analysis), the third with MUMPS (mixed precision). Before every call
+// into MUMPS held one lock (7 December 2026), the sequential library's module variables were
+// shared: one run of test_app_suggest in three died of SIGFPE in mumps_init_arch_parameters, and 3
+// of 6 runs of this test without the lock died (SIGSEGV, SIGFPE, a MUMPS analysis failing with
 // INFOG(1) = -13); with it, 8 of 8 passed (about 4 s each).
 TEST(FemSolvers, SolvesAtOnceInThreeThreadsEachGiveTheAnswerAlone) {
   Mesh m = slotted_box(ElementType::Wedge15);

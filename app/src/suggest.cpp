@@ -56,7 +56,7 @@ double seconds_since(Clock::time_point t0) {
 struct Fit {
   std::map<std::string, double> parameters;
   double turn_deg = 180;  ///< orientations are taken in [0, turn_deg)
-  std::string side_parameter;  ///< the template's parameter for the side ("" where none)
+  std::string side_parameter;    ///< the template's parameter for the side ("" where none)
   std::vector<double> sides{0};  ///< its values tried (1: left of the orientation, -1: right)
   /// The template's origin from the lesion's centre (mm along the design's frame's ex and ey,
   /// side 1; the mirror image's is mirrored): where the template's origin is not its defect's
@@ -93,8 +93,10 @@ Fit fit(const std::string& procedure, double r_mm, double ratio) {
             {1, -1},
             -from_o * Eigen::Vector2d(std::cos(delta / 2), -std::sin(delta / 2))};
   }
-  throw InvalidParameter(cat("{procedures} ", procedure, ": give ellipse, rhomboid, bilobed or "
-                             "rotation-flap (the closures suggest can lay around a lesion so far)"));
+  throw InvalidParameter(
+      cat("{procedures} ", procedure,
+          ": give ellipse, rhomboid, bilobed or "
+          "rotation-flap (the closures suggest can lay around a lesion so far)"));
 }
 
 /// A design's template parameters: its procedure's fit, and its side.
@@ -382,8 +384,9 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
                                "neo-hookean or goh"));
   const std::vector<std::string> procedures = split_list(r.procedures);
   if (procedures.empty())
-    throw InvalidParameter("{procedures}: give one or more of ellipse, rhomboid, bilobed and "
-                           "rotation-flap");
+    throw InvalidParameter(
+        "{procedures}: give one or more of ellipse, rhomboid, bilobed and "
+        "rotation-flap");
   const double r_mm = r.diameter / 2 + r.margin;
   // Every layout once before any closure: a lesion too large or small for a template's clinical
   // range is refused here, naming it.
@@ -445,7 +448,9 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
         d.side = side;
         d.orientation_deg = o;
         d.name = cat(p, side < 0 ? "-mirrored" : "", "-",
-                     std::string(o < 10 ? "00" : o < 100 ? "0" : ""),
+                     std::string(o < 10    ? "00"
+                                 : o < 100 ? "0"
+                                           : ""),
                      static_cast<int>(std::lround(o)));
         designs.push_back(d);
       }
@@ -472,9 +477,9 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       const Eigen::Vector3d right = plan::skin_frame(*on, theta, z, 90).ex;
       orientation = rad_to_deg(std::atan2(o.ex.dot(right), o.ex.dot(up)));
     }
-    plan::Plan plan = plan::place_procedure(
-        plan::layout_procedure(d.procedure, design_parameters(f, d.side)), *on, theta, z,
-        orientation);
+    plan::Plan plan =
+        plan::place_procedure(plan::layout_procedure(d.procedure, design_parameters(f, d.side)),
+                              *on, theta, z, orientation);
     plan.placement = placement;
     plan.model = plan_model;
     plan.model_hash = on->content_hash();
@@ -552,11 +557,12 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       throw InvalidParameter(cat("{objective} rstl: the relaxed skin tension lines are not known "
                                  "at this lesion (", lines.note, "); rank by force, features, "
                                  "scar or excised"));
-    if (r.objective == "rstl" &&
-        std::any_of(procedures.begin(), procedures.end(), [](const std::string& p) { return p != "ellipse"; }))
-      throw InvalidParameter("{objective} rstl ranks ellipses by their scar's angle to the skin "
-                             "lines; a flap's scars (rhomboid, bilobed, rotation) run several ways: give "
-                             "--procedures ellipse, or rank by force");
+    if (r.objective == "rstl" && std::any_of(procedures.begin(), procedures.end(),
+                                             [](const std::string& p) { return p != "ellipse"; }))
+      throw InvalidParameter(
+          "{objective} rstl ranks ellipses by their scar's angle to the skin "
+          "lines; a flap's scars (rhomboid, bilobed, rotation) run several ways: give "
+          "--procedures ellipse, or rank by force");
   }
 
   // The sweep: each design laid, checked and closed on the sweep's mesh, two at a time where the
@@ -699,14 +705,14 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
           cat(map_words, "; the model's least force on one suture is at ", least->orientation_deg,
               " deg, ", round_to(lines.least_force_angle_deg, 0), " deg from them");
       lines.sentence =
-          lines.least_force_angle_deg <= 20.0
-              ? cat(least_words, ": they agree")
+          lines.least_force_angle_deg <= 20.0 ? cat(least_words, ": they agree")
           : lines.least_force_angle_deg <= tolerance
               // Within one step of a coarse sweep: the sweep cannot tell (--step 45 put the least
               // force 45 deg from the forehead's lines and called it agreement).
               ? cat(least_words, ": within the sweep's step of ", r.step,
                     " deg, too coarse to tell; a finer --step would")
-              : cat(least_words, ": they disagree here (the model sees this patient's anatomy "
+              : cat(least_words,
+                    ": they disagree here (the model sees this patient's anatomy "
                     "and the designs that fit; the map is the textbook's average face)");
     } else {
       lines.sentence = cat(map_words, "; no ellipse was closed to compare with");

@@ -65,11 +65,16 @@ void write_result_dir(const Mesh& mesh, const SolveResult& r, const std::filesys
   if (!r.newton_steps.empty()) {
     nlohmann::json steps = nlohmann::json::array();
     for (const NewtonStep& s : r.newton_steps)
-      steps.push_back({{"step", s.step}, {"lambda", s.lambda}, {"iterations", s.iterations},
+      steps.push_back({{"step", s.step},
+                       {"lambda", s.lambda},
+                       {"iterations", s.iterations},
                        {"cutbacks", s.cutbacks},
-                       {"factorizations", s.factorizations}, {"relative_residuals", s.residual_norms},
-                       {"line_search", s.line_search}, {"shifts", s.shifts},
-                       {"corrections_mm", s.corrections_mm}, {"stagnated", s.stagnated}});
+                       {"factorizations", s.factorizations},
+                       {"relative_residuals", s.residual_norms},
+                       {"line_search", s.line_search},
+                       {"shifts", s.shifts},
+                       {"corrections_mm", s.corrections_mm},
+                       {"stagnated", s.stagnated}});
     j["newton"] = {{"iterations", r.newton_iterations}, {"factorizations", r.factorizations},
                    {"indefinite_factorizations", r.indefinite_factorizations},
                    {"secant_predictions", r.secant_predictions},

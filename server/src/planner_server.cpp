@@ -22,10 +22,10 @@
 #include <algorithm>
 #include <atomic>
 #include <cctype>
-#include <chrono>
-#include <condition_variable>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <csignal>
 #include <cstdint>
 #include <cstring>
@@ -453,8 +453,7 @@ struct PlannerServer::Impl {
       --workers;
       workers_done.notify_all();
     }).detach();
-    while (answered.wait_for(std::chrono::milliseconds(kCancelPollMs)) !=
-           std::future_status::ready)
+    while (answered.wait_for(std::chrono::milliseconds(kCancelPollMs)) != std::future_status::ready)
       ticket->check_cancelled();
     return answered.get();
   }

@@ -46,9 +46,10 @@ struct SuggestRequest {
     v(r.diameter, {"diameter", "the lesion's largest diameter (mm)", FieldKind::Required});
     v(r.margin, {"margin", "the margin excised around the lesion (mm; 1-2 for a benign lesion, "
                            "4 for a basal cell carcinoma)"});
-    v(r.procedures, {"procedures", "the closures to try, comma-separated: ellipse, rhomboid, "
-                                   "bilobed (its lobes to either side), rotation-flap (its arc "
-                                   "to either side)"});
+    v(r.procedures, {"procedures",
+                     "the closures to try, comma-separated: ellipse, rhomboid, "
+                     "bilobed (its lobes to either side), rotation-flap (its arc "
+                     "to either side)"});
     v(r.step, {"step", "degrees between the orientations tried (5-90)"});
     v(r.ratio, {"ratio", "an ellipse's length over its width (2.5-4.5; 3 gives a 37 deg apex)"});
     v(r.objective, {"objective", "what ranks the designs, least first: force (the largest "
