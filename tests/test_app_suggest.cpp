@@ -262,6 +262,35 @@ TEST(Suggest, TheRotationFlapsDefectHasTheLesionAndItsMarginAsItsInscribedCircle
   expect_mirror_images_alike(by_name, "rotation-flap");
 }
 
+// The skin lines' cross-check on the face phantom (its landmarks lay Borges's map): the ellipse
+// of least force against the lines, in words that match the angle: agreement within 20 deg;
+// within a coarser sweep's step, "too coarse to tell" (a 45 deg sweep called 45 deg "agree"
+// before 7 December 2026); beyond it, disagreement.
+TEST(Suggest, TheSkinLinesCrossCheckSaysWhatItsSweepCanTell) {
+  const fs::path dir = folder() / "face";
+  fs::create_directories(dir);
+  caps_test::make_phantom_model(dir, (dir / "model").string(), 128, 64, /*face=*/true);
+  for (const double step : {45.0, 15.0}) {
+    app::SuggestRequest r = forehead_request("linear", cat("face-", step));
+    r.model = (dir / "model").string();
+    r.at = "glabella+0,20";
+    r.step = step;
+    r.refine = 0;
+    r.domain.domain = "patch";
+    const json lines = json::parse(app::run_plan_suggest(r).suggestions_json).at("skin_lines");
+    ASSERT_TRUE(lines.at("found").get<bool>()) << lines.dump();
+    const double angle = lines.at("least_force_angle_deg").get<double>();
+    const std::string said = lines.at("sentence").get<std::string>();
+    const bool agree = said.find(": they agree") != std::string::npos;
+    const bool coarse = said.find("too coarse to tell") != std::string::npos;
+    const bool disagree = said.find("they disagree") != std::string::npos;
+    EXPECT_EQ(agree + coarse + disagree, 1) << said;
+    EXPECT_EQ(agree, angle <= 20) << said;
+    EXPECT_EQ(coarse, angle > 20 && angle <= step) << said;
+    EXPECT_EQ(disagree, angle > std::max(step, 20.0)) << said;
+  }
+}
+
 TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
   const auto refused = [](auto change, const std::string& words) {
     app::SuggestRequest r = forehead_request("neo-hookean", "refused");
