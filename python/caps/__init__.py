@@ -163,9 +163,10 @@ def plan_skin_lines(model, **fields):
 def plan_suggest(model, at, diameter, output, *, progress=None, **fields):
     """For a lesion at ``at`` ("THETA,Z" or "glabella+15,20") of ``diameter`` mm, the library's
     closures laid around it at every orientation, closed and ranked (caps plan suggest);
-    fields: margin (mm), procedures ("ellipse,rhomboid,bilobed,rotation-flap"), step (deg), objective ("force",
-    "features", "scar", "excised"), refine, material, force, ... Returns suggestions.json as a
-    dict: "best", "designs" (ranked first, each with its figures, plan and rank or refusal)."""
+    fields: margin (mm), procedures ("ellipse,rhomboid,bilobed,rotation-flap"), step (deg),
+    objective ("force", "features", "scar", "excised"), refine, material, force, ... Returns
+    suggestions.json as a dict: "best", "designs" (ranked first, each with its figures, plan and
+    rank or refusal)."""
     return run("plan_suggest", model=model, at=at, diameter=diameter, output=output,
                progress=progress, **fields)
 
