@@ -222,6 +222,7 @@ TEST(Suggest, TheBilobedFlapsDefectIsTheLesionAndItsMarginAndItsMirrorImageIsADe
     EXPECT_NEAR(o.at("parameters").at("radius").get<double>(), radius, 1e-3);
     const double side = o.at("parameters").at("lobe_side").get<double>();
     EXPECT_EQ(o.at("name").get<std::string>().find("-mirrored-") != std::string::npos, side < 0);
+    EXPECT_EQ(o.at("side"), side < 0 ? "lobes right" : "lobes left");
     EXPECT_NEAR(o.at("excised_mm2").get<double>(), area, 0.08 * area) << o.dump();
     EXPECT_NEAR(o.at("healthy_excised_mm2").get<double>(),
                 o.at("excised_mm2").get<double>() - M_PI * 4, 0.1);

@@ -106,12 +106,25 @@ std::map<std::string, double> design_parameters(const Fit& f, double side) {
   return p;
 }
 
+/// A flap's side in words ("lobes left", "arc right"); "" for a design without one.
+std::string side_words(const SuggestedDesign& d) {
+  if (d.side == 0) return "";
+  return cat(d.procedure == "bilobed" ? "lobes " : "arc ", d.side > 0 ? "left" : "right");
+}
+
 /// The family a design is drawn in: its procedure, and its side where it has one.
 std::string family(const SuggestedDesign& d) {
-  if (d.side == 0) return d.procedure;
-  const bool lobes = d.procedure == "bilobed";
-  return cat(d.procedure, d.side > 0 ? (lobes ? " (lobes left)" : " (arc left)")
-                                     : (lobes ? " (lobes right)" : " (arc right)"));
+  const std::string side = side_words(d);
+  return side.empty() ? d.procedure : cat(d.procedure, " (", side, ")");
+}
+
+/// The orientation (deg from superior towards +theta) of the skin's tangent direction `v` at
+/// (theta, z) on `model`, as plan frames measure it.
+double orientation_at(const PatientModel& model, double theta_deg, double z_mm,
+                      const Eigen::Vector3d& v) {
+  const Eigen::Vector3d up = plan::skin_frame(model, theta_deg, z_mm, 0).ex;
+  const Eigen::Vector3d right = plan::skin_frame(model, theta_deg, z_mm, 90).ex;
+  return rad_to_deg(std::atan2(v.dot(right), v.dot(up)));
 }
 
 std::vector<std::string> split_list(const std::string& text) {
@@ -473,9 +486,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
           plan::walk_on_skin(*on, plan::skin_frame(*on, theta, z, orientation), step);
       theta = o.theta_z.x();
       z = o.theta_z.y();
-      const Eigen::Vector3d up = plan::skin_frame(*on, theta, z, 0).ex;
-      const Eigen::Vector3d right = plan::skin_frame(*on, theta, z, 90).ex;
-      orientation = rad_to_deg(std::atan2(o.ex.dot(right), o.ex.dot(up)));
+      orientation = orientation_at(*on, theta, z, o.ex);
     }
     plan::Plan plan =
         plan::place_procedure(plan::layout_procedure(d.procedure, design_parameters(f, d.side)),
@@ -536,10 +547,8 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       if (dir.found) {
         const Eigen::Vector3d v =
             plan::skin_frame(*head, hc.theta_deg, hc.z_mm, dir.orientation_deg).ex;
-        const Eigen::Vector3d up = plan::skin_frame(*on, on_tz[0], on_tz[1], 0).ex;
-        const Eigen::Vector3d right = plan::skin_frame(*on, on_tz[0], on_tz[1], 90).ex;
-        const double o = round_to(
-            std::fmod(rad_to_deg(std::atan2(v.dot(right), v.dot(up))) + 360.0, 180.0), 1);
+        const double o =
+            round_to(std::fmod(orientation_at(*on, on_tz[0], on_tz[1], v) + 360.0, 180.0), 1);
         lines.found = true;
         lines.orientation_deg = o >= 180.0 ? o - 180.0 : o;
         lines.zone = dir.zone;
@@ -760,6 +769,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
     for (const auto& [k, v] : design_parameters(fits.at(d.procedure), d.side))
       params[k] = round_to(v, 3);
     o["parameters"] = params;
+    o["side"] = d.side == 0 ? json(nullptr) : json(side_words(d));
     o["plan"] = d.plan.empty() ? json(nullptr) : json(d.plan);
     if (!d.refused.empty()) {
       o["refused"] = d.refused;

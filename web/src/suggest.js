@@ -73,13 +73,9 @@ export class Suggestions {
     // Borges's relaxed skin tension lines at the lesion, and how the least force lies to them.
     e.lines.textContent = s.skin_lines?.found ? `${s.skin_lines.sentence}.`
       : `Relaxed skin tension lines: not known here (${s.skin_lines?.note ?? 'no map'}).`;
-    // A flap tried to both sides says which (its lobes or arc to the left or right of its axis).
-    const label = (d) => {
-      const side = d.parameters?.lobe_side ?? d.parameters?.arc_side;
-      const words = side === undefined ? ''
-        : ` (${d.parameters?.lobe_side !== undefined ? 'lobes' : 'arc'} ${side > 0 ? 'left' : 'right'})`;
-      return `${escapeHtml(d.procedure)} ${Math.round(d.orientation_deg)}°${words}`;
-    };
+    // A flap tried to both sides says which (suggestions.json's `side`: "lobes left", ...).
+    const label = (d) => `${escapeHtml(d.procedure)} ${Math.round(d.orientation_deg)}°` +
+      (d.side ? ` (${escapeHtml(d.side)})` : '');
     const rows = ranked.map((d) => {
       const f = figures(d);
       const feature = f.feature_words ? `${fmt(f.max_feature_mm, 2)} (${escapeHtml(f.feature_words)})` : '–';
