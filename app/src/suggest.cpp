@@ -74,12 +74,23 @@ struct Fit {
 /// second 0.75 of the first) to the left or the right of the axis from the pivot through the
 /// defect, which is the orientation.
 Fit fit(const std::string& procedure, double r_mm, double ratio) {
+  Fit f;
   if (procedure == "ellipse") {
     const double w = 2 * r_mm * std::sqrt(ratio * ratio + 1) / ratio;
-    return {{{"length", ratio * w}, {"width", w}}, 180};
+    f.parameters = {{"length", ratio * w}, {"width", w}};
+    return f;
   }
-  if (procedure == "rhomboid") return {{{"side", 4 * r_mm / std::sqrt(3.0)}}, 360};
-  if (procedure == "bilobed") return {{{"radius", r_mm}}, 360, "lobe_side", {1, -1}};
+  f.turn_deg = 360;  // the flaps differ turned by 180 deg
+  if (procedure == "rhomboid") {
+    f.parameters = {{"side", 4 * r_mm / std::sqrt(3.0)}};
+    return f;
+  }
+  f.sides = {1, -1};
+  if (procedure == "bilobed") {
+    f.parameters = {{"radius", r_mm}};
+    f.side_parameter = "lobe_side";
+    return f;
+  }
   if (procedure == "rotation-flap") {
     // The triangular defect O F S (legs R, the library's default 40 deg at O): its inscribed
     // circle, radius R sin(delta) / (2 (1 + sin(delta / 2))), is the lesion and its margin, and
@@ -87,11 +98,10 @@ Fit fit(const std::string& procedure, double r_mm, double ratio) {
     const double delta = deg_to_rad(40.0);
     const double R = 2 * r_mm * (1 + std::sin(delta / 2)) / std::sin(delta);
     const double from_o = r_mm / std::sin(delta / 2);
-    return {{{"radius", R}, {"defect_angle", 40.0}},
-            360,
-            "arc_side",
-            {1, -1},
-            -from_o * Eigen::Vector2d(std::cos(delta / 2), -std::sin(delta / 2))};
+    f.parameters = {{"radius", R}, {"defect_angle", 40.0}};
+    f.side_parameter = "arc_side";
+    f.origin_mm = -from_o * Eigen::Vector2d(std::cos(delta / 2), -std::sin(delta / 2));
+    return f;
   }
   throw InvalidParameter(
       cat("{procedures} ", procedure,
