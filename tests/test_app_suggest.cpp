@@ -14,6 +14,7 @@
 #include "caps/app/suggest.hpp"
 #include "caps/core/error.hpp"
 #include "caps/plan/plan_io.hpp"
+#include "caps/plan/skin_walk.hpp"
 #include "caps/surface/patient_model.hpp"
 #include "error_of.hpp"
 #include "phantom_model.hpp"
@@ -292,6 +293,73 @@ TEST(Suggest, TheSkinLinesCrossCheckSaysWhatItsSweepCanTell) {
   }
 }
 
+// A lesion drawn as its outline (--outline): an ellipse of 10 x 3 mm with its long axis at 60
+// deg (from superior towards +theta) on the phantom's forehead, a 1 mm margin, ellipses every 30
+// deg ranked by the healthy skin they excise. Each ellipse is sized at its orientation so that
+// the outline and its margin lie inside it: its rhombus's half width W / 2 = max(|x| / 3 + |y|)
+// + m sqrt(1 + 1/9) over the outline's points (x along the orientation), so along the lesion
+// (60 deg) it is sqrt((5/3)^2 + 1.5^2) + 1.054 = 3.30 mm, across it (150 deg) 6.08 mm. The one
+// along the lesion excises least and is the suggestion; every outline point, moved out by the
+// margin, is inside every ellipse's wound.
+TEST(Suggest, ADrawnLesionIsHeldWithItsMarginAndTheEllipseAlongItExcisesLeast) {
+  app::SuggestRequest r = forehead_request("linear", "outline");
+  const PatientModel model = PatientModel::load(r.model);
+  // A point x mm along 60 deg and y mm across it from the centre, walked to on the skin as the
+  // templates are laid, as (theta deg, z mm).
+  const plan::SkinFrame centre = plan::skin_frame(model, 0, 40, 60);
+  const auto at = [&](double x, double y) -> Eigen::Vector2d {
+    return plan::walk_on_skin(model, centre, Eigen::Vector2d(x, y)).theta_z;
+  };
+  std::vector<Eigen::Vector2d> outline;
+  std::string text;
+  for (int k = 0; k < 24; ++k) {
+    const double a = 2 * M_PI * k / 24;
+    outline.push_back(at(5 * std::cos(a), 1.5 * std::sin(a)));
+    text += (k ? ";" : "") + std::to_string(outline.back().x()) + "," +
+            std::to_string(outline.back().y());
+  }
+  r.at = "";
+  r.diameter = 0;
+  r.outline = text;
+  r.step = 30;
+  r.refine = 0;
+  r.objective = "excised";
+  r.domain.domain = "patch";
+  const json j = json::parse(app::run_plan_suggest(r).suggestions_json);
+  const json& lesion = j.at("lesion");
+  EXPECT_NEAR(lesion.at("theta_deg").get<double>(), 0, 0.05);  // the outline's centre
+  EXPECT_NEAR(lesion.at("z_mm").get<double>(), 40, 0.05);
+  EXPECT_NEAR(lesion.at("diameter_mm").get<double>(), 10, 0.3);
+  const double area = lesion.at("area_mm2").get<double>();
+  EXPECT_NEAR(area, M_PI * 5 * 1.5, 0.05 * M_PI * 5 * 1.5);
+  EXPECT_EQ(lesion.at("outline_theta_z").size(), 24u);
+  EXPECT_EQ(j.at("best").get<std::string>(), "ellipse-060") << j.dump();
+  ASSERT_EQ(j.at("designs").size(), 6u);
+  for (const json& d : j.at("designs")) {
+    const double o = d.at("orientation_deg").get<double>();
+    // Along and across the lesion closed; another may be refused by the sweep's mesher (the
+    // 31 mm ellipse at 30 deg in the small patch), its plan laid all the same.
+    if (o == 60 || o == 150) EXPECT_FALSE(d.contains("refused")) << d.dump();
+    if (d.contains("refused")) continue;
+    const double w = d.at("parameters").at("width").get<double>();
+    EXPECT_NEAR(d.at("parameters").at("length").get<double>(), 3 * w, 3e-3);  // both rounded
+    if (o == 60) EXPECT_NEAR(w / 2, 3.30, 0.05 * 3.30) << d.dump();
+    if (o == 150) EXPECT_NEAR(w / 2, 6.08, 0.05 * 6.08) << d.dump();
+    EXPECT_NEAR(d.at("healthy_excised_mm2").get<double>(), d.at("excised_mm2").get<double>() - area,
+                0.2);
+    const plan::Plan p = plan::read_plan(folder() / "outline" / d.at("plan").get<std::string>());
+    for (int k = 0; k < 24; ++k) {
+      const double a = 2 * M_PI * k / 24;
+      // The outline's point and the same moved out by 0.9 of the margin along its normal.
+      const Eigen::Vector2d n = Eigen::Vector2d(1.5 * std::cos(a), 5 * std::sin(a)).normalized();
+      for (const Eigen::Vector2d& q :
+           {at(5 * std::cos(a), 1.5 * std::sin(a)),
+            at(5 * std::cos(a) + 0.9 * n.x(), 1.5 * std::sin(a) + 0.9 * n.y())})
+        EXPECT_TRUE(inside_the_wound(p, q.x(), q.y())) << d.at("name") << " point " << k;
+    }
+  }
+}
+
 TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
   const auto refused = [](auto change, const std::string& words) {
     app::SuggestRequest r = forehead_request("neo-hookean", "refused");
@@ -306,6 +374,19 @@ TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
   refused([](app::SuggestRequest& r) { r.objective = "beauty"; }, "force, features, scar");
   refused([](app::SuggestRequest& r) { r.procedures = "ellipse,o-z"; }, "o-z");
   refused([](app::SuggestRequest& r) { r.at = ""; }, "--at");
+  refused([](app::SuggestRequest& r) { r.outline = "0,40;2,41;1,43"; }, "give one");
+  refused(
+      [](app::SuggestRequest& r) {
+        r.diameter = 0;
+        r.outline = "0,40;2,41";
+      },
+      "3 to 200 points");
+  refused(
+      [](app::SuggestRequest& r) {
+        r.diameter = 0;
+        r.outline = "0,40;2,x;1,43";
+      },
+      "THETA,Z");
   // The phantom's face has no nose: the relaxed skin tension lines are not laid on it, so they
   // cannot rank the designs (they are reported as not known: the first test).
   refused([](app::SuggestRequest& r) { r.objective = "rstl"; }, "not known at this lesion");

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "caps/core/error.hpp"
 
@@ -40,6 +41,19 @@ std::array<double, N> parse_numbers(const std::string& text, const std::string& 
     throw InvalidInput(cat(option, " '", text, "': expected ", N, " numbers separated by commas (",
                            meaning, ")"));
   return v;
+}
+
+/// "a,b;c,d;..." as points of N numbers each (`option`, `meaning` for the message).
+template <std::size_t N>
+std::vector<std::array<double, N>> parse_point_list(const std::string& text,
+                                                    const std::string& option,
+                                                    const std::string& meaning) {
+  std::vector<std::array<double, N>> out;
+  std::istringstream in(text);
+  for (std::string item; std::getline(in, item, ';');)
+    if (item.find_first_not_of(" \t") != std::string::npos)
+      out.push_back(parse_numbers<N>(item, option, meaning));
+  return out;
 }
 
 }  // namespace caps::app

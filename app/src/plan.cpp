@@ -101,19 +101,6 @@ plan::PlanReport checked_plan(const plan::Plan& p, const std::string& model_dir,
   return report;
 }
 
-// "a,b;c,d;..." as points of N numbers each (`option`, `meaning` for the message).
-template <std::size_t N>
-std::vector<std::array<double, N>> parse_point_list(const std::string& text,
-                                                    const std::string& option,
-                                                    const std::string& meaning) {
-  std::vector<std::array<double, N>> out;
-  std::istringstream in(text);
-  for (std::string item; std::getline(in, item, ';');)
-    if (item.find_first_not_of(" \t") != std::string::npos)
-      out.push_back(parse_numbers<N>(item, option, meaning));
-  return out;
-}
-
 // A free incision: one cutting path through the points (theta deg, z mm), no sutures.
 plan::Plan free_incision(const PlanNewRequest& r, const PatientModel& model) {
   if (!r.at.empty() || !r.at_xyz.empty() || !r.parameters.empty())

@@ -62,7 +62,87 @@ struct Fit {
   /// side 1; the mirror image's is mirrored): where the template's origin is not its defect's
   /// centre (a rotation flap's is its arc's centre, the defect's apex).
   Eigen::Vector2d origin_mm{0, 0};
+  /// An ellipse around a drawn outline: the outline in the skin's plane at the lesion's centre
+  /// (mm along orientation 0 and 90: LesionOutline::local), its margin and the ellipse's ratio;
+  /// its length and width then depend on the orientation (design_parameters()).
+  std::vector<Eigen::Vector2d> outline_mm;
+  double margin_mm = 0, ratio = 3;
 };
+
+/// A lesion drawn as an outline on the skin (--outline): its points, and where they lie in the
+/// plane of the skin at the lesion's centre.
+struct LesionOutline {
+  std::vector<Eigen::Vector2d> theta_z;  ///< as given (deg, mm); empty: a round lesion
+  std::vector<Eigen::Vector3d> lps;      ///< their skin points
+  /// The points in the skin's tangent plane at the centre: mm along the frames of orientation 0
+  /// (superior) and 90 (towards +theta) there.
+  std::vector<Eigen::Vector2d> local;
+  double area_mm2 = 0;     ///< the outline's area in that plane
+  double diameter_mm = 0;  ///< its largest diameter (between skin points)
+  double reach_mm = 0;     ///< its farthest point from the centre
+};
+
+/// "THETA,Z;THETA,Z;..." as the outline's points: 3 to 200 of them, distinct neighbours.
+LesionOutline parse_outline(const std::string& text) {
+  LesionOutline o;
+  for (const auto& p : parse_point_list<2>(text, "{outline}", "THETA,Z in degrees and mm"))
+    if (o.theta_z.empty() || (Eigen::Vector2d(p[0], p[1]) - o.theta_z.back()).norm() > 0)
+      o.theta_z.emplace_back(p[0], p[1]);
+  if (o.theta_z.size() > 1 && o.theta_z.front() == o.theta_z.back()) o.theta_z.pop_back();
+  if (o.theta_z.size() < 3 || o.theta_z.size() > 200)
+    throw InvalidParameter(cat("{outline}: ", o.theta_z.size(), " distinct points; draw the "
+                               "lesion's outline with 3 to 200 points THETA,Z;THETA,Z;... in order "
+                               "around it"));
+  return o;
+}
+
+/// The area centroid of the outline in (theta, z) (an affine image of the skin's plane near
+/// the lesion, so the centroid is the same point), theta taken about the first point.
+Eigen::Vector2d outline_centre(const LesionOutline& o) {
+  std::vector<Eigen::Vector2d> q = o.theta_z;
+  for (auto& p : q) p.x() = q.front().x() + std::remainder(p.x() - q.front().x(), 360.0);
+  double a2 = 0;
+  Eigen::Vector2d c = Eigen::Vector2d::Zero();
+  for (std::size_t i = 0; i < q.size(); ++i) {
+    const Eigen::Vector2d &p = q[i], &n = q[(i + 1) % q.size()];
+    const double cross = p.x() * n.y() - n.x() * p.y();
+    a2 += cross;
+    c += cross * (p + n);
+  }
+  if (std::abs(a2) < 1e-12) {  // degenerate (all on a line): the points' mean
+    c.setZero();
+    for (const auto& p : q) c += p;
+    return c / static_cast<double>(q.size());
+  }
+  return c / (3 * a2);
+}
+
+/// The outline's skin points on `model` and their place in its skin's plane at (theta, z).
+void project_outline(LesionOutline& o, const PatientModel& model, const Eigen::Vector2d& tz) {
+  o.lps.clear();
+  o.local.clear();
+  const Eigen::Vector3d c = model.skin_point(tz[0], tz[1]);
+  const Eigen::Vector3d up = plan::skin_frame(model, tz[0], tz[1], 0).ex;
+  const Eigen::Vector3d right = plan::skin_frame(model, tz[0], tz[1], 90).ex;
+  for (const Eigen::Vector2d& p : o.theta_z) {
+    const Eigen::Vector3d x = model.skin_point(p.x(), p.y());
+    if (!x.allFinite() || !c.allFinite())
+      throw InvalidParameter(cat("{outline}: the point ", p.x(), ",", p.y(),
+                                 " is not on the model's skin; draw the outline on the skin"));
+    o.lps.push_back(x);
+    o.local.emplace_back((x - c).dot(up), (x - c).dot(right));
+  }
+  double a2 = 0;
+  o.reach_mm = o.diameter_mm = 0;
+  for (std::size_t i = 0; i < o.local.size(); ++i) {
+    const Eigen::Vector2d &p = o.local[i], &n = o.local[(i + 1) % o.local.size()];
+    a2 += p.x() * n.y() - n.x() * p.y();
+    o.reach_mm = std::max(o.reach_mm, p.norm());
+    for (std::size_t j = i + 1; j < o.lps.size(); ++j)
+      o.diameter_mm = std::max(o.diameter_mm, (o.lps[i] - o.lps[j]).norm());
+  }
+  o.area_mm2 = std::abs(a2) / 2;
+}
 
 /// An ellipse of `ratio` (length / width): the library's outline is the rhombus of its length,
 /// width and apex angle (plan/procedures.cpp), whose inscribed circle has radius
@@ -109,10 +189,25 @@ Fit fit(const std::string& procedure, double r_mm, double ratio) {
           "rotation-flap (the closures suggest can lay around a lesion so far)"));
 }
 
-/// A design's template parameters: its procedure's fit, and its side.
-std::map<std::string, double> design_parameters(const Fit& f, double side) {
+/// A design's template parameters: its procedure's fit, its side, and for an ellipse around a
+/// drawn outline its size at this orientation. The ellipse's outline is a rhombus (its length L
+/// along the orientation, width W, L = ratio W); a point at (x, y) in its frame lies at least
+/// the margin m inside it when W / 2 >= |x| / ratio + |y| + m sqrt(1 + 1 / ratio^2), its
+/// distance from the side x / (L/2) + y / (W/2) = 1. (For a round lesion of radius rho this is
+/// the disc fit above with r = rho + m.)
+std::map<std::string, double> design_parameters(const Fit& f, double side, double orientation_deg) {
   std::map<std::string, double> p = f.parameters;
   if (!f.side_parameter.empty()) p[f.side_parameter] = side;
+  if (!f.outline_mm.empty()) {
+    const double a = deg_to_rad(orientation_deg);
+    const Eigen::Vector2d along(std::cos(a), std::sin(a)), across(-std::sin(a), std::cos(a));
+    double half = 0;
+    for (const Eigen::Vector2d& u : f.outline_mm)
+      half = std::max(half, std::abs(u.dot(along)) / f.ratio + std::abs(u.dot(across)));
+    const double w = 2 * (half + f.margin_mm * std::sqrt(1 + 1 / (f.ratio * f.ratio)));
+    p["length"] = f.ratio * w;
+    p["width"] = w;
+  }
   return p;
 }
 
@@ -377,12 +472,19 @@ void for_each_parallel(std::size_t n, unsigned workers, Progress& progress,
 SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   require_utf8(r.model, "the model folder");
-  if (r.at.empty() == r.at_xyz.empty())
+  const bool drawn = !r.outline.empty();
+  if ((!r.at.empty() && !r.at_xyz.empty()) || (!drawn && r.at.empty() && r.at_xyz.empty()))
     throw InvalidInput("give the lesion's centre with --at THETA,Z, --at LANDMARK+LEFT,UP or "
-                       "--at-xyz X,Y,Z");
-  if (!(r.diameter > 0 && r.diameter <= 50))
+                       "--at-xyz X,Y,Z (or draw its outline with --outline)");
+  if (drawn && r.diameter != 0)
+    throw InvalidParameter(cat("{diameter} ", r.diameter, " and an {outline}: give one, the "
+                               "diameter of a round lesion or the outline of any other (its "
+                               "largest diameter is then its own)"));
+  LesionOutline outline;
+  if (drawn) outline = parse_outline(r.outline);
+  if (!drawn && !(r.diameter > 0 && r.diameter <= 50))
     throw InvalidParameter(cat("{diameter} ", r.diameter, ": give the lesion's largest diameter "
-                               "in mm, more than 0 and at most 50"));
+                               "in mm, more than 0 and at most 50, or its --outline"));
   if (!(r.margin >= 0 && r.margin <= 20))
     throw InvalidParameter(cat("{margin} ", r.margin, ": give the margin in mm, 0 to 20"));
   if (!(r.step >= 5 && r.step <= 90))
@@ -410,20 +512,6 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
     throw InvalidParameter(
         "{procedures}: give one or more of ellipse, rhomboid, bilobed and "
         "rotation-flap");
-  const double r_mm = r.diameter / 2 + r.margin;
-  // Every layout once before any closure: a lesion too large or small for a template's clinical
-  // range is refused here, naming it.
-  std::map<std::string, Fit> fits;
-  for (const std::string& p : procedures) {
-    Fit f = fit(p, r_mm, r.ratio);
-    try {
-      for (const double side : f.sides) plan::layout_procedure(p, design_parameters(f, side));
-    } catch (const InvalidInput& e) {
-      throw InvalidParameter(cat("{diameter} ", r.diameter, " mm with a {margin} of ", r.margin,
-                                 " mm: the ", p, " around it is outside its range: ", e.what()));
-    }
-    fits.emplace(p, std::move(f));
-  }
 
   // The full closure's options (the user's simulate) and the sweep's coarser mesh.
   closure::SimulateOptions full = simulate_options(r.meshing, r.solver);
@@ -448,7 +536,47 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
   std::optional<plan::LandmarkPlacement> placement;
-  const Eigen::Vector2d tz = resolve_at(r.model, model, r.at, r.at_xyz, &placement);
+  const Eigen::Vector2d tz = !r.at.empty() || !r.at_xyz.empty()
+                                 ? resolve_at(r.model, model, r.at, r.at_xyz, &placement)
+                                 : outline_centre(outline);
+  if (drawn) {
+    project_outline(outline, model, tz);
+    if (!(outline.diameter_mm <= 50) || !(outline.reach_mm <= 50))
+      throw InvalidParameter(cat("{outline}: the lesion drawn is ", round_to(outline.diameter_mm, 1),
+                                 " mm across and reaches ", round_to(outline.reach_mm, 1),
+                                 " mm from its centre; draw a lesion at most 50 mm across, "
+                                 "with the centre (--at) inside it"));
+  }
+  // The lesion's largest diameter, and the radius of the disc about its centre that holds it
+  // and its margin (the flaps' defect; an ellipse's for a round lesion).
+  const double diameter = drawn ? outline.diameter_mm : r.diameter;
+  const double r_mm = drawn ? outline.reach_mm + r.margin : r.diameter / 2 + r.margin;
+  const std::string lesion_words =
+      drawn ? cat("the drawn lesion (", round_to(diameter, 1), " mm across, ",
+                  round_to(outline.area_mm2, 0), " mm2)")
+            : cat("a lesion of ", r.diameter, " mm");
+  // Every layout once before any closure: a lesion too large or small for a template's clinical
+  // range is refused here, naming it.
+  std::map<std::string, Fit> fits;
+  for (const std::string& p : procedures) {
+    Fit f = fit(p, r_mm, r.ratio);
+    if (drawn && p == "ellipse") {
+      f.outline_mm = outline.local;
+      f.margin_mm = r.margin;
+      f.ratio = r.ratio;
+    }
+    try {
+      for (const double side : f.sides)
+        for (double o = 0; o < f.turn_deg - 1e-9; o += r.step)
+          plan::layout_procedure(p, design_parameters(f, side, o));
+    } catch (const InvalidInput& e) {
+      throw InvalidParameter(cat(drawn ? cat("{outline}: ", lesion_words)
+                                       : cat("{diameter} ", r.diameter, " mm"),
+                                 " with a {margin} of ", r.margin, " mm: the ", p,
+                                 " around it is outside its range: ", e.what()));
+    }
+    fits.emplace(p, std::move(f));
+  }
   std::vector<std::string> common;  // carried into every closure's warnings
   if (!domain_warning.empty()) {
     warn(reporter, domain_warning);
@@ -499,7 +627,8 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       orientation = orientation_at(*on, theta, z, o.ex);
     }
     plan::Plan plan =
-        plan::place_procedure(plan::layout_procedure(d.procedure, design_parameters(f, d.side)),
+        plan::place_procedure(plan::layout_procedure(d.procedure,
+                                                     design_parameters(f, d.side, d.orientation_deg)),
                               *on, theta, z, orientation);
     plan.placement = placement;
     plan.model = plan_model;
@@ -525,6 +654,17 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
         cr.force = true;
         run_chart(cr, &quiet);
         on = std::make_shared<const PatientModel>(PatientModel::load(cr.output));
+        // The chart's frame at its centre (the lesion's) holds the outline from now on.
+        if (drawn && fits.count("ellipse")) {
+          LesionOutline on_chart = outline;
+          on_chart.theta_z.clear();
+          for (const Eigen::Vector3d& x : outline.lps) {
+            const CylindricalPoint c = on->to_cylindrical(x);
+            on_chart.theta_z.emplace_back(c.theta_deg, c.z_mm);
+          }
+          project_outline(on_chart, *on, Eigen::Vector2d(0, 0));
+          fits.at("ellipse").outline_mm = on_chart.local;
+        }
         plan_model = (fs::path(r.output) / "chart").string();
         chart_note = cat("the model's cylindrical image cannot hold the skin around the lesion (",
                          e.what(), "): every design is laid on a local chart facing it, made in ",
@@ -622,7 +762,8 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
           perimeter += (b - a).norm();
         }
         d.excised_mm2 = area2.norm() / 2;
-        d.healthy_excised_mm2 = std::max(0.0, d.excised_mm2 - kPi * r.diameter * r.diameter / 4);
+        d.healthy_excised_mm2 = std::max(
+            0.0, d.excised_mm2 - (drawn ? outline.area_mm2 : kPi * r.diameter * r.diameter / 4));
         d.scar_length_mm = perimeter / 2;  // each sutured edge meets its twin: one scar line
         check_mesh_budget(plan::wound_border(plan), *on, coarse_mesh);
         const closure::Simulation sim = closure::simulate(*on, plan, sweep, &quiet);
@@ -745,8 +886,18 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   j["version"] = 1;
   j["model"] = r.model;
   j["lesion"] = {{"theta_deg", round_to(tz[0], 3)}, {"z_mm", round_to(tz[1], 3)},
-                 {"at", r.at.empty() ? r.at_xyz : r.at}, {"diameter_mm", r.diameter},
+                 {"at", r.at.empty() ? r.at_xyz : r.at}, {"diameter_mm", round_to(diameter, 2)},
                  {"margin_mm", r.margin}, {"excised_radius_mm", round_to(r_mm, 3)}};
+  if (drawn) {
+    json points = json::array();
+    for (const Eigen::Vector2d& p : outline.theta_z)
+      points.push_back({round_to(p.x(), 3), round_to(p.y(), 3)});
+    j["lesion"]["outline_theta_z"] = points;
+    j["lesion"]["area_mm2"] = round_to(outline.area_mm2, 1);
+  } else {
+    j["lesion"]["outline_theta_z"] = nullptr;
+    j["lesion"]["area_mm2"] = round_to(kPi * r.diameter * r.diameter / 4, 1);
+  }
   j["objective"] = {{"name", objective.name}, {"meaning", objective.meaning},
                     {"unit", objective.unit}, {"least_first", true}};
   j["material"] = r.solver.material;
@@ -776,7 +927,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
               {"near_best", d.near_best},
               {"angle_to_skin_lines_deg", number_or_null(d.angle_to_skin_lines_deg, 1)}};
     json params = json::object();
-    for (const auto& [k, v] : design_parameters(fits.at(d.procedure), d.side))
+    for (const auto& [k, v] : design_parameters(fits.at(d.procedure), d.side, d.orientation_deg))
       params[k] = round_to(v, 3);
     o["parameters"] = params;
     o["side"] = d.side == 0 ? json(nullptr) : json(side_words(d));
@@ -824,7 +975,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   foot.size_px = 11;
   foot.colour = Eigen::Vector3d(0.35, 0.35, 0.35);
   canvas.text(20, 586,
-              cat("a lesion of ", r.diameter, " mm with a ", r.margin, " mm margin at theta ",
+              cat(lesion_words, " with a ", r.margin, " mm margin at theta ",
                   round_to(tz[0], 1), " deg, z ", round_to(tz[1], 1), " mm, closed in the ",
                   closure::domain_name(full.domain) == std::string("face") ? "whole face"
                                                                         : "clamped patch",
@@ -851,9 +1002,11 @@ std::string summary(const SuggestResult& s) {
                                   : cat(", ", feature_line_words(c.feature), " moved ",
                                         round_to(c.max_feature_mm, 1), " mm"),
                 ", scar ", round_to(b.scar_length_mm, 1), " mm",
-                b.refined ? std::string()
-                          : std::string("; the sweep's figures: its closure at full accuracy "
-                                        "did not finish, see suggestions.json"),
+                b.refined              ? std::string()
+                : b.full.warnings.empty() ? std::string("; the sweep's figures, not closed again")
+                                          : std::string("; the sweep's figures: its closure at "
+                                                        "full accuracy did not finish, see "
+                                                        "suggestions.json"),
                 ")");
     std::string near;
     for (const SuggestedDesign& d : s.designs)

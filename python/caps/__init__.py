@@ -160,15 +160,16 @@ def plan_skin_lines(model, **fields):
     return run("plan_skin_lines", model=model, **fields)
 
 
-def plan_suggest(model, at, diameter, output, *, progress=None, **fields):
+def plan_suggest(model, at=None, diameter=None, output=None, *, progress=None, **fields):
     """For a lesion at ``at`` ("THETA,Z" or "glabella+15,20") of ``diameter`` mm, the library's
-    closures laid around it at every orientation, closed and ranked (caps plan suggest);
-    fields: margin (mm), procedures ("ellipse,rhomboid,bilobed,rotation-flap"), step (deg),
-    objective ("force", "features", "scar", "excised"), refine, material, force, ... Returns
-    suggestions.json as a dict: "best", "designs" (ranked first, each with its figures, plan and
-    rank or refusal)."""
-    return run("plan_suggest", model=model, at=at, diameter=diameter, output=output,
-               progress=progress, **fields)
+    closures laid around it at every orientation, closed and ranked (caps plan suggest); or for a
+    lesion drawn as its outline: outline="THETA,Z;THETA,Z;..." instead of the diameter (``at``
+    then defaults to the outline's centre). Fields: margin (mm), procedures
+    ("ellipse,rhomboid,bilobed,rotation-flap"), step (deg), objective ("force", "features",
+    "scar", "excised"), refine, material, force, ... Returns suggestions.json as a dict: "best",
+    "designs" (ranked first, each with its figures, plan and rank or refusal), "lesion"."""
+    lesion = {k: v for k, v in (("at", at), ("diameter", diameter)) if v is not None}
+    return run("plan_suggest", model=model, output=output, progress=progress, **lesion, **fields)
 
 
 def mesh(model, output, **fields):

@@ -122,6 +122,13 @@ def test_a_suggestion_ranks_the_designs_around_a_lesion(model, work):
     with pytest.raises(caps.InvalidParameter, match="diameter 0"):
         caps.plan_suggest(model, "0,60", 0, work / "refused")
     assert not (work / "refused").exists()
+    # A lesion drawn as its outline (a diamond 6 mm of z tall, 2 deg wide): its centre and size
+    # its own (7.0 mm from top to bottom on the skin, where the forehead slopes back).
+    s = caps.plan_suggest(model, output=work / "outline", outline="0,57;1,60;0,63;-1,60",
+                          margin=1, step=90, refine=0, domain="patch", material="linear",
+                          objective="excised")
+    assert s["lesion"]["outline_theta_z"][0] == [0, 57] and abs(s["lesion"]["z_mm"] - 60) < 0.01
+    assert 6.8 < s["lesion"]["diameter_mm"] < 7.2 and s["best"] == "ellipse-000"
 
 
 def test_skin_lines_need_the_nose_the_phantom_has_not(model):

@@ -21,7 +21,10 @@ namespace caps::app {
 
 struct SuggestRequest {
   std::string model, at, at_xyz, output;
-  double diameter = 0;  ///< the lesion's largest diameter, mm
+  double diameter = 0;  ///< the lesion's largest diameter, mm (0 with an outline: its own)
+  /// The lesion's outline drawn on the skin, "THETA,Z;THETA,Z;..." (deg, mm; at least 3
+  /// points); empty for a round lesion of `diameter`.
+  std::string outline;
   double margin = 2;    ///< the clinical margin around it, mm
   std::string procedures = "ellipse";
   double step = 15;   ///< deg between orientations
@@ -43,7 +46,12 @@ struct SuggestRequest {
     v(r.at, {"at", "the lesion's centre on the skin: THETA,Z (deg, mm), or a landmark and mm "
                    "to the patient's left and up: glabella+15,20 (docs/landmarks.md)"});
     v(r.at_xyz, {"at_xyz", "the lesion's centre as an LPS point X,Y,Z (mm)"});
-    v(r.diameter, {"diameter", "the lesion's largest diameter (mm)", FieldKind::Required});
+    v(r.diameter, {"diameter", "the lesion's largest diameter (mm), a round lesion; or give "
+                               "its outline"});
+    v(r.outline, {"outline", "the lesion's outline drawn on the skin: THETA,Z;THETA,Z;... (deg, "
+                             "mm; 3 to 200 points in order around it); each design holds it and "
+                             "the margin around it, an ellipse sized for it at each orientation; "
+                             "its centre is the outline's unless --at is given"});
     v(r.margin, {"margin", "the margin excised around the lesion (mm; 1-2 for a benign lesion, "
                            "4 for a basal cell carcinoma)"});
     v(r.procedures, {"procedures",
