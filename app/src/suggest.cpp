@@ -82,18 +82,42 @@ struct LesionOutline {
   double reach_mm = 0;     ///< its farthest point from the centre
 };
 
-/// "THETA,Z;THETA,Z;..." as the outline's points: 3 to 200 of them, distinct neighbours.
-LesionOutline parse_outline(const std::string& text) {
+/// The outline's points (theta deg, z mm): 3 to 200 of them, distinct neighbours.
+void check_outline_count(std::size_t n) {
+  if (n < 3 || n > 200)
+    throw InvalidParameter(cat("{outline}: ", n, " distinct points; draw the lesion's outline "
+                               "with 3 to 200 points THETA,Z;THETA,Z;... in order around it"));
+}
+
+LesionOutline outline_of(const std::vector<Eigen::Vector2d>& points) {
   LesionOutline o;
-  for (const auto& p : parse_point_list<2>(text, "{outline}", "THETA,Z in degrees and mm"))
-    if (o.theta_z.empty() || (Eigen::Vector2d(p[0], p[1]) - o.theta_z.back()).norm() > 0)
-      o.theta_z.emplace_back(p[0], p[1]);
+  for (const Eigen::Vector2d& p : points)
+    if (o.theta_z.empty() || (p - o.theta_z.back()).norm() > 0) o.theta_z.push_back(p);
   if (o.theta_z.size() > 1 && o.theta_z.front() == o.theta_z.back()) o.theta_z.pop_back();
-  if (o.theta_z.size() < 3 || o.theta_z.size() > 200)
-    throw InvalidParameter(cat("{outline}: ", o.theta_z.size(), " distinct points; draw the "
-                               "lesion's outline with 3 to 200 points THETA,Z;THETA,Z;... in order "
-                               "around it"));
+  check_outline_count(o.theta_z.size());
   return o;
+}
+
+/// --outline "THETA,Z;THETA,Z;...", or --outline-xyz "X,Y,Z;..." (LPS on `model`'s skin; without
+/// the model only their syntax and count are checked).
+LesionOutline parse_outline(const std::string& theta_z, const std::string& xyz,
+                            const PatientModel* model) {
+  std::vector<Eigen::Vector2d> points;
+  if (!theta_z.empty())
+    for (const auto& p : parse_point_list<2>(theta_z, "{outline}", "THETA,Z in degrees and mm"))
+      points.emplace_back(p[0], p[1]);
+  else {
+    const auto lps = parse_point_list<3>(xyz, "{outline_xyz}", "LPS X,Y,Z in mm");
+    if (!model) {  // before the model is read: the points' count
+      check_outline_count(lps.size());
+      return {};
+    }
+    for (const auto& p : lps) {
+      const CylindricalPoint c = model->to_cylindrical(Eigen::Vector3d(p[0], p[1], p[2]));
+      points.emplace_back(c.theta_deg, c.z_mm);
+    }
+  }
+  return outline_of(points);
 }
 
 /// The area centroid of the outline in (theta, z) (an affine image of the skin's plane near
@@ -472,7 +496,10 @@ void for_each_parallel(std::size_t n, unsigned workers, Progress& progress,
 SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   require_utf8(r.model, "the model folder");
-  const bool drawn = !r.outline.empty();
+  const bool drawn = !r.outline.empty() || !r.outline_xyz.empty();
+  if (!r.outline.empty() && !r.outline_xyz.empty())
+    throw InvalidInput("give the lesion's outline once: --outline THETA,Z;... or --outline-xyz "
+                       "X,Y,Z;...");
   if ((!r.at.empty() && !r.at_xyz.empty()) || (!drawn && r.at.empty() && r.at_xyz.empty()))
     throw InvalidInput("give the lesion's centre with --at THETA,Z, --at LANDMARK+LEFT,UP or "
                        "--at-xyz X,Y,Z (or draw its outline with --outline)");
@@ -481,7 +508,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
                                "diameter of a round lesion or the outline of any other (its "
                                "largest diameter is then its own)"));
   LesionOutline outline;
-  if (drawn) outline = parse_outline(r.outline);
+  if (drawn) outline = parse_outline(r.outline, r.outline_xyz, nullptr);
   if (!drawn && !(r.diameter > 0 && r.diameter <= 50))
     throw InvalidParameter(cat("{diameter} ", r.diameter, ": give the lesion's largest diameter "
                                "in mm, more than 0 and at most 50, or its --outline"));
@@ -535,6 +562,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   fs::create_directories(out.path() / "designs");
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
+  if (!r.outline_xyz.empty()) outline = parse_outline(r.outline, r.outline_xyz, &model);
   std::optional<plan::LandmarkPlacement> placement;
   const Eigen::Vector2d tz = !r.at.empty() || !r.at_xyz.empty()
                                  ? resolve_at(r.model, model, r.at, r.at_xyz, &placement)

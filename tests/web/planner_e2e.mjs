@@ -398,15 +398,31 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, url, allow }) =>
     `caps simulate on the saved plan: ${cliForce} N, the page: ${closing3} N`);
   log(`caps simulate on the saved drawn plan: ${cliForce.toFixed(4)} N, as on the page`);
 
-  // Suggest: a 4 mm lesion (1 mm margin) at the placed plan's centre, ellipses every 45 deg,
-  // linear for speed: the ranked designs and the polar plot appear, ranked by the largest suture
-  // force; the best opens in the planner as an ellipse at its orientation, and undo goes back.
+  // Suggest: a lesion drawn on the skin around the placed plan's centre (four clicks: 6 mm tall,
+  // 3 mm wide), 1 mm margin, ellipses every 45 deg, linear for speed: the ranked designs and the
+  // polar plot appear, ranked by the largest suture force; each ellipse is sized for the outline
+  // at its orientation (the one along the lesion, 0 deg, narrower than the one across it); the
+  // best opens in the planner as an ellipse at its orientation about the outline's centre, and
+  // undo goes back.
   await page.click('#suggest-details summary');
-  await page.fill('#suggest-diameter', '4');
   await page.fill('#suggest-margin', '1');
   await page.selectOption('#suggest-step', '45');
   await page.selectOption('#material', 'linear');
   const centre = await page.evaluate(() => window.caps.planner.lines.centre);
+  await page.click('[data-view="front"]');
+  await page.click('#suggest-draw');
+  const n = centre.normal_lps;
+  const across = [-n[1], n[0], 0].map((v) => v / Math.hypot(n[0], n[1]));  // horizontal on the skin
+  const outlineLps = [[0, 0, 3], [1.5, 0, 0], [0, 0, -3], [-1.5, 0, 0]].map(([a, , up]) =>
+    centre.lps.map((v, k) => v + a * across[k] + (k === 2 ? up : 0)));
+  for (const [i, p] of outlineLps.entries()) {
+    const at = await screenOf(p);
+    await page.mouse.click(at.x, at.y);
+    await page.waitForFunction((k) => document.body.dataset.lesionOutline === String(k), i + 1);
+  }
+  await page.click('#suggest-draw');  // done drawing: clicks place plans again
+  assert.match(await page.locator('#suggest-outline').innerText(), /outline of 4 points, 6\.\d mm across/);
+  assert.ok(await page.locator('#suggest-diameter').isDisabled());
   await page.click('#suggest');
   await page.waitForSelector('body[data-suggestion="shown"]', { timeout: 240000 });
   const suggested = await page.evaluate(() => window.caps.suggestions.last);
@@ -428,10 +444,17 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, url, allow }) =>
     Math.abs(window.caps.planner.state.orientation - o) < 1e-6, ranked[0].orientation_deg);
   await page.waitForSelector('body[data-check="ok"]');
   const opened = await page.evaluate(() => window.caps.planner.plan.frame);
-  assert.ok(Math.abs(opened.theta_deg - centre.theta_deg) < 0.01 && Math.abs(opened.z_mm - centre.z_mm) < 0.01,
-    `the design lies about the lesion: ${JSON.stringify(opened)} against ${JSON.stringify(centre)}`);
-  log(`suggested in ${suggested.timings_s.suggest.toFixed(1)} s: ${ranked.length} designs ranked, the best ` +
-    `${ranked[0].name} (${ranked[0].objective} N on one suture), opened in the planner`);
+  const lesion = suggested.lesion;
+  assert.equal(lesion.outline_theta_z.length, 4);
+  assert.ok(Math.abs(lesion.theta_deg - centre.theta_deg) < 0.5 && Math.abs(lesion.z_mm - centre.z_mm) < 0.5,
+    `the outline's centre: ${JSON.stringify(lesion)} against the plan's ${JSON.stringify(centre)}`);
+  assert.ok(Math.abs(opened.theta_deg - lesion.theta_deg) < 0.01 && Math.abs(opened.z_mm - lesion.z_mm) < 0.01,
+    `the design lies about the lesion: ${JSON.stringify(opened)} against ${JSON.stringify(lesion)}`);
+  const width = (o) => suggested.designs.find((d) => d.orientation_deg === o).parameters.width;
+  assert.ok(width(0) < 0.8 * width(90), `ellipse widths along and across the lesion: ${width(0)}, ${width(90)}`);
+  log(`suggested for a drawn lesion (${lesion.diameter_mm} mm across) in ${suggested.timings_s.suggest.toFixed(1)} s: ` +
+    `${ranked.length} designs ranked, the best ${ranked[0].name} (${ranked[0].objective} N on one suture), ` +
+    `opened in the planner; ellipse widths ${width(0)} mm along the lesion, ${width(90)} mm across it`);
   await page.keyboard.press('Control+z');
   await page.waitForFunction(() => window.caps.planner.state?.procedure !== 'ellipse');
   await page.waitForSelector('body[data-check="ok"]');

@@ -2,7 +2,7 @@
 // menu, the parameter sliders, the plan check, Simulate, the alternatives and save/load.
 import { api, apiFetch } from './api.js';
 import { lpsToScene } from './frames.js';
-import { skinLineObjects } from './overlays.js';
+import { lesionOutlineObjects, skinLineObjects } from './overlays.js';
 import { kIncision, Planner } from './planner.js';
 import { showLandmarks } from './landmarks.js';
 import { Results, escapeHtml, whyNotFinished } from './results.js';
@@ -189,7 +189,8 @@ async function main() {
         Boolean(model.source?.chart);
       showSutures(planner);
       $('simulate').disabled = !plan;
-      $('suggest').disabled = !plan || document.body.dataset.suggestion === 'running';
+      $('suggest').disabled = (!plan && Number(document.body.dataset.lesionOutline ?? 0) < 3) ||
+        document.body.dataset.suggestion === 'running';
       $('save').disabled = !plan;
     },
     onNotice: notice,
@@ -276,11 +277,16 @@ async function main() {
     viewA.requestRender();
   });
 
+  // The guides on the skin before the operation: the skin lines and the lesion's outline.
+  let skinLineGuides = [];
+  const lesionOutline = [];  // LPS mm, in the order clicked
+  const showGuides = () => viewA.setGuides([...skinLineGuides, ...lesionOutlineObjects(lesionOutline)]);
   // The relaxed skin tension lines, fetched once, drawn on the skin before the operation.
   let skinLines = null;
   $('show-skin-lines').addEventListener('change', async (e) => {
     if (!e.target.checked) {
-      viewA.setGuides([]);
+      skinLineGuides = [];
+      showGuides();
       document.body.dataset.skinLines = 'hidden';
       return;
     }
@@ -292,7 +298,8 @@ async function main() {
       return;
     }
     if (!e.target.checked) return;  // unticked while they came
-    viewA.setGuides(skinLineObjects(skinLines));
+    skinLineGuides = skinLineObjects(skinLines);
+    showGuides();
     status(skinLines.count
       ? `Skin lines (green): Borges's relaxed skin tension lines (1984), laid on this face by its ` +
         'nasion, subnasale and midline; schematic, drawn on the skin before the operation.'
@@ -341,9 +348,44 @@ async function main() {
     progress: $('suggest-progress'), progressText: $('suggest-progress-text'), plot: $('suggest-plot'),
     table: $('suggestions'), summary: $('suggest-summary'), lines: $('suggest-lines'),
   }, (plan, name) => planner.load(plan, name));
+  // The lesion drawn as its outline: while Draw is on, each click on the skin adds a point.
+  const showOutline = () => {
+    const n = lesionOutline.length;
+    let across = 0;
+    for (const p of lesionOutline)
+      for (const q of lesionOutline) across = Math.max(across, Math.hypot(p[0] - q[0], p[1] - q[1], p[2] - q[2]));
+    $('suggest-outline').textContent = n === 0 ? ''
+      : n < 3 ? `${n} point${n > 1 ? 's' : ''}: at least 3`
+        : `outline of ${n} points, ${across.toFixed(1)} mm across`;
+    $('suggest-clear').hidden = n === 0;
+    $('suggest-diameter').disabled = n >= 3;
+    if (n >= 3 && document.body.dataset.suggestion !== 'running') $('suggest').disabled = false;
+    document.body.dataset.lesionOutline = String(n);
+    showGuides();
+  };
+  $('suggest-draw').addEventListener('click', () => {
+    if (planner.skinClick) {
+      planner.skinClick = null;
+      $('suggest-draw').textContent = 'Draw the lesion';
+      status('');
+      return;
+    }
+    planner.skinClick = (lps) => {
+      lesionOutline.push(lps);
+      showOutline();
+    };
+    $('suggest-draw').textContent = 'Done drawing';
+    status('Click around the lesion on the skin, in order; Done drawing when it is closed.');
+  });
+  $('suggest-clear').addEventListener('click', () => {
+    lesionOutline.length = 0;
+    showOutline();
+    $('suggest').disabled = !planner.plan;
+  });
   $('suggest').addEventListener('click', async () => {
     const c = planner.lines?.centre;
-    if (!c) return;
+    const drawn = lesionOutline.length >= 3;
+    if (!c && !drawn) return;
     const options = { material: $('material').value, tissue: $('tissue').value,
       procedures: $('suggest-procedures').value, step: Number($('suggest-step').value),
       objective: $('suggest-objective').value };
@@ -352,13 +394,18 @@ async function main() {
     $('cancel-suggest').hidden = false;
     try {
       status('Suggesting: each design is closed in turn…');
-      const s = await suggestions.run(`${c.theta_deg},${c.z_mm}`,
-        { diameter: Number($('suggest-diameter').value), margin: Number($('suggest-margin').value) }, options);
+      // A drawn lesion is fitted by its outline, about its own centre; else the placed plan's
+      // centre and the diameter.
+      const lesion = drawn
+        ? { outline_xyz: lesionOutline.map((p) => p.map((v) => v.toFixed(2)).join(',')).join(';') }
+        : { diameter: Number($('suggest-diameter').value) };
+      const s = await suggestions.run(drawn ? '' : `${c.theta_deg},${c.z_mm}`,
+        { ...lesion, margin: Number($('suggest-margin').value) }, options);
       status(`Suggested in ${s.timings_s.suggest.toFixed(0)} s: open a design to simulate it and compare.`);
     } catch (e) {
       status(e.status === 409 ? 'The suggestion was cancelled.' : `No suggestion: ${e.message}`);
     } finally {
-      $('suggest').disabled = !planner.plan;
+      $('suggest').disabled = !planner.plan && lesionOutline.length < 3;
       $('simulate').disabled = !planner.plan;
       $('cancel-suggest').hidden = true;
     }

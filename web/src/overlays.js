@@ -59,6 +59,35 @@ export function skinLineObjects(answer) {
   return [lines];
 }
 
+const outlineMaterial = new MeshBasicMaterial({ color: 0xe07000 });
+
+/** The lesion's outline drawn for Suggest (LPS mm, in order around it) as orange dots joined by
+ * a closed line on the skin, named 'lesion-outline'. */
+export function lesionOutlineObjects(points) {
+  if (!points.length) return [];
+  const dot = new SphereGeometry(0.0008, 12, 8);
+  const objects = points.map((p) => {
+    const m = new Mesh(dot, outlineMaterial);
+    m.position.copy(lpsToScene(p));
+    m.name = 'lesion-outline';
+    return m;
+  });
+  if (points.length > 1) {
+    const xyz = [];
+    for (let i = 0; i < points.length; ++i)
+      for (const p of [points[i], points[(i + 1) % points.length]]) {
+        const v = lpsToScene(p);
+        xyz.push(v.x, v.y, v.z);
+      }
+    const geometry = new BufferGeometry();
+    geometry.setAttribute('position', new Float32BufferAttribute(xyz, 3));
+    const line = new LineSegments(geometry, new LineBasicMaterial({ color: 0xe07000 }));
+    line.name = 'lesion-outline';
+    objects.push(line);
+  }
+  return objects;
+}
+
 /** The yellow handle at the plan's centre (dragged to move the plan). */
 export function handleObject(centreLps) {
   const m = new Mesh(new SphereGeometry(0.002, 20, 14), handleMaterial);

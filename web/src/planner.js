@@ -32,6 +32,7 @@ export class Planner {
     this.viewer = viewer;
     this.showSutures = true;
     this.picking = null;     // choosing a suture pair: {replace: index | -1, first: edge | -1}
+    this.skinClick = null;   // (lps) => ..., set while a click on the skin draws something else
     this.templates = new Map(templates.map((t) => [t.name, t]));
     this.ui = ui;
     this.state = null;       // null until placed
@@ -484,6 +485,7 @@ export class Planner {
       } else if (moved <= kClickSlopPx) {
         const p = this.viewer.pickSkin(e);
         if (p && this.picking) this.pickAt(sceneToLps(p));
+        else if (p && this.skinClick) this.skinClick(sceneToLps(p));
         else if (p) this.placeAt(sceneToLps(p));
       }
       down = null;

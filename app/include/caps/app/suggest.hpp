@@ -25,6 +25,7 @@ struct SuggestRequest {
   /// The lesion's outline drawn on the skin, "THETA,Z;THETA,Z;..." (deg, mm; at least 3
   /// points); empty for a round lesion of `diameter`.
   std::string outline;
+  std::string outline_xyz;  ///< the same as LPS points "X,Y,Z;X,Y,Z;..." (mm)
   double margin = 2;    ///< the clinical margin around it, mm
   std::string procedures = "ellipse";
   double step = 15;   ///< deg between orientations
@@ -52,6 +53,8 @@ struct SuggestRequest {
                              "mm; 3 to 200 points in order around it); each design holds it and "
                              "the margin around it, an ellipse sized for it at each orientation; "
                              "its centre is the outline's unless --at is given"});
+    v(r.outline_xyz, {"outline_xyz", "the lesion's outline as LPS points X,Y,Z;X,Y,Z;... (mm; "
+                                     "on the skin, as the planner's clicks give them)"});
     v(r.margin, {"margin", "the margin excised around the lesion (mm; 1-2 for a benign lesion, "
                            "4 for a basal cell carcinoma)"});
     v(r.procedures, {"procedures",
