@@ -387,6 +387,19 @@ TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
         r.outline = "0,40;2,x;1,43";
       },
       "THETA,Z");
+  refused(
+      [](app::SuggestRequest& r) {
+        r.diameter = 0;
+        r.outline = "0,40;2,41;1,43";
+        r.outline_xyz = "0,-90,40;2,-90,41;1,-90,43";
+      },
+      "outline once");
+  refused(
+      [](app::SuggestRequest& r) {
+        r.diameter = 0;
+        r.outline_xyz = "0,-90,40;2,-90,41";
+      },
+      "3 to 200 points");
   // The phantom's face has no nose: the relaxed skin tension lines are not laid on it, so they
   // cannot rank the designs (they are reported as not known: the first test).
   refused([](app::SuggestRequest& r) { r.objective = "rstl"; }, "not known at this lesion");
