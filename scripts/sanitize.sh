@@ -7,19 +7,11 @@
 # Test programs and fuzz targets run as many at a time as there are cores.
 # Both use one build directory, build-fuzz (CC=clang CXX=clang++ -DCAPS_FUZZ=ON).
 #
-#   scripts/sanitize.sh [--seconds N] [--build-only]
-#   (N: fuzzing time per target, default 20; --build-only: configure and build, run nothing)
+#   scripts/sanitize.sh [--seconds N]   (N: fuzzing time per target, default 20)
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 seconds=20
-build_only=0
-while [ $# -gt 0 ]; do
-  case "$1" in
-    --seconds) seconds="$2"; shift 2 ;;
-    --build-only) build_only=1; shift ;;
-    *) echo "sanitize.sh: unknown option $1" >&2; exit 2 ;;
-  esac
-done
+[ "${1:-}" = "--seconds" ] && seconds="$2"
 build="$here/build-fuzz"
 launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
@@ -38,7 +30,6 @@ t0=$(date +%s)
 cmake --build "$build" -j"$(nproc)" --target fuzzers "${programs[@]}"
 t1=$(date +%s)
 echo "sanitize: sanitized build $((t1 - t0)) s"
-[ "$build_only" = 1 ] && exit 0
 
 export TMPDIR="${TMPDIR:-/tmp}/caps-sanitize-$$"
 mkdir -p "$TMPDIR"

@@ -57,22 +57,11 @@ tests_tmp="$(mktemp -d "${TMPDIR:-/tmp}/caps-tests.XXXXXX")"
 # Searchable by other users, as /tmp is: the hostile-input tests run caps as an unprivileged user
 # on files in their folders (mktemp makes it the owner's alone).
 chmod 755 "$tests_tmp"
-# The sanitized tree is built beside the test suite, at the lowest priority (nice 19: the
-# scheduler gives it about 1.5 % of a core the tests want), so that it takes the cycles ctest
-# leaves idle (tests that wait on a browser, a server's deadline or one thread of their own;
-# docs/benchmarks.md, "Build and test time"). Then the sanitize phase finds the tree built (or
-# finishes it) and runs the sanitized tests and the fuzzers alone.
-sanitize_log="$(mktemp "${TMPDIR:-/tmp}/caps-sanitize-build.XXXXXX")"
-setsid nice -n 19 bash "$here/scripts/sanitize.sh" --build-only >"$sanitize_log" 2>&1 &
-sanitize_pid=$!
-trap 'kill -- -"$sanitize_pid" 2>/dev/null || true; rm -rf "$tests_tmp" "$sanitize_log"; summary' EXIT
+trap 'rm -rf "$tests_tmp"; summary' EXIT
 begin ctest
 (cd "$here/build" && TMPDIR="$tests_tmp" ctest --output-on-failure -j"$(nproc)")
 end
 rm -rf "$tests_tmp"
 begin sanitize
-# A failed build beside ctest is built again (and reported) by the whole sanitize run below.
-wait "$sanitize_pid" || echo "test.sh: the sanitized build beside ctest failed; building it again"
-sed -n 's/^sanitize: sanitized build/test.sh: beside ctest, the sanitized build took/p' "$sanitize_log"
 bash "$here/scripts/sanitize.sh" --seconds "${CAPS_FUZZ_SECONDS:-10}"
 end
