@@ -373,7 +373,7 @@ TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
   refused([](app::SuggestRequest& r) { r.step = 1; }, "step 1");
   refused([](app::SuggestRequest& r) { r.objective = "beauty"; }, "force, features, scar");
   refused([](app::SuggestRequest& r) { r.procedures = "ellipse,o-z"; }, "o-z");
-  refused([](app::SuggestRequest& r) { r.at = ""; }, "--at");
+  refused([](app::SuggestRequest& r) { r.at = ""; }, "the lesion's centre with at THETA,Z");
   refused([](app::SuggestRequest& r) { r.outline = "0,40;2,41;1,43"; }, "give one");
   refused(
       [](app::SuggestRequest& r) {

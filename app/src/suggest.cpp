@@ -82,13 +82,13 @@ struct LesionOutline {
   double reach_mm = 0;     ///< its farthest point from the centre
 };
 
-/// The outline's points (theta deg, z mm): 3 to 200 of them, distinct neighbours.
 void check_outline_count(std::size_t n) {
   if (n < 3 || n > 200)
     throw InvalidParameter(cat("{outline}: ", n, " distinct points; draw the lesion's outline "
                                "with 3 to 200 points THETA,Z;THETA,Z;... in order around it"));
 }
 
+/// The outline's points (theta deg, z mm): 3 to 200 of them, distinct neighbours.
 LesionOutline outline_of(const std::vector<Eigen::Vector2d>& points) {
   LesionOutline o;
   for (const Eigen::Vector2d& p : points)
@@ -498,11 +498,11 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   require_utf8(r.model, "the model folder");
   const bool drawn = !r.outline.empty() || !r.outline_xyz.empty();
   if (!r.outline.empty() && !r.outline_xyz.empty())
-    throw InvalidInput("give the lesion's outline once: --outline THETA,Z;... or --outline-xyz "
+    throw InvalidParameter("give the lesion's outline once: {outline} THETA,Z;... or {outline_xyz} "
                        "X,Y,Z;...");
   if ((!r.at.empty() && !r.at_xyz.empty()) || (!drawn && r.at.empty() && r.at_xyz.empty()))
-    throw InvalidInput("give the lesion's centre with --at THETA,Z, --at LANDMARK+LEFT,UP or "
-                       "--at-xyz X,Y,Z (or draw its outline with --outline)");
+    throw InvalidParameter("give the lesion's centre with {at} THETA,Z, {at} LANDMARK+LEFT,UP or "
+                           "{at_xyz} X,Y,Z (or draw its outline: {outline})");
   if (drawn && r.diameter != 0)
     throw InvalidParameter(cat("{diameter} ", r.diameter, " and an {outline}: give one, the "
                                "diameter of a round lesion or the outline of any other (its "
@@ -511,7 +511,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   if (drawn) outline = parse_outline(r.outline, r.outline_xyz, nullptr);
   if (!drawn && !(r.diameter > 0 && r.diameter <= 50))
     throw InvalidParameter(cat("{diameter} ", r.diameter, ": give the lesion's largest diameter "
-                               "in mm, more than 0 and at most 50, or its --outline"));
+                               "in mm, more than 0 and at most 50, or its {outline}"));
   if (!(r.margin >= 0 && r.margin <= 20))
     throw InvalidParameter(cat("{margin} ", r.margin, ": give the margin in mm, 0 to 20"));
   if (!(r.step >= 5 && r.step <= 90))
@@ -573,7 +573,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       throw InvalidParameter(cat("{outline}: the lesion drawn is ", round_to(outline.diameter_mm, 1),
                                  " mm across and reaches ", round_to(outline.reach_mm, 1),
                                  " mm from its centre; draw a lesion at most 50 mm across, "
-                                 "with the centre (--at) inside it"));
+                                 "with the centre ({at}) inside it"));
   }
   // The lesion's largest diameter, and the radius of the disc about its centre that holds it
   // and its margin (the flaps' defect; an ellipse's for a round lesion).
