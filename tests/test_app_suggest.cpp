@@ -10,6 +10,8 @@
 #include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
 
 #include "caps/app/suggest.hpp"
 #include "caps/core/error.hpp"
@@ -375,31 +377,21 @@ TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
   refused([](app::SuggestRequest& r) { r.procedures = "ellipse,o-z"; }, "o-z");
   refused([](app::SuggestRequest& r) { r.at = ""; }, "the lesion's centre with at THETA,Z");
   refused([](app::SuggestRequest& r) { r.outline = "0,40;2,41;1,43"; }, "give one");
-  refused(
-      [](app::SuggestRequest& r) {
-        r.diameter = 0;
-        r.outline = "0,40;2,41";
-      },
-      "3 to 200 points");
-  refused(
-      [](app::SuggestRequest& r) {
-        r.diameter = 0;
-        r.outline = "0,40;2,x;1,43";
-      },
-      "THETA,Z");
-  refused(
-      [](app::SuggestRequest& r) {
-        r.diameter = 0;
-        r.outline = "0,40;2,41;1,43";
-        r.outline_xyz = "0,-90,40;2,-90,41;1,-90,43";
-      },
-      "outline once");
-  refused(
-      [](app::SuggestRequest& r) {
-        r.diameter = 0;
-        r.outline_xyz = "0,-90,40;2,-90,41";
-      },
-      "3 to 200 points");
+  // A drawn lesion (no diameter): too few points, not numbers, given twice.
+  struct Drawn {
+    std::string outline, outline_xyz, words;
+  };
+  for (const Drawn& d : std::vector<Drawn>{{"0,40;2,41", "", "3 to 200 points"},
+                                           {"0,40;2,x;1,43", "", "THETA,Z"},
+                                           {"0,40;2,41;1,43", "0,-90,40;2,-90,41;1,-90,43", "outline once"},
+                                           {"", "0,-90,40;2,-90,41", "3 to 200 points"}})
+    refused(
+        [&](app::SuggestRequest& r) {
+          r.diameter = 0;
+          r.outline = d.outline;
+          r.outline_xyz = d.outline_xyz;
+        },
+        d.words);
   // The phantom's face has no nose: the relaxed skin tension lines are not laid on it, so they
   // cannot rank the designs (they are reported as not known: the first test).
   refused([](app::SuggestRequest& r) { r.objective = "rstl"; }, "not known at this lesion");
