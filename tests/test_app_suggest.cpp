@@ -381,10 +381,11 @@ TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
   struct Drawn {
     std::string outline, outline_xyz, words;
   };
-  for (const Drawn& d : std::vector<Drawn>{{"0,40;2,41", "", "3 to 200 points"},
-                                           {"0,40;2,x;1,43", "", "THETA,Z"},
-                                           {"0,40;2,41;1,43", "0,-90,40;2,-90,41;1,-90,43", "outline once"},
-                                           {"", "0,-90,40;2,-90,41", "3 to 200 points"}})
+  for (const Drawn& d :
+       std::vector<Drawn>{{"0,40;2,41", "", "3 to 200 points"},
+                          {"0,40;2,x;1,43", "", "THETA,Z"},
+                          {"0,40;2,41;1,43", "0,-90,40;2,-90,41;1,-90,43", "outline once"},
+                          {"", "0,-90,40;2,-90,41", "3 to 200 points"}})
     refused(
         [&](app::SuggestRequest& r) {
           r.diameter = 0;

@@ -84,7 +84,8 @@ struct LesionOutline {
 
 void check_outline_count(std::size_t n) {
   if (n < 3 || n > 200)
-    throw InvalidParameter(cat("{outline}: ", n, " distinct points; draw the lesion's outline "
+    throw InvalidParameter(cat("{outline}: ", n,
+                               " distinct points; draw the lesion's outline "
                                "with 3 to 200 points THETA,Z;THETA,Z;... in order around it"));
 }
 
@@ -498,19 +499,23 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   require_utf8(r.model, "the model folder");
   const bool drawn = !r.outline.empty() || !r.outline_xyz.empty();
   if (!r.outline.empty() && !r.outline_xyz.empty())
-    throw InvalidParameter("give the lesion's outline once: {outline} THETA,Z;... or {outline_xyz} "
-                       "X,Y,Z;...");
+    throw InvalidParameter(
+        "give the lesion's outline once: {outline} THETA,Z;... or {outline_xyz} "
+        "X,Y,Z;...");
   if ((!r.at.empty() && !r.at_xyz.empty()) || (!drawn && r.at.empty() && r.at_xyz.empty()))
-    throw InvalidParameter("give the lesion's centre with {at} THETA,Z, {at} LANDMARK+LEFT,UP or "
-                           "{at_xyz} X,Y,Z (or draw its outline: {outline})");
+    throw InvalidParameter(
+        "give the lesion's centre with {at} THETA,Z, {at} LANDMARK+LEFT,UP or "
+        "{at_xyz} X,Y,Z (or draw its outline: {outline})");
   if (drawn && r.diameter != 0)
-    throw InvalidParameter(cat("{diameter} ", r.diameter, " and an {outline}: give one, the "
+    throw InvalidParameter(cat("{diameter} ", r.diameter,
+                               " and an {outline}: give one, the "
                                "diameter of a round lesion or the outline of any other (its "
                                "largest diameter is then its own)"));
   LesionOutline outline;
   if (drawn) outline = parse_outline(r.outline, r.outline_xyz, nullptr);
   if (!drawn && !(r.diameter > 0 && r.diameter <= 50))
-    throw InvalidParameter(cat("{diameter} ", r.diameter, ": give the lesion's largest diameter "
+    throw InvalidParameter(cat("{diameter} ", r.diameter,
+                               ": give the lesion's largest diameter "
                                "in mm, more than 0 and at most 50, or its {outline}"));
   if (!(r.margin >= 0 && r.margin <= 20))
     throw InvalidParameter(cat("{margin} ", r.margin, ": give the margin in mm, 0 to 20"));
@@ -570,8 +575,9 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   if (drawn) {
     project_outline(outline, model, tz);
     if (!(outline.diameter_mm <= 50) || !(outline.reach_mm <= 50))
-      throw InvalidParameter(cat("{outline}: the lesion drawn is ", round_to(outline.diameter_mm, 1),
-                                 " mm across and reaches ", round_to(outline.reach_mm, 1),
+      throw InvalidParameter(cat("{outline}: the lesion drawn is ",
+                                 round_to(outline.diameter_mm, 1), " mm across and reaches ",
+                                 round_to(outline.reach_mm, 1),
                                  " mm from its centre; draw a lesion at most 50 mm across, "
                                  "with the centre ({at}) inside it"));
   }
@@ -579,10 +585,10 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   // and its margin (the flaps' defect; an ellipse's for a round lesion).
   const double diameter = drawn ? outline.diameter_mm : r.diameter;
   const double r_mm = drawn ? outline.reach_mm + r.margin : r.diameter / 2 + r.margin;
-  const std::string lesion_words =
-      drawn ? cat("the drawn lesion (", round_to(diameter, 1), " mm across, ",
-                  round_to(outline.area_mm2, 0), " mm2)")
-            : cat("a lesion of ", r.diameter, " mm");
+  const std::string lesion_words = drawn
+                                       ? cat("the drawn lesion (", round_to(diameter, 1),
+                                             " mm across, ", round_to(outline.area_mm2, 0), " mm2)")
+                                       : cat("a lesion of ", r.diameter, " mm");
   // Every layout once before any closure: a lesion too large or small for a template's clinical
   // range is refused here, naming it.
   std::map<std::string, Fit> fits;
@@ -598,10 +604,10 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
         for (double o = 0; o < f.turn_deg - 1e-9; o += r.step)
           plan::layout_procedure(p, design_parameters(f, side, o));
     } catch (const InvalidInput& e) {
-      throw InvalidParameter(cat(drawn ? cat("{outline}: ", lesion_words)
-                                       : cat("{diameter} ", r.diameter, " mm"),
-                                 " with a {margin} of ", r.margin, " mm: the ", p,
-                                 " around it is outside its range: ", e.what()));
+      throw InvalidParameter(
+          cat(drawn ? cat("{outline}: ", lesion_words) : cat("{diameter} ", r.diameter, " mm"),
+              " with a {margin} of ", r.margin, " mm: the ", p,
+              " around it is outside its range: ", e.what()));
     }
     fits.emplace(p, std::move(f));
   }
@@ -654,10 +660,9 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
       z = o.theta_z.y();
       orientation = orientation_at(*on, theta, z, o.ex);
     }
-    plan::Plan plan =
-        plan::place_procedure(plan::layout_procedure(d.procedure,
-                                                     design_parameters(f, d.side, d.orientation_deg)),
-                              *on, theta, z, orientation);
+    plan::Plan plan = plan::place_procedure(
+        plan::layout_procedure(d.procedure, design_parameters(f, d.side, d.orientation_deg)), *on,
+        theta, z, orientation);
     plan.placement = placement;
     plan.model = plan_model;
     plan.model_hash = on->content_hash();
@@ -913,9 +918,12 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   j["format"] = "caps-suggestions";
   j["version"] = 1;
   j["model"] = r.model;
-  j["lesion"] = {{"theta_deg", round_to(tz[0], 3)}, {"z_mm", round_to(tz[1], 3)},
-                 {"at", r.at.empty() ? r.at_xyz : r.at}, {"diameter_mm", round_to(diameter, 2)},
-                 {"margin_mm", r.margin}, {"excised_radius_mm", round_to(r_mm, 3)}};
+  j["lesion"] = {{"theta_deg", round_to(tz[0], 3)},
+                 {"z_mm", round_to(tz[1], 3)},
+                 {"at", r.at.empty() ? r.at_xyz : r.at},
+                 {"diameter_mm", round_to(diameter, 2)},
+                 {"margin_mm", r.margin},
+                 {"excised_radius_mm", round_to(r_mm, 3)}};
   if (drawn) {
     json points = json::array();
     for (const Eigen::Vector2d& p : outline.theta_z)
@@ -1002,14 +1010,14 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   TextStyle foot;
   foot.size_px = 11;
   foot.colour = Eigen::Vector3d(0.35, 0.35, 0.35);
-  canvas.text(20, 586,
-              cat(lesion_words, " with a ", r.margin, " mm margin at theta ",
-                  round_to(tz[0], 1), " deg, z ", round_to(tz[1], 1), " mm, closed in the ",
-                  closure::domain_name(full.domain) == std::string("face") ? "whole face"
-                                                                        : "clamped patch",
-                  "; ranked by ", objective.meaning, "; the suggestion: ",
-                  best.empty() ? std::string("none") : best),
-              foot);
+  canvas.text(
+      20, 586,
+      cat(lesion_words, " with a ", r.margin, " mm margin at theta ", round_to(tz[0], 1),
+          " deg, z ", round_to(tz[1], 1), " mm, closed in the ",
+          closure::domain_name(full.domain) == std::string("face") ? "whole face" : "clamped patch",
+          "; ranked by ", objective.meaning,
+          "; the suggestion: ", best.empty() ? std::string("none") : best),
+      foot);
   canvas.write_png(out.path() / "suggestions.png");
   out.commit();
   return result;
@@ -1024,13 +1032,13 @@ std::string summary(const SuggestResult& s) {
   if (ranked > 0) {
     const SuggestedDesign& b = s.designs.front();
     const SuggestedDesign::Closure& c = b.refined ? b.full : b.sweep;
-    line += cat("; best ", b.name, " (", b.procedure, " along ", b.orientation_deg,
-                " deg: up to ", round_to(c.max_force_per_suture_n, 2), " N a suture",
+    line += cat("; best ", b.name, " (", b.procedure, " along ", b.orientation_deg, " deg: up to ",
+                round_to(c.max_force_per_suture_n, 2), " N a suture",
                 c.feature.empty() ? std::string()
                                   : cat(", ", feature_line_words(c.feature), " moved ",
                                         round_to(c.max_feature_mm, 1), " mm"),
                 ", scar ", round_to(b.scar_length_mm, 1), " mm",
-                b.refined              ? std::string()
+                b.refined                 ? std::string()
                 : b.full.warnings.empty() ? std::string("; the sweep's figures, not closed again")
                                           : std::string("; the sweep's figures: its closure at "
                                                         "full accuracy did not finish, see "

@@ -68,8 +68,7 @@ double HeadPhantom::face_relief(double theta, double z) const {
   // A pair of features at +-theta0 (rad).
   auto pair = [&](double h, double t0, double wt, double z0, double wz) {
     const double u = (z - z0) / wz;
-    return u * u > kNegligible ? 0.0
-                               : h * (gauss((t - t0) / wt) + gauss((t + t0) / wt)) * gauss(u);
+    return u * u > kNegligible ? 0.0 : h * (gauss((t - t0) / wt) + gauss((t + t0) / wt)) * gauss(u);
   };
   constexpr double deg = kPi / 180.0;
   return mid(5.0, 0.30, 28.0, 6.0)      // glabella (brow)

@@ -47,14 +47,17 @@ struct SuggestRequest {
     v(r.at, {"at", "the lesion's centre on the skin: THETA,Z (deg, mm), or a landmark and mm "
                    "to the patient's left and up: glabella+15,20 (docs/landmarks.md)"});
     v(r.at_xyz, {"at_xyz", "the lesion's centre as an LPS point X,Y,Z (mm)"});
-    v(r.diameter, {"diameter", "the lesion's largest diameter (mm), a round lesion; or give "
-                               "its outline"});
-    v(r.outline, {"outline", "the lesion's outline drawn on the skin: THETA,Z;THETA,Z;... (deg, "
-                             "mm; 3 to 200 points in order around it); each design holds it and "
-                             "the margin around it, an ellipse sized for it at each orientation; "
-                             "its centre is the outline's unless --at is given"});
-    v(r.outline_xyz, {"outline_xyz", "the lesion's outline as LPS points X,Y,Z;X,Y,Z;... (mm; "
-                                     "on the skin, as the planner's clicks give them)"});
+    v(r.diameter, {"diameter",
+                   "the lesion's largest diameter (mm), a round lesion; or give "
+                   "its outline"});
+    v(r.outline, {"outline",
+                  "the lesion's outline drawn on the skin: THETA,Z;THETA,Z;... (deg, "
+                  "mm; 3 to 200 points in order around it); each design holds it and "
+                  "the margin around it, an ellipse sized for it at each orientation; "
+                  "its centre is the outline's unless --at is given"});
+    v(r.outline_xyz, {"outline_xyz",
+                      "the lesion's outline as LPS points X,Y,Z;X,Y,Z;... (mm; "
+                      "on the skin, as the planner's clicks give them)"});
     v(r.margin, {"margin", "the margin excised around the lesion (mm; 1-2 for a benign lesion, "
                            "4 for a basal cell carcinoma)"});
     v(r.procedures, {"procedures",
