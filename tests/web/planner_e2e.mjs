@@ -420,7 +420,14 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, url, allow }) =>
     await page.mouse.click(at.x, at.y);
     await page.waitForFunction((k) => document.body.dataset.lesionOutline === String(k), i + 1);
   }
-  await page.click('#suggest-draw');  // done drawing: clicks place plans again
+  // A mis-click beside it, taken back with Backspace; Enter ends drawing (clicks place plans again).
+  const stray = await screenOf(outlineLps[0].map((v, k) => v + 4 * across[k]));
+  await page.mouse.click(stray.x, stray.y);
+  await page.waitForFunction(() => document.body.dataset.lesionOutline === '5');
+  await page.keyboard.press('Backspace');
+  await page.waitForFunction(() => document.body.dataset.lesionOutline === '4');
+  await page.keyboard.press('Enter');
+  assert.equal(await page.locator('#suggest-draw').innerText(), 'Draw the lesion');
   assert.match(await page.locator('#suggest-outline').innerText(), /outline of 4 points, 6\.\d mm across/);
   assert.ok(await page.locator('#suggest-diameter').isDisabled());
   await page.click('#suggest');

@@ -359,7 +359,7 @@ async function main() {
         : `outline of ${n} points, ${across.toFixed(1)} mm across`;
     $('suggest-clear').hidden = n === 0;
     $('suggest-diameter').disabled = n >= 3;
-    if (n >= 3 && document.body.dataset.suggestion !== 'running') $('suggest').disabled = false;
+    $('suggest').disabled = document.body.dataset.suggestion === 'running' || (n < 3 && !planner.plan);
     document.body.dataset.lesionOutline = String(n);
     showGuides();
   };
@@ -375,12 +375,12 @@ async function main() {
       showOutline();
     };
     $('suggest-draw').textContent = 'Done drawing';
-    status('Click around the lesion on the skin, in order; Done drawing when it is closed.');
+    status('Click around the lesion on the skin, in order (Backspace takes the last point back); ' +
+      'Done drawing or Enter when it is closed.');
   });
   $('suggest-clear').addEventListener('click', () => {
     lesionOutline.length = 0;
     showOutline();
-    $('suggest').disabled = !planner.plan;
   });
   $('suggest').addEventListener('click', async () => {
     const c = planner.lines?.centre;
@@ -487,6 +487,16 @@ async function main() {
       e.preventDefault();
     } else if ((e.ctrlKey || e.metaKey) && e.key.toLowerCase() === 'y') {
       planner.redo();
+      e.preventDefault();
+    } else if (planner.skinClick && !e.target.closest?.('input, select, textarea') &&
+               ['Backspace', 'Delete', 'Escape', 'Enter'].includes(e.key)) {
+      // Drawing the lesion: Backspace takes the last point back, Escape or Enter ends drawing.
+      if (e.key === 'Backspace' || e.key === 'Delete') {
+        lesionOutline.pop();
+        showOutline();
+      } else {
+        $('suggest-draw').click();
+      }
       e.preventDefault();
     } else if (planner.onKey(e)) e.preventDefault();
   });
