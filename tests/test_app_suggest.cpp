@@ -15,6 +15,7 @@
 
 #include "caps/app/suggest.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/plane_geometry.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/plan/skin_walk.hpp"
 #include "caps/surface/patient_model.hpp"
@@ -60,14 +61,7 @@ const app::SuggestedDesign& design(const app::SuggestResult& s, double orientati
 
 // Whether (theta, z) lies inside the plan's wound border, the hole its cuts open (in (theta, z)).
 bool inside_the_wound(const plan::Plan& p, double theta, double z) {
-  const auto& loop = plan::wound_border(p).loop_theta_z;
-  bool in = false;
-  for (std::size_t i = 0, j = loop.size() - 1; i < loop.size(); j = i++)
-    if ((loop[i].y() > z) != (loop[j].y() > z) &&
-        theta < loop[j].x() +
-                    (z - loop[j].y()) * (loop[i].x() - loop[j].x()) / (loop[i].y() - loop[j].y()))
-      in = !in;
-  return in;
+  return point_in_polygon(plan::wound_border(p).loop_theta_z, Eigen::Vector2d(theta, z));
 }
 
 // A flap's designs every 90 deg around the forehead's lesion, the sweep's linear closures on the

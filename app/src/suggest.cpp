@@ -16,12 +16,13 @@
 #include "caps/app/loaded_model.hpp"
 #include "caps/core/atomic_output.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/plane_geometry.hpp"
 #include "caps/core/units.hpp"
 #include "caps/fem/blas.hpp"
 #include "caps/image/canvas.hpp"
 #include "caps/plan/check.hpp"
-#include "caps/plan/plan_io.hpp"
 #include "caps/plan/placement.hpp"
+#include "caps/plan/plan_io.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/plan/skin_lines.hpp"
 #include "caps/plan/skin_walk.hpp"
@@ -73,7 +74,7 @@ struct Fit {
 /// plane of the skin at the lesion's centre.
 struct LesionOutline {
   std::vector<Eigen::Vector2d> theta_z;  ///< as given (deg, mm); empty: a round lesion
-  std::vector<Eigen::Vector3d> lps;      ///< their skin points
+  std::vector<Eigen::Vector3d> lps;      ///< their skin points (--outline-xyz's as given)
   /// The points in the skin's tangent plane at the centre: mm along the frames of orientation 0
   /// (superior) and 90 (towards +theta) there.
   std::vector<Eigen::Vector2d> local;
@@ -82,64 +83,44 @@ struct LesionOutline {
   double reach_mm = 0;     ///< its farthest point from the centre
 };
 
-void check_outline_count(std::size_t n) {
+/// --outline "THETA,Z;THETA,Z;..." (theta_z) or --outline-xyz "X,Y,Z;..." (lps, LPS on the skin;
+/// theta_z is filled from them once the model is read), as given: 3 to 200 points, a point
+/// repeated next to itself (or the first again at the end) taken once.
+LesionOutline parse_outline(const std::string& theta_z, const std::string& xyz) {
+  LesionOutline o;
+  const auto add = [](auto& points, const auto& p) {
+    if (points.empty() || (p - points.back()).norm() > 0) points.push_back(p);
+  };
+  try {
+    if (!theta_z.empty())
+      for (const auto& p : parse_point_list<2>(theta_z, "{outline}", "THETA,Z in degrees and mm"))
+        add(o.theta_z, Eigen::Vector2d(p[0], p[1]));
+    else
+      for (const auto& p : parse_point_list<3>(xyz, "{outline_xyz}", "LPS X,Y,Z in mm"))
+        add(o.lps, Eigen::Vector3d(p[0], p[1], p[2]));
+  } catch (const InvalidParameter&) {
+    throw;
+  } catch (const InvalidInput& e) {  // the field named as each front end spells it
+    throw InvalidParameter(e.what());
+  }
+  const auto closed = [](auto& points) {
+    if (points.size() > 1 && points.front() == points.back()) points.pop_back();
+    return points.size();
+  };
+  const std::size_t n = theta_z.empty() ? closed(o.lps) : closed(o.theta_z);
   if (n < 3 || n > 200)
     throw InvalidParameter(cat("{outline}: ", n,
                                " distinct points; draw the lesion's outline "
                                "with 3 to 200 points THETA,Z;THETA,Z;... in order around it"));
-}
-
-/// The outline's points (theta deg, z mm): 3 to 200 of them, distinct neighbours.
-LesionOutline outline_of(const std::vector<Eigen::Vector2d>& points) {
-  LesionOutline o;
-  for (const Eigen::Vector2d& p : points)
-    if (o.theta_z.empty() || (p - o.theta_z.back()).norm() > 0) o.theta_z.push_back(p);
-  if (o.theta_z.size() > 1 && o.theta_z.front() == o.theta_z.back()) o.theta_z.pop_back();
-  check_outline_count(o.theta_z.size());
   return o;
-}
-
-/// --outline "THETA,Z;THETA,Z;...", or --outline-xyz "X,Y,Z;..." (LPS on `model`'s skin; without
-/// the model only their syntax and count are checked).
-LesionOutline parse_outline(const std::string& theta_z, const std::string& xyz,
-                            const PatientModel* model) {
-  std::vector<Eigen::Vector2d> points;
-  if (!theta_z.empty())
-    for (const auto& p : parse_point_list<2>(theta_z, "{outline}", "THETA,Z in degrees and mm"))
-      points.emplace_back(p[0], p[1]);
-  else {
-    const auto lps = parse_point_list<3>(xyz, "{outline_xyz}", "LPS X,Y,Z in mm");
-    if (!model) {  // before the model is read: the points' count
-      check_outline_count(lps.size());
-      return {};
-    }
-    for (const auto& p : lps) {
-      const CylindricalPoint c = model->to_cylindrical(Eigen::Vector3d(p[0], p[1], p[2]));
-      points.emplace_back(c.theta_deg, c.z_mm);
-    }
-  }
-  return outline_of(points);
 }
 
 /// The area centroid of the outline in (theta, z) (an affine image of the skin's plane near
 /// the lesion, so the centroid is the same point), theta taken about the first point.
 Eigen::Vector2d outline_centre(const LesionOutline& o) {
   std::vector<Eigen::Vector2d> q = o.theta_z;
-  for (auto& p : q) p.x() = q.front().x() + std::remainder(p.x() - q.front().x(), 360.0);
-  double a2 = 0;
-  Eigen::Vector2d c = Eigen::Vector2d::Zero();
-  for (std::size_t i = 0; i < q.size(); ++i) {
-    const Eigen::Vector2d &p = q[i], &n = q[(i + 1) % q.size()];
-    const double cross = p.x() * n.y() - n.x() * p.y();
-    a2 += cross;
-    c += cross * (p + n);
-  }
-  if (std::abs(a2) < 1e-12) {  // degenerate (all on a line): the points' mean
-    c.setZero();
-    for (const auto& p : q) c += p;
-    return c / static_cast<double>(q.size());
-  }
-  return c / (3 * a2);
+  for (auto& p : q) p.x() = q.front().x() + wrap_degrees(p.x() - q.front().x());
+  return area_centroid(q);
 }
 
 /// The outline's skin points on `model` and their place in its skin's plane at (theta, z).
@@ -157,16 +138,13 @@ void project_outline(LesionOutline& o, const PatientModel& model, const Eigen::V
     o.lps.push_back(x);
     o.local.emplace_back((x - c).dot(up), (x - c).dot(right));
   }
-  double a2 = 0;
   o.reach_mm = o.diameter_mm = 0;
   for (std::size_t i = 0; i < o.local.size(); ++i) {
-    const Eigen::Vector2d &p = o.local[i], &n = o.local[(i + 1) % o.local.size()];
-    a2 += p.x() * n.y() - n.x() * p.y();
-    o.reach_mm = std::max(o.reach_mm, p.norm());
+    o.reach_mm = std::max(o.reach_mm, o.local[i].norm());
     for (std::size_t j = i + 1; j < o.lps.size(); ++j)
       o.diameter_mm = std::max(o.diameter_mm, (o.lps[i] - o.lps[j]).norm());
   }
-  o.area_mm2 = std::abs(a2) / 2;
+  o.area_mm2 = std::abs(signed_area(o.local));
 }
 
 /// An ellipse of `ratio` (length / width): the library's outline is the rhombus of its length,
@@ -512,7 +490,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
                                "diameter of a round lesion or the outline of any other (its "
                                "largest diameter is then its own)"));
   LesionOutline outline;
-  if (drawn) outline = parse_outline(r.outline, r.outline_xyz, nullptr);
+  if (drawn) outline = parse_outline(r.outline, r.outline_xyz);
   if (!drawn && !(r.diameter > 0 && r.diameter <= 50))
     throw InvalidParameter(cat("{diameter} ", r.diameter,
                                ": give the lesion's largest diameter "
@@ -567,7 +545,11 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   fs::create_directories(out.path() / "designs");
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
-  if (!r.outline_xyz.empty()) outline = parse_outline(r.outline, r.outline_xyz, &model);
+  if (drawn && outline.theta_z.empty())  // given as LPS points
+    for (const Eigen::Vector3d& x : outline.lps) {
+      const CylindricalPoint c = model.to_cylindrical(x);
+      outline.theta_z.emplace_back(c.theta_deg, c.z_mm);
+    }
   std::optional<plan::LandmarkPlacement> placement;
   const Eigen::Vector2d tz = !r.at.empty() || !r.at_xyz.empty()
                                  ? resolve_at(r.model, model, r.at, r.at_xyz, &placement)

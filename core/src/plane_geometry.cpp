@@ -30,6 +30,30 @@ bool point_in_or_on_polygon(const std::vector<Eigen::Vector2d>& poly, const Eige
   return point_in_polygon(poly, p);
 }
 
+double signed_area(const std::vector<Eigen::Vector2d>& poly) {
+  double area2 = 0;
+  for (std::size_t i = 0; i < poly.size(); ++i) {
+    const Eigen::Vector2d &p = poly[i], &n = poly[(i + 1) % poly.size()];
+    area2 += p.x() * n.y() - p.y() * n.x();
+  }
+  return area2 / 2;
+}
+
+Eigen::Vector2d area_centroid(const std::vector<Eigen::Vector2d>& poly) {
+  double area2 = 0;
+  Eigen::Vector2d c = Eigen::Vector2d::Zero();
+  for (std::size_t i = 0; i < poly.size(); ++i) {
+    const Eigen::Vector2d &p = poly[i], &n = poly[(i + 1) % poly.size()];
+    const double cross = p.x() * n.y() - p.y() * n.x();
+    area2 += cross;
+    c += cross * (p + n);
+  }
+  if (std::abs(area2) >= 1e-12) return c / (3 * area2);
+  c.setZero();
+  for (const auto& p : poly) c += p;
+  return poly.empty() ? c : Eigen::Vector2d(c / static_cast<double>(poly.size()));
+}
+
 double wrap_degrees(double deg) { return deg - 360.0 * std::floor((deg + 180.0) / 360.0); }
 
 }  // namespace caps

@@ -6,6 +6,7 @@
 #include <set>
 
 #include "caps/core/error.hpp"
+#include "caps/core/plane_geometry.hpp"
 #include "caps/plan/procedures.hpp"
 #include "caps/volume/cylindrical_map.hpp"
 #include "plan_source.hpp"
@@ -148,9 +149,7 @@ PlanReport structure(const Plan& plan) {
     }
   // The tissue lies left of the loop: an excision that swaps a node and its twin across the cut
   // turns the border inside out (a counterclockwise loop).
-  double area2 = 0;
-  for (int i = 0; i < n; ++i) area2 += cross2(loop.local_mm[i], loop.local_mm[(i + 1) % n]);
-  if (area2 > 1e-6) {
+  if (2 * signed_area(loop.local_mm) > 1e-6) {
     int worst = 0;
     for (const auto& x : plan.excisions) worst = x.loop_index;
     for (const auto& x : plan.excisions) {

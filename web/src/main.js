@@ -171,6 +171,11 @@ async function main() {
     clearTimeout(noticeTimer);
     noticeTimer = setTimeout(() => status(''), 4000);
   };
+  // The lesion's outline drawn for Suggest (LPS mm, in the order clicked): Suggest needs it (three
+  // points or more) or a placed plan, and no suggestion running.
+  const lesionOutline = [];
+  const suggestReady = (plan) => (Boolean(plan) || lesionOutline.length >= 3) &&
+    document.body.dataset.suggestion !== 'running';
   const planner = new Planner(viewA, templates, {
     onState: (s) => {
       if (!s) return;
@@ -189,8 +194,7 @@ async function main() {
         Boolean(model.source?.chart);
       showSutures(planner);
       $('simulate').disabled = !plan;
-      $('suggest').disabled = (!plan && Number(document.body.dataset.lesionOutline ?? 0) < 3) ||
-        document.body.dataset.suggestion === 'running';
+      $('suggest').disabled = !suggestReady(plan);
       $('save').disabled = !plan;
     },
     onNotice: notice,
@@ -279,7 +283,6 @@ async function main() {
 
   // The guides on the skin before the operation: the skin lines and the lesion's outline.
   let skinLineGuides = [];
-  const lesionOutline = [];  // LPS mm, in the order clicked
   const showGuides = () => viewA.setGuides([...skinLineGuides, ...lesionOutlineObjects(lesionOutline)]);
   // The relaxed skin tension lines, fetched once, drawn on the skin before the operation.
   let skinLines = null;
@@ -359,7 +362,7 @@ async function main() {
         : `outline of ${n} points, ${across.toFixed(1)} mm across`;
     $('suggest-clear').hidden = n === 0;
     $('suggest-diameter').disabled = n >= 3;
-    $('suggest').disabled = document.body.dataset.suggestion === 'running' || (n < 3 && !planner.plan);
+    $('suggest').disabled = !suggestReady(planner.plan);
     document.body.dataset.lesionOutline = String(n);
     showGuides();
   };
@@ -405,7 +408,7 @@ async function main() {
     } catch (e) {
       status(e.status === 409 ? 'The suggestion was cancelled.' : `No suggestion: ${e.message}`);
     } finally {
-      $('suggest').disabled = !planner.plan && lesionOutline.length < 3;
+      $('suggest').disabled = !suggestReady(planner.plan);
       $('simulate').disabled = !planner.plan;
       $('cancel-suggest').hidden = true;
     }
