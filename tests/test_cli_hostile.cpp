@@ -19,6 +19,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <string>
 #include <tuple>
@@ -656,10 +657,15 @@ bool wait_for_entry(const fs::path& dir, const std::string& prefix, double secon
 
 // Waits for the claim `prefix` of the background run `pid` and stops the run there (SIGSTOP), so
 // that what the test does next happens while the run is writing, however fast the run is.
-bool pause_when_claimed(pid_t pid, const fs::path& dir, const std::string& prefix) {
+// Stops the run once it holds its claim: the claim file is created before it is locked, and the
+// run writes its process number into it only once the lock is held (a run stopped between the two
+// would let the other run take the output, and the test would race).
+bool pause_when_claimed(pid_t pid, const fs::path& claim) {
+  const std::string holder = std::to_string(pid) + "\n";
   for (int i = 0; i < 30000; ++i) {
-    for (const auto& e : fs::directory_iterator(dir))
-      if (e.path().filename().string().rfind(prefix, 0) == 0) return ::kill(pid, SIGSTOP) == 0;
+    std::ifstream in(claim);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (text == holder) return ::kill(pid, SIGSTOP) == 0;
     ::usleep(2000);
   }
   return false;
@@ -726,7 +732,7 @@ TEST_F(HostileModel, ASecondWriterOfTheSameOutputIsRefusedNotRaced) {
   const std::string args = "model from-volume -q " + phantom().string() + " -o " + out.string() +
                            " --n-theta 96 --n-z 48";
   const pid_t first = start_caps(args, err);
-  ASSERT_TRUE(pause_when_claimed(first, dir, "claimed_model.caps-claim")) << "the first run never started";
+  ASSERT_TRUE(pause_when_claimed(first, dir / "claimed_model.caps-claim")) << "the first run never started";
   if (fs::exists(out)) ::kill(first, SIGCONT);
   ASSERT_FALSE(fs::exists(out)) << "the first run had finished before it was paused";
   const Outcome second = run(args);
@@ -746,7 +752,7 @@ TEST_F(HostileModel, ASecondWriterOfTheSameOutputIsRefusedNotRaced) {
   const pid_t run2 = start_caps("model from-volume -q " + phantom().string() + " -o " +
                                     out2.string() + " --n-theta 96 --n-z 48",
                                 err);
-  ASSERT_TRUE(pause_when_claimed(run2, dir, "raced_model.caps-claim"));
+  ASSERT_TRUE(pause_when_claimed(run2, dir / "raced_model.caps-claim"));
   if (fs::exists(out2)) ::kill(run2, SIGCONT);
   ASSERT_FALSE(fs::exists(out2)) << "the run had finished before it was paused";
   fs::create_directories(out2);
