@@ -533,6 +533,46 @@ TEST(FemSolvers, MixedPrecisionAfterItsFallBackRefusesASingularTangent) {
   EXPECT_THROW(solver->factorize(K1), SolverError);
 }
 
+// Conjugate gradients on a new tangent, preconditioned with the last factor, tell an indefinite
+// tangent from one they merely could not solve in time: a direction of negative curvature proves
+// the factorization would fail (the finite-strain solve then skips it; issue 35). The 1-D
+// Laplacian tridiag(-1, 2, -1) of 50 equations (smallest eigenvalue 2 - 2 cos(pi / 51) = 0.0038,
+// the next 0.0152) is factored; shifted by -0.01 it has one negative eigenvalue, by +0.01 none.
+TEST(FemSolvers, ConjugateGradientsOnAReusedFactorProveATangentIndefinite) {
+  const int n = 50;
+  auto laplacian = [&](double shift) {
+    Eigen::SparseMatrix<double> K(n, n);  // the upper triangle, as the solvers take it
+    for (int i = 0; i < n; ++i) {
+      if (i > 0) K.insert(i - 1, i) = -1;
+      K.insert(i, i) = 2 + shift;
+    }
+    K.makeCompressed();
+    return K;
+  };
+  std::vector<int> blocks(n + 1);
+  for (int i = 0; i <= n; ++i) blocks[i] = i;
+  const Eigen::SparseMatrix<double> K = laplacian(0), indefinite = laplacian(-0.01),
+                                    stiffer = laplacian(0.01);
+  const Eigen::VectorXd b = Eigen::VectorXd::Ones(n);
+  for (const auto& [kind, mixed] : {std::pair{SolverKind::Mumps, true}, {SolverKind::Mumps, false},
+                                    {SolverKind::Cholmod, false}}) {
+    SCOPED_TRACE(std::string(kind == SolverKind::Cholmod ? "CHOLMOD" : mixed ? "MUMPS mixed" : "MUMPS"));
+    auto solver = fem::detail::make_direct_solver(kind, SolveOptions{}.mumps_ordering, mixed);
+    solver->analyze(K, blocks);
+    solver->factorize(K);
+    bool negative = false;
+    EXPECT_FALSE(solver->solve_reusing_factor(indefinite, b, 40, 1e-10, &negative).has_value());
+    EXPECT_TRUE(negative);
+    negative = false;
+    const std::optional<Eigen::VectorXd> x = solver->solve_reusing_factor(stiffer, b, 40, 1e-10, &negative);
+    ASSERT_TRUE(x.has_value());
+    EXPECT_FALSE(negative);
+    EXPECT_LT((stiffer.selfadjointView<Eigen::Upper>() * *x - b).norm(), 1e-8 * b.norm());
+    // What the negative curvature foretold.
+    EXPECT_THROW(solver->factorize(indefinite), SolverError);
+  }
+}
+
 // CHOLMOD's solver leaves the process's SIGTERM handler alone while it orders and factors:
 // CHOLMOD's own ordering choice would call METIS, whose GKlib swaps in a handler that longjmps to a
 // thread-local buffer for as long as it runs, so that `caps serve` stopped by SIGTERM then

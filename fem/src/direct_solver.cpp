@@ -244,7 +244,7 @@ template <class Precondition>
 std::optional<Eigen::VectorXd> conjugate_gradients(const Eigen::SparseMatrix<double>& Kupper,
                                                    const Eigen::VectorXd& b, int max_iterations,
                                                    double tolerance, Precondition&& precondition,
-                                                   int& iterations) {
+                                                   int& iterations, bool* negative_curvature = nullptr) {
   const double true_tolerance = 10 * tolerance;
   const auto K = Kupper.selfadjointView<Eigen::Upper>();
   const double bn = b.norm();
@@ -256,7 +256,11 @@ std::optional<Eigen::VectorXd> conjugate_gradients(const Eigen::SparseMatrix<dou
   for (iterations = 1; iterations <= max_iterations; ++iterations) {
     Kp.noalias() = K * p;
     const double pKp = p.dot(Kp);
-    if (!(pKp > 0) || !(rz > 0)) return std::nullopt;  // not SPD in working precision
+    if (!(pKp > 0) || !(rz > 0)) {  // not SPD in working precision
+      // p^T K p <= 0 proves K is not positive definite (a factorization of it would fail).
+      if (negative_curvature && !(pKp > 0)) *negative_curvature = true;
+      return std::nullopt;
+    }
     const double alpha = rz / pKp;
     x += alpha * p;
     r -= alpha * Kp;
@@ -276,10 +280,11 @@ std::optional<Eigen::VectorXd> conjugate_gradients(const Eigen::SparseMatrix<dou
 // CG on K preconditioned with the last factor of a double-precision `solver` (its solve()).
 std::optional<Eigen::VectorXd> reuse_factor(DirectSolver& solver, const Eigen::SparseMatrix<double>& K,
                                             const Eigen::VectorXd& b, int max_iterations,
-                                            double tolerance) {
+                                            double tolerance, bool* negative_curvature) {
   int iterations = 0;
   return conjugate_gradients(K, b, max_iterations, std::max(tolerance, kCgTolerance),
-                             [&](const Eigen::VectorXd& r, int) { return solver.solve(r); }, iterations);
+                             [&](const Eigen::VectorXd& r, int) { return solver.solve(r); }, iterations,
+                             negative_curvature);
 }
 
 // The assembled upper triangle as MUMPS coordinates, and the block starts, both 1-based.
@@ -315,8 +320,9 @@ class MumpsSolver final : public DirectSolver {
   }
   std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
                                                       const Eigen::VectorXd& b, int max_iterations,
-                                                      double tolerance) override {
-    return factored_ ? reuse_factor(*this, K, b, max_iterations, tolerance) : std::nullopt;
+                                                      double tolerance, bool* negative_curvature) override {
+    return factored_ ? reuse_factor(*this, K, b, max_iterations, tolerance, negative_curvature)
+                     : std::nullopt;
   }
   long factor_nonzeros() const override { return mumps_.factor_nonzeros(); }
 
@@ -355,11 +361,11 @@ class MixedMumpsSolver final : public DirectSolver {
   }
   std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
                                                       const Eigen::VectorXd& b,
-                                                      int max_iterations,
-                                                      double tolerance) override {
+                                                      int max_iterations, double tolerance,
+                                                      bool* negative_curvature) override {
     if (!K_ || (double_ && !double_factored_)) return std::nullopt;
     K_ = &K;
-    return cg(b, max_iterations, std::max(tolerance, kCgTolerance));
+    return cg(b, max_iterations, std::max(tolerance, kCgTolerance), negative_curvature);
   }
   Eigen::VectorXd solve(const Eigen::VectorXd& b) override {
     if (!double_) {
@@ -397,10 +403,12 @@ class MixedMumpsSolver final : public DirectSolver {
     single_.solve(z.data(), iteration);
     return z.cast<double>();
   }
-  std::optional<Eigen::VectorXd> cg(const Eigen::VectorXd& b, int max_iterations, double tolerance) {
+  std::optional<Eigen::VectorXd> cg(const Eigen::VectorXd& b, int max_iterations, double tolerance,
+                                    bool* negative_curvature = nullptr) {
     return conjugate_gradients(
         *K_, b, max_iterations, tolerance,
-        [&](const Eigen::VectorXd& r, int iteration) { return precondition(r, iteration); }, iterations_);
+        [&](const Eigen::VectorXd& r, int iteration) { return precondition(r, iteration); }, iterations_,
+        negative_curvature);
   }
   static constexpr int kMaxIterations = 40;
 
@@ -429,6 +437,11 @@ class CholmodSolver final : public DirectSolver {
     c_.nmethods = 1;
     c_.method[0].ordering = CHOLMOD_GIVEN;
     c_.postorder = 1;
+    // Always the supernodal LL^T, which stops at a pivot that is not positive. On a small matrix
+    // CHOLMOD would otherwise choose its simplicial LDL^T, which factors an indefinite matrix
+    // without a word (a 50-equation tangent with a negative eigenvalue was factored): the
+    // finite-strain solve would then take an indefinite tangent's direction for Newton's.
+    c_.supernodal = CHOLMOD_SUPERNODAL;
   }
   ~CholmodSolver() override {
     if (L_) cholmod_free_factor(&L_, &c_);
@@ -471,8 +484,9 @@ class CholmodSolver final : public DirectSolver {
   }
   std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
                                                       const Eigen::VectorXd& b, int max_iterations,
-                                                      double tolerance) override {
-    return factored_ ? reuse_factor(*this, K, b, max_iterations, tolerance) : std::nullopt;
+                                                      double tolerance, bool* negative_curvature) override {
+    return factored_ ? reuse_factor(*this, K, b, max_iterations, tolerance, negative_curvature)
+                     : std::nullopt;
   }
   Eigen::VectorXd solve(const Eigen::VectorXd& b) override {
     cholmod_dense B{};

@@ -47,12 +47,14 @@ class DirectSolver {
   /// relative residual ||b - K x|| <= tolerance ||b|| (1e-12 and below: the accuracy of solve();
   /// an inexact Newton iteration asks for less). Empty when there is no factorization to reuse,
   /// or CG needs more than `max_iterations` (then factorize() the new values). The base class
-  /// never reuses (always empty).
+  /// never reuses (always empty). `negative_curvature` (optional) is set to true when CG met a
+  /// direction p with p^T K p <= 0: K is then not positive definite, and factorizing it would fail.
   virtual std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
                                                               const Eigen::VectorXd& b,
                                                               int max_iterations,
-                                                              double tolerance = 1e-12) {
-    (void)K, (void)b, (void)max_iterations, (void)tolerance;
+                                                              double tolerance = 1e-12,
+                                                              bool* negative_curvature = nullptr) {
+    (void)K, (void)b, (void)max_iterations, (void)tolerance, (void)negative_curvature;
     return std::nullopt;
   }
   virtual long factor_nonzeros() const = 0;

@@ -283,7 +283,10 @@ class FiniteStrainSolver {
   void factorize_and_solve(Eigen::VectorXd& dq, double tolerance);
   // K dq = f by conjugate gradients preconditioned with the solver's last factor, in at most
   // max_iterations (timed as a solve); false, dq untouched, if they did not get there.
-  bool solve_with_last_factor(Eigen::VectorXd& dq, int max_iterations, double tolerance);
+  // `negative_curvature` (optional): set when CG met a direction of non-positive curvature (the
+  // tangent is then not positive definite).
+  bool solve_with_last_factor(Eigen::VectorXd& dq, int max_iterations, double tolerance,
+                              bool* negative_curvature = nullptr);
   void finish_report();
   void recover_result();
   void recover_element(const Eigen::VectorXd& u, int e, ElementRecovery& out) const;
@@ -791,10 +794,10 @@ void FiniteStrainSolver::factorize_and_solve(Eigen::VectorXd& dq, double toleran
 }
 
 bool FiniteStrainSolver::solve_with_last_factor(Eigen::VectorXd& dq, int max_iterations,
-                                                double tolerance) {
+                                                double tolerance, bool* negative_curvature) {
   const auto t0 = Clock::now();
   std::optional<Eigen::VectorXd> x =
-      solver_->solve_reusing_factor(sys_.K, sys_.f, max_iterations, tolerance);
+      solver_->solve_reusing_factor(sys_.K, sys_.f, max_iterations, tolerance, negative_curvature);
   res_.timings.solve_s += seconds_since(t0);
   if (x) dq = std::move(*x);
   return x.has_value();
@@ -825,14 +828,18 @@ std::optional<Failure> FiniteStrainSolver::solve_shifted(Eigen::VectorXd& dq, do
     if (dq.allFinite()) return std::nullopt;
     return Failure{"the Newton correction is not finite"};
   };
-  // The tangent itself first, by conjugate gradients on the last factor: no factorization.
+  // The tangent itself first, by conjugate gradients on the last factor: no factorization. A
+  // direction of negative curvature met on the way proves the tangent indefinite: its own
+  // factorization, which would fail, is not tried.
+  bool indefinite = false;
   if (damping == 0 && no_.reuse_iterations > 0 &&
-      solve_with_last_factor(dq, no_.reuse_iterations, tolerance))
+      solve_with_last_factor(dq, no_.reuse_iterations, tolerance, &indefinite))
     return finite();
   std::string unshifted;  // why the tangent itself could not be factorized
+  if (indefinite) unshifted = "conjugate gradients met a direction of negative curvature";
   double* values = sys_.K.valuePtr();
   for (Eigen::Index j = 0; j < sys_.K.cols(); ++j) kept_diagonal_[j] = values[diagonal_[j]];
-  const int lowest = damping == 0 ? -1 : shift_rung(damping);
+  const int lowest = damping == 0 ? (indefinite ? 0 : -1) : shift_rung(damping);
   // One rung: the tangent shifted by it solved, or false (not positive definite).
   int factored = kNoRung;  // the rung whose factor the solver holds, if any
   const auto attempt = [&](int k) {
