@@ -356,6 +356,55 @@ TEST(Suggest, ADrawnLesionIsHeldWithItsMarginAndTheEllipseAlongItExcisesLeast) {
   }
 }
 
+// One lesion's shape for every patient (a cohort's table): the outline in mm about the centre,
+// to the patient's left and up along the skin. The 10 x 3 mm ellipse of the test above, its long
+// axis at 60 deg, as offsets (left, up) = x (sin 60, cos 60) + y (-cos 60, sin 60): its points lie
+// where that test walked them, and each ellipse's half width is the rhombus's that holds the
+// offsets and the margin, W / 2 = max(|along| / k + |across|) + m sqrt(1 + 1 / k^2) at k = 3,
+// worked here from the offsets (the forehead is nearly flat over the lesion: within 3 %).
+TEST(Suggest, AnOutlineInMillimetresAboutTheCentreIsWalkedOnTheSkin) {
+  app::SuggestRequest r = forehead_request("linear", "outline_mm");
+  const PatientModel model = PatientModel::load(r.model);
+  const plan::SkinFrame centre = plan::skin_frame(model, 0, 40, 60);
+  const double c = std::cos(M_PI / 3), s = std::sin(M_PI / 3);
+  std::vector<Eigen::Vector2d> offsets, walked;
+  std::string text;
+  for (int k = 0; k < 24; ++k) {
+    const double a = 2 * M_PI * k / 24, x = 5 * std::cos(a), y = 1.5 * std::sin(a);
+    offsets.emplace_back(x * s - y * c, x * c + y * s);
+    walked.push_back(plan::walk_on_skin(model, centre, Eigen::Vector2d(x, y)).theta_z);
+    text += (k ? ";" : "") + std::to_string(offsets.back().x()) + "," +
+            std::to_string(offsets.back().y());
+  }
+  r.diameter = 0;
+  r.outline_mm = text;
+  r.step = 90;
+  r.refine = 0;
+  r.domain.domain = "patch";
+  const json j = json::parse(app::run_plan_suggest(r).suggestions_json);
+  const json& lesion = j.at("lesion");
+  EXPECT_NEAR(lesion.at("theta_deg").get<double>(), 0, 1e-6);  // the centre given
+  EXPECT_NEAR(lesion.at("z_mm").get<double>(), 40, 1e-6);
+  EXPECT_NEAR(lesion.at("diameter_mm").get<double>(), 10, 0.3);
+  EXPECT_NEAR(lesion.at("area_mm2").get<double>(), M_PI * 5 * 1.5, 0.05 * M_PI * 5 * 1.5);
+  ASSERT_EQ(lesion.at("outline_theta_z").size(), 24u);
+  for (int k = 0; k < 24; ++k) {
+    const json& p = lesion.at("outline_theta_z").at(k);
+    const Eigen::Vector3d got = model.skin_point(p.at(0).get<double>(), p.at(1).get<double>());
+    EXPECT_LT((got - model.skin_point(walked[k].x(), walked[k].y())).norm(), 0.1) << "point " << k;
+  }
+  const double k = 3, m = r.margin;
+  for (const json& d : j.at("designs")) {
+    const double o = d.at("orientation_deg").get<double>() * M_PI / 180;
+    const Eigen::Vector2d along(std::sin(o), std::cos(o)), across(-std::cos(o), std::sin(o));
+    double half = 0;
+    for (const Eigen::Vector2d& q : offsets)
+      half = std::max(half, std::abs(q.dot(along)) / k + std::abs(q.dot(across)));
+    half += m * std::sqrt(1 + 1 / (k * k));
+    EXPECT_NEAR(d.at("parameters").at("width").get<double>() / 2, half, 0.03 * half) << d.dump();
+  }
+}
+
 TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
   const auto refused = [](auto change, const std::string& words) {
     app::SuggestRequest r = forehead_request("neo-hookean", "refused");
@@ -372,19 +421,27 @@ TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
   refused([](app::SuggestRequest& r) { r.at = ""; }, "the lesion's centre with at THETA,Z");
   refused([](app::SuggestRequest& r) { r.outline = "0,40;2,41;1,43"; }, "give one");
   // A drawn lesion (no diameter): too few points, not numbers, given twice.
+  // In mm about the centre: the centre is needed, and the points must lie on the model.
   struct Drawn {
-    std::string outline, outline_xyz, words;
+    std::string outline, outline_xyz, outline_mm, words;
+    bool centre = true;
   };
-  for (const Drawn& d :
-       std::vector<Drawn>{{"0,40;2,41", "", "3 to 200 points"},
-                          {"0,40;2,x;1,43", "", "THETA,Z"},
-                          {"0,40;2,41;1,43", "0,-90,40;2,-90,41;1,-90,43", "outline once"},
-                          {"", "0,-90,40;2,-90,41", "3 to 200 points"}})
+  for (const Drawn& d : std::vector<Drawn>{
+           {"0,40;2,41", "", "", "3 to 200 points"},
+           {"0,40;2,x;1,43", "", "", "THETA,Z"},
+           {"0,40;2,41;1,43", "0,-90,40;2,-90,41;1,-90,43", "", "outline once"},
+           {"", "0,-90,40;2,-90,41", "", "3 to 200 points"},
+           {"", "", "-2,0;2,0;0,3", "give the centre too", false},
+           {"0,40;2,41;1,43", "", "-2,0;2,0;0,3", "outline once"},
+           {"", "", "-2,0;2,x;0,3", "LEFT,UP"},
+           {"", "", "-2,0;2,0;0,300", "outside the model"}})
     refused(
         [&](app::SuggestRequest& r) {
           r.diameter = 0;
+          if (!d.centre) r.at = "";
           r.outline = d.outline;
           r.outline_xyz = d.outline_xyz;
+          r.outline_mm = d.outline_mm;
         },
         d.words);
   // The phantom's face has no nose: the relaxed skin tension lines are not laid on it, so they

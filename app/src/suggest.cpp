@@ -75,6 +75,7 @@ struct Fit {
 struct LesionOutline {
   std::vector<Eigen::Vector2d> theta_z;  ///< as given (deg, mm); empty: a round lesion
   std::vector<Eigen::Vector3d> lps;      ///< their skin points (--outline-xyz's as given)
+  std::vector<Eigen::Vector2d> offsets_mm;  ///< --outline-mm's (left, up) as given
   /// The points in the skin's tangent plane at the centre: mm along the frames of orientation 0
   /// (superior) and 90 (towards +theta) there.
   std::vector<Eigen::Vector2d> local;
@@ -83,10 +84,12 @@ struct LesionOutline {
   double reach_mm = 0;     ///< its farthest point from the centre
 };
 
-/// --outline "THETA,Z;THETA,Z;..." (theta_z) or --outline-xyz "X,Y,Z;..." (lps, LPS on the skin;
-/// theta_z is filled from them once the model is read), as given: 3 to 200 points, a point
-/// repeated next to itself (or the first again at the end) taken once.
-LesionOutline parse_outline(const std::string& theta_z, const std::string& xyz) {
+/// --outline "THETA,Z;THETA,Z;..." (theta_z), --outline-xyz "X,Y,Z;..." (lps, LPS on the skin)
+/// or --outline-mm "LEFT,UP;..." (offsets_mm about the centre; theta_z is filled from either
+/// once the model is read), as given: 3 to 200 points, a point repeated next to itself (or the
+/// first again at the end) taken once.
+LesionOutline parse_outline(const std::string& theta_z, const std::string& xyz,
+                            const std::string& mm) {
   LesionOutline o;
   const auto add = [](auto& points, const auto& p) {
     if (points.empty() || (p - points.back()).norm() > 0) points.push_back(p);
@@ -95,6 +98,9 @@ LesionOutline parse_outline(const std::string& theta_z, const std::string& xyz) 
     if (!theta_z.empty())
       for (const auto& p : parse_point_list<2>(theta_z, "{outline}", "THETA,Z in degrees and mm"))
         add(o.theta_z, Eigen::Vector2d(p[0], p[1]));
+    else if (!mm.empty())
+      for (const auto& p : parse_point_list<2>(mm, "{outline_mm}", "LEFT,UP in mm"))
+        add(o.offsets_mm, Eigen::Vector2d(p[0], p[1]));
     else
       for (const auto& p : parse_point_list<3>(xyz, "{outline_xyz}", "LPS X,Y,Z in mm"))
         add(o.lps, Eigen::Vector3d(p[0], p[1], p[2]));
@@ -107,7 +113,9 @@ LesionOutline parse_outline(const std::string& theta_z, const std::string& xyz) 
     if (points.size() > 1 && points.front() == points.back()) points.pop_back();
     return points.size();
   };
-  const std::size_t n = theta_z.empty() ? closed(o.lps) : closed(o.theta_z);
+  const std::size_t n = !theta_z.empty() ? closed(o.theta_z)
+                        : !mm.empty()     ? closed(o.offsets_mm)
+                                          : closed(o.lps);
   if (n < 3 || n > 200)
     throw InvalidParameter(cat("{outline}: ", n,
                                " distinct points; draw the lesion's outline "
@@ -475,11 +483,16 @@ void for_each_parallel(std::size_t n, unsigned workers, Progress& progress,
 SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   detail::refuse_output_over_inputs(r);
   require_utf8(r.model, "the model folder");
-  const bool drawn = !r.outline.empty() || !r.outline_xyz.empty();
-  if (!r.outline.empty() && !r.outline_xyz.empty())
+  const int outlines = !r.outline.empty() + !r.outline_xyz.empty() + !r.outline_mm.empty();
+  const bool drawn = outlines > 0;
+  if (outlines > 1)
     throw InvalidParameter(
-        "give the lesion's outline once: {outline} THETA,Z;... or {outline_xyz} "
-        "X,Y,Z;...");
+        "give the lesion's outline once: {outline} THETA,Z;..., {outline_xyz} X,Y,Z;... or "
+        "{outline_mm} LEFT,UP;...");
+  if (!r.outline_mm.empty() && r.at.empty() && r.at_xyz.empty())
+    throw InvalidParameter(
+        "{outline_mm} is the outline in mm about the lesion's centre: give the centre too, "
+        "with {at} THETA,Z, {at} LANDMARK+LEFT,UP or {at_xyz} X,Y,Z");
   if ((!r.at.empty() && !r.at_xyz.empty()) || (!drawn && r.at.empty() && r.at_xyz.empty()))
     throw InvalidParameter(
         "give the lesion's centre with {at} THETA,Z, {at} LANDMARK+LEFT,UP or "
@@ -490,7 +503,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
                                "diameter of a round lesion or the outline of any other (its "
                                "largest diameter is then its own)"));
   LesionOutline outline;
-  if (drawn) outline = parse_outline(r.outline, r.outline_xyz);
+  if (drawn) outline = parse_outline(r.outline, r.outline_xyz, r.outline_mm);
   if (!drawn && !(r.diameter > 0 && r.diameter <= 50))
     throw InvalidParameter(cat("{diameter} ", r.diameter,
                                ": give the lesion's largest diameter "
@@ -545,7 +558,7 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   fs::create_directories(out.path() / "designs");
   const auto loaded = loaded_model(r.model);
   const PatientModel& model = *loaded;
-  if (drawn && outline.theta_z.empty())  // given as LPS points
+  if (drawn && outline.theta_z.empty() && outline.offsets_mm.empty())  // given as LPS points
     for (const Eigen::Vector3d& x : outline.lps) {
       const CylindricalPoint c = model.to_cylindrical(x);
       outline.theta_z.emplace_back(c.theta_deg, c.z_mm);
@@ -554,6 +567,19 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   const Eigen::Vector2d tz = !r.at.empty() || !r.at_xyz.empty()
                                  ? resolve_at(r.model, model, r.at, r.at_xyz, &placement)
                                  : outline_centre(outline);
+  if (!outline.offsets_mm.empty()) {
+    // Walked from the centre as a landmark's offsets are (plan::resolve_placement()).
+    const plan::SkinFrame centre = plan::skin_frame(model, tz[0], tz[1], 90.0);
+    for (const Eigen::Vector2d& step : outline.offsets_mm) {
+      Eigen::Vector2d p = step.norm() > 0 ? plan::walk_on_skin(model, centre, step).theta_z : tz;
+      p.x() = tz[0] + wrap_degrees(p.x() - tz[0]);
+      if (!model.has_z(p.y()))
+        throw InvalidParameter(cat("{outline_mm}: the point ", step.x(), ",", step.y(),
+                                   " mm from the centre lies at z = ", round_to(p.y(), 1),
+                                   " mm, outside the model; draw a smaller outline"));
+      outline.theta_z.push_back(p);
+    }
+  }
   if (drawn) {
     project_outline(outline, model, tz);
     if (!(outline.diameter_mm <= 50) || !(outline.reach_mm <= 50))

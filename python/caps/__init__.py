@@ -164,7 +164,8 @@ def plan_suggest(model, at=None, diameter=None, output=None, *, progress=None, *
     """For a lesion at ``at`` ("THETA,Z" or "glabella+15,20") of ``diameter`` mm, the library's
     closures laid around it at every orientation, closed and ranked (caps plan suggest); or for a
     lesion drawn as its outline: outline="THETA,Z;THETA,Z;..." instead of the diameter (``at``
-    then defaults to the outline's centre). Fields: margin (mm), procedures
+    then defaults to the outline's centre), or outline_mm="LEFT,UP;..." in mm about ``at``
+    (one lesion's shape for every patient). Fields: margin (mm), procedures
     ("ellipse,rhomboid,bilobed,rotation-flap"), step (deg), objective ("force", "features",
     "scar", "excised"), refine, material, force, ... Returns suggestions.json as a dict: "best",
     "designs" (ranked first, each with its figures, plan and rank or refusal), "lesion"."""

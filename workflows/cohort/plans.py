@@ -281,3 +281,24 @@ def plan_options(row):
     '--length 12 --advance 3'."""
     pairs = parse_parameters(row.get("parameters", ""), "plans table")
     return " ".join(f"--{k.replace('_', '-')} {v}" for k, v in pairs)
+
+
+def lesion_shape(lesion, where="lesions table"):
+    """A lesion's size as arguments of `caps plan suggest`: its outline in mm about its centre
+    (column outline_mm, LEFT,UP;LEFT,UP;... to the patient's left and up along the skin: one
+    lesion's shape on every patient) or its largest diameter in mm (column diameter); exactly
+    one of the two."""
+    outline = (lesion.get("outline_mm") or "").strip()
+    diameter = (lesion.get("diameter") or "").strip()
+    name = lesion.get("lesion", "?")
+    if bool(outline) == bool(diameter):
+        raise ValueError(f"{where}, lesion '{name}': give its diameter (mm) or its outline_mm "
+                         f"(LEFT,UP;LEFT,UP;... mm about its centre), one of the two")
+    if outline:
+        if not re.fullmatch(r"[0-9eE.,;+\- ]+", outline):
+            raise ValueError(f"{where}, lesion '{name}', outline_mm: '{outline}' is not "
+                             f"LEFT,UP;LEFT,UP;... in mm (numbers, commas and semicolons)")
+        return ["--outline-mm", outline]
+    _number(diameter, f"{where}, lesion '{name}', diameter")
+    return ["--diameter", diameter]
+

@@ -41,7 +41,7 @@ rerun=$!
 import concurrent.futures, csv, json, math, os, subprocess, sys
 work, caps = sys.argv[1], sys.argv[2]
 sys.path.insert(0, sys.argv[3])
-from plans import expand_plans, plan_options, simulate_arguments, simulate_options
+from plans import expand_plans, lesion_shape, plan_options, simulate_arguments, simulate_options
 patients = [r["patient"] for r in csv.DictReader(open(f"{work}/patients.tsv"), delimiter="\t")]
 rows = list(csv.DictReader(open(f"{work}/results.tsv"), delimiter="\t"))
 plans = sorted({r["plan"] for r in rows})
@@ -114,7 +114,7 @@ if os.environ.get("CAPS_LESIONS"):
     l = lesions[first["lesion"]]
     out = f"{work}/direct_suggestion"
     subprocess.run([caps, "plan", "suggest", "--model", f"{work}/models/{first['patient']}",
-                    "--at", l["at"], "--diameter", l["diameter"], "--margin", l["margin"],
+                    "--at", l["at"], *lesion_shape(l), "--margin", l["margin"],
                     *plan_options({"parameters": l["suggest"]}).split(), "-o", out, "-q"],
                    check=True, capture_output=True, text=True)
     direct = json.load(open(f"{out}/suggestions.json"))

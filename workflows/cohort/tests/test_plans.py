@@ -17,9 +17,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 COHORT = os.path.dirname(HERE)
 sys.path.insert(0, COHORT)
 
-from plans import (check_simulate_values, expand_plans, parse_simulate_help,  # noqa: E402
-                   plan_options, simulate_arguments, simulate_options, simulate_settings,
-                   sweep_values)
+from plans import (check_simulate_values, expand_plans, lesion_shape,  # noqa: E402
+                   parse_simulate_help, plan_options, simulate_arguments, simulate_options,
+                   simulate_settings, sweep_values)
 
 CRANIUM = "/usr/share/doc/invesalius-examples/examples/Cranium.inv3"
 # The build's caps program (ctest passes it); the simulate options are checked against its own.
@@ -310,3 +310,18 @@ def test_values_refused_only_together_are_asked_again_with_each_plans_own_option
     assert str(refused.value) == ("plans table, plan 'b_materiallinear': caps simulate refuses "
                                   "material=linear;prestretch=1.1: caps: error: prestretch "
                                   "needs neo-hookean")
+
+
+def test_a_lesion_is_given_by_its_diameter_or_its_outline_in_mm_one_of_the_two():
+    assert lesion_shape({"lesion": "a", "diameter": "6"}) == ["--diameter", "6"]
+    hexagon = "3,0;1.5,2.6;-1.5,2.6;-3,0;-1.5,-2.6;1.5,-2.6"
+    assert lesion_shape({"lesion": "a", "diameter": "", "outline_mm": hexagon}) == \
+        ["--outline-mm", hexagon]
+    for row, words in [({"lesion": "a", "diameter": "6", "outline_mm": hexagon}, "one of the two"),
+                       ({"lesion": "a", "diameter": " ", "outline_mm": ""}, "one of the two"),
+                       ({"lesion": "a"}, "lesion 'a'"),
+                       ({"lesion": "a", "diameter": "six"}, "'six' is not a number"),
+                       ({"lesion": "a", "outline_mm": "1,0;0,1;'$(rm x)'"}, "not LEFT,UP")]:
+        with pytest.raises(ValueError, match=words):
+            lesion_shape(row)
+

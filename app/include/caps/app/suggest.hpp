@@ -26,6 +26,10 @@ struct SuggestRequest {
   /// points); empty for a round lesion of `diameter`.
   std::string outline;
   std::string outline_xyz;  ///< the same as LPS points "X,Y,Z;X,Y,Z;..." (mm)
+  /// The same as mm about the lesion's centre (`at`), "LEFT,UP;LEFT,UP;...": walked on the skin
+  /// to the patient's left and up from it, as a landmark's offsets are (one lesion's shape for
+  /// every patient of a cohort).
+  std::string outline_mm;
   double margin = 2;    ///< the clinical margin around it, mm
   std::string procedures = "ellipse";
   double step = 15;   ///< deg between orientations
@@ -58,6 +62,10 @@ struct SuggestRequest {
     v(r.outline_xyz, {"outline_xyz",
                       "the lesion's outline as LPS points X,Y,Z;X,Y,Z;... (mm; "
                       "on the skin, as the planner's clicks give them)"});
+    v(r.outline_mm, {"outline_mm",
+                     "the lesion's outline as mm about its centre (--at): LEFT,UP;LEFT,UP;... "
+                     "along the skin to the patient's left and up, as a landmark's offsets "
+                     "(one lesion's shape on every patient of a cohort)"});
     v(r.margin, {"margin", "the margin excised around the lesion (mm; 1-2 for a benign lesion, "
                            "4 for a basal cell carcinoma)"});
     v(r.procedures, {"procedures",
