@@ -655,11 +655,11 @@ bool wait_for_entry(const fs::path& dir, const std::string& prefix, double secon
   return false;
 }
 
-// Waits for the claim `prefix` of the background run `pid` and stops the run there (SIGSTOP), so
-// that what the test does next happens while the run is writing, however fast the run is.
-// Stops the run once it holds its claim: the claim file is created before it is locked, and the
-// run writes its process number into it only once the lock is held (a run stopped between the two
-// would let the other run take the output, and the test would race).
+// Waits until the background run `pid` holds its claim `claim` and stops it there (SIGSTOP), so
+// that what the test does next happens while the run is writing, however fast the run is. The
+// claim file is created before it is locked, and the run writes its process number into it only
+// once the lock is held: a run stopped between the two would let the other run take the output
+// (in CI on 7 December 2026 the second run won that gap).
 bool pause_when_claimed(pid_t pid, const fs::path& claim) {
   const std::string holder = std::to_string(pid) + "\n";
   for (int i = 0; i < 30000; ++i) {
