@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -15,7 +16,9 @@
 #include "caps/app/model.hpp"
 #include "caps/app/plan.hpp"
 #include "caps/app/simulation.hpp"
+#include "caps/app/suggest.hpp"
 #include "caps/core/error.hpp"
+#include "caps/core/plane_geometry.hpp"
 #include "caps/plan/check.hpp"
 #include "caps/plan/plan_io.hpp"
 #include "caps/surface/chart.hpp"
@@ -270,4 +273,62 @@ TEST(Chart, PlanNewMakesOneWhereTheHeadsImageCannotHoldTheSkin) {
   said = false;
   for (const std::string& w : s.warnings) said |= w.find("a local chart of") != std::string::npos;
   EXPECT_TRUE(said);
+}
+
+// A lesion drawn where the head's image cannot hold the skin (its clicks, LPS points on the
+// skin at the vertex, as the planner sends them): caps plan suggest lays every design on a local
+// chart facing the lesion, and each design's wound holds every drawn point, and every point 0.9
+// of the margin beyond it, seen on that chart (issue 39: the chart's outline had no such check).
+TEST(Chart, ADrawnLesionWhereTheHeadsImageCannotHoldItIsHeldOnTheChart) {
+  const Fixture& f = fixture();
+  const PatientModel parent = PatientModel::load(f.model);
+  // A 7 x 3 mm elliptical lesion in the skin's tangent plane at (0, 99), its long axis along
+  // LPS x (the skin curves away from that plane by 0.03 mm over 3.5 mm of a 90 mm head).
+  const Eigen::Vector3d p = parent.skin_point(0, 99), n = parent.skin_normal(0, 99);
+  const Eigen::Vector3d e1 = (Eigen::Vector3d::UnitX() - n.x() * n).normalized(), e2 = n.cross(e1);
+  std::vector<Eigen::Vector3d> drawn, beyond;
+  std::string text;
+  const double margin = 1;
+  for (int k = 0; k < 16; ++k) {
+    const double a = 2 * kPi * k / 16, x = 3.5 * std::cos(a), y = 1.5 * std::sin(a);
+    drawn.push_back(p + x * e1 + y * e2);
+    const Eigen::Vector2d out = Eigen::Vector2d(1.5 * std::cos(a), 3.5 * std::sin(a)).normalized();
+    beyond.push_back(drawn.back() + 0.9 * margin * (out.x() * e1 + out.y() * e2));
+    char point[96];
+    std::snprintf(point, sizeof point, "%s%.4f,%.4f,%.4f", k ? ";" : "", drawn.back().x(),
+                  drawn.back().y(), drawn.back().z());
+    text += point;
+  }
+  app::SuggestRequest r;
+  r.model = f.model;
+  r.outline_xyz = text;
+  r.margin = margin;
+  r.procedures = "ellipse";
+  r.step = 45;
+  r.refine = 0;
+  r.solver.material = "linear";
+  r.domain.domain = "patch";  // the phantom's tissue model stops below the vertex
+  r.output = (f.dir / "suggest_vertex").string();
+  r.force = true;
+  const app::SuggestResult s = app::run_plan_suggest(r);
+  const nlohmann::json j = nlohmann::json::parse(s.suggestions_json);
+  const fs::path chart = fs::path(r.output) / "chart";
+  ASSERT_TRUE(fs::is_regular_file(chart / "model.json")) << "the designs were not laid on a chart";
+  const PatientModel on = PatientModel::load(chart.string());
+  EXPECT_NEAR(j.at("lesion").at("diameter_mm").get<double>(), 7, 0.2);
+  ASSERT_EQ(j.at("designs").size(), 4u);
+  int held = 0;
+  for (const nlohmann::json& d : j.at("designs")) {
+    const plan::Plan plan = plan::read_plan(fs::path(r.output) / d.at("plan").get<std::string>());
+    EXPECT_EQ(plan.model_hash, on.content_hash()) << d.at("name");
+    const std::vector<Eigen::Vector2d> wound = plan::wound_border(plan).loop_theta_z;
+    for (const auto* points : {&drawn, &beyond})
+      for (std::size_t k = 0; k < points->size(); ++k) {
+        const CylindricalPoint c = on.to_cylindrical((*points)[k]);
+        EXPECT_TRUE(point_in_polygon(wound, Eigen::Vector2d(c.theta_deg, c.z_mm)))
+            << d.at("name") << (points == &drawn ? " drawn point " : " point beyond ") << k;
+        ++held;
+      }
+  }
+  EXPECT_EQ(held, 4 * 32);
 }
