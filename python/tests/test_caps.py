@@ -129,6 +129,15 @@ def test_a_suggestion_ranks_the_designs_around_a_lesion(model, work):
                           objective="excised")
     assert s["lesion"]["outline_theta_z"][0] == [0, 57] and abs(s["lesion"]["z_mm"] - 60) < 0.01
     assert 6.8 < s["lesion"]["diameter_mm"] < 7.2 and s["best"] == "ellipse-000"
+    # The same shape in mm about its centre (left, up along the skin): one lesion for any patient.
+    s = caps.plan_suggest(model, "0,60", output=work / "outline_mm",
+                          outline_mm="0,-3.5;1.7,0;0,3.5;-1.7,0", margin=1, step=90, refine=0,
+                          domain="patch", material="linear", objective="excised")
+    top = s["lesion"]["outline_theta_z"][2]
+    assert abs(top[0]) < 1e-6 and top[1] > 62 and abs(s["lesion"]["z_mm"] - 60) < 1e-9
+    assert 6.9 < s["lesion"]["diameter_mm"] < 7.1 and s["best"] == "ellipse-000"
+    with pytest.raises(caps.InvalidParameter, match="give the centre too"):
+        caps.plan_suggest(model, output=work / "refused", outline_mm="0,-3.5;1.7,0;0,3.5")
 
 
 def test_skin_lines_need_the_nose_the_phantom_has_not(model):
