@@ -426,15 +426,15 @@ TEST(Suggest, RefusesABadRequestBeforeAnyClosure) {
     std::string outline, outline_xyz, outline_mm, words;
     bool centre = true;
   };
-  for (const Drawn& d : std::vector<Drawn>{
-           {"0,40;2,41", "", "", "3 to 200 points"},
-           {"0,40;2,x;1,43", "", "", "THETA,Z"},
-           {"0,40;2,41;1,43", "0,-90,40;2,-90,41;1,-90,43", "", "outline once"},
-           {"", "0,-90,40;2,-90,41", "", "3 to 200 points"},
-           {"", "", "-2,0;2,0;0,3", "give the centre too", false},
-           {"0,40;2,41;1,43", "", "-2,0;2,0;0,3", "outline once"},
-           {"", "", "-2,0;2,x;0,3", "LEFT,UP"},
-           {"", "", "-2,0;2,0;0,300", "outside the model"}})
+  for (const Drawn& d :
+       std::vector<Drawn>{{"0,40;2,41", "", "", "3 to 200 points"},
+                          {"0,40;2,x;1,43", "", "", "THETA,Z"},
+                          {"0,40;2,41;1,43", "0,-90,40;2,-90,41;1,-90,43", "", "outline once"},
+                          {"", "0,-90,40;2,-90,41", "", "3 to 200 points"},
+                          {"", "", "-2,0;2,0;0,3", "give the centre too", false},
+                          {"0,40;2,41;1,43", "", "-2,0;2,0;0,3", "outline once"},
+                          {"", "", "-2,0;2,x;0,3", "LEFT,UP"},
+                          {"", "", "-2,0;2,0;0,300", "outside the model"}})
     refused(
         [&](app::SuggestRequest& r) {
           r.diameter = 0;

@@ -732,7 +732,8 @@ TEST_F(HostileModel, ASecondWriterOfTheSameOutputIsRefusedNotRaced) {
   const std::string args = "model from-volume -q " + phantom().string() + " -o " + out.string() +
                            " --n-theta 96 --n-z 48";
   const pid_t first = start_caps(args, err);
-  ASSERT_TRUE(pause_when_claimed(first, dir / "claimed_model.caps-claim")) << "the first run never started";
+  ASSERT_TRUE(pause_when_claimed(first, dir / "claimed_model.caps-claim"))
+      << "the first run never started";
   if (fs::exists(out)) ::kill(first, SIGCONT);
   ASSERT_FALSE(fs::exists(out)) << "the first run had finished before it was paused";
   const Outcome second = run(args);

@@ -554,9 +554,12 @@ TEST(FemSolvers, ConjugateGradientsOnAReusedFactorProveATangentIndefinite) {
   const Eigen::SparseMatrix<double> K = laplacian(0), indefinite = laplacian(-0.01),
                                     stiffer = laplacian(0.01);
   const Eigen::VectorXd b = Eigen::VectorXd::Ones(n);
-  for (const auto& [kind, mixed] : {std::pair{SolverKind::Mumps, true}, {SolverKind::Mumps, false},
+  for (const auto& [kind, mixed] : {std::pair{SolverKind::Mumps, true},
+                                    {SolverKind::Mumps, false},
                                     {SolverKind::Cholmod, false}}) {
-    SCOPED_TRACE(std::string(kind == SolverKind::Cholmod ? "CHOLMOD" : mixed ? "MUMPS mixed" : "MUMPS"));
+    SCOPED_TRACE(std::string(kind == SolverKind::Cholmod ? "CHOLMOD"
+                             : mixed                     ? "MUMPS mixed"
+                                                         : "MUMPS"));
     auto solver = fem::detail::make_direct_solver(kind, SolveOptions{}.mumps_ordering, mixed);
     solver->analyze(K, blocks);
     solver->factorize(K);
@@ -564,7 +567,8 @@ TEST(FemSolvers, ConjugateGradientsOnAReusedFactorProveATangentIndefinite) {
     EXPECT_FALSE(solver->solve_reusing_factor(indefinite, b, 40, 1e-10, &negative).has_value());
     EXPECT_TRUE(negative);
     negative = false;
-    const std::optional<Eigen::VectorXd> x = solver->solve_reusing_factor(stiffer, b, 40, 1e-10, &negative);
+    const std::optional<Eigen::VectorXd> x =
+        solver->solve_reusing_factor(stiffer, b, 40, 1e-10, &negative);
     ASSERT_TRUE(x.has_value());
     EXPECT_FALSE(negative);
     EXPECT_LT((stiffer.selfadjointView<Eigen::Upper>() * *x - b).norm(), 1e-8 * b.norm());

@@ -114,8 +114,8 @@ LesionOutline parse_outline(const std::string& theta_z, const std::string& xyz,
     return points.size();
   };
   const std::size_t n = !theta_z.empty() ? closed(o.theta_z)
-                        : !mm.empty()     ? closed(o.offsets_mm)
-                                          : closed(o.lps);
+                        : !mm.empty()    ? closed(o.offsets_mm)
+                                         : closed(o.lps);
   if (n < 3 || n > 200)
     throw InvalidParameter(cat("{outline}: ", n,
                                " distinct points; draw the lesion's outline "

@@ -244,7 +244,8 @@ template <class Precondition>
 std::optional<Eigen::VectorXd> conjugate_gradients(const Eigen::SparseMatrix<double>& Kupper,
                                                    const Eigen::VectorXd& b, int max_iterations,
                                                    double tolerance, Precondition&& precondition,
-                                                   int& iterations, bool* negative_curvature = nullptr) {
+                                                   int& iterations,
+                                                   bool* negative_curvature = nullptr) {
   const double true_tolerance = 10 * tolerance;
   const auto K = Kupper.selfadjointView<Eigen::Upper>();
   const double bn = b.norm();
@@ -278,13 +279,15 @@ std::optional<Eigen::VectorXd> conjugate_gradients(const Eigen::SparseMatrix<dou
 }
 
 // CG on K preconditioned with the last factor of a double-precision `solver` (its solve()).
-std::optional<Eigen::VectorXd> reuse_factor(DirectSolver& solver, const Eigen::SparseMatrix<double>& K,
+std::optional<Eigen::VectorXd> reuse_factor(DirectSolver& solver,
+                                            const Eigen::SparseMatrix<double>& K,
                                             const Eigen::VectorXd& b, int max_iterations,
                                             double tolerance, bool* negative_curvature) {
   int iterations = 0;
-  return conjugate_gradients(K, b, max_iterations, std::max(tolerance, kCgTolerance),
-                             [&](const Eigen::VectorXd& r, int) { return solver.solve(r); }, iterations,
-                             negative_curvature);
+  return conjugate_gradients(
+      K, b, max_iterations, std::max(tolerance, kCgTolerance),
+      [&](const Eigen::VectorXd& r, int) { return solver.solve(r); }, iterations,
+      negative_curvature);
 }
 
 // The assembled upper triangle as MUMPS coordinates, and the block starts, both 1-based.
@@ -320,7 +323,8 @@ class MumpsSolver final : public DirectSolver {
   }
   std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
                                                       const Eigen::VectorXd& b, int max_iterations,
-                                                      double tolerance, bool* negative_curvature) override {
+                                                      double tolerance,
+                                                      bool* negative_curvature) override {
     return factored_ ? reuse_factor(*this, K, b, max_iterations, tolerance, negative_curvature)
                      : std::nullopt;
   }
@@ -360,8 +364,8 @@ class MixedMumpsSolver final : public DirectSolver {
     if (!a_.allFinite() || !single_.factorize(a_.data()).ok) fall_back();
   }
   std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
-                                                      const Eigen::VectorXd& b,
-                                                      int max_iterations, double tolerance,
+                                                      const Eigen::VectorXd& b, int max_iterations,
+                                                      double tolerance,
                                                       bool* negative_curvature) override {
     if (!K_ || (double_ && !double_factored_)) return std::nullopt;
     K_ = &K;
@@ -407,8 +411,8 @@ class MixedMumpsSolver final : public DirectSolver {
                                     bool* negative_curvature = nullptr) {
     return conjugate_gradients(
         *K_, b, max_iterations, tolerance,
-        [&](const Eigen::VectorXd& r, int iteration) { return precondition(r, iteration); }, iterations_,
-        negative_curvature);
+        [&](const Eigen::VectorXd& r, int iteration) { return precondition(r, iteration); },
+        iterations_, negative_curvature);
   }
   static constexpr int kMaxIterations = 40;
 
@@ -484,7 +488,8 @@ class CholmodSolver final : public DirectSolver {
   }
   std::optional<Eigen::VectorXd> solve_reusing_factor(const Eigen::SparseMatrix<double>& K,
                                                       const Eigen::VectorXd& b, int max_iterations,
-                                                      double tolerance, bool* negative_curvature) override {
+                                                      double tolerance,
+                                                      bool* negative_curvature) override {
     return factored_ ? reuse_factor(*this, K, b, max_iterations, tolerance, negative_curvature)
                      : std::nullopt;
   }
