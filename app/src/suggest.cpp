@@ -84,42 +84,40 @@ struct LesionOutline {
   double reach_mm = 0;     ///< its farthest point from the centre
 };
 
-/// --outline "THETA,Z;THETA,Z;..." (theta_z), --outline-xyz "X,Y,Z;..." (lps, LPS on the skin)
-/// or --outline-mm "LEFT,UP;..." (offsets_mm about the centre; theta_z is filled from either
-/// once the model is read), as given: 3 to 200 points, a point repeated next to itself (or the
-/// first again at the end) taken once.
-LesionOutline parse_outline(const std::string& theta_z, const std::string& xyz,
-                            const std::string& mm) {
-  LesionOutline o;
-  const auto add = [](auto& points, const auto& p) {
-    if (points.empty() || (p - points.back()).norm() > 0) points.push_back(p);
-  };
+/// One outline field's points as given into `points`: 3 to 200 of them, a point repeated next
+/// to itself (or the first again at the end) taken once.
+template <int N>
+void read_outline(const std::string& text, const std::string& field, const std::string& meaning,
+                  std::vector<Eigen::Matrix<double, N, 1>>& points) {
   try {
-    if (!theta_z.empty())
-      for (const auto& p : parse_point_list<2>(theta_z, "{outline}", "THETA,Z in degrees and mm"))
-        add(o.theta_z, Eigen::Vector2d(p[0], p[1]));
-    else if (!mm.empty())
-      for (const auto& p : parse_point_list<2>(mm, "{outline_mm}", "LEFT,UP in mm"))
-        add(o.offsets_mm, Eigen::Vector2d(p[0], p[1]));
-    else
-      for (const auto& p : parse_point_list<3>(xyz, "{outline_xyz}", "LPS X,Y,Z in mm"))
-        add(o.lps, Eigen::Vector3d(p[0], p[1], p[2]));
+    for (const auto& p : parse_point_list<N>(text, field, meaning)) {
+      const Eigen::Matrix<double, N, 1> q = Eigen::Map<const Eigen::Matrix<double, N, 1>>(p.data());
+      if (points.empty() || (q - points.back()).norm() > 0) points.push_back(q);
+    }
   } catch (const InvalidParameter&) {
     throw;
   } catch (const InvalidInput& e) {  // the field named as each front end spells it
     throw InvalidParameter(e.what());
   }
-  const auto closed = [](auto& points) {
-    if (points.size() > 1 && points.front() == points.back()) points.pop_back();
-    return points.size();
-  };
-  const std::size_t n = !theta_z.empty() ? closed(o.theta_z)
-                        : !mm.empty()    ? closed(o.offsets_mm)
-                                         : closed(o.lps);
-  if (n < 3 || n > 200)
-    throw InvalidParameter(cat("{outline}: ", n,
-                               " distinct points; draw the lesion's outline "
-                               "with 3 to 200 points THETA,Z;THETA,Z;... in order around it"));
+  if (points.size() > 1 && points.front() == points.back()) points.pop_back();
+  if (points.size() < 3 || points.size() > 200)
+    throw InvalidParameter(cat(field, ": ", points.size(),
+                               " distinct points; draw the lesion's outline with 3 to 200 points ",
+                               meaning, " in order around it"));
+}
+
+/// --outline "THETA,Z;THETA,Z;..." (theta_z), --outline-xyz "X,Y,Z;..." (lps, LPS on the skin)
+/// or --outline-mm "LEFT,UP;..." (offsets_mm about the centre), whichever is given; theta_z is
+/// filled from the other two once the model is read.
+LesionOutline parse_outline(const std::string& theta_z, const std::string& xyz,
+                            const std::string& mm) {
+  LesionOutline o;
+  if (!theta_z.empty())
+    read_outline<2>(theta_z, "{outline}", "THETA,Z in degrees and mm", o.theta_z);
+  else if (!mm.empty())
+    read_outline<2>(mm, "{outline_mm}", "LEFT,UP in mm", o.offsets_mm);
+  else
+    read_outline<3>(xyz, "{outline_xyz}", "LPS X,Y,Z in mm", o.lps);
   return o;
 }
 
@@ -568,10 +566,8 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
                                  ? resolve_at(r.model, model, r.at, r.at_xyz, &placement)
                                  : outline_centre(outline);
   if (!outline.offsets_mm.empty()) {
-    // Walked from the centre as a landmark's offsets are (plan::resolve_placement()).
-    const plan::SkinFrame centre = plan::skin_frame(model, tz[0], tz[1], 90.0);
-    for (const Eigen::Vector2d& step : outline.offsets_mm) {
-      Eigen::Vector2d p = step.norm() > 0 ? plan::walk_on_skin(model, centre, step).theta_z : tz;
+    for (const Eigen::Vector2d& step : outline.offsets_mm) {  // as a landmark's offsets are
+      Eigen::Vector2d p = plan::walk_left_up(model, tz, step);
       p.x() = tz[0] + wrap_degrees(p.x() - tz[0]);
       if (!model.has_z(p.y()))
         throw InvalidParameter(cat("{outline_mm}: the point ", step.x(), ",", step.y(),

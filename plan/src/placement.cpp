@@ -58,6 +58,12 @@ Landmarks model_landmarks(const std::filesystem::path& dir, const PatientModel& 
   return find_landmarks(model);
 }
 
+Eigen::Vector2d walk_left_up(const PatientModel& model, const Eigen::Vector2d& from_tz,
+                             const Eigen::Vector2d& left_up_mm) {
+  if (!(left_up_mm.norm() > 0)) return from_tz;
+  return walk_on_skin(model, skin_frame(model, from_tz[0], from_tz[1], 90.0), left_up_mm).theta_z;
+}
+
 Eigen::Vector2d resolve_placement(const PatientModel& model, const Landmarks& landmarks,
                                   const LandmarkPlacement& placement) {
   const Landmark* l = landmarks.find(placement.landmark);
@@ -66,12 +72,8 @@ Eigen::Vector2d resolve_placement(const PatientModel& model, const Landmarks& la
   if (!l->found)
     throw InvalidInput(cat("the model has no ", placement.landmark, " (", l->note,
                            "); place the plan with --at THETA,Z or another landmark"));
-  Eigen::Vector2d tz(l->theta_deg, l->z_mm);
-  const Eigen::Vector2d step(placement.left_mm, placement.up_mm);
-  if (step.norm() > 0) {
-    const SkinFrame start = skin_frame(model, l->theta_deg, l->z_mm, 90.0);
-    tz = walk_on_skin(model, start, step).theta_z;
-  }
+  Eigen::Vector2d tz = walk_left_up(model, Eigen::Vector2d(l->theta_deg, l->z_mm),
+                                    Eigen::Vector2d(placement.left_mm, placement.up_mm));
   tz[0] = std::remainder(tz[0], 360.0);
   if (tz[0] >= 180.0) tz[0] -= 360.0;
   if (!model.has_z(tz[1]))

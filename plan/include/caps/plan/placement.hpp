@@ -23,6 +23,13 @@ std::optional<LandmarkPlacement> parse_landmark_placement(const std::string& tex
 /// found now on `model` (the model in that directory).
 Landmarks model_landmarks(const std::filesystem::path& dir, const PatientModel& model);
 
+/// (theta deg, z mm) reached from `from_tz` (theta deg, z mm) by a walk on the skin of
+/// |left_up_mm| mm in the direction (left, up) of the skin's tangent frame there: a landmark's
+/// offsets (resolve_placement()), or a point of a lesion's outline about its centre. `from_tz`
+/// itself when left_up_mm is 0. Theta is not wrapped.
+Eigen::Vector2d walk_left_up(const PatientModel& model, const Eigen::Vector2d& from_tz,
+                             const Eigen::Vector2d& left_up_mm);
+
 /// (theta deg, z mm) of the placement on `model`: from the landmark, a walk on the skin of
 /// hypot(left_mm, up_mm) mm in the direction (left_mm, up_mm) of the skin's tangent frame there
 /// (left = along +theta at constant z, up = the skin's superior direction perpendicular to it;
