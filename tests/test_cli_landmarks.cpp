@@ -169,6 +169,11 @@ TEST(CliLandmarks, AHeadTiltedInTheScannerIsPutUprightAndItsLandmarksFound) {
       const V3 want{2 + std::cos(y) * x - std::sin(y) * y1, 6 + std::sin(y) * x + std::cos(y) * y1, z1};
       const double bound = name.rfind("tragion", 0) == 0 ? 3.0 : 1.5;
       EXPECT_LT(dist(v3(got["lps"]), want), bound) << name << " pitch " << p.pitch << " yaw " << p.yaw;
+      // Issue 37's "thickness within 1 mm", the tragia too since their depth is read in the
+      // hollow in front of the ear (measured: within 0.37 mm; the tragia 1.8 mm at 30 deg when it
+      // was read at the ear's edge).
+      EXPECT_NEAR(got["thickness_mm"].get<double>(), u["thickness_mm"].get<double>(), 1.0)
+          << name << " pitch " << p.pitch << " yaw " << p.yaw;
     }
   }
 }
@@ -179,7 +184,7 @@ TEST(CliLandmarks, AHeadLeaningToOneSideIsPutUprightAndItsLandmarksFound) {
   // symmetric at the edge of the midline's search, the axis is turned 15 deg and refined
   // (docs/landmarks.md, "A head leaning to one side"). Each landmark lies where the upright
   // head's does, turned with the head (measured: within 0.61 mm and its thickness within 0.25
-  // mm, the tragia 0.6 mm), and model.json's pose gives the roll.
+  // mm, the tragia 0.6 mm and their thickness 0.36 mm), and model.json's pose gives the roll.
   const json& upright = upright_face();
   for (const double roll : {10.0, 25.0}) {
     const json m = posed_face(0, 0, cat_args("lean_", roll), roll);
@@ -197,9 +202,8 @@ TEST(CliLandmarks, AHeadLeaningToOneSideIsPutUprightAndItsLandmarksFound) {
                     -std::sin(r) * (q.x - 2) + std::cos(r) * q.z};
       const bool tragion = name.rfind("tragion", 0) == 0;
       EXPECT_LT(dist(v3(got["lps"]), want), tragion ? 3.0 : 1.0) << name << " roll " << roll;
-      if (!tragion)
-        EXPECT_NEAR(got["thickness_mm"].get<double>(), u["thickness_mm"].get<double>(), 0.5)
-            << name << " roll " << roll;
+      EXPECT_NEAR(got["thickness_mm"].get<double>(), u["thickness_mm"].get<double>(), 0.5)
+          << name << " roll " << roll;
     }
   }
 }
@@ -269,7 +273,7 @@ TEST(CliLandmarks, IssuesTiltedCtStoredUnsignedBigEndianVertexFirstIsReadAsTheCt
   for (const auto& w : got["warnings"])
     EXPECT_EQ(w.get<std::string>().find("approximated"), std::string::npos) << w;
   // Each landmark where the upright head's lies turned 20 deg about L through (2, 6, 0), its
-  // depth the upright head's (measured on the tilted NIfTI: within 0.39 mm, the tragia 0.8 mm).
+  // depth the upright head's (measured: within 0.43 mm, the tragia 0.16 mm).
   const json& upright = upright_face();
   const double t = 20 * M_PI / 180;
   for (const auto& [name, u] : upright["landmarks"]["items"].items()) {

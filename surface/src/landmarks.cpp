@@ -58,6 +58,10 @@ std::vector<int> extrema(const Profile& p, int sign) {
   return out;
 }
 
+// The tragion's depth is read at the lowest skin (nearest the axis) up to this far in front of
+// the ear's edge (mm of arc): the hollow before the tragus.
+constexpr double kPreauricularMm = 15.0;
+
 // The profile's value range over z in [za, zb] (measured samples): {min, max}.
 std::pair<double, double> range_over(const Profile& p, double za, double zb) {
   double lo = std::numeric_limits<double>::infinity(), hi = -lo;
@@ -570,13 +574,30 @@ Landmarks find_landmarks(const SkinRangeView& view) {
           prev = dt;
           e_prev = excess(dt, zc);
         }
-        if (!ear_front)
+        if (!ear_front) {
           tra.push_back(absent("tragion" + suffix, "the ear's row has no front edge"));
-        else
-          tra.push_back(at("tragion" + suffix, theta_of(*ear_front), zc,
-                           0.6 * measured_factor(view, theta_of(*ear_front), zc),
-                           cat("the front edge of the ear at its centroid's height (", mm(area),
-                               "^2 of ear)")));
+        } else {
+          // The depth in front of the ear: where the skin lies lowest (nearest the axis) within
+          // kPreauricularMm in front of the ear's edge, the hollow before the tragus.
+          double dt = *ear_front, r_low = std::numeric_limits<double>::infinity();
+          for (double d = *ear_front; d >= std::max(a, *ear_front - kPreauricularMm * deg_per_mm);
+               d -= 0.25 * view.dtheta_deg)
+            if ((view.depth_measured ? view.depth_measured : view.measured)(theta_of(d), zc) &&
+                view.r_mm(theta_of(d), zc) < r_low) {
+              r_low = view.r_mm(theta_of(d), zc);
+              dt = d;
+            }
+          Landmark t = at("tragion" + suffix, theta_of(*ear_front), zc,
+                          0.6 * measured_factor(view, theta_of(*ear_front), zc),
+                          cat("the front edge of the ear at its centroid's height (", mm(area),
+                              "^2 of ear); its depth read ",
+                              std::isfinite(r_low)
+                                  ? cat(mm((*ear_front - dt) / deg_per_mm),
+                                        " in front of it, where the skin lies lowest")
+                                  : "at the edge (no measured tissue in front of it)"));
+          t.depth_theta_deg = theta_of(dt);
+          tra.push_back(t);
+        }
       }
     }
     // Zygion: the most lateral point between the subnasale's and the nasion's heights, 30 deg off
@@ -697,6 +718,9 @@ SkinRangeView skin_range_view(const PatientModel& model) {
   v.undercut = [m](double t, double z) {
     return m->has_z(z) && (m->flags_at(t, z) & kUndercut) != 0;
   };
+  v.depth_measured = [m](double t, double z) {
+    return m->has_z(z) && flags_valid(m->flags_at(t, z));
+  };
   v.z_min_mm = g.z0_mm;
   v.z_max_mm = g.z_mm(g.n_z - 1);
   v.dtheta_deg = g.dtheta_deg();
@@ -805,12 +829,13 @@ Landmarks find_landmarks(const PatientModel& model) {
   for (auto& l : out.items) {
     if (!l.found) continue;
     l.lps = model.skin_point(l.theta_deg, l.z_mm);
-    l.thickness_mm = model.thickness_normal(l.theta_deg, l.z_mm);
-    l.measured = flags_valid(model.flags_at(l.theta_deg, l.z_mm));
+    const double td = std::isnan(l.depth_theta_deg) ? l.theta_deg : l.depth_theta_deg;
+    l.thickness_mm = model.thickness_normal(td, l.z_mm);
+    l.measured = flags_valid(model.flags_at(td, l.z_mm));
     if (maps.has_layers() && !maps.thickness_skin_normal.empty()) {
-      l.skin_mm = model.sample(maps.thickness_skin_normal, l.theta_deg, l.z_mm);
-      l.fat_mm = model.sample(maps.thickness_fat_normal, l.theta_deg, l.z_mm);
-      l.deep_mm = model.sample(maps.thickness_deep_normal, l.theta_deg, l.z_mm);
+      l.skin_mm = model.sample(maps.thickness_skin_normal, td, l.z_mm);
+      l.fat_mm = model.sample(maps.thickness_fat_normal, td, l.z_mm);
+      l.deep_mm = model.sample(maps.thickness_deep_normal, td, l.z_mm);
     }
     l.doubt = landmark_doubt(l);
   }
@@ -828,6 +853,7 @@ std::string landmarks_to_json(const Landmarks& landmarks) {
       o["z_mm"] = r3(l.z_mm);
       o["lps"] = {r3(l.lps[0]), r3(l.lps[1]), r3(l.lps[2])};
       o["confidence"] = r3(l.confidence);
+      if (std::isfinite(l.depth_theta_deg)) o["depth_theta_deg"] = r3(l.depth_theta_deg);
       o["thickness_mm"] = r3(l.thickness_mm);
       o["measured"] = l.measured;
       if (std::isfinite(l.skin_mm))
@@ -871,6 +897,7 @@ Landmarks landmarks_from_json(const std::string& text, const std::string& source
         l.lps = {p.at(0).get<double>(), p.at(1).get<double>(), p.at(2).get<double>()};
         l.confidence = o.at("confidence").get<double>();
         l.thickness_mm = o.at("thickness_mm").get<double>();
+        l.depth_theta_deg = o.value("depth_theta_deg", std::numeric_limits<double>::quiet_NaN());
         l.measured = o.value("measured", false);
         if (o.contains("layers_mm")) {
           l.skin_mm = o["layers_mm"].at("skin").get<double>();

@@ -34,6 +34,11 @@ struct Landmark {
   double skin_mm = std::numeric_limits<double>::quiet_NaN();
   double fat_mm = std::numeric_limits<double>::quiet_NaN();
   double deep_mm = std::numeric_limits<double>::quiet_NaN();
+  /// Where the depth and layers are read when not at the point itself (theta deg, at z_mm):
+  /// the tragion's in front of the ear, in the hollow before the tragus (the skin's lowest point
+  /// within 15 mm in front of the ear's edge: at the edge the depth climbs with the ear's
+  /// stand-off; docs/landmarks.md). NaN: at the point.
+  double depth_theta_deg = std::numeric_limits<double>::quiet_NaN();
   bool measured = false;       ///< the skin and thickness there were measured, not filled
   std::string note;            ///< how it was found, or why it is absent
   /// Why its depth or layers are not plausible for this landmark (landmark_doubt()), or empty.
@@ -100,6 +105,9 @@ struct SkinRangeView {
   std::function<bool(double theta_deg, double z_mm)> measured;
   /// True where the skin crosses the ray more than once (an ear): counts as ear in the search.
   std::function<bool(double theta_deg, double z_mm)> undercut;
+  /// True where the soft tissue's depth at (theta, z) was measured (a valid cell): where the
+  /// tragion's depth may be read. Unset: where the skin was measured.
+  std::function<bool(double theta_deg, double z_mm)> depth_measured;
   double z_min_mm = 0, z_max_mm = 0;   ///< the range image's extent along the axis
   double dtheta_deg = 1, dz_mm = 1;    ///< the sampling steps of the search
   double r_typical_mm = 90;            ///< a typical radius, to turn mm along the skin into degrees
