@@ -106,15 +106,24 @@ SutureSpacing suture_spacing(const ContinuumMesh& cm, const SolveResult& r, doub
     if (!seen) sites.push_back(p);
   }
   out.wound_length_mm = spanning_tree_length(sites);
-  // Sutures spacing_mm apart: from the site farthest from the wound's centroid (an end), the
-  // next suture at the uncovered site nearest to those placed (an advancing front along the
-  // wound's lines, branches included); every pair then goes to its nearest suture.
-  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-  for (const auto& p : sites) centroid += p;
-  centroid /= static_cast<double>(sites.size());
+  // Sutures spacing_mm apart: the first where one suture would hold the most (the site whose
+  // pairs within half a spacing close with the largest force in sum), then each next one at the
+  // uncovered site nearest to those placed (an advancing front along the wound's lines both
+  // ways, branches included); every pair then goes to its nearest suture. So the row has a
+  // suture at the wound's most loaded place, wherever the loop starts and whichever way it
+  // runs (a design and its mirror image get the same largest suture); started at an end, the
+  // row's phase decided the largest suture by up to a third.
   std::size_t first = 0;
-  for (std::size_t i = 1; i < sites.size(); ++i)
-    if ((sites[i] - centroid).norm() > (sites[first] - centroid).norm()) first = i;
+  double most = -std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < sites.size(); ++i) {
+    double held = 0;
+    for (std::size_t k = 0; k < site.size(); ++k)
+      if ((site[k] - sites[i]).norm() <= 0.5 * spacing_mm) held += closing[k];
+    if (held > most * (1 + 1e-9) + 1e-12) {
+      most = held;
+      first = i;
+    }
+  }
   std::vector<Eigen::Vector3d> centres{sites[first]};
   std::vector<double> nearest(sites.size(), std::numeric_limits<double>::infinity());
   for (;;) {
