@@ -226,7 +226,8 @@ TEST(CliLandmarks, IssuesTiltedCtStoredUnsignedBigEndianVertexFirstIsReadAsTheCt
     std::memcpy(&value, bytes.data() + at, sizeof value);
     return value;
   };
-  const int nx = get(42, std::int16_t{}), ny = get(44, std::int16_t{}), nz = get(46, std::int16_t{});
+  const int nx = get(42, std::int16_t{}), ny = get(44, std::int16_t{}),
+            nz = get(46, std::int16_t{});
   ASSERT_EQ(get(70, std::int16_t{}), 4) << "the phantom is written as int16";
   const float slope = get(112, float{}), inter = get(116, float{});
   ASSERT_TRUE((slope == 0 || slope == 1) && inter == 0) << slope << " " << inter;
@@ -254,14 +255,14 @@ TEST(CliLandmarks, IssuesTiltedCtStoredUnsignedBigEndianVertexFirstIsReadAsTheCt
   auto lps = [&](int c, double s) {
     return cat_args("(", -srow[0][c] * s, ",", -srow[1][c] * s, ",", srow[2][c] * s, ")");
   };
-  const double top[3] = {-(srow[0][3] + srow[0][2] * (nz - 1)), -(srow[1][3] + srow[1][2] * (nz - 1)),
-                         srow[2][3] + srow[2][2] * (nz - 1)};
+  const double top[3] = {-(srow[0][3] + srow[0][2] * (nz - 1)),
+                         -(srow[1][3] + srow[1][2] * (nz - 1)), srow[2][3] + srow[2][2] * (nz - 1)};
   std::ofstream(raw / "head.nhdr")
       << "NRRD0004\ntype: unsigned short\ndimension: 3\nspace: left-posterior-superior\n"
       << "sizes: " << nx << " " << ny << " " << nz << "\nspace directions: " << lps(0, 1) << " "
       << lps(1, 1) << " " << lps(2, -1) << "\nspace origin: (" << top[0] << "," << top[1] << ","
-      << top[2] << ")\nendian: big\nencoding: raw\ndata file: slice.%d 1000 "
-      << 1000 + nz - 1 << " 1\n";
+      << top[2] << ")\nendian: big\nencoding: raw\ndata file: slice.%d 1000 " << 1000 + nz - 1
+      << " 1\n";
   const fs::path dir = kTmp / "tilt20_nhdr";
   const auto m = caps("model from-volume " + (raw / "head.nhdr").string() + " -o " + dir.string() +
                       " --n-theta 256 --n-z 128 --no-tissue --force -q");

@@ -727,14 +727,23 @@ TEST(ContinuumMesher, FlapsAreRaisedOverTheirWholeArea) {
 // ellipse (a rhombus: two sides of sqrt(10^2 + 3^2) = 10.44 mm close into one line of that
 // length). The sutures' forces add up to the total, the wound's length is the closed line's, and
 // one suture for the whole wound carries all of it.
-TEST(SutureSpacing, ForcePerSutureAndPerMmOfWound) {
+namespace {
+
+// A 20 x 6 mm ellipse across the constant-thickness cylinder (1.5 mm mesh, 25 mm out), closed.
+Simulation closed_cylinder_ellipse() {
   const PatientModel model = constant_cylinder();
   const plan::Plan p = plan::place_procedure(
       plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0.0, 40.0, 90.0);
   SimulateOptions o;
   o.surface.size_mm = 1.5;
   o.surface.extent_mm = 25;
-  const Simulation sim = simulate(model, p, o);
+  return simulate(model, p, o);
+}
+
+}  // namespace
+
+TEST(SutureSpacing, ForcePerSutureAndPerMmOfWound) {
+  const Simulation sim = closed_cylinder_ellipse();
   const SutureSpacing& s = sim.sutures;
   const double total = sim.result.total_suture_force_n;
   EXPECT_EQ(s.spacing_mm, 5.0);
@@ -839,13 +848,7 @@ TEST(SutureSpacing, AZPlastysSuturesCoverItsWholeSuturedLength) {
 // way it runs. The row once started at the end farthest from the wound's centroid, so a design
 // and its mirror image (whose ends tie) could report their largest suture a third apart.
 TEST(SutureSpacing, TheRowHasASutureAtTheMostLoadedPlace) {
-  const PatientModel model = constant_cylinder();
-  const plan::Plan p = plan::place_procedure(
-      plan::layout_procedure("ellipse", {{"length", 20.0}, {"width", 6.0}}), model, 0.0, 40.0, 90.0);
-  SimulateOptions o;
-  o.surface.size_mm = 1.5;
-  o.surface.extent_mm = 25;
-  const Simulation sim = simulate(model, p, o);
+  const Simulation sim = closed_cylinder_ellipse();
   const ContinuumMesh& c = sim.wound.continuum;
   std::vector<Eigen::Vector3d> site;
   std::vector<double> closing;
@@ -868,8 +871,10 @@ TEST(SutureSpacing, TheRowHasASutureAtTheMostLoadedPlace) {
       peak = std::max(peak, held);
     }
     const SutureSpacing s = suture_spacing(c, sim.result, spacing);
-    std::printf("ellipse 20 x 6 mm, sutures every %.0f mm: largest %.4f N, the most loaded %.0f mm "
-                "stretch %.4f N\n", spacing, s.max_suture_force_n, spacing, peak);
+    std::printf(
+        "ellipse 20 x 6 mm, sutures every %.0f mm: largest %.4f N, the most loaded %.0f mm "
+        "stretch %.4f N\n",
+        spacing, s.max_suture_force_n, spacing, peak);
     EXPECT_GE(s.max_suture_force_n, 0.98 * peak) << spacing;
   }
 }

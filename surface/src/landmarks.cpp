@@ -587,14 +587,14 @@ Landmarks find_landmarks(const SkinRangeView& view) {
               r_low = view.r_mm(theta_of(d), zc);
               dt = d;
             }
-          Landmark t = at("tragion" + suffix, theta_of(*ear_front), zc,
-                          0.6 * measured_factor(view, theta_of(*ear_front), zc),
-                          cat("the front edge of the ear at its centroid's height (", mm(area),
-                              "^2 of ear); its depth read ",
-                              std::isfinite(r_low)
-                                  ? cat(mm((*ear_front - dt) / deg_per_mm),
-                                        " in front of it, where the skin lies lowest")
-                                  : "at the edge (no measured tissue in front of it)"));
+          Landmark t =
+              at("tragion" + suffix, theta_of(*ear_front), zc,
+                 0.6 * measured_factor(view, theta_of(*ear_front), zc),
+                 cat("the front edge of the ear at its centroid's height (", mm(area),
+                     "^2 of ear); its depth read ",
+                     std::isfinite(r_low) ? cat(mm((*ear_front - dt) / deg_per_mm),
+                                                " in front of it, where the skin lies lowest")
+                                          : "at the edge (no measured tissue in front of it)"));
           t.depth_theta_deg = theta_of(dt);
           tra.push_back(t);
         }
