@@ -345,5 +345,33 @@ await withPlanner({ caps, model, webRoot, log }, async ({ page, allow }) => {
   await page.waitForSelector('body[data-ready="true"]', { timeout: 120000 });
   assert.doesNotMatch(await page.locator('#model-name').innerText(), /local chart/);
   log('back to the whole head');
+  // Below the eye (issue 39's cheek below the lateral canthus): the page's default Z-plasty
+  // clicked there reaches the eye and is refused, and Suggest lays designs that fit about the
+  // place clicked. (It needed an operable plan and stayed disabled there.)
+  const cheek = capsJson(['model', 'site', model, '--at', '30,35']);
+  await page.selectOption('#procedure', 'z-plasty');
+  await page.click('[data-view="front"]');
+  const at = await screenOf(page, cheek.lps);
+  await page.mouse.click(at.x, at.y);
+  await page.waitForSelector('body[data-check="ok"], body[data-check="refused"]', { timeout: 30000 });
+  assert.equal(await page.evaluate(() => document.body.dataset.check), 'refused');
+  assert.match(await page.locator('#check').innerText(), /eye/);
+  assert.equal(await page.locator('#suggest').isDisabled(), false,
+    'Suggest for a lesion where the plan clicked does not fit');
+  if (await page.locator('#suggest-details').getAttribute('open') === null)
+    await page.click('#suggest-details summary');
+  await page.selectOption('#suggest-step', '45');
+  await page.selectOption('#material', 'linear');
+  await page.click('#suggest');
+  await page.waitForSelector('body[data-suggestion="shown"]', { timeout: 120000 });
+  const suggested = await page.evaluate(() => window.caps.suggestions.last);
+  const { lesion } = suggested;
+  assert.ok(Math.abs(lesion.theta_deg - 30) < 1 && Math.abs(lesion.z_mm - 35) < 1,
+    `the lesion where clicked: ${JSON.stringify(lesion)}`);
+  const ranked = suggested.designs.filter((d) => d.rank > 0);
+  assert.ok(ranked.length >= 1, JSON.stringify(suggested.designs.map((d) => d.refused ?? d.rank)));
+  await page.screenshot({ path: join(out, '9-cheek-suggested.png') });
+  log(`below the eye: the Z-plasty refused, Suggest about the click: ${ranked.length} of ` +
+    `${suggested.designs.length} designs fit, the best ${ranked[0].name}`);
 });
 log('passed');

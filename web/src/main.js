@@ -172,9 +172,20 @@ async function main() {
     noticeTimer = setTimeout(() => status(''), 4000);
   };
   // The lesion's outline drawn for Suggest (LPS mm, in the order clicked): Suggest needs it (three
-  // points or more) or a placed plan, and no suggestion running.
+  // points or more) or a lesion's centre, and no suggestion running.
   const lesionOutline = [];
-  const suggestReady = (plan) => (Boolean(plan) || lesionOutline.length >= 3) &&
+  // A round lesion's centre: the placed plan's; or, where the plan laid at the click cannot be
+  // operated (the page's default Z-plasty below the eye reaches the eye), the place clicked: the
+  // lesion is there whatever the template, and Suggest lays designs that fit.
+  const lesionCentre = () => {
+    const c = planner.plan ? planner.lines?.centre : null;
+    if (c) return { at: `${c.theta_deg},${c.z_mm}` };
+    const s = planner.state;
+    if (s?.at) return { at: s.at };
+    if (s?.at_xyz) return { at_xyz: s.at_xyz };
+    return null;
+  };
+  const suggestReady = () => (lesionCentre() !== null || lesionOutline.length >= 3) &&
     document.body.dataset.suggestion !== 'running';
   const planner = new Planner(viewA, templates, {
     onState: (s) => {
@@ -194,7 +205,7 @@ async function main() {
         Boolean(model.source?.chart);
       showSutures(planner);
       $('simulate').disabled = !plan;
-      $('suggest').disabled = !suggestReady(plan);
+      $('suggest').disabled = !suggestReady();
       $('save').disabled = !plan;
     },
     onNotice: notice,
@@ -362,7 +373,7 @@ async function main() {
         : `outline of ${n} points, ${across.toFixed(1)} mm across`;
     $('suggest-clear').hidden = n === 0;
     $('suggest-diameter').disabled = n >= 3;
-    $('suggest').disabled = !suggestReady(planner.plan);
+    $('suggest').disabled = !suggestReady();
     document.body.dataset.lesionOutline = String(n);
     showGuides();
   };
@@ -386,9 +397,9 @@ async function main() {
     showOutline();
   });
   $('suggest').addEventListener('click', async () => {
-    const c = planner.lines?.centre;
+    const centre = lesionCentre();
     const drawn = lesionOutline.length >= 3;
-    if (!c && !drawn) return;
+    if (!centre && !drawn) return;
     const options = { material: $('material').value, tissue: $('tissue').value,
       procedures: $('suggest-procedures').value, step: Number($('suggest-step').value),
       objective: $('suggest-objective').value };
@@ -402,13 +413,13 @@ async function main() {
       const lesion = drawn
         ? { outline_xyz: lesionOutline.map((p) => p.map((v) => v.toFixed(2)).join(',')).join(';') }
         : { diameter: Number($('suggest-diameter').value) };
-      const s = await suggestions.run(drawn ? '' : `${c.theta_deg},${c.z_mm}`,
+      const s = await suggestions.run(drawn ? {} : centre,
         { ...lesion, margin: Number($('suggest-margin').value) }, options);
       status(`Suggested in ${s.timings_s.suggest.toFixed(0)} s: open a design to simulate it and compare.`);
     } catch (e) {
       status(e.status === 409 ? 'The suggestion was cancelled.' : `No suggestion: ${e.message}`);
     } finally {
-      $('suggest').disabled = !suggestReady(planner.plan);
+      $('suggest').disabled = !suggestReady();
       $('simulate').disabled = !planner.plan;
       $('cancel-suggest').hidden = true;
     }

@@ -25,8 +25,9 @@ export class Suggestions {
     this.last = null;
   }
 
-  /** Runs a suggestion for a lesion at `at` ("THETA,Z" on the served model); shows it. */
-  async run(at, lesion, options) {
+  /** Runs a suggestion for a lesion centred at `centre` ({at: "THETA,Z" or a landmark's
+   * placement, or at_xyz: "X,Y,Z" LPS on the served model; {} for a drawn outline); shows it. */
+  async run(centre, lesion, options) {
     const e = this.e;
     e.progress.hidden = false;
     e.progressText.textContent = 'starting…';
@@ -39,7 +40,7 @@ export class Suggestions {
       } catch { /* the next poll tries again */ }
     }, kPollMs);
     try {
-      const s = await api.suggest({ at, ...lesion, ...options });
+      const s = await api.suggest({ ...centre, ...lesion, ...options });
       this.last = s;
       this.show(s);
       document.body.dataset.suggestion = 'shown';
