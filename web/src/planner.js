@@ -195,6 +195,9 @@ export class Planner {
     }
     const at_xyz = lps.map((v) => v.toFixed(2)).join(',');
     const base = this.state?.procedure === this.procedure ? this.state : { orientation: 90 };
+    // A refusal keeps the last lines drawn in red, which shows a drag or a key that went too far;
+    // after a click elsewhere they would be another place's plan.
+    this.lines = null;
     this.change({ procedure: this.procedure, parameters: { ...this.parameters },
       orientation: base.orientation ?? 90, at_xyz, at: '', sutures: base.sutures ?? null });
   }
