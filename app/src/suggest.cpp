@@ -1005,11 +1005,15 @@ SuggestResult run_plan_suggest(const SuggestRequest& r, Reporter* reporter) {
   TextStyle legend;
   legend.size_px = 11;
   legend.colour = Eigen::Vector3d(0.35, 0.35, 0.35);
+  // The rings are the closures again that finished (one stopped at its time limit has none).
+  const auto rings = std::count_if(designs.begin(), designs.end(),
+                                   [](const SuggestedDesign& d) { return d.refined; });
   canvas.text(20, 566,
               cat("dots and line: the sweep (", sweep_solver.material, ", ", coarse_mesh.mesh_size,
-                  " mm mesh); rings: the best ", r.refine, " closed again (", r.solver.material,
-                  ", ", r.meshing.mesh_size, " mm); green: the suggestion; grey ticks: not "
-                  "possible there; an ellipse's orientation is its scar's"),
+                  " mm mesh); rings: ", rings, " closed again (", r.solver.material, ", ",
+                  r.meshing.mesh_size,
+                  " mm); green: the suggestion; grey ticks: not possible there; an ellipse's "
+                  "orientation is its scar's"),
               legend);
   TextStyle foot;
   foot.size_px = 11;
