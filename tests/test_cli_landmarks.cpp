@@ -125,6 +125,15 @@ json posed_face(double pitch, double yaw, const std::string& name, double roll =
   return read_json(dir / "model.json");
 }
 
+// An upright head's point `q` (LPS) where the phantom puts it posed (`caps phantom --pitch
+// --yaw`): turned about L through its axis point (2, 6, 0) by the pitch, then about S by the yaw.
+V3 posed_point(const V3& q, double pitch_deg, double yaw_deg) {
+  const double t = pitch_deg * M_PI / 180, y = yaw_deg * M_PI / 180;
+  const double x = q.x - 2, yy = q.y - 6, z = q.z;
+  const double y1 = std::cos(t) * yy - std::sin(t) * z, z1 = std::sin(t) * yy + std::cos(t) * z;
+  return {2 + std::cos(y) * x - std::sin(y) * y1, 6 + std::sin(y) * x + std::cos(y) * y1, z1};
+}
+
 // The upright head's model.json, made once: the tilted and the leaning heads are both compared
 // with it.
 const json& upright_face() {
@@ -157,16 +166,11 @@ TEST(CliLandmarks, AHeadTiltedInTheScannerIsPutUprightAndItsLandmarksFound) {
     for (const auto& n : m["source"]["notes"])
       said = said || n.get<std::string>().find("tilted in the scanner") != std::string::npos;
     EXPECT_TRUE(said) << m["source"]["notes"].dump();
-    const double t = p.pitch * M_PI / 180, y = p.yaw * M_PI / 180;
     for (const auto& [name, u] : upright["landmarks"]["items"].items()) {
       ASSERT_TRUE(u["found"].get<bool>()) << name;
       const auto& got = m["landmarks"]["items"][name];
       ASSERT_TRUE(got["found"].get<bool>()) << name << " pitch " << p.pitch << ": " << got["note"];
-      // The upright point turned as the phantom turns the head: pitch about L, then yaw about S.
-      const V3 q = v3(u["lps"]);
-      const double x = q.x - 2, yy = q.y - 6, z = q.z;
-      const double y1 = std::cos(t) * yy - std::sin(t) * z, z1 = std::sin(t) * yy + std::cos(t) * z;
-      const V3 want{2 + std::cos(y) * x - std::sin(y) * y1, 6 + std::sin(y) * x + std::cos(y) * y1, z1};
+      const V3 want = posed_point(v3(u["lps"]), p.pitch, p.yaw);
       const double bound = name.rfind("tragion", 0) == 0 ? 3.0 : 1.5;
       EXPECT_LT(dist(v3(got["lps"]), want), bound) << name << " pitch " << p.pitch << " yaw " << p.yaw;
       // Issue 37's "thickness within 1 mm", the tragia too since their depth is read in the
@@ -276,13 +280,10 @@ TEST(CliLandmarks, IssuesTiltedCtStoredUnsignedBigEndianVertexFirstIsReadAsTheCt
   // Each landmark where the upright head's lies turned 20 deg about L through (2, 6, 0), its
   // depth the upright head's (measured: within 0.43 mm, the tragia 0.16 mm).
   const json& upright = upright_face();
-  const double t = 20 * M_PI / 180;
   for (const auto& [name, u] : upright["landmarks"]["items"].items()) {
     const auto& l = got["landmarks"]["items"][name];
     ASSERT_TRUE(l["found"].get<bool>()) << name << ": " << l["note"];
-    const V3 q = v3(u["lps"]);
-    const V3 want{q.x, 6 + std::cos(t) * (q.y - 6) - std::sin(t) * q.z,
-                  std::sin(t) * (q.y - 6) + std::cos(t) * q.z};
+    const V3 want = posed_point(v3(u["lps"]), 20, 0);
     const bool tragion = name.rfind("tragion", 0) == 0;
     EXPECT_LT(dist(v3(l["lps"]), want), tragion ? 3.0 : 1.5) << name;
     EXPECT_NEAR(l["thickness_mm"].get<double>(), u["thickness_mm"].get<double>(), 1.0) << name;

@@ -579,14 +579,16 @@ Landmarks find_landmarks(const SkinRangeView& view) {
         } else {
           // The depth in front of the ear: where the skin lies lowest (nearest the axis) within
           // kPreauricularMm in front of the ear's edge, the hollow before the tragus.
+          const auto& depth_measured = view.depth_measured ? view.depth_measured : view.measured;
           double dt = *ear_front, r_low = std::numeric_limits<double>::infinity();
           for (double d = *ear_front; d >= std::max(a, *ear_front - kPreauricularMm * deg_per_mm);
-               d -= 0.25 * view.dtheta_deg)
-            if ((view.depth_measured ? view.depth_measured : view.measured)(theta_of(d), zc) &&
-                view.r_mm(theta_of(d), zc) < r_low) {
-              r_low = view.r_mm(theta_of(d), zc);
+               d -= 0.25 * view.dtheta_deg) {
+            if (!depth_measured(theta_of(d), zc)) continue;
+            if (const double r = view.r_mm(theta_of(d), zc); r < r_low) {
+              r_low = r;
               dt = d;
             }
+          }
           Landmark t =
               at("tragion" + suffix, theta_of(*ear_front), zc,
                  0.6 * measured_factor(view, theta_of(*ear_front), zc),
