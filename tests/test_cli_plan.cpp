@@ -89,6 +89,22 @@ TEST_F(CliPlan, RefusesBadPlansWithoutOutput) {
   expect_refused("plan new z-plasty" + m + " --at 0 -o " + out, out, "--at '0'");
   expect_refused("plan new z-plasty --model " + p("nowhere") + " --at 0,60 -o " + out, out, "nowhere");
   expect_refused("plan new ellipse" + m + " --at 0,95 --length 60 -o " + out, out, "loop node 3 (point 3)");
+  // An LPS point far off the skin was taken for the skin along its ray (9000,0,0 became theta 91,
+  // z 0); one on the skin is placed there.
+  expect_refused("plan new z-plasty" + m + " --at-xyz 9000,0,40 -o " + out, out,
+                 "mm from the skin");
+  const CliRun site = caps("model site " + kModel + " --at 0,40 --json -q");
+  ASSERT_EQ(site.code, 0) << site.out;
+  const auto lps = nlohmann::json::parse(site.out).at("lps");
+  const std::string on_skin = std::to_string(lps[0].get<double>()) + "," +
+                              std::to_string(lps[1].get<double>()) + "," +
+                              std::to_string(lps[2].get<double>());
+  const CliRun placed = caps("plan new z-plasty" + m + " --at-xyz " + on_skin + " -q -o " + out);
+  ASSERT_EQ(placed.code, 0) << placed.out;
+  const auto frame = nlohmann::json::parse(std::ifstream(out)).at("frame");
+  EXPECT_NEAR(frame.at("theta_deg").get<double>(), 0, 0.1);
+  EXPECT_NEAR(frame.at("z_mm").get<double>(), 40, 0.1);
+  fs::remove(out);
   // An existing output needs --force.
   ASSERT_EQ(caps("plan new z-plasty" + m + " --at 0,60 -q -o " + out).code, 0);
   EXPECT_EQ(caps("plan new z-plasty" + m + " --at 0,60 -q -o " + out).code, 2);
